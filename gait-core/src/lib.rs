@@ -1,0 +1,27 @@
+//! gait-core: the walking trajectory generator of seed 000 (Wong et al. 2020, TLIPFM) and
+//! seed 001 (Erbatur et al. 2009), `no_std`, allocation-free, for the servo loop.
+#![no_std]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod error;
+pub mod fastmath;
+pub mod kinematics;
+pub mod real;
+pub mod robot;
+
+pub use error::GaitError;
+pub use real::Real;
+pub use robot::{Robot, Side};
+pub mod com;
+pub mod model;
+pub mod plan;
+pub mod sampler;
+pub mod swing;
+pub mod zmp;
+pub mod support;
+pub mod measured;
+
+pub use model::{Model, ModelKind};
+pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
+pub use sampler::{GaitSample, Sampler, SupportPhase};

@@ -1,0 +1,144 @@
+//! The scalar type of the generator: `f32` on the robot, `f64` for reference evaluations.
+//!
+//! Every formula of gait-core is written once over [`Real`], so the host tests can evaluate the
+//! very same code in `f64` and compare it with the `f32` path that runs on the servo loop.
+
+use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
+
+/// A floating-point scalar (`f32` or `f64`) with the maths gait-core needs.
+pub trait Real:
+    Copy
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + core::fmt::Debug
+    + Default
+{
+    /// Converts from `f64` (rounding to nearest).
+    fn of(v: f64) -> Self;
+    /// Converts to `f64` exactly.
+    fn to_f64(self) -> f64;
+    /// Converts an unsigned integer (cheap on the target: no `f64` on the way).
+    fn from_u32(v: u32) -> Self;
+    /// e^self.
+    fn exp(self) -> Self;
+    /// Square root (NaN for negative input; callers clamp first).
+    fn sqrt(self) -> Self;
+    /// Sine.
+    fn sin(self) -> Self;
+    /// Cosine.
+    fn cos(self) -> Self;
+    /// Arc tangent of `self / x` in (−π, π].
+    fn atan2(self, x: Self) -> Self;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// True when neither NaN nor infinite.
+    fn is_finite(self) -> bool;
+    /// Zero.
+    fn zero() -> Self {
+        Self::of(0.0)
+    }
+    /// One.
+    fn one() -> Self {
+        Self::of(1.0)
+    }
+    /// The smaller of two values.
+    fn min(self, o: Self) -> Self {
+        if o < self {
+            o
+        } else {
+            self
+        }
+    }
+    /// The larger of two values.
+    fn max(self, o: Self) -> Self {
+        if o > self {
+            o
+        } else {
+            self
+        }
+    }
+    /// `self` limited to `[lo, hi]` (NaN becomes `lo`).
+    fn clamp_to(self, lo: Self, hi: Self) -> Self {
+        if self >= lo {
+            if self <= hi {
+                self
+            } else {
+                hi
+            }
+        } else {
+            lo
+        }
+    }
+}
+
+impl Real for f32 {
+    fn of(v: f64) -> Self {
+        v as f32
+    }
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn from_u32(v: u32) -> Self {
+        v as f32
+    }
+    fn exp(self) -> Self {
+        libm::expf(self)
+    }
+    fn sqrt(self) -> Self {
+        libm::sqrtf(self)
+    }
+    fn sin(self) -> Self {
+        libm::sinf(self)
+    }
+    fn cos(self) -> Self {
+        libm::cosf(self)
+    }
+    fn atan2(self, x: Self) -> Self {
+        libm::atan2f(self, x)
+    }
+    fn abs(self) -> Self {
+        libm::fabsf(self)
+    }
+    fn is_finite(self) -> bool {
+        f32::is_finite(self)
+    }
+}
+
+impl Real for f64 {
+    fn of(v: f64) -> Self {
+        v
+    }
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn from_u32(v: u32) -> Self {
+        v as f64
+    }
+    fn exp(self) -> Self {
+        libm::exp(self)
+    }
+    fn sqrt(self) -> Self {
+        libm::sqrt(self)
+    }
+    fn sin(self) -> Self {
+        libm::sin(self)
+    }
+    fn cos(self) -> Self {
+        libm::cos(self)
+    }
+    fn atan2(self, x: Self) -> Self {
+        libm::atan2(self, x)
+    }
+    fn abs(self) -> Self {
+        libm::fabs(self)
+    }
+    fn is_finite(self) -> bool {
+        f64::is_finite(self)
+    }
+}

@@ -1,0 +1,271 @@
+//! The robot description: masses, geometry, joint limits and servo limits in one value.
+//!
+//! [`Robot::reference`] is the TKU-X class robot of `shared/reference-robot.md` (masses from
+//! seed 000 Table 1; geometry assumed there). Every other module takes its numbers from a
+//! `Robot`, never from literals.
+//!
+//! Frames: world x forward, y left, z up. Joint order per leg: `hip_yaw` (z), `hip_roll` (x),
+//! `hip_pitch` (y), `knee` (y), `ankle_pitch` (y), `ankle_roll` (x); zero = straight leg with the
+//! sole flat and parallel to the pelvis; positive = right-hand rule about the axis in the pelvis
+//! frame at the zero pose (knee flexion > 0).
+
+use crate::error::GaitError;
+
+/// Number of joints of one leg.
+pub const JOINTS_PER_LEG: usize = 6;
+/// Number of leg joints of the robot (left leg then right leg).
+pub const LEG_JOINTS: usize = 2 * JOINTS_PER_LEG;
+
+/// Joint names as used in logs and CSV files (left leg, then right leg).
+pub const JOINT_NAMES: [&str; LEG_JOINTS] = [
+    "l_hip_yaw",
+    "l_hip_roll",
+    "l_hip_pitch",
+    "l_knee",
+    "l_ankle_pitch",
+    "l_ankle_roll",
+    "r_hip_yaw",
+    "r_hip_roll",
+    "r_hip_pitch",
+    "r_knee",
+    "r_ankle_pitch",
+    "r_ankle_roll",
+];
+
+/// Which leg / foot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Side {
+    /// The left leg (+y side).
+    Left,
+    /// The right leg (−y side).
+    Right,
+}
+
+impl Side {
+    /// The other leg.
+    pub fn other(self) -> Side {
+        match self {
+            Side::Left => Side::Right,
+            Side::Right => Side::Left,
+        }
+    }
+    /// +1 for the left leg, −1 for the right leg (the sign of its lateral offset).
+    pub fn sign(self) -> f64 {
+        match self {
+            Side::Left => 1.0,
+            Side::Right => -1.0,
+        }
+    }
+    /// Index of the leg in left-then-right arrays (0 left, 1 right).
+    pub fn index(self) -> usize {
+        match self {
+            Side::Left => 0,
+            Side::Right => 1,
+        }
+    }
+}
+
+/// Lower and upper limit of one joint, rad.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointLimit {
+    /// Lowest allowed angle, rad.
+    pub min: f64,
+    /// Highest allowed angle, rad.
+    pub max: f64,
+}
+
+/// Masses of the robot (seed 000 Table 1), kg, and where the multi-body model puts them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Masses {
+    /// Upper body M_u (head, trunk, arms), kg.
+    pub upper_body: f64,
+    /// Height l_u of the upper-body mass above the pelvis point P, m.
+    pub upper_body_height: f64,
+    /// Thigh m_t, each leg, kg (at the middle of the thigh).
+    pub thigh: f64,
+    /// Calf, each leg, kg (at the middle of the calf).
+    pub calf: f64,
+    /// Sole, each leg, kg (under the ankle, [`Masses::sole_height`] above the ground).
+    pub sole: f64,
+    /// Height of the sole mass above the ground, m.
+    pub sole_height: f64,
+    /// Upper-body rotational inertia J about the pitch axis, kg·m² (τ = J·φ̈, seed 000 eq 1).
+    pub upper_body_inertia: f64,
+}
+
+impl Masses {
+    /// TLIPFM's m_c: calf plus sole of one leg, kg.
+    pub fn calf_and_sole(&self) -> f64 {
+        self.calf + self.sole
+    }
+    /// Mass of one whole leg, kg.
+    pub fn leg(&self) -> f64 {
+        self.thigh + self.calf + self.sole
+    }
+    /// Mass of the whole robot, kg.
+    pub fn total(&self) -> f64 {
+        self.upper_body + 2.0 * self.leg()
+    }
+}
+
+/// Leg and foot geometry, m.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Geometry {
+    /// Lateral offset of each hip joint from the pelvis point P (left +, right −), m.
+    pub hip_offset_y: f64,
+    /// Thigh length, hip to knee, m.
+    pub thigh: f64,
+    /// Calf length, knee to ankle, m.
+    pub calf: f64,
+    /// Height of the ankle joint above the sole, m.
+    pub ankle_height: f64,
+    /// Sole length (x), centred under the ankle, m.
+    pub sole_length: f64,
+    /// Sole width (y), centred under the ankle, m.
+    pub sole_width: f64,
+    /// Force sensor positions (x, y) relative to the ankle's ground projection, foot frame, m.
+    /// Order: front-left, front-right, rear-left, rear-right.
+    pub force_sensors: [[f64; 2]; 4],
+}
+
+impl Geometry {
+    /// Height of the pelvis point above the ground with straight legs, m.
+    pub fn straight_leg_height(&self) -> f64 {
+        self.thigh + self.calf + self.ankle_height
+    }
+}
+
+/// Servo characteristics shared by the 12 leg servos.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServoLimits {
+    /// Highest joint speed the servo can follow, rad/s (no-load speed of an XM430 ≈ 4.8).
+    pub max_speed: f64,
+    /// Encoder ticks per turn.
+    pub ticks_per_turn: u32,
+    /// Tick that stands for 0 rad.
+    pub zero_tick: i32,
+}
+
+/// The robot description: everything the gait, the kinematics and the simulator need.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Robot {
+    /// Masses and their positions.
+    pub masses: Masses,
+    /// Leg and foot geometry.
+    pub geometry: Geometry,
+    /// Joint limits of one leg in joint order; the right leg mirrors roll and yaw (see
+    /// [`Robot::joint_limit`]).
+    pub joint_limits: [JointLimit; JOINTS_PER_LEG],
+    /// Servo limits.
+    pub servo: ServoLimits,
+    /// Gravity g, m/s².
+    pub gravity: f64,
+}
+
+impl Default for Robot {
+    fn default() -> Self {
+        Self::reference()
+    }
+}
+
+impl Robot {
+    /// The reference robot of `shared/reference-robot.md`.
+    pub const fn reference() -> Robot {
+        Robot {
+            masses: Masses {
+                upper_body: 3.05,
+                upper_body_height: 0.09,
+                thigh: 0.20,
+                calf: 0.50,
+                sole: 0.25,
+                sole_height: 0.015,
+                upper_body_inertia: 0.026,
+            },
+            geometry: Geometry {
+                hip_offset_y: 0.045,
+                thigh: 0.100,
+                calf: 0.100,
+                ankle_height: 0.030,
+                sole_length: 0.100,
+                sole_width: 0.060,
+                force_sensors: [[0.040, 0.025], [0.040, -0.025], [-0.040, 0.025], [-0.040, -0.025]],
+            },
+            // Left-leg limits; positive roll moves the left foot outward (+y).
+            joint_limits: [
+                JointLimit { min: -0.9, max: 0.9 },  // hip_yaw
+                JointLimit { min: -0.5, max: 0.7 },  // hip_roll
+                JointLimit { min: -1.9, max: 0.9 },  // hip_pitch
+                JointLimit { min: 0.0, max: 2.5 },   // knee
+                JointLimit { min: -1.3, max: 1.1 },  // ankle_pitch
+                JointLimit { min: -0.7, max: 0.5 },  // ankle_roll
+            ],
+            servo: ServoLimits { max_speed: 4.8, ticks_per_turn: 4096, zero_tick: 2048 },
+            gravity: 9.80665,
+        }
+    }
+
+    /// Limits of joint `j` (0..6, joint order) of leg `side`. The right leg mirrors the left
+    /// leg's yaw and roll limits (a motion outward is positive roll on the left, negative on the
+    /// right).
+    pub fn joint_limit(&self, side: Side, j: usize) -> JointLimit {
+        let l = match self.joint_limits.get(j) {
+            Some(l) => *l,
+            None => return JointLimit { min: 0.0, max: 0.0 },
+        };
+        match (side, j) {
+            (Side::Right, 0) | (Side::Right, 1) | (Side::Right, 5) => {
+                JointLimit { min: -l.max, max: -l.min }
+            }
+            _ => l,
+        }
+    }
+
+    /// Checks that every number is finite and every mass, length and limit makes sense.
+    pub fn validate(&self) -> Result<(), GaitError> {
+        let m = &self.masses;
+        let g = &self.geometry;
+        let all = [
+            m.upper_body,
+            m.upper_body_height,
+            m.thigh,
+            m.calf,
+            m.sole,
+            m.sole_height,
+            m.upper_body_inertia,
+            g.hip_offset_y,
+            g.thigh,
+            g.calf,
+            g.ankle_height,
+            g.sole_length,
+            g.sole_width,
+            self.servo.max_speed,
+            self.gravity,
+        ];
+        if all.iter().any(|v| !v.is_finite()) {
+            return Err(GaitError::NonFinite);
+        }
+        if g.force_sensors.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(GaitError::NonFinite);
+        }
+        if m.upper_body <= 0.0 || m.thigh < 0.0 || m.calf < 0.0 || m.sole < 0.0 {
+            return Err(GaitError::NonPositiveMass);
+        }
+        if m.upper_body_inertia < 0.0 {
+            return Err(GaitError::NonPositiveMass);
+        }
+        if g.thigh <= 0.0 || g.calf <= 0.0 || g.ankle_height < 0.0 || g.sole_length <= 0.0 {
+            return Err(GaitError::NonPositiveLength);
+        }
+        if g.sole_width <= 0.0 || g.hip_offset_y < 0.0 || m.upper_body_height < 0.0 {
+            return Err(GaitError::NonPositiveLength);
+        }
+        if self.gravity <= 0.0 || self.servo.max_speed <= 0.0 || self.servo.ticks_per_turn == 0 {
+            return Err(GaitError::NonPositiveParameter);
+        }
+        if self.joint_limits.iter().any(|l| !(l.min.is_finite() && l.max.is_finite() && l.min < l.max)) {
+            return Err(GaitError::BadJointLimit);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,348 @@
+//! The streaming sampler: every dt it yields the ZMP reference, the CoM position and velocity,
+//! both feet and the support phase, with O(1) work and no allocation per sample.
+//!
+//! Time runs in integer nanoseconds (u64, no drift at any servo rate); each segment is evaluated
+//! in its own local time (u32 ns → seconds), so nothing grows with the length of the walk.
+//! The timeline: lead-in (standing, ZMP between the feet, CoM gets under way), the queued steps
+//! (three ZMP segments each: double support, single support, double support), lead-out
+//! (standing, CoM settles), then done (the final pose is held). Seed 000's t = 0 is the end of
+//! the lead-in ([`Sampler::walk_start_ns`]).
+//!
+//! Per sample: two `exp` calls for the CoM (com.rs C1-C2), the swing-foot profile (swing.rs),
+//! and the τ response (com.rs C6). At each segment boundary: one or two DCM back-steps (C4).
+
+use crate::com::{dcm_back, ComSegment, TauResponse};
+use crate::error::GaitError;
+use crate::plan::{Footstep, Place, Plan};
+use crate::real::Real;
+use crate::robot::Side;
+use crate::swing::{swing_foot, FootSample};
+
+/// Largest |τ| the sampler accepts, N·m; larger measured values are clamped (a kid-size upper
+/// body with J = 0.026 kg·m² reaches this only at φ̈ ≈ 1900 rad/s², i.e. a sensor fault).
+pub const TAU_LIMIT: f64 = 50.0;
+
+/// Which feet carry the robot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SupportPhase {
+    /// Standing on both feet before the first or after the last step.
+    Standing,
+    /// Double support inside a step.
+    Double,
+    /// Single support on the given foot (the other one swings).
+    Single(Side),
+}
+
+/// One sample of the gait.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GaitSample<R> {
+    /// Time since the start of the lead-in, ns.
+    pub time_ns: u64,
+    /// ZMP reference (x, y), m.
+    pub zmp: [R; 2],
+    /// CoM / pelvis point (x, y, z_c), m.
+    pub com: [R; 3],
+    /// CoM velocity (x, y), m/s.
+    pub com_vel: [R; 2],
+    /// Left and right foot (sole point), world frame.
+    pub feet: [FootSample<R>; 2],
+    /// Support phase.
+    pub phase: SupportPhase,
+    /// The support foot in this step (the one that does not swing); `None` while standing.
+    pub support_foot: Option<Side>,
+    /// Number of steps completed.
+    pub steps_done: u32,
+}
+
+impl<R: Real> GaitSample<R> {
+    /// True when every number of the sample is finite.
+    pub fn is_finite(&self) -> bool {
+        self.zmp.iter().chain(self.com.iter()).chain(self.com_vel.iter()).all(|v| v.is_finite())
+            && self.feet.iter().all(|f| f.x.is_finite() && f.y.is_finite() && f.z.is_finite() && f.yaw.is_finite())
+    }
+}
+
+/// Where the sampler is on the timeline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Stage {
+    /// Standing before the first step.
+    LeadIn,
+    /// In the first queued step, phase 0 (double), 1 (single) or 2 (double).
+    Step(u8),
+    /// Standing after the last step.
+    LeadOut,
+    /// The walk is over; the final pose is held.
+    Done,
+}
+
+/// The streaming gait sampler over a plan with room for `N` steps.
+#[derive(Clone, Debug)]
+pub struct Sampler<R, const N: usize> {
+    plan: Plan<R, N>,
+    stage: Stage,
+    seg: ComSegment<R>,
+    seg_start_ns: u64,
+    seg_len_ns: u64,
+    now_ns: u64,
+    dt_ns: u64,
+    decay_dt: R,
+    tau: TauResponse<R>,
+    feet: [Place<R>; 2],
+    steps_done: u32,
+    walk_start_ns: u64,
+}
+
+/// Seconds to nanoseconds, rounded to whole microseconds: an f32 duration ≤ 4 s is exact to
+/// ±0.25 µs, so f32 and f64 plans switch phases on the same sample.
+fn secs_to_ns<R: Real>(s: R) -> u64 {
+    let v = s.to_f64() * 1e6;
+    if v > 0.0 {
+        libm::round(v) as u64 * 1000
+    } else {
+        0
+    }
+}
+
+impl<R: Real, const N: usize> Sampler<R, N> {
+    /// A sampler over `plan` at the servo period `dt` (1/1000 s ≤ dt ≤ 1/50 s, and no phase of
+    /// the plan shorter than dt).
+    pub fn new(plan: Plan<R, N>, dt: f64) -> Result<Self, GaitError> {
+        if !dt.is_finite() {
+            return Err(GaitError::NonFinite);
+        }
+        if !(1.0 / 1000.0 - 1e-12..=1.0 / 50.0 + 1e-12).contains(&dt) {
+            return Err(GaitError::BadSampleTime);
+        }
+        let p = *plan.params();
+        let t = p.timing;
+        let shortest = t.t1.min(t.t2 - t.t1).min(t.period - t.t2).min(p.lead_in).min(p.lead_out);
+        if shortest.to_f64() < dt {
+            return Err(GaitError::BadSampleTime);
+        }
+        let omega = p.model.omega;
+        let start = plan.start_zmp();
+        let mut s = Sampler {
+            feet: plan.start_feet(),
+            plan,
+            stage: Stage::LeadIn,
+            seg: ComSegment::default(),
+            seg_start_ns: 0,
+            seg_len_ns: 0,
+            now_ns: 0,
+            dt_ns: libm::round(dt * 1e9) as u64,
+            decay_dt: R::of(libm::exp(-omega.to_f64() * dt)),
+            tau: TauResponse::default(),
+            steps_done: 0,
+            walk_start_ns: secs_to_ns(p.lead_in),
+        };
+        s.enter(Stage::LeadIn, start);
+        Ok(s)
+    }
+
+    /// The plan (its queue shrinks as steps are walked).
+    pub fn plan(&self) -> &Plan<R, N> {
+        &self.plan
+    }
+    /// Where the sampler is on the timeline.
+    pub fn stage(&self) -> Stage {
+        self.stage
+    }
+    /// The time of the next sample, ns.
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns
+    }
+    /// The servo period, ns.
+    pub fn dt_ns(&self) -> u64 {
+        self.dt_ns
+    }
+    /// The end of the lead-in (seed 000's t = 0), ns.
+    pub fn walk_start_ns(&self) -> u64 {
+        self.walk_start_ns
+    }
+    /// True once the lead-out is over.
+    pub fn is_done(&self) -> bool {
+        self.stage == Stage::Done
+    }
+    /// Start of the current segment, ns.
+    pub fn segment_start_ns(&self) -> u64 {
+        self.seg_start_ns
+    }
+    /// The current CoM segment (for tests and diagnostics).
+    pub fn segment(&self) -> &ComSegment<R> {
+        &self.seg
+    }
+
+    /// Appends a footstep while walking. Steps appended less than about 5·T_TF before they
+    /// start change the CoM velocity slightly (the DCM sees its future late); append at least
+    /// one step ahead. Refused once the lead-out has begun.
+    pub fn push_step(&mut self, step: Footstep<R>) -> Result<(), GaitError> {
+        if matches!(self.stage, Stage::LeadOut | Stage::Done) {
+            return Err(GaitError::WalkEnded);
+        }
+        self.plan.push(step)?;
+        // Re-anchor: the rest of the current segment becomes a segment of its own, starting
+        // from the present CoM, with the DCM recomputed for the longer plan.
+        let s = self.local_time();
+        let (x, _) = self.seg.eval(self.plan.params().model.omega, s);
+        let p_now = self.seg.zmp(s);
+        let elapsed = self.now_ns.saturating_sub(self.seg_start_ns);
+        self.seg_start_ns = self.now_ns;
+        self.seg_len_ns = self.seg_len_ns.saturating_sub(elapsed);
+        let (p1, xi1) = self.segment_end(self.stage);
+        let d = R::from_u32(self.seg_len_ns as u32) * R::of(1e-9);
+        self.seg = ComSegment::new(self.plan.params().model.omega, p_now, p1, d, xi1, x);
+        Ok(())
+    }
+
+    fn local_time(&self) -> R {
+        let d = self.now_ns.saturating_sub(self.seg_start_ns).min(self.seg_len_ns);
+        R::from_u32(d as u32) * R::of(1e-9)
+    }
+
+    /// Durations of the three phases of a step, s.
+    fn phase_durations(&self) -> [R; 3] {
+        let t = self.plan.params().timing;
+        [t.t1, t.t2 - t.t1, t.period - t.t2]
+    }
+
+    /// ZMP and DCM at the end of the segment of `stage`.
+    fn segment_end(&self, stage: Stage) -> ([R; 2], [R; 2]) {
+        let end = self.plan.end_zmp();
+        match stage {
+            Stage::LeadIn => (self.plan.start_zmp(), self.plan.dcm_at_first_step()),
+            Stage::Step(ph) => match (self.plan.knots(0), self.plan.step(0)) {
+                (Some(k), Some(e)) => {
+                    let durs = self.phase_durations();
+                    let w = self.plan.params().model.omega;
+                    let mut xi = e.dcm_end;
+                    let mut j = 2usize;
+                    while j > ph as usize {
+                        xi = dcm_back(w, k[j], k[j + 1], durs[j], xi);
+                        j -= 1;
+                    }
+                    (k[ph as usize + 1], xi)
+                }
+                _ => (end, end),
+            },
+            Stage::LeadOut | Stage::Done => (end, end),
+        }
+    }
+
+    /// Starts the segment of `stage` at the current segment end, CoM at `x0`.
+    fn enter(&mut self, stage: Stage, x0: [R; 2]) {
+        let p = *self.plan.params();
+        let (p0, dur) = match stage {
+            Stage::LeadIn => (self.plan.start_zmp(), p.lead_in),
+            Stage::Step(ph) => match self.plan.knots(0) {
+                Some(k) => (k[ph as usize], self.phase_durations()[ph as usize]),
+                None => (self.plan.end_zmp(), p.lead_out),
+            },
+            Stage::LeadOut | Stage::Done => (self.plan.end_zmp(), p.lead_out),
+        };
+        let (p1, xi1) = self.segment_end(stage);
+        self.seg_len_ns = secs_to_ns(dur);
+        let d = R::from_u32(self.seg_len_ns as u32) * R::of(1e-9);
+        self.seg = ComSegment::new(p.model.omega, p0, p1, d, xi1, x0);
+        self.stage = stage;
+    }
+
+    /// Moves to the next segment when the current one is over.
+    fn advance_segment(&mut self) {
+        let omega = self.plan.params().model.omega;
+        let x_end = self.seg.end_position(omega);
+        let next = match self.stage {
+            Stage::LeadIn => {
+                if self.plan.is_empty() {
+                    Stage::LeadOut
+                } else {
+                    Stage::Step(0)
+                }
+            }
+            Stage::Step(ph) if ph < 2 => Stage::Step(ph + 1),
+            Stage::Step(_) => {
+                if let Some(e) = self.plan.pop_front() {
+                    if let Some(f) = self.feet.get_mut(e.step.side.index()) {
+                        *f = e.step.place;
+                    }
+                    self.steps_done = self.steps_done.saturating_add(1);
+                }
+                if self.plan.is_empty() {
+                    Stage::LeadOut
+                } else {
+                    Stage::Step(0)
+                }
+            }
+            Stage::LeadOut | Stage::Done => Stage::Done,
+        };
+        self.seg_start_ns = self.seg_start_ns.saturating_add(self.seg_len_ns);
+        if next == Stage::Done {
+            // Hold the final segment frozen at its end.
+            self.stage = Stage::Done;
+            self.seg_start_ns = self.seg_start_ns.saturating_sub(self.seg_len_ns);
+            return;
+        }
+        self.enter(next, x_end);
+    }
+
+    /// The sample at the current time, with the measured torque `tau` (N·m, τ = J·φ̈) held
+    /// until the next sample; then advances by dt. A non-finite τ counts as 0.
+    pub fn next(&mut self, tau: R) -> GaitSample<R> {
+        for _ in 0..4 {
+            if self.stage == Stage::Done || self.now_ns < self.seg_start_ns.saturating_add(self.seg_len_ns) {
+                break;
+            }
+            self.advance_segment();
+        }
+        let p = *self.plan.params();
+        let omega = p.model.omega;
+        let lim = R::of(TAU_LIMIT);
+        let tau = if tau.is_finite() { tau.clamp_to(-lim, lim) } else { R::zero() };
+        self.tau.hold(tau, p.model.tau_to_offset);
+        let s = self.local_time();
+        let (x, v) = self.seg.eval(omega, s);
+        let zmp = self.seg.zmp(s);
+        let (phase, support, feet) = self.feet_now(s);
+        let sample = GaitSample {
+            time_ns: self.now_ns,
+            zmp,
+            com: [x[0] + self.tau.offset, x[1], p.model.z_c],
+            com_vel: [v[0] + self.tau.velocity(omega), v[1]],
+            feet,
+            phase,
+            support_foot: support,
+            steps_done: self.steps_done,
+        };
+        self.tau.advance(self.decay_dt);
+        self.now_ns = self.now_ns.saturating_add(self.dt_ns);
+        sample
+    }
+
+    fn feet_now(&self, s: R) -> (SupportPhase, Option<Side>, [FootSample<R>; 2]) {
+        let mut feet = [FootSample::on_ground(&self.feet[0]), FootSample::on_ground(&self.feet[1])];
+        match (self.stage, self.plan.step(0)) {
+            (Stage::Step(ph), Some(e)) => {
+                let side = e.step.side;
+                let support = side.other();
+                let phase = if ph == 1 {
+                    let u = if self.seg.duration > R::zero() { s / self.seg.duration } else { R::one() };
+                    let f = swing_foot(&self.plan.params().swing, &e.from, &e.step.place, u, R::of(side.sign()));
+                    if let Some(slot) = feet.get_mut(side.index()) {
+                        *slot = f;
+                    }
+                    SupportPhase::Single(support)
+                } else {
+                    if ph == 2 {
+                        if let Some(slot) = feet.get_mut(side.index()) {
+                            *slot = FootSample::on_ground(&e.step.place);
+                        }
+                    }
+                    SupportPhase::Double
+                };
+                (phase, Some(support), feet)
+            }
+            _ => (SupportPhase::Standing, None, feet),
+        }
+    }
+}
