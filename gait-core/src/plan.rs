@@ -463,7 +463,7 @@ impl ForwardWalk {
 
     /// Support-foot location p^c_n of step n (eqs 6-7).
     pub fn support_location(&self, n: usize) -> (f64, f64) {
-        let sign = if n % 2 == 0 { 1.0 } else { -1.0 };
+        let sign = if n.is_multiple_of(2) { 1.0 } else { -1.0 };
         (n as f64 * self.step_length, f64::from(self.s_first) * self.step_width * sign)
     }
 
@@ -483,7 +483,7 @@ impl ForwardWalk {
         // S_first = −1: the right foot supports step 0, so the left foot swings first.
         let first_swing = if self.s_first < 0 { Side::Left } else { Side::Right };
         for n in 0..self.steps {
-            let side = if n % 2 == 0 { first_swing } else { first_swing.other() };
+            let side = if n.is_multiple_of(2) { first_swing } else { first_swing.other() };
             let x = if n + 1 == self.steps { n as f64 } else { (n + 1) as f64 } * self.step_length;
             let y = side.sign() * w;
             plan.push(Footstep { side, place: Place::new(x, y, 0.0) })?;

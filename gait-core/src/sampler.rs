@@ -286,15 +286,51 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         self.enter(next, x_end);
     }
 
-    /// The sample at the current time, with the measured torque `tau` (N·m, τ = J·φ̈) held
-    /// until the next sample; then advances by dt. A non-finite τ counts as 0.
-    pub fn next(&mut self, tau: R) -> GaitSample<R> {
+    /// Moves to the segment that contains the current time; true when the segment changed.
+    pub fn sync(&mut self) -> bool {
+        let mut changed = false;
         for _ in 0..4 {
             if self.stage == Stage::Done || self.now_ns < self.seg_start_ns.saturating_add(self.seg_len_ns) {
                 break;
             }
             self.advance_segment();
+            changed = true;
         }
+        changed
+    }
+
+    /// Local time in the current segment, ns (clamped to the segment).
+    pub fn local_ns(&self) -> u32 {
+        self.now_ns.saturating_sub(self.seg_start_ns).min(self.seg_len_ns) as u32
+    }
+
+    /// Moves the clock on by one servo period.
+    pub fn tick(&mut self) {
+        self.now_ns = self.now_ns.saturating_add(self.dt_ns);
+    }
+
+    /// Steps completed so far.
+    pub fn steps_done(&self) -> u32 {
+        self.steps_done
+    }
+
+    /// Feet on the ground (left, right) at the last step change.
+    pub fn stance_feet(&self) -> [Place<R>; 2] {
+        self.feet
+    }
+
+    /// The swing of the current step: (swing foot, lift-off place, touch-down place, phase).
+    pub fn current_step(&self) -> Option<(Side, Place<R>, Place<R>, u8)> {
+        match (self.stage, self.plan.step(0)) {
+            (Stage::Step(ph), Some(e)) => Some((e.step.side, e.from, e.step.place, ph)),
+            _ => None,
+        }
+    }
+
+    /// The sample at the current time, with the measured torque `tau` (N·m, τ = J·φ̈) held
+    /// until the next sample; then advances by dt. A non-finite τ counts as 0.
+    pub fn next(&mut self, tau: R) -> GaitSample<R> {
+        self.sync();
         let p = *self.plan.params();
         let omega = p.model.omega;
         let lim = R::of(TAU_LIMIT);
@@ -315,8 +351,17 @@ impl<R: Real, const N: usize> Sampler<R, N> {
             steps_done: self.steps_done,
         };
         self.tau.advance(self.decay_dt);
-        self.now_ns = self.now_ns.saturating_add(self.dt_ns);
+        self.tick();
         sample
+    }
+
+    /// Support phase and support foot now.
+    pub fn phase(&self) -> (SupportPhase, Option<Side>) {
+        match self.current_step() {
+            Some((side, _, _, 1)) => (SupportPhase::Single(side.other()), Some(side.other())),
+            Some((side, ..)) => (SupportPhase::Double, Some(side.other())),
+            None => (SupportPhase::Standing, None),
+        }
     }
 
     fn feet_now(&self, s: R) -> (SupportPhase, Option<Side>, [FootSample<R>; 2]) {

@@ -76,7 +76,8 @@ pub fn wrap_pi<R: Real>(a: R) -> R {
     let two_pi = R::of(2.0 * PI);
     let mut x = a;
     // Bounded loop: plans never hold angles far outside (−2π, 2π]; larger inputs are clamped.
-    if !(x.abs() < R::of(64.0)) {
+    let in_range = x.abs() < R::of(64.0);
+    if !in_range {
         return R::zero();
     }
     for _ in 0..16 {

@@ -469,3 +469,110 @@ proptest! {
         prop_assert!(samples.iter().all(|s| s.is_finite()));
     }
 }
+
+#[test]
+fn fixed_point_agrees_with_f64_over_the_whole_walk() {
+    use gait_core::fixed_point::FixedSampler;
+    for kind in ModelKind::ALL {
+        let robot = Robot::reference();
+        let walk = ForwardWalk::table2();
+        let model = Model::<f32>::new(kind, &robot, walk.z_c).unwrap();
+        let plan = walk.plan::<f32, CAP>(&robot, walk.params(model)).unwrap();
+        let mut fxs = FixedSampler::new(plan, 0.005).unwrap();
+        let mut reference = table2_sampler::<f64>(kind, 0.005);
+        let (mut worst, mut worst_v): (f64, f64) = (0.0, 0.0);
+        let mut n = 0;
+        while !reference.is_done() {
+            let a = fxs.next(0);
+            let b = reference.next(0.0);
+            assert_eq!(a.time_ns, b.time_ns);
+            assert_eq!(a.phase, b.phase);
+            for i in 0..2 {
+                worst = worst.max((a.com[i].to_num::<f64>() - b.com[i]).abs());
+                worst = worst.max((a.zmp[i].to_num::<f64>() - b.zmp[i]).abs());
+                worst_v = worst_v.max((a.com_vel[i].to_num::<f64>() - b.com_vel[i]).abs());
+                worst = worst.max((a.feet[i].x.to_num::<f64>() - b.feet[i].x).abs());
+                worst = worst.max((a.feet[i].y.to_num::<f64>() - b.feet[i].y).abs());
+                worst = worst.max((a.feet[i].z.to_num::<f64>() - b.feet[i].z).abs());
+            }
+            n += 1;
+        }
+        println!("{kind:?}: fixed point vs f64 over {n} samples: {worst:.3e} m, velocity {worst_v:.3e} m/s");
+        assert!(worst < 5e-4, "{kind:?}: fixed point off by {worst} m");
+        assert!(worst_v < 5e-3, "{kind:?}: fixed point velocity off by {worst_v} m/s");
+    }
+}
+
+#[test]
+fn fixed_point_math_primitives() {
+    use gait_core::fixed_point::{exp_neg, sin_cos, Fx};
+    for i in 0..2000 {
+        let x = i as f64 * 0.01;
+        let e = exp_neg(Fx::from_num(x)) as f64 / (1u64 << 30) as f64;
+        let xr = Fx::from_num(x).to_num::<f64>();
+        assert!((e - (-xr).exp()).abs() < 3e-8, "exp(-{x}) = {e}");
+    }
+    for i in -700..700 {
+        let x = i as f64 * 0.01;
+        let (s, c) = sin_cos(Fx::from_num(x));
+        let xr = Fx::from_num(x).to_num::<f64>();
+        let k = (1u64 << 30) as f64;
+        assert!((s as f64 / k - xr.sin()).abs() < 4e-7 && (c as f64 / k - xr.cos()).abs() < 4e-7, "sincos {x}");
+    }
+}
+
+/// The ZMP reference never leaves the support polygon: the support sole in single support, the
+/// hull of both soles in double support and while standing.
+fn zmp_margin_min(samples: &[GaitSample<f64>], robot: &Robot) -> f64 {
+    use gait_core::support::SupportPolygon;
+    let mut worst = f64::INFINITY;
+    for s in samples {
+        let place = |i: usize| Place::new(s.feet[i].x, s.feet[i].y, s.feet[i].yaw);
+        let poly = match s.phase {
+            SupportPhase::Single(side) => SupportPolygon::single(&place(side.index()), robot).unwrap(),
+            _ => SupportPolygon::double(&place(0), &place(1), robot).unwrap(),
+        };
+        worst = worst.min(poly.margin([s.zmp[0], s.zmp[1]]));
+    }
+    worst
+}
+
+#[test]
+fn table2_zmp_reference_stays_inside_the_support_polygon() {
+    let robot = Robot::reference();
+    for kind in ModelKind::ALL {
+        let samples = run(table2_sampler::<f64>(kind, 0.005));
+        let m = zmp_margin_min(&samples, &robot);
+        // In single support the ZMP is at most a = 4 mm off the ankle along the 10 cm sole and
+        // on the sole's centre line: margin = min(0.05 − 0.004, 0.03) = 0.03 m.
+        assert!((m - 0.03).abs() < 1e-9, "{kind:?}: margin {m}");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+    #[test]
+    fn random_walks_keep_the_zmp_on_the_support_polygon(
+        steps in prop::collection::vec((-0.04f64..0.06, 0.08f64..0.11, -0.25f64..0.25), 1..8),
+        continuous in any::<bool>(),
+    ) {
+        let robot = Robot::reference();
+        let mut pp = params(0.15, 0.49, 0.64);
+        if continuous {
+            pp.zmp = ZmpShape::Continuous { b: 0.01 };
+        }
+        let mut plan = Plan::<f64, CAP>::new(&robot, pp, Place::new(0.0, 0.045, 0.0), Place::new(0.0, -0.045, 0.0)).unwrap();
+        let mut side = Side::Left;
+        for (fwd, width, turn) in steps {
+            let sup = plan.end_feet()[side.other().index()];
+            let yaw = sup.yaw + turn;
+            let (s, c) = yaw.sin_cos();
+            let lat = side.sign() * width;
+            let to = Place::new(sup.x + c * fwd - s * lat, sup.y + s * fwd + c * lat, yaw);
+            if plan.push(Footstep { side, place: to }).is_ok() { side = side.other(); }
+        }
+        let samples = run(Sampler::new(plan, 0.005).unwrap());
+        let m = zmp_margin_min(&samples, &robot);
+        prop_assert!(m >= 0.0, "ZMP left the support polygon by {}", -m);
+    }
+}

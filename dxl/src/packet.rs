@@ -1,0 +1,544 @@
+//! Protocol 2.0 packet framing: encoder, byte stuffing and a streaming decoder.
+//!
+//! Wire format of every packet (instruction and status alike):
+//!
+//! ```text
+//! FF FF FD 00 | ID | LEN_L LEN_H | INST | PARAM ... | CRC_L CRC_H
+//! ```
+//!
+//! * `LEN` counts `INST`, the parameters **after stuffing** and the two CRC bytes.
+//! * The CRC ([`crate::crc`]) covers everything from the first header byte through the last
+//!   stuffed parameter.
+//! * Byte stuffing: inside the `INST`+`PARAM` region every `FF FF FD` is followed by an
+//!   extra `FD`, so the header pattern `FF FF FD 00` can never appear inside a packet. The
+//!   decoder removes the extra byte again.
+//!
+//! [`PacketWriter`] encodes into a caller-supplied `&mut [u8]`; [`Decoder`] is fed one byte
+//! at a time, skips garbage, resynchronises on the next header and reports typed errors.
+//!
+//! Resynchronisation: while looking for a packet the decoder keeps the longest suffix of the
+//! input that can still start one, so a false header with an impossible ID or LEN never
+//! hides a real packet behind it; a header appearing inside a (stuffed) packet body aborts
+//! that packet ([`DecodeError::Interrupted`]) and decoding restarts from it; after a CRC
+//! failure decoding resumes from any header prefix seen in the rejected frame's last bytes.
+//! Hence a valid packet after arbitrary garbage is always found, unless the garbage and the
+//! packet's first bytes happen to form a frame with a valid CRC (a 2⁻¹⁶ coincidence the
+//! protocol cannot rule out). Every accepted packet is a CRC-valid frame.
+
+use crate::crc;
+
+/// The four header bytes that start every packet.
+pub const HEADER: [u8; 4] = [0xFF, 0xFF, 0xFD, 0x00];
+/// Broadcast ID: every device executes the instruction (and only some reply).
+pub const BROADCAST_ID: u8 = 0xFE;
+/// Largest ID a single device may have.
+pub const MAX_DEVICE_ID: u8 = 0xFC;
+/// Bytes before the instruction: header, ID, LEN.
+pub const PREAMBLE_LEN: usize = 7;
+/// Packet overhead: preamble, instruction and CRC.
+pub const OVERHEAD: usize = PREAMBLE_LEN + 1 + 2;
+
+/// Encoding failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EncodeError {
+    /// The output buffer cannot hold the packet.
+    BufferTooSmall,
+    /// The packet would exceed the 16-bit LEN field.
+    TooLong,
+    /// An argument is inconsistent (e.g. sync-write data of the wrong length, bad ID).
+    InvalidArgument,
+}
+
+/// Writes one packet into a byte buffer, stuffing the instruction/parameter region.
+#[derive(Debug)]
+pub struct PacketWriter<'a> {
+    buf: &'a mut [u8],
+    pos: usize,
+    stuffing: bool,
+    /// The last two bytes written in the stuffed region.
+    hist: [u8; 2],
+}
+
+impl<'a> PacketWriter<'a> {
+    /// Starts a packet (header, ID, LEN placeholder, instruction) with byte stuffing.
+    pub fn new(buf: &'a mut [u8], id: u8, instruction: u8) -> Result<Self, EncodeError> {
+        Self::with_stuffing(buf, id, instruction, true)
+    }
+
+    /// Starts a packet, choosing whether the parameter region is byte-stuffed.
+    ///
+    /// Only the FAST SYNC READ combined reply is sent unstuffed.
+    pub fn with_stuffing(
+        buf: &'a mut [u8],
+        id: u8,
+        instruction: u8,
+        stuffing: bool,
+    ) -> Result<Self, EncodeError> {
+        let mut w = PacketWriter {
+            buf,
+            pos: 0,
+            stuffing,
+            hist: [0; 2],
+        };
+        for b in HEADER.into_iter().chain([id, 0, 0]) {
+            w.put(b)?;
+        }
+        w.push(instruction)?;
+        Ok(w)
+    }
+
+    fn put(&mut self, b: u8) -> Result<(), EncodeError> {
+        let slot = self
+            .buf
+            .get_mut(self.pos)
+            .ok_or(EncodeError::BufferTooSmall)?;
+        *slot = b;
+        self.pos += 1;
+        Ok(())
+    }
+
+    /// Appends one byte of the instruction/parameter region (stuffing as needed).
+    pub fn push(&mut self, b: u8) -> Result<(), EncodeError> {
+        self.put(b)?;
+        if self.stuffing && self.hist == [0xFF, 0xFF] && b == 0xFD {
+            self.put(0xFD)?;
+            self.hist = [0xFD, 0xFD];
+        } else {
+            self.hist = [self.hist[1], b];
+        }
+        Ok(())
+    }
+
+    /// Appends parameter bytes.
+    pub fn extend(&mut self, data: &[u8]) -> Result<(), EncodeError> {
+        data.iter().try_for_each(|&b| self.push(b))
+    }
+
+    /// Appends a little-endian `u16` parameter.
+    pub fn push_u16(&mut self, v: u16) -> Result<(), EncodeError> {
+        self.extend(&v.to_le_bytes())
+    }
+
+    /// Writes a LEN value now (normally [`finish`](Self::finish) fills it in).
+    ///
+    /// Needed when a running CRC must cover LEN before the packet ends (FAST SYNC READ).
+    pub fn preset_len(&mut self, len: u16) {
+        let [lo, hi] = len.to_le_bytes();
+        if let Some(s) = self.buf.get_mut(5) {
+            *s = lo;
+        }
+        if let Some(s) = self.buf.get_mut(6) {
+            *s = hi;
+        }
+    }
+
+    /// Bytes written so far (as they will appear on the wire).
+    pub fn written(&self) -> &[u8] {
+        self.buf.get(..self.pos).unwrap_or(&[])
+    }
+
+    /// Fills in LEN and the CRC; returns the total packet length.
+    pub fn finish(mut self) -> Result<usize, EncodeError> {
+        let len = self
+            .pos
+            .checked_sub(PREAMBLE_LEN - 2)
+            .and_then(|l| u16::try_from(l).ok())
+            .ok_or(EncodeError::TooLong)?;
+        self.preset_len(len);
+        let crc = crc::crc16(self.written());
+        let [lo, hi] = crc.to_le_bytes();
+        self.put(lo)?;
+        self.put(hi)?;
+        Ok(self.pos)
+    }
+}
+
+/// Encodes a complete packet with the given parameters; returns its length.
+pub fn encode(
+    buf: &mut [u8],
+    id: u8,
+    instruction: u8,
+    params: &[u8],
+) -> Result<usize, EncodeError> {
+    let mut w = PacketWriter::new(buf, id, instruction)?;
+    w.extend(params)?;
+    w.finish()
+}
+
+/// A decoded packet; `params` are already unstuffed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Packet<'a> {
+    /// Device ID (or [`BROADCAST_ID`]).
+    pub id: u8,
+    /// Instruction byte (`0x55` for status packets).
+    pub instruction: u8,
+    /// Parameters without stuffing and without CRC.
+    pub params: &'a [u8],
+}
+
+/// Decoding failure reported by [`Decoder::push`]; the decoder is ready for the next byte.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DecodeError {
+    /// The received CRC does not match; `id` is the (untrusted) ID field.
+    Crc {
+        /// ID field of the rejected packet.
+        id: u8,
+    },
+    /// The ID field is 0xFD or 0xFF (reserved / impossible).
+    BadId,
+    /// LEN is smaller than 3 (instruction + CRC).
+    LenTooSmall,
+    /// LEN announces more parameter bytes than the decoder buffer holds.
+    LenTooLarge,
+    /// A new header appeared inside a packet body; decoding restarted from it.
+    Interrupted,
+    /// The input ended before a complete packet (one-shot [`decode`] only).
+    Incomplete,
+}
+
+/// Receive counters of a [`Decoder`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DecoderStats {
+    /// Packets accepted.
+    pub packets: u32,
+    /// Packets rejected for a bad CRC.
+    pub crc_errors: u32,
+    /// Headers rejected for a bad ID or LEN, or interrupted by a new header.
+    pub framing_errors: u32,
+    /// Bytes skipped while searching for a header.
+    pub skipped_bytes: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    Preamble,
+    Body,
+    CrcLow,
+    CrcHigh,
+}
+
+/// Buffer-independent decoder state (shared by [`Decoder`] and [`decode`]).
+#[derive(Debug, Clone)]
+struct Core {
+    state: State,
+    pre: [u8; PREAMBLE_LEN],
+    pre_len: usize,
+    id: u8,
+    instruction: u8,
+    have_instruction: bool,
+    /// Raw region bytes (instruction + stuffed params) still expected.
+    remaining: usize,
+    params_len: usize,
+    crc: u16,
+    crc_low: u8,
+    /// Last three raw region bytes, for unstuffing.
+    hist: [u8; 3],
+    /// Progress of a header match inside the body and CRC (for resynchronisation).
+    nested: usize,
+    stuffing: bool,
+    complete: bool,
+    stats: DecoderStats,
+}
+
+/// Returns whether `p` can still be the beginning of a valid packet preamble.
+fn check_preamble(p: &[u8], capacity: usize) -> Result<(), Option<DecodeError>> {
+    for (i, &b) in p.iter().enumerate() {
+        match i {
+            0..=3 if HEADER.get(i) != Some(&b) => return Err(None),
+            4 if b == 0xFD || b == 0xFF => return Err(Some(DecodeError::BadId)),
+            6 => {
+                let len = usize::from(u16::from_le_bytes([p.get(5).copied().unwrap_or(0), b]));
+                if len < 3 {
+                    return Err(Some(DecodeError::LenTooSmall));
+                }
+                if len - 3 > capacity {
+                    return Err(Some(DecodeError::LenTooLarge));
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// One step of matching [`HEADER`] in a byte stream: `state` = header bytes matched so far.
+fn header_step(state: usize, byte: u8) -> usize {
+    match (state, byte) {
+        (1 | 2, 0xFF) => 2,
+        (_, 0xFF) => 1,
+        (2, 0xFD) => 3,
+        (3, 0x00) => 4,
+        _ => 0,
+    }
+}
+
+impl Core {
+    const fn new() -> Self {
+        Core {
+            state: State::Preamble,
+            pre: [0; PREAMBLE_LEN],
+            pre_len: 0,
+            id: 0,
+            instruction: 0,
+            have_instruction: false,
+            remaining: 0,
+            params_len: 0,
+            crc: 0,
+            crc_low: 0,
+            hist: [0; 3],
+            nested: 0,
+            stuffing: true,
+            complete: false,
+            stats: DecoderStats {
+                packets: 0,
+                crc_errors: 0,
+                framing_errors: 0,
+                skipped_bytes: 0,
+            },
+        }
+    }
+
+    fn reset(&mut self) {
+        self.state = State::Preamble;
+        self.pre_len = 0;
+        self.complete = false;
+    }
+
+    fn packet<'b>(&self, buf: &'b [u8]) -> Option<Packet<'b>> {
+        if !self.complete {
+            return None;
+        }
+        Some(Packet {
+            id: self.id,
+            instruction: self.instruction,
+            params: buf.get(..self.params_len)?,
+        })
+    }
+
+    fn push(&mut self, buf: &mut [u8], byte: u8) -> Option<Result<(), DecodeError>> {
+        self.complete = false;
+        match self.state {
+            State::Preamble => self.push_preamble(buf.len(), byte),
+            State::Body => self.push_body(buf, byte),
+            State::CrcLow => {
+                self.nested = header_step(self.nested, byte);
+                self.crc_low = byte;
+                self.state = State::CrcHigh;
+                None
+            }
+            State::CrcHigh => {
+                self.nested = header_step(self.nested, byte);
+                self.reset();
+                if u16::from_le_bytes([self.crc_low, byte]) == self.crc {
+                    self.complete = true;
+                    self.stats.packets = self.stats.packets.wrapping_add(1);
+                    Some(Ok(()))
+                } else {
+                    self.stats.crc_errors = self.stats.crc_errors.wrapping_add(1);
+                    // Resume on a header (prefix) that began inside the rejected frame.
+                    self.pre = [0xFF, 0xFF, 0xFD, 0x00, 0, 0, 0];
+                    self.pre_len = self.nested;
+                    Some(Err(DecodeError::Crc { id: self.id }))
+                }
+            }
+        }
+    }
+
+    fn push_preamble(&mut self, capacity: usize, byte: u8) -> Option<Result<(), DecodeError>> {
+        if let Some(slot) = self.pre.get_mut(self.pre_len) {
+            *slot = byte;
+            self.pre_len += 1;
+        }
+        let mut first_error = None;
+        // Keep the longest suffix of the received bytes that can still start a packet.
+        while self.pre_len > 0 {
+            let p = self.pre.get(..self.pre_len).unwrap_or(&[]);
+            match check_preamble(p, capacity) {
+                Ok(()) => break,
+                Err(e) => {
+                    if let Some(e) = e {
+                        self.stats.framing_errors = self.stats.framing_errors.wrapping_add(1);
+                        first_error = first_error.or(Some(e));
+                    } else {
+                        self.stats.skipped_bytes = self.stats.skipped_bytes.wrapping_add(1);
+                    }
+                    self.pre.copy_within(1.., 0);
+                    self.pre_len -= 1;
+                }
+            }
+        }
+        if self.pre_len == PREAMBLE_LEN {
+            let [.., id, lo, hi] = self.pre;
+            self.id = id;
+            // `check_preamble` guaranteed LEN >= 3.
+            self.remaining = usize::from(u16::from_le_bytes([lo, hi])).saturating_sub(2);
+            self.crc = crc::crc16(&self.pre);
+            self.params_len = 0;
+            self.have_instruction = false;
+            self.hist = [0; 3];
+            self.nested = 0;
+            self.state = State::Body;
+        }
+        first_error.map(Err)
+    }
+
+    fn push_body(&mut self, buf: &mut [u8], byte: u8) -> Option<Result<(), DecodeError>> {
+        self.crc = crc::update_byte(self.crc, byte);
+        self.remaining = self.remaining.saturating_sub(1);
+        if self.remaining == 0 {
+            self.state = State::CrcLow;
+        }
+        self.nested = header_step(self.nested, byte);
+        if self.stuffing {
+            // A correctly stuffed region never contains FF FF FD 00: it is a new packet.
+            if self.nested == 4 {
+                self.stats.framing_errors = self.stats.framing_errors.wrapping_add(1);
+                self.state = State::Preamble;
+                self.pre = [0xFF, 0xFF, 0xFD, 0x00, 0, 0, 0];
+                self.pre_len = 4;
+                return Some(Err(DecodeError::Interrupted));
+            }
+            if self.hist == [0xFF, 0xFF, 0xFD] && byte == 0xFD {
+                self.hist = [0; 3];
+                return None;
+            }
+            self.hist = [self.hist[1], self.hist[2], byte];
+        }
+        if !self.have_instruction {
+            self.instruction = byte;
+            self.have_instruction = true;
+        } else if let Some(slot) = buf.get_mut(self.params_len) {
+            *slot = byte;
+            self.params_len += 1;
+        }
+        // (A full buffer cannot happen: the preamble check bounds LEN by the capacity.)
+        None
+    }
+}
+
+/// Streaming packet decoder holding at most `N` parameter bytes.
+///
+/// Feed it bytes with [`push`](Self::push). `N` bounds the *raw* (stuffed) parameter length
+/// (`LEN - 3`); longer packets are rejected with [`DecodeError::LenTooLarge`] as soon as
+/// their LEN field arrives.
+#[derive(Debug, Clone)]
+pub struct Decoder<const N: usize> {
+    core: Core,
+    buf: [u8; N],
+}
+
+impl<const N: usize> Default for Decoder<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> Decoder<N> {
+    /// Creates an empty decoder.
+    pub const fn new() -> Self {
+        Decoder {
+            core: Core::new(),
+            buf: [0; N],
+        }
+    }
+
+    /// Feeds one byte; returns a packet or an error when one is complete.
+    pub fn push(&mut self, byte: u8) -> Option<Result<Packet<'_>, DecodeError>> {
+        match self.core.push(&mut self.buf, byte)? {
+            Ok(()) => self.core.packet(&self.buf).map(Ok),
+            Err(e) => Some(Err(e)),
+        }
+    }
+
+    /// Feeds bytes until a packet or error completes; returns the bytes consumed and the event.
+    pub fn feed(&mut self, bytes: &[u8]) -> (usize, Option<Result<Packet<'_>, DecodeError>>) {
+        for (i, &b) in bytes.iter().enumerate() {
+            if let Some(r) = self.core.push(&mut self.buf, b) {
+                let ev = match r {
+                    Ok(()) => self.core.packet(&self.buf).map(Ok),
+                    Err(e) => Some(Err(e)),
+                };
+                return (i + 1, ev);
+            }
+        }
+        (bytes.len(), None)
+    }
+
+    /// The packet completed by the last [`push`](Self::push), if it completed one.
+    pub fn packet(&self) -> Option<Packet<'_>> {
+        self.core.packet(&self.buf)
+    }
+
+    /// Drops any partial packet and starts searching for a header again.
+    pub fn reset(&mut self) {
+        self.core.reset();
+    }
+
+    /// Enables or disables unstuffing (disable only to receive a FAST SYNC READ reply).
+    pub fn set_stuffing(&mut self, enabled: bool) {
+        self.core.stuffing = enabled;
+    }
+
+    /// Whether the decoder is between packets (no partial packet buffered).
+    pub fn is_idle(&self) -> bool {
+        self.core.state == State::Preamble && self.core.pre_len == 0
+    }
+
+    /// Receive counters.
+    pub fn stats(&self) -> DecoderStats {
+        self.core.stats
+    }
+}
+
+/// One-shot decode of the first packet in `bytes`, unstuffing the parameters into `buf`.
+///
+/// Leading garbage is skipped; the first complete packet or the first error is returned.
+pub fn decode<'b>(bytes: &[u8], buf: &'b mut [u8]) -> Result<Packet<'b>, DecodeError> {
+    let mut core = Core::new();
+    for &b in bytes {
+        match core.push(buf, b) {
+            None => {}
+            Some(Err(e)) => return Err(e),
+            Some(Ok(())) => return core.packet(buf).ok_or(DecodeError::Incomplete),
+        }
+    }
+    Err(DecodeError::Incomplete)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ping_roundtrip() {
+        let mut buf = [0u8; 16];
+        let n = encode(&mut buf, 1, 0x01, &[]).unwrap();
+        assert_eq!(
+            &buf[..n],
+            &[0xFF, 0xFF, 0xFD, 0x00, 0x01, 0x03, 0x00, 0x01, 0x19, 0x4E]
+        );
+        let mut out = [0u8; 4];
+        let p = decode(&buf[..n], &mut out).unwrap();
+        assert_eq!((p.id, p.instruction, p.params), (1, 1, &[][..]));
+    }
+
+    #[test]
+    fn stuffing_inserts_fd() {
+        let mut buf = [0u8; 32];
+        let n = encode(&mut buf, 1, 0x03, &[0xFF, 0xFF, 0xFD, 0x01]).unwrap();
+        assert_eq!(&buf[7..n - 2], &[0x03, 0xFF, 0xFF, 0xFD, 0xFD, 0x01]);
+        assert_eq!(u16::from_le_bytes([buf[5], buf[6]]), 8);
+    }
+
+    #[test]
+    fn buffer_too_small() {
+        let mut buf = [0u8; 9];
+        assert_eq!(
+            encode(&mut buf, 1, 1, &[]),
+            Err(EncodeError::BufferTooSmall)
+        );
+    }
+}

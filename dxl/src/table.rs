@@ -1,0 +1,391 @@
+//! Control tables of the devices on the robot's bus, shared by firmware and simulator.
+//!
+//! Each field is a [`Field`] (address + size in bytes); multi-byte values are little-endian.
+//! Besides the ROBOTIS X-series servo ([`x_series`]), the bus carries two devices of our own:
+//! the foot force-sensor boards ([`foot`]) and the IMU board ([`imu`]). Both implement the
+//! Protocol 2.0 subset PING / READ / WRITE / SYNC READ / BULK READ and share the common
+//! header of the table (model number at 0, firmware version at 6, ID at 7, return delay at 9).
+//! Bus IDs are in [`ids`].
+
+/// A control-table field: start address and size in bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Field {
+    /// Start address.
+    pub addr: u16,
+    /// Size in bytes.
+    pub len: u16,
+}
+
+const fn f(addr: u16, len: u16) -> Field {
+    Field { addr, len }
+}
+
+fn i32_at(b: &[u8], i: usize) -> Option<i32> {
+    let s = b.get(i..i.checked_add(4)?)?;
+    Some(i32::from_le_bytes([
+        *s.first()?,
+        *s.get(1)?,
+        *s.get(2)?,
+        *s.get(3)?,
+    ]))
+}
+
+fn u16_at(b: &[u8], i: usize) -> Option<u16> {
+    Some(u16::from_le_bytes([*b.get(i)?, *b.get(i.checked_add(1)?)?]))
+}
+
+/// ROBOTIS X-series servo (XM430-W350 / XL430-W250), Protocol 2.0 control table.
+pub mod x_series {
+    use super::{f, Field};
+
+    /// Model Number (u16, read-only).
+    pub const MODEL_NUMBER: Field = f(0, 2);
+    /// Firmware Version (u8, read-only).
+    pub const FIRMWARE_VERSION: Field = f(6, 1);
+    /// ID (u8, EEPROM).
+    pub const ID: Field = f(7, 1);
+    /// Baud Rate code (u8, EEPROM; 3 = 1 Mbps, 4 = 2 Mbps, 5 = 3 Mbps, 6 = 4 Mbps).
+    pub const BAUD_RATE: Field = f(8, 1);
+    /// Return Delay Time (u8, EEPROM, unit 2 µs, default 250 = 500 µs).
+    pub const RETURN_DELAY_TIME: Field = f(9, 1);
+    /// Operating Mode (u8, EEPROM; 3 = position, 4 = extended position).
+    pub const OPERATING_MODE: Field = f(11, 1);
+    /// Torque Enable (u8; 1 = on, locks the EEPROM area).
+    pub const TORQUE_ENABLE: Field = f(64, 1);
+    /// LED (u8).
+    pub const LED: Field = f(65, 1);
+    /// Status Return Level (u8; 0 = PING only, 1 = + READ, 2 = all).
+    pub const STATUS_RETURN_LEVEL: Field = f(68, 1);
+    /// Hardware Error Status (u8 bit field, read-only).
+    pub const HARDWARE_ERROR_STATUS: Field = f(70, 1);
+    /// Goal Velocity (i32, unit [`VELOCITY_UNIT_RPM`]).
+    pub const GOAL_VELOCITY: Field = f(104, 4);
+    /// Profile Acceleration (u32).
+    pub const PROFILE_ACCELERATION: Field = f(108, 4);
+    /// Profile Velocity (u32, 0 = unlimited).
+    pub const PROFILE_VELOCITY: Field = f(112, 4);
+    /// Goal Position (i32, ticks).
+    pub const GOAL_POSITION: Field = f(116, 4);
+    /// Moving (u8, read-only).
+    pub const MOVING: Field = f(122, 1);
+    /// Present Current (i16, unit [`CURRENT_UNIT_MA`], read-only).
+    pub const PRESENT_CURRENT: Field = f(126, 2);
+    /// Present Velocity (i32, unit [`VELOCITY_UNIT_RPM`], read-only).
+    pub const PRESENT_VELOCITY: Field = f(128, 4);
+    /// Present Position (i32, ticks, read-only).
+    pub const PRESENT_POSITION: Field = f(132, 4);
+    /// Present Temperature (u8, °C, read-only).
+    pub const PRESENT_TEMPERATURE: Field = f(146, 1);
+
+    /// Model number of the XM430-W350.
+    pub const MODEL_XM430_W350: u16 = 1020;
+    /// Model number of the XL430-W250.
+    pub const MODEL_XL430_W250: u16 = 1060;
+    /// Default Return Delay Time register value (×2 µs).
+    pub const DEFAULT_RETURN_DELAY: u8 = 250;
+    /// Operating Mode value for position control.
+    pub const MODE_POSITION: u8 = 3;
+    /// Operating Mode value for extended position control.
+    pub const MODE_EXTENDED_POSITION: u8 = 4;
+    /// Velocity unit in rpm per LSB.
+    pub const VELOCITY_UNIT_RPM: f32 = 0.229;
+    /// Current unit in mA per LSB (XM430).
+    pub const CURRENT_UNIT_MA: f32 = 2.69;
+
+    /// Encoder ticks per revolution.
+    pub const TICKS_PER_TURN: i32 = 4096;
+    /// Tick value of the 0 rad joint position.
+    pub const CENTER_TICK: i32 = 2048;
+    /// Largest |Goal Position| in extended position mode.
+    pub const MAX_EXTENDED_TICKS: i32 = 1_048_575;
+    /// Ticks per radian.
+    pub const TICKS_PER_RAD: f32 = TICKS_PER_TURN as f32 / core::f32::consts::TAU;
+
+    /// Joint angle (rad) to ticks, rounded to nearest.
+    ///
+    /// Returns `None` for non-finite input or results beyond ±[`MAX_EXTENDED_TICKS`].
+    pub fn rad_to_ticks(rad: f32) -> Option<i32> {
+        let t = rad * TICKS_PER_RAD + CENTER_TICK as f32;
+        let limit = MAX_EXTENDED_TICKS as f32;
+        if !t.is_finite() || !(-limit..=limit).contains(&t) {
+            return None;
+        }
+        // Round half away from zero; the cast cannot saturate within the limit.
+        let r = if t >= 0.0 { t + 0.5 } else { t - 0.5 };
+        Some(r as i32)
+    }
+
+    /// Ticks to joint angle (rad).
+    pub fn ticks_to_rad(ticks: i32) -> f32 {
+        (i64::from(ticks) - i64::from(CENTER_TICK)) as f32 / TICKS_PER_RAD
+    }
+}
+
+/// Foot force-sensor board (our device): four load cells under each sole.
+///
+/// Frame: x forward, y left, origin at the ground projection of the ankle joint.
+/// Sensor order and position (m): 0 front-left (+0.040, +0.025), 1 front-right
+/// (+0.040, −0.025), 2 rear-left (−0.040, +0.025), 3 rear-right (−0.040, −0.025).
+///
+/// | addr | size | field |
+/// |---|---|---|
+/// | 0 | 2 | model number ([`foot::MODEL_NUMBER_VALUE`]) |
+/// | 6 | 1 | firmware version |
+/// | 7 | 1 | ID |
+/// | 9 | 1 | return delay time (×2 µs) |
+/// | 128 | 16 | force\[0..4\], i32 each, millinewtons, positive = load on the sole |
+/// | 144 | 2 | sample counter (u16, wraps) |
+pub mod foot {
+    use super::{f, i32_at, u16_at, Field};
+
+    /// Model Number (u16).
+    pub const MODEL_NUMBER: Field = f(0, 2);
+    /// Firmware Version (u8).
+    pub const FIRMWARE_VERSION: Field = f(6, 1);
+    /// ID (u8).
+    pub const ID: Field = f(7, 1);
+    /// Return Delay Time (u8, ×2 µs).
+    pub const RETURN_DELAY_TIME: Field = f(9, 1);
+    /// Whole sample block: four forces and the counter (one READ).
+    pub const SAMPLE: Field = f(128, 18);
+    /// The four forces (4 × i32 mN).
+    pub const FORCES: Field = f(128, 16);
+    /// Sample counter (u16).
+    pub const COUNTER: Field = f(144, 2);
+    /// Model number reported by the foot board.
+    pub const MODEL_NUMBER_VALUE: u16 = 0x5A11;
+    /// Sensor positions `[x, y]` in metres, in force order.
+    pub const SENSOR_POSITIONS_M: [[f32; 2]; 4] = [
+        [0.040, 0.025],
+        [0.040, -0.025],
+        [-0.040, 0.025],
+        [-0.040, -0.025],
+    ];
+
+    /// One sample of a foot board.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct FootForces {
+        /// Forces in mN: front-left, front-right, rear-left, rear-right.
+        pub forces_mn: [i32; 4],
+        /// Sample counter.
+        pub counter: u16,
+    }
+
+    impl FootForces {
+        /// Decodes the [`SAMPLE`] block (at least 18 bytes).
+        pub fn from_bytes(b: &[u8]) -> Option<Self> {
+            Some(FootForces {
+                forces_mn: [i32_at(b, 0)?, i32_at(b, 4)?, i32_at(b, 8)?, i32_at(b, 12)?],
+                counter: u16_at(b, 16)?,
+            })
+        }
+
+        /// Encodes the [`SAMPLE`] block.
+        pub fn to_bytes(&self) -> [u8; 18] {
+            let mut out = [0u8; 18];
+            for (chunk, v) in out.chunks_exact_mut(4).zip(self.forces_mn) {
+                chunk.copy_from_slice(&v.to_le_bytes());
+            }
+            let [lo, hi] = self.counter.to_le_bytes();
+            out[16] = lo;
+            out[17] = hi;
+            out
+        }
+
+        /// Total vertical force in newtons.
+        pub fn total_n(&self) -> f32 {
+            self.forces_mn.iter().map(|&v| v as f32).sum::<f32>() * 1e-3
+        }
+
+        /// Centre of pressure `[x, y]` (m) when the total force exceeds `min_total_n`.
+        pub fn cop_m(&self, min_total_n: f32) -> Option<[f32; 2]> {
+            let total = self.total_n();
+            // Written so that NaN thresholds also yield `None`.
+            if total.partial_cmp(&min_total_n) != Some(core::cmp::Ordering::Greater) || total <= 0.0
+            {
+                return None;
+            }
+            let mut cop = [0.0f32; 2];
+            for (&fz, pos) in self.forces_mn.iter().zip(SENSOR_POSITIONS_M) {
+                let w = fz as f32 * 1e-3 / total;
+                cop[0] += w * pos[0];
+                cop[1] += w * pos[1];
+            }
+            Some(cop)
+        }
+    }
+}
+
+/// IMU board (our device): gyroscope and accelerometer in the torso frame (x forward,
+/// y left, z up).
+///
+/// Units: angular rate in µrad/s (1e-6 rad/s, range ±2147 rad/s, far beyond the ±20 rad/s
+/// a kid-size robot sees), acceleration in µm/s² (1e-6 m/s², range ±2147 m/s² ≈ ±219 g,
+/// covering the ±4 g sensor range with sub-µg resolution to spare).
+///
+/// | addr | size | field |
+/// |---|---|---|
+/// | 0 | 2 | model number ([`imu::MODEL_NUMBER_VALUE`]) |
+/// | 6 | 1 | firmware version |
+/// | 7 | 1 | ID |
+/// | 9 | 1 | return delay time (×2 µs) |
+/// | 128 | 12 | gyro x, y, z (i32, µrad/s) |
+/// | 140 | 12 | accel x, y, z (i32, µm/s², includes gravity: +9.81 on z when upright) |
+/// | 152 | 2 | sample counter (u16, wraps) |
+pub mod imu {
+    use super::{f, i32_at, u16_at, Field};
+
+    /// Model Number (u16).
+    pub const MODEL_NUMBER: Field = f(0, 2);
+    /// Firmware Version (u8).
+    pub const FIRMWARE_VERSION: Field = f(6, 1);
+    /// ID (u8).
+    pub const ID: Field = f(7, 1);
+    /// Return Delay Time (u8, ×2 µs).
+    pub const RETURN_DELAY_TIME: Field = f(9, 1);
+    /// Whole sample block: gyro, accel, counter (one READ).
+    pub const SAMPLE: Field = f(128, 26);
+    /// Gyroscope (3 × i32 µrad/s).
+    pub const GYRO: Field = f(128, 12);
+    /// Accelerometer (3 × i32 µm/s²).
+    pub const ACCEL: Field = f(140, 12);
+    /// Sample counter (u16).
+    pub const COUNTER: Field = f(152, 2);
+    /// Model number reported by the IMU board.
+    pub const MODEL_NUMBER_VALUE: u16 = 0x5A20;
+    /// Scale from raw units to SI (rad/s or m/s²).
+    pub const SCALE: f32 = 1e-6;
+
+    /// One IMU sample in raw units.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+    pub struct ImuSample {
+        /// Angular rate x, y, z in µrad/s.
+        pub gyro_urad_s: [i32; 3],
+        /// Acceleration x, y, z in µm/s².
+        pub accel_um_s2: [i32; 3],
+        /// Sample counter.
+        pub counter: u16,
+    }
+
+    impl ImuSample {
+        /// Decodes the [`SAMPLE`] block (at least 26 bytes).
+        pub fn from_bytes(b: &[u8]) -> Option<Self> {
+            Some(ImuSample {
+                gyro_urad_s: [i32_at(b, 0)?, i32_at(b, 4)?, i32_at(b, 8)?],
+                accel_um_s2: [i32_at(b, 12)?, i32_at(b, 16)?, i32_at(b, 20)?],
+                counter: u16_at(b, 24)?,
+            })
+        }
+
+        /// Encodes the [`SAMPLE`] block.
+        pub fn to_bytes(&self) -> [u8; 26] {
+            let mut out = [0u8; 26];
+            let values = self.gyro_urad_s.into_iter().chain(self.accel_um_s2);
+            for (chunk, v) in out.chunks_exact_mut(4).zip(values) {
+                chunk.copy_from_slice(&v.to_le_bytes());
+            }
+            let [lo, hi] = self.counter.to_le_bytes();
+            out[24] = lo;
+            out[25] = hi;
+            out
+        }
+
+        /// Angular rate in rad/s.
+        pub fn gyro_rad_s(&self) -> [f32; 3] {
+            self.gyro_urad_s.map(|v| v as f32 * SCALE)
+        }
+
+        /// Acceleration in m/s².
+        pub fn accel_m_s2(&self) -> [f32; 3] {
+            self.accel_um_s2.map(|v| v as f32 * SCALE)
+        }
+
+        /// Builds a sample from SI values, saturating out-of-range values (NaN maps to 0).
+        pub fn from_si(gyro_rad_s: [f32; 3], accel_m_s2: [f32; 3], counter: u16) -> Self {
+            ImuSample {
+                gyro_urad_s: gyro_rad_s.map(|v| (v / SCALE) as i32),
+                accel_um_s2: accel_m_s2.map(|v| (v / SCALE) as i32),
+                counter,
+            }
+        }
+    }
+}
+
+/// Bus IDs of the reference robot.
+pub mod ids {
+    /// Left-leg servos in joint order (see [`JOINT_NAMES`]).
+    pub const LEFT_LEG: [u8; 6] = [1, 2, 3, 4, 5, 6];
+    /// Right-leg servos in joint order.
+    pub const RIGHT_LEG: [u8; 6] = [7, 8, 9, 10, 11, 12];
+    /// All twelve leg servos, left then right.
+    pub const LEGS: [u8; 12] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
+    /// Joint names, in the order of [`LEFT_LEG`] / [`RIGHT_LEG`].
+    pub const JOINT_NAMES: [&str; 6] = [
+        "hip_yaw",
+        "hip_roll",
+        "hip_pitch",
+        "knee",
+        "ankle_pitch",
+        "ankle_roll",
+    ];
+    /// Left foot sensor board.
+    pub const FOOT_LEFT: u8 = 111;
+    /// Right foot sensor board.
+    pub const FOOT_RIGHT: u8 = 112;
+    /// IMU board.
+    pub const IMU: u8 = 200;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::foot::FootForces;
+    use super::imu::ImuSample;
+    use super::x_series::*;
+
+    #[test]
+    fn ticks() {
+        assert_eq!(rad_to_ticks(0.0), Some(2048));
+        assert_eq!(rad_to_ticks(core::f32::consts::PI), Some(4096));
+        assert_eq!(rad_to_ticks(-core::f32::consts::FRAC_PI_2), Some(1024));
+        assert_eq!(rad_to_ticks(f32::NAN), None);
+        assert_eq!(rad_to_ticks(f32::INFINITY), None);
+        assert_eq!(rad_to_ticks(1e9), None);
+        assert!((ticks_to_rad(3072) - core::f32::consts::FRAC_PI_2).abs() < 1e-6);
+        let _ = ticks_to_rad(i32::MIN);
+        for t in [-5000, 0, 1, 2047, 2048, 4095, 100_000] {
+            assert_eq!(rad_to_ticks(ticks_to_rad(t)), Some(t));
+        }
+    }
+
+    #[test]
+    fn sensor_blocks() {
+        let f = FootForces {
+            forces_mn: [1000, 2000, -3, i32::MAX],
+            counter: 0xBEEF,
+        };
+        assert_eq!(FootForces::from_bytes(&f.to_bytes()), Some(f));
+        assert_eq!(FootForces::from_bytes(&[0; 17]), None);
+        let s = ImuSample {
+            gyro_urad_s: [1, -2, 3],
+            accel_um_s2: [0, 0, 9_806_650],
+            counter: 7,
+        };
+        assert_eq!(ImuSample::from_bytes(&s.to_bytes()), Some(s));
+        assert_eq!(ImuSample::from_bytes(&[0; 25]), None);
+        let even = FootForces {
+            forces_mn: [10_000; 4],
+            counter: 0,
+        };
+        let cop = even.cop_m(1.0).unwrap();
+        assert!(cop[0].abs() < 1e-6 && cop[1].abs() < 1e-6);
+        let front = FootForces {
+            forces_mn: [10_000, 10_000, 0, 0],
+            counter: 0,
+        };
+        assert!((front.cop_m(1.0).unwrap()[0] - 0.040).abs() < 1e-6);
+        assert_eq!(FootForces::default().cop_m(1.0), None);
+    }
+}

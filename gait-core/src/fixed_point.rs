@@ -1,0 +1,311 @@
+//! The fixed-point sampler for cores without an FPU (Cortex-M0/M3).
+//!
+//! Format: every length, velocity and time is `I16F16` (the `fixed` crate): range ±32,768 m,
+//! resolution 2⁻¹⁶ m ≈ 0.015 mm — thirty times finer than the 0.5 mm budget, and a kid-size
+//! robot's walk never leaves the range. Factors in [0, 1] (the exponentials e^{−ω(D−s)}, e^{−ωs},
+//! sin, cos) are `I2F30` (resolution 9.3e-10). Products are formed in `i64` and shifted back, so
+//! nothing overflows; every operation saturates instead of panicking.
+//!
+//! Per sample the work is integer only: two fixed-point exponentials (range reduction by ln 2
+//! and a degree-10 polynomial, |error| < 1e-8), com.rs C1-C2, and for the swing foot one
+//! fixed-point sin/cos pair (quadrant reduction and odd/even polynomials, |error| < 4e-7).
+//! Once per segment (about every 0.15-0.34 s) the segment coefficients come from the `f32` plan
+//! bookkeeping of [`Sampler`] — software floats on an FPU-less core, but off the per-sample path.
+
+use crate::error::GaitError;
+use crate::plan::{Place, Plan, SwingShape};
+use crate::robot::Side;
+use crate::sampler::{Sampler, SupportPhase, TAU_LIMIT};
+use fixed::types::{I16F16, I2F30};
+
+/// A length (m), velocity (m/s) or time (s) in the sampler's fixed-point format.
+pub type Fx = I16F16;
+/// A factor in [−2, 2) (exponentials, sines).
+pub type Fac = I2F30;
+
+const ONE_FAC: i64 = 1 << 30;
+
+/// f32 → `Fx`, saturating; non-finite becomes an error.
+pub fn fx(v: f32) -> Result<Fx, GaitError> {
+    if !v.is_finite() {
+        return Err(GaitError::NonFinite);
+    }
+    if v.abs() >= 32_767.0 {
+        return Err(GaitError::FixedPointOverflow);
+    }
+    Ok(Fx::saturating_from_num(v))
+}
+
+fn sat32(v: i64) -> i32 {
+    v.clamp(i32::MIN as i64, i32::MAX as i64) as i32
+}
+
+/// `a` (Fx) times `f` (Fac).
+fn mul_fac(a: Fx, f: i64) -> Fx {
+    Fx::from_bits(sat32((a.to_bits() as i64 * f) >> 30))
+}
+
+/// `a` times `b`, both Fx.
+fn mul_fx(a: Fx, b: Fx) -> Fx {
+    Fx::from_bits(sat32((a.to_bits() as i64 * b.to_bits() as i64) >> 16))
+}
+
+/// e^{−x} for x ≥ 0 in Fx, as a Fac (bits, 2³⁰ = 1). Negative x counts as 0.
+pub fn exp_neg(x: Fx) -> i64 {
+    let xb = (x.to_bits().max(0) as i64) << 14; // 2^30 = 1
+    const LN2: i64 = 744_261_118; // ln 2 · 2^30
+    let n = xb / LN2;
+    if n >= 31 {
+        return 0;
+    }
+    let r = (xb - n * LN2) as i128; // r in 2^30 units, r ∈ [0, ln 2)
+    // e^{−r} by its Taylor polynomial to r¹⁰ (Horner, 2^30 units): truncation < ln2¹¹/11! ≈ 4e-10.
+    let one = ONE_FAC as i128;
+    let mut acc = one;
+    for k in (1..=10).rev() {
+        acc = one - (acc * r / one) / k as i128;
+    }
+    (acc as i64) >> n
+}
+
+/// sin and cos of `x` (rad, Fx) as Fac bits.
+pub fn sin_cos(x: Fx) -> (i64, i64) {
+    // Reduce to [−π/4, π/4] by quadrant.
+    const HALF_PI: i64 = 1_686_629_713; // π/2 · 2^30
+    let xb = (x.to_bits() as i64) << 14; // 2^30 = 1
+    let q = (xb + HALF_PI / 2).div_euclid(HALF_PI);
+    let r = (xb - q * HALF_PI) as i128; // 2^30 units
+    let one = ONE_FAC as i128;
+    let r2 = r * r / one;
+    // Taylor to r^9 / r^8: |r| ≤ π/4 → error < (π/4)^10/10! ≈ 2e-8.
+    let mut s = one;
+    let mut c = one;
+    for k in (1..=4).rev() {
+        s = one - s * r2 / one / ((2 * k) * (2 * k + 1)) as i128;
+        c = one - c * r2 / one / ((2 * k - 1) * (2 * k)) as i128;
+    }
+    let s = (s * r / one) as i64;
+    let c = c as i64;
+    match q.rem_euclid(4) {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
+/// A foot sample in fixed point.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct FixedFoot {
+    /// x, m.
+    pub x: Fx,
+    /// y, m.
+    pub y: Fx,
+    /// Height above the ground, m.
+    pub z: Fx,
+    /// Heading, rad.
+    pub yaw: Fx,
+}
+
+/// One gait sample in fixed point (same meaning as [`crate::GaitSample`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FixedSample {
+    /// Time since the start of the lead-in, ns.
+    pub time_ns: u64,
+    /// ZMP reference, m.
+    pub zmp: [Fx; 2],
+    /// CoM (x, y, z_c), m.
+    pub com: [Fx; 3],
+    /// CoM velocity, m/s.
+    pub com_vel: [Fx; 2],
+    /// Left and right foot.
+    pub feet: [FixedFoot; 2],
+    /// Support phase.
+    pub phase: SupportPhase,
+    /// Support foot of the current step.
+    pub support_foot: Option<Side>,
+    /// Steps completed.
+    pub steps_done: u32,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct FixedSegment {
+    p0: [Fx; 2],
+    slope: [Fx; 2],
+    a: [Fx; 2],
+    c: [Fx; 2],
+    duration: Fx,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct FixedPlace {
+    x: Fx,
+    y: Fx,
+    yaw: Fx,
+}
+
+impl FixedPlace {
+    fn of(p: &Place<f32>) -> Self {
+        FixedPlace {
+            x: Fx::saturating_from_num(p.x),
+            y: Fx::saturating_from_num(p.y),
+            yaw: Fx::saturating_from_num(p.yaw),
+        }
+    }
+    fn foot(&self) -> FixedFoot {
+        FixedFoot { x: self.x, y: self.y, z: Fx::ZERO, yaw: self.yaw }
+    }
+}
+
+/// The streaming sampler with integer-only work per sample.
+#[derive(Clone, Debug)]
+pub struct FixedSampler<const N: usize> {
+    inner: Sampler<f32, N>,
+    seg: FixedSegment,
+    omega: Fx,
+    z_c: Fx,
+    tau_gain: Fx,
+    decay_dt: i64,
+    tau_offset: Fx,
+    swing_height: Fx,
+    swing_width: Fx,
+    cycloid: bool,
+}
+
+impl<const N: usize> FixedSampler<N> {
+    /// A fixed-point sampler over an `f32` plan at servo period `dt` (s).
+    pub fn new(plan: Plan<f32, N>, dt: f64) -> Result<Self, GaitError> {
+        let inner = Sampler::new(plan, dt)?;
+        let p = *inner.plan().params();
+        let (h, w, cycloid) = match p.swing {
+            SwingShape::Cycloid { height, width } => (height, width, true),
+            SwingShape::Sinusoid { height } => (height, 0.0, false),
+        };
+        let mut s = FixedSampler {
+            seg: FixedSegment::default(),
+            omega: fx(p.model.omega)?,
+            z_c: fx(p.model.z_c)?,
+            tau_gain: fx(p.model.tau_to_offset)?,
+            decay_dt: (libm::exp(-(p.model.omega as f64) * dt) * ONE_FAC as f64) as i64,
+            tau_offset: Fx::ZERO,
+            swing_height: fx(h)?,
+            swing_width: fx(w)?,
+            cycloid,
+            inner,
+        };
+        s.load_segment();
+        Ok(s)
+    }
+
+    /// The `f32` bookkeeping sampler (plan queue, stage).
+    pub fn inner(&self) -> &Sampler<f32, N> {
+        &self.inner
+    }
+    /// True once the lead-out is over.
+    pub fn is_done(&self) -> bool {
+        self.inner.is_done()
+    }
+
+    fn load_segment(&mut self) {
+        let s = self.inner.segment();
+        let conv = |v: [f32; 2]| [Fx::saturating_from_num(v[0]), Fx::saturating_from_num(v[1])];
+        self.seg = FixedSegment {
+            p0: conv(s.p0),
+            slope: conv(s.slope),
+            a: conv(s.a),
+            c: conv(s.c),
+            duration: Fx::saturating_from_num(s.duration),
+        };
+    }
+
+    /// The sample now with the measured torque `tau_mnm` (mN·m, integer as read from the bus)
+    /// held until the next sample; then advances by dt.
+    pub fn next(&mut self, tau_mnm: i32) -> FixedSample {
+        if self.inner.sync() {
+            self.load_segment();
+        }
+        // Local time: ns → s in 2^16 units: ns·2^16/1e9 = ns·70369/2^30 (0.0002 % low).
+        let ns = self.inner.local_ns() as i64;
+        let s = Fx::from_bits(sat32((ns * 70_369) >> 30));
+        let w = self.omega;
+        let eu = exp_neg(mul_fx(w, self.seg.duration.saturating_sub(s)));
+        let es = exp_neg(mul_fx(w, s));
+        let mut x = [Fx::ZERO; 2];
+        let mut v = [Fx::ZERO; 2];
+        let mut zmp = [Fx::ZERO; 2];
+        for i in 0..2 {
+            let g = &self.seg;
+            zmp[i] = g.p0[i].saturating_add(mul_fx(g.slope[i], s));
+            x[i] = zmp[i].saturating_add(mul_fac(g.a[i], eu)).saturating_add(mul_fac(g.c[i], es));
+            let dv = mul_fac(g.a[i], eu).saturating_sub(mul_fac(g.c[i], es));
+            v[i] = g.slope[i].saturating_add(mul_fx(w, dv));
+        }
+        // τ response (com.rs C6) in fixed point: Δ = τ·T²/C², e ← Δ + (e − Δ)·e^{−ω dt}.
+        let lim = (TAU_LIMIT * 1000.0) as i32;
+        let tau = Fx::from_bits(sat32(((tau_mnm.clamp(-lim, lim) as i64) << 16) / 1000));
+        let target = mul_fx(tau, self.tau_gain);
+        let offset = self.tau_offset;
+        x[0] = x[0].saturating_add(offset);
+        v[0] = v[0].saturating_add(mul_fx(w, target.saturating_sub(offset)));
+        self.tau_offset = target.saturating_add(mul_fac(offset.saturating_sub(target), self.decay_dt));
+
+        let (phase, support) = self.inner.phase();
+        let stance = self.inner.stance_feet();
+        let mut feet = [FixedPlace::of(&stance[0]).foot(), FixedPlace::of(&stance[1]).foot()];
+        if let Some((side, from, to, ph)) = self.inner.current_step() {
+            let to_f = FixedPlace::of(&to);
+            let slot = feet.get_mut(side.index());
+            if let Some(slot) = slot {
+                if ph == 2 {
+                    *slot = to_f.foot();
+                } else if ph == 1 {
+                    *slot = self.swing(&FixedPlace::of(&from), &to_f, s, side);
+                }
+            }
+        }
+        let out = FixedSample {
+            time_ns: self.inner.now_ns(),
+            zmp,
+            com: [x[0], x[1], self.z_c],
+            com_vel: v,
+            feet,
+            phase,
+            support_foot: support,
+            steps_done: self.inner.steps_done(),
+        };
+        self.inner.tick();
+        out
+    }
+
+    /// swing.rs in fixed point: u = s/D of the single support.
+    fn swing(&self, from: &FixedPlace, to: &FixedPlace, s: Fx, side: Side) -> FixedFoot {
+        let d = self.seg.duration.to_bits().max(1) as i64;
+        let u = ((s.to_bits().max(0) as i64) << 30) / d; // Fac bits, [0, 1]
+        let u = u.clamp(0, ONE_FAC);
+        const TWO_PI: i64 = 411_775; // 2π · 2^16
+        const PI: i64 = 205_887;
+        let (fh, fz, bulge) = if self.cycloid {
+            let th = Fx::from_bits(sat32((TWO_PI * u) >> 30));
+            let (sn, cs) = sin_cos(th);
+            // (θ − sin θ)/2π in Fac: θ in Fac units = u·2π.
+            let th_fac = (th.to_bits() as i64) << 14;
+            let fh = ((th_fac - sn) << 16) / TWO_PI;
+            let one_m_cos = ONE_FAC - cs;
+            (fh, mul_fac(self.swing_height, one_m_cos / 2), mul_fac(self.swing_width, one_m_cos / 2))
+        } else {
+            let (_, c1) = sin_cos(Fx::from_bits(sat32((PI * u) >> 30)));
+            let (_, c2) = sin_cos(Fx::from_bits(sat32((TWO_PI * u) >> 30)));
+            ((ONE_FAC - c1) / 2, mul_fac(self.swing_height, (ONE_FAC - c2) / 2), Fx::ZERO)
+        };
+        let lerp = |a: Fx, b: Fx| a.saturating_add(mul_fac(b.saturating_sub(a), fh));
+        let yaw = lerp(from.yaw, to.yaw);
+        let b = if side == Side::Left { bulge } else { -bulge };
+        let (sy, cy) = if self.swing_width == Fx::ZERO { (0, ONE_FAC) } else { sin_cos(yaw) };
+        FixedFoot {
+            x: lerp(from.x, to.x).saturating_sub(mul_fac(b, sy)),
+            y: lerp(from.y, to.y).saturating_add(mul_fac(b, cy)),
+            z: fz,
+            yaw,
+        }
+    }
+}
