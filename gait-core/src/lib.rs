@@ -27,3 +27,4 @@ pub use model::{Model, ModelKind};
 pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
 pub use sampler::{GaitSample, Sampler, SupportPhase};
 pub mod fixed_point;
+pub mod pipeline;
