@@ -21,3 +21,21 @@ cargo build -p gait-core --target thumbv7em-none-eabihf
 
 step "host tests"
 cargo test --target host-tuple --workspace
+
+step "Dynamixel codec: 10^6 random and mutated byte streams (release)"
+DXL_FUZZ_CASES=1000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams
+
+step "firmware: clippy and release builds for both boards"
+cargo clippy --release --no-deps --no-default-features --features board-qemu --bins -- -D warnings
+cargo clippy --release --no-deps --no-default-features --features board-opencr --bins -- -D warnings
+cargo build --release --no-default-features --features board-qemu --bin qemu
+cargo build --release --no-default-features --features board-opencr --bin opencr
+
+step "firmware: on-target tests in QEMU (mps2-an500, Cortex-M7)"
+CARGO_TARGET_THUMBV7EM_NONE_EABIHF_RUNNER=scripts/qemu-run.sh \
+    cargo test --release --no-default-features --features board-qemu --test on_target
+
+step "firmware: boots in QEMU"
+scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --timeout 120
+
+printf '\nall checks passed\n'

@@ -2,10 +2,11 @@
 //! form in f32 and f64, the fixed-point sampler, and the Fourier series (N = 24).
 //! Run: `cargo bench --target host-tuple -p gait-core --bench sampler`.
 
-use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion};
 use gait_core::fixed_point::FixedSampler;
 use gait_core::fourier::FourierCom;
 use gait_core::{ForwardWalk, Model, ModelKind, Real, Robot, Sampler};
+use std::hint::black_box;
 
 const CAP: usize = 32;
 
@@ -13,7 +14,9 @@ fn sampler<R: Real>(kind: ModelKind) -> Sampler<R, CAP> {
     let robot = Robot::reference();
     let walk = ForwardWalk::table2();
     let model = Model::<R>::new(kind, &robot, walk.z_c).expect("model");
-    let plan = walk.plan::<R, CAP>(&robot, walk.params(model)).expect("plan");
+    let plan = walk
+        .plan::<R, CAP>(&robot, walk.params(model))
+        .expect("plan");
     Sampler::new(plan, 0.005).expect("sampler")
 }
 
@@ -42,7 +45,9 @@ fn bench(c: &mut Criterion) {
         let robot = Robot::reference();
         let walk = ForwardWalk::table2();
         let model = Model::<f32>::new(kind, &robot, walk.z_c).expect("model");
-        let plan = walk.plan::<f32, CAP>(&robot, walk.params(model)).expect("plan");
+        let plan = walk
+            .plan::<f32, CAP>(&robot, walk.params(model))
+            .expect("plan");
         let fresh_fx = FixedSampler::new(plan, 0.005).expect("fixed");
         let mut fxs = fresh_fx.clone();
         c.bench_function(&format!("sample/{}/fixed", kind.name()), |b| {
@@ -54,9 +59,13 @@ fn bench(c: &mut Criterion) {
             })
         });
         let params = walk.params(model);
-        let fourier =
-            FourierCom::<f32, 24>::from_params(&params, walk.step_length as f32, -walk.step_width as f32, 24)
-                .expect("fourier");
+        let fourier = FourierCom::<f32, 24>::from_params(
+            &params,
+            walk.step_length as f32,
+            -walk.step_width as f32,
+            24,
+        )
+        .expect("fourier");
         let mut t = 0.0f32;
         c.bench_function(&format!("sample/{}/fourier24-f32", kind.name()), |b| {
             b.iter(|| {

@@ -42,7 +42,11 @@ pub fn dcm_back<R: Real>(omega: R, p0: [R; 2], p1: [R; 2], d: R, xi1: [R; 2]) ->
     let decay = (-(omega * d)).exp();
     let mut out = [R::zero(); 2];
     for (i, o) in out.iter_mut().enumerate() {
-        let k = if d > R::zero() { (p1[i] - p0[i]) / d } else { R::zero() };
+        let k = if d > R::zero() {
+            (p1[i] - p0[i]) / d
+        } else {
+            R::zero()
+        };
         let kw = k / omega;
         *o = p0[i] + kw + (xi1[i] - p1[i] - kw) * decay;
     }
@@ -69,9 +73,17 @@ impl<R: Real> ComSegment<R> {
     /// the CoM at `x0`.
     pub fn new(omega: R, p0: [R; 2], p1: [R; 2], d: R, xi1: [R; 2], x0: [R; 2]) -> Self {
         let decay = (-(omega * d)).exp();
-        let mut s = ComSegment { p0, duration: d, ..Default::default() };
+        let mut s = ComSegment {
+            p0,
+            duration: d,
+            ..Default::default()
+        };
         for i in 0..2 {
-            let k = if d > R::zero() { (p1[i] - p0[i]) / d } else { R::zero() };
+            let k = if d > R::zero() {
+                (p1[i] - p0[i]) / d
+            } else {
+                R::zero()
+            };
             s.slope[i] = k;
             s.a[i] = (xi1[i] - p1[i] - k / omega) * R::of(0.5);
             s.c[i] = x0[i] - p0[i] - s.a[i] * decay;
@@ -81,7 +93,10 @@ impl<R: Real> ComSegment<R> {
 
     /// ZMP p(s), m.
     pub fn zmp(&self, s: R) -> [R; 2] {
-        [self.p0[0] + self.slope[0] * s, self.p0[1] + self.slope[1] * s]
+        [
+            self.p0[0] + self.slope[0] * s,
+            self.p0[1] + self.slope[1] * s,
+        ]
     }
 
     /// CoM position and velocity at local time `s` (C1, C2).

@@ -59,7 +59,7 @@ pub fn exp_neg(x: Fx) -> i64 {
         return 0;
     }
     let r = (xb - n * LN2) as i128; // r in 2^30 units, r ∈ [0, ln 2)
-    // e^{−r} by its Taylor polynomial to r¹⁰ (Horner, 2^30 units): truncation < ln2¹¹/11! ≈ 4e-10.
+                                    // e^{−r} by its Taylor polynomial to r¹⁰ (Horner, 2^30 units): truncation < ln2¹¹/11! ≈ 4e-10.
     let one = ONE_FAC as i128;
     let mut acc = one;
     for k in (1..=10).rev() {
@@ -153,7 +153,12 @@ impl FixedPlace {
         }
     }
     fn foot(&self) -> FixedFoot {
-        FixedFoot { x: self.x, y: self.y, z: Fx::ZERO, yaw: self.yaw }
+        FixedFoot {
+            x: self.x,
+            y: self.y,
+            z: Fx::ZERO,
+            yaw: self.yaw,
+        }
     }
 }
 
@@ -236,7 +241,9 @@ impl<const N: usize> FixedSampler<N> {
         for i in 0..2 {
             let g = &self.seg;
             zmp[i] = g.p0[i].saturating_add(mul_fx(g.slope[i], s));
-            x[i] = zmp[i].saturating_add(mul_fac(g.a[i], eu)).saturating_add(mul_fac(g.c[i], es));
+            x[i] = zmp[i]
+                .saturating_add(mul_fac(g.a[i], eu))
+                .saturating_add(mul_fac(g.c[i], es));
             let dv = mul_fac(g.a[i], eu).saturating_sub(mul_fac(g.c[i], es));
             v[i] = g.slope[i].saturating_add(mul_fx(w, dv));
         }
@@ -247,11 +254,15 @@ impl<const N: usize> FixedSampler<N> {
         let offset = self.tau_offset;
         x[0] = x[0].saturating_add(offset);
         v[0] = v[0].saturating_add(mul_fx(w, target.saturating_sub(offset)));
-        self.tau_offset = target.saturating_add(mul_fac(offset.saturating_sub(target), self.decay_dt));
+        self.tau_offset =
+            target.saturating_add(mul_fac(offset.saturating_sub(target), self.decay_dt));
 
         let (phase, support) = self.inner.phase();
         let stance = self.inner.stance_feet();
-        let mut feet = [FixedPlace::of(&stance[0]).foot(), FixedPlace::of(&stance[1]).foot()];
+        let mut feet = [
+            FixedPlace::of(&stance[0]).foot(),
+            FixedPlace::of(&stance[1]).foot(),
+        ];
         if let Some((side, from, to, ph)) = self.inner.current_step() {
             let to_f = FixedPlace::of(&to);
             let slot = feet.get_mut(side.index());
@@ -291,16 +302,28 @@ impl<const N: usize> FixedSampler<N> {
             let th_fac = (th.to_bits() as i64) << 14;
             let fh = ((th_fac - sn) << 16) / TWO_PI;
             let one_m_cos = ONE_FAC - cs;
-            (fh, mul_fac(self.swing_height, one_m_cos / 2), mul_fac(self.swing_width, one_m_cos / 2))
+            (
+                fh,
+                mul_fac(self.swing_height, one_m_cos / 2),
+                mul_fac(self.swing_width, one_m_cos / 2),
+            )
         } else {
             let (_, c1) = sin_cos(Fx::from_bits(sat32((PI * u) >> 30)));
             let (_, c2) = sin_cos(Fx::from_bits(sat32((TWO_PI * u) >> 30)));
-            ((ONE_FAC - c1) / 2, mul_fac(self.swing_height, (ONE_FAC - c2) / 2), Fx::ZERO)
+            (
+                (ONE_FAC - c1) / 2,
+                mul_fac(self.swing_height, (ONE_FAC - c2) / 2),
+                Fx::ZERO,
+            )
         };
         let lerp = |a: Fx, b: Fx| a.saturating_add(mul_fac(b.saturating_sub(a), fh));
         let yaw = lerp(from.yaw, to.yaw);
         let b = if side == Side::Left { bulge } else { -bulge };
-        let (sy, cy) = if self.swing_width == Fx::ZERO { (0, ONE_FAC) } else { sin_cos(yaw) };
+        let (sy, cy) = if self.swing_width == Fx::ZERO {
+            (0, ONE_FAC)
+        } else {
+            sin_cos(yaw)
+        };
         FixedFoot {
             x: lerp(from.x, to.x).saturating_sub(mul_fac(b, sy)),
             y: lerp(from.y, to.y).saturating_add(mul_fac(b, cy)),

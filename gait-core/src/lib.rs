@@ -15,13 +15,13 @@ pub use real::Real;
 pub use robot::{Robot, Side};
 pub mod com;
 pub mod fourier;
+pub mod measured;
 pub mod model;
 pub mod plan;
 pub mod sampler;
+pub mod support;
 pub mod swing;
 pub mod zmp;
-pub mod support;
-pub mod measured;
 
 pub use model::{Model, ModelKind};
 pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};

@@ -21,7 +21,14 @@ pub fn foot_pose<R: Real>(f: &FootSample<R>) -> Pose<R> {
 
 /// The 12 joint targets (left leg then right leg, joint order of the robot description) of a
 /// sample, and what the IK had to clamp.
-pub fn joint_targets<R: Real>(kin: &LegKinematics<R>, sample: &GaitSample<R>) -> ([R; 12], LegsIkReport<R>) {
+pub fn joint_targets<R: Real>(
+    kin: &LegKinematics<R>,
+    sample: &GaitSample<R>,
+) -> ([R; 12], LegsIkReport<R>) {
     let pelvis = pelvis_pose(sample);
-    kin.legs_ik(&pelvis, &foot_pose(&sample.feet[0]), &foot_pose(&sample.feet[1]))
+    kin.legs_ik(
+        &pelvis,
+        &foot_pose(&sample.feet[0]),
+        &foot_pose(&sample.feet[1]),
+    )
 }

@@ -34,11 +34,18 @@ pub struct Place<R> {
 impl<R: Real> Place<R> {
     /// A place from f64 numbers.
     pub fn new(x: f64, y: f64, yaw: f64) -> Self {
-        Place { x: R::of(x), y: R::of(y), yaw: R::of(yaw) }
+        Place {
+            x: R::of(x),
+            y: R::of(y),
+            yaw: R::of(yaw),
+        }
     }
     /// The point `along` metres forward along this foot's heading.
     pub fn ahead(&self, along: R) -> [R; 2] {
-        [self.x + along * self.yaw.cos(), self.y + along * self.yaw.sin()]
+        [
+            self.x + along * self.yaw.cos(),
+            self.y + along * self.yaw.sin(),
+        ]
     }
     /// The horizontal position.
     pub fn xy(&self) -> [R; 2] {
@@ -117,7 +124,11 @@ impl<R: Real> GaitParams<R> {
     pub fn quantized(&self) -> Self {
         let t = self.timing;
         GaitParams {
-            timing: Timing { t1: quantize(t.t1), t2: quantize(t.t2), period: quantize(t.period) },
+            timing: Timing {
+                t1: quantize(t.t1),
+                t2: quantize(t.t2),
+                period: quantize(t.period),
+            },
             lead_in: quantize(self.lead_in),
             lead_out: quantize(self.lead_out),
             ..*self
@@ -189,8 +200,16 @@ impl StepLimits {
         let g = &robot.geometry;
         let l = 0.95 * (g.thigh + g.calf);
         let h = z_c - g.ankle_height;
-        let reach = if l > h { libm::sqrt(l * l - h * h) } else { 0.0 };
-        let yaw = robot.joint_limits.first().map(|j| j.max.min(-j.min)).unwrap_or(0.0);
+        let reach = if l > h {
+            libm::sqrt(l * l - h * h)
+        } else {
+            0.0
+        };
+        let yaw = robot
+            .joint_limits
+            .first()
+            .map(|j| j.max.min(-j.min))
+            .unwrap_or(0.0);
         StepLimits {
             max_length: 2.0 * reach,
             min_width: g.sole_width + 0.01,
@@ -200,16 +219,27 @@ impl StepLimits {
     }
 
     /// Checks `to` (a `side` foot) against the support foot at `support`.
-    pub fn check<R: Real>(&self, side: Side, support: &Place<R>, to: &Place<R>) -> Result<(), GaitError> {
+    pub fn check<R: Real>(
+        &self,
+        side: Side,
+        support: &Place<R>,
+        to: &Place<R>,
+    ) -> Result<(), GaitError> {
         if !to.is_finite() {
             return Err(GaitError::NonFinite);
         }
         let dx = (to.x - support.x).to_f64();
         let dy = (to.y - support.y).to_f64();
-        let (s, c) = (libm::sin(support.yaw.to_f64()), libm::cos(support.yaw.to_f64()));
+        let (s, c) = (
+            libm::sin(support.yaw.to_f64()),
+            libm::cos(support.yaw.to_f64()),
+        );
         let fwd = c * dx + s * dy;
         let lat = (-s * dx + c * dy) * side.sign();
-        let turn = libm::remainder(to.yaw.to_f64() - support.yaw.to_f64(), 2.0 * core::f64::consts::PI);
+        let turn = libm::remainder(
+            to.yaw.to_f64() - support.yaw.to_f64(),
+            2.0 * core::f64::consts::PI,
+        );
         if libm::fabs(fwd) > self.max_length
             || lat < self.min_width
             || lat > self.max_width
@@ -250,7 +280,12 @@ pub struct Plan<R, const N: usize> {
 
 impl<R: Real, const N: usize> Plan<R, N> {
     /// An empty plan standing on `left` and `right`.
-    pub fn new(robot: &Robot, params: GaitParams<R>, left: Place<R>, right: Place<R>) -> Result<Self, GaitError> {
+    pub fn new(
+        robot: &Robot,
+        params: GaitParams<R>,
+        left: Place<R>,
+        right: Place<R>,
+    ) -> Result<Self, GaitError> {
         params.validate(robot)?;
         let params = params.quantized();
         params.validate(robot)?;
@@ -259,7 +294,13 @@ impl<R: Real, const N: usize> Plan<R, N> {
         }
         let limits = StepLimits::for_robot(robot, params.model.z_c.to_f64());
         limits.check(Side::Left, &right, &left)?;
-        Ok(Plan { params, limits, start: [left, right], end: [left, right], steps: Deque::new() })
+        Ok(Plan {
+            params,
+            limits,
+            start: [left, right],
+            end: [left, right],
+            steps: Deque::new(),
+        })
     }
 
     /// The gait parameters.
@@ -313,9 +354,18 @@ impl<R: Real, const N: usize> Plan<R, N> {
         let from = self.end[step.side.index()];
         let zmp_start = match self.steps.back() {
             None => midpoint(&self.end),
-            Some(prev) => self.params.zmp.boundary(&self.params.timing, &prev.support, &support),
+            Some(prev) => self
+                .params
+                .zmp
+                .boundary(&self.params.timing, &prev.support, &support),
         };
-        let entry = StepEntry { step, from, support, zmp_start, dcm_end: [R::zero(); 2] };
+        let entry = StepEntry {
+            step,
+            from,
+            support,
+            zmp_start,
+            dcm_end: [R::zero(); 2],
+        };
         if self.steps.push_back(entry).is_err() {
             return Err(GaitError::CapacityExceeded);
         }
@@ -378,7 +428,13 @@ impl<R: Real, const N: usize> Plan<R, N> {
                 let durs = [t.t1, t.t2 - t.t1, t.period - t.t2];
                 let mut xi = self.steps.front().map(|e| e.dcm_end).unwrap_or(k[3]);
                 for seg in (0..3).rev() {
-                    xi = crate::com::dcm_back(self.params.model.omega, k[seg], k[seg + 1], durs[seg], xi);
+                    xi = crate::com::dcm_back(
+                        self.params.model.omega,
+                        k[seg],
+                        k[seg + 1],
+                        durs[seg],
+                        xi,
+                    );
                 }
                 xi
             }
@@ -453,9 +509,20 @@ impl ForwardWalk {
     pub fn params<R: Real>(&self, model: Model<R>) -> GaitParams<R> {
         GaitParams {
             model,
-            timing: Timing { t1: R::of(self.t1), t2: R::of(self.t2), period: R::of(self.period) },
-            zmp: ZmpShape::Natural { d1: R::of(self.d1), d2: R::of(self.d2), a: R::of(self.a) },
-            swing: SwingShape::Cycloid { height: R::of(self.h_z), width: R::of(self.w_y) },
+            timing: Timing {
+                t1: R::of(self.t1),
+                t2: R::of(self.t2),
+                period: R::of(self.period),
+            },
+            zmp: ZmpShape::Natural {
+                d1: R::of(self.d1),
+                d2: R::of(self.d2),
+                a: R::of(self.a),
+            },
+            swing: SwingShape::Cycloid {
+                height: R::of(self.h_z),
+                width: R::of(self.w_y),
+            },
             lead_in: R::of(self.lead_in),
             lead_out: R::of(self.lead_out),
         }
@@ -464,11 +531,18 @@ impl ForwardWalk {
     /// Support-foot location p^c_n of step n (eqs 6-7).
     pub fn support_location(&self, n: usize) -> (f64, f64) {
         let sign = if n.is_multiple_of(2) { 1.0 } else { -1.0 };
-        (n as f64 * self.step_length, f64::from(self.s_first) * self.step_width * sign)
+        (
+            n as f64 * self.step_length,
+            f64::from(self.s_first) * self.step_width * sign,
+        )
     }
 
     /// Builds the plan (feet side by side at x = 0 to start; see the module doc).
-    pub fn plan<R: Real, const N: usize>(&self, robot: &Robot, params: GaitParams<R>) -> Result<Plan<R, N>, GaitError> {
+    pub fn plan<R: Real, const N: usize>(
+        &self,
+        robot: &Robot,
+        params: GaitParams<R>,
+    ) -> Result<Plan<R, N>, GaitError> {
         if self.steps == 0 {
             return Err(GaitError::EmptyPlan);
         }
@@ -479,14 +553,34 @@ impl ForwardWalk {
             return Err(GaitError::BadStartFoot);
         }
         let w = self.step_width;
-        let mut plan = Plan::new(robot, params, Place::new(0.0, w, 0.0), Place::new(0.0, -w, 0.0))?;
+        let mut plan = Plan::new(
+            robot,
+            params,
+            Place::new(0.0, w, 0.0),
+            Place::new(0.0, -w, 0.0),
+        )?;
         // S_first = −1: the right foot supports step 0, so the left foot swings first.
-        let first_swing = if self.s_first < 0 { Side::Left } else { Side::Right };
+        let first_swing = if self.s_first < 0 {
+            Side::Left
+        } else {
+            Side::Right
+        };
         for n in 0..self.steps {
-            let side = if n.is_multiple_of(2) { first_swing } else { first_swing.other() };
-            let x = if n + 1 == self.steps { n as f64 } else { (n + 1) as f64 } * self.step_length;
+            let side = if n.is_multiple_of(2) {
+                first_swing
+            } else {
+                first_swing.other()
+            };
+            let x = if n + 1 == self.steps {
+                n as f64
+            } else {
+                (n + 1) as f64
+            } * self.step_length;
             let y = side.sign() * w;
-            plan.push(Footstep { side, place: Place::new(x, y, 0.0) })?;
+            plan.push(Footstep {
+                side,
+                place: Place::new(x, y, 0.0),
+            })?;
         }
         Ok(plan)
     }

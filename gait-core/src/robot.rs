@@ -189,18 +189,42 @@ impl Robot {
                 ankle_height: 0.030,
                 sole_length: 0.100,
                 sole_width: 0.060,
-                force_sensors: [[0.040, 0.025], [0.040, -0.025], [-0.040, 0.025], [-0.040, -0.025]],
+                force_sensors: [
+                    [0.040, 0.025],
+                    [0.040, -0.025],
+                    [-0.040, 0.025],
+                    [-0.040, -0.025],
+                ],
             },
             // Left-leg limits; positive roll moves the left foot outward (+y).
             joint_limits: [
-                JointLimit { min: -0.9, max: 0.9 },  // hip_yaw
-                JointLimit { min: -0.5, max: 0.7 },  // hip_roll
-                JointLimit { min: -1.9, max: 0.9 },  // hip_pitch
-                JointLimit { min: 0.0, max: 2.5 },   // knee
-                JointLimit { min: -1.3, max: 1.1 },  // ankle_pitch
-                JointLimit { min: -0.7, max: 0.5 },  // ankle_roll
+                JointLimit {
+                    min: -0.9,
+                    max: 0.9,
+                }, // hip_yaw
+                JointLimit {
+                    min: -0.5,
+                    max: 0.7,
+                }, // hip_roll
+                JointLimit {
+                    min: -1.9,
+                    max: 0.9,
+                }, // hip_pitch
+                JointLimit { min: 0.0, max: 2.5 }, // knee
+                JointLimit {
+                    min: -1.3,
+                    max: 1.1,
+                }, // ankle_pitch
+                JointLimit {
+                    min: -0.7,
+                    max: 0.5,
+                }, // ankle_roll
             ],
-            servo: ServoLimits { max_speed: 4.8, ticks_per_turn: 4096, zero_tick: 2048 },
+            servo: ServoLimits {
+                max_speed: 4.8,
+                ticks_per_turn: 4096,
+                zero_tick: 2048,
+            },
             gravity: 9.80665,
         }
     }
@@ -214,9 +238,10 @@ impl Robot {
             None => return JointLimit { min: 0.0, max: 0.0 },
         };
         match (side, j) {
-            (Side::Right, 0) | (Side::Right, 1) | (Side::Right, 5) => {
-                JointLimit { min: -l.max, max: -l.min }
-            }
+            (Side::Right, 0) | (Side::Right, 1) | (Side::Right, 5) => JointLimit {
+                min: -l.max,
+                max: -l.min,
+            },
             _ => l,
         }
     }
@@ -263,7 +288,11 @@ impl Robot {
         if self.gravity <= 0.0 || self.servo.max_speed <= 0.0 || self.servo.ticks_per_turn == 0 {
             return Err(GaitError::NonPositiveParameter);
         }
-        if self.joint_limits.iter().any(|l| !(l.min.is_finite() && l.max.is_finite() && l.min < l.max)) {
+        if self
+            .joint_limits
+            .iter()
+            .any(|l| !(l.min.is_finite() && l.max.is_finite() && l.min < l.max))
+        {
             return Err(GaitError::BadJointLimit);
         }
         Ok(())

@@ -58,8 +58,15 @@ pub struct GaitSample<R> {
 impl<R: Real> GaitSample<R> {
     /// True when every number of the sample is finite.
     pub fn is_finite(&self) -> bool {
-        self.zmp.iter().chain(self.com.iter()).chain(self.com_vel.iter()).all(|v| v.is_finite())
-            && self.feet.iter().all(|f| f.x.is_finite() && f.y.is_finite() && f.z.is_finite() && f.yaw.is_finite())
+        self.zmp
+            .iter()
+            .chain(self.com.iter())
+            .chain(self.com_vel.iter())
+            .all(|v| v.is_finite())
+            && self
+                .feet
+                .iter()
+                .all(|f| f.x.is_finite() && f.y.is_finite() && f.z.is_finite() && f.yaw.is_finite())
     }
 }
 
@@ -117,7 +124,11 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         }
         let p = *plan.params();
         let t = p.timing;
-        let shortest = t.t1.min(t.t2 - t.t1).min(t.period - t.t2).min(p.lead_in).min(p.lead_out);
+        let shortest =
+            t.t1.min(t.t2 - t.t1)
+                .min(t.period - t.t2)
+                .min(p.lead_in)
+                .min(p.lead_out);
         if shortest.to_f64() < dt {
             return Err(GaitError::BadSampleTime);
         }
@@ -197,7 +208,10 @@ impl<R: Real, const N: usize> Sampler<R, N> {
     }
 
     fn local_time(&self) -> R {
-        let d = self.now_ns.saturating_sub(self.seg_start_ns).min(self.seg_len_ns);
+        let d = self
+            .now_ns
+            .saturating_sub(self.seg_start_ns)
+            .min(self.seg_len_ns);
         R::from_u32(d as u32) * R::of(1e-9)
     }
 
@@ -290,7 +304,9 @@ impl<R: Real, const N: usize> Sampler<R, N> {
     pub fn sync(&mut self) -> bool {
         let mut changed = false;
         for _ in 0..4 {
-            if self.stage == Stage::Done || self.now_ns < self.seg_start_ns.saturating_add(self.seg_len_ns) {
+            if self.stage == Stage::Done
+                || self.now_ns < self.seg_start_ns.saturating_add(self.seg_len_ns)
+            {
                 break;
             }
             self.advance_segment();
@@ -301,7 +317,9 @@ impl<R: Real, const N: usize> Sampler<R, N> {
 
     /// Local time in the current segment, ns (clamped to the segment).
     pub fn local_ns(&self) -> u32 {
-        self.now_ns.saturating_sub(self.seg_start_ns).min(self.seg_len_ns) as u32
+        self.now_ns
+            .saturating_sub(self.seg_start_ns)
+            .min(self.seg_len_ns) as u32
     }
 
     /// Moves the clock on by one servo period.
@@ -334,7 +352,11 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         let p = *self.plan.params();
         let omega = p.model.omega;
         let lim = R::of(TAU_LIMIT);
-        let tau = if tau.is_finite() { tau.clamp_to(-lim, lim) } else { R::zero() };
+        let tau = if tau.is_finite() {
+            tau.clamp_to(-lim, lim)
+        } else {
+            R::zero()
+        };
         self.tau.hold(tau, p.model.tau_to_offset);
         let s = self.local_time();
         let (x, v) = self.seg.eval(omega, s);
@@ -365,14 +387,27 @@ impl<R: Real, const N: usize> Sampler<R, N> {
     }
 
     fn feet_now(&self, s: R) -> (SupportPhase, Option<Side>, [FootSample<R>; 2]) {
-        let mut feet = [FootSample::on_ground(&self.feet[0]), FootSample::on_ground(&self.feet[1])];
+        let mut feet = [
+            FootSample::on_ground(&self.feet[0]),
+            FootSample::on_ground(&self.feet[1]),
+        ];
         match (self.stage, self.plan.step(0)) {
             (Stage::Step(ph), Some(e)) => {
                 let side = e.step.side;
                 let support = side.other();
                 let phase = if ph == 1 {
-                    let u = if self.seg.duration > R::zero() { s / self.seg.duration } else { R::one() };
-                    let f = swing_foot(&self.plan.params().swing, &e.from, &e.step.place, u, R::of(side.sign()));
+                    let u = if self.seg.duration > R::zero() {
+                        s / self.seg.duration
+                    } else {
+                        R::one()
+                    };
+                    let f = swing_foot(
+                        &self.plan.params().swing,
+                        &e.from,
+                        &e.step.place,
+                        u,
+                        R::of(side.sign()),
+                    );
                     if let Some(slot) = feet.get_mut(side.index()) {
                         *slot = f;
                     }

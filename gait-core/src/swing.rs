@@ -37,25 +37,44 @@ pub struct FootSample<R> {
 impl<R: Real> FootSample<R> {
     /// The foot standing on `p`.
     pub fn on_ground(p: &Place<R>) -> Self {
-        FootSample { x: p.x, y: p.y, z: R::zero(), yaw: p.yaw }
+        FootSample {
+            x: p.x,
+            y: p.y,
+            z: R::zero(),
+            yaw: p.yaw,
+        }
     }
 }
 
 /// The swing foot at fraction `u` ∈ [0, 1] of the single support, from `from` to `to`;
 /// `outward` is +1 for the left foot, −1 for the right (direction of the W_y bulge).
-pub fn swing_foot<R: Real>(shape: &SwingShape<R>, from: &Place<R>, to: &Place<R>, u: R, outward: R) -> FootSample<R> {
+pub fn swing_foot<R: Real>(
+    shape: &SwingShape<R>,
+    from: &Place<R>,
+    to: &Place<R>,
+    u: R,
+    outward: R,
+) -> FootSample<R> {
     let u = u.clamp_to(R::zero(), R::one());
     let (fh, fz, bulge) = match *shape {
         SwingShape::Cycloid { height, width } => {
             let th = R::of(2.0 * PI) * u;
             let (s, c) = (th.sin(), th.cos());
             let one_m_cos = R::one() - c;
-            ((th - s) / R::of(2.0 * PI), height * R::of(0.5) * one_m_cos, width * R::of(0.5) * one_m_cos)
+            (
+                (th - s) / R::of(2.0 * PI),
+                height * R::of(0.5) * one_m_cos,
+                width * R::of(0.5) * one_m_cos,
+            )
         }
         SwingShape::Sinusoid { height } => {
             let c1 = (R::of(PI) * u).cos();
             let c2 = (R::of(2.0 * PI) * u).cos();
-            ((R::one() - c1) * R::of(0.5), height * R::of(0.5) * (R::one() - c2), R::zero())
+            (
+                (R::one() - c1) * R::of(0.5),
+                height * R::of(0.5) * (R::one() - c2),
+                R::zero(),
+            )
         }
     };
     let dyaw = wrap_pi(to.yaw - from.yaw);

@@ -99,6 +99,10 @@ impl<R: Real> ZmpShape<R> {
 
 /// Linear interpolation between two knots: p(s) = p0 + (p1 − p0)·s/d, clamped to [0, d].
 pub fn lerp2<R: Real>(p0: [R; 2], p1: [R; 2], s: R, d: R) -> [R; 2] {
-    let f = if d > R::zero() { (s / d).clamp_to(R::zero(), R::one()) } else { R::one() };
+    let f = if d > R::zero() {
+        (s / d).clamp_to(R::zero(), R::one())
+    } else {
+        R::one()
+    };
     [p0[0] + (p1[0] - p0[0]) * f, p0[1] + (p1[1] - p0[1]) * f]
 }

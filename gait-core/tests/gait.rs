@@ -15,7 +15,9 @@ fn table2_sampler<R: Real>(kind: ModelKind, dt: f64) -> Sampler<R, CAP> {
     let robot = Robot::reference();
     let walk = ForwardWalk::table2();
     let model = Model::<R>::new(kind, &robot, walk.z_c).expect("model");
-    let plan = walk.plan::<R, CAP>(&robot, walk.params(model)).expect("plan");
+    let plan = walk
+        .plan::<R, CAP>(&robot, walk.params(model))
+        .expect("plan");
     Sampler::new(plan, dt).expect("sampler")
 }
 
@@ -36,7 +38,12 @@ fn tlipfm_constants_match_eq4_by_hand() {
     let c2 = mu * zc + mu * lu + 9.0 * mt * zc / 16.0 + mc * zc / 16.0;
     let t2 = c2 / ((mu + 3.0 * mt / 4.0 + mc / 4.0) * g);
     let m = Model::<f64>::new(ModelKind::Tlipfm, &Robot::reference(), zc).unwrap();
-    assert!((m.t_tf - t2.sqrt()).abs() / t2.sqrt() < 1e-6, "T_TF {} vs {}", m.t_tf, t2.sqrt());
+    assert!(
+        (m.t_tf - t2.sqrt()).abs() / t2.sqrt() < 1e-6,
+        "T_TF {} vs {}",
+        m.t_tf,
+        t2.sqrt()
+    );
     assert!((m.c_tau() - c2.sqrt()).abs() / c2.sqrt() < 1e-6);
     assert!((m.inv_c_tau_sq - 1.0 / c2).abs() * c2 < 1e-6);
     // The numbers themselves (hand arithmetic): C_τ² = 0.970934375, T_TF = 0.170962 s.
@@ -140,11 +147,19 @@ fn table2_com_is_continuous_and_starts_and_ends_at_rest() {
         assert!(speed(last) < 1e-4, "{kind:?} end speed {}", speed(last));
         // Over the start and end positions: between the feet, 13·S_L forward at the end.
         assert!(first.com[0].abs() < 1e-9 && first.com[1].abs() < 1e-9);
-        assert!((last.com[0] - 13.0 * 0.02).abs() < 1e-4 && last.com[1].abs() < 1e-4, "{:?}", last.com);
+        assert!(
+            (last.com[0] - 13.0 * 0.02).abs() < 1e-4 && last.com[1].abs() < 1e-4,
+            "{:?}",
+            last.com
+        );
         assert_eq!(last.steps_done, 14);
         // The walk is bounded: the CoM never leaves a band around the footprints.
         for s in &samples {
-            assert!(s.com[0] > -0.03 && s.com[0] < 0.29 && s.com[1].abs() < 0.05, "{:?}", s.com);
+            assert!(
+                s.com[0] > -0.03 && s.com[0] < 0.29 && s.com[1].abs() < 0.05,
+                "{:?}",
+                s.com
+            );
         }
     }
 }
@@ -162,10 +177,18 @@ fn table2_timeline_and_zmp_knots_match_eqs_10_11() {
         let (px, py) = walk.support_location(n);
         let base = n as f64 * walk.period;
         // eq 10 (with the erratum), eq 11.
-        let checks = [(0.0, px - walk.d1, 0.0), (walk.t1, px - walk.a, py), (walk.t2, px + walk.a, py)];
+        let checks = [
+            (0.0, px - walk.d1, 0.0),
+            (walk.t1, px - walk.a, py),
+            (walk.t2, px + walk.a, py),
+        ];
         for (t, ex, ey) in checks {
             let s = at(base + t);
-            assert!((s.zmp[0] - ex).abs() < 1e-9 && (s.zmp[1] - ey).abs() < 1e-9, "step {n} t {t}: {:?}", s.zmp);
+            assert!(
+                (s.zmp[0] - ex).abs() < 1e-9 && (s.zmp[1] - ey).abs() < 1e-9,
+                "step {n} t {t}: {:?}",
+                s.zmp
+            );
         }
         let mid_ssp = at(base + 0.5 * (walk.t1 + walk.t2));
         let support = if py > 0.0 { Side::Left } else { Side::Right };
@@ -174,7 +197,10 @@ fn table2_timeline_and_zmp_knots_match_eqs_10_11() {
     }
     assert_eq!(samples[0].phase, SupportPhase::Standing);
     // 14 steps of 0.64 s = 8.96 s of walking (seed 000 Figs. 14-16).
-    let walking = samples.iter().filter(|s| s.phase != SupportPhase::Standing).count();
+    let walking = samples
+        .iter()
+        .filter(|s| s.phase != SupportPhase::Standing)
+        .count();
     assert_eq!(walking, 8960);
 }
 
@@ -253,7 +279,11 @@ fn cycloid_stride_height_and_zero_end_velocity() {
         let first = steps.first().unwrap().feet[swing];
         let last = steps.last().unwrap().feet[swing];
         let stride = last.x - first.x;
-        let want = if n == 0 || n == 13 { walk.step_length } else { 2.0 * walk.step_length };
+        let want = if n == 0 || n == 13 {
+            walk.step_length
+        } else {
+            2.0 * walk.step_length
+        };
         assert!((stride - want).abs() < 1e-3, "step {n}: stride {stride}");
         let peak = steps.iter().map(|s| s.feet[swing].z).fold(0.0, f64::max);
         assert!((peak - walk.h_z).abs() < 1e-5, "peak {peak}");
@@ -264,7 +294,9 @@ fn cycloid_stride_height_and_zero_end_velocity() {
         assert!(v0.abs() < 1e-3 && v1.abs() < 0.02, "v0 {v0} vz1 {v1}");
         // The support foot never moves.
         let sup = 1 - swing;
-        assert!(steps.iter().all(|s| s.feet[sup].x == first_support(&steps, sup) && s.feet[sup].z == 0.0));
+        assert!(steps
+            .iter()
+            .all(|s| s.feet[sup].x == first_support(&steps, sup) && s.feet[sup].z == 0.0));
     }
 }
 
@@ -285,11 +317,17 @@ fn constant_tau_shifts_the_com_forward_and_stays_bounded() {
         let sa = a.next(tau);
         let sb = b.next(0.0);
         let d = sa.com[0] - sb.com[0];
-        assert!(d >= -1e-12 && d <= shift + 1e-12, "offset {d} outside [0, {shift}]");
+        assert!(
+            d >= -1e-12 && d <= shift + 1e-12,
+            "offset {d} outside [0, {shift}]"
+        );
         assert_eq!(sa.com[1], sb.com[1], "τ does not act laterally (eq 4)");
         last = d;
     }
-    assert!((last - shift).abs() < 1e-9, "settled offset {last} vs {shift}");
+    assert!(
+        (last - shift).abs() < 1e-9,
+        "settled offset {last} vs {shift}"
+    );
 }
 
 #[test]
@@ -327,8 +365,16 @@ fn steering_step_by_step_matches_the_whole_plan() {
     let walk = ForwardWalk::table2();
     let model = Model::<f64>::new(ModelKind::Tlipfm, &robot, walk.z_c).unwrap();
     let full = walk.plan::<f64, CAP>(&robot, walk.params(model)).unwrap();
-    let steps: Vec<Footstep<f64>> = (0..full.len()).map(|i| full.step(i).unwrap().step).collect();
-    let mut queued = Plan::<f64, 4>::new(&robot, walk.params(model), full.start_feet()[0], full.start_feet()[1]).unwrap();
+    let steps: Vec<Footstep<f64>> = (0..full.len())
+        .map(|i| full.step(i).unwrap().step)
+        .collect();
+    let mut queued = Plan::<f64, 4>::new(
+        &robot,
+        walk.params(model),
+        full.start_feet()[0],
+        full.start_feet()[1],
+    )
+    .unwrap();
     for st in steps.iter().take(3) {
         queued.push(*st).unwrap();
     }
@@ -344,7 +390,9 @@ fn steering_step_by_step_matches_the_whole_plan() {
         }
         let sa = a.next(0.0);
         let sb = b.next(0.0);
-        worst = worst.max((sa.com[0] - sb.com[0]).abs()).max((sa.com[1] - sb.com[1]).abs());
+        worst = worst
+            .max((sa.com[0] - sb.com[0]).abs())
+            .max((sa.com[1] - sb.com[1]).abs());
         if let Some(v) = prev_v {
             // No velocity jump beyond what the model's acceleration allows in one sample.
             assert!((sb.com_vel[1] - v[1]).abs() < 0.02, "velocity jump");
@@ -360,8 +408,15 @@ fn params(t1: f64, t2: f64, period: f64) -> GaitParams<f64> {
     GaitParams {
         model: Model::new(ModelKind::Tlipfm, &robot, 0.217).unwrap(),
         timing: Timing { t1, t2, period },
-        zmp: ZmpShape::Natural { d1: 0.01, d2: 0.01, a: 0.004 },
-        swing: SwingShape::Cycloid { height: 0.03, width: 0.0 },
+        zmp: ZmpShape::Natural {
+            d1: 0.01,
+            d2: 0.01,
+            a: 0.004,
+        },
+        swing: SwingShape::Cycloid {
+            height: 0.03,
+            width: 0.0,
+        },
         lead_in: 1.6,
         lead_out: 1.6,
     }
@@ -375,20 +430,36 @@ fn every_error_variant_is_reported() {
     let p = |pp: GaitParams<f64>| Plan::<f64, 4>::new(&robot, pp, l, r).err();
     assert_eq!(p(params(0.3, 0.2, 0.64)), Some(GaitError::BadPhaseTimes));
     assert_eq!(p(params(0.15, 0.7, 0.64)), Some(GaitError::BadPhaseTimes));
-    assert_eq!(p(params(0.15, 0.49, -1.0)), Some(GaitError::NonPositivePeriod));
+    assert_eq!(
+        p(params(0.15, 0.49, -1.0)),
+        Some(GaitError::NonPositivePeriod)
+    );
     assert_eq!(p(params(0.15, 0.49, 5.0)), Some(GaitError::PeriodTooLong));
     assert_eq!(p(params(f64::NAN, 0.49, 0.64)), Some(GaitError::NonFinite));
     let mut off = params(0.15, 0.49, 0.64);
-    off.zmp = ZmpShape::Natural { d1: 0.01, d2: 0.01, a: 0.06 };
+    off.zmp = ZmpShape::Natural {
+        d1: 0.01,
+        d2: 0.01,
+        a: 0.06,
+    };
     assert_eq!(p(off), Some(GaitError::ZmpOffsetOffSole));
     let mut neg = params(0.15, 0.49, 0.64);
-    neg.swing = SwingShape::Cycloid { height: -0.01, width: 0.0 };
+    neg.swing = SwingShape::Cycloid {
+        height: -0.01,
+        width: 0.0,
+    };
     assert_eq!(p(neg), Some(GaitError::NonPositiveLength));
     // Robot description errors.
     let mut bad = robot;
     bad.masses.upper_body = 0.0;
-    assert_eq!(Model::<f64>::new(ModelKind::Tlipfm, &bad, 0.217).err(), Some(GaitError::NonPositiveMass));
-    assert_eq!(Model::<f64>::new(ModelKind::Tlipfm, &robot, -0.2).err(), Some(GaitError::NonPositiveLength));
+    assert_eq!(
+        Model::<f64>::new(ModelKind::Tlipfm, &bad, 0.217).err(),
+        Some(GaitError::NonPositiveMass)
+    );
+    assert_eq!(
+        Model::<f64>::new(ModelKind::Tlipfm, &robot, -0.2).err(),
+        Some(GaitError::NonPositiveLength)
+    );
     bad = robot;
     bad.gravity = 0.0;
     assert_eq!(bad.validate(), Err(GaitError::NonPositiveParameter));
@@ -400,30 +471,68 @@ fn every_error_variant_is_reported() {
     assert_eq!(bad.validate(), Err(GaitError::NonFinite));
     // Footsteps.
     let mut plan = Plan::<f64, 2>::new(&robot, params(0.15, 0.49, 0.64), l, r).unwrap();
-    let far = Footstep { side: Side::Left, place: Place::new(0.5, 0.045, 0.0) };
+    let far = Footstep {
+        side: Side::Left,
+        place: Place::new(0.5, 0.045, 0.0),
+    };
     assert_eq!(plan.push(far), Err(GaitError::StepOutOfReach));
-    let crossing = Footstep { side: Side::Left, place: Place::new(0.02, -0.08, 0.0) };
+    let crossing = Footstep {
+        side: Side::Left,
+        place: Place::new(0.02, -0.08, 0.0),
+    };
     assert_eq!(plan.push(crossing), Err(GaitError::StepOutOfReach));
-    let nan = Footstep { side: Side::Left, place: Place::new(f64::NAN, 0.045, 0.0) };
+    let nan = Footstep {
+        side: Side::Left,
+        place: Place::new(f64::NAN, 0.045, 0.0),
+    };
     assert_eq!(plan.push(nan), Err(GaitError::NonFinite));
-    plan.push(Footstep { side: Side::Left, place: Place::new(0.02, 0.045, 0.0) }).unwrap();
-    plan.push(Footstep { side: Side::Right, place: Place::new(0.04, -0.045, 0.0) }).unwrap();
-    let third = Footstep { side: Side::Left, place: Place::new(0.06, 0.045, 0.0) };
+    plan.push(Footstep {
+        side: Side::Left,
+        place: Place::new(0.02, 0.045, 0.0),
+    })
+    .unwrap();
+    plan.push(Footstep {
+        side: Side::Right,
+        place: Place::new(0.04, -0.045, 0.0),
+    })
+    .unwrap();
+    let third = Footstep {
+        side: Side::Left,
+        place: Place::new(0.06, 0.045, 0.0),
+    };
     assert_eq!(plan.push(third), Err(GaitError::CapacityExceeded));
     // Sampler.
-    assert_eq!(Sampler::new(plan.clone(), 0.0001).err(), Some(GaitError::BadSampleTime));
-    assert_eq!(Sampler::new(plan.clone(), f64::NAN).err(), Some(GaitError::NonFinite));
+    assert_eq!(
+        Sampler::new(plan.clone(), 0.0001).err(),
+        Some(GaitError::BadSampleTime)
+    );
+    assert_eq!(
+        Sampler::new(plan.clone(), f64::NAN).err(),
+        Some(GaitError::NonFinite)
+    );
     let short = Plan::<f64, 2>::new(&robot, params(0.002, 0.49, 0.64), l, r).unwrap();
-    assert_eq!(Sampler::new(short, 0.005).err(), Some(GaitError::BadSampleTime));
+    assert_eq!(
+        Sampler::new(short, 0.005).err(),
+        Some(GaitError::BadSampleTime)
+    );
     // Forward walks.
     let mut w = ForwardWalk::table2();
     w.steps = 0;
     let m = Model::new(ModelKind::Tlipfm, &robot, 0.217).unwrap();
-    assert_eq!(w.plan::<f64, 16>(&robot, w.params(m)).err(), Some(GaitError::EmptyPlan));
+    assert_eq!(
+        w.plan::<f64, 16>(&robot, w.params(m)).err(),
+        Some(GaitError::EmptyPlan)
+    );
     w = ForwardWalk::table2();
-    assert_eq!(w.plan::<f64, 8>(&robot, w.params(m)).err(), Some(GaitError::CapacityExceeded));
+    assert_eq!(
+        w.plan::<f64, 8>(&robot, w.params(m)).err(),
+        Some(GaitError::CapacityExceeded)
+    );
     w.s_first = 0;
-    assert_eq!(w.plan::<f64, 16>(&robot, w.params(m)).err(), Some(GaitError::BadStartFoot));
+    assert_eq!(
+        w.plan::<f64, 16>(&robot, w.params(m)).err(),
+        Some(GaitError::BadStartFoot)
+    );
 }
 
 proptest! {
@@ -499,7 +608,10 @@ fn fixed_point_agrees_with_f64_over_the_whole_walk() {
         }
         println!("{kind:?}: fixed point vs f64 over {n} samples: {worst:.3e} m, velocity {worst_v:.3e} m/s");
         assert!(worst < 5e-4, "{kind:?}: fixed point off by {worst} m");
-        assert!(worst_v < 5e-3, "{kind:?}: fixed point velocity off by {worst_v} m/s");
+        assert!(
+            worst_v < 5e-3,
+            "{kind:?}: fixed point velocity off by {worst_v} m/s"
+        );
     }
 }
 
@@ -517,7 +629,10 @@ fn fixed_point_math_primitives() {
         let (s, c) = sin_cos(Fx::from_num(x));
         let xr = Fx::from_num(x).to_num::<f64>();
         let k = (1u64 << 30) as f64;
-        assert!((s as f64 / k - xr.sin()).abs() < 4e-7 && (c as f64 / k - xr.cos()).abs() < 4e-7, "sincos {x}");
+        assert!(
+            (s as f64 / k - xr.sin()).abs() < 4e-7 && (c as f64 / k - xr.cos()).abs() < 4e-7,
+            "sincos {x}"
+        );
     }
 }
 
@@ -529,7 +644,9 @@ fn zmp_margin_min(samples: &[GaitSample<f64>], robot: &Robot) -> f64 {
     for s in samples {
         let place = |i: usize| Place::new(s.feet[i].x, s.feet[i].y, s.feet[i].yaw);
         let poly = match s.phase {
-            SupportPhase::Single(side) => SupportPolygon::single(&place(side.index()), robot).unwrap(),
+            SupportPhase::Single(side) => {
+                SupportPolygon::single(&place(side.index()), robot).unwrap()
+            }
             _ => SupportPolygon::double(&place(0), &place(1), robot).unwrap(),
         };
         worst = worst.min(poly.margin([s.zmp[0], s.zmp[1]]));
@@ -575,4 +692,13 @@ proptest! {
         let m = zmp_margin_min(&samples, &robot);
         prop_assert!(m >= 0.0, "ZMP left the support polygon by {}", -m);
     }
+}
+
+#[test]
+fn fixed_point_conversion_refuses_out_of_range_and_non_finite() {
+    use gait_core::fixed_point::fx;
+    assert_eq!(fx(40_000.0), Err(GaitError::FixedPointOverflow));
+    assert_eq!(fx(-1e30), Err(GaitError::FixedPointOverflow));
+    assert_eq!(fx(f32::NAN), Err(GaitError::NonFinite));
+    assert_eq!(fx(0.25).map(|v| v.to_num::<f32>()), Ok(0.25));
 }

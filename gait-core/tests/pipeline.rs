@@ -17,7 +17,11 @@ fn walk_joints<R: gait_core::Real>(kind: ModelKind) -> (Vec<[f64; 12]>, f64) {
     while !s.is_done() {
         let sample = s.next(R::zero());
         let (q, report) = joint_targets(&kin, &sample);
-        assert!(!report.clamped(), "IK clamped at t = {} ns: {report:?}", sample.time_ns);
+        assert!(
+            !report.clamped(),
+            "IK clamped at t = {} ns: {report:?}",
+            sample.time_ns
+        );
         let q64: [f64; 12] = core::array::from_fn(|i| q[i].to_f64());
         assert!(q64.iter().all(|v| v.is_finite()));
         // FK closes the loop: both feet are where the gait put them.
@@ -49,7 +53,11 @@ fn table2_joint_trajectories_are_finite_within_limits_continuous_and_feasible() 
             for (j, v) in q.iter().enumerate() {
                 let side = if j < 6 { Side::Left } else { Side::Right };
                 let lim = robot.joint_limit(side, j % 6);
-                assert!(*v >= lim.min && *v <= lim.max, "{} = {v} outside limits", JOINT_NAMES[j]);
+                assert!(
+                    *v >= lim.min && *v <= lim.max,
+                    "{} = {v} outside limits",
+                    JOINT_NAMES[j]
+                );
             }
             mon.push(k as f64 * dt, q);
         }
@@ -62,9 +70,15 @@ fn table2_joint_trajectories_are_finite_within_limits_continuous_and_feasible() 
             }
         }
         let report = mon.report();
-        println!("{kind:?} peak joint speeds (rad/s, limit {}):", report.limit);
-        for j in 0..12 {
-            println!("  {:>14} {:6.3} at t = {:.3} s", JOINT_NAMES[j], report.peak_speed[j], report.peak_time[j]);
+        println!(
+            "{kind:?} peak joint speeds (rad/s, limit {}):",
+            report.limit
+        );
+        for (j, name) in JOINT_NAMES.iter().enumerate() {
+            println!(
+                "  {:>14} {:6.3} at t = {:.3} s",
+                name, report.peak_speed[j], report.peak_time[j]
+            );
             assert!(report.peak_speed[j].is_finite());
         }
         // Feasibility as it comes out: the Table 2 swing (3 cm in 0.17 s) asks the swing knee
@@ -74,7 +88,10 @@ fn table2_joint_trajectories_are_finite_within_limits_continuous_and_feasible() 
             Err(e) => {
                 println!("  INFEASIBLE: {e}");
                 assert!(e.speed > e.limit && e.joint == report.worst_joint);
-                assert!(JOINT_NAMES[e.joint].ends_with("knee") || JOINT_NAMES[e.joint].ends_with("pitch"));
+                assert!(
+                    JOINT_NAMES[e.joint].ends_with("knee")
+                        || JOINT_NAMES[e.joint].ends_with("pitch")
+                );
             }
         }
         // The knees bend (z_c < straight-leg height) and the hips/knees actually move.
@@ -88,7 +105,11 @@ fn f64_pipeline_matches_f32_pipeline() {
     let (a, _) = walk_joints::<f32>(ModelKind::Tlipfm);
     let (b, fk) = walk_joints::<f64>(ModelKind::Tlipfm);
     assert!(fk < 1e-9);
-    let worst = a.iter().zip(&b).flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs())).fold(0.0, f64::max);
+    let worst = a
+        .iter()
+        .zip(&b)
+        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
+        .fold(0.0, f64::max);
     println!("f32 vs f64 joint angles: {worst:.2e} rad");
     assert!(worst < 1e-4, "{worst}");
 }

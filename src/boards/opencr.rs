@@ -1,0 +1,419 @@
+//! ROBOTIS OpenCR 1.0 (STM32F746ZG, Cortex-M7F) as a board, with stm32f7xx-hal 0.8.
+//!
+//! # Hardware assumptions (from the OpenCR 1.0 Arduino variant sources of ROBOTIS)
+//! | what | where | note |
+//! | --- | --- | --- |
+//! | HSE crystal | 25 MHz | PLL → SYSCLK 216 MHz (HCLK 216, APB1 54, APB2 108) |
+//! | Dynamixel TTL/RS-485 bus | **USART3**, PC10 TX / PC11 RX (AF7) | the Arduino core's `Serial3`, which `Dynamixel2Arduino` uses as `DXL_SERIAL` on the OpenCR (the task brief guessed USART6 on PC6/PC7: that is `Serial1`, the Arduino-header UART) |
+//! | bus direction (TX enable) | **PC9**, high = transmit | Arduino pin 84, `DXL_DIR_PIN` |
+//! | Dynamixel power switch (FET) | **PF15**, high = on | `BDPIN_DXL_PWR_EN` |
+//! | log UART | **USART6**, PC6 TX / PC7 RX (AF8) at 921 600 baud | Arduino header pins 1 (TX) / 0 (RX), `Serial1`; spare on this robot |
+//! | tick and µs clock | TIM2, 32-bit, free-running at 1 MHz | extended to 64 bits in software |
+//! | watchdog | IWDG (LSI ≈ 32 kHz) | started when walking begins, fed each tick |
+//! | defmt | RTT (probe-rs) | |
+//!
+//! The pins are the `BUS_*`, `LOG_*` constants' documentation and the concrete pin types in
+//! [`OpenCrBoard::new`]; change both together if a board revision differs.
+//! Both UARTs are clocked from SYSCLK (216 MHz, oversampling 16), so the bus can run at 1, 2,
+//! 3 or 4.5 Mbps (BRR ≥ 16 needs ≤ 13.5 Mbps) and the log at 921 600 baud (−0.16 %).
+//!
+//! # Timing
+//! [`TickTimer::wait_tick`] busy-waits on TIM2 until `k · period` (deadlines never drift) and
+//! meanwhile drains the log ring buffer into USART6 — the log never blocks the loop: a frame
+//! that does not fit the 1 KiB ring is dropped whole and counted ([`OpenCrBoard::log_dropped`]).
+//!
+//! # Exit and panic
+//! [`Board::exit`] and the panic handler send the broadcast torque-off packet, switch the
+//! Dynamixel power FET off as a backup, then reset the MCU (after a reset the firmware does
+//! not enable torque until it is told to walk).
+
+use core::cell::Cell;
+
+use cortex_m::peripheral::SCB;
+// Link the runtime and the defmt global logger (RTT) into every binary using this board.
+use cortex_m_rt as _;
+use defmt_rtt as _;
+use embedded_hal::digital::{ErrorType, OutputPin};
+use stm32f7xx_hal::gpio::{Output, PushPull, PC9, PF15};
+use stm32f7xx_hal::pac;
+use stm32f7xx_hal::prelude::*;
+use stm32f7xx_hal::rcc::{HSEClock, HSEClockMode};
+use stm32f7xx_hal::serial::{self, Serial};
+use stm32f7xx_hal::watchdog::IndependentWatchdog;
+
+use crate::board::{
+    Board, BusError, Clock, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
+    TORQUE_OFF_PACKET,
+};
+use crate::log::BoardId;
+use crate::Config;
+
+/// SYSCLK, Hz.
+pub const SYSCLK_HZ: u32 = 216_000_000;
+/// HSE crystal of the OpenCR 1.0, Hz.
+pub const HSE_HZ: u32 = 25_000_000;
+/// Log UART baud rate.
+pub const LOG_BAUD: u32 = 921_600;
+/// Log ring buffer size, bytes (≈ 25 tick records).
+pub const LOG_RING: usize = 1024;
+
+/// The Dynamixel direction pin as an `embedded-hal` 1.0 output (stm32f7xx-hal 0.8 pins only
+/// implement embedded-hal 0.2): PC9, high = transmit.
+pub struct DxlDir(PC9<Output<PushPull>>);
+
+impl ErrorType for DxlDir {
+    type Error = core::convert::Infallible;
+}
+
+impl OutputPin for DxlDir {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        self.0.set_low();
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        self.0.set_high();
+        Ok(())
+    }
+}
+
+fn usart3() -> &'static pac::usart1::RegisterBlock {
+    // SAFETY: the USART3 register block is always mapped; the board owns USART3 after `new`
+    // (the panic path steals it on purpose, after which nothing else runs).
+    unsafe { &*pac::USART3::ptr() }
+}
+
+fn usart6() -> &'static pac::usart1::RegisterBlock {
+    // SAFETY: as for `usart3`, for the log UART USART6.
+    unsafe { &*pac::USART6::ptr() }
+}
+
+fn brr(baud: u32) -> Option<u32> {
+    let div = SYSCLK_HZ.checked_div(baud)?;
+    if (16..=0xFFFF).contains(&div) {
+        Some(div)
+    } else {
+        None
+    }
+}
+
+/// Best-effort torque off from anywhere (panic handler): direction pin high, the broadcast
+/// Torque Enable = 0 packet on USART3 with bounded spins, direction low, then the servo power
+/// FET off. Harmless if the board was never initialised (writes then go nowhere).
+pub fn panic_torque_off() {
+    // SAFETY: register-level access during a panic/exit: nothing else runs any more. GPIOC/F
+    // BSRR writes are atomic set/reset of single pins.
+    let gpioc = unsafe { &*pac::GPIOC::ptr() };
+    let gpiof = unsafe { &*pac::GPIOF::ptr() };
+    let u = usart3();
+    gpioc.bsrr.write(|w| w.bs9().set_bit());
+    'send: for &b in TORQUE_OFF_PACKET.iter() {
+        let mut spins = 0u32;
+        while u.isr.read().txe().bit_is_clear() {
+            spins += 1;
+            if spins > 1_000_000 {
+                break 'send;
+            }
+        }
+        u.tdr.write(|w| w.tdr().bits(u16::from(b)));
+    }
+    let mut spins = 0u32;
+    while u.isr.read().tc().bit_is_clear() && spins < 1_000_000 {
+        spins += 1;
+    }
+    gpioc.bsrr.write(|w| w.br9().set_bit());
+    // Give the servos a moment to act on the packet before cutting their power (~2 ms).
+    cortex_m::asm::delay(SYSCLK_HZ / 500);
+    gpiof.bsrr.write(|w| w.br15().set_bit());
+}
+
+/// Panic path of the OpenCR binary: log, torque off, reset.
+pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    panic_torque_off();
+    SCB::sys_reset()
+}
+
+/// The OpenCR board. `D` is the bus direction pin ([`DxlDir`] on the real board).
+pub struct OpenCrBoard<D: OutputPin = DxlDir> {
+    dir: D,
+    _dxl_power: PF15<Output<PushPull>>,
+    baud: u32,
+    tim: pac::TIM2,
+    clock_high: Cell<u64>,
+    clock_last: Cell<u32>,
+    schedule: TickSchedule,
+    iwdg: IndependentWatchdog,
+    watchdog_running: bool,
+    ring: [u8; LOG_RING],
+    head: usize,
+    len: usize,
+    log_dropped: u32,
+    uart_errors: u32,
+}
+
+impl OpenCrBoard<DxlDir> {
+    /// Brings the board up: 216 MHz clocks, Dynamixel power on, USART3 bus at
+    /// `cfg.bus_baud`, USART6 log at [`LOG_BAUD`], TIM2 at 1 MHz. The watchdog is not started.
+    pub fn new(dp: pac::Peripherals, cfg: &Config) -> Self {
+        let rcc = dp.RCC.constrain();
+        let clocks = rcc
+            .cfgr
+            .hse(HSEClock::new(HSE_HZ.Hz(), HSEClockMode::Oscillator))
+            .sysclk(SYSCLK_HZ.Hz())
+            .freeze();
+
+        let gpioc = dp.GPIOC.split();
+        let gpiof = dp.GPIOF.split();
+
+        let mut dir = gpioc.pc9.into_push_pull_output();
+        dir.set_low();
+        let mut power = gpiof.pf15.into_push_pull_output();
+        power.set_high();
+
+        let bus_cfg = serial::Config {
+            baud_rate: cfg.bus_baud.bps(),
+            sysclock: true,
+            ..Default::default()
+        };
+        let bus = Serial::new(
+            dp.USART3,
+            (
+                gpioc.pc10.into_alternate::<7>(),
+                gpioc.pc11.into_alternate::<7>(),
+            ),
+            &clocks,
+            bus_cfg,
+        );
+        let log_cfg = serial::Config {
+            baud_rate: LOG_BAUD.bps(),
+            sysclock: true,
+            ..Default::default()
+        };
+        let log = Serial::new(
+            dp.USART6,
+            (
+                gpioc.pc6.into_alternate::<8>(),
+                gpioc.pc7.into_alternate::<8>(),
+            ),
+            &clocks,
+            log_cfg,
+        );
+        // Keep both configured; drive them at register level (no DMA requests).
+        let (_u3, _p3) = bus.release();
+        let (_u6, _p6) = log.release();
+        usart3()
+            .cr3
+            .write(|w| w.dmat().disabled().dmar().disabled());
+        usart6()
+            .cr3
+            .write(|w| w.dmat().disabled().dmar().disabled());
+
+        // TIM2: 32-bit free-running µs counter. APB1 timers run at 2 × PCLK1.
+        // SAFETY: enabling the TIM2 clock in RCC.APB1ENR (read-modify-write, single core,
+        // before interrupts are used).
+        let rcc_regs = unsafe { &*pac::RCC::ptr() };
+        rcc_regs.apb1enr.modify(|_, w| w.tim2en().set_bit());
+        let tim = dp.TIM2;
+        let prescale = (clocks.timclk1().raw() / 1_000_000).saturating_sub(1);
+        tim.psc.write(|w| w.psc().bits(prescale.min(0xFFFF) as u16));
+        tim.arr.write(|w| w.bits(u32::MAX));
+        tim.egr.write(|w| w.ug().set_bit());
+        tim.cr1.modify(|_, w| w.cen().set_bit());
+
+        let iwdg = IndependentWatchdog::new(dp.IWDG);
+
+        OpenCrBoard {
+            dir: DxlDir(dir),
+            _dxl_power: power,
+            baud: cfg.bus_baud,
+            tim,
+            clock_high: Cell::new(0),
+            clock_last: Cell::new(0),
+            schedule: TickSchedule::new(cfg.tick_period_us),
+            iwdg,
+            watchdog_running: false,
+            ring: [0; LOG_RING],
+            head: 0,
+            len: 0,
+            log_dropped: 0,
+            uart_errors: 0,
+        }
+    }
+}
+
+impl<D: OutputPin> OpenCrBoard<D> {
+    /// Log frames dropped because the ring was full.
+    pub fn log_dropped(&self) -> u32 {
+        self.log_dropped
+    }
+
+    /// Overrun/framing/noise errors seen on the bus UART.
+    pub fn uart_errors(&self) -> u32 {
+        self.uart_errors
+    }
+
+    /// Moves log bytes from the ring to USART6 while its data register is free.
+    fn pump_log(&mut self) {
+        let u = usart6();
+        while self.len > 0 && u.isr.read().txe().bit_is_set() {
+            let b = self.ring.get(self.head).copied().map_or(0, |b| b);
+            u.tdr.write(|w| w.tdr().bits(u16::from(b)));
+            self.head = (self.head + 1) % LOG_RING;
+            self.len -= 1;
+        }
+    }
+
+    /// Clears the bus UART's error flags (counting them) and drops any pending byte.
+    fn discard_input(&mut self) {
+        let u = usart3();
+        let isr = u.isr.read();
+        if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
+            self.uart_errors = self.uart_errors.saturating_add(1);
+            u.icr
+                .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
+        }
+        while u.isr.read().rxne().bit_is_set() {
+            let _ = u.rdr.read().bits();
+        }
+    }
+}
+
+impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
+    fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
+        self.discard_input();
+        let u = usart3();
+        let _ = self.dir.set_high();
+        for &b in packet {
+            while u.isr.read().txe().bit_is_clear() {}
+            u.tdr.write(|w| w.tdr().bits(u16::from(b)));
+        }
+        while u.isr.read().tc().bit_is_clear() {}
+        let _ = self.dir.set_low();
+        // Whatever the transceiver echoed while we were driving the line is not a reply.
+        self.discard_input();
+        Ok(())
+    }
+
+    fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
+        let u = usart3();
+        let deadline = self.now_us() + u64::from(timeout_us);
+        let mut n = 0;
+        while n < buf.len() {
+            let isr = u.isr.read();
+            if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
+                self.uart_errors = self.uart_errors.saturating_add(1);
+                u.icr
+                    .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
+            }
+            if isr.rxne().bit_is_set() {
+                if let Some(slot) = buf.get_mut(n) {
+                    *slot = (u.rdr.read().bits() & 0xFF) as u8;
+                }
+                n += 1;
+            } else if self.now_us() >= deadline {
+                break;
+            }
+        }
+        Ok(n)
+    }
+
+    fn baud(&self) -> u32 {
+        self.baud
+    }
+
+    fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
+        let div = brr(baud).ok_or(BusError::UnsupportedBaud)?;
+        let u = usart3();
+        while u.isr.read().tc().bit_is_clear() {}
+        u.cr1.modify(|_, w| w.ue().clear_bit());
+        // SAFETY: any 16-bit value is a valid BRR; `div` is in 16..=0xFFFF.
+        u.brr.write(|w| unsafe { w.bits(div) });
+        u.cr1.modify(|_, w| w.ue().set_bit());
+        self.baud = baud;
+        Ok(())
+    }
+}
+
+impl<D: OutputPin> Clock for OpenCrBoard<D> {
+    fn now_us(&self) -> u64 {
+        let cnt = self.tim.cnt.read().bits();
+        if cnt < self.clock_last.get() {
+            self.clock_high.set(self.clock_high.get() + (1u64 << 32));
+        }
+        self.clock_last.set(cnt);
+        self.clock_high.get() | u64::from(cnt)
+    }
+}
+
+impl<D: OutputPin> TickTimer for OpenCrBoard<D> {
+    fn period_us(&self) -> u32 {
+        self.schedule.period_us()
+    }
+
+    fn wait_tick(&mut self) -> Tick {
+        let plan = self.schedule.plan(self.now_us());
+        if let Some(t) = plan.wait_until_us {
+            while self.now_us() < t {
+                self.pump_log();
+            }
+        }
+        self.pump_log();
+        plan.tick
+    }
+
+    fn overruns(&self) -> u32 {
+        self.schedule.overruns()
+    }
+}
+
+impl<D: OutputPin> LogSink for OpenCrBoard<D> {
+    fn write_log(&mut self, bytes: &[u8]) {
+        if bytes.len() > LOG_RING - self.len {
+            self.log_dropped = self.log_dropped.saturating_add(1);
+        } else {
+            for &b in bytes {
+                let i = (self.head + self.len) % LOG_RING;
+                if let Some(slot) = self.ring.get_mut(i) {
+                    *slot = b;
+                }
+                self.len += 1;
+            }
+        }
+        self.pump_log();
+    }
+}
+
+impl<D: OutputPin> Watchdog for OpenCrBoard<D> {
+    fn start(&mut self, timeout_ms: u32) {
+        if !self.watchdog_running {
+            self.iwdg.start(timeout_ms.max(1).millis());
+            self.watchdog_running = true;
+        }
+    }
+    fn feed(&mut self) {
+        if self.watchdog_running {
+            self.iwdg.feed();
+        }
+    }
+}
+
+impl<D: OutputPin> Board for OpenCrBoard<D> {
+    const NAME: &'static str = "opencr-1.0";
+    const ID: BoardId = BoardId::OpenCr;
+
+    fn torque_off_best_effort(&mut self) {
+        let _ = self.send(&TORQUE_OFF_PACKET);
+    }
+
+    fn exit(&mut self, code: i32) -> ! {
+        defmt::warn!("exit({=i32}): torque off, servo power off, reset", code);
+        self.torque_off_best_effort();
+        // Let the log drain (bounded: ≤ LOG_RING bytes at 921 600 baud ≈ 11 ms).
+        let start = self.now_us();
+        while self.len > 0 && self.now_us() < start + 20_000 {
+            self.pump_log();
+        }
+        panic_torque_off();
+        SCB::sys_reset()
+    }
+}

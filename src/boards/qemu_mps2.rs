@@ -1,0 +1,507 @@
+//! QEMU `mps2-an500` (Cortex-M7; `mps2-an386` Cortex-M4F runs the same ELF) as a board:
+//! firmware-in-the-loop with a simulated robot, bit-for-bit deterministic whatever the host load.
+//!
+//! # Wiring (qemu's `-serial` options map in order to UART0, UART1, UART2)
+//! | UART | base | use |
+//! | --- | --- | --- |
+//! | UART0 | 0x4000_4000 | the servo bus (`-serial tcp:127.0.0.1:PORT,nodelay=on` to the simulator; `null` = unconnected) |
+//! | UART1 | 0x4000_5000 | the binary ZMP-response log ([`crate::log`]; to a file or TCP) |
+//! | UART2 | 0x4000_6000 | the lock-step channel (TCP to the simulator) |
+//!
+//! CMSDK APB UART registers: DATA 0x00, STATE 0x04 (bit 0 TX full, bit 1 RX full), CTRL 0x08
+//! (bit 0 TX enable, bit 1 RX enable), BAUDDIV 0x10 (≥ 16, 25 MHz clock). defmt goes out over
+//! semihosting (stdout of qemu), the exit code through semihosting SYS_EXIT_EXTENDED.
+//! `scripts/qemu-run.sh` starts qemu with all of this; see `docs/lockstep.md`.
+//!
+//! # Lock-step protocol (firmware side; the simulator implements the other end exactly)
+//! Lock-step is on when the semihosting command line (qemu `-append`) contains the word
+//! `lockstep` (`scripts/qemu-run.sh --lockstep SPEC` adds it). Without it the bus is treated
+//! as unconnected: packets are written to UART0 and every read times out at once.
+//!
+//! * **Time frames, firmware → simulator on UART2**: `0x5A` followed by the board's virtual
+//!   time as u64 little-endian microseconds (9 bytes). Sent at the start of every control tick
+//!   and before each instruction packet on the bus; a frame whose time equals the previous
+//!   frame's is not repeated. The simulator advances its physics to that time.
+//! * **Reply announcements, simulator → firmware on UART2**: after the simulator has read one
+//!   complete instruction packet from the bus and written its whole reply on the bus, it
+//!   writes `0xA5, n_lo, n_hi` = the number of bytes it wrote on the bus for that
+//!   instruction (0 when there is no reply: broadcast SYNC WRITE, a dropped packet in fault
+//!   injection, …). Every instruction packet gets exactly one announcement.
+//! * The bus transport therefore knows after each packet how many reply bytes will come. It
+//!   reads exactly those (blocking, no wall-clock timeout); a read beyond them returns
+//!   "timeout" at once and advances the virtual clock to the driver's deadline. A dropped reply
+//!   is a deterministic timeout, and a slow host never causes a spurious one. Reply bytes the
+//!   driver did not read are drained (they are known to come) before the next packet.
+//! * Bytes on UART2 other than `0xA5` where an announcement is due are skipped and
+//!   counted ([`QemuBoard::lockstep_errors`]).
+//!
+//! # Virtual clock ([`Clock::now_us`])
+//! Deterministic by construction: it advances only by
+//! * modelled bus time: 10 bits per byte at the configured baud (default 1 Mbps) for every byte
+//!   sent and every byte received, plus the servo Return Delay Time before the first byte of
+//!   each reply ([`crate::Config::return_delay_us`]);
+//! * a timeout: a read past the announced reply jumps to the driver's deadline;
+//! * a fixed modelled compute time per tick ([`QemuBoard::set_compute_us`], default
+//!   [`DEFAULT_COMPUTE_US`]), charged when the tick's work ends (at [`TickTimer::wait_tick`]);
+//! * [`TickTimer::wait_tick`] jumping to the next deadline `k · period` (an overrun when it is
+//!   already past; deadlines never drift).
+//!
+//! Why not the measured compute time: SysTick under `-icount shift=0` counts one step per 40
+//! instructions, and where the count boundaries fall relative to the code depends on how many
+//! instructions the blocking UART spins took — which depends on host speed. A measured compute
+//! time would differ by ±1 count between runs and break bit-for-bit determinism. The CPU time
+//! *is* measured (SysTick, spins excluded) for diagnostics only: [`QemuBoard::cpu_us`].
+//!
+//! # Watchdog
+//! A virtual watchdog: once started, a tick that begins more than the timeout (virtual time)
+//! after the last feed sends torque off and exits with [`EXIT_WATCHDOG`].
+
+use core::ptr::{read_volatile, write_volatile};
+
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+// Link the runtime (vector table, reset handler) and the defmt global logger into every
+// binary that uses this board, the on-target tests included.
+use cortex_m_rt as _;
+use defmt_semihosting as _;
+
+use crate::board::{
+    Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
+    TORQUE_OFF_PACKET,
+};
+use crate::log::BoardId;
+use crate::Config;
+
+/// CMSDK UART0 (servo bus).
+pub const UART0_BASE: usize = 0x4000_4000;
+/// CMSDK UART1 (log).
+pub const UART1_BASE: usize = 0x4000_5000;
+/// CMSDK UART2 (lock-step).
+pub const UART2_BASE: usize = 0x4000_6000;
+/// UART / SysTick clock of the mps2 boards, Hz.
+pub const SYSCLK_HZ: u32 = 25_000_000;
+/// Default modelled compute time per tick, µs.
+pub const DEFAULT_COMPUTE_US: u32 = 150;
+/// Exit code when the virtual watchdog bites.
+pub const EXIT_WATCHDOG: i32 = 3;
+/// Exit code after a panic.
+pub const EXIT_PANIC: i32 = 101;
+/// Lock-step time frame marker (firmware → simulator).
+pub const LOCKSTEP_TIME: u8 = 0x5A;
+/// Lock-step reply announcement marker (simulator → firmware).
+pub const LOCKSTEP_REPLY: u8 = 0xA5;
+
+const DATA: usize = 0x00;
+const STATE: usize = 0x04;
+const CTRL: usize = 0x08;
+const BAUDDIV: usize = 0x10;
+const STATE_TX_FULL: u32 = 1;
+const STATE_RX_FULL: u32 = 2;
+
+/// One CMSDK APB UART, polled.
+#[derive(Clone, Copy)]
+struct Uart {
+    base: usize,
+}
+
+impl Uart {
+    fn reg(self, off: usize) -> *mut u32 {
+        (self.base + off) as *mut u32
+    }
+    fn read(self, off: usize) -> u32 {
+        // SAFETY: `base` is one of the CMSDK UART blocks of the mps2 memory map; the register
+        // offsets are those of the CMSDK APB UART. Volatile 32-bit access, no aliasing state.
+        unsafe { read_volatile(self.reg(off)) }
+    }
+    fn write(self, off: usize, v: u32) {
+        // SAFETY: as in `read`.
+        unsafe { write_volatile(self.reg(off), v) }
+    }
+    fn init(self, baud: u32) {
+        let div = (SYSCLK_HZ / baud.max(1)).max(16);
+        self.write(BAUDDIV, div);
+        self.write(CTRL, 0b11);
+    }
+    fn tx_full(self) -> bool {
+        self.read(STATE) & STATE_TX_FULL != 0
+    }
+    fn rx_full(self) -> bool {
+        self.read(STATE) & STATE_RX_FULL != 0
+    }
+    fn put(self, b: u8) {
+        while self.tx_full() {}
+        self.write(DATA, u32::from(b));
+    }
+    /// Bounded-spin write for the panic path: gives up if the UART never drains.
+    fn put_bounded(self, b: u8) -> bool {
+        let mut spins = 0u32;
+        while self.tx_full() {
+            spins += 1;
+            if spins > 1_000_000 {
+                return false;
+            }
+        }
+        self.write(DATA, u32::from(b));
+        true
+    }
+    fn get(self) -> u8 {
+        while !self.rx_full() {}
+        (self.read(DATA) & 0xFF) as u8
+    }
+}
+
+/// SysTick as a free-running 24-bit down counter at 25 MHz: CPU time excluding UART spins.
+struct CpuMeter {
+    mark: u32,
+    counts: u64,
+}
+
+impl CpuMeter {
+    fn now() -> u32 {
+        SYST::get_current()
+    }
+    fn resume(&mut self) {
+        self.mark = Self::now();
+    }
+    fn pause(&mut self) {
+        let n = Self::now();
+        self.counts += u64::from(self.mark.wrapping_sub(n) & 0x00FF_FFFF);
+        self.mark = n;
+    }
+    fn take_us(&mut self) -> u32 {
+        self.pause();
+        let us = self.counts / u64::from(SYSCLK_HZ / 1_000_000);
+        self.counts = 0;
+        us.min(u64::from(u32::MAX)) as u32
+    }
+}
+
+/// Semihosting SYS_EXIT_EXTENDED with `code` (qemu exits with that status).
+pub fn semihosting_exit(code: i32) -> ! {
+    // ADP_Stopped_ApplicationExit, then the exit code.
+    let block: [usize; 2] = [0x20026, code as u32 as usize];
+    loop {
+        // SAFETY: 0x20 = SYS_EXIT_EXTENDED, whose argument block is two words (reason, code).
+        unsafe {
+            cortex_m_semihosting::syscall(0x20, &block);
+        }
+    }
+}
+
+/// Reads the semihosting command line (qemu `-append`) into `buf`; returns its length.
+fn semihosting_cmdline(buf: &mut [u8]) -> Option<usize> {
+    let mut block: [usize; 2] = [buf.as_mut_ptr() as usize, buf.len()];
+    let p = block.as_mut_ptr();
+    // SAFETY: 0x15 = SYS_GET_CMDLINE: the block is (buffer address, buffer size); the host
+    // writes at most `size` bytes into the buffer and the length into block[1]. The block is
+    // passed by raw pointer and read back volatile, as the host writes it behind our back.
+    let (r, len) = unsafe {
+        let r = cortex_m_semihosting::syscall1(0x15, p as usize);
+        (r, core::ptr::read_volatile(p.add(1)))
+    };
+    if r == 0 {
+        Some(len.min(buf.len()))
+    } else {
+        None
+    }
+}
+
+fn contains_word(hay: &[u8], word: &[u8]) -> bool {
+    hay.split(|&b| b == b' ' || b == b'\t' || b == 0)
+        .any(|w| w == word)
+}
+
+/// Best-effort torque off from anywhere (panic handler): the broadcast Torque Enable = 0
+/// packet on UART0, with bounded spins so that a stuck UART cannot hang the panic path.
+pub fn panic_torque_off() {
+    let bus = Uart { base: UART0_BASE };
+    for &b in TORQUE_OFF_PACKET.iter() {
+        if !bus.put_bounded(b) {
+            return;
+        }
+    }
+}
+
+/// Panic path shared by the QEMU binary and the on-target tests: log, torque off, exit 101.
+pub fn panic_exit(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    panic_torque_off();
+    semihosting_exit(EXIT_PANIC)
+}
+
+/// The QEMU mps2 board.
+pub struct QemuBoard {
+    bus: Uart,
+    log: Uart,
+    lockstep_uart: Uart,
+    lockstep: bool,
+    line: LineTime,
+    return_delay_ns: u64,
+    compute_ns: u64,
+    virt_ns: u64,
+    last_sync_us: Option<u64>,
+    pending_reply: usize,
+    reply_started: bool,
+    lockstep_errors: u32,
+    schedule: TickSchedule,
+    watchdog_ms: Option<u32>,
+    last_feed_ns: u64,
+    cpu: CpuMeter,
+    cpu_last_us: u32,
+    cpu_max_us: u32,
+    _syst: SYST,
+}
+
+impl QemuBoard {
+    /// Sets up the UARTs and SysTick; reads the semihosting command line for `lockstep`.
+    pub fn new(mut syst: SYST, cfg: &Config) -> Self {
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(0x00FF_FFFF);
+        syst.clear_current();
+        syst.enable_counter();
+
+        let bus = Uart { base: UART0_BASE };
+        let log = Uart { base: UART1_BASE };
+        let ls = Uart { base: UART2_BASE };
+        bus.init(cfg.bus_baud);
+        log.init(921_600);
+        ls.init(SYSCLK_HZ / 16);
+
+        let mut cmd = [0u8; 128];
+        let lockstep = match semihosting_cmdline(&mut cmd) {
+            Some(n) => cmd.get(..n).is_some_and(|c| contains_word(c, b"lockstep")),
+            None => false,
+        };
+
+        let mut b = QemuBoard {
+            bus,
+            log,
+            lockstep_uart: ls,
+            lockstep,
+            line: LineTime { baud: cfg.bus_baud },
+            return_delay_ns: u64::from(cfg.return_delay_us) * 1000,
+            compute_ns: u64::from(DEFAULT_COMPUTE_US) * 1000,
+            virt_ns: 0,
+            last_sync_us: None,
+            pending_reply: 0,
+            reply_started: false,
+            lockstep_errors: 0,
+            schedule: TickSchedule::new(cfg.tick_period_us),
+            watchdog_ms: None,
+            last_feed_ns: 0,
+            cpu: CpuMeter { mark: 0, counts: 0 },
+            cpu_last_us: 0,
+            cpu_max_us: 0,
+            _syst: syst,
+        };
+        b.cpu.resume();
+        b
+    }
+
+    /// True when the lock-step channel is in use.
+    pub fn lockstep(&self) -> bool {
+        self.lockstep
+    }
+
+    /// Sets the modelled compute time per tick, µs.
+    pub fn set_compute_us(&mut self, us: u32) {
+        self.compute_ns = u64::from(us) * 1000;
+    }
+
+    /// Protocol errors seen on the lock-step channel.
+    pub fn lockstep_errors(&self) -> u32 {
+        self.lockstep_errors
+    }
+
+    /// Measured CPU time (SysTick, UART spins excluded) of the last tick and the maximum, µs.
+    /// Diagnostics only: not deterministic to the microsecond, never used for the clock.
+    pub fn cpu_us(&self) -> (u32, u32) {
+        (self.cpu_last_us, self.cpu_max_us)
+    }
+
+    fn now_us_inner(&self) -> u64 {
+        self.virt_ns / 1000
+    }
+
+    /// Sends a time frame on UART2 if the time changed since the last one.
+    fn sync_time(&mut self) {
+        if !self.lockstep {
+            return;
+        }
+        let now = self.now_us_inner();
+        if self.last_sync_us == Some(now) {
+            return;
+        }
+        self.last_sync_us = Some(now);
+        self.cpu.pause();
+        self.lockstep_uart.put(LOCKSTEP_TIME);
+        for b in now.to_le_bytes() {
+            self.lockstep_uart.put(b);
+        }
+        self.cpu.resume();
+    }
+
+    /// Reads one reply announcement from UART2.
+    fn read_announcement(&mut self) -> usize {
+        self.cpu.pause();
+        loop {
+            let b = self.lockstep_uart.get();
+            if b == LOCKSTEP_REPLY {
+                break;
+            }
+            self.lockstep_errors = self.lockstep_errors.saturating_add(1);
+        }
+        let lo = self.lockstep_uart.get();
+        let hi = self.lockstep_uart.get();
+        self.cpu.resume();
+        usize::from(u16::from_le_bytes([lo, hi]))
+    }
+
+    /// Writes raw bytes on UART0 (blocking; spin excluded from the CPU meter).
+    fn bus_write(&mut self, bytes: &[u8]) {
+        self.cpu.pause();
+        for &b in bytes {
+            self.bus.put(b);
+        }
+        self.cpu.resume();
+    }
+
+    fn check_watchdog(&mut self) {
+        if let Some(ms) = self.watchdog_ms {
+            if self.virt_ns.saturating_sub(self.last_feed_ns) > u64::from(ms) * 1_000_000 {
+                defmt::error!("virtual watchdog expired at {} us", self.now_us_inner());
+                self.torque_off_best_effort();
+                semihosting_exit(EXIT_WATCHDOG);
+            }
+        }
+    }
+}
+
+impl ServoBus for QemuBoard {
+    fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
+        if packet.len() > usize::from(u16::MAX) {
+            return Err(BusError::TooLong);
+        }
+        // Unread reply bytes of the previous packet are known to come: drain them.
+        if self.pending_reply > 0 {
+            self.cpu.pause();
+            for _ in 0..self.pending_reply {
+                let _ = self.bus.get();
+            }
+            self.cpu.resume();
+            self.pending_reply = 0;
+        }
+        self.sync_time();
+        self.bus_write(packet);
+        self.virt_ns += self.line.bytes_ns(packet.len());
+        self.reply_started = false;
+        self.pending_reply = if self.lockstep {
+            self.read_announcement()
+        } else {
+            0
+        };
+        Ok(())
+    }
+
+    fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
+        let start = self.virt_ns;
+        let n = buf.len().min(self.pending_reply);
+        if n > 0 {
+            if !self.reply_started {
+                self.virt_ns += self.return_delay_ns;
+                self.reply_started = true;
+            }
+            self.cpu.pause();
+            for slot in buf.iter_mut().take(n) {
+                *slot = self.bus.get();
+            }
+            self.cpu.resume();
+            self.pending_reply -= n;
+            self.virt_ns += self.line.bytes_ns(n);
+        }
+        if n < buf.len() {
+            self.virt_ns = self.virt_ns.max(start + u64::from(timeout_us) * 1000);
+        }
+        Ok(n)
+    }
+
+    fn baud(&self) -> u32 {
+        self.line.baud
+    }
+
+    fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
+        // The CMSDK UART needs BAUDDIV ≥ 16 (`init` clamps it), but its speed is irrelevant
+        // over a chardev: any rate the servos support is accepted and only modelled.
+        if baud == 0 {
+            return Err(BusError::UnsupportedBaud);
+        }
+        self.line = LineTime { baud };
+        self.bus.init(baud);
+        Ok(())
+    }
+}
+
+impl Clock for QemuBoard {
+    fn now_us(&self) -> u64 {
+        self.now_us_inner()
+    }
+}
+
+impl TickTimer for QemuBoard {
+    fn period_us(&self) -> u32 {
+        self.schedule.period_us()
+    }
+
+    fn wait_tick(&mut self) -> Tick {
+        // The tick's work ends: charge the modelled compute time.
+        self.virt_ns += self.compute_ns;
+        let plan = self.schedule.plan(self.now_us_inner());
+        if let Some(t) = plan.wait_until_us {
+            self.virt_ns = self.virt_ns.max(t * 1000);
+        }
+        self.check_watchdog();
+        let cpu = self.cpu.take_us();
+        self.cpu_last_us = cpu;
+        self.cpu_max_us = self.cpu_max_us.max(cpu);
+        self.sync_time();
+        plan.tick
+    }
+
+    fn overruns(&self) -> u32 {
+        self.schedule.overruns()
+    }
+}
+
+impl LogSink for QemuBoard {
+    fn write_log(&mut self, bytes: &[u8]) {
+        self.cpu.pause();
+        for &b in bytes {
+            self.log.put(b);
+        }
+        self.cpu.resume();
+    }
+}
+
+impl Watchdog for QemuBoard {
+    fn start(&mut self, timeout_ms: u32) {
+        self.watchdog_ms = Some(timeout_ms.max(1));
+        self.last_feed_ns = self.virt_ns;
+    }
+    fn feed(&mut self) {
+        self.last_feed_ns = self.virt_ns;
+    }
+}
+
+impl Board for QemuBoard {
+    const NAME: &'static str = "qemu-mps2-an500";
+    const ID: BoardId = BoardId::QemuMps2;
+
+    fn torque_off_best_effort(&mut self) {
+        self.cpu.pause();
+        panic_torque_off();
+        self.cpu.resume();
+    }
+
+    fn exit(&mut self, code: i32) -> ! {
+        semihosting_exit(code)
+    }
+}

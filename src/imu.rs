@@ -1,0 +1,375 @@
+//! IMU processing: the upper-body pitch acceleration φ̈ and torque τ = J·φ̈ from the gyro, and
+//! the trunk tilt from the accelerometer (fall detection).
+//!
+//! # φ̈ filter
+//! With the pitch rate ω_k (gyro y axis, rad/s) sampled every `dt` (the servo tick):
+//!
+//! ```text
+//! d_k = (ω_k − ω_{k−1}) / dt                    backward difference
+//! y_k = y_{k−1} + α (d_k − y_{k−1}),  α = 1 − exp(−2π f_c dt)   first-order low-pass
+//! ```
+//!
+//! so `H(z) = (1 − z⁻¹)/dt · α / (1 − (1 − α) z⁻¹)`. For a pitch rate `A sin(Ω t)` the exact
+//! φ̈ is `A Ω cos(Ω t)`; the filter's steady-state output is `A |H(e^{jΩdt})| sin(Ω t + arg H)`
+//! ([`PitchAccel::response`] evaluates `|H|` and `arg H`). Well below the cutoff
+//! `|H| ≈ Ω` and the output lags the exact φ̈ by about `dt/2 + (1 − α)/α · dt` (≈ 10.5 ms at
+//! 1 kHz and 15 Hz): e.g. at 1.5 Hz (the gait's step frequency) the gain error is < 0.6 % and
+//! the phase lag ≈ 5.7°. The default cutoff is [`DEFAULT_CUTOFF_HZ`] = 15 Hz.
+//!
+//! A non-finite gyro sample is dropped: the output holds its last value and the next good
+//! sample is differenced against the last good one over the true elapsed time.
+//!
+//! # Tilt
+//! From the accelerometer's specific force `a` (body frame; upright reads `(0, 0, +g)`):
+//! roll = atan2(a_y, a_z), pitch = atan2(−a_x, √(a_y² + a_z²)), tilt from vertical =
+//! atan2(√(a_x² + a_y²), a_z). A sample that is non-finite or whose norm is outside
+//! [0.25 g, 4 g] (free fall, impact) is rejected and the last good tilt is held.
+
+/// Default low-pass cutoff of the φ̈ filter, Hz.
+pub const DEFAULT_CUTOFF_HZ: f32 = 15.0;
+/// Standard gravity used for the accelerometer plausibility window, m/s².
+const G: f32 = 9.80665;
+
+/// φ̈ filter settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PitchAccelConfig {
+    /// Sample period (the servo tick), s.
+    pub dt_s: f32,
+    /// Low-pass cutoff, Hz.
+    pub cutoff_hz: f32,
+    /// Upper-body pitch inertia J, kg·m².
+    pub inertia: f32,
+}
+
+impl PitchAccelConfig {
+    /// The reference robot's J with the default cutoff at sample period `dt_s`.
+    pub fn reference(dt_s: f32) -> Self {
+        let robot = gait_core::Robot::reference();
+        PitchAccelConfig {
+            dt_s,
+            cutoff_hz: DEFAULT_CUTOFF_HZ,
+            inertia: robot.masses.upper_body_inertia as f32,
+        }
+    }
+}
+
+/// Pitch-rate differentiator + low-pass → φ̈, τ = J·φ̈.
+#[derive(Clone, Debug)]
+pub struct PitchAccel {
+    dt: f32,
+    alpha: f32,
+    inertia: f32,
+    prev_rate: Option<f32>,
+    gap: u32,
+    acc: f32,
+    rejected: u32,
+}
+
+impl PitchAccel {
+    /// A filter at rest. A non-positive or non-finite `dt_s` or cutoff falls back to 1 ms /
+    /// [`DEFAULT_CUTOFF_HZ`].
+    pub fn new(cfg: PitchAccelConfig) -> Self {
+        let dt = if cfg.dt_s.is_finite() && cfg.dt_s > 0.0 {
+            cfg.dt_s
+        } else {
+            1.0e-3
+        };
+        let fc = if cfg.cutoff_hz.is_finite() && cfg.cutoff_hz > 0.0 {
+            cfg.cutoff_hz
+        } else {
+            DEFAULT_CUTOFF_HZ
+        };
+        let inertia = if cfg.inertia.is_finite() {
+            cfg.inertia
+        } else {
+            0.0
+        };
+        PitchAccel {
+            dt,
+            alpha: 1.0 - libm::expf(-core::f32::consts::TAU * fc * dt),
+            inertia,
+            prev_rate: None,
+            gap: 1,
+            acc: 0.0,
+            rejected: 0,
+        }
+    }
+
+    /// The smoothing factor α.
+    pub fn alpha(&self) -> f32 {
+        self.alpha
+    }
+
+    /// Feeds one pitch-rate sample (rad/s); returns the filtered φ̈ (rad/s²).
+    pub fn update(&mut self, rate: f32) -> f32 {
+        if !rate.is_finite() {
+            self.rejected = self.rejected.saturating_add(1);
+            self.gap = self.gap.saturating_add(1);
+            return self.acc;
+        }
+        if let Some(prev) = self.prev_rate {
+            let d = (rate - prev) / (self.dt * self.gap as f32);
+            if d.is_finite() {
+                self.acc += self.alpha * (d - self.acc);
+            }
+        }
+        self.prev_rate = Some(rate);
+        self.gap = 1;
+        self.acc
+    }
+
+    /// Filtered φ̈, rad/s².
+    pub fn accel(&self) -> f32 {
+        self.acc
+    }
+
+    /// τ = J·φ̈, N·m.
+    pub fn torque(&self) -> f32 {
+        self.inertia * self.acc
+    }
+
+    /// Non-finite samples dropped so far.
+    pub fn rejected(&self) -> u32 {
+        self.rejected
+    }
+
+    /// Frequency response of the whole filter at `f_hz`: (|H|, arg H) with H in (rad/s²) per
+    /// (rad/s); compare |H| with Ω = 2π f (an exact differentiator) and arg H with +π/2.
+    pub fn response(&self, f_hz: f32) -> (f32, f32) {
+        let w = core::f32::consts::TAU * f_hz * self.dt;
+        let (s, c) = (libm::sinf(w), libm::cosf(w));
+        // 1 − z⁻¹ with z⁻¹ = cos w − j sin w.
+        let (dr, di) = (1.0 - c, s);
+        // 1 − (1 − α) z⁻¹.
+        let b = 1.0 - self.alpha;
+        let (lr, li) = (1.0 - b * c, b * s);
+        let num = libm::sqrtf(dr * dr + di * di);
+        let den = libm::sqrtf(lr * lr + li * li);
+        let gain = self.alpha * num / (den * self.dt);
+        let phase = libm::atan2f(di, dr) - libm::atan2f(li, lr);
+        (gain, phase)
+    }
+}
+
+/// Trunk attitude from gravity, rad.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub struct Tilt {
+    /// Roll about x.
+    pub roll: f32,
+    /// Pitch about y.
+    pub pitch: f32,
+    /// Angle between the body z axis and vertical (≥ 0).
+    pub tilt: f32,
+}
+
+/// Tilt from the accelerometer with last-good hold.
+#[derive(Clone, Debug, Default)]
+pub struct TiltEstimator {
+    last: Tilt,
+    rejected: u32,
+}
+
+impl TiltEstimator {
+    /// Upright until the first good sample.
+    pub const fn new() -> Self {
+        TiltEstimator {
+            last: Tilt {
+                roll: 0.0,
+                pitch: 0.0,
+                tilt: 0.0,
+            },
+            rejected: 0,
+        }
+    }
+
+    /// Feeds one accelerometer sample (m/s², body frame); returns the (held) tilt.
+    pub fn update(&mut self, a: [f32; 3]) -> Tilt {
+        let [ax, ay, az] = a;
+        let n2 = ax * ax + ay * ay + az * az;
+        let lo = 0.25 * G;
+        let hi = 4.0 * G;
+        if !(n2.is_finite() && n2 >= lo * lo && n2 <= hi * hi) {
+            self.rejected = self.rejected.saturating_add(1);
+            return self.last;
+        }
+        let t = Tilt {
+            roll: libm::atan2f(ay, az),
+            pitch: libm::atan2f(-ax, libm::sqrtf(ay * ay + az * az)),
+            tilt: libm::atan2f(libm::sqrtf(ax * ax + ay * ay), az),
+        };
+        self.last = t;
+        t
+    }
+
+    /// Last good tilt.
+    pub fn last(&self) -> Tilt {
+        self.last
+    }
+
+    /// Rejected samples so far.
+    pub fn rejected(&self) -> u32 {
+        self.rejected
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::f64::consts::TAU as TAU64;
+
+    /// Feeds A sin(Ω t) for `settle` s, then fits the output to a sin + b cos over whole
+    /// periods; returns (amplitude, phase) of the output relative to sin(Ω t).
+    fn measure(f: &mut PitchAccel, dt: f64, a: f64, hz: f64) -> (f64, f64) {
+        let settle = (2.0 / dt) as usize;
+        // Whole periods only (callers pick frequencies with an integer number of samples).
+        let per = (1.0 / (hz * dt)).round() as usize;
+        let n = per * 4;
+        let (mut s_sum, mut c_sum) = (0.0, 0.0);
+        for k in 0..settle + n {
+            let t = k as f64 * dt;
+            let y = f.update((a * (TAU64 * hz * t).sin()) as f32) as f64;
+            if k >= settle {
+                s_sum += y * (TAU64 * hz * t).sin();
+                c_sum += y * (TAU64 * hz * t).cos();
+            }
+        }
+        let (sa, ca) = (2.0 * s_sum / n as f64, 2.0 * c_sum / n as f64);
+        ((sa * sa + ca * ca).sqrt(), ca.atan2(sa))
+    }
+
+    #[test]
+    fn reference_config_uses_robot_inertia() {
+        let c = PitchAccelConfig::reference(1e-3);
+        assert!((c.inertia - 0.026).abs() < 1e-7);
+        assert_eq!(c.cutoff_hz, 15.0);
+    }
+
+    #[test]
+    fn sinusoid_matches_documented_response() {
+        let dt = 1e-3;
+        for hz in [0.5f64, 1.25, 5.0, 12.5, 20.0, 40.0] {
+            let mut f = PitchAccel::new(PitchAccelConfig::reference(dt as f32));
+            let a = 0.8; // rad/s
+            let (amp, ph) = measure(&mut f, dt, a, hz);
+            let (g, p) = f.response(hz as f32);
+            assert!(
+                (amp - a * g as f64).abs() < 2e-3 * a * g as f64,
+                "{hz} Hz: {amp} vs {}",
+                a * g as f64
+            );
+            assert!((ph - p as f64).abs() < 2e-3, "{hz} Hz: {ph} vs {p}");
+        }
+    }
+
+    #[test]
+    fn low_frequency_is_close_to_analytic() {
+        let dt = 1e-3;
+        let hz = 1.25; // 800 samples per period (the step frequency is ≈ 1.5 Hz)
+        let mut f = PitchAccel::new(PitchAccelConfig::reference(dt as f32));
+        let a = 0.5;
+        let (amp, ph) = measure(&mut f, dt, a, hz);
+        let omega = TAU64 * hz;
+        // Exact φ̈ = A Ω cos = A Ω sin(· + π/2).
+        assert!(
+            (amp / (a * omega) - 1.0).abs() < 0.006,
+            "gain {}",
+            amp / (a * omega)
+        );
+        let lag = core::f64::consts::FRAC_PI_2 - ph;
+        let alpha = f.alpha() as f64;
+        let expected_lag = omega * (dt / 2.0 + (1.0 - alpha) / alpha * dt);
+        assert!(
+            (lag - expected_lag).abs() < 0.01,
+            "lag {lag} vs {expected_lag}"
+        );
+        assert!(lag > 0.0 && lag < 0.11);
+        // τ amplitude follows J.
+        assert!((f.torque() / f.accel() - 0.026).abs() < 1e-6);
+    }
+
+    #[test]
+    fn constant_rate_gives_zero_torque() {
+        let mut f = PitchAccel::new(PitchAccelConfig::reference(1e-3));
+        for _ in 0..2000 {
+            f.update(1.2);
+        }
+        assert!(f.accel().abs() < 1e-6);
+        assert!(f.torque().abs() < 1e-7);
+    }
+
+    #[test]
+    fn step_decays() {
+        let mut f = PitchAccel::new(PitchAccelConfig::reference(1e-3));
+        f.update(0.0);
+        let peak = f.update(0.1);
+        assert!((peak - f.alpha() * 100.0).abs() < 1e-3);
+        for _ in 0..1000 {
+            f.update(0.1);
+        }
+        assert!(f.accel().abs() < 1e-3);
+    }
+
+    #[test]
+    fn non_finite_never_propagates() {
+        let mut f = PitchAccel::new(PitchAccelConfig::reference(1e-3));
+        let mut g = PitchAccel::new(PitchAccelConfig::reference(1e-3));
+        for k in 0..500 {
+            let w = (k as f32 * 0.01).sin();
+            let bad = k % 50 == 7;
+            let y = f.update(if bad { f32::NAN } else { w });
+            if k % 50 == 9 {
+                f.update(f32::INFINITY);
+            }
+            assert!(y.is_finite() && f.torque().is_finite());
+            if !bad {
+                g.update(w);
+            }
+        }
+        assert!(f.rejected() >= 20);
+        // Dropping samples of a smooth signal barely changes the output.
+        assert!((f.accel() - g.accel()).abs() < 0.05);
+        // Bad configuration falls back to sane values.
+        let mut h = PitchAccel::new(PitchAccelConfig {
+            dt_s: f32::NAN,
+            cutoff_hz: -1.0,
+            inertia: f32::NAN,
+        });
+        assert!(h.update(1.0).is_finite());
+        assert!(h.update(2.0).is_finite());
+        assert!(h.torque().is_finite());
+    }
+
+    #[test]
+    fn tilt_from_gravity() {
+        let mut t = TiltEstimator::new();
+        let up = t.update([0.0, 0.0, G]);
+        assert!(up.tilt.abs() < 1e-6 && up.roll.abs() < 1e-6 && up.pitch.abs() < 1e-6);
+        // Pitched forward by 0.3 rad: gravity appears with −x component... a_x = −g sin θ.
+        let th = 0.3f32;
+        let p = t.update([-G * libm::sinf(th), 0.0, G * libm::cosf(th)]);
+        assert!((p.pitch - th).abs() < 1e-5, "{p:?}");
+        assert!((p.tilt - th).abs() < 1e-5);
+        let r = t.update([0.0, G * libm::sinf(-0.2), G * libm::cosf(-0.2)]);
+        assert!((r.roll + 0.2).abs() < 1e-5 && (r.tilt - 0.2).abs() < 1e-5);
+        // Lying on the back: tilt ≈ π/2.
+        let l = t.update([G, 0.0, 0.0]);
+        assert!((l.tilt - core::f32::consts::FRAC_PI_2).abs() < 1e-5);
+    }
+
+    #[test]
+    fn tilt_holds_on_bad_samples() {
+        let mut t = TiltEstimator::new();
+        let good = t.update([0.0, G * 0.1, G]);
+        for bad in [
+            [f32::NAN, 0.0, G],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 100.0 * G],
+            [f32::INFINITY; 3],
+        ] {
+            assert_eq!(t.update(bad), good);
+        }
+        assert_eq!(t.rejected(), 4);
+        assert_eq!(t.last(), good);
+    }
+}

@@ -1,0 +1,670 @@
+//! Supervisor: device freshness, fall and overrun detection, the stop sequence, and the target
+//! filter that keeps non-finite or out-of-limit values away from the servos.
+//!
+//! States: `Running` → (any stop reason) → `Stopping` (hold the last pose for
+//! [`SupervisorConfig::stopping_ticks`] ticks) → `TorqueOff` (broadcast Torque Enable = 0, sent
+//! once). The first stop reason wins and is reported (log stop record). A device missing at
+//! start-up goes straight to `TorqueOff` (torque was never enabled).
+//!
+//! Per device, a missed reply is bridged by holding its last good value for at most
+//! [`SupervisorConfig::hold_ticks`] consecutive ticks; one more miss is `DeviceLost`.
+
+use gait_core::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
+
+/// Why the supervisor stopped the robot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum StopReason {
+    /// A device did not answer the start-up probe.
+    DeviceMissing {
+        /// Its bus id.
+        id: u8,
+    },
+    /// A device missed more than `hold_ticks` replies in a row.
+    DeviceLost {
+        /// Its bus id.
+        id: u8,
+    },
+    /// The trunk tilted beyond the limit.
+    Fall {
+        /// Tilt from vertical, mrad.
+        tilt_mrad: u16,
+    },
+    /// Too many consecutive tick overruns.
+    OverrunBurst {
+        /// Consecutive overruns counted.
+        count: u16,
+    },
+    /// A joint target was NaN or infinite.
+    NonFiniteTarget {
+        /// Joint index 0..12 (left leg then right leg).
+        joint: u8,
+    },
+    /// The walking plan finished.
+    PlanDone,
+    /// Stop requested from outside (operator, host).
+    Requested,
+}
+
+impl StopReason {
+    /// Wire form (code, id, value) used by the log's stop record.
+    /// Codes: 1 device missing (id), 2 device lost (id), 3 fall (value = tilt mrad),
+    /// 4 overrun burst (value = count), 5 non-finite target (id = joint), 6 plan done,
+    /// 7 requested.
+    pub fn code(&self) -> (u8, u8, i32) {
+        match *self {
+            StopReason::DeviceMissing { id } => (1, id, 0),
+            StopReason::DeviceLost { id } => (2, id, 0),
+            StopReason::Fall { tilt_mrad } => (3, 0, i32::from(tilt_mrad)),
+            StopReason::OverrunBurst { count } => (4, 0, i32::from(count)),
+            StopReason::NonFiniteTarget { joint } => (5, joint, 0),
+            StopReason::PlanDone => (6, 0, 0),
+            StopReason::Requested => (7, 0, 0),
+        }
+    }
+
+    /// Inverse of [`StopReason::code`]; None for an unknown code or impossible value.
+    pub fn from_code(code: u8, id: u8, value: i32) -> Option<Self> {
+        Some(match code {
+            1 => StopReason::DeviceMissing { id },
+            2 => StopReason::DeviceLost { id },
+            3 => StopReason::Fall {
+                tilt_mrad: u16::try_from(value).ok()?,
+            },
+            4 => StopReason::OverrunBurst {
+                count: u16::try_from(value).ok()?,
+            },
+            5 => StopReason::NonFiniteTarget { joint: id },
+            6 => StopReason::PlanDone,
+            7 => StopReason::Requested,
+            _ => return None,
+        })
+    }
+}
+
+/// Supervisor limits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupervisorConfig {
+    /// Consecutive missed replies bridged with the last good value (then `DeviceLost`).
+    pub hold_ticks: u16,
+    /// Tilt from vertical that counts as a fall, rad.
+    pub tilt_limit_rad: f32,
+    /// Ticks the pose is held in `Stopping` before torque off.
+    pub stopping_ticks: u16,
+    /// Consecutive overruns that stop the robot.
+    pub overrun_burst: u16,
+}
+
+impl Default for SupervisorConfig {
+    fn default() -> Self {
+        SupervisorConfig {
+            hold_ticks: 10,
+            tilt_limit_rad: 0.6,
+            stopping_ticks: 200,
+            overrun_burst: 5,
+        }
+    }
+}
+
+/// Supervisor state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum State {
+    /// Walking or standing under control.
+    Running,
+    /// Holding the last pose before torque off.
+    Stopping {
+        /// Why.
+        reason: StopReason,
+        /// Ticks left before torque off.
+        ticks_left: u16,
+    },
+    /// Torque off (final).
+    TorqueOff {
+        /// Why.
+        reason: StopReason,
+    },
+}
+
+/// What the control loop must do this tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum Action {
+    /// Compute and send new targets.
+    Run,
+    /// Send the last targets again (hold the pose).
+    HoldPose,
+    /// Send the broadcast torque-off now (returned once).
+    SendTorqueOff,
+    /// Nothing to send.
+    Idle,
+}
+
+/// Freshness of one device's data this tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum Freshness {
+    /// Fresh data.
+    Fresh,
+    /// Missed; use the last good value (held for this many consecutive ticks).
+    Held(u16),
+    /// Missed more than `hold_ticks` times: lost (the supervisor is stopping).
+    Lost,
+    /// Not a supervised device id.
+    Unknown,
+}
+
+/// The supervisor for `N` devices.
+#[derive(Clone, Debug)]
+pub struct Supervisor<const N: usize> {
+    cfg: SupervisorConfig,
+    ids: [u8; N],
+    misses: [u16; N],
+    state: State,
+    overrun_run: u16,
+    torque_off_sent: bool,
+}
+
+impl<const N: usize> Supervisor<N> {
+    /// A running supervisor watching the devices `ids`.
+    pub fn new(cfg: SupervisorConfig, ids: [u8; N]) -> Self {
+        Supervisor {
+            cfg,
+            ids,
+            misses: [0; N],
+            state: State::Running,
+            overrun_run: 0,
+            torque_off_sent: false,
+        }
+    }
+
+    /// Current state.
+    pub fn state(&self) -> State {
+        self.state
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SupervisorConfig {
+        &self.cfg
+    }
+
+    /// The stop reason, once stopping.
+    pub fn stop_reason(&self) -> Option<StopReason> {
+        match self.state {
+            State::Running => None,
+            State::Stopping { reason, .. } | State::TorqueOff { reason } => Some(reason),
+        }
+    }
+
+    /// True while at least one device is on last-good hold.
+    pub fn any_holding(&self) -> bool {
+        self.misses.iter().any(|&m| m > 0)
+    }
+
+    /// State for the log's status byte.
+    pub fn fault_state(&self) -> crate::log::FaultState {
+        match self.state {
+            State::Running if self.any_holding() => crate::log::FaultState::Holding,
+            State::Running => crate::log::FaultState::Ok,
+            State::Stopping { .. } => crate::log::FaultState::Stopping,
+            State::TorqueOff { .. } => crate::log::FaultState::TorqueOff,
+        }
+    }
+
+    /// Start-up probe result: every id in `missing` did not answer. Any missing device goes
+    /// straight to `TorqueOff` with `DeviceMissing` (the first missing id).
+    pub fn startup(&mut self, missing: &[u8]) -> Result<(), StopReason> {
+        match missing.first() {
+            None => Ok(()),
+            Some(&id) => {
+                let reason = StopReason::DeviceMissing { id };
+                if self.state == State::Running {
+                    self.state = State::TorqueOff { reason };
+                }
+                Err(reason)
+            }
+        }
+    }
+
+    /// Starts the stop sequence (the first reason wins).
+    pub fn stop(&mut self, reason: StopReason) {
+        if self.state == State::Running {
+            self.state = if self.cfg.stopping_ticks == 0 {
+                State::TorqueOff { reason }
+            } else {
+                State::Stopping {
+                    reason,
+                    ticks_left: self.cfg.stopping_ticks,
+                }
+            };
+        }
+    }
+
+    /// Reports whether device `id` answered this tick.
+    pub fn report(&mut self, id: u8, answered: bool) -> Freshness {
+        let Some(pos) = self.ids.iter().position(|&d| d == id) else {
+            return Freshness::Unknown;
+        };
+        let Some(m) = self.misses.get_mut(pos) else {
+            return Freshness::Unknown;
+        };
+        if answered {
+            *m = 0;
+            return Freshness::Fresh;
+        }
+        *m = m.saturating_add(1);
+        if *m > self.cfg.hold_ticks {
+            self.stop(StopReason::DeviceLost { id });
+            Freshness::Lost
+        } else {
+            Freshness::Held(*m)
+        }
+    }
+
+    /// Reports the trunk tilt from vertical, rad (non-finite values are ignored: the IMU
+    /// filter already holds its last good value).
+    pub fn tilt(&mut self, tilt_rad: f32) {
+        if tilt_rad.is_finite() && libm::fabsf(tilt_rad) > self.cfg.tilt_limit_rad {
+            let mrad = libm::fminf(libm::fabsf(tilt_rad) * 1000.0, 65535.0) as u16;
+            self.stop(StopReason::Fall { tilt_mrad: mrad });
+        }
+    }
+
+    /// Reports whether this tick overran.
+    pub fn tick_timing(&mut self, overrun: bool) {
+        if overrun {
+            self.overrun_run = self.overrun_run.saturating_add(1);
+            if self.overrun_run >= self.cfg.overrun_burst.max(1) {
+                self.stop(StopReason::OverrunBurst {
+                    count: self.overrun_run,
+                });
+            }
+        } else {
+            self.overrun_run = 0;
+        }
+    }
+
+    /// Reports that the walking plan is finished.
+    pub fn plan_done(&mut self) {
+        self.stop(StopReason::PlanDone);
+    }
+
+    /// Advances one tick after all reports; tells the loop what to send.
+    pub fn step(&mut self) -> Action {
+        match self.state {
+            State::Running => Action::Run,
+            State::Stopping { reason, ticks_left } => {
+                let left = ticks_left.saturating_sub(1);
+                if left == 0 {
+                    self.state = State::TorqueOff { reason };
+                } else {
+                    self.state = State::Stopping {
+                        reason,
+                        ticks_left: left,
+                    };
+                }
+                Action::HoldPose
+            }
+            State::TorqueOff { .. } => {
+                if self.torque_off_sent {
+                    Action::Idle
+                } else {
+                    self.torque_off_sent = true;
+                    Action::SendTorqueOff
+                }
+            }
+        }
+    }
+}
+
+/// Joint angle → servo tick mapping and limits of the 12 leg joints.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointMap {
+    /// Tick that stands for 0 rad.
+    pub zero_tick: i32,
+    /// Ticks per radian.
+    pub ticks_per_rad: f32,
+    /// +1 when joint-positive is servo-positive, −1 otherwise (mounting).
+    pub sign: [i8; LEG_JOINTS],
+    /// Lower joint limits, rad.
+    pub min_rad: [f32; LEG_JOINTS],
+    /// Upper joint limits, rad.
+    pub max_rad: [f32; LEG_JOINTS],
+    /// Lowest tick the servo accepts.
+    pub tick_min: i32,
+    /// Highest tick the servo accepts.
+    pub tick_max: i32,
+}
+
+impl JointMap {
+    /// From the robot description (all signs +1: the mounting is not described yet).
+    pub fn from_robot(robot: &Robot) -> Self {
+        let mut min_rad = [0.0f32; LEG_JOINTS];
+        let mut max_rad = [0.0f32; LEG_JOINTS];
+        for (i, (lo, hi)) in min_rad.iter_mut().zip(max_rad.iter_mut()).enumerate() {
+            let side = if i < JOINTS_PER_LEG {
+                Side::Left
+            } else {
+                Side::Right
+            };
+            let l = robot.joint_limit(side, i % JOINTS_PER_LEG);
+            *lo = l.min as f32;
+            *hi = l.max as f32;
+        }
+        let tpt = robot.servo.ticks_per_turn as f32;
+        JointMap {
+            zero_tick: robot.servo.zero_tick,
+            ticks_per_rad: tpt / core::f32::consts::TAU,
+            sign: [1; LEG_JOINTS],
+            min_rad,
+            max_rad,
+            tick_min: 0,
+            tick_max: robot.servo.ticks_per_turn as i32 - 1,
+        }
+    }
+
+    /// Tick of joint `j` at `rad` (clamped to the joint and servo limits; `rad` must be finite).
+    fn tick(&self, j: usize, rad: f32) -> (i32, bool) {
+        let lo = self.min_rad.get(j).copied().map_or(0.0, |v| v);
+        let hi = self.max_rad.get(j).copied().map_or(0.0, |v| v);
+        let sign = self
+            .sign
+            .get(j)
+            .map_or(1.0, |&s| if s < 0 { -1.0 } else { 1.0 });
+        let c = if rad < lo {
+            lo
+        } else if rad > hi {
+            hi
+        } else {
+            rad
+        };
+        let t = self.zero_tick + libm::roundf(sign * c * self.ticks_per_rad) as i32;
+        let tc = t.clamp(self.tick_min, self.tick_max);
+        (tc, c != rad || tc != t)
+    }
+}
+
+/// Targets that passed the filter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SafeTargets {
+    /// Servo ticks to send.
+    pub ticks: [i32; LEG_JOINTS],
+    /// Bit j set: joint j was clamped to its limit.
+    pub clamped: u16,
+}
+
+/// Some targets were non-finite; `ticks` still holds safe values to send (previous target for
+/// the rejected joints).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TargetError {
+    /// Safe servo ticks (non-finite joints hold their previous target).
+    pub ticks: [i32; LEG_JOINTS],
+    /// Bit j set: joint j was NaN or infinite.
+    pub non_finite: u16,
+    /// Bit j set: joint j was clamped.
+    pub clamped: u16,
+}
+
+impl TargetError {
+    /// Index of the first non-finite joint.
+    pub fn first_joint(&self) -> u8 {
+        self.non_finite.trailing_zeros().min(15) as u8
+    }
+}
+
+/// Converts joint targets (rad) to servo ticks so that nothing non-finite or out of limit
+/// reaches a servo: finite values are clamped to the joint limits (and the servo's tick range);
+/// a non-finite value holds `prev` (itself clamped to the tick range) and makes the result
+/// `Err` — whose `ticks` are still safe to send.
+pub fn safe_targets(
+    targets: &[f32; LEG_JOINTS],
+    map: &JointMap,
+    prev: &[i32; LEG_JOINTS],
+) -> Result<SafeTargets, TargetError> {
+    let mut ticks = [0i32; LEG_JOINTS];
+    let mut clamped = 0u16;
+    let mut non_finite = 0u16;
+    for (j, ((out, &rad), &p)) in ticks
+        .iter_mut()
+        .zip(targets.iter())
+        .zip(prev.iter())
+        .enumerate()
+    {
+        if rad.is_finite() {
+            let (t, c) = map.tick(j, rad);
+            *out = t;
+            if c {
+                clamped |= 1 << j;
+            }
+        } else {
+            non_finite |= 1 << j;
+            *out = p.clamp(map.tick_min, map.tick_max);
+        }
+    }
+    if non_finite == 0 {
+        Ok(SafeTargets { ticks, clamped })
+    } else {
+        Err(TargetError {
+            ticks,
+            non_finite,
+            clamped,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const IDS: [u8; 15] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 111, 112, 200];
+
+    fn sup() -> Supervisor<15> {
+        Supervisor::new(
+            SupervisorConfig {
+                stopping_ticks: 3,
+                ..SupervisorConfig::default()
+            },
+            IDS,
+        )
+    }
+
+    fn run_to_off(s: &mut Supervisor<15>) -> [Action; 5] {
+        [s.step(), s.step(), s.step(), s.step(), s.step()]
+    }
+
+    #[test]
+    fn running_runs() {
+        let mut s = sup();
+        assert_eq!(s.startup(&[]), Ok(()));
+        for _ in 0..100 {
+            for id in IDS {
+                assert_eq!(s.report(id, true), Freshness::Fresh);
+            }
+            s.tilt(0.1);
+            s.tick_timing(false);
+            assert_eq!(s.step(), Action::Run);
+        }
+        assert_eq!(s.fault_state(), crate::log::FaultState::Ok);
+    }
+
+    #[test]
+    fn missing_at_startup_goes_to_torque_off() {
+        let mut s = sup();
+        let r = s.startup(&[111, 7]);
+        assert_eq!(r, Err(StopReason::DeviceMissing { id: 111 }));
+        assert_eq!(
+            s.state(),
+            State::TorqueOff {
+                reason: StopReason::DeviceMissing { id: 111 }
+            }
+        );
+        assert_eq!(s.step(), Action::SendTorqueOff);
+        assert_eq!(s.step(), Action::Idle);
+    }
+
+    #[test]
+    fn hold_then_lost() {
+        let mut s = sup();
+        for k in 1..=10u16 {
+            assert_eq!(s.report(200, false), Freshness::Held(k));
+            assert_eq!(s.fault_state(), crate::log::FaultState::Holding);
+            assert_eq!(s.step(), Action::Run);
+        }
+        // A fresh reply resets the count.
+        assert_eq!(s.report(200, true), Freshness::Fresh);
+        for _ in 0..10 {
+            s.report(200, false);
+        }
+        assert_eq!(s.report(200, false), Freshness::Lost);
+        assert_eq!(s.stop_reason(), Some(StopReason::DeviceLost { id: 200 }));
+        assert_eq!(
+            run_to_off(&mut s),
+            [
+                Action::HoldPose,
+                Action::HoldPose,
+                Action::HoldPose,
+                Action::SendTorqueOff,
+                Action::Idle
+            ]
+        );
+        assert_eq!(s.report(99, true), Freshness::Unknown);
+    }
+
+    #[test]
+    fn fall() {
+        let mut s = sup();
+        s.tilt(f32::NAN);
+        s.tilt(-0.59);
+        assert_eq!(s.state(), State::Running);
+        s.tilt(-0.75);
+        assert_eq!(s.stop_reason(), Some(StopReason::Fall { tilt_mrad: 750 }));
+        // The first reason wins.
+        s.plan_done();
+        assert_eq!(s.stop_reason(), Some(StopReason::Fall { tilt_mrad: 750 }));
+        assert_eq!(s.fault_state(), crate::log::FaultState::Stopping);
+        run_to_off(&mut s);
+        assert_eq!(s.fault_state(), crate::log::FaultState::TorqueOff);
+    }
+
+    #[test]
+    fn overrun_burst() {
+        let mut s = sup();
+        for _ in 0..4 {
+            s.tick_timing(true);
+        }
+        s.tick_timing(false);
+        for _ in 0..4 {
+            s.tick_timing(true);
+        }
+        assert_eq!(s.state(), State::Running);
+        s.tick_timing(true);
+        assert_eq!(s.stop_reason(), Some(StopReason::OverrunBurst { count: 5 }));
+    }
+
+    #[test]
+    fn plan_done_and_zero_stopping_ticks() {
+        let mut s: Supervisor<1> = Supervisor::new(
+            SupervisorConfig {
+                stopping_ticks: 0,
+                ..SupervisorConfig::default()
+            },
+            [1],
+        );
+        s.plan_done();
+        assert_eq!(
+            s.state(),
+            State::TorqueOff {
+                reason: StopReason::PlanDone
+            }
+        );
+        assert_eq!(s.step(), Action::SendTorqueOff);
+    }
+
+    #[test]
+    fn stop_reason_codes_round_trip() {
+        let all = [
+            StopReason::DeviceMissing { id: 3 },
+            StopReason::DeviceLost { id: 200 },
+            StopReason::Fall { tilt_mrad: 65535 },
+            StopReason::OverrunBurst { count: 5 },
+            StopReason::NonFiniteTarget { joint: 11 },
+            StopReason::PlanDone,
+            StopReason::Requested,
+        ];
+        for r in all {
+            let (c, i, v) = r.code();
+            assert_eq!(StopReason::from_code(c, i, v), Some(r));
+        }
+        assert_eq!(StopReason::from_code(0, 0, 0), None);
+        assert_eq!(StopReason::from_code(3, 0, -1), None);
+    }
+
+    fn map() -> JointMap {
+        JointMap::from_robot(&Robot::reference())
+    }
+
+    #[test]
+    fn map_from_reference_robot() {
+        let m = map();
+        assert_eq!(m.zero_tick, 2048);
+        assert!((m.ticks_per_rad - 651.8986).abs() < 1e-3);
+        // Knee 0..2.5 on both legs; right hip roll mirrored.
+        assert_eq!((m.min_rad[3], m.max_rad[3]), (0.0, 2.5));
+        assert_eq!((m.min_rad[9], m.max_rad[9]), (0.0, 2.5));
+        assert_eq!((m.min_rad[7], m.max_rad[7]), (-0.7, 0.5));
+    }
+
+    #[test]
+    fn finite_targets_pass_and_clamp() {
+        let m = map();
+        let prev = [2048; 12];
+        let mut t = [0.0f32; 12];
+        t[3] = 0.5;
+        let ok = safe_targets(&t, &m, &prev).unwrap();
+        assert_eq!(ok.ticks[0], 2048);
+        assert_eq!(ok.ticks[3], 2048 + 326);
+        assert_eq!(ok.clamped, 0);
+        t[3] = -1.0; // knee below 0 → 0
+        t[2] = 10.0; // hip pitch above 0.9 → 0.9
+        let ok = safe_targets(&t, &m, &prev).unwrap();
+        assert_eq!(ok.ticks[3], 2048);
+        assert_eq!(
+            ok.ticks[2],
+            2048 + libm::roundf(0.9 * m.ticks_per_rad) as i32
+        );
+        assert_eq!(ok.clamped, (1 << 3) | (1 << 2));
+    }
+
+    #[test]
+    fn non_finite_targets_hold_previous() {
+        let m = map();
+        let mut prev = [2048; 12];
+        prev[5] = 2100;
+        prev[6] = 99_999; // garbage previous value is clamped to the servo range
+        let mut t = [0.1f32; 12];
+        t[5] = f32::NAN;
+        t[6] = f32::NEG_INFINITY;
+        let e = safe_targets(&t, &m, &prev).unwrap_err();
+        assert_eq!(e.non_finite, (1 << 5) | (1 << 6));
+        assert_eq!(e.first_joint(), 5);
+        assert_eq!(e.ticks[5], 2100);
+        assert_eq!(e.ticks[6], 4095);
+        assert_eq!(e.ticks[0], 2048 + 65);
+        assert!(e.ticks.iter().all(|&x| (0..=4095).contains(&x)));
+    }
+
+    #[test]
+    fn tick_range_clamp_with_wide_limits() {
+        let mut m = map();
+        m.min_rad = [-100.0; 12];
+        m.max_rad = [100.0; 12];
+        m.sign[0] = -1;
+        let mut t = [0.0f32; 12];
+        t[0] = 50.0;
+        t[1] = 50.0;
+        let ok = safe_targets(&t, &m, &[2048; 12]).unwrap();
+        assert_eq!(ok.ticks[0], 0);
+        assert_eq!(ok.ticks[1], 4095);
+        assert_eq!(ok.clamped & 3, 3);
+    }
+}
