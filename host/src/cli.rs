@@ -1,0 +1,591 @@
+//! The `walker` command line: a small hand parser (no clap: compile time) and a table of
+//! subcommands. Adding a subcommand = one [`Subcommand`] entry in [`SUBCOMMANDS`] with a
+//! handler `fn(&mut Args) -> Result<(), CliError>` that takes its options from [`Args`] and
+//! calls [`Args::finish`] before doing any work (so unknown options are refused early).
+//!
+//! Exit codes: 0 success, 1 failure (bad plan file, unreadable log, serial port not found, …),
+//! 2 usage error (unknown subcommand or option, missing or malformed value).
+
+use crate::planfile::{self, WalkSpec};
+use crate::{capture, export, report};
+use gait_core::Robot;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+/// A command-line error with its exit code.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CliError {
+    /// What went wrong.
+    pub message: String,
+    /// Exit code (1 failure, 2 usage).
+    pub code: i32,
+}
+
+impl CliError {
+    /// A usage error (exit code 2).
+    pub fn usage(msg: impl Into<String>) -> Self {
+        CliError {
+            message: msg.into(),
+            code: 2,
+        }
+    }
+    /// A failure (exit code 1).
+    pub fn failed(msg: impl Into<String>) -> Self {
+        CliError {
+            message: msg.into(),
+            code: 1,
+        }
+    }
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for CliError {}
+
+impl From<String> for CliError {
+    fn from(s: String) -> Self {
+        CliError::failed(s)
+    }
+}
+
+impl From<planfile::PlanError> for CliError {
+    fn from(e: planfile::PlanError) -> Self {
+        CliError::failed(e.to_string())
+    }
+}
+
+/// The options of one subcommand, consumed by name.
+#[derive(Debug)]
+pub struct Args {
+    cmd: &'static str,
+    items: Vec<String>,
+    used: Vec<bool>,
+}
+
+impl Args {
+    /// The arguments after the subcommand name.
+    pub fn new(cmd: &'static str, items: &[String]) -> Self {
+        Args {
+            cmd,
+            items: items.to_vec(),
+            used: vec![false; items.len()],
+        }
+    }
+
+    /// True when `--help` / `-h` was given.
+    pub fn wants_help(&self) -> bool {
+        self.items.iter().any(|a| a == "--help" || a == "-h")
+    }
+
+    /// The value of `--name VALUE` or `--name=VALUE` (the last one wins).
+    pub fn value(&mut self, name: &str) -> Result<Option<String>, CliError> {
+        let mut found = None;
+        let prefix = format!("{name}=");
+        let mut i = 0;
+        while i < self.items.len() {
+            if self.items[i] == name {
+                self.used[i] = true;
+                match self.items.get(i + 1) {
+                    Some(v) if !v.starts_with("--") => {
+                        self.used[i + 1] = true;
+                        found = Some(v.clone());
+                        i += 1;
+                    }
+                    _ => {
+                        return Err(CliError::usage(format!(
+                            "walker {}: {name} needs a value",
+                            self.cmd
+                        )))
+                    }
+                }
+            } else if let Some(v) = self.items[i].strip_prefix(&prefix) {
+                self.used[i] = true;
+                found = Some(v.to_string());
+            }
+            i += 1;
+        }
+        Ok(found)
+    }
+
+    /// A required value.
+    pub fn required(&mut self, name: &str) -> Result<String, CliError> {
+        self.value(name)?
+            .ok_or_else(|| CliError::usage(format!("walker {}: {name} is required", self.cmd)))
+    }
+
+    /// A value parsed as `T`.
+    pub fn parsed<T: FromStr>(&mut self, name: &str) -> Result<Option<T>, CliError>
+    where
+        T::Err: fmt::Display,
+    {
+        match self.value(name)? {
+            None => Ok(None),
+            Some(v) => v
+                .parse::<T>()
+                .map(Some)
+                .map_err(|e| CliError::usage(format!("walker {}: {name} {v:?}: {e}", self.cmd))),
+        }
+    }
+
+    /// A flag without a value.
+    pub fn flag(&mut self, name: &str) -> bool {
+        let mut hit = false;
+        for (a, u) in self.items.iter().zip(self.used.iter_mut()) {
+            if a == name {
+                *u = true;
+                hit = true;
+            }
+        }
+        hit
+    }
+
+    /// Refuses anything not consumed.
+    pub fn finish(&self) -> Result<(), CliError> {
+        match self.items.iter().zip(&self.used).find(|(_, u)| !**u) {
+            Some((a, _)) => Err(CliError::usage(format!(
+                "walker {}: unexpected argument {a:?} (see `walker {} --help`)",
+                self.cmd, self.cmd
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    /// The arguments not consumed yet (for pass-through subcommands).
+    pub fn rest(&mut self) -> Vec<String> {
+        let out = self
+            .items
+            .iter()
+            .zip(&self.used)
+            .filter(|(_, u)| !**u)
+            .map(|(a, _)| a.clone())
+            .collect();
+        self.used.iter_mut().for_each(|u| *u = true);
+        out
+    }
+}
+
+/// One subcommand.
+pub struct Subcommand {
+    /// Its name.
+    pub name: &'static str,
+    /// One line for the overview.
+    pub summary: &'static str,
+    /// Its usage text.
+    pub usage: &'static str,
+    /// The handler.
+    pub run: fn(&mut Args) -> Result<(), CliError>,
+}
+
+/// Every subcommand, in the order of the help text.
+pub const SUBCOMMANDS: &[Subcommand] = &[
+    Subcommand {
+        name: "export",
+        summary: "sample a plan and write ZMP, CoM, feet and the 12 joint angles as CSV",
+        usage: "walker export [--plan plans/table2.toml] [--out out/plan.csv] [--dt 0.005]\n\
+                \n  --plan  plan/parameter file (TOML; default: the built-in Table 2 walk)\
+                \n  --out   CSV to write (default out/plan.csv)\
+                \n  --dt    sample time, s (default: the plan's dt)",
+        run: run_export,
+    },
+    Subcommand {
+        name: "report",
+        summary: "decode a firmware log: ZMP CSV, plots (SVG/PNG), Table 3 statistics",
+        usage: "walker report --log out/walk.log [--out out/report] [--truth out/truth.csv] [--plan plans/table2.toml] [--model tlipfm]\n\
+                \n  --log    captured firmware log (binary COBS frames)\
+                \n  --out    folder for zmp_response.csv, events.csv, zmp_response.svg/.png, report.md, stats.json\
+                \n  --truth  CSV with t, zmp_x, zmp_y (e.g. the simulator's true ZMP), same clock as the log\
+                \n  --plan   the plan the firmware walked (support-polygon bounds; default Table 2)\
+                \n  --model  lipm | dlipm | tlipfm: the model the firmware ran (report title; default: the plan's)",
+        run: run_report,
+    },
+    Subcommand {
+        name: "compare",
+        summary: "Table 3 statistics of several runs side by side",
+        usage: "walker compare --runs lipm=out/lipm.log,dlipm=out/dlipm.log,tlipfm=out/tlipfm.log [--out out/compare.md]",
+        run: run_compare,
+    },
+    Subcommand {
+        name: "capture",
+        summary: "record the firmware log from a serial port (or decode a saved capture)",
+        usage: "walker capture --port /dev/ttyUSB0 [--baud 921600] --out out/walk.log [--seconds N]\n\
+                walker capture --from-file saved.log [--out out/walk.log]\n\
+                \n  writes the raw stream to --out, the decoded ticks to <out>.csv and events to <out>.events.csv\
+                \n  without --seconds, capture runs until Ctrl-C",
+        run: run_capture,
+    },
+    Subcommand {
+        name: "simulate",
+        summary: "serve the simulated robot on the servo bus (TCP) for the firmware",
+        usage: "walker simulate [--port 5760] [--lockstep-port 5761] [--connect] [--seed N] [--truth out/truth.csv] [--timeout S]\n\
+                \n  --port           bus TCP port on 127.0.0.1 (QEMU -serial tcp:127.0.0.1:PORT)\
+                \n  --lockstep-port  lock-step time channel (default: free-running)\
+                \n  --connect        connect to a listening QEMU instead of listening\
+                \n  --seed           seed of the noise and fault streams\
+                \n  --truth          write the ground truth (true ZMP, …) to this CSV (for `walker report --truth`)\
+                \n  --timeout        seconds to wait for the firmware (default 30)",
+        run: run_simulate,
+    },
+    Subcommand {
+        name: "fil",
+        summary: "firmware-in-the-loop: the firmware in QEMU against the simulated robot",
+        usage: "walker fil [options of the runner]",
+        run: run_fil,
+    },
+];
+
+/// The overview help text.
+pub fn usage() -> String {
+    let mut s = String::from("walker: host tools of the walking controller\n\nusage: walker <command> [options]\n\ncommands:\n");
+    for c in SUBCOMMANDS {
+        s.push_str(&format!("  {:<9} {}\n", c.name, c.summary));
+    }
+    s.push_str("\n`walker <command> --help` shows a command's options.\n");
+    s
+}
+
+/// Runs the command line `args` (without the program name); returns the exit code.
+pub fn main_with(args: &[String]) -> i32 {
+    match dispatch(args) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("error: {e}");
+            e.code
+        }
+    }
+}
+
+/// Finds and runs the subcommand.
+pub fn dispatch(args: &[String]) -> Result<(), CliError> {
+    let Some(name) = args.first() else {
+        print!("{}", usage());
+        return Err(CliError::usage("no command given"));
+    };
+    if name == "help" || name == "--help" || name == "-h" {
+        match args
+            .get(1)
+            .and_then(|n| SUBCOMMANDS.iter().find(|c| c.name == n))
+        {
+            Some(c) => println!("{}", c.usage),
+            None => print!("{}", usage()),
+        }
+        return Ok(());
+    }
+    let Some(cmd) = SUBCOMMANDS.iter().find(|c| c.name == name) else {
+        return Err(CliError::usage(format!(
+            "unknown command {name:?}\n\n{}",
+            usage()
+        )));
+    };
+    let mut a = Args::new(cmd.name, &args[1..]);
+    if a.wants_help() {
+        println!("{}", cmd.usage);
+        return Ok(());
+    }
+    (cmd.run)(&mut a)
+}
+
+/// Loads `--plan` (or the built-in Table 2 walk).
+fn plan_arg(a: &mut Args) -> Result<(WalkSpec, String), CliError> {
+    match a.value("--plan")? {
+        Some(p) => Ok((planfile::load(Path::new(&p))?, p)),
+        None => Ok((WalkSpec::default(), "built-in Table 2 walk".to_string())),
+    }
+}
+
+fn create_parent(p: &Path) -> Result<(), CliError> {
+    if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d)
+            .map_err(|e| CliError::failed(format!("cannot create {}: {e}", d.display())))?;
+    }
+    Ok(())
+}
+
+fn run_export(a: &mut Args) -> Result<(), CliError> {
+    let plan = a.value("--plan")?;
+    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/plan.csv".into()));
+    let dt: Option<f64> = a.parsed("--dt")?;
+    a.finish()?;
+    let (spec, name) = match plan {
+        Some(p) => (planfile::load(Path::new(&p))?, p),
+        None => (WalkSpec::default(), "built-in Table 2 walk".to_string()),
+    };
+    let robot = Robot::reference();
+    let dt = dt.unwrap_or(spec.dt);
+    let (rows, summary) = export::export_rows(&spec, &robot, dt).map_err(|e| {
+        let e = if e.field == "dt" {
+            planfile::PlanError {
+                field: "--dt / dt".into(),
+                ..e
+            }
+        } else {
+            e
+        };
+        CliError::failed(format!("{name}: {e}"))
+    })?;
+    create_parent(&out)?;
+    let file = std::fs::File::create(&out)
+        .map_err(|e| CliError::failed(format!("cannot create {}: {e}", out.display())))?;
+    export::write_csv(&rows, std::io::BufWriter::new(file))
+        .map_err(|e| CliError::failed(format!("cannot write {}: {e}", out.display())))?;
+    println!(
+        "{}: {} rows at dt = {dt} s ({:.3} s, model {}) → {}",
+        name,
+        summary.rows,
+        rows.last().map_or(0.0, |r| r.t),
+        spec.model_kind().name(),
+        out.display()
+    );
+    if summary.clamped_rows > 0 {
+        eprintln!(
+            "warning: the leg IK could not meet the feet exactly in {} rows (worst reach deficit {:.6} m)",
+            summary.clamped_rows, summary.worst_reach_deficit
+        );
+    }
+    Ok(())
+}
+
+fn run_report(a: &mut Args) -> Result<(), CliError> {
+    let log = PathBuf::from(a.required("--log")?);
+    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/report".into()));
+    let truth = a.value("--truth")?.map(PathBuf::from);
+    let model = a.value("--model")?;
+    let (mut spec, plan_name) = plan_arg(a)?;
+    a.finish()?;
+    if let Some(m) = model {
+        spec.model = match m.as_str() {
+            "lipm" => planfile::ModelName::Lipm,
+            "dlipm" => planfile::ModelName::Dlipm,
+            "tlipfm" => planfile::ModelName::Tlipfm,
+            other => {
+                return Err(CliError::usage(format!(
+                    "walker report: --model {other:?}: expected lipm, dlipm or tlipfm"
+                )))
+            }
+        };
+    }
+    if !log.exists() {
+        return Err(CliError::failed(format!(
+            "log file {} not found",
+            log.display()
+        )));
+    }
+    let opts = report::ReportOptions {
+        log,
+        out_dir: out.clone(),
+        truth,
+        spec,
+        plan_name,
+    };
+    let r = report::run(&opts, &Robot::reference())?;
+    println!(
+        "{}: {} good records ({} ticks, {} events), {} bad, {} sequence gaps",
+        opts.log.display(),
+        r.log.good(),
+        r.log.ticks.len(),
+        r.log.events.len(),
+        r.log.bad(),
+        r.log.decoder.seq_gaps
+    );
+    println!("\nZMP tracking error, measured − reference (seed 000 Table 3):\n");
+    print!("{}", report::stats_table(&r.stats));
+    if let Some(ts) = &r.truth_stats {
+        println!("\nmeasured − true ZMP:\n");
+        print!("{}", report::stats_table(ts));
+    }
+    println!(
+        "\nwrote {}",
+        r.files
+            .iter()
+            .map(|f| f.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
+/// Parses `name=path,name=path`.
+pub fn parse_runs(s: &str) -> Result<Vec<(String, PathBuf)>, CliError> {
+    let mut out = Vec::new();
+    for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+        let (name, path) = item.split_once('=').ok_or_else(|| {
+            CliError::usage(format!(
+                "walker compare: --runs item {item:?} is not name=path"
+            ))
+        })?;
+        if name.is_empty() || path.is_empty() {
+            return Err(CliError::usage(format!(
+                "walker compare: --runs item {item:?} is not name=path"
+            )));
+        }
+        out.push((name.to_string(), PathBuf::from(path)));
+    }
+    if out.is_empty() {
+        return Err(CliError::usage("walker compare: --runs lists no run"));
+    }
+    Ok(out)
+}
+
+fn run_compare(a: &mut Args) -> Result<(), CliError> {
+    let runs = parse_runs(&a.required("--runs")?)?;
+    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/compare.md".into()));
+    a.finish()?;
+    let mut results = Vec::new();
+    for (name, path) in &runs {
+        if !path.exists() {
+            return Err(CliError::failed(format!(
+                "log file {} (run {name}) not found",
+                path.display()
+            )));
+        }
+        let log = report::decode_file(path)?;
+        let stats = report::error_stats(&report::tick_rows(&log.ticks));
+        results.push((name.clone(), log, stats));
+    }
+    let table = report::compare_table(&results);
+    let rank_x = report::ranking(&results, |s| s.x.sum_abs);
+    let rank_y = report::ranking(&results, |s| s.y.sum_abs);
+    println!("ZMP tracking error, measured − reference (seed 000 Table 3), as measured:\n");
+    print!("{table}");
+    println!("\nΣ|e_x| smallest first: {rank_x}\nΣ|e_y| smallest first: {rank_y}");
+    let mut md = String::from("# ZMP tracking error by model (seed 000 Table 3)\n\n");
+    md.push_str("As measured from the logs below; e = measured − reference ZMP.\n\n");
+    for (name, path) in &runs {
+        md.push_str(&format!("- {name}: `{}`\n", path.display()));
+    }
+    md.push('\n');
+    md.push_str(&table);
+    md.push_str(&format!(
+        "\nΣ|e_x| smallest first: {rank_x}\n\nΣ|e_y| smallest first: {rank_y}\n"
+    ));
+    create_parent(&out)?;
+    std::fs::write(&out, md)
+        .map_err(|e| CliError::failed(format!("cannot write {}: {e}", out.display())))?;
+    println!("\nwrote {}", out.display());
+    Ok(())
+}
+
+fn run_capture(a: &mut Args) -> Result<(), CliError> {
+    let from = a.value("--from-file")?.map(PathBuf::from);
+    let port = a.value("--port")?.map(PathBuf::from);
+    let baud: Option<u32> = a.parsed("--baud")?;
+    let out = a.value("--out")?.map(PathBuf::from);
+    let seconds: Option<f64> = a.parsed("--seconds")?;
+    a.finish()?;
+    if let Some(s) = seconds {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(CliError::usage(format!(
+                "walker capture: --seconds must be positive (got {s})"
+            )));
+        }
+    }
+    let log = match (from, port) {
+        (Some(_), Some(_)) => {
+            return Err(CliError::usage(
+                "walker capture: give either --port or --from-file, not both",
+            ))
+        }
+        (None, None) => {
+            return Err(CliError::usage(
+                "walker capture: --port (or --from-file) is required",
+            ))
+        }
+        (Some(input), None) => {
+            if !input.exists() {
+                return Err(CliError::failed(format!(
+                    "capture file {} not found",
+                    input.display()
+                )));
+            }
+            let (log, files) = capture::from_file(&input, out.as_deref())?;
+            println!(
+                "wrote {}",
+                files
+                    .iter()
+                    .map(|f| f.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            log
+        }
+        (None, Some(port)) => {
+            let out = out.ok_or_else(|| CliError::usage("walker capture: --out is required"))?;
+            let opts = capture::CaptureOptions {
+                port,
+                baud: baud.unwrap_or(921_600),
+                out: out.clone(),
+                seconds,
+            };
+            let log = capture::capture(&opts)?;
+            println!(
+                "wrote {}, {}, {}",
+                out.display(),
+                capture::csv_path(&out).display(),
+                capture::events_path(&out).display()
+            );
+            log
+        }
+    };
+    println!(
+        "{} bytes: {} good records ({} ticks, {} events), {} bad, {} sequence gaps",
+        log.bytes,
+        log.good(),
+        log.ticks.len(),
+        log.events.len(),
+        log.bad(),
+        log.decoder.seq_gaps
+    );
+    Ok(())
+}
+
+fn run_simulate(a: &mut Args) -> Result<(), CliError> {
+    let port: Option<u16> = a.parsed("--port")?;
+    let lockstep: Option<u16> = a.parsed("--lockstep-port")?;
+    let connect = a.flag("--connect");
+    let seed: Option<u64> = a.parsed("--seed")?;
+    let truth = a.value("--truth")?.map(PathBuf::from);
+    let timeout: Option<f64> = a.parsed("--timeout")?;
+    a.finish()?;
+    let mut cfg = crate::sim::SimConfig::default();
+    if let Some(p) = port {
+        cfg.port = p;
+    }
+    cfg.lockstep_port = lockstep;
+    cfg.connect = connect;
+    if let Some(s) = seed {
+        cfg.seed = s;
+    }
+    if let Some(t) = timeout {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(CliError::usage(format!(
+                "walker simulate: --timeout must be positive (got {t})"
+            )));
+        }
+        cfg.connect_timeout = std::time::Duration::from_secs_f64(t);
+    }
+    if let Some(t) = &truth {
+        create_parent(t)?;
+    }
+    cfg.log_truth = truth;
+    eprintln!(
+        "simulated robot on 127.0.0.1:{} (lock-step {}); waiting for the firmware…",
+        cfg.port,
+        cfg.lockstep_port
+            .map_or("off".to_string(), |p| format!("127.0.0.1:{p}"))
+    );
+    let summary =
+        crate::sim::run(cfg).map_err(|e| CliError::failed(format!("walker simulate: {e}")))?;
+    println!("{summary:#?}");
+    Ok(())
+}
+
+fn run_fil(a: &mut Args) -> Result<(), CliError> {
+    let _rest = a.rest();
+    Err(CliError::failed(
+        "walker fil: the firmware-in-the-loop runner is not wired into the CLI yet",
+    ))
+}

@@ -1,0 +1,148 @@
+//! Plan export: the sampled plan with the 12 joint angles of the leg IK, as CSV.
+//!
+//! Columns: `t, zmp_x, zmp_y, com_x, com_y, com_z, l_foot_x, l_foot_y, l_foot_z, r_foot_x,
+//! r_foot_y, r_foot_z` then the joint names of [`gait_core::robot::JOINT_NAMES`]. SI units
+//! (s, m, rad), world frame, `t` from the start of the lead-in. The pelvis is the CoM point
+//! (x, y, z_c), upright, heading = the mean of the two feet's headings; the feet are level.
+
+use crate::planfile::{PlanError, WalkSpec};
+use gait_core::kinematics::{legs_ik, Pose};
+use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
+use gait_core::Robot;
+use std::io::Write;
+
+/// The 12 leading columns of the export (the joint names follow).
+pub const LEAD_COLUMNS: [&str; 12] = [
+    "t", "zmp_x", "zmp_y", "com_x", "com_y", "com_z", "l_foot_x", "l_foot_y", "l_foot_z",
+    "r_foot_x", "r_foot_y", "r_foot_z",
+];
+
+/// One row of the export.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExportRow {
+    /// Time from the start of the lead-in, s.
+    pub t: f64,
+    /// ZMP reference (x, y), m.
+    pub zmp: [f64; 2],
+    /// CoM / pelvis point (x, y, z), m.
+    pub com: [f64; 3],
+    /// Feet sole points (left, right): x, y, z, m.
+    pub feet: [[f64; 3]; 2],
+    /// Feet headings (left, right), rad (not exported; used for the pelvis heading).
+    pub feet_yaw: [f64; 2],
+    /// Joint angles (left leg then right leg), rad.
+    pub q: [f64; LEG_JOINTS],
+}
+
+impl ExportRow {
+    /// The pelvis pose of this row.
+    pub fn pelvis(&self) -> Pose<f64> {
+        Pose::level(
+            self.com[0],
+            self.com[1],
+            self.com[2],
+            mean_angle(self.feet_yaw[0], self.feet_yaw[1]),
+        )
+    }
+}
+
+/// Summary of an export.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ExportSummary {
+    /// Rows written.
+    pub rows: usize,
+    /// Rows where the IK could not meet a foot target exactly (reach or joint limit).
+    pub clamped_rows: usize,
+    /// Largest reach deficit seen, m.
+    pub worst_reach_deficit: f64,
+}
+
+/// The mean of two angles (on the circle).
+pub fn mean_angle(a: f64, b: f64) -> f64 {
+    (a.sin() + b.sin()).atan2(a.cos() + b.cos())
+}
+
+/// Samples the plan at `dt` until the lead-out ends and solves the leg IK per sample.
+pub fn export_rows(
+    spec: &WalkSpec,
+    robot: &Robot,
+    dt: f64,
+) -> Result<(Vec<ExportRow>, ExportSummary), PlanError> {
+    let mut sampler = spec.sampler(robot, dt)?;
+    let mut rows = Vec::new();
+    let mut summary = ExportSummary::default();
+    // Bounded: a plan of 64 steps of at most 4 s plus two 4 s stands at ≥ 1 kHz.
+    let limit = 1 + ((crate::planfile::PLAN_CAPACITY as f64 * 4.0 + 8.0) / dt) as usize;
+    while !sampler.is_done() && rows.len() < limit {
+        let s = sampler.next(0.0);
+        let f = s.feet;
+        let mut row = ExportRow {
+            t: s.time_ns as f64 * 1e-9,
+            zmp: s.zmp,
+            com: s.com,
+            feet: [[f[0].x, f[0].y, f[0].z], [f[1].x, f[1].y, f[1].z]],
+            feet_yaw: [f[0].yaw, f[1].yaw],
+            q: [0.0; LEG_JOINTS],
+        };
+        let pelvis = row.pelvis();
+        let lf = Pose::level(f[0].x, f[0].y, f[0].z, f[0].yaw);
+        let rf = Pose::level(f[1].x, f[1].y, f[1].z, f[1].yaw);
+        let (q, rep) = legs_ik(robot, &pelvis, &lf, &rf);
+        row.q = q;
+        if rep.clamped() {
+            summary.clamped_rows += 1;
+        }
+        summary.worst_reach_deficit = summary
+            .worst_reach_deficit
+            .max(rep.reach_deficit[0])
+            .max(rep.reach_deficit[1]);
+        rows.push(row);
+    }
+    summary.rows = rows.len();
+    Ok((rows, summary))
+}
+
+/// The header line (without newline).
+pub fn header() -> String {
+    LEAD_COLUMNS
+        .iter()
+        .chain(JOINT_NAMES.iter())
+        .copied()
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// Writes the CSV (header and rows; 9 decimals: 1 nm, 1 nrad).
+pub fn write_csv(rows: &[ExportRow], mut w: impl Write) -> std::io::Result<()> {
+    writeln!(w, "{}", header())?;
+    for r in rows {
+        let mut line = String::with_capacity(256);
+        let lead = [
+            r.t,
+            r.zmp[0],
+            r.zmp[1],
+            r.com[0],
+            r.com[1],
+            r.com[2],
+            r.feet[0][0],
+            r.feet[0][1],
+            r.feet[0][2],
+            r.feet[1][0],
+            r.feet[1][1],
+            r.feet[1][2],
+        ];
+        for (i, v) in lead.iter().chain(r.q.iter()).enumerate() {
+            if i > 0 {
+                line.push(',');
+            }
+            let f = format!("{v:.9}");
+            line.push_str(if f == "-0.000000000" {
+                "0.000000000"
+            } else {
+                &f
+            });
+        }
+        writeln!(w, "{line}")?;
+    }
+    Ok(())
+}

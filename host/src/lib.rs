@@ -1,0 +1,9 @@
+//! walker-host: host tools for the walking controller.
+
+pub mod capture;
+pub mod cli;
+pub mod export;
+pub mod planfile;
+pub mod plot;
+pub mod report;
+pub mod sim;

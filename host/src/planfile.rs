@@ -1,0 +1,624 @@
+//! Plan / parameter files: a walk described in TOML.
+//!
+//! Every key is optional; a missing key takes its seed 000 Table 2 value
+//! ([`ForwardWalk::table2`]). Keys (all SI units, flat at the top level):
+//!
+//! ```toml
+//! model = "tlipfm"        # lipm | dlipm | tlipfm
+//! dt = 0.001              # sample time of exports and simulations, s (1/1000 ..= 1/50)
+//! # Table 2 forward walk
+//! step_length = 0.02      # S_L, m
+//! step_width = 0.045      # S_W (half the distance between the feet), m
+//! s_first = -1            # -1: left foot swings first, +1: right foot first
+//! steps = 14              # N
+//! d1 = 0.01               # natural ZMP: start behind the support foot, m
+//! d2 = 0.01               # natural ZMP: end ahead of the support foot, m
+//! a = 0.004               # natural ZMP: half travel under the sole, m
+//! z_c = 0.217             # CoM (pelvis point) height, m
+//! w_y = 0.0               # swing bulge, m
+//! h_z = 0.03              # swing height, m
+//! t1 = 0.15               # end of the first double support, s
+//! t2 = 0.49               # end of the single support, s
+//! period = 0.64           # step period T, s
+//! lead_in = 1.6           # standing before the first step, s
+//! lead_out = 1.6          # standing after the last step, s
+//! zmp = "natural"         # natural (d1, d2, a) | continuous (b)
+//! b = 0.004               # continuous ZMP: half travel under the sole, m (default: a)
+//! swing = "cycloid"       # cycloid (h_z, w_y) | sinusoid (h_z)
+//!
+//! # Instead of the forward walk (step_length, s_first, steps are then ignored):
+//! # feet start side by side at x = 0, y = ±step_width; each entry is one step.
+//! [[footsteps]]
+//! side = "left"           # the foot that swings
+//! x = 0.02
+//! y = 0.045
+//! yaw = 0.0               # rad
+//! ```
+//!
+//! Errors name the field and the reason: `plans/x.toml: field `t2`: phase times must satisfy
+//! 0 < t1 < t2 < T`. Unknown keys are errors (a typo must not silently fall back to Table 2).
+
+use gait_core::plan::{SwingShape, Timing};
+use gait_core::zmp::ZmpShape;
+use gait_core::{
+    Footstep, ForwardWalk, GaitError, GaitParams, Model, ModelKind, Place, Plan, Robot, Sampler,
+    Side,
+};
+use serde::Deserialize;
+use std::fmt;
+use std::path::Path;
+
+/// Most footsteps a plan file may hold.
+pub const PLAN_CAPACITY: usize = 64;
+/// The plan type used by the host tools.
+pub type HostPlan = Plan<f64, PLAN_CAPACITY>;
+/// The sampler type used by the host tools.
+pub type HostSampler = Sampler<f64, PLAN_CAPACITY>;
+/// Default sample time, s (the firmware's 1 kHz tick).
+pub const DEFAULT_DT: f64 = 0.001;
+
+/// A plan-file error: which field and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanError {
+    /// The file, when the plan came from one.
+    pub file: Option<String>,
+    /// The field (`t2`, `footsteps[3].x`, …); empty when the whole file is at fault.
+    pub field: String,
+    /// The reason.
+    pub reason: String,
+}
+
+impl PlanError {
+    /// An error of `field`.
+    pub fn new(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        PlanError {
+            file: None,
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+    fn gait(field: &str, e: GaitError) -> Self {
+        PlanError::new(field, e.to_string())
+    }
+    /// The same error, attributed to `file`.
+    pub fn in_file(mut self, file: &str) -> Self {
+        self.file = Some(file.to_string());
+        self
+    }
+}
+
+impl fmt::Display for PlanError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(file) = &self.file {
+            write!(f, "{file}: ")?;
+        }
+        if self.field.is_empty() {
+            write!(f, "{}", self.reason)
+        } else {
+            write!(f, "field `{}`: {}", self.field, self.reason)
+        }
+    }
+}
+
+impl std::error::Error for PlanError {}
+
+/// The ZMP reference shape of a plan file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ZmpKind {
+    /// Seed 000: natural ZMP (d1, d2, a).
+    #[default]
+    Natural,
+    /// Seed 001: continuous forward-moving ZMP (b).
+    Continuous,
+}
+
+/// The swing-foot profile of a plan file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum SwingKind {
+    /// Seed 000 cycloid (h_z, w_y).
+    #[default]
+    Cycloid,
+    /// Seed 001 sinusoid (h_z).
+    Sinusoid,
+}
+
+/// The model name of a plan file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelName {
+    /// LIPM.
+    Lipm,
+    /// DLIPM.
+    Dlipm,
+    /// TLIPFM (seed 000).
+    #[default]
+    Tlipfm,
+}
+
+impl From<ModelName> for ModelKind {
+    fn from(m: ModelName) -> ModelKind {
+        match m {
+            ModelName::Lipm => ModelKind::Lipm,
+            ModelName::Dlipm => ModelKind::Dlipm,
+            ModelName::Tlipfm => ModelKind::Tlipfm,
+        }
+    }
+}
+
+/// Which foot (plan-file spelling).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SideName {
+    /// Left foot.
+    Left,
+    /// Right foot.
+    Right,
+}
+
+impl From<SideName> for Side {
+    fn from(s: SideName) -> Side {
+        match s {
+            SideName::Left => Side::Left,
+            SideName::Right => Side::Right,
+        }
+    }
+}
+
+/// One explicit footstep.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FootstepSpec {
+    /// The foot that swings.
+    pub side: SideName,
+    /// Landing x, m.
+    pub x: f64,
+    /// Landing y, m.
+    pub y: f64,
+    /// Landing heading, rad.
+    #[serde(default)]
+    pub yaw: f64,
+}
+
+/// A walk as described by a plan file (defaults = Table 2).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WalkSpec {
+    /// Pendulum model.
+    pub model: ModelName,
+    /// Sample time, s.
+    pub dt: f64,
+    /// S_L, m.
+    pub step_length: f64,
+    /// S_W, m.
+    pub step_width: f64,
+    /// S_first.
+    pub s_first: i64,
+    /// N.
+    pub steps: i64,
+    /// d1, m.
+    pub d1: f64,
+    /// d2, m.
+    pub d2: f64,
+    /// a, m.
+    pub a: f64,
+    /// z_c, m.
+    pub z_c: f64,
+    /// W_y, m.
+    pub w_y: f64,
+    /// H_z, m.
+    pub h_z: f64,
+    /// t1, s.
+    pub t1: f64,
+    /// t2, s.
+    pub t2: f64,
+    /// T, s.
+    pub period: f64,
+    /// Lead-in, s.
+    pub lead_in: f64,
+    /// Lead-out, s.
+    pub lead_out: f64,
+    /// ZMP shape.
+    pub zmp: ZmpKind,
+    /// Continuous-ZMP b, m (default: `a`).
+    pub b: Option<f64>,
+    /// Swing profile.
+    pub swing: SwingKind,
+    /// Explicit footsteps (replace the forward walk when present).
+    pub footsteps: Option<Vec<FootstepSpec>>,
+}
+
+impl Default for WalkSpec {
+    fn default() -> Self {
+        let t = ForwardWalk::table2();
+        WalkSpec {
+            model: ModelName::Tlipfm,
+            dt: DEFAULT_DT,
+            step_length: t.step_length,
+            step_width: t.step_width,
+            s_first: i64::from(t.s_first),
+            steps: t.steps as i64,
+            d1: t.d1,
+            d2: t.d2,
+            a: t.a,
+            z_c: t.z_c,
+            w_y: t.w_y,
+            h_z: t.h_z,
+            t1: t.t1,
+            t2: t.t2,
+            period: t.period,
+            lead_in: t.lead_in,
+            lead_out: t.lead_out,
+            zmp: ZmpKind::Natural,
+            b: None,
+            swing: SwingKind::Cycloid,
+            footsteps: None,
+        }
+    }
+}
+
+/// Reads and checks a plan file.
+pub fn load(path: &Path) -> Result<WalkSpec, PlanError> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        PlanError::new("", format!("cannot read the plan file: {e}")).in_file(&name)
+    })?;
+    let spec = parse(&text).map_err(|e| e.in_file(&name))?;
+    spec.check(&Robot::reference())
+        .map_err(|e| e.in_file(&name))?;
+    Ok(spec)
+}
+
+/// Parses plan-file text (no semantic checks beyond types; see [`WalkSpec::check`]).
+pub fn parse(text: &str) -> Result<WalkSpec, PlanError> {
+    toml::from_str::<WalkSpec>(text).map_err(|e| toml_error(text, &e))
+}
+
+/// Turns a TOML error into a field error: the key is found from the error's position.
+fn toml_error(text: &str, e: &toml::de::Error) -> PlanError {
+    let msg = e.message().trim().to_string();
+    // serde names unknown keys itself ("unknown field `foo`, expected one of …").
+    if let Some(rest) = msg.strip_prefix("unknown field `") {
+        if let Some(end) = rest.find('`') {
+            let key = &rest[..end];
+            let field = match e.span().map(|s| footstep_index(text, s.start)) {
+                Some(Some(i)) => format!("footsteps[{i}].{key}"),
+                _ => key.to_string(),
+            };
+            return PlanError::new(field, "unknown field (misspelt?)");
+        }
+    }
+    if let Some(rest) = msg.strip_prefix("missing field `") {
+        if let Some(end) = rest.find('`') {
+            let key = &rest[..end];
+            let field = match e.span().map(|s| footstep_index(text, s.start)) {
+                Some(Some(i)) => format!("footsteps[{i}].{key}"),
+                _ => key.to_string(),
+            };
+            return PlanError::new(field, "missing (required in every footstep)");
+        }
+    }
+    let Some(span) = e.span() else {
+        return PlanError::new("", msg);
+    };
+    let start = span.start.min(text.len());
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
+    let line = &text[line_start..line_end];
+    let line_no = text[..line_start].matches('\n').count() + 1;
+    let key = line
+        .split_once('=')
+        .map(|(k, _)| k.trim().trim_matches('"').to_string())
+        .filter(|k| !k.is_empty() && !k.starts_with('['));
+    match key {
+        Some(k) => {
+            let field = match footstep_index(text, start) {
+                Some(i) => format!("footsteps[{i}].{k}"),
+                None => k,
+            };
+            PlanError::new(field, format!("{msg} (line {line_no})"))
+        }
+        None => PlanError::new("", format!("line {line_no}: {msg}")),
+    }
+}
+
+/// Index of the `[[footsteps]]` table that the byte offset `pos` is in, if any.
+fn footstep_index(text: &str, pos: usize) -> Option<usize> {
+    // Up to the end of the line at `pos` (a span may point at the `[[footsteps]]` header).
+    let pos = pos.min(text.len());
+    let end = text[pos..].find('\n').map_or(text.len(), |i| pos + i);
+    let before = &text[..end];
+    let mut idx: Option<usize> = None;
+    let mut count = 0usize;
+    for line in before.lines() {
+        let t = line.trim();
+        if t.starts_with("[[")
+            && t.trim_start_matches('[')
+                .trim_start()
+                .starts_with("footsteps")
+        {
+            idx = Some(count);
+            count += 1;
+        } else if t.starts_with('[') {
+            idx = None;
+        }
+    }
+    idx
+}
+
+fn finite(field: &str, v: f64) -> Result<f64, PlanError> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(PlanError::gait(field, GaitError::NonFinite))
+    }
+}
+
+fn positive(field: &str, v: f64) -> Result<f64, PlanError> {
+    finite(field, v)?;
+    if v > 0.0 {
+        Ok(v)
+    } else {
+        Err(PlanError::new(field, format!("must be positive (got {v})")))
+    }
+}
+
+fn not_negative(field: &str, v: f64) -> Result<f64, PlanError> {
+    finite(field, v)?;
+    if v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(PlanError::new(
+            field,
+            format!("must not be negative (got {v})"),
+        ))
+    }
+}
+
+fn check_dt(dt: f64) -> Result<(), PlanError> {
+    finite("dt", dt)?;
+    if !(1.0 / 1000.0 - 1e-12..=1.0 / 50.0 + 1e-12).contains(&dt) {
+        return Err(PlanError::new(
+            "dt",
+            format!("{} (got {dt})", GaitError::BadSampleTime),
+        ));
+    }
+    Ok(())
+}
+
+impl WalkSpec {
+    /// The model kind.
+    pub fn model_kind(&self) -> ModelKind {
+        self.model.into()
+    }
+
+    /// The ForwardWalk of the Table 2 fields.
+    pub fn forward_walk(&self) -> ForwardWalk {
+        ForwardWalk {
+            step_length: self.step_length,
+            step_width: self.step_width,
+            s_first: self.s_first.clamp(-1, 1) as i8,
+            steps: self.steps.max(0) as usize,
+            d1: self.d1,
+            d2: self.d2,
+            a: self.a,
+            z_c: self.z_c,
+            w_y: self.w_y,
+            h_z: self.h_z,
+            t1: self.t1,
+            t2: self.t2,
+            period: self.period,
+            lead_in: self.lead_in,
+            lead_out: self.lead_out,
+        }
+    }
+
+    /// Checks every field and builds the plan once (errors name the field).
+    pub fn check(&self, robot: &Robot) -> Result<(), PlanError> {
+        self.sampler(robot, self.dt).map(|_| ())
+    }
+
+    /// The gait parameters (field-by-field checks first).
+    pub fn params(&self, robot: &Robot) -> Result<GaitParams<f64>, PlanError> {
+        positive("z_c", self.z_c)?;
+        let model = Model::<f64>::new(self.model_kind(), robot, self.z_c)
+            .map_err(|e| PlanError::gait("z_c", e))?;
+        positive("t1", self.t1)?;
+        positive("t2", self.t2)?;
+        positive("period", self.period)?;
+        positive("lead_in", self.lead_in)?;
+        positive("lead_out", self.lead_out)?;
+        let max = gait_core::plan::MAX_SEGMENT;
+        for (f, v) in [
+            ("period", self.period),
+            ("lead_in", self.lead_in),
+            ("lead_out", self.lead_out),
+        ] {
+            if v > max {
+                return Err(PlanError::new(
+                    f,
+                    format!("{} (got {v})", GaitError::PeriodTooLong),
+                ));
+            }
+        }
+        if self.t2 <= self.t1 {
+            return Err(PlanError::new(
+                "t2",
+                format!(
+                    "{} (t1 = {}, t2 = {})",
+                    GaitError::BadPhaseTimes,
+                    self.t1,
+                    self.t2
+                ),
+            ));
+        }
+        if self.period <= self.t2 {
+            return Err(PlanError::new(
+                "period",
+                format!(
+                    "{} (t2 = {}, T = {})",
+                    GaitError::BadPhaseTimes,
+                    self.t2,
+                    self.period
+                ),
+            ));
+        }
+        let half_sole = robot.geometry.sole_length * 0.5;
+        let zmp = match self.zmp {
+            ZmpKind::Natural => {
+                not_negative("d1", self.d1)?;
+                not_negative("d2", self.d2)?;
+                not_negative("a", self.a)?;
+                if self.a >= half_sole {
+                    return Err(PlanError::new(
+                        "a",
+                        format!(
+                            "{} (a = {} m, half the sole = {half_sole} m)",
+                            GaitError::ZmpOffsetOffSole,
+                            self.a
+                        ),
+                    ));
+                }
+                ZmpShape::Natural {
+                    d1: self.d1,
+                    d2: self.d2,
+                    a: self.a,
+                }
+            }
+            ZmpKind::Continuous => {
+                let b = self.b.unwrap_or(self.a);
+                not_negative("b", b)?;
+                if b >= half_sole {
+                    return Err(PlanError::new(
+                        "b",
+                        format!(
+                            "{} (b = {b} m, half the sole = {half_sole} m)",
+                            GaitError::ZmpOffsetOffSole
+                        ),
+                    ));
+                }
+                ZmpShape::Continuous { b }
+            }
+        };
+        not_negative("h_z", self.h_z)?;
+        let swing = match self.swing {
+            SwingKind::Cycloid => {
+                not_negative("w_y", self.w_y)?;
+                SwingShape::Cycloid {
+                    height: self.h_z,
+                    width: self.w_y,
+                }
+            }
+            SwingKind::Sinusoid => SwingShape::Sinusoid { height: self.h_z },
+        };
+        let params = GaitParams {
+            model,
+            timing: Timing {
+                t1: self.t1,
+                t2: self.t2,
+                period: self.period,
+            },
+            zmp,
+            swing,
+            lead_in: self.lead_in,
+            lead_out: self.lead_out,
+        };
+        params.validate(robot).map_err(|e| PlanError::gait("", e))?;
+        Ok(params)
+    }
+
+    /// Builds the footstep plan.
+    pub fn plan(&self, robot: &Robot) -> Result<HostPlan, PlanError> {
+        let params = self.params(robot)?;
+        positive("step_width", self.step_width)?;
+        let w = self.step_width;
+        let start = Plan::<f64, PLAN_CAPACITY>::new(
+            robot,
+            params,
+            Place::new(0.0, w, 0.0),
+            Place::new(0.0, -w, 0.0),
+        )
+        .map_err(|e| PlanError::new("step_width", format!("{e} (the feet start at y = ±{w} m)")))?;
+        match &self.footsteps {
+            Some(list) => {
+                if list.is_empty() {
+                    return Err(PlanError::gait("footsteps", GaitError::EmptyPlan));
+                }
+                if list.len() > PLAN_CAPACITY {
+                    return Err(PlanError::new(
+                        "footsteps",
+                        format!(
+                            "{} ({} > {PLAN_CAPACITY})",
+                            GaitError::CapacityExceeded,
+                            list.len()
+                        ),
+                    ));
+                }
+                let mut plan = start;
+                for (i, s) in list.iter().enumerate() {
+                    finite(&format!("footsteps[{i}].x"), s.x)?;
+                    finite(&format!("footsteps[{i}].y"), s.y)?;
+                    finite(&format!("footsteps[{i}].yaw"), s.yaw)?;
+                    plan.push(Footstep {
+                        side: s.side.into(),
+                        place: Place::new(s.x, s.y, s.yaw),
+                    })
+                    .map_err(|e| PlanError::gait(&format!("footsteps[{i}]"), e))?;
+                }
+                Ok(plan)
+            }
+            None => {
+                finite("step_length", self.step_length)?;
+                if !(self.s_first == -1 || self.s_first == 1) {
+                    return Err(PlanError::new(
+                        "s_first",
+                        format!("{} (got {})", GaitError::BadStartFoot, self.s_first),
+                    ));
+                }
+                if self.steps <= 0 {
+                    return Err(PlanError::new(
+                        "steps",
+                        format!("{} (got {})", GaitError::EmptyPlan, self.steps),
+                    ));
+                }
+                if self.steps as usize > PLAN_CAPACITY {
+                    return Err(PlanError::new(
+                        "steps",
+                        format!(
+                            "{} ({} > {PLAN_CAPACITY})",
+                            GaitError::CapacityExceeded,
+                            self.steps
+                        ),
+                    ));
+                }
+                self.forward_walk()
+                    .plan::<f64, PLAN_CAPACITY>(robot, params)
+                    .map_err(|e| match e {
+                        GaitError::StepOutOfReach => PlanError::new(
+                            "step_length",
+                            format!(
+                                "{e} (S_L = {} m, limit {:.3} m)",
+                                self.step_length,
+                                start.limits().max_length / 2.0
+                            ),
+                        ),
+                        other => PlanError::gait("", other),
+                    })
+            }
+        }
+    }
+
+    /// A sampler over the plan at sample time `dt` (the `dt` field, or an override).
+    pub fn sampler(&self, robot: &Robot, dt: f64) -> Result<HostSampler, PlanError> {
+        check_dt(dt)?;
+        let plan = self.plan(robot)?;
+        Sampler::new(plan, dt).map_err(|e| match e {
+            GaitError::BadSampleTime => PlanError::new(
+                "dt",
+                format!("dt = {dt} s is longer than the shortest phase (t1, t2 − t1, T − t2, lead_in, lead_out)"),
+            ),
+            other => PlanError::gait("dt", other),
+        })
+    }
+}

@@ -1,0 +1,884 @@
+//! ZMP-response report: decode a captured firmware log (with the firmware's own
+//! [`walker_firmware::log::Decoder`]), write it as CSV, plot reference vs response with the
+//! support-polygon bounds (seed 000 Figs. 14-16), and compute the Table 3 error statistics.
+//!
+//! Record counts: *good* = frames the decoder accepted (tick and event records), *bad* = frames
+//! it rejected (COBS, CRC, type, length or field errors, overlong garbage; a capture that
+//! starts mid-frame rejects its first partial frame) plus one for bytes left after the last
+//! delimiter (a frame truncated by the end of the capture). Nothing is fatal.
+//!
+//! Time: `t` is the firmware's tick clock in seconds (32-bit µs, unwrapped). The plan's time
+//! is aligned on the walk start: the first tick whose phase leaves `standing` is the end of the
+//! plan's lead-in; a log without that transition is taken to run on the plan's clock.
+//!
+//! Statistics (seed 000 Table 3), per axis over the ticks with a valid measured ZMP,
+//! `e = measured − reference`: Σ|e|, mean |e|, RMS e, max |e| (gait-core's `ZmpErrorStats`).
+
+use crate::planfile::{WalkSpec, PLAN_CAPACITY};
+use crate::plot::{Dash, Figure, Panel, Series};
+use gait_core::measured::{AxisErrorStats, ZmpErrorStats};
+use gait_core::support::SupportPolygon;
+use gait_core::{Robot, SupportPhase as PlanPhase};
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use walker_firmware::log::{
+    DecodeError, Decoder, DecoderStats, FaultState, Record, SupportPhase, TickRecord, POS_NA,
+    TAU_NA,
+};
+
+/// Rejections by cause.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RejectCounts {
+    /// Malformed COBS.
+    pub cobs: u64,
+    /// CRC mismatch.
+    pub crc: u64,
+    /// Unknown record type.
+    pub unknown_type: u64,
+    /// Wrong length for the type.
+    pub length: u64,
+    /// Impossible field value.
+    pub field: u64,
+    /// Longer than any frame (garbage).
+    pub overlong: u64,
+}
+
+impl RejectCounts {
+    fn add(&mut self, e: DecodeError) {
+        match e {
+            DecodeError::Cobs => self.cobs += 1,
+            DecodeError::Crc => self.crc += 1,
+            DecodeError::UnknownType(_) => self.unknown_type += 1,
+            DecodeError::Length => self.length += 1,
+            DecodeError::Field => self.field += 1,
+            DecodeError::Overlong => self.overlong += 1,
+        }
+    }
+}
+
+/// A decoded log.
+#[derive(Clone, Debug, Default)]
+pub struct DecodedLog {
+    /// Tick records in stream order.
+    pub ticks: Vec<TickRecord>,
+    /// Event records (start-up, stop, fault) in stream order.
+    pub events: Vec<Record>,
+    /// The decoder's counters.
+    pub decoder: DecoderStats,
+    /// Rejections by cause.
+    pub rejects: RejectCounts,
+    /// Bytes after the last delimiter (an unterminated frame at the end).
+    pub trailing_bytes: usize,
+    /// Bytes fed.
+    pub bytes: usize,
+}
+
+impl DecodedLog {
+    /// Records decoded (ticks and events).
+    pub fn good(&self) -> u64 {
+        u64::from(self.decoder.frames)
+    }
+    /// Records rejected, plus one for an unterminated frame at the end.
+    pub fn bad(&self) -> u64 {
+        u64::from(self.decoder.rejected) + u64::from(self.trailing_bytes > 0)
+    }
+}
+
+/// A streaming log decoder that keeps everything (for captures and files).
+#[derive(Clone, Debug, Default)]
+pub struct LogCollector {
+    dec: Decoder,
+    log: DecodedLog,
+}
+
+impl LogCollector {
+    /// A fresh collector.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Feeds bytes; returns how many tick records were added.
+    pub fn feed(&mut self, bytes: &[u8]) -> usize {
+        let before = self.log.ticks.len();
+        let log = &mut self.log;
+        self.dec.feed(bytes, |r| match r {
+            Ok(Record::Tick(t)) => log.ticks.push(t),
+            Ok(other) => log.events.push(other),
+            Err(e) => log.rejects.add(e),
+        });
+        log.bytes += bytes.len();
+        match bytes.iter().rposition(|&b| b == 0) {
+            Some(i) => log.trailing_bytes = bytes.len() - i - 1,
+            None => log.trailing_bytes += bytes.len(),
+        }
+        self.log.ticks.len() - before
+    }
+    /// The log so far.
+    pub fn log(&self) -> &DecodedLog {
+        &self.log
+    }
+    /// Ends the stream.
+    pub fn finish(mut self) -> DecodedLog {
+        self.log.decoder = self.dec.stats();
+        self.log
+    }
+}
+
+/// Decodes a whole byte stream.
+pub fn decode_bytes(bytes: &[u8]) -> DecodedLog {
+    let mut c = LogCollector::new();
+    c.feed(bytes);
+    c.finish()
+}
+
+/// Reads and decodes a log file.
+pub fn decode_file(path: &Path) -> Result<DecodedLog, String> {
+    let bytes =
+        std::fs::read(path).map_err(|e| format!("cannot read the log {}: {e}", path.display()))?;
+    Ok(decode_bytes(&bytes))
+}
+
+/// Metres from a 10 µm count (NaN when not available).
+pub fn pos_m(v: i32) -> f64 {
+    if v == POS_NA {
+        f64::NAN
+    } else {
+        f64::from(v) * 1e-5
+    }
+}
+
+/// N·m from mN·m (NaN when not available).
+pub fn tau_nm(v: i16) -> f64 {
+    if v == TAU_NA {
+        f64::NAN
+    } else {
+        f64::from(v) * 1e-3
+    }
+}
+
+/// Lower-case phase name.
+pub fn phase_name(p: SupportPhase) -> &'static str {
+    match p {
+        SupportPhase::Double => "double",
+        SupportPhase::SingleLeft => "single_left",
+        SupportPhase::SingleRight => "single_right",
+        SupportPhase::Standing => "standing",
+        SupportPhase::Stopped => "stopped",
+    }
+}
+
+fn fault_name(f: FaultState) -> &'static str {
+    match f {
+        FaultState::Ok => "ok",
+        FaultState::Holding => "holding",
+        FaultState::Stopping => "stopping",
+        FaultState::TorqueOff => "torque_off",
+    }
+}
+
+/// One tick in SI units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickRow {
+    /// Firmware clock, s (unwrapped).
+    pub t: f64,
+    /// The record.
+    pub rec: TickRecord,
+    /// ZMP reference, m (NaN = not available).
+    pub zmp_ref: [f64; 2],
+    /// Measured ZMP, m (NaN = not available).
+    pub zmp_meas: [f64; 2],
+    /// CoM, m.
+    pub com: [f64; 2],
+    /// τ, N·m.
+    pub tau: f64,
+}
+
+impl TickRow {
+    /// The measured ZMP when valid.
+    pub fn measured(&self) -> Option<[f64; 2]> {
+        (self.rec.zmp_valid && self.zmp_meas.iter().all(|v| v.is_finite())).then_some(self.zmp_meas)
+    }
+}
+
+/// Converts the tick records, unwrapping the 32-bit µs clock.
+pub fn tick_rows(ticks: &[TickRecord]) -> Vec<TickRow> {
+    let mut out = Vec::with_capacity(ticks.len());
+    let mut prev: Option<(u32, i64)> = None;
+    for r in ticks {
+        let us = match prev {
+            None => i64::from(r.time_us),
+            Some((p, acc)) => acc + i64::from(r.time_us.wrapping_sub(p) as i32),
+        };
+        prev = Some((r.time_us, us));
+        out.push(TickRow {
+            t: us as f64 * 1e-6,
+            rec: *r,
+            zmp_ref: [pos_m(r.zmp_ref[0]), pos_m(r.zmp_ref[1])],
+            zmp_meas: [pos_m(r.zmp_meas[0]), pos_m(r.zmp_meas[1])],
+            com: [pos_m(r.com[0]), pos_m(r.com[1])],
+            tau: tau_nm(r.tau_mnm),
+        });
+    }
+    out
+}
+
+/// Header of `zmp_response.csv`.
+pub const RESPONSE_HEADER: &str = "t,seq,zmp_ref_x,zmp_ref_y,zmp_meas_x,zmp_meas_y,zmp_valid,com_x,com_y,tau,phase,fault,overrun,bus_timeouts,bus_crc_errors,bus_status_errors,tick_overruns";
+
+fn num(v: f64, decimals: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.decimals$}")
+    } else {
+        String::new()
+    }
+}
+
+/// Writes the tick rows as CSV (not-available values are empty fields).
+pub fn write_response_csv(rows: &[TickRow], mut w: impl Write) -> std::io::Result<()> {
+    writeln!(w, "{RESPONSE_HEADER}")?;
+    for r in rows {
+        let b = r.rec.bus;
+        writeln!(
+            w,
+            "{:.6},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            r.t,
+            r.rec.seq,
+            num(r.zmp_ref[0], 5),
+            num(r.zmp_ref[1], 5),
+            num(r.zmp_meas[0], 5),
+            num(r.zmp_meas[1], 5),
+            u8::from(r.rec.zmp_valid),
+            num(r.com[0], 5),
+            num(r.com[1], 5),
+            num(r.tau, 3),
+            phase_name(r.rec.phase),
+            fault_name(r.rec.fault),
+            u8::from(r.rec.overrun),
+            b.timeouts,
+            b.crc,
+            b.status,
+            r.rec.overruns
+        )?;
+    }
+    Ok(())
+}
+
+/// One event as text.
+pub fn event_text(r: &Record) -> (u16, u32, &'static str, String) {
+    match r {
+        // Debug of the whole record: robust to the record's fields evolving.
+        Record::Startup(s) => (s.seq, s.time_us, "startup", format!("{s:?}")),
+        Record::Stop(s) => (s.seq, s.time_us, "stop", format!("{:?}", s.reason)),
+        Record::Fault(f) => (
+            f.seq,
+            f.time_us,
+            "fault",
+            format!("{:?} id {} value {}", f.kind, f.id, f.value),
+        ),
+        Record::Tick(t) => (t.seq, t.time_us, "tick", String::new()),
+    }
+}
+
+/// Writes the event records as CSV.
+pub fn write_events_csv(events: &[Record], mut w: impl Write) -> std::io::Result<()> {
+    writeln!(w, "seq,time_us,kind,detail")?;
+    for e in events {
+        let (seq, t, kind, detail) = event_text(e);
+        writeln!(w, "{seq},{t},{kind},\"{}\"", detail.replace('"', "'"))?;
+    }
+    Ok(())
+}
+
+/// Table 3 statistics of one run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ErrorSummary {
+    /// Tick records looked at.
+    pub ticks: u64,
+    /// Of those, without a valid measured ZMP.
+    pub skipped: u64,
+    /// Of those, with a non-finite reference.
+    pub invalid: u64,
+    /// Sagittal (x) error.
+    pub x: AxisErrorStats,
+    /// Lateral (y) error.
+    pub y: AxisErrorStats,
+}
+
+/// Error statistics of `measured − reference` over the rows.
+pub fn error_stats(rows: &[TickRow]) -> ErrorSummary {
+    let mut s = ZmpErrorStats::<f64>::new();
+    for r in rows {
+        s.push(r.zmp_ref, r.measured());
+    }
+    ErrorSummary {
+        ticks: s.samples(),
+        skipped: s.skipped(),
+        invalid: s.invalid(),
+        x: s.x(),
+        y: s.y(),
+    }
+}
+
+/// Support-polygon bounds of the plan over time (plan clock).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SupportBounds {
+    /// Plan time of each sample, s.
+    pub t: Vec<f64>,
+    /// Min and max x of the support polygon, m.
+    pub x: Vec<[f64; 2]>,
+    /// Min and max y of the support polygon, m.
+    pub y: Vec<[f64; 2]>,
+    /// End of the lead-in, s.
+    pub walk_start: f64,
+}
+
+/// Runs the plan through gait-core and records the support polygon's bounds at every sample:
+/// the support sole in single support, the hull of both soles otherwise.
+pub fn support_bounds(spec: &WalkSpec, robot: &Robot, dt: f64) -> Result<SupportBounds, String> {
+    let mut s = spec.sampler(robot, dt).map_err(|e| e.to_string())?;
+    let mut out = SupportBounds {
+        walk_start: s.walk_start_ns() as f64 * 1e-9,
+        ..Default::default()
+    };
+    let limit = 1 + ((PLAN_CAPACITY as f64 * 4.0 + 8.0) / dt) as usize;
+    while !s.is_done() && out.t.len() < limit {
+        let g = s.next(0.0);
+        let place = |i: usize| gait_core::Place {
+            x: g.feet[i].x,
+            y: g.feet[i].y,
+            yaw: g.feet[i].yaw,
+        };
+        let poly = match g.phase {
+            PlanPhase::Single(side) => SupportPolygon::single(&place(side.index()), robot),
+            _ => SupportPolygon::double(&place(0), &place(1), robot),
+        }
+        .map_err(|e| format!("support polygon: {e}"))?;
+        let (mut x, mut y) = (
+            [f64::INFINITY, f64::NEG_INFINITY],
+            [f64::INFINITY, f64::NEG_INFINITY],
+        );
+        for v in poly.vertices() {
+            x = [x[0].min(v[0]), x[1].max(v[0])];
+            y = [y[0].min(v[1]), y[1].max(v[1])];
+        }
+        out.t.push(g.time_ns as f64 * 1e-9);
+        out.x.push(x);
+        out.y.push(y);
+    }
+    Ok(out)
+}
+
+/// How the log's clock maps to the plan's: `plan_t = t + offset`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Alignment {
+    /// Offset, s.
+    pub offset: f64,
+    /// How it was found.
+    pub how: String,
+}
+
+/// Aligns the log on the plan's walk start (first tick leaving `standing`).
+pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
+    let walking = |p: SupportPhase| {
+        matches!(
+            p,
+            SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
+        )
+    };
+    for w in rows.windows(2) {
+        if w[0].rec.phase == SupportPhase::Standing && walking(w[1].rec.phase) {
+            return Alignment {
+                offset: walk_start - w[1].t,
+                how: format!("walk start (first walking tick at t = {:.3} s = plan's end of lead-in {walk_start:.3} s)", w[1].t),
+            };
+        }
+    }
+    Alignment {
+        offset: 0.0,
+        how: "no standing → walking transition in the log: log clock = plan clock".into(),
+    }
+}
+
+/// A ground-truth ZMP trace (e.g. from the simulator), on the log's clock.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Truth {
+    /// Time, s.
+    pub t: Vec<f64>,
+    /// ZMP (x, y), m.
+    pub zmp: Vec<[f64; 2]>,
+}
+
+impl Truth {
+    /// The ZMP at time `t` (nearest sample at or before `t`, none outside the trace).
+    pub fn at(&self, t: f64) -> Option<[f64; 2]> {
+        let first = *self.t.first()?;
+        let last = *self.t.last()?;
+        if t < first - 1e-9 || t > last + 1e-9 {
+            return None;
+        }
+        let i = self.t.partition_point(|&v| v <= t + 1e-9).saturating_sub(1);
+        self.zmp.get(i).copied()
+    }
+}
+
+/// Reads a truth CSV: a header with `t` (or `time`) and `zmp_x`/`zmp_y` (or `zmp_true_x`,
+/// `true_zmp_x`), s and m, on the log's clock.
+pub fn read_truth(path: &Path) -> Result<Truth, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read the truth file {}: {e}", path.display()))?;
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+    let header: Vec<String> = lines
+        .next()
+        .ok_or_else(|| format!("{}: empty truth file", path.display()))?
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .collect();
+    let col = |names: &[&str]| header.iter().position(|h| names.contains(&h.as_str()));
+    let ct = col(&["t", "time", "t_s"])
+        .ok_or_else(|| format!("{}: no `t` column in {header:?}", path.display()))?;
+    let cx = col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
+        .ok_or_else(|| format!("{}: no `zmp_x` column in {header:?}", path.display()))?;
+    let cy = col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
+        .ok_or_else(|| format!("{}: no `zmp_y` column in {header:?}", path.display()))?;
+    let mut out = Truth::default();
+    for (n, line) in lines.enumerate() {
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        let get = |i: usize| -> Result<f64, String> {
+            let s = f.get(i).copied().unwrap_or("");
+            if s.is_empty() {
+                return Ok(f64::NAN);
+            }
+            s.parse::<f64>().map_err(|e| {
+                format!(
+                    "{}: data line {}: column {}: {e}",
+                    path.display(),
+                    n + 1,
+                    header[i]
+                )
+            })
+        };
+        let t = get(ct)?;
+        if !t.is_finite() {
+            continue;
+        }
+        out.t.push(t);
+        out.zmp.push([get(cx)?, get(cy)?]);
+    }
+    Ok(out)
+}
+
+/// Options of a report.
+#[derive(Clone, Debug)]
+pub struct ReportOptions {
+    /// The captured log.
+    pub log: PathBuf,
+    /// Output folder.
+    pub out_dir: PathBuf,
+    /// Optional ground-truth ZMP CSV.
+    pub truth: Option<PathBuf>,
+    /// The plan the firmware walked (for the support bounds).
+    pub spec: WalkSpec,
+    /// Name of the plan (for the report).
+    pub plan_name: String,
+}
+
+/// What a report found.
+#[derive(Clone, Debug)]
+pub struct ReportSummary {
+    /// The decoded log.
+    pub log: DecodedLog,
+    /// Tick rows.
+    pub rows: Vec<TickRow>,
+    /// Measured vs reference.
+    pub stats: ErrorSummary,
+    /// Measured vs truth, when a truth file was given.
+    pub truth_stats: Option<ErrorSummary>,
+    /// Clock alignment.
+    pub alignment: Alignment,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+}
+
+/// A Table 3 style markdown table of one run.
+pub fn stats_table(s: &ErrorSummary) -> String {
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "| axis | samples | Σ\\|e\\| (m) | mean \\|e\\| (m) | RMS e (m) | max \\|e\\| (m) |"
+    );
+    let _ = writeln!(t, "| --- | ---: | ---: | ---: | ---: | ---: |");
+    for (name, a) in [("x (sagittal)", &s.x), ("y (lateral)", &s.y)] {
+        let _ = writeln!(
+            t,
+            "| {name} | {} | {:.6} | {:.6} | {:.6} | {:.6} |",
+            a.count, a.sum_abs, a.mean_abs, a.rms, a.max_abs
+        );
+    }
+    t
+}
+
+fn axis_json(a: &AxisErrorStats) -> String {
+    format!(
+        "{{\"count\": {}, \"sum_abs\": {}, \"mean_abs\": {}, \"rms\": {}, \"max_abs\": {}}}",
+        a.count,
+        json_num(a.sum_abs),
+        json_num(a.mean_abs),
+        json_num(a.rms),
+        json_num(a.max_abs)
+    )
+}
+
+fn json_num(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:e}")
+    } else {
+        "null".into()
+    }
+}
+
+fn json_str(s: &str) -> String {
+    let mut o = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => o.push_str("\\\""),
+            '\\' => o.push_str("\\\\"),
+            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
+            c => o.push(c),
+        }
+    }
+    o.push('"');
+    o
+}
+
+/// The statistics as a JSON object.
+pub fn stats_json(s: &ErrorSummary) -> String {
+    format!(
+        "{{\"ticks\": {}, \"skipped\": {}, \"invalid\": {}, \"x\": {}, \"y\": {}}}",
+        s.ticks,
+        s.skipped,
+        s.invalid,
+        axis_json(&s.x),
+        axis_json(&s.y)
+    )
+}
+
+fn write_file(path: &Path, data: &[u8], files: &mut Vec<PathBuf>) -> Result<(), String> {
+    std::fs::write(path, data).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    files.push(path.to_path_buf());
+    Ok(())
+}
+
+/// The ZMP figure: reference (dash-dot), response (solid), support bounds (dashed), truth
+/// (dotted) in the sagittal and the lateral plane over time.
+pub fn zmp_figure(
+    title: &str,
+    rows: &[TickRow],
+    bounds: &SupportBounds,
+    offset: f64,
+    truth: Option<&Truth>,
+) -> Figure {
+    let (t0, t1) = match (rows.first(), rows.last()) {
+        (Some(a), Some(b)) => (a.t, b.t),
+        _ => (0.0, 0.0),
+    };
+    let mut panels = Vec::new();
+    for (axis, name) in [(0usize, "sagittal plane (x)"), (1, "lateral plane (y)")] {
+        let mut series = Vec::new();
+        let (mut lo, mut hi) = (Vec::new(), Vec::new());
+        for (i, &tp) in bounds.t.iter().enumerate() {
+            let t = tp - offset;
+            if t < t0 - 1e-9 || t > t1 + 1e-9 {
+                continue;
+            }
+            let b = if axis == 0 { bounds.x[i] } else { bounds.y[i] };
+            lo.push((t, b[0]));
+            hi.push((t, b[1]));
+        }
+        let gray = [110, 110, 110];
+        series.push(Series {
+            label: "support polygon min/max".into(),
+            color: gray,
+            dash: Dash::Dashed,
+            width: 1.0,
+            points: lo,
+        });
+        series.push(Series {
+            label: String::new(),
+            color: gray,
+            dash: Dash::Dashed,
+            width: 1.0,
+            points: hi,
+        });
+        series.push(Series {
+            label: "ZMP response".into(),
+            color: [200, 30, 30],
+            dash: Dash::Solid,
+            width: 1.2,
+            points: rows
+                .iter()
+                .map(|r| (r.t, r.measured().map_or(f64::NAN, |m| m[axis])))
+                .collect(),
+        });
+        series.push(Series {
+            label: "ZMP reference".into(),
+            color: [30, 80, 200],
+            dash: Dash::DashDot,
+            width: 1.5,
+            points: rows.iter().map(|r| (r.t, r.zmp_ref[axis])).collect(),
+        });
+        if let Some(tr) = truth {
+            series.push(Series {
+                label: "ZMP truth".into(),
+                color: [20, 150, 60],
+                dash: Dash::Dotted,
+                width: 1.2,
+                points: tr
+                    .t
+                    .iter()
+                    .zip(&tr.zmp)
+                    .map(|(&t, z)| (t, z[axis]))
+                    .collect(),
+            });
+        }
+        panels.push(Panel {
+            title: format!("ZMP, {name}"),
+            x_label: "t (s)".into(),
+            y_label: format!("ZMP {} (m)", if axis == 0 { "x" } else { "y" }),
+            series,
+        });
+    }
+    Figure {
+        title: title.into(),
+        width: 1100,
+        panel_height: 360,
+        panels,
+    }
+}
+
+/// Writes the whole report; returns what it found.
+pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String> {
+    let log = decode_file(&opts.log)?;
+    std::fs::create_dir_all(&opts.out_dir)
+        .map_err(|e| format!("cannot create {}: {e}", opts.out_dir.display()))?;
+    let rows = tick_rows(&log.ticks);
+    let stats = error_stats(&rows);
+    let mut files = Vec::new();
+
+    let mut csv = Vec::new();
+    write_response_csv(&rows, &mut csv).map_err(|e| e.to_string())?;
+    write_file(&opts.out_dir.join("zmp_response.csv"), &csv, &mut files)?;
+    let mut ev = Vec::new();
+    write_events_csv(&log.events, &mut ev).map_err(|e| e.to_string())?;
+    write_file(&opts.out_dir.join("events.csv"), &ev, &mut files)?;
+
+    // Support bounds from the same plan, sampled at the log's tick period.
+    let dt = tick_period(&log).clamp(0.001, 0.02);
+    let bounds = support_bounds(&opts.spec, robot, dt)?;
+    let alignment = align(&rows, bounds.walk_start);
+
+    let truth = match &opts.truth {
+        Some(p) => Some(read_truth(p)?),
+        None => None,
+    };
+    let truth_stats = truth.as_ref().map(|tr| {
+        let mut s = ZmpErrorStats::<f64>::new();
+        for r in &rows {
+            if let Some(z) = tr.at(r.t) {
+                s.push(z, r.measured());
+            }
+        }
+        ErrorSummary {
+            ticks: s.samples(),
+            skipped: s.skipped(),
+            invalid: s.invalid(),
+            x: s.x(),
+            y: s.y(),
+        }
+    });
+
+    let model = opts.spec.model_kind().name().to_uppercase();
+    let fig = zmp_figure(
+        &format!("ZMP reference vs response ({model}, {})", opts.plan_name),
+        &rows,
+        &bounds,
+        alignment.offset,
+        truth.as_ref(),
+    );
+    write_file(
+        &opts.out_dir.join("zmp_response.svg"),
+        fig.to_svg().as_bytes(),
+        &mut files,
+    )?;
+    write_file(
+        &opts.out_dir.join("zmp_response.png"),
+        &fig.to_png(),
+        &mut files,
+    )?;
+
+    // report.md
+    let mut md = String::new();
+    let _ = writeln!(md, "# ZMP response report\n");
+    let _ = writeln!(md, "- log: `{}` ({} bytes)", opts.log.display(), log.bytes);
+    let _ = writeln!(
+        md,
+        "- plan: {} (model {model}) — used for the support-polygon bounds",
+        opts.plan_name
+    );
+    let _ = writeln!(
+        md,
+        "- records: {} good ({} ticks, {} events), {} bad (COBS {}, CRC {}, type {}, length {}, field {}, overlong {}, unterminated at end {}), {} sequence gaps",
+        log.good(),
+        log.ticks.len(),
+        log.events.len(),
+        log.bad(),
+        log.rejects.cobs,
+        log.rejects.crc,
+        log.rejects.unknown_type,
+        log.rejects.length,
+        log.rejects.field,
+        log.rejects.overlong,
+        u8::from(log.trailing_bytes > 0),
+        log.decoder.seq_gaps
+    );
+    if let (Some(a), Some(b)) = (rows.first(), rows.last()) {
+        let _ = writeln!(md, "- time: {:.3} s to {:.3} s (firmware clock)", a.t, b.t);
+    }
+    let _ = writeln!(md, "- alignment: {}", alignment.how);
+    let _ = writeln!(
+        md,
+        "- bus errors at the end: {} timeouts, {} CRC errors, {} status errors, {} tick overruns",
+        rows.last().map_or(0, |r| r.rec.bus.timeouts),
+        rows.last().map_or(0, |r| r.rec.bus.crc),
+        rows.last().map_or(0, |r| r.rec.bus.status),
+        rows.last().map_or(0, |r| r.rec.overruns)
+    );
+    let _ = writeln!(
+        md,
+        "\n## ZMP tracking error (seed 000 Table 3): measured − reference\n"
+    );
+    let _ = writeln!(
+        md,
+        "{} ticks, {} without a valid measured ZMP.\n",
+        stats.ticks, stats.skipped
+    );
+    md.push_str(&stats_table(&stats));
+    if let Some(ts) = &truth_stats {
+        let _ = writeln!(md, "\n## Measured − true ZMP (sensor error)\n");
+        md.push_str(&stats_table(ts));
+    }
+    let _ = writeln!(
+        md,
+        "\n## Plot\n\n![ZMP reference vs response](zmp_response.svg)\n"
+    );
+    let _ = writeln!(md, "Reference dash-dot, response solid, support-polygon min/max dashed (PNG: zmp_response.png).");
+    if !log.events.is_empty() {
+        let _ = writeln!(
+            md,
+            "\n## Events\n\n| seq | time (µs) | kind | detail |\n| ---: | ---: | --- | --- |"
+        );
+        for e in &log.events {
+            let (seq, t, kind, detail) = event_text(e);
+            let _ = writeln!(md, "| {seq} | {t} | {kind} | {detail} |");
+        }
+    }
+    write_file(&opts.out_dir.join("report.md"), md.as_bytes(), &mut files)?;
+
+    let json = format!(
+        "{{\n  \"log\": {},\n  \"plan\": {},\n  \"model\": {},\n  \"records\": {{\"good\": {}, \"bad\": {}, \"ticks\": {}, \"events\": {}, \"seq_gaps\": {}, \"bytes\": {}}},\n  \"zmp_error\": {},\n  \"truth_error\": {}\n}}\n",
+        json_str(&opts.log.display().to_string()),
+        json_str(&opts.plan_name),
+        json_str(opts.spec.model_kind().name()),
+        log.good(),
+        log.bad(),
+        log.ticks.len(),
+        log.events.len(),
+        log.decoder.seq_gaps,
+        log.bytes,
+        stats_json(&stats),
+        truth_stats.as_ref().map_or("null".into(), stats_json)
+    );
+    write_file(
+        &opts.out_dir.join("stats.json"),
+        json.as_bytes(),
+        &mut files,
+    )?;
+
+    Ok(ReportSummary {
+        log,
+        rows,
+        stats,
+        truth_stats,
+        alignment,
+        files,
+    })
+}
+
+/// The tick period of a log, s: from its start-up record, else the median tick spacing,
+/// else 1 ms.
+pub fn tick_period(log: &DecodedLog) -> f64 {
+    for e in &log.events {
+        if let Record::Startup(s) = e {
+            if s.tick_period_us > 0 {
+                return f64::from(s.tick_period_us) * 1e-6;
+            }
+        }
+    }
+    let mut d: Vec<u32> = log
+        .ticks
+        .windows(2)
+        .map(|w| w[1].time_us.wrapping_sub(w[0].time_us))
+        .filter(|&v| v > 0)
+        .collect();
+    if d.is_empty() {
+        return 0.001;
+    }
+    d.sort_unstable();
+    f64::from(d[d.len() / 2]) * 1e-6
+}
+
+/// Compares runs: their Table 3 statistics side by side, as markdown.
+pub fn compare_table(runs: &[(String, DecodedLog, ErrorSummary)]) -> String {
+    let mut t = String::new();
+    let names: Vec<&str> = runs.iter().map(|r| r.0.as_str()).collect();
+    let _ = writeln!(t, "| statistic | {} |", names.join(" | "));
+    let _ = writeln!(t, "| --- |{}", " ---: |".repeat(runs.len()));
+    type Get = fn(&ErrorSummary) -> f64;
+    let rows: [(&str, Get); 8] = [
+        ("Σ\\|e_x\\| (m)", |s| s.x.sum_abs),
+        ("mean \\|e_x\\| (m)", |s| s.x.mean_abs),
+        ("RMS e_x (m)", |s| s.x.rms),
+        ("max \\|e_x\\| (m)", |s| s.x.max_abs),
+        ("Σ\\|e_y\\| (m)", |s| s.y.sum_abs),
+        ("mean \\|e_y\\| (m)", |s| s.y.mean_abs),
+        ("RMS e_y (m)", |s| s.y.rms),
+        ("max \\|e_y\\| (m)", |s| s.y.max_abs),
+    ];
+    for (label, get) in rows {
+        let vals: Vec<String> = runs.iter().map(|r| format!("{:.6}", get(&r.2))).collect();
+        let _ = writeln!(t, "| {label} | {} |", vals.join(" | "));
+    }
+    let counts: Vec<String> = runs.iter().map(|r| format!("{}", r.2.x.count)).collect();
+    let _ = writeln!(
+        t,
+        "| samples with a measured ZMP | {} |",
+        counts.join(" | ")
+    );
+    let good: Vec<String> = runs
+        .iter()
+        .map(|r| format!("{} / {}", r.1.good(), r.1.bad()))
+        .collect();
+    let _ = writeln!(t, "| records good / bad | {} |", good.join(" | "));
+    t
+}
+
+/// Ranks the runs by one statistic (smallest first), e.g. `tlipfm < dlipm < lipm`.
+pub fn ranking(
+    runs: &[(String, DecodedLog, ErrorSummary)],
+    get: fn(&ErrorSummary) -> f64,
+) -> String {
+    let mut v: Vec<(&str, f64)> = runs.iter().map(|r| (r.0.as_str(), get(&r.2))).collect();
+    v.sort_by(|a, b| a.1.total_cmp(&b.1));
+    v.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(" < ")
+}

@@ -1,0 +1,656 @@
+//! The simulated body: servo dynamics, stance-leg kinematics, support switching, whole-body
+//! ZMP, foot forces, IMU signals, the upper-body disturbance and falls.
+//!
+//! # Model (documented simplifications)
+//!
+//! * **Servos**: position-controlled; each physics step the joint moves toward its goal
+//!   (clamped to the robot's joint limits, the mechanical stops) along a first-order lag
+//!   `q ← g + (q − g)·e^(−dt/τ)`, with the step limited to `v_max·dt` (`v_max` = the configured
+//!   speed limit, lowered by a non-zero Profile Velocity). Torque off = limp, modelled as
+//!   holding the present position.
+//! * **Body**: the stance sole stays where it is (no slip). The pelvis pose is the inverse of
+//!   the stance leg's forward kinematics from that fixed sole pose, so pelvis roll and pitch
+//!   follow from the joints. The other foot is placed by its own forward kinematics from the
+//!   pelvis. Its sole height above the stance sole decides contact (≤ `contact_threshold` →
+//!   double support, the pelvis still comes from the stance foot). When it is lower than the
+//!   stance sole by more than `switch_threshold`, it becomes the stance foot, at its current
+//!   pose (so nothing jumps: positions stay continuous, accelerations finite; the ground level
+//!   can drift by at most the switch threshold per step, and a tilted landing foot stays tilted).
+//! * **Masses**: upper body M_u at l_u above the pelvis point P (rotated with the pelvis and the
+//!   disturbance pitch φ_d), each leg's thigh, calf and sole masses from `gait-core`'s
+//!   `LegPoints` — both legs, the swing leg included.
+//! * **Accelerations** are second-order central differences over the positions at
+//!   `t − h, t, t + h` on the fixed physics grid (`h` = the acceleration window), so the ground
+//!   truth at `t` is known at `t + h`: every sensor sample lags by `h` (default 5 ms).
+//! * **ZMP**: see [`super::zmp`], with `L̇_y = J·φ̈ − τ` (upper-body pitch inertia J, external
+//!   disturbance torque τ); other link rotational inertia is neglected.
+//! * **Disturbance**: an external pitch torque τ on the upper body, which is joined to the
+//!   pelvis by a stiff, damped waist compliance: `J·φ̈_d = τ − k·φ_d − c·φ̇_d`.
+//! * **Falls**: once triggered (forced at a time, ZMP outside the support polygon by more than a
+//!   margin for a while, or a pelvis tilt above a limit), the whole robot rotates about the
+//!   support edge in the fall direction (towards the CoM projection when it is outside the
+//!   polygon, else towards the ZMP; the pelvis tilt direction; or the configured heading) as an inverted pendulum
+//!   `θ̈ = (g/L)·(sin θ + 0.05)`, until it lies on the ground (θ = π/2 − 0.05). While it falls the
+//!   whole load sits on the edge; once it lies, the feet carry nothing.
+
+use std::collections::VecDeque;
+
+use gait_core::kinematics::{LegKinematics, Pose};
+use gait_core::plan::Place;
+use gait_core::support::SupportPolygon;
+use gait_core::{Robot, Side};
+
+use super::forces::{distribute, FootContact};
+use super::rng::Rng;
+use super::zmp::{center_of_mass, whole_body_zmp, MassPoint};
+use super::SimConfig;
+
+type V3 = [f64; 3];
+/// Row-major rotation matrix.
+type M3 = [[f64; 3]; 3];
+
+const I3: M3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+/// Fall angle at which the robot lies on the ground, rad.
+const LYING: f64 = core::f64::consts::FRAC_PI_2 - 0.05;
+
+fn add(a: V3, b: V3) -> V3 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn mv(m: &M3, v: V3) -> V3 {
+    [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
+}
+fn mul(a: &M3, b: &M3) -> M3 {
+    [0, 1, 2].map(|i| [0, 1, 2].map(|j| a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j]))
+}
+fn tr(a: &M3) -> M3 {
+    [0, 1, 2].map(|i| [0, 1, 2].map(|j| a[j][i]))
+}
+fn ry(a: f64) -> M3 {
+    let (s, c) = a.sin_cos();
+    [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]
+}
+/// Rotation by `angle` about the unit `axis`.
+fn rodrigues(axis: V3, angle: f64) -> M3 {
+    let (s, c) = angle.sin_cos();
+    let [x, y, z] = axis;
+    let t = 1.0 - c;
+    [
+        [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
+        [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
+        [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
+    ]
+}
+/// ZYX angles (roll, pitch, yaw) of a rotation matrix.
+pub(crate) fn rpy(m: &M3) -> V3 {
+    [
+        m[2][1].atan2(m[2][2]),
+        (-m[2][0]).atan2((m[0][0] * m[0][0] + m[1][0] * m[1][0]).sqrt()),
+        m[1][0].atan2(m[0][0]),
+    ]
+}
+fn to_pose(p: V3, m: &M3) -> Pose<f64> {
+    let [roll, pitch, yaw] = rpy(m);
+    Pose::new(p[0], p[1], p[2], roll, pitch, yaw)
+}
+
+/// One servo's command for a physics step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ServoCmd {
+    /// Goal angle (rad) when the torque is on; `None` = limp.
+    pub goal: Option<f64>,
+    /// Speed limit, rad/s.
+    pub speed_limit: f64,
+}
+
+/// Support state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Support {
+    /// Only the left foot touches the ground.
+    #[default]
+    Left,
+    /// Only the right foot.
+    Right,
+    /// Both feet.
+    Double,
+}
+
+impl Support {
+    /// One-letter code for logs: `L`, `R`, `D`.
+    pub fn code(self) -> char {
+        match self {
+            Support::Left => 'L',
+            Support::Right => 'R',
+            Support::Double => 'D',
+        }
+    }
+}
+
+/// Ground truth at one physics time (the centre of the acceleration window).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Truth {
+    /// Time, µs.
+    pub t_us: u64,
+    /// Whole-body ZMP, m (the last valid one if `fz ≤ 0`).
+    pub zmp: [f64; 2],
+    /// Σ mᵢ(z̈ᵢ + g), N.
+    pub fz: f64,
+    /// Whole-body centre of mass, m.
+    pub com: V3,
+    /// Pelvis point P, m.
+    pub pelvis: V3,
+    /// Pelvis roll, pitch, yaw, rad.
+    pub pelvis_rpy: V3,
+    /// Which feet touch the ground.
+    pub support: Support,
+    /// Stance (pelvis reference) foot is the left one.
+    pub stance_left: bool,
+    /// Signed distance of the ZMP to the support polygon boundary (positive inside), m.
+    pub margin: f64,
+    /// Sensor forces (N, noiseless): left foot then right foot, sensor order of `dxl::table::foot`.
+    pub forces: [[f64; 4]; 2],
+    /// Upper-body angular rate in the body frame, rad/s (noiseless).
+    pub gyro: V3,
+    /// Specific force at P in the upper-body frame, m/s² (noiseless, +g on z when upright).
+    pub accel: V3,
+    /// Disturbance torque, N·m.
+    pub tau: f64,
+    /// The robot is falling (or lies on the ground).
+    pub falling: bool,
+    /// Fall angle, rad (0 upright).
+    pub fall_angle: f64,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Snapshot {
+    t_us: u64,
+    points: [V3; 7],
+    pelvis: V3,
+    r_pelvis: M3,
+    r_ub: M3,
+    ground_z: f64,
+    contact: [bool; 2],
+    feet: [FootContact; 2],
+    stance: Side,
+    tau: f64,
+    fall_angle: f64,
+    fall_pivot: Option<[f64; 2]>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Fall {
+    pivot: V3,
+    axis: V3,
+    angle: f64,
+    rate: f64,
+    length: f64,
+}
+
+/// The simulated body.
+#[derive(Clone, Debug)]
+pub struct Physics {
+    robot: Robot,
+    kin: LegKinematics<f64>,
+    masses: [f64; 7],
+    /// Joint angles, rad (left leg then right leg).
+    pub q: [f64; 12],
+    /// Joint velocities, rad/s.
+    pub qd: [f64; 12],
+    stance: Side,
+    stance_place: (V3, M3),
+    contact: [bool; 2],
+    phi_d: f64,
+    phi_d_rate: f64,
+    tau: f64,
+    fall: Option<Fall>,
+    fallen_at_us: Option<u64>,
+    fall_started_us: Option<u64>,
+    outside_us: u64,
+    history: VecDeque<Snapshot>,
+    window: usize,
+    /// Physics time, µs.
+    pub time_us: u64,
+    dt_us: u64,
+    truth: Truth,
+    dist_rng: Rng,
+    cfg: SimConfig,
+    /// Largest distance of the ZMP outside the support polygon seen, m.
+    pub max_outside: f64,
+}
+
+impl Physics {
+    /// The body at rest at `cfg.initial_q` on flat ground, pelvis upright.
+    pub fn new(cfg: &SimConfig) -> Self {
+        let robot = cfg.robot;
+        let m = robot.masses;
+        let kin = LegKinematics::new(&robot);
+        let mut q = cfg.initial_q;
+        for (j, qj) in q.iter_mut().enumerate() {
+            let side = if j < 6 { Side::Left } else { Side::Right };
+            let l = robot.joint_limit(side, j % 6);
+            *qj = qj.clamp(l.min, l.max);
+        }
+        let window = (cfg.accel_window_us / cfg.physics_dt_us.max(1)).max(1) as usize;
+        let mut p = Physics {
+            robot,
+            kin,
+            masses: [
+                m.upper_body,
+                m.thigh,
+                m.calf,
+                m.sole,
+                m.thigh,
+                m.calf,
+                m.sole,
+            ],
+            q,
+            qd: [0.0; 12],
+            stance: Side::Left,
+            stance_place: ([0.0; 3], I3),
+            contact: [true; 2],
+            phi_d: 0.0,
+            phi_d_rate: 0.0,
+            tau: 0.0,
+            fall: None,
+            fallen_at_us: None,
+            fall_started_us: None,
+            outside_us: 0,
+            history: VecDeque::with_capacity(2 * window + 1),
+            window,
+            time_us: 0,
+            dt_us: cfg.physics_dt_us.max(1),
+            truth: Truth::default(),
+            dist_rng: Rng::new(cfg.seed, 3),
+            cfg: cfg.clone(),
+            max_outside: 0.0,
+        };
+        // Upright pelvis, lower sole on the ground at z = 0.
+        let rel = [p.foot_rel(Side::Left), p.foot_rel(Side::Right)];
+        let stance = if rel[1].0[2] < rel[0].0[2] - 1e-12 {
+            Side::Right
+        } else {
+            Side::Left
+        };
+        let (s0, r0) = rel[stance.index()];
+        p.stance = stance;
+        p.stance_place = ([s0[0], s0[1], 0.0], r0);
+        p.update_contacts();
+        let snap = p.snapshot();
+        for _ in 0..2 * window + 1 {
+            p.history.push_back(snap);
+        }
+        p.truth = p.compute_truth();
+        p
+    }
+
+    fn leg_q(&self, side: Side) -> [f64; 6] {
+        let o = 6 * side.index();
+        [0, 1, 2, 3, 4, 5].map(|j| self.q[o + j])
+    }
+
+    /// Sole pose relative to a pelvis at the origin, upright.
+    fn foot_rel(&self, side: Side) -> (V3, M3) {
+        let f = self.kin.fk(side, &Pose::default(), &self.leg_q(side));
+        (f.position(), f.rotation())
+    }
+
+    /// Pelvis position and rotation with the sole of `side` at `place`.
+    fn pelvis_from(&self, side: Side, place: &(V3, M3)) -> (V3, M3) {
+        let (s0, r0) = self.foot_rel(side);
+        let rp = mul(&place.1, &tr(&r0));
+        (sub(place.0, mv(&rp, s0)), rp)
+    }
+
+    fn update_contacts(&mut self) {
+        let st = self.stance;
+        let ot = st.other();
+        let (p, rp) = self.pelvis_from(st, &self.stance_place);
+        let fo = self.kin.fk(ot, &to_pose(p, &rp), &self.leg_q(ot));
+        let dz = fo.z - self.stance_place.0[2];
+        if dz < -self.cfg.switch_threshold {
+            self.stance = ot;
+            self.stance_place = (fo.position(), fo.rotation());
+            self.contact[ot.index()] = true;
+            self.contact[st.index()] = -dz <= self.cfg.contact_threshold;
+        } else {
+            self.contact[st.index()] = true;
+            self.contact[ot.index()] = dz <= self.cfg.contact_threshold;
+        }
+    }
+
+    fn snapshot(&self) -> Snapshot {
+        let (mut p, rp) = self.pelvis_from(self.stance, &self.stance_place);
+        let pose = to_pose(p, &rp);
+        let legs = [Side::Left, Side::Right].map(|s| self.kin.points(s, &pose, &self.leg_q(s)));
+        let feet_pose = [Side::Left, Side::Right].map(|s| self.kin.fk(s, &pose, &self.leg_q(s)));
+        let mut r_ub = mul(&rp, &ry(self.phi_d));
+        let ub = add(
+            p,
+            mv(&r_ub, [0.0, 0.0, self.robot.masses.upper_body_height]),
+        );
+        let mut points = [
+            ub,
+            legs[0].thigh_mass,
+            legs[0].calf_mass,
+            legs[0].sole_mass,
+            legs[1].thigh_mass,
+            legs[1].calf_mass,
+            legs[1].sole_mass,
+        ];
+        let mut r_pelvis = rp;
+        let mut fall_angle = 0.0;
+        let mut fall_pivot = None;
+        if let Some(f) = &self.fall {
+            let rf = rodrigues(f.axis, f.angle);
+            let tf = |x: V3| add(f.pivot, mv(&rf, sub(x, f.pivot)));
+            for pt in points.iter_mut() {
+                *pt = tf(*pt);
+            }
+            p = tf(p);
+            r_pelvis = mul(&rf, &r_pelvis);
+            r_ub = mul(&rf, &r_ub);
+            fall_angle = f.angle;
+            fall_pivot = Some([f.pivot[0], f.pivot[1]]);
+        }
+        Snapshot {
+            t_us: self.time_us,
+            points,
+            pelvis: p,
+            r_pelvis,
+            r_ub,
+            ground_z: self.stance_place.0[2],
+            contact: self.contact,
+            feet: [0, 1].map(|i| FootContact {
+                xy: [feet_pose[i].x, feet_pose[i].y],
+                yaw: feet_pose[i].yaw,
+            }),
+            stance: self.stance,
+            tau: self.tau,
+            fall_angle,
+            fall_pivot,
+        }
+    }
+
+    /// The support polygon of the feet in contact.
+    fn polygon(&self, feet: &[FootContact; 2], contact: [bool; 2]) -> Option<SupportPolygon<f64>> {
+        let place = |f: &FootContact| Place::<f64>::new(f.xy[0], f.xy[1], f.yaw);
+        match contact {
+            [true, true] => {
+                SupportPolygon::double(&place(&feet[0]), &place(&feet[1]), &self.robot).ok()
+            }
+            [true, false] => SupportPolygon::single(&place(&feet[0]), &self.robot).ok(),
+            [false, true] => SupportPolygon::single(&place(&feet[1]), &self.robot).ok(),
+            [false, false] => None,
+        }
+    }
+
+    fn compute_truth(&self) -> Truth {
+        let n = self.window;
+        let (a, c, b) = (&self.history[0], &self.history[n], &self.history[2 * n]);
+        let h = (n as u64 * self.dt_us) as f64 * 1e-6;
+        let g = self.robot.gravity;
+        let dd =
+            |pa: V3, pc: V3, pb: V3| [0, 1, 2].map(|k| (pb[k] - 2.0 * pc[k] + pa[k]) / (h * h));
+        let pts: Vec<MassPoint> = (0..7)
+            .map(|i| {
+                let mut pos = c.points[i];
+                pos[2] -= c.ground_z;
+                MassPoint {
+                    mass: self.masses[i],
+                    pos,
+                    acc: dd(a.points[i], c.points[i], b.points[i]),
+                }
+            })
+            .collect();
+        let pitch = |s: &Snapshot| rpy(&s.r_ub)[1];
+        let phi_dd = (pitch(b) - 2.0 * pitch(c) + pitch(a)) / (h * h);
+        let j_term = if self.cfg.upper_body_inertia_term {
+            self.robot.masses.upper_body_inertia * phi_dd
+        } else {
+            0.0
+        };
+        let zmp = whole_body_zmp(&pts, g, [0.0, j_term - c.tau]);
+        let mut com = center_of_mass(&pts);
+        com[2] += c.ground_z;
+        let rt = tr(&c.r_ub);
+        let dr = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (b.r_ub[i][j] - a.r_ub[i][j]) / (2.0 * h)));
+        let w = mul(&rt, &dr);
+        let gyro = [
+            0.5 * (w[2][1] - w[1][2]),
+            0.5 * (w[0][2] - w[2][0]),
+            0.5 * (w[1][0] - w[0][1]),
+        ];
+        let acc_p = dd(a.pelvis, c.pelvis, b.pelvis);
+        let accel = mv(&rt, add(acc_p, [0.0, 0.0, g]));
+        let poly = self.polygon(&c.feet, c.contact);
+        let (zmp_xy, fz) = match zmp {
+            Some(z) => (z.xy, z.fz),
+            None => (self.truth.zmp, 0.0),
+        };
+        let margin = poly
+            .as_ref()
+            .map_or(f64::NEG_INFINITY, |p| p.margin(zmp_xy));
+        let sensors = self.robot.geometry.force_sensors;
+        let feet = [0, 1].map(|i| c.contact[i].then_some(c.feet[i]));
+        let forces = if c.fall_angle >= LYING {
+            [[0.0; 4]; 2]
+        } else if let Some(pivot) = c.fall_pivot {
+            let weight = self.robot.masses.total() * g;
+            distribute(weight, pivot, feet[0], feet[1], &sensors)
+        } else if fz > 0.0 {
+            let target = poly
+                .as_ref()
+                .map_or(zmp_xy, |p| clamp_to_polygon(p, zmp_xy));
+            distribute(fz, target, feet[0], feet[1], &sensors)
+        } else {
+            [[0.0; 4]; 2]
+        };
+        Truth {
+            t_us: c.t_us,
+            zmp: zmp_xy,
+            fz,
+            com,
+            pelvis: c.pelvis,
+            pelvis_rpy: rpy(&c.r_pelvis),
+            support: match c.contact {
+                [true, true] => Support::Double,
+                [false, true] => Support::Right,
+                _ => Support::Left,
+            },
+            stance_left: c.stance == Side::Left,
+            margin,
+            forces,
+            gyro,
+            accel,
+            tau: c.tau,
+            falling: c.fall_pivot.is_some(),
+            fall_angle: c.fall_angle,
+        }
+    }
+
+    /// The latest ground truth (at `time_us − accel_window`).
+    pub fn truth(&self) -> &Truth {
+        &self.truth
+    }
+
+    /// When the robot came to lie on the ground, µs.
+    pub fn fallen_at_us(&self) -> Option<u64> {
+        self.fallen_at_us
+    }
+
+    /// When the fall started, µs.
+    pub fn fall_started_us(&self) -> Option<u64> {
+        self.fall_started_us
+    }
+
+    fn update_disturbance(&mut self, dt: f64) {
+        let d = &self.cfg.disturbance;
+        let t = self.time_us as f64 * 1e-6;
+        let active = t >= d.start_s && d.end_s.is_none_or(|e| t < e);
+        let hold_us = ((d.hold_s * 1e6) as u64).max(self.dt_us);
+        if d.random_std_nm > 0.0 && self.time_us.is_multiple_of(hold_us) {
+            // Resampled on a fixed time grid (independent of `active`, so streams stay aligned).
+            let r = self.dist_rng.gaussian() * d.random_std_nm;
+            self.tau = if active { d.constant_nm + r } else { 0.0 };
+        } else if d.random_std_nm <= 0.0 {
+            self.tau = if active { d.constant_nm } else { 0.0 };
+        } else if !active {
+            self.tau = 0.0;
+        }
+        let j = self.robot.masses.upper_body_inertia.max(1e-6);
+        let wn = core::f64::consts::TAU * d.waist_frequency_hz;
+        let acc = (self.tau
+            - j * wn * wn * self.phi_d
+            - 2.0 * d.waist_damping * j * wn * self.phi_d_rate)
+            / j;
+        self.phi_d_rate += acc * dt;
+        self.phi_d += self.phi_d_rate * dt;
+    }
+
+    fn start_fall(&mut self, dir: [f64; 2]) {
+        let n = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt();
+        let d = if n > 1e-9 {
+            [dir[0] / n, dir[1] / n]
+        } else {
+            [1.0, 0.0]
+        };
+        let com = self.truth.com;
+        let cur = self.history.back().copied();
+        let poly = cur.and_then(|s| self.polygon(&s.feet, s.contact));
+        let far = [com[0] + d[0], com[1] + d[1]];
+        let piv = poly
+            .as_ref()
+            .map_or([com[0], com[1]], |p| clamp_to_polygon(p, far));
+        let pivot = [piv[0], piv[1], self.stance_place.0[2]];
+        let r = sub(com, pivot);
+        self.fall = Some(Fall {
+            pivot,
+            axis: [-d[1], d[0], 0.0],
+            angle: 0.0,
+            rate: 0.2,
+            length: (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt().max(0.05),
+        });
+        self.fall_started_us = Some(self.time_us);
+    }
+
+    fn update_fall(&mut self, dt: f64) {
+        let g = self.robot.gravity;
+        let f = self.cfg.fall.clone();
+        if self.fall.is_none() {
+            if let Some(t) = f.forced_at_s {
+                if self.time_us as f64 * 1e-6 >= t {
+                    self.start_fall([f.forced_direction.cos(), f.forced_direction.sin()]);
+                }
+            }
+        }
+        if self.fall.is_none() && f.enabled {
+            let tr = self.truth;
+            if tr.margin < -f.zmp_margin {
+                self.outside_us += self.dt_us;
+            } else {
+                self.outside_us = 0;
+            }
+            let tilt_axis = self.history.back().map(|s| s.r_pelvis).unwrap_or(I3);
+            let tilt = tilt_axis[2][2].clamp(-1.0, 1.0).acos();
+            if self.outside_us as f64 * 1e-6 >= f.zmp_time_s {
+                let poly = self
+                    .history
+                    .back()
+                    .and_then(|s| self.polygon(&s.feet, s.contact));
+                // Towards the CoM if it is outside (a static tip-over), else towards the ZMP.
+                let com = [tr.com[0], tr.com[1]];
+                let com_in = poly.as_ref().map_or(com, |p| clamp_to_polygon(p, com));
+                let zmp_in = poly
+                    .as_ref()
+                    .map_or(tr.zmp, |p| clamp_to_polygon(p, tr.zmp));
+                let dc = [com[0] - com_in[0], com[1] - com_in[1]];
+                if dc[0].hypot(dc[1]) > 1e-6 {
+                    self.start_fall(dc);
+                } else {
+                    self.start_fall([tr.zmp[0] - zmp_in[0], tr.zmp[1] - zmp_in[1]]);
+                }
+            } else if tilt > f.max_tilt_rad {
+                self.start_fall([tilt_axis[0][2], tilt_axis[1][2]]);
+            }
+        }
+        if let Some(fl) = &mut self.fall {
+            if fl.angle < LYING {
+                fl.rate += g / fl.length * (fl.angle.sin() + 0.05) * dt;
+                fl.angle += fl.rate * dt;
+                if fl.angle >= LYING {
+                    fl.angle = LYING;
+                    fl.rate = 0.0;
+                    self.fallen_at_us = Some(self.time_us);
+                }
+            }
+        }
+    }
+
+    /// Advances one physics step with these servo commands.
+    pub fn step(&mut self, cmds: &[ServoCmd; 12]) {
+        let dt = self.dt_us as f64 * 1e-6;
+        self.time_us += self.dt_us;
+        let lag = self.cfg.servo_lag;
+        for (j, cmd) in cmds.iter().enumerate() {
+            let Some(goal) = cmd.goal else {
+                self.qd[j] = 0.0;
+                continue;
+            };
+            let side = if j < 6 { Side::Left } else { Side::Right };
+            let l = self.robot.joint_limit(side, j % 6);
+            let g = goal.clamp(l.min, l.max);
+            let q = self.q[j];
+            let target = if lag > 0.0 {
+                g + (q - g) * (-dt / lag).exp()
+            } else {
+                g
+            };
+            let vmax = cmd.speed_limit.max(0.0) * dt;
+            let dq = (target - q).clamp(-vmax, vmax);
+            self.q[j] = q + dq;
+            self.qd[j] = dq / dt;
+        }
+        self.update_disturbance(dt);
+        self.update_contacts();
+        self.update_fall(dt);
+        let s = self.snapshot();
+        self.history.push_back(s);
+        while self.history.len() > 2 * self.window + 1 {
+            self.history.pop_front();
+        }
+        self.truth = self.compute_truth();
+        if self.truth.margin.is_finite() && !self.truth.falling {
+            self.max_outside = self.max_outside.max(-self.truth.margin);
+        }
+    }
+}
+
+/// The point of the polygon nearest to `q` (`q` itself when inside).
+pub fn clamp_to_polygon(poly: &SupportPolygon<f64>, q: [f64; 2]) -> [f64; 2] {
+    if poly.margin(q) >= 0.0 {
+        return q;
+    }
+    let v = poly.vertices();
+    let mut best = v.first().copied().unwrap_or(q);
+    let mut best_d = f64::INFINITY;
+    for k in 0..v.len() {
+        let a = v[k];
+        let b = v[(k + 1) % v.len()];
+        let e = [b[0] - a[0], b[1] - a[1]];
+        let l2 = e[0] * e[0] + e[1] * e[1];
+        let t = if l2 > 0.0 {
+            (((q[0] - a[0]) * e[0] + (q[1] - a[1]) * e[1]) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let p = [a[0] + t * e[0], a[1] + t * e[1]];
+        let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+        if d < best_d {
+            best_d = d;
+            best = p;
+        }
+    }
+    best
+}

@@ -1,0 +1,530 @@
+//! The simulated robot on the servo bus.
+//!
+//! A kid-size humanoid ([`gait_core::Robot::reference`] by default) whose 12 leg servos
+//! (IDs 1–6 left leg, 7–12 right leg), two foot force-sensor boards (111 left, 112 right) and
+//! IMU board (200) answer Dynamixel Protocol 2.0 instructions over TCP, with the control tables
+//! of `dxl::table`. The body follows the servos' positions ([`body`]); the whole-body ZMP
+//! computed from all link masses and accelerations is the ground truth ([`zmp`]); the foot
+//! boards report forces whose centre of pressure is that ZMP ([`forces`]); the IMU reports the
+//! upper body's rate and specific force. See [`transport`] for the TCP endpoints and the
+//! lock-step protocol used with the firmware in QEMU.
+//!
+//! ```no_run
+//! use walker_host::sim::{spawn, SimConfig};
+//! let cfg = SimConfig { port: 5760, lockstep_port: Some(5761), seed: 7, ..SimConfig::default() };
+//! let handle = spawn(cfg).unwrap();          // listening now; start QEMU, then:
+//! let summary = handle.join().unwrap();      // returns when the master disconnects
+//! println!("{} instructions", summary.bus.instructions);
+//! ```
+
+pub mod body;
+pub mod bus;
+pub mod device;
+pub mod forces;
+pub mod rng;
+pub mod transport;
+pub mod truth;
+pub mod zmp;
+
+use std::fmt;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use dxl::table::{foot::FootForces, ids, imu::ImuSample, x_series};
+use dxl::{DecodeError, Decoder};
+use gait_core::Robot;
+
+pub use body::{Physics, ServoCmd, Support, Truth};
+pub use bus::{Bus, BusCounters, BusFaults, OwnedPacket};
+pub use device::{Device, DeviceKind};
+pub use transport::{run, spawn, SimHandle, SimProgress, LOCKSTEP_ACK, LOCKSTEP_TIME};
+
+/// Fault injection on the bus (drops, corruption, dead devices); forced falls are in
+/// [`FallConfig`].
+pub type FaultConfig = BusFaults;
+
+/// Sensor noise and bias (all deterministic from the seed).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NoiseConfig {
+    /// Standard deviation of each force sensor, N.
+    pub force_std_n: f64,
+    /// Standard deviation of each gyro axis, rad/s.
+    pub gyro_std_rad_s: f64,
+    /// Standard deviation of each accelerometer axis, m/s².
+    pub accel_std_m_s2: f64,
+    /// Constant gyro bias, rad/s.
+    pub gyro_bias_rad_s: [f64; 3],
+    /// Constant accelerometer bias, m/s².
+    pub accel_bias_m_s2: [f64; 3],
+}
+
+/// External pitch torque on the upper body (the angular-momentum disturbance).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DisturbanceConfig {
+    /// Constant torque while active, N·m (positive pitches the upper body forward).
+    pub constant_nm: f64,
+    /// Standard deviation of a random torque added while active, N·m.
+    pub random_std_nm: f64,
+    /// The random torque is piecewise constant over this period, s.
+    pub hold_s: f64,
+    /// Start of the disturbance, s.
+    pub start_s: f64,
+    /// End of the disturbance, s (`None`: never ends).
+    pub end_s: Option<f64>,
+    /// Natural frequency of the waist compliance joining the upper body to the pelvis, Hz.
+    pub waist_frequency_hz: f64,
+    /// Damping ratio of the waist compliance.
+    pub waist_damping: f64,
+}
+
+impl Default for DisturbanceConfig {
+    fn default() -> Self {
+        DisturbanceConfig {
+            constant_nm: 0.0,
+            random_std_nm: 0.0,
+            hold_s: 0.05,
+            start_s: 0.0,
+            end_s: None,
+            waist_frequency_hz: 8.0,
+            waist_damping: 0.7,
+        }
+    }
+}
+
+/// Fall detection and forced falls.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FallConfig {
+    /// Detect falls from the ZMP and the pelvis tilt.
+    pub enabled: bool,
+    /// ZMP outside the support polygon by more than this, m …
+    pub zmp_margin: f64,
+    /// … for at least this long, s, starts a fall.
+    pub zmp_time_s: f64,
+    /// A pelvis tilt beyond this starts a fall, rad.
+    pub max_tilt_rad: f64,
+    /// Force a fall at this time, s.
+    pub forced_at_s: Option<f64>,
+    /// Direction of a forced fall (heading in the ground plane; 0 = forward, π/2 = left), rad.
+    pub forced_direction: f64,
+}
+
+impl Default for FallConfig {
+    fn default() -> Self {
+        FallConfig {
+            enabled: true,
+            zmp_margin: 0.005,
+            zmp_time_s: 0.05,
+            max_tilt_rad: 0.6,
+            forced_at_s: None,
+            forced_direction: 0.0,
+        }
+    }
+}
+
+/// Everything the simulator needs; `SimConfig::default()` is the reference robot on port 5760
+/// without lock-step, faults or noise.
+#[derive(Clone, Debug)]
+pub struct SimConfig {
+    /// Robot description.
+    pub robot: Robot,
+    /// Bus TCP port on 127.0.0.1 (0 = any free port; see [`SimHandle::bus_addr`]).
+    pub port: u16,
+    /// Lock-step channel TCP port (`None`: free-running on the wall clock).
+    pub lockstep_port: Option<u16>,
+    /// `false` (default): listen and accept one connection per channel (QEMU with
+    /// `-serial tcp:127.0.0.1:PORT,nodelay=on`); `true`: connect to a listening peer
+    /// (QEMU with `-serial tcp:127.0.0.1:PORT,server=on,wait=off`), retrying.
+    pub connect: bool,
+    /// How long to wait for the peer (accept or connect retries).
+    pub connect_timeout: Duration,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Servo speed limit, rad/s.
+    pub servo_speed_limit: f64,
+    /// Servo first-order lag time constant, s (0 = none).
+    pub servo_lag: f64,
+    /// Physics step, µs.
+    pub physics_dt_us: u64,
+    /// Half-width h of the central-difference stencil for accelerations, µs. The sensors lag the
+    /// truth by h. Make it a multiple of the firmware's tick period: each goal update kicks the
+    /// first-order servo's velocity, and a window of whole periods cancels that ripple exactly
+    /// (5 ms suits 1, 2.5 and 5 ms ticks; use 10 ms for a 10 ms tick).
+    pub accel_window_us: u64,
+    /// A sole at most this high above the stance sole is in contact, m.
+    pub contact_threshold: f64,
+    /// A sole this much lower than the stance sole becomes the stance foot, m.
+    pub switch_threshold: f64,
+    /// Joint angles at start, rad (left leg then right leg).
+    pub initial_q: [f64; 12],
+    /// Include the upper body's J·φ̈ pitch term in the ZMP.
+    pub upper_body_inertia_term: bool,
+    /// Sensor noise.
+    pub noise: NoiseConfig,
+    /// Disturbance torque.
+    pub disturbance: DisturbanceConfig,
+    /// Bus faults.
+    pub faults: FaultConfig,
+    /// Falls.
+    pub fall: FallConfig,
+    /// Write the ground truth to this CSV file.
+    pub log_truth: Option<PathBuf>,
+    /// Period of the truth CSV rows, µs (rounded up to whole physics steps).
+    pub log_every_us: u64,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        let robot = Robot::reference();
+        SimConfig {
+            robot,
+            port: 5760,
+            lockstep_port: None,
+            connect: false,
+            connect_timeout: Duration::from_secs(30),
+            seed: 0,
+            servo_speed_limit: robot.servo.max_speed,
+            servo_lag: 0.010,
+            physics_dt_us: 1000,
+            accel_window_us: 5000,
+            contact_threshold: 0.002,
+            switch_threshold: 0.0005,
+            initial_q: [0.0; 12],
+            upper_body_inertia_term: true,
+            noise: NoiseConfig::default(),
+            disturbance: DisturbanceConfig::default(),
+            faults: FaultConfig::default(),
+            fall: FallConfig::default(),
+            log_truth: None,
+            log_every_us: 1000,
+        }
+    }
+}
+
+impl SimConfig {
+    /// Checks the numbers.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |m: &str| Err(SimError::Config(m.to_string()));
+        if self.robot.validate().is_err() {
+            return bad("invalid robot description");
+        }
+        let p = |v: f64| (0.0..=1.0).contains(&v);
+        if !p(self.faults.p_drop)
+            || !p(self.faults.p_corrupt)
+            || !p(self.faults.p_drop + self.faults.p_corrupt)
+        {
+            return bad("fault probabilities must be in [0, 1] and sum to at most 1");
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        if !positive(self.servo_speed_limit) || !non_negative(self.servo_lag) {
+            return bad("servo speed limit must be > 0 and lag >= 0");
+        }
+        if self.physics_dt_us == 0 || self.accel_window_us < self.physics_dt_us {
+            return bad("physics step must be > 0 and the acceleration window at least one step");
+        }
+        if !non_negative(self.contact_threshold) || !non_negative(self.switch_threshold) {
+            return bad("contact thresholds must be >= 0");
+        }
+        if self.initial_q.iter().any(|q| !q.is_finite()) {
+            return bad("initial joint angles must be finite");
+        }
+        Ok(())
+    }
+}
+
+/// Simulator failure.
+#[derive(Debug)]
+pub enum SimError {
+    /// Socket or file error.
+    Io(std::io::Error),
+    /// The peer did not connect / accept in time.
+    Timeout(String),
+    /// Invalid configuration.
+    Config(String),
+    /// The simulator thread panicked.
+    Panicked,
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SimError::Io(e) => write!(f, "simulator I/O error: {e}"),
+            SimError::Timeout(m) => write!(f, "simulator timeout: {m}"),
+            SimError::Config(m) => write!(f, "invalid simulator configuration: {m}"),
+            SimError::Panicked => write!(f, "simulator thread panicked"),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+impl From<std::io::Error> for SimError {
+    fn from(e: std::io::Error) -> Self {
+        SimError::Io(e)
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SimSummary {
+    /// Final simulated time, µs.
+    pub sim_time_us: u64,
+    /// Physics steps run.
+    pub physics_steps: u64,
+    /// Bus counters.
+    pub bus: BusCounters,
+    /// Bytes received on the bus.
+    pub bytes_in: u64,
+    /// Whether the run was in lock-step mode.
+    pub lockstep: bool,
+    /// Time messages received on the lock-step channel.
+    pub lockstep_messages: u64,
+    /// Unexpected bytes on the lock-step channel.
+    pub lockstep_errors: u64,
+    /// When a fall started, µs.
+    pub fall_started_us: Option<u64>,
+    /// When the robot came to lie on the ground, µs.
+    pub fallen_at_us: Option<u64>,
+    /// Largest distance of the true ZMP outside the support polygon (before any fall), m.
+    pub max_zmp_outside_m: f64,
+    /// Rows written to the truth CSV.
+    pub truth_rows: u64,
+}
+
+/// A complete packet from the bus decoder.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Incoming {
+    /// A well-formed packet.
+    Packet(OwnedPacket),
+    /// An instruction packet with a bad CRC and this ID field.
+    CrcError(u8),
+}
+
+/// Bus devices plus body, independent of the transport (used by [`transport`] and tests).
+pub struct Simulator {
+    /// The bus and its devices.
+    pub bus: Bus,
+    /// The body.
+    pub physics: Physics,
+    decoder: Box<Decoder<4096>>,
+    noise_rng: rng::Rng,
+    cfg: SimConfig,
+    log: Option<truth::TruthLog>,
+    next_log_us: u64,
+    counter: u16,
+    steps: u64,
+    bytes_in: u64,
+}
+
+impl fmt::Debug for Simulator {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Simulator")
+            .field("time_us", &self.physics.time_us)
+            .field("counters", &self.bus.counters)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Index of the foot boards and the IMU in [`Bus::devices`] (after the 12 servos).
+const FOOT_INDEX: [usize; 2] = [12, 13];
+const IMU_INDEX: usize = 14;
+
+impl Simulator {
+    /// A simulator at time 0 (opens the truth CSV if asked).
+    pub fn new(cfg: &SimConfig) -> Result<Self, SimError> {
+        cfg.validate()?;
+        let physics = Physics::new(cfg);
+        let mut devices: Vec<Device> = ids::LEGS
+            .iter()
+            .enumerate()
+            .map(|(j, &id)| Device::servo(id, j, rad_to_ticks(physics.q[j])))
+            .collect();
+        devices.push(Device::foot(ids::FOOT_LEFT, 0));
+        devices.push(Device::foot(ids::FOOT_RIGHT, 1));
+        devices.push(Device::imu(ids::IMU));
+        let bus = Bus::new(devices, cfg.faults.clone(), rng::Rng::new(cfg.seed, 1));
+        let log = match &cfg.log_truth {
+            Some(p) => Some(truth::TruthLog::create(p)?),
+            None => None,
+        };
+        let mut sim = Simulator {
+            bus,
+            physics,
+            decoder: Box::new(Decoder::new()),
+            noise_rng: rng::Rng::new(cfg.seed, 2),
+            cfg: cfg.clone(),
+            log,
+            next_log_us: 0,
+            counter: 0,
+            steps: 0,
+            bytes_in: 0,
+        };
+        sim.publish()?;
+        Ok(sim)
+    }
+
+    /// Simulated time, µs.
+    pub fn time_us(&self) -> u64 {
+        self.physics.time_us
+    }
+
+    /// Runs the physics up to `t_us` (whole steps; earlier times are ignored).
+    pub fn advance_to(&mut self, t_us: u64) -> Result<(), SimError> {
+        let dt = self.cfg.physics_dt_us;
+        while self.physics.time_us + dt <= t_us {
+            let cmds: [ServoCmd; 12] = std::array::from_fn(|j| {
+                let d = &self.bus.devices[j];
+                let profile = d.get_i32(x_series::PROFILE_VELOCITY);
+                let mut limit = self.cfg.servo_speed_limit;
+                if profile > 0 {
+                    let rad_s = profile as f64
+                        * f64::from(x_series::VELOCITY_UNIT_RPM)
+                        * std::f64::consts::TAU
+                        / 60.0;
+                    limit = limit.min(rad_s);
+                }
+                ServoCmd {
+                    goal: (d.torque_on() && !d.dead)
+                        .then(|| ticks_to_rad(d.get_i32(x_series::GOAL_POSITION))),
+                    speed_limit: limit,
+                }
+            });
+            self.physics.step(&cmds);
+            self.steps += 1;
+            self.publish()?;
+        }
+        Ok(())
+    }
+
+    /// Writes the present state into the device tables and the truth log.
+    fn publish(&mut self) -> Result<(), SimError> {
+        for j in 0..12 {
+            let (q, qd) = (self.physics.q[j], self.physics.qd[j]);
+            let d = &mut self.bus.devices[j];
+            let ticks = rad_to_ticks(q);
+            d.set_i32(x_series::PRESENT_POSITION, ticks);
+            let rpm = qd * 60.0 / std::f64::consts::TAU;
+            d.set_i32(
+                x_series::PRESENT_VELOCITY,
+                (rpm / f64::from(x_series::VELOCITY_UNIT_RPM)).round() as i32,
+            );
+            let moving = d.torque_on() && (d.get_i32(x_series::GOAL_POSITION) - ticks).abs() > 1;
+            d.set(x_series::MOVING, &[u8::from(moving)]);
+        }
+        let t = *self.physics.truth();
+        self.counter = self.counter.wrapping_add(1);
+        let nz = self.cfg.noise.clone();
+        for (index, side_forces) in FOOT_INDEX.into_iter().zip(t.forces) {
+            let mut f = [0i32; 4];
+            for (fi, v) in f.iter_mut().zip(side_forces) {
+                let noise = if nz.force_std_n > 0.0 {
+                    self.noise_rng.gaussian() * nz.force_std_n
+                } else {
+                    0.0
+                };
+                *fi = ((v + noise) * 1000.0).round() as i32;
+            }
+            let s = FootForces {
+                forces_mn: f,
+                counter: self.counter,
+            };
+            self.bus.devices[index].set(dxl::table::foot::SAMPLE, &s.to_bytes());
+        }
+        let mut gyro = [0f32; 3];
+        let mut accel = [0f32; 3];
+        for k in 0..3 {
+            let ng = if nz.gyro_std_rad_s > 0.0 {
+                self.noise_rng.gaussian() * nz.gyro_std_rad_s
+            } else {
+                0.0
+            };
+            let na = if nz.accel_std_m_s2 > 0.0 {
+                self.noise_rng.gaussian() * nz.accel_std_m_s2
+            } else {
+                0.0
+            };
+            gyro[k] = (t.gyro[k] + nz.gyro_bias_rad_s[k] + ng) as f32;
+            accel[k] = (t.accel[k] + nz.accel_bias_m_s2[k] + na) as f32;
+        }
+        let s = ImuSample::from_si(gyro, accel, self.counter);
+        self.bus.devices[IMU_INDEX].set(dxl::table::imu::SAMPLE, &s.to_bytes());
+        if let Some(log) = &mut self.log {
+            if t.t_us >= self.next_log_us {
+                log.row(&t)?;
+                self.next_log_us = t.t_us + self.cfg.log_every_us.max(1);
+            }
+        }
+        Ok(())
+    }
+
+    /// Feeds one bus byte; returns a packet when one completes.
+    pub fn push_byte(&mut self, b: u8) -> Option<Incoming> {
+        self.bytes_in += 1;
+        match self.decoder.push(b)? {
+            Ok(p) => Some(Incoming::Packet(OwnedPacket::from_packet(&p))),
+            Err(DecodeError::Crc { id }) => Some(Incoming::CrcError(id)),
+            Err(_) => None,
+        }
+    }
+
+    /// Executes a packet; returns the bytes to write on the bus, or `None` when the packet is
+    /// not an instruction (a status packet: no lock-step acknowledgement either).
+    pub fn respond(&mut self, inc: &Incoming) -> Option<Vec<u8>> {
+        match inc {
+            Incoming::Packet(p) => self.bus.handle(&p.packet()),
+            Incoming::CrcError(id) => Some(self.bus.handle_crc_error(*id)),
+        }
+    }
+
+    /// Feeds bytes and answers every instruction in them; returns the replies in order.
+    pub fn feed(&mut self, bytes: &[u8]) -> Vec<Vec<u8>> {
+        let mut out = Vec::new();
+        for &b in bytes {
+            if let Some(inc) = self.push_byte(b) {
+                if let Some(r) = self.respond(&inc) {
+                    out.push(r);
+                }
+            }
+        }
+        out
+    }
+
+    /// The run's summary so far (flushes the truth log).
+    pub fn summary(&mut self) -> SimSummary {
+        let rows = self.log.as_mut().map_or(0, |l| {
+            let _ = l.flush();
+            l.rows()
+        });
+        SimSummary {
+            sim_time_us: self.physics.time_us,
+            physics_steps: self.steps,
+            bus: self.bus.counters,
+            bytes_in: self.bytes_in,
+            lockstep: self.cfg.lockstep_port.is_some(),
+            lockstep_messages: 0,
+            lockstep_errors: 0,
+            fall_started_us: self.physics.fall_started_us(),
+            fallen_at_us: self.physics.fallen_at_us(),
+            max_zmp_outside_m: self.physics.max_outside,
+            truth_rows: rows,
+        }
+    }
+}
+
+/// Joint angle to servo ticks (nearest; saturating at the extended-position range).
+pub fn rad_to_ticks(q: f64) -> i32 {
+    let t = q * f64::from(x_series::TICKS_PER_TURN) / std::f64::consts::TAU
+        + f64::from(x_series::CENTER_TICK);
+    let lim = f64::from(x_series::MAX_EXTENDED_TICKS);
+    if t.is_finite() {
+        t.round().clamp(-lim, lim) as i32
+    } else {
+        x_series::CENTER_TICK
+    }
+}
+
+/// Servo ticks to joint angle.
+pub fn ticks_to_rad(t: i32) -> f64 {
+    (f64::from(t) - f64::from(x_series::CENTER_TICK)) * std::f64::consts::TAU
+        / f64::from(x_series::TICKS_PER_TURN)
+}

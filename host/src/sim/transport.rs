@@ -1,0 +1,340 @@
+//! TCP endpoints of the simulator and the lock-step protocol.
+//!
+//! # Endpoints
+//!
+//! The bus is one TCP connection carrying raw Dynamixel 2.0 bytes (any Protocol 2.0 master can
+//! use it, e.g. the ROBOTIS SDK through a socket-backed port handler). By default the simulator
+//! **listens** on `127.0.0.1:port` and accepts one connection per channel — start the simulator
+//! first ([`spawn`] returns once the sockets are bound), then QEMU with
+//! `-serial tcp:127.0.0.1:PORT,nodelay=on` (and the lock-step UART likewise). With
+//! [`SimConfig::connect`] the simulator connects instead (QEMU `server=on,wait=off`), retrying
+//! until [`SimConfig::connect_timeout`]. TCP_NODELAY is set on every connection.
+//!
+//! # Lock-step channel (fixed protocol)
+//!
+//! * firmware → simulator: [`LOCKSTEP_TIME`] (`0x5A`) + u64 little-endian virtual time in µs
+//!   (9 bytes), at the start of every control tick and before bus bursts. The simulator runs
+//!   its physics up to that time (whole physics steps; never backwards; no wall clock).
+//! * simulator → firmware: after reading one complete instruction packet from the bus and
+//!   writing its whole reply, [`LOCKSTEP_ACK`] (`0xA5`), `n_lo`, `n_hi` = the number of bytes
+//!   written on the bus for that instruction (0 for a broadcast SYNC WRITE, a dropped reply, a
+//!   dead device, a packet with a bad CRC). Status packets on the bus are not instructions and
+//!   are not acknowledged.
+//!
+//! Before executing each instruction, the simulator reads every lock-step byte already
+//! received (non-blocking), so a time message the firmware sent before the instruction is
+//! applied first (on loopback TCP the sender's bytes are queued at the receiver when its write
+//! returns, and QEMU writes the UARTs in guest program order). Without a lock-step channel the
+//! physics follows the wall clock since the bus connection.
+
+use std::io::{ErrorKind, Read, Write};
+use std::net::{Ipv4Addr, SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use super::{SimConfig, SimError, SimSummary, Simulator};
+
+/// First byte of a lock-step time message (firmware → simulator).
+pub const LOCKSTEP_TIME: u8 = 0x5A;
+/// First byte of a lock-step byte count (simulator → firmware).
+pub const LOCKSTEP_ACK: u8 = 0xA5;
+
+/// Live progress of a running simulator (read it from any thread).
+#[derive(Debug, Default)]
+pub struct SimProgress {
+    /// Simulated time, µs.
+    pub time_us: AtomicU64,
+    /// Instruction packets handled.
+    pub instructions: AtomicU64,
+    /// Every channel is connected.
+    pub connected: AtomicBool,
+    /// A fall has started.
+    pub falling: AtomicBool,
+}
+
+enum Endpoint {
+    Listen(TcpListener),
+    Connect(SocketAddr),
+}
+
+/// A simulator running on its own thread.
+#[derive(Debug)]
+pub struct SimHandle {
+    bus_addr: SocketAddr,
+    lockstep_addr: Option<SocketAddr>,
+    progress: Arc<SimProgress>,
+    stop: Arc<AtomicBool>,
+    thread: JoinHandle<Result<SimSummary, SimError>>,
+}
+
+impl SimHandle {
+    /// The bus address (the bound one when listening, useful with port 0).
+    pub fn bus_addr(&self) -> SocketAddr {
+        self.bus_addr
+    }
+
+    /// The lock-step channel address.
+    pub fn lockstep_addr(&self) -> Option<SocketAddr> {
+        self.lockstep_addr
+    }
+
+    /// Live progress.
+    pub fn progress(&self) -> Arc<SimProgress> {
+        Arc::clone(&self.progress)
+    }
+
+    /// Asks the simulator to stop (it returns within ~20 ms).
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether the simulator thread has returned.
+    pub fn is_finished(&self) -> bool {
+        self.thread.is_finished()
+    }
+
+    /// Waits for the simulator to return (when the master disconnects or after [`stop`](Self::stop)).
+    pub fn join(self) -> Result<SimSummary, SimError> {
+        self.thread.join().map_err(|_| SimError::Panicked)?
+    }
+}
+
+/// Runs the simulator on the calling thread until the master disconnects.
+pub fn run(config: SimConfig) -> Result<SimSummary, SimError> {
+    spawn(config)?.join()
+}
+
+fn endpoint(cfg: &SimConfig, port: u16) -> Result<(Endpoint, SocketAddr), SimError> {
+    let addr = SocketAddr::from((Ipv4Addr::LOCALHOST, port));
+    if cfg.connect {
+        Ok((Endpoint::Connect(addr), addr))
+    } else {
+        let l = TcpListener::bind(addr)?;
+        let a = l.local_addr()?;
+        Ok((Endpoint::Listen(l), a))
+    }
+}
+
+/// Binds the sockets (listen mode), opens the truth log and starts the simulator thread.
+pub fn spawn(config: SimConfig) -> Result<SimHandle, SimError> {
+    config.validate()?;
+    let (bus_ep, bus_addr) = endpoint(&config, config.port)?;
+    let (ls_ep, lockstep_addr) = match config.lockstep_port {
+        Some(p) => {
+            let (e, a) = endpoint(&config, p)?;
+            (Some(e), Some(a))
+        }
+        None => (None, None),
+    };
+    let sim = Simulator::new(&config)?;
+    let progress = Arc::new(SimProgress::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let (p2, s2) = (Arc::clone(&progress), Arc::clone(&stop));
+    let thread = std::thread::Builder::new()
+        .name("walker-sim".into())
+        .spawn(move || serve(sim, bus_ep, ls_ep, config, &p2, &s2))?;
+    Ok(SimHandle {
+        bus_addr,
+        lockstep_addr,
+        progress,
+        stop,
+        thread,
+    })
+}
+
+fn establish(ep: Endpoint, deadline: Instant, stop: &AtomicBool) -> Result<TcpStream, SimError> {
+    let s = match ep {
+        Endpoint::Listen(l) => {
+            l.set_nonblocking(true)?;
+            loop {
+                match l.accept() {
+                    Ok((s, _)) => break s,
+                    Err(e)
+                        if e.kind() == ErrorKind::WouldBlock
+                            || e.kind() == ErrorKind::Interrupted => {}
+                    Err(e) => return Err(e.into()),
+                }
+                if stop.load(Ordering::SeqCst) || Instant::now() > deadline {
+                    return Err(SimError::Timeout("no connection accepted".into()));
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+        Endpoint::Connect(addr) => loop {
+            match TcpStream::connect_timeout(&addr, Duration::from_millis(500)) {
+                Ok(s) => break s,
+                Err(e) => {
+                    if stop.load(Ordering::SeqCst) || Instant::now() > deadline {
+                        return Err(SimError::Timeout(format!("cannot connect to {addr}: {e}")));
+                    }
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+        },
+    };
+    s.set_nonblocking(false)?;
+    s.set_nodelay(true)?;
+    Ok(s)
+}
+
+/// Lock-step channel state.
+struct Lockstep {
+    stream: TcpStream,
+    frame: [u8; 9],
+    len: usize,
+    open: bool,
+    messages: u64,
+    errors: u64,
+}
+
+impl Lockstep {
+    /// Reads every byte available now and applies the complete time messages.
+    fn drain(&mut self, sim: &mut Simulator) -> Result<(), SimError> {
+        let mut buf = [0u8; 512];
+        while self.open {
+            match self.stream.read(&mut buf) {
+                Ok(0) => self.open = false,
+                Ok(n) => {
+                    for &b in &buf[..n] {
+                        if self.len == 0 && b != LOCKSTEP_TIME {
+                            self.errors += 1;
+                            continue;
+                        }
+                        self.frame[self.len] = b;
+                        self.len += 1;
+                        if self.len == self.frame.len() {
+                            self.len = 0;
+                            self.messages += 1;
+                            let mut t = [0u8; 8];
+                            t.copy_from_slice(&self.frame[1..]);
+                            sim.advance_to(u64::from_le_bytes(t))?;
+                        }
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(_) => self.open = false,
+            }
+        }
+        Ok(())
+    }
+
+    fn ack(&mut self, n: usize) -> Result<(), SimError> {
+        if !self.open {
+            return Ok(());
+        }
+        let [lo, hi] = u16::try_from(n).unwrap_or(u16::MAX).to_le_bytes();
+        let msg = [LOCKSTEP_ACK, lo, hi];
+        let mut done = 0;
+        while done < msg.len() {
+            match self.stream.write(&msg[done..]) {
+                Ok(0) => {
+                    self.open = false;
+                    break;
+                }
+                Ok(k) => done += k,
+                Err(e)
+                    if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted =>
+                {
+                    std::thread::sleep(Duration::from_micros(200));
+                }
+                Err(_) => {
+                    self.open = false;
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn serve(
+    mut sim: Simulator,
+    bus_ep: Endpoint,
+    ls_ep: Option<Endpoint>,
+    cfg: SimConfig,
+    progress: &SimProgress,
+    stop: &AtomicBool,
+) -> Result<SimSummary, SimError> {
+    let deadline = Instant::now() + cfg.connect_timeout;
+    let mut bus = establish(bus_ep, deadline, stop)?;
+    let mut ls = match ls_ep {
+        Some(ep) => {
+            let stream = establish(ep, deadline, stop)?;
+            stream.set_nonblocking(true)?;
+            Some(Lockstep {
+                stream,
+                frame: [0; 9],
+                len: 0,
+                open: true,
+                messages: 0,
+                errors: 0,
+            })
+        }
+        None => None,
+    };
+    progress.connected.store(true, Ordering::SeqCst);
+    bus.set_read_timeout(Some(Duration::from_millis(20)))?;
+    let start = Instant::now();
+    let mut buf = [0u8; 4096];
+    let sync = |sim: &mut Simulator, ls: &mut Option<Lockstep>| -> Result<(), SimError> {
+        match ls {
+            Some(l) => l.drain(sim)?,
+            None => sim.advance_to(start.elapsed().as_micros() as u64)?,
+        }
+        progress.time_us.store(sim.time_us(), Ordering::Relaxed);
+        progress
+            .falling
+            .store(sim.physics.fall_started_us().is_some(), Ordering::Relaxed);
+        Ok(())
+    };
+    while !stop.load(Ordering::SeqCst) {
+        match bus.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => {
+                for &b in &buf[..n] {
+                    let Some(inc) = sim.push_byte(b) else {
+                        continue;
+                    };
+                    sync(&mut sim, &mut ls)?;
+                    if let Some(reply) = sim.respond(&inc) {
+                        bus.write_all(&reply)?;
+                        if let Some(l) = ls.as_mut() {
+                            l.ack(reply.len())?;
+                        }
+                    }
+                    progress
+                        .instructions
+                        .store(sim.bus.counters.instructions, Ordering::Relaxed);
+                }
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
+                ) =>
+            {
+                sync(&mut sim, &mut ls)?;
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    ErrorKind::ConnectionReset
+                        | ErrorKind::ConnectionAborted
+                        | ErrorKind::BrokenPipe
+                ) =>
+            {
+                break
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+    let mut summary = sim.summary();
+    if let Some(l) = &ls {
+        summary.lockstep_messages = l.messages;
+        summary.lockstep_errors = l.errors;
+    }
+    Ok(summary)
+}

@@ -1,0 +1,83 @@
+//! Ground-truth CSV log.
+//!
+//! One row per `log_every_us` of physics time (time = the centre of the acceleration window,
+//! i.e. the instant the values describe). Columns:
+//!
+//! `t_s, zmp_x, zmp_y, fz_n, com_x, com_y, com_z, pelvis_x, pelvis_y, pelvis_z, pelvis_roll,
+//! pelvis_pitch, pelvis_yaw, support (L/R/D), stance (L/R), margin_m, l_f0..l_f3, r_f0..r_f3
+//! (N, noiseless, sensor order front-left, front-right, rear-left, rear-right), gyro_x..z
+//! (rad/s), acc_x..z (m/s²), tau_nm, falling (0/1), fall_angle`.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+use super::body::Truth;
+
+/// Header line of the truth CSV (without newline).
+pub const HEADER: &str = "t_s,zmp_x,zmp_y,fz_n,com_x,com_y,com_z,pelvis_x,pelvis_y,pelvis_z,\
+pelvis_roll,pelvis_pitch,pelvis_yaw,support,stance,margin_m,l_f0,l_f1,l_f2,l_f3,r_f0,r_f1,r_f2,r_f3,\
+gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z,tau_nm,falling,fall_angle";
+
+/// Writer of the truth CSV.
+#[derive(Debug)]
+pub struct TruthLog {
+    out: BufWriter<File>,
+    rows: u64,
+}
+
+impl TruthLog {
+    /// Creates the file and writes the header.
+    pub fn create(path: &Path) -> std::io::Result<Self> {
+        let mut out = BufWriter::new(File::create(path)?);
+        writeln!(out, "{HEADER}")?;
+        Ok(TruthLog { out, rows: 0 })
+    }
+
+    /// Appends one row.
+    pub fn row(&mut self, t: &Truth) -> std::io::Result<()> {
+        let mut s = format!("{:.6}", t.t_us as f64 * 1e-6);
+        let mut put = |v: f64| {
+            s.push(',');
+            s.push_str(&format!("{v:.6}"));
+        };
+        for v in [t.zmp[0], t.zmp[1], t.fz] {
+            put(v);
+        }
+        for v in t.com.iter().chain(&t.pelvis).chain(&t.pelvis_rpy) {
+            put(*v);
+        }
+        let margin = if t.margin.is_finite() {
+            t.margin
+        } else {
+            f64::NAN
+        };
+        s.push_str(&format!(
+            ",{},{},{margin:.6}",
+            t.support.code(),
+            if t.stance_left { 'L' } else { 'R' }
+        ));
+        let mut put = |v: f64| {
+            s.push(',');
+            s.push_str(&format!("{v:.6}"));
+        };
+        for v in t.forces.iter().flatten().chain(&t.gyro).chain(&t.accel) {
+            put(*v);
+        }
+        put(t.tau);
+        s.push_str(&format!(",{},{:.6}", u8::from(t.falling), t.fall_angle));
+        writeln!(self.out, "{s}")?;
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// Rows written.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Flushes the file.
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+}

@@ -1,0 +1,540 @@
+//! End-to-end tests of the `walker` CLI: export round trip, report on a synthetic log with
+//! garbage, plan-file errors, hand-computed statistics, compare and capture --from-file.
+
+use gait_core::kinematics::{leg_fk, Pose};
+use gait_core::{Robot, Side};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use walker_firmware::log::{
+    encode, BoardId, Record, StartupRecord, StopRecord, SupportPhase, TickRecord, MAX_FRAME,
+};
+use walker_firmware::supervisor::StopReason;
+use walker_host::export;
+use walker_host::planfile::{self, WalkSpec};
+use walker_host::report;
+
+fn walker(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_walker"))
+        .args(args)
+        .current_dir(workspace())
+        .output()
+        .expect("run walker")
+}
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("walker-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    (header, rows)
+}
+
+fn frame(rec: &Record) -> Vec<u8> {
+    let mut b = [0u8; MAX_FRAME];
+    let n = encode(rec, &mut b);
+    assert!(n > 0);
+    b[..n].to_vec()
+}
+
+fn tick(seq: u16, zmp_ref: [f32; 2], meas: Option<[f32; 2]>, phase: SupportPhase) -> Record {
+    let mut r = TickRecord {
+        seq,
+        time_us: 1_000_000 + u32::from(seq) * 1000,
+        phase,
+        zmp_valid: meas.is_some(),
+        ..TickRecord::default()
+    };
+    r.set_zmp_ref_m(zmp_ref[0], zmp_ref[1]);
+    if let Some(m) = meas {
+        r.set_zmp_meas_m(m[0], m[1]);
+    }
+    r.set_com_m(zmp_ref[0], zmp_ref[1]);
+    r.set_tau_nm(0.01);
+    r.bus.timeouts = seq / 10;
+    Record::Tick(r)
+}
+
+#[test]
+fn export_round_trips_through_forward_kinematics() {
+    let dir = tmp("export");
+    let out = dir.join("plan.csv");
+    let o = walker(&[
+        "export",
+        "--plan",
+        "plans/table2.toml",
+        "--out",
+        s(&out),
+        "--dt",
+        "0.005",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (header, rows) = read_csv(&out);
+    let mut expect: Vec<&str> = export::LEAD_COLUMNS.to_vec();
+    expect.extend(gait_core::robot::JOINT_NAMES);
+    assert_eq!(header, expect);
+    // 1.6 + 14·0.64 + 1.6 s at 5 ms.
+    assert_eq!(rows.len(), 12160 / 5 + 1);
+    let robot = Robot::reference();
+    let mut worst = 0.0f64;
+    for row in &rows {
+        let v: Vec<f64> = row.iter().map(|x| x.parse().unwrap()).collect();
+        assert_eq!(v.len(), 24);
+        // Table 2 walks straight: every heading is 0, so the pelvis is level with yaw 0.
+        let pelvis = Pose::level(v[3], v[4], v[5], 0.0);
+        assert!((v[5] - 0.217).abs() < 1e-12);
+        for (side, feet, q) in [(Side::Left, 6, 12), (Side::Right, 9, 18)] {
+            let angles: [f64; 6] = v[q..q + 6].try_into().unwrap();
+            let foot = leg_fk(&robot, side, &pelvis, &angles);
+            for (k, got) in [foot.x, foot.y, foot.z].into_iter().enumerate() {
+                worst = worst.max((got - v[feet + k]).abs());
+            }
+            assert!(foot.roll.abs() < 1e-6 && foot.pitch.abs() < 1e-6 && foot.yaw.abs() < 1e-6);
+        }
+    }
+    assert!(
+        worst < 1e-6,
+        "FK of the exported angles misses the feet by {worst} m"
+    );
+}
+
+#[test]
+fn turning_export_round_trips_in_memory() {
+    let spec = planfile::load(&workspace().join("plans/turn.toml")).unwrap();
+    let robot = Robot::reference();
+    let (rows, summary) = export::export_rows(&spec, &robot, 0.005).unwrap();
+    assert_eq!(summary.clamped_rows, 0);
+    let last = rows.last().unwrap();
+    assert!((last.feet_yaw[0] - 0.4).abs() < 1e-9 && (last.feet_yaw[1] - 0.4).abs() < 1e-9);
+    for r in &rows {
+        let pelvis = r.pelvis();
+        assert_eq!([pelvis.x, pelvis.y, pelvis.z], r.com);
+        for (i, side) in [Side::Left, Side::Right].into_iter().enumerate() {
+            let q: [f64; 6] = r.q[6 * i..6 * i + 6].try_into().unwrap();
+            let f = leg_fk(&robot, side, &pelvis, &q);
+            let e = (f.x - r.feet[i][0])
+                .abs()
+                .max((f.y - r.feet[i][1]).abs())
+                .max((f.z - r.feet[i][2]).abs());
+            assert!(e < 1e-6, "t = {}: foot {i} off by {e}", r.t);
+            let dyaw = (f.yaw - r.feet_yaw[i] + std::f64::consts::PI)
+                .rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            assert!(dyaw.abs() < 1e-6);
+        }
+    }
+}
+
+/// A log with every kind of damage: starts mid-frame, garbage, a truncated frame, a corrupted
+/// frame and an unterminated frame at the end.
+fn damaged_log() -> (Vec<u8>, Vec<u16>) {
+    let mut bytes = Vec::new();
+    // Mid-stream start: the tail of a frame.
+    let prev = frame(&tick(999, [0.0, 0.0], None, SupportPhase::Standing));
+    bytes.extend_from_slice(&prev[prev.len() - 17..]);
+    bytes.extend(frame(&Record::Startup(StartupRecord {
+        seq: 0,
+        time_us: 999_000,
+        board: BoardId::QemuMps2,
+        fw: [0, 1, 0],
+        tick_period_us: 1000,
+        bus_baud: 1_000_000,
+        device_count: 15,
+        probed: false,
+        missing: Default::default(),
+    })));
+    let mut kept = Vec::new();
+    for seq in 1..=100u16 {
+        let phase = if seq <= 20 {
+            SupportPhase::Standing
+        } else {
+            SupportPhase::Double
+        };
+        let x = f32::from(seq) * 1e-4;
+        let mut f = frame(&tick(seq, [x, 0.01], Some([x + 0.001, 0.01]), phase));
+        match seq {
+            // Garbage after this frame, terminated by a delimiter.
+            30 => {
+                bytes.extend(&f);
+                bytes.extend([0x11, 0x22, 0x33, 0x00]);
+                kept.push(seq);
+                continue;
+            }
+            // Truncated: only its first 20 bytes arrive; it swallows frame 61.
+            60 => f.truncate(20),
+            61 => {}
+            // One flipped bit: CRC error.
+            80 => f[12] ^= 0x04,
+            _ => kept.push(seq),
+        }
+        bytes.extend(f);
+    }
+    bytes.extend(frame(&Record::Stop(StopRecord {
+        seq: 101,
+        time_us: 1_200_000,
+        reason: StopReason::PlanDone,
+    })));
+    // Unterminated frame at the end.
+    let last = frame(&tick(102, [0.0, 0.0], None, SupportPhase::Standing));
+    bytes.extend_from_slice(&last[..10]);
+    (bytes, kept)
+}
+
+#[test]
+fn report_on_damaged_log_counts_exactly() {
+    let (bytes, kept) = damaged_log();
+    assert_eq!(kept.len(), 97);
+    let log = report::decode_bytes(&bytes);
+    assert_eq!(log.ticks.len(), 97);
+    assert_eq!(log.events.len(), 2);
+    assert_eq!(log.good(), 99);
+    // mid-stream start, garbage, truncated 60 + 61, CRC of 80, unterminated end.
+    assert_eq!(log.bad(), 5);
+    assert_eq!(log.decoder.rejected, 4);
+    // The flipped bit is a CRC error; the mid-stream tail fails COBS or CRC; garbage fails COBS.
+    let r = log.rejects;
+    assert!(r.crc >= 1);
+    assert_eq!(r.overlong, 1);
+    assert_eq!(
+        r.cobs + r.crc + r.unknown_type + r.length + r.field + r.overlong,
+        4
+    );
+    assert!(log.trailing_bytes == 10);
+
+    let dir = tmp("report");
+    let path = dir.join("walk.log");
+    std::fs::write(&path, &bytes).unwrap();
+    let out = dir.join("report");
+    let o = walker(&["report", "--log", s(&path), "--out", s(&out)]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains("99 good records (97 ticks, 2 events), 5 bad"),
+        "{stdout}"
+    );
+    let (header, rows) = read_csv(&out.join("zmp_response.csv"));
+    assert_eq!(header.join(","), report::RESPONSE_HEADER);
+    assert_eq!(rows.len(), 97);
+    let seqs: Vec<u16> = rows.iter().map(|r| r[1].parse().unwrap()).collect();
+    assert_eq!(seqs, kept);
+    // Row of seq 30: t, reference, measured, phase, bus timeouts.
+    let r = &rows[kept.iter().position(|&k| k == 30).unwrap()];
+    assert_eq!(r[0], "1.030000");
+    assert_eq!(r[2], "0.00300");
+    assert_eq!(r[3], "0.01000");
+    assert_eq!(r[4], "0.00400");
+    assert_eq!(r[6], "1");
+    assert_eq!(r[10], "double");
+    assert_eq!(r[13], "3");
+    for f in [
+        "report.md",
+        "stats.json",
+        "zmp_response.svg",
+        "zmp_response.png",
+        "events.csv",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
+    assert!(
+        json.contains("\"good\": 99, \"bad\": 5, \"ticks\": 97, \"events\": 2"),
+        "{json}"
+    );
+    let png = std::fs::read(out.join("zmp_response.png")).unwrap();
+    assert_eq!(&png[..8], &[0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A]);
+    let svg = std::fs::read_to_string(out.join("zmp_response.svg")).unwrap();
+    assert!(svg.contains("ZMP reference") && svg.contains("stroke-dasharray"));
+    // Every measured x is 1 mm ahead of the reference.
+    assert!(
+        stdout.contains("| x (sagittal) | 97 | 0.097000 | 0.001000 | 0.001000 | 0.001000 |"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn bad_plan_file_names_the_field() {
+    let dir = tmp("badplan");
+    let cases = [
+        ("t2 = 0.1\n", "field `t2`"),
+        ("a = 0.06\n", "field `a`"),
+        ("z_c = -1.0\n", "field `z_c`"),
+        ("model = \"lip\"\n", "field `model`"),
+        ("step_lenght = 0.02\n", "field `step_lenght`"),
+        ("s_first = 0\n", "field `s_first`"),
+        ("steps = 0\n", "field `steps`"),
+        (
+            "[[footsteps]]\nside = \"left\"\nx = 0.02\ny = 0.045\n[[footsteps]]\nside = \"right\"\nx = 0.9\ny = -0.045\n",
+            "field `footsteps[1]`",
+        ),
+        ("[[footsteps]]\nside = \"left\"\nx = 0.02\ny = 0.045\n[[footsteps]]\nside = \"right\"\ny = -0.045\n", "footsteps[1].x"),
+        ("dt = 0.3\n", "field `dt`"),
+    ];
+    for (i, (text, want)) in cases.iter().enumerate() {
+        let p = dir.join(format!("bad{i}.toml"));
+        std::fs::write(&p, text).unwrap();
+        let o = walker(&["export", "--plan", s(&p), "--out", s(&dir.join("x.csv"))]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{text}: {err}");
+        assert!(err.contains(want), "{text:?}: want {want:?} in {err:?}");
+        assert!(err.contains(&format!("bad{i}.toml")), "{err}");
+    }
+    // The library gives the field separately.
+    let e = planfile::parse("t1 = 0.2\nt2 = 0.1\n")
+        .unwrap()
+        .check(&Robot::reference())
+        .unwrap_err();
+    assert_eq!(e.field, "t2");
+    assert!(e.reason.contains("0 < t1 < t2 < T"));
+    // Defaults are Table 2.
+    assert_eq!(planfile::parse("").unwrap(), WalkSpec::default());
+    assert_eq!(
+        planfile::load(&workspace().join("plans/table2.toml")).unwrap(),
+        WalkSpec::default()
+    );
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    assert_eq!(walker(&["frobnicate"]).status.code(), Some(2));
+    assert_eq!(walker(&["report"]).status.code(), Some(2));
+    assert_eq!(walker(&["export", "--dt", "abc"]).status.code(), Some(2));
+    assert_eq!(
+        walker(&["compare", "--runs", "lipm"]).status.code(),
+        Some(2)
+    );
+    assert!(walker(&["--help"]).status.success());
+    assert!(walker(&["report", "--help"]).status.success());
+}
+
+/// Three ticks with hand-picked errors (and one without a measured ZMP).
+fn hand_log(scale: f32) -> Vec<u8> {
+    let errs = [[0.001, 0.0], [-0.002, 0.004], [0.003, -0.004]];
+    let mut bytes = vec![0u8];
+    for (i, e) in errs.iter().enumerate() {
+        let r = [0.01, -0.02];
+        let m = [r[0] + e[0] * scale, r[1] + e[1] * scale];
+        bytes.extend(frame(&tick(i as u16, r, Some(m), SupportPhase::Double)));
+    }
+    bytes.extend(frame(&tick(3, [0.0, 0.0], None, SupportPhase::Double)));
+    bytes
+}
+
+#[test]
+fn statistics_match_a_hand_computed_case() {
+    let log = report::decode_bytes(&hand_log(1.0));
+    assert_eq!((log.good(), log.bad()), (4, 0));
+    let st = report::error_stats(&report::tick_rows(&log.ticks));
+    assert_eq!((st.ticks, st.skipped), (4, 1));
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+    // x errors 1, −2, 3 mm: Σ 6 mm, mean 2 mm, RMS √(14/3) mm, max 3 mm.
+    assert_eq!(st.x.count, 3);
+    assert!(close(st.x.sum_abs, 0.006) && close(st.x.mean_abs, 0.002));
+    assert!(close(st.x.rms, (14.0f64 / 3.0).sqrt() * 1e-3) && close(st.x.max_abs, 0.003));
+    // y errors 0, 4, −4 mm: Σ 8 mm, mean 8/3 mm, RMS √(32/3) mm, max 4 mm.
+    assert!(close(st.y.sum_abs, 0.008) && close(st.y.mean_abs, 0.008 / 3.0));
+    assert!(close(st.y.rms, (32.0f64 / 3.0).sqrt() * 1e-3) && close(st.y.max_abs, 0.004));
+}
+
+#[test]
+fn compare_prints_runs_side_by_side() {
+    let dir = tmp("compare");
+    let mut runs = Vec::new();
+    for (name, scale) in [("lipm", 3.0), ("dlipm", 2.0), ("tlipfm", 1.0)] {
+        let p = dir.join(format!("{name}.log"));
+        std::fs::write(&p, hand_log(scale)).unwrap();
+        runs.push(format!("{name}={}", s(&p)));
+    }
+    let out = dir.join("compare.md");
+    let o = walker(&["compare", "--runs", &runs.join(","), "--out", s(&out)]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains("| statistic | lipm | dlipm | tlipfm |"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("| Σ\\|e_x\\| (m) | 0.018000 | 0.012000 | 0.006000 |"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("Σ|e_x| smallest first: tlipfm < dlipm < lipm"),
+        "{stdout}"
+    );
+    let md = std::fs::read_to_string(&out).unwrap();
+    assert!(
+        md.contains("| max \\|e_y\\| (m) | 0.012000 | 0.008000 | 0.004000 |"),
+        "{md}"
+    );
+    let o = walker(&[
+        "compare",
+        "--runs",
+        &format!("x={}", s(&dir.join("missing.log"))),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not found"));
+}
+
+#[test]
+fn capture_from_file_and_missing_port() {
+    let dir = tmp("capture");
+    let (bytes, kept) = damaged_log();
+    let saved = dir.join("saved.bin");
+    std::fs::write(&saved, &bytes).unwrap();
+    let out = dir.join("walk.log");
+    let o = walker(&["capture", "--from-file", s(&saved), "--out", s(&out)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&out).unwrap(), bytes);
+    let (_, rows) = read_csv(&dir.join("walk.csv"));
+    assert_eq!(rows.len(), kept.len());
+    let (_, events) = read_csv(&dir.join("walk.events.csv"));
+    assert_eq!(events.len(), 2);
+
+    let o = walker(&[
+        "capture",
+        "--port",
+        "/dev/ttyDOESNOTEXIST",
+        "--out",
+        s(&dir.join("x.log")),
+        "--seconds",
+        "1",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("serial port /dev/ttyDOESNOTEXIST not found"),
+        "{err}"
+    );
+    let o = walker(&[
+        "capture",
+        "--port",
+        "/dev/null",
+        "--baud",
+        "12345",
+        "--out",
+        s(&dir.join("x.log")),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unsupported baud rate"));
+}
+
+#[test]
+fn capture_from_a_pseudo_terminal() {
+    let (mut master, slave) = {
+        let (mut m, mut sl) = (0, 0);
+        let mut name = [0 as libc::c_char; 128];
+        // SAFETY: openpty writes two descriptors and a NUL-terminated name into our buffers.
+        let rc = unsafe {
+            libc::openpty(
+                &mut m,
+                &mut sl,
+                name.as_mut_ptr(),
+                std::ptr::null(),
+                std::ptr::null(),
+            )
+        };
+        assert_eq!(rc, 0, "openpty failed");
+        // SAFETY: `name` is NUL-terminated by openpty; `m` is a fresh descriptor we own.
+        let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
+            .to_string_lossy()
+            .into_owned();
+        let master = unsafe { <std::fs::File as std::os::unix::io::FromRawFd>::from_raw_fd(m) };
+        (master, (sl, path))
+    };
+    let dir = tmp("pty");
+    let out = dir.join("walk.log");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_walker"))
+        .args([
+            "capture",
+            "--port",
+            &slave.1,
+            "--baud",
+            "921600",
+            "--out",
+            s(&out),
+            "--seconds",
+            "2",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The capture prints "capturing …" once the port is raw and flushed: send after that.
+    let mut err = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut err, &mut line).unwrap();
+    assert!(line.starts_with("capturing"), "{line}");
+    let (bytes, kept) = damaged_log();
+    for chunk in bytes.chunks(333) {
+        std::io::Write::write_all(&mut master, chunk).unwrap();
+    }
+    let o = child.wait_with_output().unwrap();
+    // SAFETY: closing the slave descriptor openpty gave us, after the child is done.
+    unsafe { libc::close(slave.0) };
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut err, &mut rest).unwrap();
+    assert!(o.status.success(), "{rest}");
+    assert_eq!(std::fs::read(&out).unwrap(), bytes);
+    let (_, rows) = read_csv(&dir.join("walk.csv"));
+    assert_eq!(rows.len(), kept.len());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("99 good records (97 ticks, 2 events), 5 bad"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn report_with_truth_file() {
+    let dir = tmp("truth");
+    let log = dir.join("walk.log");
+    std::fs::write(&log, hand_log(1.0)).unwrap();
+    // The sim's truth CSV: t_s plus more columns; the true ZMP equals the reference here.
+    let truth = dir.join("truth.csv");
+    let mut t = String::from("t_s,zmp_x,zmp_y,fz_n\n");
+    for k in 0..4 {
+        t.push_str(&format!(
+            "{:.6},0.010000,-0.020000,48.5\n",
+            1.0 + k as f64 * 1e-3
+        ));
+    }
+    std::fs::write(&truth, t).unwrap();
+    let out = dir.join("report");
+    let o = walker(&[
+        "report",
+        "--log",
+        s(&log),
+        "--truth",
+        s(&truth),
+        "--out",
+        s(&out),
+        "--model",
+        "lipm",
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let x_row = "| x (sagittal) | 3 | 0.006000 | 0.002000 | 0.002160 | 0.003000 |";
+    assert_eq!(stdout.matches(x_row).count(), 2, "{stdout}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("Measured − true ZMP") && md.contains("LIPM"));
+    let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
+    assert!(!json.contains("\"truth_error\": null"));
+}

@@ -1,0 +1,781 @@
+//! Tests of the simulated robot: ground-truth ZMP, force distribution, the bus over TCP with
+//! lock-step, fault injection and determinism.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::time::Duration;
+
+use dxl::instruction::{encode_bulk_read, encode_sync_write, opcode, BulkReadRequest};
+use dxl::table::{foot, foot::FootForces, imu, imu::ImuSample, x_series};
+use dxl::{Decoder, Instruction, Status, BROADCAST_ID};
+use gait_core::kinematics::{leg_points, Pose};
+use gait_core::{Robot, Side};
+use walker_host::sim::forces::{center_of_pressure, distribute, FootContact};
+use walker_host::sim::zmp::{whole_body_zmp, MassPoint};
+use walker_host::sim::{spawn, FaultConfig, SimConfig, Simulator, Support};
+
+const G: f64 = 9.80665;
+const TOTAL_MASS: f64 = 4.95;
+/// Σ mᵢ zᵢ at the zero pose, by hand: upper body 3.05 kg at 0.23 + 0.09 = 0.32 m; per leg
+/// thigh 0.20 kg at 0.18 m, calf 0.50 kg at 0.08 m, sole 0.25 kg at 0.015 m.
+const SUM_MZ: f64 = 3.05 * 0.32 + 2.0 * (0.20 * 0.18 + 0.50 * 0.08 + 0.25 * 0.015);
+
+/// The seven mass points of the reference robot at the zero pose, pelvis at (0, 0, 0.23).
+fn zero_pose_points(acc: [f64; 3]) -> Vec<MassPoint> {
+    let robot = Robot::reference();
+    let pelvis = Pose::new(0.0, 0.0, 0.23, 0.0, 0.0, 0.0);
+    let mut pts = vec![MassPoint {
+        mass: 3.05,
+        pos: [0.0, 0.0, 0.32],
+        acc,
+    }];
+    for side in [Side::Left, Side::Right] {
+        let lp = leg_points(&robot, side, &pelvis, &[0.0; 6]);
+        for (m, p) in [
+            (0.20, lp.thigh_mass),
+            (0.50, lp.calf_mass),
+            (0.25, lp.sole_mass),
+        ] {
+            pts.push(MassPoint {
+                mass: m,
+                pos: p,
+                acc,
+            });
+        }
+    }
+    pts
+}
+
+#[test]
+fn zero_pose_mass_points_match_hand_values() {
+    let pts = zero_pose_points([0.0; 3]);
+    let m: f64 = pts.iter().map(|p| p.mass).sum();
+    let mz: f64 = pts.iter().map(|p| p.mass * p.pos[2]).sum();
+    assert!((m - TOTAL_MASS).abs() < 1e-12);
+    assert!((mz - SUM_MZ).abs() < 1e-12, "{mz} vs {SUM_MZ}");
+}
+
+#[test]
+fn static_zmp_is_com_projection() {
+    let z = whole_body_zmp(&zero_pose_points([0.0; 3]), G, [0.0; 2]).unwrap();
+    // Symmetric straight legs: the CoM is under P = (0, 0).
+    assert!(z.xy[0].abs() < 1e-12 && z.xy[1].abs() < 1e-12);
+    assert!((z.fz - TOTAL_MASS * G).abs() < 1e-9);
+}
+
+#[test]
+fn horizontal_acceleration_shifts_zmp() {
+    for a in [1.0, -2.5] {
+        let z = whole_body_zmp(&zero_pose_points([a, 0.5 * a, 0.0]), G, [0.0; 2]).unwrap();
+        let expect = -a * SUM_MZ / (TOTAL_MASS * G);
+        assert!((z.xy[0] - expect).abs() < 1e-12, "{} vs {expect}", z.xy[0]);
+        assert!((z.xy[1] - 0.5 * expect).abs() < 1e-12);
+        // e.g. a = 1 m/s² → −0.023393 m.
+    }
+    let z = whole_body_zmp(&zero_pose_points([1.0, 0.0, 0.0]), G, [0.0; 2]).unwrap();
+    assert!((z.xy[0] + 0.023393).abs() < 1e-5);
+}
+
+#[test]
+fn simulated_static_robot_zmp_and_forces() {
+    let mut sim = Simulator::new(&SimConfig::default()).unwrap();
+    sim.advance_to(100_000).unwrap();
+    let t = *sim.physics.truth();
+    assert_eq!(t.support, Support::Double);
+    assert!(
+        t.zmp[0].abs() < 1e-9 && t.zmp[1].abs() < 1e-9,
+        "{:?}",
+        t.zmp
+    );
+    assert!((t.fz - TOTAL_MASS * G).abs() < 1e-6);
+    let com_z = SUM_MZ / TOTAL_MASS;
+    assert!((t.com[2] - com_z).abs() < 1e-9);
+    assert!((t.pelvis[2] - 0.23).abs() < 1e-12);
+    // The foot boards' tables: forces sum to the weight, centre of pressure under P.
+    let mut total = 0.0;
+    for id in [111, 112] {
+        let d = sim.bus.device(id).unwrap();
+        let s =
+            FootForces::from_bytes(d.read(foot::SAMPLE.addr, foot::SAMPLE.len).unwrap()).unwrap();
+        total += f64::from(s.total_n());
+        let cop = s.cop_m(1.0).unwrap();
+        assert!(cop[0].abs() < 1e-4 && cop[1].abs() < 1e-4);
+        assert!((f64::from(s.total_n()) - TOTAL_MASS * G / 2.0).abs() < 0.01);
+    }
+    assert!((total - TOTAL_MASS * G).abs() < 0.01);
+    // The IMU: no rotation, +g on z.
+    let d = sim.bus.device(200).unwrap();
+    let s = ImuSample::from_bytes(d.read(imu::SAMPLE.addr, imu::SAMPLE.len).unwrap()).unwrap();
+    assert_eq!(s.gyro_urad_s, [0, 0, 0]);
+    assert!((s.accel_m_s2()[2] as f64 - G).abs() < 1e-4);
+}
+
+#[test]
+fn static_crouch_zmp_equals_com_projection() {
+    // Crouched, asymmetric static pose: no accelerations → ZMP = CoM ground projection.
+    let mut q = [0.0; 12];
+    q[2] = -0.3;
+    q[3] = 0.6;
+    q[4] = -0.3;
+    q[8] = -0.2;
+    q[9] = 0.4;
+    q[10] = -0.2;
+    let cfg = SimConfig {
+        initial_q: q,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulator::new(&cfg).unwrap();
+    sim.advance_to(50_000).unwrap();
+    let t = *sim.physics.truth();
+    assert!((t.zmp[0] - t.com[0]).abs() < 1e-9 && (t.zmp[1] - t.com[1]).abs() < 1e-9);
+    // Stance = the lower (longer, right) leg; the bent left leg is in the air.
+    assert_eq!(t.support, Support::Right);
+}
+
+#[test]
+fn force_distribution_matches_zmp_and_weight() {
+    let s = Robot::reference().geometry.force_sensors;
+    let w = TOTAL_MASS * G;
+    let l = FootContact {
+        xy: [0.0, 0.045],
+        yaw: 0.0,
+    };
+    let r = FootContact {
+        xy: [0.02, -0.045],
+        yaw: 0.1,
+    };
+    for zmp in [
+        [0.0, 0.0],
+        [0.01, 0.02],
+        [0.015, -0.04],
+        [-0.02, 0.05],
+        [0.03, 0.0],
+    ] {
+        let f = distribute(w, zmp, Some(l), Some(r), &s);
+        assert!(f.iter().flatten().all(|v| *v >= 0.0));
+        let (cop, total) = center_of_pressure(&f, [Some(l), Some(r)], &s).unwrap();
+        assert!((total - w).abs() < 1e-9);
+        assert!(
+            (cop[0] - zmp[0]).abs() < 1e-9 && (cop[1] - zmp[1]).abs() < 1e-9,
+            "{zmp:?} {cop:?}"
+        );
+    }
+    // Single support.
+    let f = distribute(w, [0.03, 0.05], Some(l), None, &s);
+    let (cop, total) = center_of_pressure(&f, [Some(l), None], &s).unwrap();
+    assert!(
+        (total - w).abs() < 1e-9 && (cop[0] - 0.03).abs() < 1e-9 && (cop[1] - 0.05).abs() < 1e-9
+    );
+    assert_eq!(f[1], [0.0; 4]);
+}
+
+#[test]
+fn disturbance_torque_shifts_zmp() {
+    let mut cfg = SimConfig::default();
+    cfg.disturbance.constant_nm = 0.5;
+    cfg.fall.enabled = false;
+    let mut sim = Simulator::new(&cfg).unwrap();
+    sim.advance_to(2_000_000).unwrap();
+    let t = *sim.physics.truth();
+    // Steady state: φ_d = τ/k, ZMP_x = τ/(Mg) + M_u·l_u·sin φ_d / M.
+    let k = 0.026 * (std::f64::consts::TAU * 8.0).powi(2);
+    let phi = 0.5 / k;
+    let expect = 0.5 / (TOTAL_MASS * G) + 3.05 * 0.09 * phi.sin() / TOTAL_MASS;
+    assert!((t.zmp[0] - expect).abs() < 1e-4, "{} vs {expect}", t.zmp[0]);
+}
+
+#[test]
+fn forced_fall_tilts_imu_and_unloads_feet() {
+    let mut cfg = SimConfig::default();
+    cfg.fall.forced_at_s = Some(0.1);
+    let mut sim = Simulator::new(&cfg).unwrap();
+    sim.advance_to(3_000_000).unwrap();
+    let s = sim.summary();
+    assert!(s.fall_started_us.is_some() && s.fallen_at_us.is_some());
+    let d = sim.bus.device(200).unwrap();
+    let imu_s = ImuSample::from_bytes(d.read(imu::SAMPLE.addr, imu::SAMPLE.len).unwrap()).unwrap();
+    let a = imu_s.accel_m_s2();
+    // Lying on its front: gravity mostly along body x.
+    assert!(a[0].abs() > 8.0 && a[2].abs() < 2.0, "{a:?}");
+    let t = sim.physics.truth();
+    assert!(t.falling && t.forces.iter().flatten().all(|v| *v == 0.0));
+}
+
+#[test]
+fn truth_csv_is_written() {
+    let path = std::env::temp_dir().join(format!("walker-sim-truth-{}.csv", std::process::id()));
+    let cfg = SimConfig {
+        log_truth: Some(path.clone()),
+        log_every_us: 10_000,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulator::new(&cfg).unwrap();
+    sim.advance_to(1_000_000).unwrap();
+    let s = sim.summary();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let _ = std::fs::remove_file(&path);
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[0].starts_with("t_s,zmp_x,zmp_y"));
+    assert_eq!(lines.len() as u64, s.truth_rows + 1);
+    assert!((95..=101).contains(&s.truth_rows), "{}", s.truth_rows);
+    let cols = lines[0].split(',').count();
+    assert!(lines[1..].iter().all(|l| l.split(',').count() == cols));
+}
+
+fn ping(id: u8) -> Vec<u8> {
+    let mut buf = [0u8; 16];
+    let n = Instruction::Ping.encode(&mut buf, id).unwrap();
+    buf[..n].to_vec()
+}
+
+fn statuses(bytes: &[u8]) -> Vec<(u8, u8, Vec<u8>)> {
+    let mut dec = Decoder::<1024>::new();
+    let mut out = Vec::new();
+    for &b in bytes {
+        if let Some(Ok(p)) = dec.push(b) {
+            let s = Status::from_packet(&p).unwrap();
+            out.push((s.id, s.error.to_byte(), s.data.to_vec()));
+        }
+    }
+    out
+}
+
+#[test]
+fn fault_rates_and_dead_device() {
+    let cfg = SimConfig {
+        seed: 1234,
+        faults: FaultConfig {
+            p_drop: 0.1,
+            p_corrupt: 0.05,
+            dead_ids: vec![111],
+        },
+        ..SimConfig::default()
+    };
+    let mut sim = Simulator::new(&cfg).unwrap();
+    let clean = {
+        let mut s = Simulator::new(&SimConfig::default()).unwrap();
+        s.feed(&ping(1)).remove(0)
+    };
+    let (mut dropped, mut corrupted) = (0, 0);
+    let n = 10_000;
+    let p = ping(1);
+    for _ in 0..n {
+        let r = sim.feed(&p);
+        assert_eq!(r.len(), 1);
+        if r[0].is_empty() {
+            dropped += 1;
+        } else if r[0] != clean {
+            corrupted += 1;
+            assert_eq!(r[0].len(), clean.len());
+            assert_eq!(r[0].iter().zip(&clean).filter(|(a, b)| a != b).count(), 1);
+        }
+    }
+    // Binomial: 4 standard deviations.
+    let sd = |p: f64| 4.0 * (n as f64 * p * (1.0 - p)).sqrt();
+    assert!(
+        (dropped as f64 - 1000.0).abs() < sd(0.1),
+        "dropped {dropped}"
+    );
+    assert!(
+        (corrupted as f64 - 500.0).abs() < sd(0.05),
+        "corrupted {corrupted}"
+    );
+    assert_eq!(sim.bus.counters.dropped, dropped);
+    assert_eq!(sim.bus.counters.corrupted, corrupted);
+    // Dead left foot board.
+    let mut sim = Simulator::new(&SimConfig {
+        faults: FaultConfig {
+            dead_ids: vec![111],
+            ..FaultConfig::default()
+        },
+        ..SimConfig::default()
+    })
+    .unwrap();
+    assert_eq!(sim.feed(&ping(111)), vec![Vec::<u8>::new()]);
+    let mut buf = [0u8; 32];
+    let k = Instruction::SyncRead {
+        addr: foot::SAMPLE.addr,
+        len: foot::SAMPLE.len,
+        ids: &[111, 112],
+    }
+    .encode(&mut buf, BROADCAST_ID)
+    .unwrap();
+    let r = sim.feed(&buf[..k]);
+    let st = statuses(&r[0]);
+    assert_eq!(st.len(), 1);
+    assert_eq!(st[0].0, 112);
+}
+
+#[test]
+fn in_process_determinism() {
+    let run = |seed: u64| {
+        let mut cfg = SimConfig {
+            seed,
+            ..SimConfig::default()
+        };
+        cfg.faults.p_drop = 0.2;
+        cfg.faults.p_corrupt = 0.2;
+        cfg.noise.force_std_n = 0.5;
+        cfg.noise.gyro_std_rad_s = 0.01;
+        let mut sim = Simulator::new(&cfg).unwrap();
+        let mut out = Vec::new();
+        let mut buf = [0u8; 64];
+        for k in 0..200u64 {
+            sim.advance_to(k * 10_000).unwrap();
+            let n = encode_bulk_read(
+                &mut buf,
+                &[
+                    BulkReadRequest {
+                        id: 111,
+                        addr: foot::SAMPLE.addr,
+                        len: foot::SAMPLE.len,
+                    },
+                    BulkReadRequest {
+                        id: 200,
+                        addr: imu::SAMPLE.addr,
+                        len: imu::SAMPLE.len,
+                    },
+                ],
+            )
+            .unwrap();
+            for r in sim.feed(&buf[..n]) {
+                out.extend(r);
+            }
+        }
+        out
+    };
+    assert_eq!(run(5), run(5));
+    assert_ne!(run(5), run(6));
+}
+
+/// A master on the TCP bus plus the lock-step channel.
+struct Client {
+    bus: TcpStream,
+    ls: TcpStream,
+    log: Vec<u8>,
+}
+
+impl Client {
+    fn connect(cfg: SimConfig) -> (Client, walker_host::sim::SimHandle) {
+        let h = spawn(SimConfig {
+            port: 0,
+            lockstep_port: Some(0),
+            ..cfg
+        })
+        .unwrap();
+        let bus = TcpStream::connect(h.bus_addr()).unwrap();
+        let ls = TcpStream::connect(h.lockstep_addr().unwrap()).unwrap();
+        for s in [&bus, &ls] {
+            s.set_nodelay(true).unwrap();
+            s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        }
+        (
+            Client {
+                bus,
+                ls,
+                log: Vec::new(),
+            },
+            h,
+        )
+    }
+
+    fn time(&mut self, t_us: u64) {
+        let mut m = vec![0x5A];
+        m.extend_from_slice(&t_us.to_le_bytes());
+        self.ls.write_all(&m).unwrap();
+    }
+
+    /// Sends one instruction; returns the reply bytes announced on the lock-step channel.
+    fn send(&mut self, pkt: &[u8]) -> Vec<u8> {
+        self.bus.write_all(pkt).unwrap();
+        let mut ack = [0u8; 3];
+        self.ls.read_exact(&mut ack).unwrap();
+        assert_eq!(ack[0], 0xA5);
+        let n = usize::from(u16::from_le_bytes([ack[1], ack[2]]));
+        let mut reply = vec![0u8; n];
+        self.bus.read_exact(&mut reply).unwrap();
+        self.log.extend_from_slice(&ack);
+        self.log.extend_from_slice(&reply);
+        reply
+    }
+
+    fn read(&mut self, id: u8, addr: u16, len: u16) -> Vec<u8> {
+        let mut buf = [0u8; 32];
+        let n = Instruction::Read { addr, len }
+            .encode(&mut buf, id)
+            .unwrap();
+        let st = statuses(&self.send(&buf[..n]));
+        assert_eq!(st.len(), 1);
+        assert_eq!((st[0].0, st[0].1), (id, 0));
+        st[0].2.clone()
+    }
+}
+
+fn i32_of(b: &[u8]) -> i32 {
+    i32::from_le_bytes([b[0], b[1], b[2], b[3]])
+}
+
+#[test]
+fn tcp_bus_conversation_with_lockstep() {
+    let (mut c, h) = Client::connect(SimConfig::default());
+    c.time(0);
+    // PING every device.
+    let expect: Vec<(u8, u16)> = (1..=12)
+        .map(|id| (id, x_series::MODEL_XM430_W350))
+        .chain([
+            (111, foot::MODEL_NUMBER_VALUE),
+            (112, foot::MODEL_NUMBER_VALUE),
+            (200, imu::MODEL_NUMBER_VALUE),
+        ])
+        .collect();
+    for &(id, model) in &expect {
+        let st = statuses(&c.send(&ping(id)));
+        assert_eq!(st.len(), 1);
+        assert_eq!(st[0].0, id);
+        assert_eq!(u16::from_le_bytes([st[0].2[0], st[0].2[1]]), model);
+    }
+    // Nobody at ID 50: zero bytes.
+    assert!(c.send(&ping(50)).is_empty());
+    // Broadcast PING: everyone, in ID order.
+    let st = statuses(&c.send(&ping(BROADCAST_ID)));
+    assert_eq!(
+        st.iter().map(|s| s.0).collect::<Vec<_>>(),
+        expect.iter().map(|e| e.0).collect::<Vec<_>>()
+    );
+    // WRITE Return Delay Time, READ it back.
+    let mut buf = [0u8; 256];
+    let n = Instruction::Write {
+        addr: x_series::RETURN_DELAY_TIME.addr,
+        data: &[5],
+    }
+    .encode(&mut buf, 3)
+    .unwrap();
+    let st = statuses(&c.send(&buf[..n]));
+    assert_eq!((st[0].0, st[0].1), (3, 0));
+    assert_eq!(c.read(3, x_series::RETURN_DELAY_TIME.addr, 1), vec![5]);
+    // Torque on for every servo (broadcast SYNC WRITE: no reply, ack 0).
+    let on: Vec<(u8, &[u8])> = (1..=12u8).map(|id| (id, &[1u8][..])).collect();
+    let n = encode_sync_write(&mut buf, x_series::TORQUE_ENABLE.addr, 1, &on).unwrap();
+    assert!(c.send(&buf[..n]).is_empty());
+    // Goal: left hip yaw (ID 1) +100 ticks.
+    let goal = (2048 + 100i32).to_le_bytes();
+    let n =
+        encode_sync_write(&mut buf, x_series::GOAL_POSITION.addr, 4, &[(1, &goal[..])]).unwrap();
+    assert!(c.send(&buf[..n]).is_empty());
+    // 10 ms later: moved, by at most 4.8 rad/s · 10 ms = 31.3 ticks.
+    c.time(10_000);
+    let p = i32_of(&c.read(1, x_series::PRESENT_POSITION.addr, 4));
+    assert!(p > 2048 && p <= 2048 + 32, "present {p}");
+    let v = i32_of(&c.read(1, x_series::PRESENT_VELOCITY.addr, 4));
+    assert!(
+        v > 0 && f64::from(v) * 0.229 * std::f64::consts::TAU / 60.0 <= 4.8 + 0.03,
+        "velocity {v}"
+    );
+    // Time does not run without the lock-step channel saying so.
+    assert_eq!(i32_of(&c.read(1, x_series::PRESENT_POSITION.addr, 4)), p);
+    c.time(300_000);
+    let p = i32_of(&c.read(1, x_series::PRESENT_POSITION.addr, 4));
+    assert!((p - 2148).abs() <= 1, "present {p}");
+    // SYNC READ of all twelve present positions: 12 status packets, counted exactly.
+    let ids: Vec<u8> = (1..=12).collect();
+    let n = Instruction::SyncRead {
+        addr: x_series::PRESENT_POSITION.addr,
+        len: 4,
+        ids: &ids,
+    }
+    .encode(&mut buf, BROADCAST_ID)
+    .unwrap();
+    let r = c.send(&buf[..n]);
+    let st = statuses(&r);
+    assert_eq!(st.len(), 12);
+    assert_eq!(r.len(), 12 * 15);
+    // BULK READ the sensors.
+    let n = encode_bulk_read(
+        &mut buf,
+        &[
+            BulkReadRequest {
+                id: 111,
+                addr: foot::SAMPLE.addr,
+                len: foot::SAMPLE.len,
+            },
+            BulkReadRequest {
+                id: 112,
+                addr: foot::SAMPLE.addr,
+                len: foot::SAMPLE.len,
+            },
+            BulkReadRequest {
+                id: 200,
+                addr: imu::SAMPLE.addr,
+                len: imu::SAMPLE.len,
+            },
+        ],
+    )
+    .unwrap();
+    let st = statuses(&c.send(&buf[..n]));
+    assert_eq!(
+        st.iter().map(|s| s.0).collect::<Vec<_>>(),
+        vec![111, 112, 200]
+    );
+    let total: f32 = st[..2]
+        .iter()
+        .map(|s| FootForces::from_bytes(&s.2).unwrap().total_n())
+        .sum();
+    assert!(
+        (f64::from(total) - TOTAL_MASS * G).abs() < 0.05,
+        "total {total}"
+    );
+    // FAST SYNC READ: one combined packet.
+    let n = Instruction::FastSyncRead {
+        addr: x_series::PRESENT_POSITION.addr,
+        len: 4,
+        ids: &[1, 2, 3],
+    }
+    .encode(&mut buf, BROADCAST_ID)
+    .unwrap();
+    let r = c.send(&buf[..n]);
+    let mut dec = Decoder::<256>::new();
+    dec.set_stuffing(false);
+    let (_, ev) = dec.feed(&r);
+    let pkt = ev.unwrap().unwrap();
+    let parts: Vec<_> = dxl::FastSyncParts::parse(&pkt, 4).unwrap().collect();
+    assert_eq!(
+        parts.iter().map(|p| p.id).collect::<Vec<_>>(),
+        vec![1, 2, 3]
+    );
+    assert!((i32_of(parts[0].data) - 2148).abs() <= 1);
+    // An unknown instruction gets the Instruction error.
+    let n = dxl::encode(&mut buf, 2, 0x40, &[]).unwrap();
+    let st = statuses(&c.send(&buf[..n]));
+    assert_eq!(st[0].1, 2);
+    // A status packet on the bus is not an instruction: no ack; the next PING is acked normally.
+    let n = dxl::instruction::encode_status(&mut buf, 1, dxl::StatusError::OK, &[]).unwrap();
+    assert_eq!(buf[7], opcode::STATUS);
+    c.bus.write_all(&buf[..n]).unwrap();
+    assert_eq!(statuses(&c.send(&ping(7))).len(), 1);
+    // A bad CRC: no reply, announced as 0 bytes.
+    let mut bad = ping(7);
+    let last = bad.len() - 1;
+    bad[last] ^= 0x55;
+    assert!(c.send(&bad).is_empty());
+    // Nothing beyond the announced bytes was written.
+    c.bus
+        .set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let mut extra = [0u8; 1];
+    assert!(c.bus.read(&mut extra).is_err());
+    drop(c);
+    let s = h.join().unwrap();
+    assert_eq!(s.sim_time_us, 300_000);
+    assert_eq!(s.lockstep_messages, 3);
+    assert_eq!(s.lockstep_errors, 0);
+}
+
+fn tcp_session(seed: u64) -> Vec<u8> {
+    let mut cfg = SimConfig {
+        seed,
+        ..SimConfig::default()
+    };
+    cfg.faults.p_drop = 0.1;
+    cfg.faults.p_corrupt = 0.1;
+    cfg.noise.force_std_n = 0.2;
+    cfg.noise.accel_std_m_s2 = 0.05;
+    let (mut c, h) = Client::connect(cfg);
+    let mut buf = [0u8; 128];
+    let on: Vec<(u8, &[u8])> = (1..=12u8).map(|id| (id, &[1u8][..])).collect();
+    c.time(0);
+    let n = encode_sync_write(&mut buf, x_series::TORQUE_ENABLE.addr, 1, &on).unwrap();
+    c.send(&buf[..n]);
+    for k in 1..=100u64 {
+        c.time(k * 10_000);
+        let g = (2048 + (k as i32 % 20) * 5).to_le_bytes();
+        let n = encode_sync_write(
+            &mut buf,
+            x_series::GOAL_POSITION.addr,
+            4,
+            &[(3, &g[..]), (9, &g[..])],
+        )
+        .unwrap();
+        c.send(&buf[..n]);
+        c.time(k * 10_000 + 300);
+        let n = encode_bulk_read(
+            &mut buf,
+            &[
+                BulkReadRequest {
+                    id: 3,
+                    addr: x_series::PRESENT_POSITION.addr,
+                    len: 4,
+                },
+                BulkReadRequest {
+                    id: 111,
+                    addr: foot::SAMPLE.addr,
+                    len: foot::SAMPLE.len,
+                },
+                BulkReadRequest {
+                    id: 200,
+                    addr: imu::SAMPLE.addr,
+                    len: imu::SAMPLE.len,
+                },
+            ],
+        )
+        .unwrap();
+        c.send(&buf[..n]);
+    }
+    let log = std::mem::take(&mut c.log);
+    drop(c);
+    h.join().unwrap();
+    log
+}
+
+#[test]
+fn tcp_runs_are_deterministic() {
+    let a = tcp_session(99);
+    let b = tcp_session(99);
+    assert!(a.len() > 1000);
+    assert_eq!(a, b);
+    assert_ne!(a, tcp_session(100));
+}
+
+/// Writes goal angles (rad) of all 12 joints with one SYNC WRITE (torque assumed on).
+fn set_goals(sim: &mut Simulator, q: &[f64; 12]) {
+    let data: Vec<[u8; 4]> = q
+        .iter()
+        .map(|&a| walker_host::sim::rad_to_ticks(a).to_le_bytes())
+        .collect();
+    let entries: Vec<(u8, &[u8])> = (0..12).map(|j| (j as u8 + 1, &data[j][..])).collect();
+    let mut buf = [0u8; 128];
+    let n = encode_sync_write(&mut buf, x_series::GOAL_POSITION.addr, 4, &entries).unwrap();
+    assert_eq!(sim.feed(&buf[..n]), vec![Vec::<u8>::new()]);
+}
+
+fn torque_on(sim: &mut Simulator) {
+    let on: Vec<(u8, &[u8])> = (1..=12u8).map(|id| (id, &[1u8][..])).collect();
+    let mut buf = [0u8; 64];
+    let n = encode_sync_write(&mut buf, x_series::TORQUE_ENABLE.addr, 1, &on).unwrap();
+    sim.feed(&buf[..n]);
+}
+
+#[test]
+fn lateral_sway_zmp_follows_cart_table() {
+    // Parallelogram sway: hip roll θ, ankle roll −θ on both legs: the pelvis stays upright and
+    // moves sideways by ≈ 0.2·sin θ. Cart-table check: ZMP_y ≈ y_com − (z/g)·ÿ_com.
+    // Goals every 10 ms: the acceleration window must be a multiple of that period.
+    let cfg = SimConfig {
+        accel_window_us: 10_000,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulator::new(&cfg).unwrap();
+    torque_on(&mut sim);
+    let mut rows = Vec::new();
+    for k in 0..2000u64 {
+        let t = k as f64 * 1e-3;
+        if k % 10 == 0 {
+            let th = 0.1 * (std::f64::consts::TAU * 1.5 * t).sin();
+            let mut q = [0.0; 12];
+            q[1] = th;
+            q[5] = -th;
+            q[7] = th;
+            q[11] = -th;
+            set_goals(&mut sim, &q);
+        }
+        sim.advance_to((k + 1) * 1000).unwrap();
+        let tr = *sim.physics.truth();
+        rows.push((tr.zmp[1], tr.com[1], tr.com[2], tr.support, tr.pelvis_rpy));
+        if (560..600).contains(&k) {
+            eprintln!(
+                "k {k} t {} py {:.6} pz {:.6} stance {} zmp {:.4} fz {:.3}",
+                tr.t_us, tr.pelvis[1], tr.pelvis[2], tr.stance_left, tr.zmp[1], tr.fz
+            );
+        }
+    }
+    assert!(rows.iter().all(|r| r.3 == Support::Double));
+    assert!(rows.iter().all(|r| r.4[0].abs() < 1e-6));
+    let amp = rows.iter().map(|r| r.1.abs()).fold(0.0, f64::max);
+    assert!(amp > 0.012 && amp < 0.025, "CoM sway amplitude {amp}");
+    // Compare over the steady part with 10 ms central differences of the CoM.
+    let (mut err2, mut dev2) = (0.0, 0.0);
+    for i in 500..1990 {
+        let acc = (rows[i + 10].1 - 2.0 * rows[i].1 + rows[i - 10].1) / 1e-4;
+        let pred = rows[i].1 - rows[i].2 / G * acc;
+        err2 += (rows[i].0 - pred).powi(2);
+        dev2 += (rows[i].0 - rows[i].1).powi(2);
+    }
+    let rel = (err2 / dev2).sqrt();
+    assert!(rel < 0.35, "relative error {rel}");
+    assert!(
+        dev2.sqrt() / 1490f64.sqrt() > 0.002,
+        "the dynamics must matter"
+    );
+}
+
+#[test]
+fn stepping_switches_support_without_jumps() {
+    // Shift the weight over the right foot, lift the left foot, put it down, shift back.
+    let mut cfg = SimConfig::default();
+    cfg.fall.enabled = false;
+    let mut sim = Simulator::new(&cfg).unwrap();
+    torque_on(&mut sim);
+    let mut supports = Vec::new();
+    let mut last_pelvis: Option<[f64; 3]> = None;
+    let mut max_jump: f64 = 0.0;
+    for k in 0..3000u64 {
+        let t = k as f64 * 1e-3;
+        if k % 10 == 0 {
+            // Sway right (negative roll shifts the pelvis right), then lift the left leg.
+            let th = -0.2 * (std::f64::consts::PI * (t / 3.0)).sin().powi(2);
+            let lift = 0.3 * (std::f64::consts::PI * ((t - 1.0) / 1.0).clamp(0.0, 1.0)).sin();
+            let mut q = [0.0; 12];
+            q[1] = th;
+            q[5] = -th;
+            q[7] = th;
+            q[11] = -th;
+            q[2] = -lift;
+            q[3] = 2.0 * lift;
+            q[4] = -lift;
+            set_goals(&mut sim, &q);
+        }
+        sim.advance_to((k + 1) * 1000).unwrap();
+        let tr = *sim.physics.truth();
+        if let Some(p) = last_pelvis {
+            let d = ((tr.pelvis[0] - p[0]).powi(2)
+                + (tr.pelvis[1] - p[1]).powi(2)
+                + (tr.pelvis[2] - p[2]).powi(2))
+            .sqrt();
+            max_jump = max_jump.max(d);
+        }
+        last_pelvis = Some(tr.pelvis);
+        if supports.last() != Some(&tr.support) {
+            supports.push(tr.support);
+        }
+    }
+    assert_eq!(
+        supports,
+        vec![Support::Double, Support::Right, Support::Double],
+        "{supports:?}"
+    );
+    // 1 ms steps, speeds below 1 m/s: no teleporting at the switches.
+    assert!(max_jump < 1e-3, "pelvis jump {max_jump}");
+}
+
+#[test]
+fn zmp_outside_support_starts_a_fall() {
+    // Lift the left leg without shifting the weight: the CoM is outside the right sole.
+    let mut sim = Simulator::new(&SimConfig::default()).unwrap();
+    torque_on(&mut sim);
+    let mut q = [0.0; 12];
+    q[2] = -0.4;
+    q[3] = 0.8;
+    q[4] = -0.4;
+    set_goals(&mut sim, &q);
+    sim.advance_to(150_000).unwrap();
+    let t = *sim.physics.truth();
+    assert_eq!(t.support, Support::Right);
+    sim.advance_to(2_000_000).unwrap();
+    let s = sim.summary();
+    let start = s.fall_started_us.expect("a fall");
+    assert!(start < 300_000, "fall at {start}");
+    assert!(s.fallen_at_us.is_some());
+    // Falls to the left (the unsupported side): body y axis tips toward gravity.
+    let d = sim.bus.device(200).unwrap();
+    let imu_s = ImuSample::from_bytes(d.read(imu::SAMPLE.addr, imu::SAMPLE.len).unwrap()).unwrap();
+    assert!(imu_s.accel_m_s2()[1] < -8.0, "{:?}", imu_s.accel_m_s2());
+}
