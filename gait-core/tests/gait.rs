@@ -535,6 +535,25 @@ fn every_error_variant_is_reported() {
     );
 }
 
+/// A plan from random (forward, width, turn) steps relative to the support foot, alternating
+/// feet; steps the plan refuses (out of reach) are skipped.
+fn random_plan(robot: &Robot, pp: GaitParams<f64>, steps: &[(f64, f64, f64)]) -> Plan<f64, CAP> {
+    let start = (Place::new(0.0, 0.045, 0.0), Place::new(0.0, -0.045, 0.0));
+    let mut plan = Plan::<f64, CAP>::new(robot, pp, start.0, start.1).unwrap();
+    let mut side = Side::Left;
+    for &(fwd, width, turn) in steps {
+        let sup = plan.end_feet()[side.other().index()];
+        let yaw = sup.yaw + turn;
+        let (s, c) = yaw.sin_cos();
+        let lat = side.sign() * width;
+        let to = Place::new(sup.x + c * fwd - s * lat, sup.y + s * fwd + c * lat, yaw);
+        if plan.push(Footstep { side, place: to }).is_ok() {
+            side = side.other();
+        }
+    }
+    plan
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
     /// Random plans: forward/backward, sideways and turning steps with random timing.
@@ -552,17 +571,7 @@ proptest! {
             pp.zmp = ZmpShape::Continuous { b: 0.01 };
             pp.swing = SwingShape::Sinusoid { height: 0.02 };
         }
-        let mut plan = Plan::<f64, CAP>::new(&robot, pp, Place::new(0.0, 0.045, 0.0), Place::new(0.0, -0.045, 0.0)).unwrap();
-        let mut side = Side::Left;
-        for (fwd, width, turn) in steps {
-            let sup = plan.end_feet()[side.other().index()];
-            let yaw = sup.yaw + turn;
-            let (s, c) = yaw.sin_cos();
-            let lat = side.sign() * width;
-            let to = Place::new(sup.x + c * fwd - s * lat, sup.y + s * fwd + c * lat, yaw);
-            let step = Footstep { side, place: to };
-            if plan.push(step).is_ok() { side = side.other(); }
-        }
+        let plan = random_plan(&robot, pp, &steps);
         let s = Sampler::new(plan.clone(), 0.005).unwrap();
         let r = ode_residual(s.clone(), 1e-4);
         prop_assert!(r <= 1e-6, "residual {}", r);
@@ -678,16 +687,7 @@ proptest! {
         if continuous {
             pp.zmp = ZmpShape::Continuous { b: 0.01 };
         }
-        let mut plan = Plan::<f64, CAP>::new(&robot, pp, Place::new(0.0, 0.045, 0.0), Place::new(0.0, -0.045, 0.0)).unwrap();
-        let mut side = Side::Left;
-        for (fwd, width, turn) in steps {
-            let sup = plan.end_feet()[side.other().index()];
-            let yaw = sup.yaw + turn;
-            let (s, c) = yaw.sin_cos();
-            let lat = side.sign() * width;
-            let to = Place::new(sup.x + c * fwd - s * lat, sup.y + s * fwd + c * lat, yaw);
-            if plan.push(Footstep { side, place: to }).is_ok() { side = side.other(); }
-        }
+        let plan = random_plan(&robot, pp, &steps);
         let samples = run(Sampler::new(plan, 0.005).unwrap());
         let m = zmp_margin_min(&samples, &robot);
         prop_assert!(m >= 0.0, "ZMP left the support polygon by {}", -m);
