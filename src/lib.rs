@@ -9,7 +9,13 @@
 //! * [`board`]: the traits a board provides (servo bus, clock, tick, log sink, watchdog, exit);
 //! * [`log`]: the ZMP-response log records, their framing and the streaming decoder;
 //! * [`imu`]: φ̈ and τ = J·φ̈ from the gyro, tilt from the accelerometer;
-//! * [`supervisor`]: last-good hold, fall/overrun/device-loss stop sequence, target filter.
+//! * [`supervisor`]: last-good hold, fall/overrun/device-loss stop sequence, target filter;
+//! * [`bus`]: the Dynamixel master (`dxl`) over a board's servo bus and clock;
+//! * [`startup`]: bus probe, Return Delay Time, present pose, torque on, smooth move to the
+//!   initial pose;
+//! * [`control`]: the walking loop (sensors → supervisor → gait → IK → servos → log) and the
+//!   exit codes;
+//! * [`params`]: `key=value` overrides of [`Config`] (the QEMU command line).
 #![cfg_attr(not(test), no_std)]
 #![warn(missing_docs)]
 
@@ -37,9 +43,16 @@ macro_rules! fw_log {
 }
 
 pub mod board;
+pub mod bus;
+pub mod control;
 pub mod imu;
 pub mod log;
+pub mod params;
+pub mod startup;
 pub mod supervisor;
+
+#[cfg(test)]
+mod testkit;
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 pub mod boards;
@@ -69,28 +82,62 @@ const fn parse_u8(s: &str) -> u8 {
     }
 }
 
-/// Run-time configuration shared by the boards and the control loop.
+/// Run-time configuration shared by the boards and the control loop. On QEMU every field
+/// named in [`params::KEYS`] can be overridden from the semihosting command line; on the real
+/// board the configuration is compiled in.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
-    /// Control tick period, µs.
+    /// Control tick period = gait sample time dt, µs (1000 ..= 20000).
     pub tick_period_us: u32,
     /// Servo bus baud rate, bit/s.
     pub bus_baud: u32,
     /// Servo Return Delay Time, µs (modelled by the QEMU board's clock).
     pub return_delay_us: u32,
-    /// Watchdog timeout once walking, ms.
+    /// Watchdog timeout once the control loop runs, ms.
     pub watchdog_ms: u32,
     /// Supervisor limits.
     pub supervisor: supervisor::SupervisorConfig,
     /// Low-pass cutoff of the φ̈ filter, Hz.
     pub imu_cutoff_hz: f32,
+    /// Pendulum model of the gait.
+    pub model: gait_core::ModelKind,
+    /// The forward walk (seed 000 Table 2 by default).
+    pub walk: gait_core::ForwardWalk,
+    /// Use seed 001's continuous ZMP instead of the natural ZMP (d1, d2, a).
+    pub zmp_continuous: bool,
+    /// Half travel b of the continuous ZMP, m (`None`: the walk's `a`).
+    pub zmp_b: Option<f64>,
+    /// Use seed 001's sinusoid swing (height h_z) instead of the cycloid (h_z, w_y).
+    pub swing_sinusoid: bool,
+    /// Reply timeout of the Dynamixel master, µs (per expected status packet).
+    pub reply_timeout_us: u32,
+    /// Longest single wait for one reply byte, µs (see [`bus`]).
+    pub read_poll_us: u32,
+    /// Attempts per start-up transaction (ping, Return Delay Time, positions, torque).
+    pub startup_attempts: u8,
+    /// Duration of the smooth move from the present pose to the initial pose, µs.
+    pub ramp_us: u32,
+    /// Time the final pose is held after the plan before torque off, µs.
+    pub final_hold_us: u32,
+    /// Smallest load of a foot that counts for the measured ZMP, N.
+    pub min_load_n: f32,
+    /// A foot board missing at start-up stops the robot (`true`) or is tolerated (`false`:
+    /// the walk runs with the other foot's forces only; see [`control`]).
+    pub feet_required: bool,
+    /// Modelled compute time per tick on the QEMU board, µs (ignored by real boards).
+    pub compute_us: u32,
+    /// Fault injection: replace joint 0's target by NaN at this walk tick.
+    pub fault_nan_tick: Option<u32>,
+    /// Fault injection: request a stop at this walk tick.
+    pub stop_at_tick: Option<u32>,
 }
 
 impl Config {
-    /// Defaults: 1 kHz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog.
+    /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
+    /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load.
     pub const fn default_config() -> Self {
         Config {
-            tick_period_us: 1_000,
+            tick_period_us: 5_000,
             bus_baud: 1_000_000,
             return_delay_us: 0,
             watchdog_ms: 50,
@@ -101,7 +148,32 @@ impl Config {
                 overrun_burst: 5,
             },
             imu_cutoff_hz: imu::DEFAULT_CUTOFF_HZ,
+            model: gait_core::ModelKind::Tlipfm,
+            walk: gait_core::ForwardWalk::table2(),
+            zmp_continuous: false,
+            zmp_b: None,
+            swing_sinusoid: false,
+            reply_timeout_us: 1_000,
+            read_poll_us: bus::DEFAULT_READ_POLL_US,
+            startup_attempts: 3,
+            ramp_us: 1_500_000,
+            final_hold_us: 1_000_000,
+            min_load_n: 2.0,
+            feet_required: true,
+            compute_us: 150,
+            fault_nan_tick: None,
+            stop_at_tick: None,
         }
+    }
+
+    /// The tick period in seconds (the gait's dt).
+    pub fn dt_s(&self) -> f64 {
+        f64::from(self.tick_period_us) * 1e-6
+    }
+
+    /// Number of whole ticks covering `us` microseconds (at least 1).
+    pub fn ticks_for_us(&self, us: u32) -> u32 {
+        us.div_ceil(self.tick_period_us.max(1)).max(1)
     }
 }
 

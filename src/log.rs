@@ -166,6 +166,13 @@ pub enum FaultKind {
     TargetClamped,
     /// A non-finite IMU sample was replaced by the last good one (`value` = count).
     ImuNonFinite,
+    /// A run-time parameter was rejected before start-up (`id` = key index in
+    /// `params::KEYS`, 0xFF unknown key, 0xFE plan rejected by gait-core; `value` = token
+    /// position, or the `GaitError` discriminant for 0xFE).
+    ConfigRejected,
+    /// A start-up step failed after the probe (`id` = device, `value` = step code of
+    /// `startup::StartupStep`).
+    StartupFailed,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -178,6 +185,8 @@ impl FaultKind {
             Self::DeviceRecovered => 2,
             Self::TargetClamped => 3,
             Self::ImuNonFinite => 4,
+            Self::ConfigRejected => 5,
+            Self::StartupFailed => 6,
             Self::Other(c) => c,
         }
     }
@@ -188,6 +197,8 @@ impl FaultKind {
             2 => Self::DeviceRecovered,
             3 => Self::TargetClamped,
             4 => Self::ImuNonFinite,
+            5 => Self::ConfigRejected,
+            6 => Self::StartupFailed,
             c => Self::Other(c),
         }
     }

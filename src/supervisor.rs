@@ -240,6 +240,22 @@ impl<const N: usize> Supervisor<N> {
         }
     }
 
+    /// Starts the stop sequence holding the pose for `hold_ticks` ticks instead of the
+    /// configured [`SupervisorConfig::stopping_ticks`] (e.g. the final hold after the plan).
+    /// The first reason wins, as with [`Supervisor::stop`].
+    pub fn stop_with_hold(&mut self, reason: StopReason, hold_ticks: u16) {
+        if self.state == State::Running {
+            self.state = if hold_ticks == 0 {
+                State::TorqueOff { reason }
+            } else {
+                State::Stopping {
+                    reason,
+                    ticks_left: hold_ticks,
+                }
+            };
+        }
+    }
+
     /// Reports whether device `id` answered this tick.
     pub fn report(&mut self, id: u8, answered: bool) -> Freshness {
         let Some(pos) = self.ids.iter().position(|&d| d == id) else {
@@ -361,6 +377,21 @@ impl JointMap {
             tick_min: 0,
             tick_max: robot.servo.ticks_per_turn as i32 - 1,
         }
+    }
+
+    /// Joint angle (rad) of joint `j` at servo tick `tick` (inverse of the tick mapping,
+    /// without clamping).
+    pub fn rad_of_tick(&self, j: usize, tick: i32) -> f32 {
+        let sign = self
+            .sign
+            .get(j)
+            .map_or(1.0, |&s| if s < 0 { -1.0 } else { 1.0 });
+        let tpr = if self.ticks_per_rad.is_finite() && self.ticks_per_rad != 0.0 {
+            self.ticks_per_rad
+        } else {
+            1.0
+        };
+        sign * (tick.saturating_sub(self.zero_tick)) as f32 / tpr
     }
 
     /// Tick of joint `j` at `rad` (clamped to the joint and servo limits; `rad` must be finite).
@@ -578,6 +609,31 @@ mod tests {
             }
         );
         assert_eq!(s.step(), Action::SendTorqueOff);
+    }
+
+    #[test]
+    fn stop_with_hold_uses_its_own_hold() {
+        let mut s = sup();
+        s.stop_with_hold(StopReason::PlanDone, 2);
+        assert_eq!(s.step(), Action::HoldPose);
+        assert_eq!(s.step(), Action::HoldPose);
+        assert_eq!(s.step(), Action::SendTorqueOff);
+        // The first reason wins.
+        s.stop(StopReason::Requested);
+        assert_eq!(s.stop_reason(), Some(StopReason::PlanDone));
+        let mut z = sup();
+        z.stop_with_hold(StopReason::PlanDone, 0);
+        assert_eq!(z.step(), Action::SendTorqueOff);
+    }
+
+    #[test]
+    fn rad_of_tick_inverts_tick() {
+        let mut m = map();
+        m.sign[4] = -1;
+        for j in 0..12 {
+            let (t, _) = m.tick(j, 0.3);
+            assert!((m.rad_of_tick(j, t) - 0.3).abs() < 1e-3, "{j}");
+        }
     }
 
     #[test]

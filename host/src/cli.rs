@@ -233,7 +233,12 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
     Subcommand {
         name: "fil",
         summary: "firmware-in-the-loop: the firmware in QEMU against the simulated robot",
-        usage: "walker fil [options of the runner]",
+        usage: "walker fil [--plan plans/table2.toml] [--model lipm|dlipm|tlipfm] [--out out/fil]\n\
+                [--elf target/thumbv7em-none-eabihf/release/qemu] [--machine mps2-an500|mps2-an386]\n\
+                [--seed N] [--p-drop P] [--p-corrupt P] [--dead ID,ID] [--fall-at S]\n\
+                [--tau-constant NM] [--tau-random NM] [--firmware-args 'k=v ...'] [--timeout S]\n\
+         Runs the firmware ELF in QEMU in lock-step with the simulated robot, captures its log\n\
+         to OUT/walk.log and writes the report to OUT/report. Exit code 3: the firmware failed.",
         run: run_fil,
     },
 ];
@@ -297,6 +302,18 @@ fn plan_arg(a: &mut Args) -> Result<(WalkSpec, String), CliError> {
     }
 }
 
+/// The `--model` value of subcommand `cmd`.
+fn model_name(cmd: &str, m: &str) -> Result<planfile::ModelName, CliError> {
+    match m {
+        "lipm" => Ok(planfile::ModelName::Lipm),
+        "dlipm" => Ok(planfile::ModelName::Dlipm),
+        "tlipfm" => Ok(planfile::ModelName::Tlipfm),
+        other => Err(CliError::usage(format!(
+            "walker {cmd}: --model {other:?}: expected lipm, dlipm or tlipfm"
+        ))),
+    }
+}
+
 fn create_parent(p: &Path) -> Result<(), CliError> {
     if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(d)
@@ -357,16 +374,7 @@ fn run_report(a: &mut Args) -> Result<(), CliError> {
     let (mut spec, plan_name) = plan_arg(a)?;
     a.finish()?;
     if let Some(m) = model {
-        spec.model = match m.as_str() {
-            "lipm" => planfile::ModelName::Lipm,
-            "dlipm" => planfile::ModelName::Dlipm,
-            "tlipfm" => planfile::ModelName::Tlipfm,
-            other => {
-                return Err(CliError::usage(format!(
-                    "walker report: --model {other:?}: expected lipm, dlipm or tlipfm"
-                )))
-            }
-        };
+        spec.model = model_name("report", &m)?;
     }
     if !log.exists() {
         return Err(CliError::failed(format!(
@@ -584,8 +592,114 @@ fn run_simulate(a: &mut Args) -> Result<(), CliError> {
 }
 
 fn run_fil(a: &mut Args) -> Result<(), CliError> {
-    let _rest = a.rest();
-    Err(CliError::failed(
-        "walker fil: the firmware-in-the-loop runner is not wired into the CLI yet",
-    ))
+    let elf = PathBuf::from(
+        a.value("--elf")?
+            .unwrap_or_else(|| "target/thumbv7em-none-eabihf/release/qemu".into()),
+    );
+    let model = a.value("--model")?;
+    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/fil".into()));
+    let seed: Option<u64> = a.parsed("--seed")?;
+    let p_drop: Option<f64> = a.parsed("--p-drop")?;
+    let p_corrupt: Option<f64> = a.parsed("--p-corrupt")?;
+    let dead = a.value("--dead")?;
+    let fall_at: Option<f64> = a.parsed("--fall-at")?;
+    let tau_const: Option<f64> = a.parsed("--tau-constant")?;
+    let tau_random: Option<f64> = a.parsed("--tau-random")?;
+    let machine = a.value("--machine")?.unwrap_or_else(|| "mps2-an500".into());
+    let timeout: Option<f64> = a.parsed("--timeout")?;
+    let tokens = a.value("--firmware-args")?;
+    let (mut spec, plan_name) = plan_arg(a)?;
+    a.finish()?;
+    if let Some(m) = model {
+        spec.model = model_name("fil", &m)?;
+    }
+    let mut sim = crate::sim::SimConfig::default();
+    if let Some(s) = seed {
+        sim.seed = s;
+    }
+    for (name, p) in [("--p-drop", p_drop), ("--p-corrupt", p_corrupt)] {
+        if let Some(v) = p {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(CliError::usage(format!(
+                    "walker fil: {name} must be within 0..=1 (got {v})"
+                )));
+            }
+        }
+    }
+    sim.faults.p_drop = p_drop.unwrap_or(0.0);
+    sim.faults.p_corrupt = p_corrupt.unwrap_or(0.0);
+    if let Some(d) = dead {
+        for id in d.split(',').filter(|s| !s.is_empty()) {
+            let id: u8 = id.trim().parse().map_err(|_| {
+                CliError::usage(format!("walker fil: --dead: bad device id {id:?}"))
+            })?;
+            sim.faults.dead_ids.push(id);
+        }
+    }
+    sim.fall.forced_at_s = fall_at;
+    if let Some(t) = tau_const {
+        sim.disturbance.constant_nm = t;
+    }
+    if let Some(t) = tau_random {
+        sim.disturbance.random_std_nm = t;
+    }
+    let opts = crate::fil::FilOptions {
+        elf,
+        spec: spec.clone(),
+        out_dir: out.clone(),
+        machine,
+        timeout: std::time::Duration::from_secs_f64(timeout.unwrap_or(1800.0)),
+        sim,
+        extra_tokens: tokens
+            .map(|t| t.split_whitespace().map(String::from).collect())
+            .unwrap_or_default(),
+    };
+    eprintln!(
+        "walker fil: {} ({:?}) in QEMU {} against the simulated robot",
+        plan_name, spec.model, opts.machine
+    );
+    let last = std::cell::Cell::new(-1.0f64);
+    let r = crate::fil::run(&opts, |t, n| {
+        if t - last.get() >= 0.5 {
+            eprint!("\r  simulated time {t:6.2} s, {n} bus instructions");
+            last.set(t);
+        }
+    })?;
+    eprintln!();
+    eprintln!("  {}", crate::fil::summary_line(&r.sim));
+    eprintln!("  wall clock {:.1} s", r.wall.as_secs_f64());
+    let ropts = report::ReportOptions {
+        log: r.log.clone(),
+        out_dir: out.join("report"),
+        truth: Some(r.truth.clone()),
+        spec,
+        plan_name,
+    };
+    let rep = report::run(&ropts, &Robot::reference())?;
+    println!(
+        "{}: {} good records ({} ticks, {} events), {} bad",
+        r.log.display(),
+        rep.log.good(),
+        rep.log.ticks.len(),
+        rep.log.events.len(),
+        rep.log.bad()
+    );
+    for ev in &rep.log.events {
+        let (_, t, kind, text) = report::event_text(ev);
+        println!("  event at {:.3} s: {kind} {text}", t as f64 * 1e-6);
+    }
+    println!("\nZMP tracking error, measured − reference (seed 000 Table 3):\n");
+    print!("{}", report::stats_table(&rep.stats));
+    if let Some(ts) = &rep.truth_stats {
+        println!("\nmeasured − true (simulator) ZMP:\n");
+        print!("{}", report::stats_table(ts));
+    }
+    println!("\nreport: {}", out.join("report").display());
+    match r.exit_code {
+        Some(0) => Ok(()),
+        code => Err(CliError {
+            message: format!("the firmware exited with code {code:?}"),
+            code: 3,
+        }),
+    }
 }

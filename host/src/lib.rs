@@ -3,6 +3,7 @@
 pub mod capture;
 pub mod cli;
 pub mod export;
+pub mod fil;
 pub mod planfile;
 pub mod plot;
 pub mod report;

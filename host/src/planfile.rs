@@ -55,7 +55,7 @@ pub type HostPlan = Plan<f64, PLAN_CAPACITY>;
 /// The sampler type used by the host tools.
 pub type HostSampler = Sampler<f64, PLAN_CAPACITY>;
 /// Default sample time, s (the firmware's 1 kHz tick).
-pub const DEFAULT_DT: f64 = 0.001;
+pub const DEFAULT_DT: f64 = 0.005;
 
 /// A plan-file error: which field and why.
 #[derive(Clone, Debug, PartialEq)]

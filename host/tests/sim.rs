@@ -761,14 +761,22 @@ fn zmp_outside_support_starts_a_fall() {
     // Lift the left leg without shifting the weight: the CoM is outside the right sole.
     let mut sim = Simulator::new(&SimConfig::default()).unwrap();
     torque_on(&mut sim);
-    let mut q = [0.0; 12];
-    q[2] = -0.4;
-    q[3] = 0.8;
-    q[4] = -0.4;
-    set_goals(&mut sim, &q);
-    sim.advance_to(150_000).unwrap();
+    // Ramp the goals so that the three pitch joints move together (the foot stays flat).
+    for k in 1..=20u64 {
+        let a = 0.4 * k as f64 / 20.0;
+        let mut q = [0.0; 12];
+        q[2] = -a;
+        q[3] = 2.0 * a;
+        q[4] = -a;
+        set_goals(&mut sim, &q);
+        sim.advance_to(k * 10_000).unwrap();
+        if sim.summary().fall_started_us.is_some() {
+            break;
+        }
+    }
     let t = *sim.physics.truth();
     assert_eq!(t.support, Support::Right);
+    assert!(t.pelvis_rpy[1].abs() < 0.05);
     sim.advance_to(2_000_000).unwrap();
     let s = sim.summary();
     let start = s.fall_started_us.expect("a fall");
@@ -777,5 +785,113 @@ fn zmp_outside_support_starts_a_fall() {
     // Falls to the left (the unsupported side): body y axis tips toward gravity.
     let d = sim.bus.device(200).unwrap();
     let imu_s = ImuSample::from_bytes(d.read(imu::SAMPLE.addr, imu::SAMPLE.len).unwrap()).unwrap();
-    assert!(imu_s.accel_m_s2()[1] < -8.0, "{:?}", imu_s.accel_m_s2());
+    let t = *sim.physics.truth();
+    assert!(
+        imu_s.accel_m_s2()[1] < -8.0,
+        "{:?} {:?} {:?} {:?}",
+        imu_s.accel_m_s2(),
+        t.pelvis,
+        t.com,
+        t.pelvis_rpy
+    );
+}
+
+fn read_statuses(bus: &mut TcpStream, count: usize) -> Vec<(u8, u8, Vec<u8>)> {
+    let mut dec = Decoder::<1024>::new();
+    let mut out = Vec::new();
+    let mut b = [0u8; 1];
+    while out.len() < count {
+        bus.read_exact(&mut b).unwrap();
+        if let Some(Ok(p)) = dec.push(b[0]) {
+            let s = Status::from_packet(&p).unwrap();
+            out.push((s.id, s.error.to_byte(), s.data.to_vec()));
+        }
+    }
+    out
+}
+
+#[test]
+fn free_running_follows_wall_clock() {
+    let h = spawn(SimConfig {
+        port: 0,
+        ..SimConfig::default()
+    })
+    .unwrap();
+    let mut bus = TcpStream::connect(h.bus_addr()).unwrap();
+    bus.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    bus.write_all(&ping(12)).unwrap();
+    assert_eq!(read_statuses(&mut bus, 1)[0].0, 12);
+    let mut buf = [0u8; 64];
+    let n = Instruction::Write {
+        addr: x_series::TORQUE_ENABLE.addr,
+        data: &[1],
+    }
+    .encode(&mut buf, 5)
+    .unwrap();
+    bus.write_all(&buf[..n]).unwrap();
+    read_statuses(&mut bus, 1);
+    let n = Instruction::Write {
+        addr: x_series::GOAL_POSITION.addr,
+        data: &2100i32.to_le_bytes(),
+    }
+    .encode(&mut buf, 5)
+    .unwrap();
+    bus.write_all(&buf[..n]).unwrap();
+    read_statuses(&mut bus, 1);
+    std::thread::sleep(Duration::from_millis(200));
+    let n = Instruction::Read {
+        addr: x_series::PRESENT_POSITION.addr,
+        len: 4,
+    }
+    .encode(&mut buf, 5)
+    .unwrap();
+    bus.write_all(&buf[..n]).unwrap();
+    let st = read_statuses(&mut bus, 1);
+    assert!((i32_of(&st[0].2) - 2100).abs() <= 1);
+    let progress = h.progress();
+    drop(bus);
+    let s = h.join().unwrap();
+    assert!(s.sim_time_us >= 200_000 && !s.lockstep);
+    assert_eq!(
+        progress
+            .instructions
+            .load(std::sync::atomic::Ordering::Relaxed),
+        4
+    );
+}
+
+#[test]
+fn connect_mode_reaches_a_listening_master() {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = l.local_addr().unwrap().port();
+    let h = spawn(SimConfig {
+        port,
+        connect: true,
+        ..SimConfig::default()
+    })
+    .unwrap();
+    let (mut bus, _) = l.accept().unwrap();
+    bus.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    bus.write_all(&ping(200)).unwrap();
+    let st = read_statuses(&mut bus, 1);
+    assert_eq!(
+        u16::from_le_bytes([st[0].2[0], st[0].2[1]]),
+        imu::MODEL_NUMBER_VALUE
+    );
+    drop(bus);
+    h.join().unwrap();
+}
+
+#[test]
+fn stop_while_waiting_for_a_connection() {
+    let h = spawn(SimConfig {
+        port: 0,
+        ..SimConfig::default()
+    })
+    .unwrap();
+    h.stop();
+    assert!(matches!(
+        h.join(),
+        Err(walker_host::sim::SimError::Timeout(_))
+    ));
 }

@@ -1,7 +1,9 @@
-//! Firmware for the real robot: ROBOTIS OpenCR 1.0 (STM32F746ZG). This phase's minimal main:
-//! brings the board up, prints the board name (defmt over RTT), writes the start-up record on
-//! the log UART, then runs the tick loop idle (torque never enabled; the watchdog is started
-//! only when walking begins, in a later phase).
+//! Firmware for the real robot: ROBOTIS OpenCR 1.0 (STM32F746ZG). Brings the board up, runs
+//! start-up and the walk with the compiled-in [`walker_firmware::Config`]
+//! ([`walker_firmware::control::run`]: probe, Return Delay Time, torque on, 1.5 s move to the
+//! initial pose, the walk, final hold, torque off), then idles: torque stays off, the tick
+//! keeps running and the watchdog (started when the control loop began) is fed, so the board
+//! does not reset into a new walk.
 //!
 //! Build: `cargo build --release --no-default-features --features board-opencr --bin opencr`
 //! Flash and run (needs probe-rs and a probe on the SWD header): `cargo run --release --bin opencr`
@@ -17,10 +19,10 @@ fn main() {
 mod firmware {
 
     use cortex_m_rt::entry;
-    use walker_firmware::board::{Board, TickTimer};
+    use walker_firmware::board::{Board, TickTimer, Watchdog};
     use walker_firmware::boards::opencr::{self, OpenCrBoard};
-    use walker_firmware::log::LogWriter;
-    use walker_firmware::{startup_record, Config};
+    use walker_firmware::control;
+    use walker_firmware::Config;
 
     #[entry]
     fn main() -> ! {
@@ -30,20 +32,25 @@ mod firmware {
         };
         let mut board = OpenCrBoard::new(dp, &cfg);
         defmt::info!(
-            "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud",
+            "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, model {=str}, {=usize} steps",
             env!("CARGO_PKG_VERSION"),
             <OpenCrBoard as Board>::NAME,
             cfg.tick_period_us,
-            cfg.bus_baud
+            cfg.bus_baud,
+            cfg.model.name(),
+            cfg.walk.steps
         );
-        let mut log = LogWriter::new();
-        let rec = startup_record(&board, &cfg, None);
-        log.write(&mut board, rec);
+        let end = control::run(&mut board, &cfg);
+        defmt::warn!(
+            "run ended (exit code {=i32}); torque off, idling",
+            end.exit_code()
+        );
         loop {
             let tick = board.wait_tick();
             if tick.overrun {
                 defmt::warn!("overrun at tick {=u64}", tick.index);
             }
+            board.feed();
         }
     }
 

@@ -1,6 +1,15 @@
-//! Firmware for QEMU `mps2-an500` (firmware-in-the-loop). This phase's minimal main: boots,
-//! prints the board name (defmt over semihosting), writes one start-up record on UART1 (the
-//! log) and exits 0 through semihosting.
+//! Firmware for QEMU `mps2-an500` (firmware-in-the-loop): reads its run-time parameters from
+//! the semihosting command line, runs start-up and the walk ([`walker_firmware::control::run`])
+//! and exits through semihosting with the run's exit code (see `walker_firmware::control`:
+//! 0 plan done, 2 bad parameter, 11 device missing, 12 lost, 13 fall, 14 overrun burst,
+//! 15 non-finite target, 17 requested, 20 start-up failure; the board adds 3 watchdog and
+//! 101 panic).
+//!
+//! Parameters: `key=value` tokens after qemu's `-append` (see `walker_firmware::params`),
+//! e.g. `-append "lockstep model=lipm steps=6"`. A bad token writes the start-up record and a
+//! `ConfigRejected` fault record to the log and exits with 2 (the key is printed over defmt).
+//! Without a simulator (bus unconnected) every device is missing: exit 11 within ~50 ms of
+//! virtual time.
 //!
 //! Build and run:
 //! ```text
@@ -19,37 +28,53 @@ fn main() {
 mod firmware {
 
     use cortex_m_rt::entry;
-    use walker_firmware::board::{Board, Clock, LogSink};
-    use walker_firmware::boards::qemu_mps2::{self, QemuBoard};
-    use walker_firmware::log::LogWriter;
-    use walker_firmware::{startup_record, Config};
+    use walker_firmware::board::{Board, Clock};
+    use walker_firmware::boards::qemu_mps2::{self, QemuBoard, CMDLINE_MAX};
+    use walker_firmware::control::{self, exit_code};
+    use walker_firmware::{params, Config};
 
     #[entry]
     fn main() -> ! {
-        let cfg = Config::default();
+        let mut cfg = Config::default();
+        let mut cmd = [0u8; CMDLINE_MAX];
+        let n = qemu_mps2::semihosting_cmdline(&mut cmd).unwrap_or(0);
+        let args = params::apply(&mut cfg, cmd.get(..n).unwrap_or(&[]));
+        if args.is_err() {
+            cfg = Config::default();
+        }
         let Some(cp) = cortex_m::Peripherals::take() else {
-            qemu_mps2::semihosting_exit(2);
+            qemu_mps2::semihosting_exit(exit_code::CONFIG);
         };
         let mut board = QemuBoard::new(cp.SYST, &cfg);
+        board.set_compute_us(cfg.compute_us);
+        if let Err(e) = args {
+            defmt::error!(
+                "bad parameter `{=str}` (token {=u8}): {}",
+                e.key(),
+                e.position,
+                e.kind
+            );
+            control::report_arg_error(&mut board, &cfg, &e);
+            board.exit(exit_code::CONFIG)
+        }
         defmt::info!(
-            "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, lockstep {=bool}",
+            "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, lockstep {=bool}, model {=str}, {=usize} steps",
             env!("CARGO_PKG_VERSION"),
             QemuBoard::NAME,
             cfg.tick_period_us,
             cfg.bus_baud,
-            board.lockstep()
+            board.lockstep(),
+            cfg.model.name(),
+            cfg.walk.steps
         );
-
-        let mut log = LogWriter::new();
-        // The bus is not probed in this phase: the record says so (probed = false).
-        let rec = startup_record(&board, &cfg, None);
-        log.write(&mut board, rec);
-        board.write_log(&[]);
+        let end = control::run(&mut board, &cfg);
+        let code = end.exit_code();
         defmt::info!(
-            "start-up record written at t = {=u64} us; exiting",
-            board.now_us()
+            "run ended at t = {=u64} us: exit code {=i32}",
+            board.now_us(),
+            code
         );
-        board.exit(0)
+        board.exit(code)
     }
 
     #[panic_handler]

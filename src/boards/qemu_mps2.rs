@@ -187,8 +187,13 @@ pub fn semihosting_exit(code: i32) -> ! {
     }
 }
 
-/// Reads the semihosting command line (qemu `-append`) into `buf`; returns its length.
-fn semihosting_cmdline(buf: &mut [u8]) -> Option<usize> {
+/// Longest semihosting command line read, bytes (qemu refuses SYS_GET_CMDLINE when the line,
+/// kernel file name first, does not fit the buffer).
+pub const CMDLINE_MAX: usize = 1024;
+
+/// Reads the semihosting command line (qemu `-append`, after the kernel's file name) into
+/// `buf`; returns its length (None when qemu refuses, e.g. `buf` is too small).
+pub fn semihosting_cmdline(buf: &mut [u8]) -> Option<usize> {
     let mut block: [usize; 2] = [buf.as_mut_ptr() as usize, buf.len()];
     let p = block.as_mut_ptr();
     // SAFETY: 0x15 = SYS_GET_CMDLINE: the block is (buffer address, buffer size); the host
@@ -266,7 +271,7 @@ impl QemuBoard {
         log.init(921_600);
         ls.init(SYSCLK_HZ / 16);
 
-        let mut cmd = [0u8; 128];
+        let mut cmd = [0u8; CMDLINE_MAX];
         let lockstep = match semihosting_cmdline(&mut cmd) {
             Some(n) => cmd.get(..n).is_some_and(|c| contains_word(c, b"lockstep")),
             None => false,

@@ -16,6 +16,8 @@
 //!   stance sole by more than `switch_threshold`, it becomes the stance foot, at its current
 //!   pose (so nothing jumps: positions stay continuous, accelerations finite; the ground level
 //!   can drift by at most the switch threshold per step, and a tilted landing foot stays tilted).
+//!   Contact is judged from the sole point (the ankle's projection) only: sole corners of a
+//!   tilted foot are ignored (no rolling onto a heel or toe edge).
 //! * **Masses**: upper body M_u at l_u above the pelvis point P (rotated with the pelvis and the
 //!   disturbance pitch φ_d), each leg's thigh, calf and sole masses from `gait-core`'s
 //!   `LegPoints` — both legs, the swing leg included.

@@ -1,0 +1,218 @@
+//! Firmware in the loop: the firmware ELF built for the emulated board runs in QEMU
+//! (`mps2-an500`, Cortex-M7) against the simulated robot, in lock-step, and its ZMP-response log
+//! is captured and reported.
+//!
+//! Wiring (see `docs/lockstep.md`): QEMU's UART0 (the servo bus) and UART2 (the lock-step
+//! channel) connect as TCP clients to the simulator's two listening sockets; UART1 (the log)
+//! goes to `OUT/walk.log`; the semihosting output (defmt frames) to `OUT/firmware.defmt`. The
+//! walk's parameters reach the firmware as `key=value` tokens on its semihosting command line
+//! (`-append`), so any forward-walk plan file can be walked. Time in the loop is the firmware's
+//! virtual clock, so the result does not depend on how fast the host is.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::planfile::{ModelName, SwingKind, WalkSpec, ZmpKind};
+use crate::sim::{self, SimConfig, SimSummary};
+
+/// What to run.
+#[derive(Clone, Debug)]
+pub struct FilOptions {
+    /// The board-qemu firmware ELF.
+    pub elf: PathBuf,
+    /// The walk.
+    pub spec: WalkSpec,
+    /// Output folder.
+    pub out_dir: PathBuf,
+    /// QEMU machine (`mps2-an500` Cortex-M7 or `mps2-an386` Cortex-M4F).
+    pub machine: String,
+    /// Wall-clock limit, s.
+    pub timeout: Duration,
+    /// The simulator's configuration (ports are chosen here).
+    pub sim: SimConfig,
+    /// Extra `key=value` tokens for the firmware.
+    pub extra_tokens: Vec<String>,
+}
+
+/// What came out.
+#[derive(Debug)]
+pub struct FilResult {
+    /// The firmware's exit code (semihosting), or None when QEMU was killed.
+    pub exit_code: Option<i32>,
+    /// The simulator's summary.
+    pub sim: SimSummary,
+    /// The captured log.
+    pub log: PathBuf,
+    /// The ground-truth CSV.
+    pub truth: PathBuf,
+    /// Wall-clock duration of the run.
+    pub wall: Duration,
+}
+
+/// The firmware command-line tokens of a forward-walk plan.
+pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
+    if spec.footsteps.is_some() {
+        return Err(
+            "the firmware takes forward-walk plans only (footstep lists are host-side for now)"
+                .into(),
+        );
+    }
+    if spec.zmp != ZmpKind::Natural || spec.swing != SwingKind::Cycloid {
+        return Err(
+            "the firmware walks the natural ZMP with the cycloid swing (seed 000) only".into(),
+        );
+    }
+    let model = match spec.model {
+        ModelName::Lipm => "lipm",
+        ModelName::Dlipm => "dlipm",
+        ModelName::Tlipfm => "tlipfm",
+    };
+    let mut t = vec![format!("model={model}")];
+    let nums: [(&str, f64); 14] = [
+        ("dt", spec.dt),
+        ("step_length", spec.step_length),
+        ("step_width", spec.step_width),
+        ("d1", spec.d1),
+        ("d2", spec.d2),
+        ("a", spec.a),
+        ("z_c", spec.z_c),
+        ("h_z", spec.h_z),
+        ("t1", spec.t1),
+        ("t2", spec.t2),
+        ("period", spec.period),
+        ("lead_in", spec.lead_in),
+        ("lead_out", spec.lead_out),
+        ("w_y", spec.w_y),
+    ];
+    for (k, v) in nums {
+        t.push(format!("{k}={v}"));
+    }
+    t.push(format!("steps={}", spec.steps));
+    t.push(format!("s_first={}", spec.s_first));
+    Ok(t)
+}
+
+/// Runs the firmware in QEMU against the simulator; blocks until the firmware exits.
+pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, String> {
+    let qemu = which("qemu-system-arm").ok_or_else(|| {
+        "qemu-system-arm not found: install it with `sudo apt-get install -y qemu-system-arm`"
+            .to_string()
+    })?;
+    if !opts.elf.is_file() {
+        return Err(format!(
+            "firmware ELF {} not found: build it with `cargo build --release --no-default-features --features board-qemu --bin qemu`",
+            opts.elf.display()
+        ));
+    }
+    std::fs::create_dir_all(&opts.out_dir)
+        .map_err(|e| format!("{}: {e}", opts.out_dir.display()))?;
+    let log = opts.out_dir.join("walk.log");
+    let truth = opts.out_dir.join("truth.csv");
+    let defmt = opts.out_dir.join("firmware.defmt");
+    let _ = std::fs::remove_file(&log);
+
+    let mut cfg = opts.sim.clone();
+    cfg.port = 0;
+    cfg.lockstep_port = Some(0);
+    cfg.connect = false;
+    cfg.log_truth = Some(truth.clone());
+    let dt_us = (opts.spec.dt * 1e6).round() as u64;
+    if dt_us > 0 {
+        // A whole number of ticks cancels the servo-kick ripple in the finite differences.
+        cfg.accel_window_us = dt_us;
+    }
+    let handle = sim::spawn(cfg).map_err(|e| format!("simulator: {e}"))?;
+    let bus = handle.bus_addr();
+    let lockstep = handle
+        .lockstep_addr()
+        .ok_or("simulator: no lock-step socket")?;
+    let tokens = {
+        let mut t = vec!["lockstep".to_string()];
+        t.extend(firmware_tokens(&opts.spec)?);
+        t.extend(opts.extra_tokens.iter().cloned());
+        t.join(" ")
+    };
+    let defmt_file =
+        std::fs::File::create(&defmt).map_err(|e| format!("{}: {e}", defmt.display()))?;
+    let started = Instant::now();
+    let mut child = Command::new(qemu)
+        .args(["-M", &opts.machine, "-nographic", "-monitor", "none"])
+        .args(["-serial", &format!("tcp:{bus},nodelay=on")])
+        .args(["-serial", &format!("file:{}", log.display())])
+        .args(["-serial", &format!("tcp:{lockstep},nodelay=on")])
+        .args([
+            "-semihosting-config",
+            "enable=on,target=native",
+            "-icount",
+            "shift=0",
+        ])
+        .arg("-kernel")
+        .arg(&opts.elf)
+        .args(["-append", &tokens])
+        .stdin(Stdio::null())
+        .stdout(Stdio::from(defmt_file))
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| format!("starting QEMU: {e}"))?;
+    let p = handle.progress();
+    let exit_code = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break status.code(),
+            Ok(None) => {}
+            Err(e) => return Err(format!("waiting for QEMU: {e}")),
+        }
+        if started.elapsed() > opts.timeout {
+            let _ = child.kill();
+            let _ = child.wait();
+            handle.stop();
+            return Err(format!(
+                "firmware did not finish within {:?} (wall clock)",
+                opts.timeout
+            ));
+        }
+        progress(
+            p.time_us.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-6,
+            p.instructions.load(std::sync::atomic::Ordering::Relaxed),
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let summary = handle.join().map_err(|e| format!("simulator: {e}"))?;
+    Ok(FilResult {
+        exit_code,
+        sim: summary,
+        log,
+        truth,
+        wall: started.elapsed(),
+    })
+}
+
+/// One line about the simulator's run.
+pub fn summary_line(s: &SimSummary) -> String {
+    let mut out = String::new();
+    let _ = write!(
+        out,
+        "simulated {:.2} s, {} instructions on the bus ({} dropped, {} corrupted), lock-step messages {}",
+        s.sim_time_us as f64 * 1e-6,
+        s.bus.instructions,
+        s.bus.dropped,
+        s.bus.corrupted,
+        s.lockstep_messages
+    );
+    if let Some(t) = s.fall_started_us {
+        let _ = write!(out, ", FELL at {:.2} s", t as f64 * 1e-6);
+    }
+    out
+}
+
+fn which(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .map(|d| d.join(name))
+        .find(|p| is_exe(p))
+}
+
+fn is_exe(p: &Path) -> bool {
+    p.is_file()
+}

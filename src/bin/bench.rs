@@ -1,0 +1,1103 @@
+//! On-target benchmark (issue 6): instructions per call of every stage of the control tick and
+//! of a full tick, counted in QEMU with `-icount shift=0` (1 instruction = 1 virtual ns).
+//!
+//! Build and run (`scripts/bench.sh` does all of this and rewrites BENCHMARKS.md):
+//! ```text
+//! cargo build --release --no-default-features --features board-qemu --bin bench
+//! qemu-system-arm -M mps2-an500 -nographic -semihosting-config enable=on,target=native \
+//!     -icount shift=0 -kernel target/thumbv7em-none-eabihf/release/bench
+//! cargo build --release --no-default-features --features board-qemu --bin bench \
+//!     --target thumbv7m-none-eabi
+//! qemu-system-arm -M mps2-an385 ... -kernel target/thumbv7m-none-eabi/release/bench
+//! ```
+//!
+//! # Method
+//! SysTick runs free at 25 MHz from reload 0xFF_FFFF; under `-icount shift=0` one count is 40
+//! instructions, exactly, run after run. Each figure comes from a loop of K calls
+//! ([`measure`]): the counter is read before and after every call. The **average** is the
+//! telescoped sum of the counts from the end of one call to the end of the next (so the
+//! 40-instruction granularity falls out, K·40 instructions ≥ …), minus the loop's own
+//! overhead per iteration measured with an empty call; the **max** is the largest count
+//! between the two reads around a single call, times 40 (resolution one count = 40
+//! instructions; it includes the ≈ 10 instructions of the call and the reads).
+//! Inputs that a stage takes from an earlier stage (the IK's gait samples) are computed
+//! beforehand into RAM, so that each stage is timed alone.
+//!
+//! Output: one `key value` pair per line on semihosting stdout (`hprintln!`; defmt stays
+//! silent in this binary), then `done 1` and exit code 0.
+#![cfg_attr(all(target_arch = "arm", target_os = "none"), no_std, no_main)]
+
+/// On the host (workspace-wide `cargo test`/`clippy --all-targets`) this binary is a stub.
+#[cfg(not(all(target_arch = "arm", target_os = "none")))]
+fn main() {
+    eprintln!(
+        "the bench runs in QEMU only: bash scripts/bench.sh \
+         (thumbv7em-none-eabihf on mps2-an500/an386, thumbv7m-none-eabi on mps2-an385)"
+    );
+}
+
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+mod firmware {
+    use core::hint::black_box;
+    use core::mem::MaybeUninit;
+
+    use cortex_m::peripheral::{syst::SystClkSource, SYST};
+    use cortex_m_rt::entry;
+    use cortex_m_semihosting::hprintln;
+
+    use dxl::table::foot::FootForces;
+    use dxl::table::imu::ImuSample;
+    use dxl::table::{foot, imu, x_series};
+    use dxl::{BulkReadRequest, Decoder, Status, StatusError};
+    use gait_core::fixed_point::{FixedSample, FixedSampler, Fx};
+    use gait_core::fourier::FourierCom;
+    use gait_core::kinematics::LegKinematics;
+    use gait_core::measured::{measured_zmp, ForceReading};
+    use gait_core::pipeline::joint_targets;
+    use gait_core::plan::SwingShape;
+    use gait_core::swing::{swing_foot, FootSample};
+    use gait_core::{
+        ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
+    };
+    use walker_firmware::boards::qemu_mps2::semihosting_exit;
+    use walker_firmware::board::{
+        Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer,
+        Watchdog,
+    };
+    use walker_firmware::control::{self, RunEnd};
+    use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
+    use walker_firmware::log::BoardId;
+    use walker_firmware::supervisor::StopReason;
+    use walker_firmware::Config;
+
+    /// Plan capacity (Table 2 has 14 steps).
+    const CAP: usize = 16;
+    /// Servo period of the bench: the firmware's tick ([`Config::default`]).
+    const DT_S: f64 = Config::default_config().tick_period_us as f64 * 1e-6;
+    /// Room for every tick of the Table 2 walk at 1 kHz (12.16 s) or slower.
+    const MAX_TICKS: usize = 12_800;
+    /// Calls in the loops that do not walk the plan.
+    const K: u32 = 4_096;
+    /// SysTick counts per instruction under `-icount shift=0` at 25 MHz.
+    const INSN_PER_COUNT: u64 = 40;
+    const MASK: u32 = 0x00FF_FFFF;
+    /// Foot-board and IMU ids on the bus.
+    const FOOT_L: u8 = 111;
+    const FOOT_R: u8 = 112;
+    const IMU: u8 = 200;
+    /// A foot counts for the measured ZMP from this load on, N.
+    const MIN_LOAD_N: f32 = 2.0;
+
+    /// The gait samples of one walk, computed before the stages that consume them are timed.
+    static mut SAMPLES: MaybeUninit<[GaitSample<f32>; MAX_TICKS]> = MaybeUninit::uninit();
+
+    fn now() -> u32 {
+        SYST::get_current()
+    }
+
+    /// Result of one timed loop, in SysTick counts.
+    #[derive(Clone, Copy)]
+    struct Stat {
+        n: u32,
+        total: u64,
+        max: u32,
+    }
+
+    /// Times `n` calls of `f(i)`, i = 0..n (see the module doc).
+    #[inline(never)]
+    fn measure(n: u32, f: &mut dyn FnMut(u32)) -> Stat {
+        let mut total = 0u64;
+        let mut max = 0u32;
+        let mut prev = now();
+        for i in 0..n {
+            let a = now();
+            f(i);
+            let b = now();
+            let d = a.wrapping_sub(b) & MASK;
+            if d > max {
+                max = d;
+            }
+            total += u64::from(prev.wrapping_sub(b) & MASK);
+            prev = b;
+        }
+        Stat { n, total, max }
+    }
+
+    /// Prints `name.avg` (instructions per call, one decimal, loop overhead removed),
+    /// `name.max` (instructions, resolution 40) and `name.n`.
+    fn report(name: &str, s: Stat, overhead_milli: u64) {
+        let n = u64::from(s.n.max(1));
+        let milli = (s.total * INSN_PER_COUNT * 1000 / n).saturating_sub(overhead_milli);
+        let tenths = (milli + 50) / 100;
+        hprintln!("{}.avg {}.{}", name, tenths / 10, tenths % 10);
+        hprintln!("{}.max {}", name, u64::from(s.max) * INSN_PER_COUNT);
+        hprintln!("{}.n {}", name, s.n);
+    }
+
+    fn walk_plan(kind: ModelKind) -> (GaitParams<f32>, Plan<f32, CAP>) {
+        let robot = Robot::reference();
+        let walk = ForwardWalk::table2();
+        let Ok(model) = Model::<f32>::new(kind, &robot, walk.z_c) else {
+            fail("model")
+        };
+        let params = walk.params(model);
+        let Ok(plan) = walk.plan::<f32, CAP>(&robot, params) else {
+            fail("plan")
+        };
+        (params, plan)
+    }
+
+    fn fail(what: &str) -> ! {
+        hprintln!("error {}", what);
+        semihosting_exit(1)
+    }
+
+    /// Fills `buf` with the samples `next` yields (until `None` or full); the filled part.
+    fn record<'a>(
+        buf: &'a mut [MaybeUninit<GaitSample<f32>>; MAX_TICKS],
+        mut next: impl FnMut() -> Option<GaitSample<f32>>,
+    ) -> &'a [GaitSample<f32>] {
+        let mut n = 0;
+        for slot in buf.iter_mut() {
+            match next() {
+                Some(s) => {
+                    slot.write(s);
+                    n += 1;
+                }
+                None => break,
+            }
+        }
+        // SAFETY: the first `n` elements were initialised just above; MaybeUninit<T> has the
+        // layout of T; the slice borrows `buf` for its lifetime.
+        unsafe { core::slice::from_raw_parts(buf.as_ptr().cast::<GaitSample<f32>>(), n) }
+    }
+
+    /// A fixed-point sample as the f32 sample the (f32) IK and measured ZMP take.
+    fn to_f32(s: &FixedSample) -> GaitSample<f32> {
+        let foot = |f: &gait_core::fixed_point::FixedFoot| FootSample {
+            x: f.x.to_num::<f32>(),
+            y: f.y.to_num::<f32>(),
+            z: f.z.to_num::<f32>(),
+            yaw: f.yaw.to_num::<f32>(),
+        };
+        GaitSample {
+            time_ns: s.time_ns,
+            zmp: s.zmp.map(|v| v.to_num::<f32>()),
+            com: s.com.map(|v| v.to_num::<f32>()),
+            com_vel: s.com_vel.map(|v| v.to_num::<f32>()),
+            feet: [foot(&s.feet[0]), foot(&s.feet[1])],
+            phase: s.phase,
+            support_foot: s.support_foot,
+            steps_done: s.steps_done,
+        }
+    }
+
+    /// The BULK READ of one tick: both foot boards' and the IMU's sample blocks.
+    const BULK: [BulkReadRequest; 3] = [
+        BulkReadRequest {
+            id: FOOT_L,
+            addr: foot::SAMPLE.addr,
+            len: foot::SAMPLE.len,
+        },
+        BulkReadRequest {
+            id: FOOT_R,
+            addr: foot::SAMPLE.addr,
+            len: foot::SAMPLE.len,
+        },
+        BulkReadRequest {
+            id: IMU,
+            addr: imu::SAMPLE.addr,
+            len: imu::SAMPLE.len,
+        },
+    ];
+
+    /// The three status replies to [`BULK`] as they arrive on the bus (both feet loaded).
+    fn reply_stream(buf: &mut [u8; 160]) -> (usize, [usize; 3]) {
+        let left = FootForces {
+            forces_mn: [4_100, 3_900, 4_300, 3_700],
+            counter: 17,
+        };
+        let right = FootForces {
+            forces_mn: [3_800, 4_200, 3_600, 4_400],
+            counter: 17,
+        };
+        let imu_s = ImuSample::from_si([0.012, -0.034, 0.002], [0.15, -0.08, 9.79], 17);
+        let mut at = 0;
+        let mut lens = [0usize; 3];
+        let parts: [(u8, &[u8]); 3] = [
+            (FOOT_L, &left.to_bytes()),
+            (FOOT_R, &right.to_bytes()),
+            (IMU, &imu_s.to_bytes()),
+        ];
+        for (k, (id, data)) in parts.iter().enumerate() {
+            let Some(rest) = buf.get_mut(at..) else {
+                fail("reply buffer")
+            };
+            let Ok(n) = dxl::encode_status(rest, *id, StatusError::OK, data) else {
+                fail("encode_status")
+            };
+            lens[k] = n;
+            at += n;
+        }
+        (at, lens)
+    }
+
+    /// What the tick decodes from the bus.
+    #[derive(Clone, Copy, Default)]
+    struct Sensors {
+        feet: [FootForces; 2],
+        imu: ImuSample,
+    }
+
+    /// Decodes the reply stream byte by byte into `out`; the number of packets accepted.
+    fn decode_replies(dec: &mut Decoder<64>, bytes: &[u8], out: &mut Sensors) -> u32 {
+        let mut got = 0;
+        for &b in bytes {
+            if let Some(Ok(p)) = dec.push(b) {
+                if let Ok(st) = Status::from_packet(&p) {
+                    match st.id {
+                        FOOT_L => {
+                            if let Some(f) = FootForces::from_bytes(st.data) {
+                                out.feet[0] = f;
+                                got += 1;
+                            }
+                        }
+                        FOOT_R => {
+                            if let Some(f) = FootForces::from_bytes(st.data) {
+                                out.feet[1] = f;
+                                got += 1;
+                            }
+                        }
+                        IMU => {
+                            if let Some(s) = ImuSample::from_bytes(st.data) {
+                                out.imu = s;
+                                got += 1;
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        got
+    }
+
+    /// Encodes the SYNC WRITE of the 12 goal positions (ticks); its length.
+    fn encode_goals(buf: &mut [u8; 128], goals: &[i32; 12]) -> usize {
+        let bytes: [[u8; 4]; 12] = goals.map(|g| g.to_le_bytes());
+        let mut entries: [(u8, &[u8]); 12] = [(0, &[]); 12];
+        for (k, e) in entries.iter_mut().enumerate() {
+            *e = (dxl::table::ids::LEGS[k], &bytes[k][..]);
+        }
+        dxl::encode_sync_write(
+            buf,
+            x_series::GOAL_POSITION.addr,
+            x_series::GOAL_POSITION.len,
+            &entries,
+        )
+        .unwrap_or(0)
+    }
+
+    fn encode_bulk(buf: &mut [u8; 64]) -> usize {
+        dxl::encode_bulk_read(buf, &BULK).unwrap_or(0)
+    }
+
+    /// State of the f32 full tick shared by both paths.
+    struct TickIo {
+        robot: Robot,
+        kin: LegKinematics<f32>,
+        pitch: PitchAccel,
+        dec: Decoder<64>,
+        sensors: Sensors,
+        goals: [i32; 12],
+        sw: [u8; 128],
+        br: [u8; 64],
+    }
+
+    impl TickIo {
+        fn new() -> Self {
+            let robot = Robot::reference();
+            TickIo {
+                robot,
+                kin: LegKinematics::new(&robot),
+                pitch: PitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
+                dec: Decoder::new(),
+                sensors: Sensors::default(),
+                goals: [x_series::CENTER_TICK; 12],
+                sw: [0; 128],
+                br: [0; 64],
+            }
+        }
+
+        /// Start of a tick: the replies of the last BULK READ → τ (N·m).
+        fn sense(&mut self, replies: &[u8]) -> f32 {
+            decode_replies(&mut self.dec, replies, &mut self.sensors);
+            let rate = self.sensors.imu.gyro_rad_s()[1];
+            self.pitch.update(rate);
+            self.pitch.torque()
+        }
+
+        /// Rest of a tick: measured ZMP, IK, goal positions out, next BULK READ.
+        fn act(&mut self, s: &GaitSample<f32>) -> usize {
+            let f = self
+                .sensors
+                .feet
+                .map(|f| ForceReading::new(f.forces_mn.map(|v| v as f32 * 1e-3)));
+            let m = measured_zmp(
+                &self.robot,
+                (&s.feet[0], &f[0]),
+                (&s.feet[1], &f[1]),
+                MIN_LOAD_N,
+            );
+            black_box(&m);
+            let (q, rep) = joint_targets(&self.kin, s);
+            black_box(&rep);
+            for (g, a) in self.goals.iter_mut().zip(q) {
+                if let Some(t) = x_series::rad_to_ticks(a) {
+                    *g = t;
+                }
+            }
+            let n = encode_goals(&mut self.sw, &self.goals);
+            n + encode_bulk(&mut self.br)
+        }
+    }
+
+    #[entry]
+    fn main() -> ! {
+        let Some(mut cp) = cortex_m::Peripherals::take() else {
+            semihosting_exit(2)
+        };
+        cp.SYST.set_clock_source(SystClkSource::Core);
+        cp.SYST.set_reload(MASK);
+        cp.SYST.clear_current();
+        cp.SYST.enable_counter();
+
+        // SAFETY: taken once, here, before anything else can refer to the buffer.
+        let buf = unsafe { &mut *core::ptr::addr_of_mut!(SAMPLES) };
+        // SAFETY: an array of MaybeUninit needs no initialisation; same layout as the
+        // uninitialised array.
+        let buf: &mut [MaybeUninit<GaitSample<f32>>; MAX_TICKS] =
+            unsafe { &mut *(buf as *mut MaybeUninit<[GaitSample<f32>; MAX_TICKS]>).cast() };
+
+        hprintln!(
+            "target {}",
+            if cfg!(target_abi = "eabihf") {
+                "thumbv7em-none-eabihf"
+            } else {
+                "thumbv7m-none-eabi"
+            }
+        );
+        hprintln!("tick_us {}", Config::default_config().tick_period_us);
+
+        // Loop overhead: an empty call, once per loop shape.
+        let empty = measure(K, &mut |i| {
+            black_box(i);
+        });
+        let ovh = empty.total * INSN_PER_COUNT * 1000 / u64::from(empty.n);
+        let t = (ovh + 50) / 100;
+        hprintln!("overhead.avg {}.{}", t / 10, t % 10);
+        hprintln!("overhead.max {}", u64::from(empty.max) * INSN_PER_COUNT);
+
+        // ---- bus packets: sizes from the dxl encoders ----
+        let mut replies = [0u8; 160];
+        let (rlen, rlens) = reply_stream(&mut replies);
+        let replies = &replies[..rlen];
+        let mut swb = [0u8; 128];
+        let mut brb = [0u8; 64];
+        let sw_len = encode_goals(&mut swb, &[x_series::CENTER_TICK; 12]);
+        let br_len = encode_bulk(&mut brb);
+        hprintln!("bytes.bulk_read {}", br_len);
+        hprintln!("bytes.status_foot_left {}", rlens[0]);
+        hprintln!("bytes.status_foot_right {}", rlens[1]);
+        hprintln!("bytes.status_imu {}", rlens[2]);
+        hprintln!("bytes.sync_write {}", sw_len);
+
+        // ---- primitives ----
+        let xs: [f32; 16] = core::array::from_fn(|k| 0.05 + 0.37 * k as f32);
+        let x = |i: u32| black_box(xs[(i % 16) as usize]);
+        report(
+            "prim.expf",
+            measure(K, &mut |i| {
+                black_box(libm::expf(-x(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.sqrtf",
+            measure(K, &mut |i| {
+                black_box(libm::sqrtf(x(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.atan2f",
+            measure(K, &mut |i| {
+                black_box(libm::atan2f(x(i) - 1.7, 0.9));
+            }),
+            ovh,
+        );
+        report(
+            "prim.sin_cos_fast",
+            measure(K, &mut |i| {
+                black_box(gait_core::fastmath::sin_cos(x(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.sinf_libm",
+            measure(K, &mut |i| {
+                black_box(libm::sinf(x(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.fmul",
+            measure(K, &mut |i| {
+                black_box(x(i) * x(i + 1));
+            }),
+            ovh,
+        );
+        report(
+            "prim.fdiv",
+            measure(K, &mut |i| {
+                black_box(x(i) / x(i + 1));
+            }),
+            ovh,
+        );
+
+        let fxs: [Fx; 16] = core::array::from_fn(|k| Fx::from_bits(3_000 + 9_001 * k as i32));
+        let fxx = |i: u32| black_box(fxs[(i % 16) as usize]);
+        report(
+            "prim.fx_exp_neg",
+            measure(K, &mut |i| {
+                black_box(gait_core::fixed_point::exp_neg(fxx(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.fx_sin_cos",
+            measure(K, &mut |i| {
+                black_box(gait_core::fixed_point::sin_cos(fxx(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.i128_div",
+            measure(K, &mut |i| {
+                let a = black_box(i128::from(fxx(i).to_bits()) << 40);
+                black_box(a / black_box(i128::from(i % 9 + 2)));
+            }),
+            ovh,
+        );
+
+        // ---- codec ----
+        let goal_sets: [[i32; 12]; 16] = core::array::from_fn(|k| {
+            core::array::from_fn(|j| 1_500 + ((k * 37 + j * 101) % 1_000) as i32)
+        });
+        report(
+            "dxl.sync_write12",
+            measure(K, &mut |i| {
+                black_box(encode_goals(
+                    &mut swb,
+                    black_box(&goal_sets[(i % 16) as usize]),
+                ));
+            }),
+            ovh,
+        );
+        report(
+            "dxl.bulk_read3",
+            measure(K, &mut |_| {
+                black_box(encode_bulk(black_box(&mut brb)));
+            }),
+            ovh,
+        );
+        let mut dec = Decoder::<64>::new();
+        let mut sensors = Sensors::default();
+        report(
+            "dxl.decode3",
+            measure(K, &mut |_| {
+                let got = decode_replies(&mut dec, black_box(replies), &mut sensors);
+                black_box(got);
+            }),
+            ovh,
+        );
+        if decode_replies(&mut dec, replies, &mut sensors) != 3 {
+            fail("decode");
+        }
+        let crc_in: [u8; 72] = core::array::from_fn(|k| (k as u8).wrapping_mul(29) ^ 0x5A);
+        report(
+            "dxl.crc16_72",
+            measure(K, &mut |_| {
+                black_box(dxl::crc::crc16(black_box(&crc_in[..])));
+            }),
+            ovh,
+        );
+
+        // ---- IMU filter ----
+        let mut pitch = PitchAccel::new(PitchAccelConfig::reference(DT_S as f32));
+        report(
+            "imu.pitch_accel",
+            measure(K, &mut |i| {
+                black_box(pitch.update(x(i)));
+                black_box(pitch.torque());
+            }),
+            ovh,
+        );
+
+        // ---- swing foot alone (cycloid, one single support) ----
+        let (params, _) = walk_plan(ModelKind::Tlipfm);
+        let from = Place::<f32>::new(0.0, 0.045, 0.0);
+        let to = Place::<f32>::new(0.04, 0.045, 0.0);
+        let shape: SwingShape<f32> = params.swing;
+        report(
+            "swing.cycloid",
+            measure(K, &mut |i| {
+                let u = black_box(i as f32 / K as f32);
+                black_box(swing_foot(&shape, &from, &to, u, 1.0));
+            }),
+            ovh,
+        );
+
+        // ---- per model: samplers, Fourier, IK, measured ZMP, full ticks ----
+        let robot = Robot::reference();
+        let kin = LegKinematics::<f32>::new(&robot);
+        let walk = ForwardWalk::table2();
+        for kind in ModelKind::ALL {
+            let m = kind.name();
+            let (params, plan) = walk_plan(kind);
+            let Ok(fresh) = Sampler::<f32, CAP>::new(plan.clone(), DT_S) else {
+                fail("sampler")
+            };
+            let mut s = fresh.clone();
+            let mut n = 0u32;
+            while !s.is_done() {
+                black_box(s.next(0.0));
+                n += 1;
+            }
+            hprintln!("walk.{}.ticks {}", m, n);
+
+            let mut s = fresh.clone();
+            let mut name = Name::new();
+            report(
+                name.set("sample.f32.", m),
+                measure(n, &mut |_| {
+                    black_box(s.next(black_box(0.0)));
+                }),
+                ovh,
+            );
+
+            let Ok(fresh_fx) = FixedSampler::<CAP>::new(plan.clone(), DT_S) else {
+                fail("fixed sampler")
+            };
+            let mut fs = fresh_fx.clone();
+            report(
+                name.set("sample.fixed.", m),
+                measure(n, &mut |_| {
+                    black_box(fs.next(black_box(0)));
+                }),
+                ovh,
+            );
+
+            let Ok(fourier) = FourierCom::<f32, 24>::from_params(
+                &params,
+                walk.step_length as f32,
+                -walk.step_width as f32,
+                24,
+            ) else {
+                fail("fourier")
+            };
+            report(
+                name.set("fourier24.", m),
+                measure(n, &mut |i| {
+                    black_box(fourier.sample(black_box(i as f32 * DT_S as f32)));
+                }),
+                ovh,
+            );
+
+            // The IK and the measured ZMP on the f32 samples of the whole walk.
+            let mut s = fresh.clone();
+            let samples = record(buf, || (!s.is_done()).then(|| s.next(0.0)));
+            report(
+                name.set("ik.", m),
+                measure(samples.len() as u32, &mut |i| {
+                    black_box(joint_targets(&kin, black_box(&samples[i as usize])));
+                }),
+                ovh,
+            );
+            let lf = ForceReading::new([4.1f32, 3.9, 4.3, 3.7]);
+            let rf = ForceReading::new([3.8f32, 4.2, 3.6, 4.4]);
+            report(
+                name.set("mzmp.", m),
+                measure(samples.len() as u32, &mut |i| {
+                    let smp = black_box(&samples[i as usize]);
+                    black_box(measured_zmp(
+                        &robot,
+                        (&smp.feet[0], black_box(&lf)),
+                        (&smp.feet[1], black_box(&rf)),
+                        MIN_LOAD_N,
+                    ));
+                }),
+                ovh,
+            );
+
+            // Full tick, f32 path: decode → τ → exact f32 sample → measured ZMP → IK →
+            // SYNC WRITE + BULK READ encode.
+            let mut io = TickIo::new();
+            let mut s = fresh.clone();
+            report(
+                name.set("tick.f32.", m),
+                measure(n, &mut |_| {
+                    let tau = io.sense(black_box(replies));
+                    let smp = s.next(tau);
+                    black_box(io.act(&smp));
+                }),
+                ovh,
+            );
+
+            // Full tick, fixed path: the same with the fixed-point sampler (τ in mN·m), its
+            // sample converted to f32 for the measured ZMP and the (f32-only) IK.
+            let mut io = TickIo::new();
+            let mut fs = fresh_fx.clone();
+            report(
+                name.set("tick.fixed.", m),
+                measure(n, &mut |_| {
+                    let tau = io.sense(black_box(replies));
+                    let smp = fs.next((tau * 1000.0) as i32);
+                    black_box(io.act(&to_f32(&smp)));
+                }),
+                ovh,
+            );
+
+            if kind == ModelKind::Tlipfm {
+                // The fixed → f32 sample conversion alone (part of tick.fixed).
+                let mut fs = fresh_fx.clone();
+                let fx_samples: [FixedSample; 16] = core::array::from_fn(|_| {
+                    for _ in 0..200 {
+                        fs.next(0);
+                    }
+                    fs.next(0)
+                });
+                report(
+                    "fixed.to_f32",
+                    measure(K, &mut |i| {
+                        black_box(to_f32(black_box(&fx_samples[(i % 16) as usize])));
+                    }),
+                    ovh,
+                );
+            }
+        }
+
+        control_loop();
+
+        hprintln!("done 1");
+        semihosting_exit(0)
+    }
+
+    // ---- the firmware's control loop on an in-memory bus ----
+
+    #[derive(Clone, Copy, PartialEq)]
+    enum Kind {
+        Servo,
+        Foot(usize),
+        Imu,
+    }
+
+    #[derive(Clone, Copy)]
+    struct Dev {
+        id: u8,
+        kind: Kind,
+        rdt: u8,
+        torque: bool,
+        goal: i32,
+        present: i32,
+    }
+
+    /// A board whose bus is a set of emulated devices (12 servos, both foot boards with a
+    /// constant load, the IMU), with a virtual clock like the QEMU board's (line time at the
+    /// configured baud, a modelled compute time, deadlines). It meters the firmware's CPU
+    /// work per tick: SysTick from the return of one `wait_tick` to the next call, minus the
+    /// time spent inside the board's own methods (the device emulation behind `send`, the
+    /// byte queue behind `recv`, the log sink); the calls themselves are counted.
+    struct BenchBoard {
+        now_ns: u64,
+        now_us: u64,
+        line: LineTime,
+        rx: heapless::Deque<u8, 512>,
+        sched: TickSchedule,
+        compute_ns: u64,
+        devs: [Dev; 15],
+        imu_counter: u16,
+        mark: Option<u32>,
+        paused_at: u32,
+        excluded: u32,
+        seen: u32,
+        recent: heapless::Deque<u32, 4>,
+        folded: Stat,
+        log_bytes: u32,
+    }
+
+    /// Ticks left out of the statistics at the start (first tick, ramp) and end (final hold,
+    /// torque off).
+    const SKIP_FIRST: u32 = 2;
+
+    impl BenchBoard {
+        fn new(cfg: &Config) -> Self {
+            let mut devs = [Dev {
+                id: 0,
+                kind: Kind::Servo,
+                rdt: x_series::DEFAULT_RETURN_DELAY,
+                torque: false,
+                goal: x_series::CENTER_TICK,
+                present: x_series::CENTER_TICK,
+            }; 15];
+            for (k, d) in devs.iter_mut().enumerate() {
+                d.id = walker_firmware::DEVICE_IDS[k];
+                d.kind = match d.id {
+                    FOOT_L => Kind::Foot(0),
+                    FOOT_R => Kind::Foot(1),
+                    IMU => Kind::Imu,
+                    _ => Kind::Servo,
+                };
+            }
+            BenchBoard {
+                now_ns: 0,
+                now_us: 0,
+                line: LineTime { baud: cfg.bus_baud },
+                rx: heapless::Deque::new(),
+                sched: TickSchedule::new(cfg.tick_period_us),
+                compute_ns: 150_000,
+                devs,
+                imu_counter: 0,
+                mark: None,
+                paused_at: 0,
+                excluded: 0,
+                seen: 0,
+                recent: heapless::Deque::new(),
+                folded: Stat {
+                    n: 0,
+                    total: 0,
+                    max: 0,
+                },
+                log_bytes: 0,
+            }
+        }
+
+        fn pause(&mut self) {
+            self.paused_at = now();
+        }
+
+        fn resume(&mut self) {
+            self.excluded += self.paused_at.wrapping_sub(now()) & MASK;
+        }
+
+        fn advance(&mut self, ns: u64) {
+            self.now_ns += ns;
+            self.now_us = self.now_ns / 1000;
+        }
+
+        fn alive(&self, id: u8) -> Option<usize> {
+            self.devs.iter().position(|d| d.id == id)
+        }
+
+        fn status(&mut self, id: u8, data: &[u8]) {
+            let mut buf = [0u8; 64];
+            if let Ok(n) = dxl::encode_status(&mut buf, id, StatusError::OK, data) {
+                for &b in &buf[..n] {
+                    let _ = self.rx.push_back(b);
+                }
+            }
+        }
+
+        fn read_mem(&mut self, i: usize, addr: u16, len: u16, out: &mut [u8; 32]) -> usize {
+            let d = self.devs[i];
+            let put = |out: &mut [u8; 32], b: &[u8]| {
+                out[..b.len()].copy_from_slice(b);
+                b.len()
+            };
+            match (d.kind, addr, len) {
+                (_, 9, 1) => put(out, &[d.rdt]),
+                (Kind::Servo, 132, 4) => put(out, &d.present.to_le_bytes()),
+                (Kind::Servo, 116, 4) => put(out, &d.goal.to_le_bytes()),
+                (Kind::Servo, 64, 1) => put(out, &[u8::from(d.torque)]),
+                (Kind::Foot(s), 128, 18) => {
+                    let f = FootForces {
+                        forces_mn: if s == 0 {
+                            [4_100, 3_900, 4_300, 3_700]
+                        } else {
+                            [3_800, 4_200, 3_600, 4_400]
+                        },
+                        counter: self.imu_counter,
+                    };
+                    put(out, &f.to_bytes())
+                }
+                (Kind::Imu, 128, 26) => {
+                    self.imu_counter = self.imu_counter.wrapping_add(1);
+                    let rate = if self.imu_counter % 2 == 0 { 0.02 } else { -0.01 };
+                    let s = ImuSample::from_si([0.0, rate, 0.0], [0.0, 0.0, 9.81], self.imu_counter);
+                    put(out, &s.to_bytes())
+                }
+                _ => 0,
+            }
+        }
+
+        fn write_mem(&mut self, i: usize, addr: u16, data: &[u8]) -> bool {
+            let d = &mut self.devs[i];
+            match (d.kind, addr, data) {
+                (_, 9, [v]) => {
+                    d.rdt = *v;
+                    true
+                }
+                (Kind::Servo, 64, [v]) => {
+                    d.torque = *v != 0;
+                    if d.torque {
+                        d.goal = d.present;
+                    }
+                    true
+                }
+                (Kind::Servo, 116, [a, b, c, e]) => {
+                    d.goal = i32::from_le_bytes([*a, *b, *c, *e]);
+                    if d.torque {
+                        d.present = d.goal;
+                    }
+                    true
+                }
+                _ => false,
+            }
+        }
+
+        fn handle(&mut self, packet: &[u8]) {
+            let mut buf = [0u8; 160];
+            let Ok(p) = dxl::decode(packet, &mut buf) else {
+                return;
+            };
+            let Ok(inst) = dxl::Instruction::parse(&p) else {
+                return;
+            };
+            let bcast = p.id == dxl::BROADCAST_ID;
+            let mut data = [0u8; 32];
+            match inst {
+                dxl::Instruction::Ping => {
+                    if let Some(i) = self.alive(p.id) {
+                        let model = match self.devs[i].kind {
+                            Kind::Servo => x_series::MODEL_XM430_W350,
+                            Kind::Foot(_) => foot::MODEL_NUMBER_VALUE,
+                            Kind::Imu => imu::MODEL_NUMBER_VALUE,
+                        };
+                        let [lo, hi] = model.to_le_bytes();
+                        self.status(p.id, &[lo, hi, 48]);
+                    }
+                }
+                dxl::Instruction::Read { addr, len } => {
+                    if let Some(i) = self.alive(p.id) {
+                        let n = self.read_mem(i, addr, len, &mut data);
+                        if n > 0 {
+                            self.status(p.id, &data[..n]);
+                        }
+                    }
+                }
+                dxl::Instruction::Write { addr, data: w } => {
+                    if bcast {
+                        for i in 0..self.devs.len() {
+                            self.write_mem(i, addr, w);
+                        }
+                    } else if let Some(i) = self.alive(p.id) {
+                        if self.write_mem(i, addr, w) {
+                            self.status(p.id, &[]);
+                        }
+                    }
+                }
+                dxl::Instruction::SyncRead { addr, len, ids } => {
+                    for &id in ids {
+                        if let Some(i) = self.alive(id) {
+                            let n = self.read_mem(i, addr, len, &mut data);
+                            if n > 0 {
+                                self.status(id, &data[..n]);
+                            }
+                        }
+                    }
+                }
+                dxl::Instruction::SyncWrite(sw) => {
+                    for (id, d) in sw.entries() {
+                        if let Some(i) = self.alive(id) {
+                            self.write_mem(i, sw.addr, d);
+                        }
+                    }
+                }
+                dxl::Instruction::BulkRead(br) => {
+                    for r in br.entries() {
+                        if let Some(i) = self.alive(r.id) {
+                            let n = self.read_mem(i, r.addr, r.len, &mut data);
+                            if n > 0 {
+                                self.status(r.id, &data[..n]);
+                            }
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+
+        /// Folds one tick's count into the statistics, leaving out the first
+        /// [`SKIP_FIRST`] ticks and (by holding the last four back) the last four.
+        fn record_tick(&mut self, counts: u32) {
+            self.seen += 1;
+            if self.recent.is_full() {
+                if let Some(c) = self.recent.pop_front() {
+                    if self.seen > SKIP_FIRST + 4 {
+                        self.folded.n += 1;
+                        self.folded.total += u64::from(c);
+                        self.folded.max = self.folded.max.max(c);
+                    }
+                }
+            }
+            let _ = self.recent.push_back(counts);
+        }
+    }
+
+    impl ServoBus for BenchBoard {
+        fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
+            self.pause();
+            self.rx.clear();
+            self.advance(self.line.bytes_ns(packet.len()));
+            self.handle(packet);
+            self.resume();
+            Ok(())
+        }
+
+        fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
+            self.pause();
+            let start = self.now_ns;
+            let mut n = 0;
+            for slot in buf.iter_mut() {
+                let Some(b) = self.rx.pop_front() else { break };
+                *slot = b;
+                n += 1;
+            }
+            if n > 0 {
+                self.advance(self.line.bytes_ns(n));
+            }
+            if n < buf.len() {
+                let t = self.now_ns.max(start + u64::from(timeout_us) * 1000);
+                self.advance(t - self.now_ns);
+            }
+            self.resume();
+            Ok(n)
+        }
+
+        fn baud(&self) -> u32 {
+            self.line.baud
+        }
+
+        fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
+            self.line = LineTime { baud };
+            Ok(())
+        }
+    }
+
+    impl Clock for BenchBoard {
+        fn now_us(&self) -> u64 {
+            self.now_us
+        }
+    }
+
+    impl TickTimer for BenchBoard {
+        fn period_us(&self) -> u32 {
+            self.sched.period_us()
+        }
+
+        fn wait_tick(&mut self) -> Tick {
+            let t = now();
+            if let Some(m) = self.mark {
+                let c = (m.wrapping_sub(t) & MASK).saturating_sub(self.excluded);
+                self.record_tick(c);
+            }
+            self.advance(self.compute_ns);
+            let plan = self.sched.plan(self.now_us);
+            if let Some(w) = plan.wait_until_us {
+                let target = self.now_ns.max(w * 1000);
+                self.advance(target - self.now_ns);
+            }
+            self.excluded = 0;
+            self.mark = Some(now());
+            plan.tick
+        }
+
+        fn overruns(&self) -> u32 {
+            self.sched.overruns()
+        }
+    }
+
+    impl LogSink for BenchBoard {
+        fn write_log(&mut self, bytes: &[u8]) {
+            self.pause();
+            self.log_bytes = self.log_bytes.wrapping_add(bytes.len() as u32);
+            self.resume();
+        }
+    }
+
+    impl Watchdog for BenchBoard {
+        fn start(&mut self, _timeout_ms: u32) {}
+        fn feed(&mut self) {}
+    }
+
+    impl Board for BenchBoard {
+        const NAME: &'static str = "bench";
+        const ID: BoardId = BoardId::Unknown;
+
+        fn torque_off_best_effort(&mut self) {
+            for d in self.devs.iter_mut() {
+                d.torque = false;
+            }
+        }
+
+        fn exit(&mut self, code: i32) -> ! {
+            semihosting_exit(code)
+        }
+    }
+
+    /// `control::run` with the default configuration (ramp and final hold cut to one tick)
+    /// on the in-memory bus: instructions per walking tick of the real control loop.
+    fn control_loop() {
+        let mut cfg = Config::default_config();
+        cfg.ramp_us = cfg.tick_period_us;
+        cfg.final_hold_us = cfg.tick_period_us;
+        let mut board = BenchBoard::new(&cfg);
+        let end = control::run(&mut board, &cfg);
+        if end != RunEnd::Stopped(StopReason::PlanDone) {
+            hprintln!("error control.run ended with exit code {}", end.exit_code());
+            semihosting_exit(1);
+        }
+        hprintln!("control.model {}", cfg.model.name());
+        hprintln!("control.ticks {}", board.seen);
+        hprintln!("control.log_bytes {}", board.log_bytes);
+        hprintln!("control.overruns {}", board.sched.overruns());
+        report("control.tick", board.folded, 0);
+    }
+
+    /// A small stack string for `prefix + model` keys.
+    struct Name {
+        buf: [u8; 48],
+    }
+
+    impl Name {
+        fn new() -> Self {
+            Name { buf: [0; 48] }
+        }
+        fn set(&mut self, prefix: &str, model: &str) -> &str {
+            let mut n = 0;
+            for &b in prefix.as_bytes().iter().chain(model.as_bytes()) {
+                if let Some(slot) = self.buf.get_mut(n) {
+                    *slot = b;
+                    n += 1;
+                }
+            }
+            core::str::from_utf8(&self.buf[..n]).unwrap_or("?")
+        }
+    }
+
+    #[panic_handler]
+    fn panic(info: &core::panic::PanicInfo) -> ! {
+        hprintln!("panic {}", info);
+        semihosting_exit(101)
+    }
+}

@@ -1,0 +1,562 @@
+//! The walking controller: start-up, the smooth move to the initial pose, the control loop at
+//! the servo rate, and the stop sequence. Written once over `B: Board`; the QEMU and OpenCR
+//! binaries call [`run`], host tests run it on a fake board.
+//!
+//! # One tick (period [`Config::tick_period_us`], default 5 ms = 200 Hz)
+//! 1. `wait_tick()`; overruns go to the supervisor (a burst of them stops).
+//! 2. ONE BULK READ: foot boards 111/112 (18 bytes at 128: 4 forces + counter) and the IMU 200
+//!    (26 bytes at 128: gyro, accelerometer, counter).
+//! 3. Per device the supervisor decides fresh / held (last good value, at most
+//!    [`crate::supervisor::SupervisorConfig::hold_ticks`] ticks in a row) / lost (stop).
+//! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp`, feet placed where the previous
+//!    gait sample put them, feet under [`Config::min_load_n`] ignored); φ̈ from the gyro pitch
+//!    rate through [`PitchAccel`], τ = J·φ̈; tilt from the accelerometer (fall → stop).
+//! 5. One gait sample with τ, the two-leg IK ([`LegKinematics`], built once),
+//!    [`safe_targets`] → servo ticks (a non-finite target holds the previous tick and stops),
+//!    ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes each).
+//! 6. The tick log record (nominal time, ZMP reference, measured ZMP, CoM, τ, support phase,
+//!    fault state, bus error counters, overruns); the watchdog is fed.
+//!
+//! Bus traffic per tick at 1 Mbps (no byte stuffing needed for typical data): BULK READ
+//! instruction 25 bytes out; replies 29 + 29 + 37 = 95 bytes in; SYNC WRITE 74 bytes out — 99
+//! bytes out and 95 in, ≈ 1.94 ms of line time (+ the Return Delay Times, 0 after start-up).
+//!
+//! # Phases
+//! * Ramp: [`Config::ramp_us`] of minimum-jerk motion from the present pose to the first gait
+//!   sample's joint targets (same tick structure: sensors are read and supervised).
+//! * Walk: one gait sample per tick until the sampler is done.
+//! * Final hold: the final pose for [`Config::final_hold_us`], then torque off (broadcast WRITE
+//!   Torque Enable = 0) and the stop record `PlanDone`.
+//! * Any supervisor stop: the pose is held for `stopping_ticks`, torque off, stop record with
+//!   the reason.
+//!
+//! # Foot boards missing at start-up
+//! With [`Config::feet_required`] (the default) a missing foot board stops like any other
+//! device. With `feet=optional` the walk runs without it: it is not read, its forces count as
+//! invalid, the measured ZMP comes from the other foot only (and is "not available" while
+//! only the missing foot carries load). The gait itself never depends on the feet: they are
+//! measurement instruments for the ZMP-response log. A foot board that stops answering
+//! *during* the walk is a device loss (stop), whatever this setting.
+//!
+//! # Exit codes ([`RunEnd::exit_code`]; QEMU passes them to the host through semihosting)
+//! | code | meaning |
+//! | --- | --- |
+//! | 0 | plan done |
+//! | 2 | configuration rejected (bad `key=value` token, or gait-core rejected the plan) |
+//! | 3 | virtual watchdog (QEMU board) |
+//! | 11 | device missing at start-up (stop record `DeviceMissing`, first missing id) |
+//! | 12 | device lost while running |
+//! | 13 | fall (tilt beyond the limit) |
+//! | 14 | overrun burst |
+//! | 15 | non-finite joint target |
+//! | 17 | stop requested |
+//! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
+//! | 101 | panic |
+//!
+//! i.e. 10 + the stop record's reason code for supervisor stops.
+
+use core::cell::Cell;
+
+use dxl::table::foot::FootForces;
+use dxl::table::imu::ImuSample;
+use dxl::table::{foot, ids, imu as imu_table, x_series};
+use dxl::{BulkReadRequest, DeviceResult};
+use gait_core::kinematics::LegKinematics;
+use gait_core::measured::{measured_zmp, ForceReading};
+use gait_core::pipeline::joint_targets;
+use gait_core::plan::SwingShape;
+use gait_core::robot::LEG_JOINTS;
+use gait_core::zmp::ZmpShape;
+use gait_core::{GaitError, GaitSample, Model, Robot, Sampler, Side};
+
+use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
+use crate::bus::Bus;
+use crate::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
+use crate::log::{
+    FaultKind, FaultRecord, FaultState, LogWriter, Record, StopRecord, SupportPhase, TickRecord,
+};
+use crate::params::ArgError;
+use crate::startup::{self, Ramp, StartupError};
+use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
+use crate::{startup_record, Config, DEVICE_IDS};
+
+/// Most footsteps a plan may have.
+pub const MAX_STEPS: usize = 64;
+/// The sampler type of the firmware.
+pub type GaitSampler = Sampler<f32, MAX_STEPS>;
+/// Devices read every tick, in bulk-read order.
+pub const SENSOR_IDS: [u8; 3] = [ids::FOOT_LEFT, ids::FOOT_RIGHT, ids::IMU];
+/// Fault-record id of a plan rejected by gait-core.
+pub const PLAN_REJECTED_ID: u8 = 0xFE;
+
+/// Exit codes (see the module docs).
+pub mod exit_code {
+    /// Plan done.
+    pub const OK: i32 = 0;
+    /// Configuration rejected.
+    pub const CONFIG: i32 = 2;
+    /// Virtual watchdog (QEMU board).
+    pub const WATCHDOG: i32 = 3;
+    /// Base of supervisor stops: 10 + stop reason code.
+    pub const STOP_BASE: i32 = 10;
+    /// A start-up step failed after the probe.
+    pub const STARTUP: i32 = 20;
+    /// Panic.
+    pub const PANIC: i32 = 101;
+}
+
+/// How a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunEnd {
+    /// The supervisor stopped (plan done or a fault); torque is off.
+    Stopped(StopReason),
+    /// A start-up step failed after the probe; torque is off.
+    Startup(StartupError),
+    /// gait-core rejected the configured walk; the bus was not touched.
+    Config(GaitError),
+}
+
+impl RunEnd {
+    /// The exit code (QEMU) of this end.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            RunEnd::Stopped(StopReason::PlanDone) => exit_code::OK,
+            RunEnd::Stopped(r) => exit_code::STOP_BASE + i32::from(r.code().0),
+            RunEnd::Startup(_) => exit_code::STARTUP,
+            RunEnd::Config(_) => exit_code::CONFIG,
+        }
+    }
+}
+
+/// The gait sampler of `cfg` (model, walk, ZMP and swing shape, dt).
+pub fn build_sampler(cfg: &Config, robot: &Robot) -> Result<GaitSampler, GaitError> {
+    let w = &cfg.walk;
+    let model = Model::<f32>::new(cfg.model, robot, w.z_c)?;
+    let mut params = w.params(model);
+    if cfg.zmp_continuous {
+        let b = cfg.zmp_b.unwrap_or(w.a);
+        params.zmp = ZmpShape::Continuous { b: b as f32 };
+    }
+    if cfg.swing_sinusoid {
+        params.swing = SwingShape::Sinusoid {
+            height: w.h_z as f32,
+        };
+    }
+    let plan = w.plan::<f32, MAX_STEPS>(robot, params)?;
+    Sampler::new(plan, cfg.dt_s())
+}
+
+/// Logs a rejected command line: the start-up record (bus not probed) and a
+/// `ConfigRejected` fault record (id = key index, value = token position).
+pub fn report_arg_error<B: Board>(board: &mut B, cfg: &Config, e: &ArgError) {
+    let mut log = LogWriter::new();
+    let rec = startup_record(board, cfg, None);
+    log.write(board, rec);
+    let rec = fault(
+        board.now_us(),
+        FaultKind::ConfigRejected,
+        e.key_index,
+        i32::from(e.position),
+    );
+    log.write(board, rec);
+}
+
+fn fault(time_us: u64, kind: FaultKind, id: u8, value: i32) -> Record {
+    Record::Fault(FaultRecord {
+        seq: 0,
+        time_us: time_us as u32,
+        kind,
+        id,
+        value,
+    })
+}
+
+fn is_foot(id: u8) -> bool {
+    id == ids::FOOT_LEFT || id == ids::FOOT_RIGHT
+}
+
+fn phase_of(s: &GaitSample<f32>) -> SupportPhase {
+    match s.phase {
+        gait_core::SupportPhase::Standing => SupportPhase::Standing,
+        gait_core::SupportPhase::Double => SupportPhase::Double,
+        gait_core::SupportPhase::Single(Side::Left) => SupportPhase::SingleLeft,
+        gait_core::SupportPhase::Single(Side::Right) => SupportPhase::SingleRight,
+    }
+}
+
+/// Broadcast Torque Enable = 0 through the master (lock-step aware); the board's
+/// best-effort raw packet if that fails.
+fn torque_off<B: Board>(bus: &mut Bus<'_, B>) {
+    if bus
+        .master()
+        .write(BROADCAST_ID, TORQUE_ENABLE_ADDR, &[0])
+        .is_err()
+    {
+        bus.board().torque_off_best_effort();
+    }
+}
+
+fn write_stop<B: Board>(bus: &mut Bus<'_, B>, log: &mut LogWriter, reason: StopReason) {
+    let b = bus.board();
+    let rec = Record::Stop(StopRecord {
+        seq: 0,
+        time_us: b.now_us() as u32,
+        reason,
+    });
+    log.write(b, rec);
+}
+
+/// ONE SYNC WRITE of the 12 Goal Positions.
+fn write_goals<B: Board>(bus: &mut Bus<'_, B>, ticks: &[i32; LEG_JOINTS]) {
+    let mut data = [[0u8; 4]; LEG_JOINTS];
+    for (d, t) in data.iter_mut().zip(ticks.iter()) {
+        *d = t.to_le_bytes();
+    }
+    let mut entries: [(u8, &[u8]); LEG_JOINTS] = [(0, &[]); LEG_JOINTS];
+    for ((e, &id), d) in entries.iter_mut().zip(ids::LEGS.iter()).zip(data.iter()) {
+        *e = (id, d.as_slice());
+    }
+    let f = x_series::GOAL_POSITION;
+    // A failed broadcast is counted in the master's stats; nothing else to do this tick.
+    let _ = bus.master().sync_write(f.addr, f.len, &entries);
+}
+
+/// The sensor devices read each tick and where their data lands in the bulk-read buffer.
+struct Sensors {
+    reqs: heapless::Vec<BulkReadRequest, 3>,
+    /// Per request: index into [`SENSOR_IDS`] and offset into the buffer.
+    slots: heapless::Vec<(usize, usize), 3>,
+    buf: [u8; 18 + 18 + 26],
+    results: [DeviceResult; 3],
+}
+
+impl Sensors {
+    fn new(missing: &[u8]) -> Self {
+        let mut s = Sensors {
+            reqs: heapless::Vec::new(),
+            slots: heapless::Vec::new(),
+            buf: [0; 62],
+            results: [Ok(()); 3],
+        };
+        let mut off = 0usize;
+        for (k, &id) in SENSOR_IDS.iter().enumerate() {
+            if missing.contains(&id) {
+                continue;
+            }
+            let f = if id == ids::IMU {
+                imu_table::SAMPLE
+            } else {
+                foot::SAMPLE
+            };
+            // At most 3 entries: cannot fail.
+            let _ = s.reqs.push(BulkReadRequest {
+                id,
+                addr: f.addr,
+                len: f.len,
+            });
+            let _ = s.slots.push((k, off));
+            off += usize::from(f.len);
+        }
+        s
+    }
+
+    /// ONE BULK READ; afterwards `results[i]` is request i's outcome.
+    fn read<B: Board>(&mut self, bus: &mut Bus<'_, B>) {
+        let n = self.reqs.len();
+        let Some(results) = self.results.get_mut(..n) else {
+            return;
+        };
+        if n == 0 {
+            return;
+        }
+        if let Err(e) = bus.master().bulk_read(&self.reqs, &mut self.buf, results) {
+            results.iter_mut().for_each(|r| *r = Err(e));
+        }
+    }
+
+    fn data(&self, req: usize, len: usize) -> Option<&[u8]> {
+        let &(_, off) = self.slots.get(req)?;
+        self.buf.get(off..off + len)
+    }
+}
+
+/// Last good sensor values.
+struct SensorState {
+    feet: [Option<FootForces>; 2],
+    held: [u16; 3],
+}
+
+/// Runs start-up and the walk on `board` with `cfg` until torque is off (see the module docs).
+/// Never returns before torque is off once it was enabled.
+pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
+    let robot = Robot::reference();
+    let mut log = LogWriter::new();
+    let mut sampler = match build_sampler(cfg, &robot) {
+        Ok(s) => s,
+        Err(e) => {
+            crate::fw_log!(error, "walk rejected by gait-core: error {}", e as u8);
+            let rec = startup_record(board, cfg, None);
+            log.write(board, rec);
+            let rec = fault(
+                board.now_us(),
+                FaultKind::ConfigRejected,
+                PLAN_REJECTED_ID,
+                e as i32,
+            );
+            log.write(board, rec);
+            return RunEnd::Config(e);
+        }
+    };
+
+    let time = Cell::new(0);
+    let mut bus = Bus::new(board, &time, cfg);
+
+    // 1. Probe.
+    let missing = startup::probe(&mut bus, &DEVICE_IDS, cfg);
+    {
+        let b = bus.board();
+        let rec = startup_record(&*b, cfg, Some(&missing));
+        log.write(b, rec);
+    }
+    let mut critical: heapless::Vec<u8, { crate::log::MAX_MISSING }> = heapless::Vec::new();
+    for &id in missing.iter() {
+        if cfg.feet_required || !is_foot(id) {
+            let _ = critical.push(id);
+        }
+    }
+    let mut sup = Supervisor::new(cfg.supervisor, SENSOR_IDS);
+    if let Err(reason) = sup.startup(&critical) {
+        crate::fw_log!(
+            error,
+            "{} device(s) missing, first {}",
+            missing.len(),
+            critical.first()
+        );
+        torque_off(&mut bus);
+        write_stop(&mut bus, &mut log, reason);
+        return RunEnd::Stopped(reason);
+    }
+
+    // 2–4. Return Delay Time, present pose, goal = present, torque on.
+    let mut present_ids: heapless::Vec<u8, 15> = heapless::Vec::new();
+    for &id in DEVICE_IDS.iter() {
+        if !missing.contains(&id) {
+            let _ = present_ids.push(id);
+        }
+    }
+    let present = match startup::set_return_delay(&mut bus, &present_ids, cfg)
+        .and_then(|_| startup::read_positions(&mut bus, cfg))
+        .and_then(|p| {
+            write_goals(&mut bus, &p);
+            startup::enable_torque(&mut bus, cfg).map(|()| p)
+        }) {
+        Ok(p) => p,
+        Err(e) => {
+            crate::fw_log!(error, "start-up failed at device {}", e.id);
+            let t = bus.board().now_us();
+            let b = bus.board();
+            log.write(b, fault(t, FaultKind::StartupFailed, e.id, e.step as i32));
+            torque_off(&mut bus);
+            write_stop(&mut bus, &mut log, StopReason::DeviceLost { id: e.id });
+            return RunEnd::Startup(e);
+        }
+    };
+
+    // 5. The initial pose and the ramp to it.
+    let kin = LegKinematics::<f32>::new(&robot);
+    let map = JointMap::from_robot(&robot);
+    let first = sampler.next(0.0);
+    let (q0, _) = joint_targets(&kin, &first);
+    let mut from = [0.0f32; LEG_JOINTS];
+    for (j, (f, &t)) in from.iter_mut().zip(present.iter()).enumerate() {
+        *f = map.rad_of_tick(j, t);
+    }
+    let ramp = Ramp::new(from, q0, cfg.ticks_for_us(cfg.ramp_us));
+    let final_hold = u16::try_from(cfg.ticks_for_us(cfg.final_hold_us)).unwrap_or(u16::MAX);
+
+    let mut sensors = Sensors::new(&missing);
+    let mut state = SensorState {
+        feet: [None; 2],
+        held: [0; 3],
+    };
+    let mut pitch = PitchAccel::new(PitchAccelConfig {
+        dt_s: cfg.dt_s() as f32,
+        cutoff_hz: cfg.imu_cutoff_hz,
+        inertia: robot.masses.upper_body_inertia as f32,
+    });
+    let mut tilt = TiltEstimator::new();
+    let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
+    let mut ramp_k: Option<u32> = Some(0);
+    let mut pending = Some(first);
+    let mut prev = first;
+    let mut walk_tick: u32 = 0;
+    let mut clamped_seen = 0u16;
+
+    crate::fw_log!(info, "walking: ramp {} ticks", ramp.ticks());
+    bus.board().start(cfg.watchdog_ms);
+    loop {
+        let tick = bus.board().wait_tick();
+        sup.tick_timing(tick.overrun);
+
+        // Sensors.
+        sensors.read(&mut bus);
+        let mut imu_fresh = None;
+        for (i, &(k, _)) in sensors.slots.clone().iter().enumerate() {
+            let Some(&id) = SENSOR_IDS.get(k) else {
+                continue;
+            };
+            let ok = sensors.results.get(i).is_some_and(|r| r.is_ok());
+            let fresh = sup.report(id, ok);
+            let held = state.held.get_mut(k);
+            let t = bus.board().now_us();
+            match (fresh, held) {
+                (Freshness::Fresh, Some(h)) => {
+                    if *h > 0 {
+                        let rec = fault(t, FaultKind::DeviceRecovered, id, i32::from(*h));
+                        log.write(bus.board(), rec);
+                    }
+                    *h = 0;
+                    if id == ids::IMU {
+                        imu_fresh = sensors.data(i, 26).and_then(ImuSample::from_bytes);
+                    } else if let Some(slot) = state.feet.get_mut(k) {
+                        *slot = sensors.data(i, 18).and_then(FootForces::from_bytes);
+                    }
+                }
+                (Freshness::Held(n), Some(h)) => {
+                    *h = n;
+                    if n == 1 {
+                        log.write(bus.board(), fault(t, FaultKind::DeviceHolding, id, 1));
+                    }
+                }
+                _ => {}
+            }
+        }
+        match imu_fresh {
+            Some(s) => {
+                let [_, rate, _] = s.gyro_rad_s();
+                pitch.update(rate);
+                tilt.update(s.accel_m_s2());
+            }
+            None => {
+                pitch.update(f32::NAN);
+            }
+        }
+        sup.tilt(tilt.last().tilt);
+        let tau = pitch.torque();
+        let reading = |f: &Option<FootForces>| {
+            ForceReading::new(f.map_or([f32::NAN; 4], |f| f.forces_mn.map(|v| v as f32 * 1e-3)))
+        };
+        let [fl, fr] = &state.feet;
+        let [pl, pr] = &prev.feet;
+        let meas = measured_zmp(
+            &robot,
+            (pl, &reading(fl)),
+            (pr, &reading(fr)),
+            cfg.min_load_n,
+        );
+
+        // Supervisor, targets, servos.
+        let action = sup.step();
+        let mut rec = TickRecord {
+            time_us: tick.nominal_us as u32,
+            overrun: tick.overrun,
+            ..TickRecord::default()
+        };
+        match action {
+            Action::Run => {
+                let q = match ramp_k {
+                    Some(k) => {
+                        ramp_k = if k + 1 >= ramp.ticks() {
+                            None
+                        } else {
+                            Some(k + 1)
+                        };
+                        ramp.at(k)
+                    }
+                    None => {
+                        let k = walk_tick;
+                        walk_tick = walk_tick.saturating_add(1);
+                        let s = pending.take().unwrap_or_else(|| sampler.next(tau));
+                        let (mut q, _) = joint_targets(&kin, &s);
+                        if sampler.is_done() {
+                            sup.stop_with_hold(StopReason::PlanDone, final_hold);
+                        }
+                        if cfg.stop_at_tick == Some(k) {
+                            sup.stop(StopReason::Requested);
+                        }
+                        if cfg.fault_nan_tick == Some(k) {
+                            if let Some(v) = q.first_mut() {
+                                *v = f32::NAN;
+                            }
+                        }
+                        let ([zx, zy], [cx, cy, _]) = (s.zmp, s.com);
+                        rec.set_zmp_ref_m(zx, zy);
+                        rec.set_com_m(cx, cy);
+                        rec.phase = phase_of(&s);
+                        prev = s;
+                        q
+                    }
+                };
+                let ticks = match safe_targets(&q, &map, &last_ticks) {
+                    Ok(t) => {
+                        if t.clamped & !clamped_seen != 0 {
+                            let first = t.clamped.trailing_zeros() as u8;
+                            let now = bus.board().now_us();
+                            let rec =
+                                fault(now, FaultKind::TargetClamped, first, i32::from(t.clamped));
+                            log.write(bus.board(), rec);
+                        }
+                        clamped_seen |= t.clamped;
+                        t.ticks
+                    }
+                    Err(e) => {
+                        sup.stop(StopReason::NonFiniteTarget {
+                            joint: e.first_joint(),
+                        });
+                        e.ticks
+                    }
+                };
+                write_goals(&mut bus, &ticks);
+                last_ticks = ticks;
+            }
+            Action::HoldPose => write_goals(&mut bus, &last_ticks),
+            Action::SendTorqueOff => torque_off(&mut bus),
+            Action::Idle => {}
+        }
+        if action != Action::Run {
+            let ([zx, zy], [cx, cy, _]) = (prev.zmp, prev.com);
+            rec.set_zmp_ref_m(zx, zy);
+            rec.set_com_m(cx, cy);
+            rec.phase = match sup.stop_reason() {
+                Some(StopReason::PlanDone) => SupportPhase::Standing,
+                _ => SupportPhase::Stopped,
+            };
+        }
+        if let Some([zx, zy]) = meas.zmp {
+            rec.set_zmp_meas_m(zx, zy);
+            rec.zmp_valid = true;
+        }
+        rec.set_tau_nm(tau);
+        // The state that produced this tick's action.
+        rec.fault = match action {
+            Action::Run if sup.any_holding() => FaultState::Holding,
+            Action::Run => FaultState::Ok,
+            Action::HoldPose => FaultState::Stopping,
+            Action::SendTorqueOff | Action::Idle => FaultState::TorqueOff,
+        };
+        rec.bus = bus.counters();
+        rec.overruns = u16::try_from(bus.board().overruns()).unwrap_or(u16::MAX);
+        log.write(bus.board(), Record::Tick(rec));
+        bus.board().feed();
+
+        if matches!(action, Action::SendTorqueOff | Action::Idle) {
+            let reason = sup.stop_reason().unwrap_or(StopReason::Requested);
+            write_stop(&mut bus, &mut log, reason);
+            crate::fw_log!(info, "stopped: {}", reason);
+            return RunEnd::Stopped(reason);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,325 @@
+//! Start-up on the bus: probe every device, Return Delay Time 0, present pose, torque on, and
+//! the smooth move from the present pose to the gait's initial pose.
+//!
+//! Sequence (run by [`crate::control::run`]):
+//! 1. [`probe`]: PING every id of [`crate::DEVICE_IDS`] (each up to
+//!    [`Config::startup_attempts`] times); the ids that never answer are reported in the
+//!    start-up log record. A missing servo or IMU stops (exit code 11, stop record
+//!    `DeviceMissing`); a missing foot board too unless [`Config::feet_required`] is false
+//!    (then the walk runs without it, see [`crate::control`]).
+//! 2. [`set_return_delay`]: READ Return Delay Time (address 9) of every present device; when it
+//!    is not 0, WRITE 0 and READ it back (the register is in EEPROM: writing only when needed
+//!    spares it). A device whose value does not read back as 0 fails start-up.
+//! 3. [`read_positions`]: one SYNC READ of Present Position (132, 4 bytes) of the 12 servos.
+//! 4. [`enable_torque`]: WRITE Torque Enable (64) = 1 to each servo, status checked.
+//! 5. [`Ramp`]: the joints move from the present pose to the initial pose (the first gait
+//!    sample through the IK) along a minimum-jerk profile over [`Config::ramp_us`], one SYNC
+//!    WRITE of Goal Position per tick (done by the control loop).
+//!
+//! Steps 2–4 report the first failing device as a [`StartupError`] (log fault record
+//! `StartupFailed`, exit code 20).
+
+use dxl::table::{ids, x_series};
+
+use crate::board::{Clock, ServoBus};
+use crate::bus::Bus;
+use crate::log::MAX_MISSING;
+use crate::Config;
+use gait_core::robot::LEG_JOINTS;
+
+/// Which start-up step failed (wire code in the fault record's `value`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum StartupStep {
+    /// Reading Return Delay Time.
+    ReturnDelayRead = 1,
+    /// Writing Return Delay Time = 0.
+    ReturnDelayWrite = 2,
+    /// The read-back value was not 0.
+    ReturnDelayVerify = 3,
+    /// SYNC READ of the present positions.
+    ReadPositions = 4,
+    /// WRITE Torque Enable = 1.
+    TorqueEnable = 5,
+}
+
+/// A start-up step failed for device `id`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StartupError {
+    /// The step.
+    pub step: StartupStep,
+    /// The device.
+    pub id: u8,
+    /// The driver's error (`None` for a verification mismatch).
+    pub error: Option<dxl::Error>,
+}
+
+/// Retries `f` up to `attempts` times (at least once); returns the last result.
+fn retry<T>(attempts: u8, mut f: impl FnMut() -> Result<T, dxl::Error>) -> Result<T, dxl::Error> {
+    let mut last = Err(dxl::Error::Timeout);
+    for _ in 0..attempts.max(1) {
+        last = f();
+        if last.is_ok() {
+            break;
+        }
+    }
+    last
+}
+
+/// PINGs every id of `devices`; returns the ids that never answered (at most
+/// [`MAX_MISSING`], in bus order).
+pub fn probe<B: ServoBus + Clock>(
+    bus: &mut Bus<'_, B>,
+    devices: &[u8],
+    cfg: &Config,
+) -> heapless::Vec<u8, MAX_MISSING> {
+    let mut missing = heapless::Vec::new();
+    for &id in devices {
+        if retry(cfg.startup_attempts, || bus.master().ping(id).map(|_| ())).is_err() {
+            // More than MAX_MISSING missing devices: the list is full, the count is enough.
+            let _ = missing.push(id);
+        }
+    }
+    missing
+}
+
+/// Sets Return Delay Time to 0 on every device of `devices` (write only when needed) and
+/// verifies it by reading it back; returns how many devices were written.
+pub fn set_return_delay<B: ServoBus + Clock>(
+    bus: &mut Bus<'_, B>,
+    devices: &[u8],
+    cfg: &Config,
+) -> Result<u8, StartupError> {
+    let addr = x_series::RETURN_DELAY_TIME.addr;
+    let n = cfg.startup_attempts;
+    let fail = |step, id, error| StartupError { step, id, error };
+    let mut written = 0u8;
+    for &id in devices {
+        let mut v = [0xFFu8; 1];
+        retry(n, || bus.master().read(id, addr, &mut v))
+            .map_err(|e| fail(StartupStep::ReturnDelayRead, id, Some(e)))?;
+        if v[0] == 0 {
+            continue;
+        }
+        retry(n, || bus.master().write(id, addr, &[0]))
+            .map_err(|e| fail(StartupStep::ReturnDelayWrite, id, Some(e)))?;
+        written = written.saturating_add(1);
+        let mut back = [0xFFu8; 1];
+        retry(n, || bus.master().read(id, addr, &mut back))
+            .map_err(|e| fail(StartupStep::ReturnDelayRead, id, Some(e)))?;
+        if back[0] != 0 {
+            return Err(fail(StartupStep::ReturnDelayVerify, id, None));
+        }
+    }
+    Ok(written)
+}
+
+/// Present positions (ticks) of the 12 leg servos, one SYNC READ (retried as a whole).
+pub fn read_positions<B: ServoBus + Clock>(
+    bus: &mut Bus<'_, B>,
+    cfg: &Config,
+) -> Result<[i32; LEG_JOINTS], StartupError> {
+    let f = x_series::PRESENT_POSITION;
+    let mut out = [0u8; 4 * LEG_JOINTS];
+    let mut results = [Ok(()); LEG_JOINTS];
+    let mut failed = None;
+    for _ in 0..cfg.startup_attempts.max(1) {
+        failed = match bus
+            .master()
+            .sync_read(f.addr, f.len, &ids::LEGS, &mut out, &mut results)
+        {
+            Ok(_) => results
+                .iter()
+                .zip(ids::LEGS.iter())
+                .find_map(|(r, &id)| r.err().map(|e| (id, e))),
+            Err(e) => Some((0, e)),
+        };
+        if failed.is_none() {
+            break;
+        }
+    }
+    if let Some((id, e)) = failed {
+        return Err(StartupError {
+            step: StartupStep::ReadPositions,
+            id,
+            error: Some(e),
+        });
+    }
+    let mut ticks = [0i32; LEG_JOINTS];
+    for (t, c) in ticks.iter_mut().zip(out.chunks_exact(4)) {
+        *t = <[u8; 4]>::try_from(c).map_or(0, i32::from_le_bytes);
+    }
+    Ok(ticks)
+}
+
+/// WRITE Torque Enable = 1 to each leg servo (status checked).
+pub fn enable_torque<B: ServoBus + Clock>(
+    bus: &mut Bus<'_, B>,
+    cfg: &Config,
+) -> Result<(), StartupError> {
+    let addr = x_series::TORQUE_ENABLE.addr;
+    for &id in ids::LEGS.iter() {
+        retry(cfg.startup_attempts, || bus.master().write(id, addr, &[1])).map_err(|e| {
+            StartupError {
+                step: StartupStep::TorqueEnable,
+                id,
+                error: Some(e),
+            }
+        })?;
+    }
+    Ok(())
+}
+
+/// Minimum-jerk blend `s(u) = 10u³ − 15u⁴ + 6u⁵` for `u` clamped to [0, 1]: s(0) = 0,
+/// s(1) = 1, zero velocity and acceleration at both ends (NaN counts as 0).
+pub fn min_jerk(u: f32) -> f32 {
+    let u = if u.is_nan() { 0.0 } else { u.clamp(0.0, 1.0) };
+    u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
+}
+
+/// The smooth move from the present pose to the initial pose, in joint space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ramp {
+    from: [f32; LEG_JOINTS],
+    to: [f32; LEG_JOINTS],
+    ticks: u32,
+}
+
+impl Ramp {
+    /// From `from` to `to` (rad) in `ticks` ticks (at least 1).
+    pub fn new(from: [f32; LEG_JOINTS], to: [f32; LEG_JOINTS], ticks: u32) -> Self {
+        Ramp {
+            from,
+            to,
+            ticks: ticks.max(1),
+        }
+    }
+
+    /// Number of ticks of the move; tick `ticks()` − 1 commands `to` exactly.
+    pub fn ticks(&self) -> u32 {
+        self.ticks
+    }
+
+    /// The joint targets of tick `k` (0-based): `from + (to − from)·s((k+1)/ticks)`.
+    pub fn at(&self, k: u32) -> [f32; LEG_JOINTS] {
+        let s = min_jerk(k.saturating_add(1) as f32 / self.ticks as f32);
+        let mut q = [0.0f32; LEG_JOINTS];
+        for ((o, &a), &b) in q.iter_mut().zip(self.from.iter()).zip(self.to.iter()) {
+            *o = a + (b - a) * s;
+        }
+        q
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testkit::FakeBoard;
+    use core::cell::Cell;
+    use dxl::opcode;
+
+    #[test]
+    fn min_jerk_profile() {
+        assert_eq!(min_jerk(0.0), 0.0);
+        assert!((min_jerk(1.0) - 1.0).abs() < 1e-6);
+        assert!((min_jerk(0.5) - 0.5).abs() < 1e-6);
+        assert_eq!(min_jerk(-3.0), 0.0);
+        assert!((min_jerk(7.0) - 1.0).abs() < 1e-6);
+        assert_eq!(min_jerk(f32::NAN), 0.0);
+        let mut prev = 0.0;
+        for i in 1..=100 {
+            let s = min_jerk(i as f32 / 100.0);
+            assert!(s >= prev);
+            prev = s;
+        }
+        // Zero slope at the ends: the first step of 1/100 moves by ~1e-5.
+        assert!(min_jerk(0.01) < 2e-5);
+        assert!(1.0 - min_jerk(0.99) < 2e-5);
+    }
+
+    #[test]
+    fn ramp_ends_at_target() {
+        let from = [0.5f32; 12];
+        let mut to = [0.0f32; 12];
+        to[3] = 1.0;
+        let r = Ramp::new(from, to, 300);
+        assert_eq!(r.at(299), to);
+        let q0 = r.at(0);
+        assert!((q0[0] - 0.5).abs() < 1e-4);
+        assert_eq!(Ramp::new(from, to, 0).ticks(), 1);
+    }
+
+    #[test]
+    fn startup_pings_all_sets_and_verifies_return_delay() {
+        let mut board = FakeBoard::robot();
+        let time = Cell::new(0);
+        let cfg = Config::default();
+        let mut bus = Bus::new(&mut board, &time, &cfg);
+        let missing = probe(&mut bus, &crate::DEVICE_IDS, &cfg);
+        assert!(missing.is_empty());
+        let written = set_return_delay(&mut bus, &crate::DEVICE_IDS, &cfg);
+        assert_eq!(written, Ok(15));
+        // Second time: already 0, nothing written.
+        assert_eq!(set_return_delay(&mut bus, &crate::DEVICE_IDS, &cfg), Ok(0));
+        let ticks = read_positions(&mut bus, &cfg).unwrap();
+        assert_eq!(ticks, FakeBoard::initial_ticks());
+        enable_torque(&mut bus, &cfg).unwrap();
+        drop(bus);
+        // Every device pinged, written (addr 9 = 0) and read back.
+        for id in crate::DEVICE_IDS {
+            let pk = |op: u8| {
+                board
+                    .packets
+                    .iter()
+                    .filter(move |p| p.id == id && p.op == op)
+            };
+            assert_eq!(pk(opcode::PING).count(), 1, "ping {id}");
+            let writes: Vec<_> = pk(opcode::WRITE).filter(|p| p.addr == 9).collect();
+            assert_eq!(writes.len(), 1, "write {id}");
+            assert_eq!(writes[0].data, vec![0]);
+            assert_eq!(
+                pk(opcode::READ).filter(|p| p.addr == 9).count(),
+                3,
+                "reads {id}"
+            );
+            assert_eq!(board.device(id).unwrap().rdt, 0);
+        }
+        assert!(board.servos().all(|d| d.torque));
+        assert_eq!(
+            board
+                .packets
+                .iter()
+                .filter(|p| p.op == opcode::SYNC_READ)
+                .count(),
+            1
+        );
+    }
+
+    #[test]
+    fn probe_reports_missing_and_verify_catches_a_stuck_register() {
+        let mut board = FakeBoard::robot();
+        board.remove(7);
+        board.remove(200);
+        board.device_mut(3).unwrap().rdt_stuck = true;
+        let time = Cell::new(0);
+        let cfg = Config::default();
+        let mut bus = Bus::new(&mut board, &time, &cfg);
+        let missing = probe(&mut bus, &crate::DEVICE_IDS, &cfg);
+        assert_eq!(&missing[..], &[7, 200]);
+        let e = set_return_delay(&mut bus, &[1, 2, 3], &cfg).unwrap_err();
+        assert_eq!(e.step, StartupStep::ReturnDelayVerify);
+        assert_eq!(e.id, 3);
+        let e = read_positions(&mut bus, &cfg).unwrap_err();
+        assert_eq!((e.step, e.id), (StartupStep::ReadPositions, 7));
+        let e = enable_torque(&mut bus, &cfg).unwrap_err();
+        assert_eq!((e.step, e.id), (StartupStep::TorqueEnable, 7));
+        drop(bus);
+        // Each missing device was pinged `startup_attempts` times.
+        let pings = board
+            .packets
+            .iter()
+            .filter(|p| p.id == 7 && p.op == opcode::PING)
+            .count();
+        assert_eq!(pings, usize::from(cfg.startup_attempts));
+    }
+}
