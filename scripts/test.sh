@@ -35,7 +35,16 @@ step "firmware: on-target tests in QEMU (mps2-an500, Cortex-M7)"
 CARGO_TARGET_THUMBV7EM_NONE_EABIHF_RUNNER=scripts/qemu-run.sh \
     cargo test --release --no-default-features --features board-qemu --test on_target
 
-step "firmware: boots in QEMU"
-scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --timeout 120
+step "firmware: boots in QEMU without a robot and reports every device missing (exit 11)"
+code=0
+scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --timeout 120 || code=$?
+if [ "$code" != 11 ]; then
+    echo "expected exit code 11 (device missing at start-up), got $code" >&2
+    exit 1
+fi
+
+step "firmware in the loop: short walks in QEMU against the simulated robot (determinism, faults, fall)"
+WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu \
+    cargo test --release --target host-tuple -p walker-host --test fil -- --ignored --test-threads 1
 
 printf '\nall checks passed\n'

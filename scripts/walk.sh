@@ -1,24 +1,29 @@
 #!/usr/bin/env bash
-# Main job. Target: the firmware walks the Table 2 plan (14 steps) in QEMU against the simulated
-# robot and writes the ZMP-response report. Today (see README "Main job") it builds and boots the
-# QEMU firmware, then walks the Table 2 plan through gait-core on the host for all three models
-# and writes the planned trajectories (ZMP, CoM, feet, 12 joint angles) to out/.
+# Main job: the firmware, built for the emulated board (QEMU mps2-an500, Cortex-M7), walks the
+# seed's Table 2 plan (14 steps) against the simulated robot in lock-step, once per model (LIPM,
+# DLIPM, TLIPFM); each run writes its captured log, the simulator's ground truth and the
+# ZMP-response report (CSV, SVG/PNG plots like seed 000 Figs. 14-16, Table 3 statistics) to
+# out/fil-MODEL/, and the three models are compared side by side in out/compare.md.
+# Options: PLAN=plans/other.toml bash scripts/walk.sh; MODELS="tlipfm" for one model only.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source scripts/setup.sh
-mkdir -p out
+plan=${PLAN:-plans/table2.toml}
+models=${MODELS:-"lipm dlipm tlipfm"}
 
-echo "== firmware for the emulated board (mps2-an500, Cortex-M7)"
+echo "== building the firmware (board-qemu) and the host tools"
 cargo build --release --no-default-features --features board-qemu --bin qemu
-scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --timeout 120
-
-echo "== Table 2 walk (14 steps) planned by gait-core: LIPM, DLIPM, TLIPFM"
 cargo build --release --target host-tuple -p walker-host --bin walker
-walker=target/x86_64-unknown-linux-gnu/release/walker
-[ -x "$walker" ] || walker=$(find target -path '*release/walker' -type f | head -n 1)
-for model in lipm dlipm tlipfm; do
-    sed "s/^model *=.*/model = \"$model\"/" plans/table2.toml > "out/table2-$model.toml"
-    "$walker" export --plan "out/table2-$model.toml" --out "out/plan-$model.csv"
-    echo "   out/plan-$model.csv: $(($(wc -l < "out/plan-$model.csv") - 1)) samples"
+walker=target/$(rustc -vV | sed -n 's/^host: //p')/release/walker
+
+runs=()
+for model in $models; do
+    echo
+    echo "== $plan with $model: firmware in QEMU against the simulated robot"
+    "$walker" fil --plan "$plan" --model "$model" --out "out/fil-$model"
+    runs+=("$model=out/fil-$model/walk.log")
 done
-echo "done: see out/"
+
+echo
+echo "== side by side"
+"$walker" compare --runs "$(IFS=,; echo "${runs[*]}")" --out out/compare.md

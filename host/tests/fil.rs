@@ -1,0 +1,182 @@
+//! Firmware in the loop: the board-qemu firmware ELF in QEMU against the simulated robot.
+//!
+//! These tests need QEMU and the firmware ELF, so they are `#[ignore]`d in a plain `cargo test`
+//! and run by `scripts/test.sh` after it has built the ELF:
+//! `WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu cargo test --release
+//!  --target host-tuple -p walker-host --test fil -- --ignored --test-threads 1`.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use walker_firmware::log::Record;
+use walker_firmware::supervisor::StopReason;
+use walker_host::fil::{run, FilOptions, FilResult};
+use walker_host::planfile::WalkSpec;
+use walker_host::report::{decode_file, DecodedLog};
+use walker_host::sim::SimConfig;
+
+fn elf() -> PathBuf {
+    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let p = std::env::var("WALKER_QEMU_ELF")
+        .unwrap_or_else(|_| "target/thumbv7em-none-eabihf/release/qemu".into());
+    let p = root.join(p);
+    assert!(
+        p.is_file(),
+        "firmware ELF {} missing: build it first (scripts/test.sh does)",
+        p.display()
+    );
+    p
+}
+
+fn short_walk(steps: i64) -> WalkSpec {
+    WalkSpec {
+        steps,
+        lead_in: 1.0,
+        lead_out: 1.0,
+        ..WalkSpec::default()
+    }
+}
+
+fn fil(name: &str, spec: WalkSpec, sim: SimConfig, tokens: &[&str]) -> (FilResult, DecodedLog) {
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let opts = FilOptions {
+        elf: elf(),
+        spec,
+        out_dir: out,
+        machine: "mps2-an500".into(),
+        timeout: Duration::from_secs(600),
+        sim,
+        extra_tokens: tokens.iter().map(|s| s.to_string()).collect(),
+    };
+    let r = run(&opts, |_, _| {}).expect("firmware-in-the-loop run");
+    let log = decode_file(&r.log).expect("log");
+    (r, log)
+}
+
+fn stop_reason(log: &DecodedLog) -> Option<StopReason> {
+    log.events.iter().find_map(|e| match e {
+        Record::Stop(s) => Some(s.reason),
+        _ => None,
+    })
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn short_walk_completes_and_is_deterministic() {
+    let spec = short_walk(4);
+    let (a, log_a) = fil(
+        "det-a",
+        spec.clone(),
+        SimConfig {
+            seed: 7,
+            ..SimConfig::default()
+        },
+        &[],
+    );
+    let (b, log_b) = fil(
+        "det-b",
+        spec.clone(),
+        SimConfig {
+            seed: 7,
+            ..SimConfig::default()
+        },
+        &[],
+    );
+    assert_eq!(a.exit_code, Some(0));
+    assert_eq!(stop_reason(&log_a), Some(StopReason::PlanDone));
+    assert_eq!(log_a.bad(), 0, "a clean run has no bad log frames");
+    // 4 steps of 0.64 s + 1 s lead-in + 1 s lead-out at 200 Hz, plus the start-up ramp and hold.
+    let walking = log_a.ticks.iter().filter(|t| t.time_us > 0).count();
+    assert!(
+        walking > (4.0 * 0.64 + 2.0) as usize * 200,
+        "{walking} ticks"
+    );
+    // Lock-step: byte-identical logs and truth files for the same seed.
+    assert_eq!(
+        std::fs::read(&a.log).unwrap(),
+        std::fs::read(&b.log).unwrap(),
+        "logs differ"
+    );
+    assert_eq!(
+        std::fs::read(&a.truth).unwrap(),
+        std::fs::read(&b.truth).unwrap(),
+        "truth differs"
+    );
+    assert_eq!(log_a.ticks.len(), log_b.ticks.len());
+    // The walk actually moved the robot forward: the CoM ends 3·S_L ahead.
+    let last = log_a.ticks.last().unwrap();
+    let com_x = last.com[0] as f64 * 1e-5;
+    assert!((com_x - 3.0 * 0.02).abs() < 0.005, "final CoM x {com_x}");
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn dropped_and_corrupted_replies_are_counted_and_survived() {
+    let mut sim = SimConfig {
+        seed: 11,
+        ..SimConfig::default()
+    };
+    sim.faults.p_drop = 0.05;
+    sim.faults.p_corrupt = 0.02;
+    let (r, log) = fil("faults", short_walk(4), sim, &[]);
+    assert!(
+        r.sim.bus.dropped > 10 && r.sim.bus.corrupted > 3,
+        "{:?}",
+        r.sim.bus
+    );
+    assert_eq!(r.exit_code, Some(0), "5 % drops must not stop the walk");
+    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
+    let last = log.ticks.last().unwrap();
+    assert!(last.bus.timeouts > 0 && last.bus.crc > 0, "{:?}", last.bus);
+    // Last good values held: the measured ZMP never jumps to nonsense on a lost reply.
+    assert!(log
+        .ticks
+        .iter()
+        .all(|t| t.zmp_meas.iter().all(|v| (*v as f64 * 1e-5).abs() < 1.0)));
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn a_dead_foot_board_is_reported_missing_at_start_up() {
+    let mut sim = SimConfig::default();
+    sim.faults.dead_ids = vec![111];
+    let (r, log) = fil("dead-foot", short_walk(2), sim, &[]);
+    assert_eq!(
+        r.exit_code,
+        Some(11),
+        "exit 11 = device missing at start-up"
+    );
+    assert_eq!(
+        stop_reason(&log),
+        Some(StopReason::DeviceMissing { id: 111 })
+    );
+    let startup = log.events.iter().find_map(|e| match e {
+        Record::Startup(s) => Some(s.clone()),
+        _ => None,
+    });
+    assert_eq!(startup.expect("start-up record").missing.as_slice(), &[111]);
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn a_fall_stops_the_walk_and_turns_torque_off() {
+    let mut sim = SimConfig::default();
+    sim.fall.forced_at_s = Some(3.0);
+    let (r, log) = fil("fall", short_walk(6), sim, &[]);
+    assert_eq!(r.exit_code, Some(13), "exit 13 = fall");
+    assert!(
+        matches!(stop_reason(&log), Some(StopReason::Fall { .. })),
+        "{:?}",
+        log.events
+    );
+    // The firmware stopped walking soon after the fall began.
+    let stop_t = log.events.iter().find_map(|e| match e {
+        Record::Stop(s) => Some(s.time_us as f64 * 1e-6),
+        _ => None,
+    });
+    let fall_t = r.sim.fall_started_us.expect("simulator saw the fall") as f64 * 1e-6;
+    assert!(
+        stop_t.unwrap() - fall_t < 2.0,
+        "stopped at {stop_t:?}, fell at {fall_t}"
+    );
+}

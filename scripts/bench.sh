@@ -1,0 +1,415 @@
+#!/usr/bin/env bash
+# Benchmarks of issue 6, written into BENCHMARKS.md between <!-- bench:begin --> and
+# <!-- bench:end --> (the rest of the file is hand-written and left alone).
+#
+# Usage: bash scripts/bench.sh [--no-host]
+#   --no-host   skip the host criterion benches (their table keeps the previous figures out:
+#               it says "not run")
+#
+# What it does:
+#   1. builds the on-target bench (src/bin/bench.rs) for thumbv7em-none-eabihf (Cortex-M7/M4F,
+#      FPU) and thumbv7m-none-eabi (Cortex-M3, soft float), and the release firmware ELFs
+#      `qemu` and `opencr`;
+#   2. runs the bench in qemu-system-arm with -icount shift=0 (1 instruction = 1 virtual ns;
+#      SysTick counts one per 40 instructions) on mps2-an500 (M7) and mps2-an386 (M4F) with the
+#      eabihf ELF and on mps2-an385 (M3) with the thumbv7m ELF — each twice, side by side, and
+#      checks that both runs print identical lines (they must: the counts depend only on the
+#      instruction stream);
+#   3. reads flash/RAM of the firmware ELFs with binutils `readelf -S`;
+#   4. computes the bus time of one control tick from the packet sizes the bench printed
+#      (dxl's own encoders);
+#   5. runs the host criterion benches of gait-core briefly (host figures vary run to run);
+#   6. rewrites the marked section of BENCHMARKS.md.
+# Raw outputs: target/bench/{an500,an386,an385}.txt, host logs target/bench/host-*.txt.
+# Environment: BENCH_TURNAROUND_US (per-packet bus allowance, default 25),
+#              BENCH_CPU_MHZ (OpenCR clock for the compute-time estimate, default 216),
+#              BENCH_QEMU_TIMEOUT (s per QEMU run, default 900).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+host=1
+for a in "$@"; do
+    case "$a" in
+        --no-host) host=0 ;;
+        *) echo "usage: $0 [--no-host]" >&2; exit 2 ;;
+    esac
+done
+
+turnaround_us=${BENCH_TURNAROUND_US:-25}
+cpu_mhz=${BENCH_CPU_MHZ:-216}
+qemu_timeout=${BENCH_QEMU_TIMEOUT:-900}
+out=target/bench
+mkdir -p "$out"
+
+for tool in qemu-system-arm readelf awk; do
+    if ! command -v "$tool" >/dev/null 2>&1; then
+        echo "bench.sh: $tool not found (qemu-system-arm: bash scripts/setup.sh; readelf: binutils)" >&2
+        exit 127
+    fi
+done
+
+# ---- 1. builds ----
+# The bench is built with defmt compiled out (DEFMT_LOG=off: the control loop's defmt logs
+# would interleave with the bench's text on semihosting stdout) in its own target directory,
+# so that switching DEFMT_LOG never rebuilds the firmware ELFs in target/.
+qemu_feat=(--release --no-default-features --features board-qemu)
+bench_dir=target/bench-build
+echo "bench.sh: building" >&2
+DEFMT_LOG=off cargo build "${qemu_feat[@]}" --bin bench --target-dir "$bench_dir"
+DEFMT_LOG=off cargo build "${qemu_feat[@]}" --bin bench --target-dir "$bench_dir" \
+    --target thumbv7m-none-eabi
+cargo build "${qemu_feat[@]}" --bin qemu
+cargo build --release --no-default-features --features board-opencr --bin opencr
+elf_hf=$bench_dir/thumbv7em-none-eabihf/release/bench
+elf_m3=$bench_dir/thumbv7m-none-eabi/release/bench
+
+# ---- 2. QEMU runs ----
+run_once() { # machine elf outfile
+    timeout --foreground "$qemu_timeout" qemu-system-arm -M "$1" -nographic -monitor none \
+        -serial null -semihosting-config enable=on,target=native -icount shift=0 \
+        -kernel "$2" >"$3" 2>"$3.err"
+}
+run_machine() { # machine elf name
+    local m=$1 elf=$2 name=$3 rc1=0 rc2=0
+    echo "bench.sh: running $elf on $m (twice, in parallel)" >&2
+    run_once "$m" "$elf" "$out/$name.run1" & local p1=$!
+    run_once "$m" "$elf" "$out/$name.run2" & local p2=$!
+    wait "$p1" || rc1=$?
+    wait "$p2" || rc2=$?
+    if [ "$rc1" -ne 0 ] || [ "$rc2" -ne 0 ] || ! grep -q '^done 1$' "$out/$name.run1"; then
+        echo "bench.sh: $m run failed (exit $rc1/$rc2); output in $out/$name.run1{,.err}" >&2
+        cat "$out/$name.run1" "$out/$name.run1.err" >&2 || true
+        exit 1
+    fi
+    if ! cmp -s "$out/$name.run1" "$out/$name.run2"; then
+        echo "bench.sh: $m: the two runs differ — instruction counts are not deterministic:" >&2
+        diff "$out/$name.run1" "$out/$name.run2" >&2 || true
+        exit 1
+    fi
+    if [ -f "$out/$name.txt" ]; then
+        if cmp -s "$out/$name.run1" "$out/$name.txt"; then
+            echo "bench.sh: $m: identical to the previous bench.sh run" >&2
+        else
+            echo "bench.sh: $m: differs from the previous bench.sh run (code changed?):" >&2
+            diff "$out/$name.txt" "$out/$name.run1" >&2 || true
+        fi
+    fi
+    mv "$out/$name.run1" "$out/$name.txt"
+    rm -f "$out/$name.run2" "$out/$name.run1.err" "$out/$name.run2.err"
+}
+run_machine mps2-an500 "$elf_hf" an500
+run_machine mps2-an386 "$elf_hf" an386
+run_machine mps2-an385 "$elf_m3" an385
+
+declare -A M7 M4 M3
+load() { # file assoc-array-name
+    local -n arr=$2
+    local k v
+    while read -r k v; do
+        [ -n "$k" ] && arr[$k]=$v
+    done <"$1"
+}
+load "$out/an500.txt" M7
+load "$out/an386.txt" M4
+load "$out/an385.txt" M3
+
+# ---- helpers ----
+calc() { awk "BEGIN { printf \"%.${2:-0}f\", $1 }"; }
+commas() { # integer or decimal → thousands separators
+    local s=$1 int frac=""
+    int=${s%%.*}
+    [ "$int" != "$s" ] && frac=".${s#*.}"
+    int=$(echo "$int" | sed -E ':a;s/^(-?[0-9]+)([0-9]{3})/\1,\2/;ta')
+    printf '%s%s' "$int" "$frac"
+}
+n() { commas "$(calc "$1")"; }              # rounded integer with separators
+cell() { # array key → "avg (max)"
+    local -n a=$1
+    local avg=${a[$2.avg]:-} max=${a[$2.max]:-}
+    if [ -z "$avg" ]; then printf 'n/a'; return; fi
+    printf '%s (%s)' "$(n "$avg")" "$(n "$max")"
+}
+
+# ---- 3. sizes ----
+elf_sizes() { # elf → "flash ram text rodata data bss" (bytes)
+    local flash=0 ram=0 text=0 ro=0 data=0 bss=0 name type addr off size es flg rest sz
+    while read -r name type addr off size es flg rest; do
+        if [[ $flg != *A* ]]; then continue; fi
+        sz=$((16#$size))
+        if [ "$type" != NOBITS ]; then flash=$((flash + sz)); fi
+        if [ $((16#$addr)) -ge $((0x20000000)) ]; then ram=$((ram + sz)); fi
+        case $name in
+            .text) text=$sz ;;
+            .rodata) ro=$sz ;;
+            .data) data=$sz ;;
+            .bss) bss=$sz ;;
+        esac
+    done < <(readelf -S -W "$1" | sed -nE 's/^ *\[ *[0-9]+\] +//p')
+    echo "$flash $ram $text $ro $data $bss"
+}
+read -r q_flash q_ram q_text q_ro q_data q_bss < <(elf_sizes target/thumbv7em-none-eabihf/release/qemu)
+read -r o_flash o_ram o_text o_ro o_data o_bss < <(elf_sizes target/thumbv7em-none-eabihf/release/opencr)
+kib() { calc "$1 / 1024" 1; }
+verdict() { # value limit
+    if [ "$1" -le "$2" ]; then printf 'within'; else printf '**over**'; fi
+}
+
+# ---- 4. bus budget ----
+br=${M7[bytes.bulk_read]}
+sfl=${M7[bytes.status_foot_left]}
+sfr=${M7[bytes.status_foot_right]}
+simu=${M7[bytes.status_imu]}
+sw=${M7[bytes.sync_write]}
+bus_bytes=$((br + sfl + sfr + simu + sw))
+packets=5
+tick_m7_max=${M7[tick.f32.tlipfm.max]}
+compute_us=$(calc "$tick_m7_max / $cpu_mhz" 1)
+
+# ---- 5. host criterion ----
+crit() { # bench-name → "name value unit" lines
+    cargo bench --target host-tuple -p gait-core --bench "$1" -- \
+        --warm-up-time 0.3 --measurement-time 1 2>&1 | tee "$out/host-$1.txt" >&2
+    awk '
+        /time:/ {
+            name = ($1 == "time:") ? prev : $1
+            for (i = 1; i <= NF; i++) if ($i ~ /^\[/) { print name, $(i + 2), $(i + 3); break }
+            next
+        }
+        NF > 0 && $1 !~ /^(Benchmarking|Found|change:|Performance|No|Change|[0-9]+)/ { prev = $1 }
+    ' "$out/host-$1.txt"
+}
+declare -A H
+if [ "$host" -eq 1 ]; then
+    echo "bench.sh: host criterion benches (gait-core sampler, ik)" >&2
+    while read -r k v u; do H[$k]="$v $u"; done < <(crit sampler; crit ik)
+fi
+h() { printf '%s' "${H[$1]:-not run}"; }
+
+# ---- 6. the section ----
+rustc_v=$(rustc --version | awk '{ print $2 }')
+qemu_v=$(qemu-system-arm --version | head -1 | sed -E 's/.*version ([^ ]+).*/\1/')
+t7=${M7[tick.f32.tlipfm.avg]}
+t3=${M3[tick.fixed.tlipfm.avg]}
+codec7=$(calc "${M7[dxl.decode3.avg]} + ${M7[dxl.sync_write12.avg]} + ${M7[dxl.bulk_read3.avg]}")
+codec3=$(calc "${M3[dxl.decode3.avg]} + ${M3[dxl.sync_write12.avg]} + ${M3[dxl.bulk_read3.avg]}")
+pct() { calc "100 * ($1) / ($2)"; }
+# Transcendental calls per two-leg IK, counted in gait-core/src/kinematics.rs (legs_ik):
+# 3 rot_cols × 3 sin_cos + 2 legs × 2 sin_cos, 2 legs × 7 atan2, 2 legs × 5 sqrt.
+ik_sc=13 ik_at=14 ik_sq=10
+ik_tr() { # array → instructions in the IK's sin_cos/atan2/sqrt (primitive figures × calls)
+    local -n a=$1
+    calc "$ik_sc * ${a[prim.sin_cos_fast.avg]} + $ik_at * ${a[prim.atan2f.avg]} + $ik_sq * ${a[prim.sqrtf.avg]}"
+}
+ik7=$(ik_tr M7)
+ik3=$(ik_tr M3)
+exp3=$(calc "2 * ${M3[prim.fx_exp_neg.avg]}")
+exp7=$(calc "2 * ${M7[prim.fx_exp_neg.avg]}")
+
+section=$out/section.md
+{
+    cat <<EOF
+## On target: instructions per call (QEMU \`-icount shift=0\`), sizes, bus budget
+
+Generated by \`bash scripts/bench.sh\` (rustc $rustc_v, qemu-system-arm $qemu_v); do not edit
+between the markers. The instruction counts are exact and deterministic: every QEMU run is done
+twice and the script stops if the two outputs differ; running the script again gives the same
+counts (only the host criterion figures change, they are wall-clock).
+
+How it counts (\`src/bin/bench.rs\`): with \`-icount shift=0\` one instruction is one virtual
+ns and SysTick counts at 25 MHz, i.e. one count per 40 instructions. Each stage runs K times in
+a loop (K = every tick of the Table 2 walk at the firmware's ${M7[tick_us]} µs period,
+$(n "${M7[walk.tlipfm.ticks]}") ticks, for the gait stages; 4,096 otherwise),
+SysTick read before and after each call. **avg** = telescoped counts × 40 / K minus the loop's
+own overhead (an empty call: ${M7[overhead.avg]} instructions per iteration); **max** = the largest
+single call, resolution 40 instructions (one count), call and timer reads included. QEMU counts
+instructions, not cycles: the M7 and M4F run the same ELF and give the same counts (a real M7
+dual-issues; cycles are not modelled). Inputs a stage takes from an earlier stage (the IK's gait
+samples) are computed beforehand, so each stage is timed alone. Release profile of Cargo.toml
+(opt-level "s", fat LTO).
+
+Reproduce one machine by hand:
+
+\`\`\`sh
+DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu --bin bench --target-dir target/bench-build
+DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu --bin bench --target-dir target/bench-build --target thumbv7m-none-eabi
+qemu-system-arm -M mps2-an500 -nographic -monitor none -serial null \\
+    -semihosting-config enable=on,target=native -icount shift=0 \\
+    -kernel target/bench-build/thumbv7em-none-eabihf/release/bench        # also -M mps2-an386
+qemu-system-arm -M mps2-an385 -nographic -monitor none -serial null \\
+    -semihosting-config enable=on,target=native -icount shift=0 \\
+    -kernel target/bench-build/thumbv7m-none-eabi/release/bench
+\`\`\`
+
+### Full control tick, instructions (avg over the walk, max per tick in parentheses)
+
+A tick = decode the three status replies byte by byte (\`dxl::Decoder\`) → pitch-rate filter,
+τ = J·φ̈ (\`imu::PitchAccel\`) → one gait sample with that τ → measured ZMP from the 8 forces →
+two-leg IK (\`pipeline::joint_targets\`) → 12 × \`rad_to_ticks\` → encode the SYNC WRITE of 12
+goal positions and the BULK READ of feet + IMU. These are the library calls alone; the
+firmware's own loop is measured below.
+
+| machine | path | LIPM | DLIPM | TLIPFM | target (issue 6) |
+| --- | --- | --- | --- | --- | --- |
+| Cortex-M7, mps2-an500 | f32 (exact sampler) | $(cell M7 tick.f32.lipm) | $(cell M7 tick.f32.dlipm) | $(cell M7 tick.f32.tlipfm) | ≤ 3,000: **$(calc "$t7 / 3000" 1)× over** |
+| Cortex-M4F, mps2-an386 | f32 (exact sampler) | $(cell M4 tick.f32.lipm) | $(cell M4 tick.f32.dlipm) | $(cell M4 tick.f32.tlipfm) | |
+| Cortex-M7, mps2-an500 | fixed sampler + f32 IK | $(cell M7 tick.fixed.lipm) | $(cell M7 tick.fixed.dlipm) | $(cell M7 tick.fixed.tlipfm) | |
+| Cortex-M3, mps2-an385 | fixed sampler + soft-float IK | $(cell M3 tick.fixed.lipm) | $(cell M3 tick.fixed.dlipm) | $(cell M3 tick.fixed.tlipfm) | ≤ 3 × M7: **$(calc "$t3 / $t7" 1)× the M7 tick**, $(calc "$t3 / 9000" 1)× the 9,000 target |
+| Cortex-M3, mps2-an385 | f32 soft float (exact sampler) | $(cell M3 tick.f32.lipm) | $(cell M3 tick.f32.dlipm) | $(cell M3 tick.f32.tlipfm) | |
+
+The firmware's control loop itself: \`control::run\` with the default configuration
+(${M7[control.model]}, ramp and final hold cut to one tick) on an in-memory bus of emulated
+devices (12 servos, two loaded foot boards, the IMU). Per walking tick = SysTick from the return
+of one \`wait_tick\` to the next, minus the time inside the board's methods (device emulation
+behind \`send\`, byte queue behind \`recv\`, log sink; the calls themselves count), over
+$(n "${M7[control.tick.n]}") ticks (the first 2 and last 4 of ${M7[control.ticks]} left out). It adds to the
+library calls above: the dxl master driver (one BULK READ transaction, byte-by-byte reads
+through \`bus::Link\`), the supervisor, the tilt estimate, \`safe_targets\` and the log record
+(≈ $(calc "${M7[control.log_bytes]} / ${M7[control.ticks]}") bytes per tick).
+
+| machine | control-loop tick, avg (max) | vs the library-call tick above (TLIPFM) |
+| --- | --- | --- |
+| Cortex-M7, mps2-an500 | $(cell M7 control.tick) | $(calc "${M7[control.tick.avg]} / $t7" 2)× |
+| Cortex-M4F, mps2-an386 | $(cell M4 control.tick) | $(calc "${M4[control.tick.avg]} / ${M4[tick.f32.tlipfm.avg]}" 2)× |
+| Cortex-M3, mps2-an385 (f32 soft float; the loop has no fixed-point path) | $(cell M3 control.tick) | $(calc "${M3[control.tick.avg]} / ${M3[tick.f32.tlipfm.avg]}" 2)× |
+
+What dominates (TLIPFM, avg):
+
+- **M7, f32 tick $(n "$t7")**: the Dynamixel codec $(n "$codec7") ($(pct "$codec7" "$t7") %: decoding the
+  95 reply bytes $(n "${M7[dxl.decode3.avg]}") ≈ $(calc "${M7[dxl.decode3.avg]} / 95") per byte, the 74-byte SYNC WRITE
+  $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") — against $(n "${M7[dxl.crc16_72.avg]}") for a 72-byte CRC), then the
+  IK $(n "${M7[ik.tlipfm.avg]}") ($(pct "${M7[ik.tlipfm.avg]}" "$t7") %; its $ik_sc sin_cos + $ik_at \`atan2f\` + $ik_sq \`sqrtf\` are ≈ $(n "$ik7") by the
+  primitive figures below, \`sqrtf\` being libm's software square root), the measured ZMP
+  $(n "${M7[mzmp.tlipfm.avg]}") and the gait sample $(n "${M7[sample.f32.tlipfm.avg]}"). Even without the codec the tick
+  ($(n "$t7 - $codec7")) is above 3,000.
+- **M3, fixed-path tick $(n "$t3")**: the fixed-point sampler $(n "${M3[sample.fixed.tlipfm.avg]}") — its two
+  \`fixed_point::exp_neg\` calls alone are $(n "$exp3") (10 \`i128\` divisions each, \`__divti3\` ≈
+  $(n "${M3[prim.i128_div.avg]}") per division); the soft-float IK $(n "${M3[ik.tlipfm.avg]}") (sin_cos/atan2/sqrt ≈ $(n "$ik3")),
+  the codec $(n "$codec3"), the measured ZMP $(n "${M3[mzmp.tlipfm.avg]}"). The fixed-point sampler is **slower** than
+  the f32 sampler in soft float ($(n "${M3[sample.f32.tlipfm.avg]}")); on the M7 it costs
+  $(n "${M7[sample.fixed.tlipfm.avg]}") ($(n "$exp7") in \`exp_neg\`) against $(n "${M7[sample.f32.tlipfm.avg]}") for the f32 sampler.
+- **Control loop, M7 $(n "${M7[control.tick.avg]}")**: $(n "${M7[control.tick.avg]} - $t7") more than the library calls: the loop's
+  own work listed above (not broken down further by this bench).
+
+### Stages, instructions per call: avg (max)
+
+| stage | model | Cortex-M7 (an500) | Cortex-M4F (an386) | Cortex-M3 (an385, soft float) |
+| --- | --- | --- | --- | --- |
+EOF
+    for st in "sample.f32:exact closed-form sample, f32 (\`Sampler::next\`)" \
+        "sample.fixed:fixed-point sample (\`FixedSampler::next\`)" \
+        "fourier24:Fourier CoM, 24 terms, f32 (\`FourierCom::sample\`)" \
+        "ik:two-leg IK, f32 (\`pipeline::joint_targets\`)" \
+        "mzmp:measured ZMP, f32 (\`measured::measured_zmp\`)" \
+        "tick.f32:full tick, f32 sampler" \
+        "tick.fixed:full tick, fixed sampler"; do
+        key=${st%%:*}
+        label=${st#*:}
+        for m in lipm dlipm tlipfm; do
+            echo "| $label | $m | $(cell M7 "$key.$m") | $(cell M4 "$key.$m") | $(cell M3 "$key.$m") |"
+        done
+    done
+    for st in "swing.cycloid:swing foot alone, cycloid (\`swing::swing_foot\`)" \
+        "fixed.to_f32:fixed sample → f32 sample (for the IK)" \
+        "imu.pitch_accel:pitch-rate filter and τ (\`imu::PitchAccel\`)" \
+        "dxl.sync_write12:encode SYNC WRITE, 12 goal positions (${sw} bytes)" \
+        "dxl.bulk_read3:encode BULK READ, feet + IMU (${br} bytes)" \
+        "dxl.decode3:decode 3 status replies byte by byte (${sfl} + ${sfr} + ${simu} bytes)" \
+        "dxl.crc16_72:CRC-16 over 72 bytes (\`dxl::crc::crc16\`)"; do
+        key=${st%%:*}
+        label=${st#*:}
+        echo "| $label | all | $(cell M7 "$key") | $(cell M4 "$key") | $(cell M3 "$key") |"
+    done
+    cat <<EOF
+
+Primitives (per call, including a \`black_box\` store and load of the argument and result):
+
+| function | Cortex-M7 | Cortex-M4F | Cortex-M3 |
+| --- | --- | --- | --- |
+EOF
+    for st in "prim.expf:\`libm::expf\`" "prim.sqrtf:\`libm::sqrtf\` (software)" \
+        "prim.atan2f:\`libm::atan2f\`" "prim.sin_cos_fast:\`gait_core::fastmath::sin_cos\`" \
+        "prim.sinf_libm:\`libm::sinf\` (software doubles)" "prim.fmul:f32 multiply" \
+        "prim.fdiv:f32 divide" "prim.fx_exp_neg:\`fixed_point::exp_neg\`" \
+        "prim.fx_sin_cos:\`fixed_point::sin_cos\`" "prim.i128_div:\`i128\` division"; do
+        key=${st%%:*}
+        label=${st#*:}
+        echo "| $label | $(cell M7 "$key") | $(cell M4 "$key") | $(cell M3 "$key") |"
+    done
+    cat <<EOF
+
+### Firmware sizes (release ELFs, \`readelf -S\`)
+
+\`cargo build --release --no-default-features --features board-qemu --bin qemu\` and
+\`cargo build --release --no-default-features --features board-opencr --bin opencr\`. Flash =
+every allocated section with contents (vector table, .text, .rodata, the .data image); static
+RAM = .data + .bss + .uninit (the stack comes on top).
+
+| ELF | .text | .rodata | .data | .bss | flash | static RAM | targets: ≤ 64 KiB flash, ≤ 16 KiB RAM |
+| --- | --- | --- | --- | --- | --- | --- | --- |
+| \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B = $(kib "$q_flash") KiB | $(commas "$q_ram") B = $(kib "$q_ram") KiB | flash $(verdict "$q_flash" 65536), RAM $(verdict "$q_ram" 16384) |
+| \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B = $(kib "$o_flash") KiB | $(commas "$o_ram") B = $(kib "$o_ram") KiB | flash $(verdict "$o_flash" 65536), RAM $(verdict "$o_ram" 16384) |
+
+These are the binaries as they are at this commit (the control loop is not wired into them yet).
+
+### Bus budget per control tick
+
+Packet sizes from dxl's encoders (printed by the bench): BULK READ request $br B, status replies
+$sfl + $sfr + $simu B (feet 18 data bytes, IMU 26), SYNC WRITE of 12 goal positions $sw B:
+**$bus_bytes bytes per tick**, $packets packets, 10 bits per byte, Return Delay Time 0. Turnaround
+allowance: $turnaround_us µs per packet (assumed, not measured: the line changes direction or the
+talker changes before each of the 5 packets; an AX-12 at Return Delay 0 answers a READ after
+≈ 22 µs, X-series and our boards are not measured; \`BENCH_TURNAROUND_US\` changes it). The
+last column adds the M7 tick's worst case (f32, TLIPFM, $(n "$tick_m7_max") instructions) at
+$cpu_mhz MHz assuming one instruction per cycle (≈ $compute_us µs; an estimate, the bus and the
+CPU do not overlap in a blocking loop).
+
+| bus | bytes on the wire | + allowance | bus time per tick | highest servo rate (bus only) | with the M7 compute |
+| --- | --- | --- | --- | --- | --- |
+EOF
+    for mbps in 1 3 4.5; do
+        wire=$(calc "$bus_bytes * 10 / $mbps" 1)
+        total=$(calc "$wire + $packets * $turnaround_us" 1)
+        echo "| $mbps Mbps | $wire µs | $(calc "$packets * $turnaround_us") µs | $total µs | $(n "1000000 / $total - 0.5") Hz | $(n "1000000 / ($total + $compute_us) - 0.5") Hz |"
+    done
+    cat <<EOF
+
+The default configuration (1 kHz tick, 1 Mbps bus) does not fit: the bus alone needs
+$(calc "$bus_bytes * 10 + $packets * $turnaround_us") µs per tick at 1 Mbps.
+
+### Host (criterion, x86-64, this run)
+
+\`cargo bench --target host-tuple -p gait-core --bench sampler -- --warm-up-time 0.3 --measurement-time 1\`
+and \`... --bench ik -- --warm-up-time 0.3 --measurement-time 1\`; the middle of criterion's
+interval. Wall-clock figures on a shared 2-core machine: they change from run to run (±20 %).
+
+| model | exact f32 | exact f64 | fixed point | Fourier N = 24, f32 |
+| --- | --- | --- | --- | --- |
+EOF
+    for m in lipm dlipm tlipfm; do
+        echo "| $m | $(h "sample/$m/f32") | $(h "sample/$m/f64") | $(h "sample/$m/fixed") | $(h "sample/$m/fourier24-f32") |"
+    done
+    cat <<EOF
+
+| two-leg IK | time |
+| --- | --- |
+| \`legs_ik\` f32 | $(h legs_ik_f32) |
+| \`legs_ik\` f64 | $(h legs_ik_f64) |
+| \`LegKinematics::legs_ik\` f32 | $(h legs_ik_f32_precomputed) |
+| \`LegKinematics::legs_ik\` f64 | $(h legs_ik_f64_precomputed) |
+EOF
+} >"$section"
+
+# ---- splice into BENCHMARKS.md ----
+md=BENCHMARKS.md
+tmp=$(mktemp)
+if grep -q '^<!-- bench:begin -->$' "$md" && grep -q '^<!-- bench:end -->$' "$md"; then
+    awk -v sec="$section" '
+        /^<!-- bench:begin -->$/ { print; while ((getline l < sec) > 0) print l; skip = 1; next }
+        /^<!-- bench:end -->$/ { skip = 0 }
+        !skip { print }
+    ' "$md" >"$tmp"
+else
+    { cat "$md"; echo; echo '<!-- bench:begin -->'; cat "$section"; echo '<!-- bench:end -->'; } >"$tmp"
+fi
+mv "$tmp" "$md"
+echo "bench.sh: BENCHMARKS.md updated (raw outputs in $out/)" >&2
