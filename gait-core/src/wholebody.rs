@@ -160,10 +160,9 @@ impl<R: Real> WholeBody<R> {
     pub fn zmp(&self, points: &[[(R, [R; 3]); MASS_POINTS]; 3], dt: R) -> Option<[R; 2]> {
         let (mut num_x, mut num_y, mut den) = (R::zero(), R::zero(), R::zero());
         let h2 = dt * dt;
-        for i in 0..MASS_POINTS {
-            let (m, r0) = points[0][i];
-            let (_, r1) = points[1][i];
-            let (_, r2) = points[2][i];
+        let [before, now, after] = points;
+        for (((m, r0), (_, r1)), (_, r2)) in before.iter().zip(now).zip(after) {
+            let (m, r0, r1, r2) = (*m, *r0, *r1, *r2);
             let acc: [R; 3] = core::array::from_fn(|k| (r2[k] - r1[k] - r1[k] + r0[k]) / h2);
             let f = m * (acc[2] + self.gravity);
             num_x += f * r1[0] - m * acc[0] * r1[2];
