@@ -149,7 +149,7 @@ elf_sizes() { # elf → "flash ram text rodata data bss" (bytes)
 }
 read -r q_flash q_ram q_text q_ro q_data q_bss < <(elf_sizes target/thumbv7em-none-eabihf/release/qemu)
 read -r o_flash o_ram o_text o_ro o_data o_bss < <(elf_sizes target/thumbv7em-none-eabihf/release/opencr)
-kib() { calc "$1 / 1024" 1; }
+kib() { calc "$1 / 1024" 2; }
 verdict() { # value limit
     if [ "$1" -le "$2" ]; then printf 'within'; else printf '**over**'; fi
 }
@@ -162,7 +162,9 @@ simu=${M7[bytes.status_imu]}
 sw=${M7[bytes.sync_write]}
 bus_bytes=$((br + sfl + sfr + simu + sw))
 packets=5
-tick_m7_max=${M7[tick.f32.tlipfm.max]}
+tick_m7_max=${M7[control.tick.max]}
+bus_default_us=$(calc "$bus_bytes * 10000000 / ${M7[bus_baud]} + $packets * $turnaround_us")
+if [ "$bus_default_us" -le "${M7[tick_us]}" ]; then fits="fits"; else fits="does **not** fit"; fi
 compute_us=$(calc "$tick_m7_max / $cpu_mhz" 1)
 
 # ---- 5. host criterion ----
@@ -346,10 +348,11 @@ RAM = .data + .bss + .uninit (the stack comes on top).
 
 | ELF | .text | .rodata | .data | .bss | flash | static RAM | targets: ≤ 64 KiB flash, ≤ 16 KiB RAM |
 | --- | --- | --- | --- | --- | --- | --- | --- |
-| \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B = $(kib "$q_flash") KiB | $(commas "$q_ram") B = $(kib "$q_ram") KiB | flash $(verdict "$q_flash" 65536), RAM $(verdict "$q_ram" 16384) |
-| \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B = $(kib "$o_flash") KiB | $(commas "$o_ram") B = $(kib "$o_ram") KiB | flash $(verdict "$o_flash" 65536), RAM $(verdict "$o_ram" 16384) |
+| \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B ($(kib "$q_flash") KiB) | $(commas "$q_ram") B ($(kib "$q_ram") KiB) | flash $(verdict "$q_flash" 65536), RAM $(verdict "$q_ram" 16384) |
+| \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B ($(kib "$o_flash") KiB) | $(commas "$o_ram") B ($(kib "$o_ram") KiB) | flash $(verdict "$o_flash" 65536), RAM $(verdict "$o_ram" 16384) |
 
-These are the binaries as they are at this commit (the control loop is not wired into them yet).
+Built from the working tree at the time of the run. The firmware keeps its state (sampler,
+plan, IK) on the stack, so static RAM understates its RAM use; the stack is not measured here.
 
 ### Bus budget per control tick
 
@@ -359,7 +362,7 @@ $sfl + $sfr + $simu B (feet 18 data bytes, IMU 26), SYNC WRITE of 12 goal positi
 allowance: $turnaround_us µs per packet (assumed, not measured: the line changes direction or the
 talker changes before each of the 5 packets; an AX-12 at Return Delay 0 answers a READ after
 ≈ 22 µs, X-series and our boards are not measured; \`BENCH_TURNAROUND_US\` changes it). The
-last column adds the M7 tick's worst case (f32, TLIPFM, $(n "$tick_m7_max") instructions) at
+last column adds the M7 control-loop tick's worst case ($(n "$tick_m7_max") instructions) at
 $cpu_mhz MHz assuming one instruction per cycle (≈ $compute_us µs; an estimate, the bus and the
 CPU do not overlap in a blocking loop).
 
@@ -373,8 +376,8 @@ EOF
     done
     cat <<EOF
 
-The default configuration (1 kHz tick, 1 Mbps bus) does not fit: the bus alone needs
-$(calc "$bus_bytes * 10 + $packets * $turnaround_us") µs per tick at 1 Mbps.
+The firmware's default configuration (tick ${M7[tick_us]} µs, bus $(calc "${M7[bus_baud]} / 1000000" 1) Mbps) $fits: the bus
+needs $(calc "$bus_bytes * 10000000 / ${M7[bus_baud]} + $packets * $turnaround_us") µs of it. A 1 kHz tick needs at least 3 Mbps.
 
 ### Host (criterion, x86-64, this run)
 

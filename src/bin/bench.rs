@@ -59,11 +59,11 @@ mod firmware {
     use gait_core::{
         ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
     };
-    use walker_firmware::boards::qemu_mps2::semihosting_exit;
     use walker_firmware::board::{
         Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer,
         Watchdog,
     };
+    use walker_firmware::boards::qemu_mps2::semihosting_exit;
     use walker_firmware::control::{self, RunEnd};
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
     use walker_firmware::log::BoardId;
@@ -153,10 +153,10 @@ mod firmware {
     }
 
     /// Fills `buf` with the samples `next` yields (until `None` or full); the filled part.
-    fn record<'a>(
-        buf: &'a mut [MaybeUninit<GaitSample<f32>>; MAX_TICKS],
+    fn record(
+        buf: &mut [MaybeUninit<GaitSample<f32>>; MAX_TICKS],
         mut next: impl FnMut() -> Option<GaitSample<f32>>,
-    ) -> &'a [GaitSample<f32>] {
+    ) -> &[GaitSample<f32>] {
         let mut n = 0;
         for slot in buf.iter_mut() {
             match next() {
@@ -388,6 +388,7 @@ mod firmware {
             }
         );
         hprintln!("tick_us {}", Config::default_config().tick_period_us);
+        hprintln!("bus_baud {}", Config::default_config().bus_baud);
 
         // Loop overhead: an empty call, once per loop shape.
         let empty = measure(K, &mut |i| {
@@ -832,8 +833,13 @@ mod firmware {
                 }
                 (Kind::Imu, 128, 26) => {
                     self.imu_counter = self.imu_counter.wrapping_add(1);
-                    let rate = if self.imu_counter % 2 == 0 { 0.02 } else { -0.01 };
-                    let s = ImuSample::from_si([0.0, rate, 0.0], [0.0, 0.0, 9.81], self.imu_counter);
+                    let rate = if self.imu_counter.is_multiple_of(2) {
+                        0.02
+                    } else {
+                        -0.01
+                    };
+                    let s =
+                        ImuSample::from_si([0.0, rate, 0.0], [0.0, 0.0, 9.81], self.imu_counter);
                     put(out, &s.to_bytes())
                 }
                 _ => 0,
