@@ -50,42 +50,66 @@ fn mul_fx(a: Fx, b: Fx) -> Fx {
     Fx::from_bits(sat32((a.to_bits() as i64 * b.to_bits() as i64) >> 16))
 }
 
+/// 2³⁰/k for k = 1..=10: Horner steps multiply instead of divide (no 64-bit division, which
+/// is a library call on Cortex-M).
+const INV: [i64; 11] = [
+    0,
+    1_073_741_824,
+    536_870_912,
+    357_913_941,
+    268_435_456,
+    214_748_365,
+    178_956_971,
+    153_391_689,
+    134_217_728,
+    119_304_647,
+    107_374_182,
+];
+/// 2³⁰/((2k)(2k+1)) and 2³⁰/((2k−1)(2k)) for k = 1..=4 (sine and cosine Taylor steps).
+const INV_SIN: [i64; 5] = [0, 178_956_971, 53_687_091, 25_565_282, 14_913_081];
+const INV_COS: [i64; 5] = [0, 536_870_912, 89_478_485, 35_791_394, 19_173_962];
+
+/// (a·b) >> 30 for Fac-scaled values (|a|, |b| < 2³²: the product fits i64).
+fn mul30(a: i64, b: i64) -> i64 {
+    (a * b) >> 30
+}
+
 /// e^{−x} for x ≥ 0 in Fx, as a Fac (bits, 2³⁰ = 1). Negative x counts as 0.
 pub fn exp_neg(x: Fx) -> i64 {
-    let xb = (x.to_bits().max(0) as i64) << 14; // 2^30 = 1
+    let x16 = x.to_bits().max(0);
+    const LN2_16: i32 = 45_426; // ln 2 · 2^16 (only picks n; r is reduced exactly below)
     const LN2: i64 = 744_261_118; // ln 2 · 2^30
-    let n = xb / LN2;
+    let n = x16 / LN2_16;
     if n >= 31 {
         return 0;
     }
-    let r = (xb - n * LN2) as i128; // r in 2^30 units, r ∈ [0, ln 2)
-                                    // e^{−r} by its Taylor polynomial to r¹⁰ (Horner, 2^30 units): truncation < ln2¹¹/11! ≈ 4e-10.
-    let one = ONE_FAC as i128;
-    let mut acc = one;
-    for k in (1..=10).rev() {
-        acc = one - (acc * r / one) / k as i128;
+    // r in 2^30 units, r ∈ [0, ln 2) up to the rounding of LN2_16 (harmless for the series).
+    let r = ((x16 as i64) << 14) - n as i64 * LN2;
+    // e^{−r} by its Taylor polynomial to r¹⁰ (Horner): truncation < ln2¹¹/11! ≈ 4e-10.
+    let mut acc = ONE_FAC;
+    for inv in INV.iter().skip(1).rev() {
+        acc = ONE_FAC - mul30(mul30(acc, r), *inv);
     }
-    (acc as i64) >> n
+    acc >> n
 }
 
 /// sin and cos of `x` (rad, Fx) as Fac bits.
 pub fn sin_cos(x: Fx) -> (i64, i64) {
-    // Reduce to [−π/4, π/4] by quadrant.
+    // Reduce to [−π/4, π/4] by quadrant q (32-bit division picks q; r is exact in 2^30 units).
+    const HALF_PI_16: i32 = 102_944; // π/2 · 2^16
     const HALF_PI: i64 = 1_686_629_713; // π/2 · 2^30
-    let xb = (x.to_bits() as i64) << 14; // 2^30 = 1
-    let q = (xb + HALF_PI / 2).div_euclid(HALF_PI);
-    let r = (xb - q * HALF_PI) as i128; // 2^30 units
-    let one = ONE_FAC as i128;
-    let r2 = r * r / one;
-    // Taylor to r^9 / r^8: |r| ≤ π/4 → error < (π/4)^10/10! ≈ 2e-8.
-    let mut s = one;
-    let mut c = one;
+    let x16 = x.to_bits();
+    let q = x16.saturating_add(HALF_PI_16 / 2).div_euclid(HALF_PI_16);
+    let r = ((x16 as i64) << 14) - q as i64 * HALF_PI;
+    let r2 = mul30(r, r);
+    // Taylor to r⁹ / r⁸: |r| ≤ π/4 → error < (π/4)^10/10! ≈ 2e-8.
+    let mut s = ONE_FAC;
+    let mut c = ONE_FAC;
     for k in (1..=4).rev() {
-        s = one - s * r2 / one / ((2 * k) * (2 * k + 1)) as i128;
-        c = one - c * r2 / one / ((2 * k - 1) * (2 * k)) as i128;
+        s = ONE_FAC - mul30(mul30(s, r2), INV_SIN[k]);
+        c = ONE_FAC - mul30(mul30(c, r2), INV_COS[k]);
     }
-    let s = (s * r / one) as i64;
-    let c = c as i64;
+    let s = mul30(s, r);
     match q.rem_euclid(4) {
         0 => (s, c),
         1 => (c, -s),
@@ -135,6 +159,8 @@ struct FixedSegment {
     a: [Fx; 2],
     c: [Fx; 2],
     duration: Fx,
+    /// 2⁴⁶ / duration bits, so that u = s/D = (s_bits · inv_duration) >> 16 in Fac units.
+    inv_duration: i64,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -175,6 +201,10 @@ pub struct FixedSampler<const N: usize> {
     swing_height: Fx,
     swing_width: Fx,
     cycloid: bool,
+    /// Feet on the ground and the current swing (side, from, to, phase), converted to fixed
+    /// point once per segment.
+    feet: [FixedPlace; 2],
+    step: Option<(Side, FixedPlace, FixedPlace, u8)>,
 }
 
 impl<const N: usize> FixedSampler<N> {
@@ -196,6 +226,8 @@ impl<const N: usize> FixedSampler<N> {
             swing_height: fx(h)?,
             swing_width: fx(w)?,
             cycloid,
+            feet: [FixedPlace::default(); 2],
+            step: None,
             inner,
         };
         s.load_segment();
@@ -220,7 +252,15 @@ impl<const N: usize> FixedSampler<N> {
             a: conv(s.a),
             c: conv(s.c),
             duration: Fx::saturating_from_num(s.duration),
+            inv_duration: (1i64 << 46)
+                / (Fx::saturating_from_num(s.duration).to_bits().max(1) as i64),
         };
+        let stance = self.inner.stance_feet();
+        self.feet = [FixedPlace::of(&stance[0]), FixedPlace::of(&stance[1])];
+        self.step = self
+            .inner
+            .current_step()
+            .map(|(side, from, to, ph)| (side, FixedPlace::of(&from), FixedPlace::of(&to), ph));
     }
 
     /// The sample now with the measured torque `tau_mnm` (mN·m, integer as read from the bus)
@@ -249,7 +289,8 @@ impl<const N: usize> FixedSampler<N> {
         }
         // τ response (com.rs C6) in fixed point: Δ = τ·T²/C², e ← Δ + (e − Δ)·e^{−ω dt}.
         let lim = (TAU_LIMIT * 1000.0) as i32;
-        let tau = Fx::from_bits(sat32(((tau_mnm.clamp(-lim, lim) as i64) << 16) / 1000));
+        // mN·m → N·m in 2^16 units: ×65.536 = ×4_294_967/2^16 (no division).
+        let tau = Fx::from_bits(sat32((tau_mnm.clamp(-lim, lim) as i64 * 4_294_967) >> 16));
         let target = mul_fx(tau, self.tau_gain);
         let offset = self.tau_offset;
         x[0] = x[0].saturating_add(offset);
@@ -258,19 +299,13 @@ impl<const N: usize> FixedSampler<N> {
             target.saturating_add(mul_fac(offset.saturating_sub(target), self.decay_dt));
 
         let (phase, support) = self.inner.phase();
-        let stance = self.inner.stance_feet();
-        let mut feet = [
-            FixedPlace::of(&stance[0]).foot(),
-            FixedPlace::of(&stance[1]).foot(),
-        ];
-        if let Some((side, from, to, ph)) = self.inner.current_step() {
-            let to_f = FixedPlace::of(&to);
-            let slot = feet.get_mut(side.index());
-            if let Some(slot) = slot {
+        let mut feet = [self.feet[0].foot(), self.feet[1].foot()];
+        if let Some((side, from, to, ph)) = self.step {
+            if let Some(slot) = feet.get_mut(side.index()) {
                 if ph == 2 {
-                    *slot = to_f.foot();
+                    *slot = to.foot();
                 } else if ph == 1 {
-                    *slot = self.swing(&FixedPlace::of(&from), &to_f, s, side);
+                    *slot = self.swing(&from, &to, s, side);
                 }
             }
         }
@@ -290,17 +325,16 @@ impl<const N: usize> FixedSampler<N> {
 
     /// swing.rs in fixed point: u = s/D of the single support.
     fn swing(&self, from: &FixedPlace, to: &FixedPlace, s: Fx, side: Side) -> FixedFoot {
-        let d = self.seg.duration.to_bits().max(1) as i64;
-        let u = ((s.to_bits().max(0) as i64) << 30) / d; // Fac bits, [0, 1]
-        let u = u.clamp(0, ONE_FAC);
+        // u = s/D in Fac bits, by the segment's precomputed reciprocal (no 64-bit division).
+        let u = ((s.to_bits().max(0) as i64 * self.seg.inv_duration) >> 16).clamp(0, ONE_FAC);
+        const INV_TWO_PI: i64 = 170_891_318; // 2^30 / 2π
         const TWO_PI: i64 = 411_775; // 2π · 2^16
         const PI: i64 = 205_887;
         let (fh, fz, bulge) = if self.cycloid {
             let th = Fx::from_bits(sat32((TWO_PI * u) >> 30));
             let (sn, cs) = sin_cos(th);
-            // (θ − sin θ)/2π in Fac: θ in Fac units = u·2π.
-            let th_fac = (th.to_bits() as i64) << 14;
-            let fh = ((th_fac - sn) << 16) / TWO_PI;
+            // (θ − sin θ)/2π = u − sin θ/2π, in Fac units.
+            let fh = u - mul30(sn, INV_TWO_PI);
             let one_m_cos = ONE_FAC - cs;
             (
                 fh,

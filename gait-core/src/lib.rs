@@ -28,4 +28,5 @@ pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
 pub use sampler::{GaitSample, Sampler, SupportPhase};
 pub mod fixed_point;
 pub mod pipeline;
+pub mod stabilizer;
 pub mod wholebody;
