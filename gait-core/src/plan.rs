@@ -228,18 +228,13 @@ impl StepLimits {
         if !to.is_finite() {
             return Err(GaitError::NonFinite);
         }
-        let dx = (to.x - support.x).to_f64();
-        let dy = (to.y - support.y).to_f64();
-        let (s, c) = (
-            libm::sin(support.yaw.to_f64()),
-            libm::cos(support.yaw.to_f64()),
-        );
-        let fwd = c * dx + s * dy;
-        let lat = (-s * dx + c * dy) * side.sign();
-        let turn = libm::remainder(
-            to.yaw.to_f64() - support.yaw.to_f64(),
-            2.0 * core::f64::consts::PI,
-        );
+        // In the plan's own scalar type: no f64 trigonometry on the target.
+        let dx = to.x - support.x;
+        let dy = to.y - support.y;
+        let (s, c) = (support.yaw.sin(), support.yaw.cos());
+        let fwd = (c * dx + s * dy).to_f64();
+        let lat = ((c * dy - s * dx) * R::of(side.sign())).to_f64();
+        let turn = crate::swing::wrap_pi(to.yaw - support.yaw).to_f64();
         if libm::fabs(fwd) > self.max_length
             || lat < self.min_width
             || lat > self.max_width

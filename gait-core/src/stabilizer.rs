@@ -71,13 +71,13 @@ pub struct StabilizerConfig {
 
 impl StabilizerConfig {
     /// The defaults tuned in the firmware-in-the-loop walk (`walker beyond`): k_p 0, k_i 2 /s,
-    /// λ 0.1 /s, k_g 0, k 1, s_max 2 cm, v_max 5 cm/s, m 5 mm, f_c 0.25 Hz.
+    /// λ 0.1 /s, k_g 0.15 s (≈ 1/ω), k 1, s_max 2 cm, v_max 5 cm/s, m 5 mm, f_c 0.25 Hz.
     pub const fn default_gains() -> Self {
         StabilizerConfig {
             kp: 0.0,
             ki: 2.0,
             leak: 0.1,
-            kg: 0.0,
+            kg: 0.15,
             dcm_k: 1.0,
             max_shift: 0.02,
             max_rate: 0.05,

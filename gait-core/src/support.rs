@@ -104,7 +104,14 @@ impl<R: Real> SupportPolygon<R> {
         for p in points {
             all.push(*p).ok()?;
         }
-        all.sort_unstable_by(lexicographic);
+        // Insertion sort: at most 8 points, and no general-purpose sort in the firmware's flash.
+        for i in 1..all.len() {
+            let mut j = i;
+            while j > 0 && lexicographic(&all[j - 1], &all[j]) == core::cmp::Ordering::Greater {
+                all.swap(j - 1, j);
+                j -= 1;
+            }
+        }
         // Drop repeated points so that the chains never hold a zero-length edge.
         let mut sorted: Vec<[R; 2], MAX_VERTICES> = Vec::new();
         for p in all.iter() {

@@ -62,16 +62,21 @@ fn fast_sin_cos_exhaustive_near_quadrant_edges() {
     }
 }
 
-/// The fast path stays accurate (a few ulp of the argument reduction) up to FAST_RANGE and the
-/// libm fallback takes over beyond it; NaN and infinities give NaN.
+/// The fast path stays accurate (a few ulp of the argument reduction) up to FAST_RANGE; beyond
+/// it the fmodf reduction keeps the result finite with an error ≤ |x|·1.8e-7; NaN and
+/// infinities give NaN.
 #[test]
 fn fast_sin_cos_large_and_special_arguments() {
     let (e, at) = max_error(-f64::from(FAST_RANGE), f64::from(FAST_RANGE), 1_000_000);
     assert!(e <= 1e-6, "max error {e:e} at x = {at}");
     for x in [1.0e4f32, -3.3e5, 1.0e20, f32::MAX] {
         let (s, c) = sin_cos(x);
-        assert_eq!(s.to_bits(), libm::sinf(x).to_bits());
-        assert_eq!(c.to_bits(), libm::cosf(x).to_bits());
+        assert!(s.abs() <= 1.0 && c.abs() <= 1.0 && (s * s + c * c - 1.0).abs() < 1e-5, "{x}");
+        if x.abs() < 1e6 {
+            let tol = f64::from(x.abs()) * 1.8e-7 + 1e-6;
+            assert!((f64::from(s) - libm::sin(f64::from(x))).abs() < tol, "sin {x}");
+            assert!((f64::from(c) - libm::cos(f64::from(x))).abs() < tol, "cos {x}");
+        }
     }
     for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
         let (s, c) = sin_cos(x);
