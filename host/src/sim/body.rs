@@ -3,11 +3,15 @@
 //!
 //! # Model (documented simplifications)
 //!
-//! * **Servos**: position-controlled; each physics step the joint moves toward its goal
-//!   (clamped to the robot's joint limits, the mechanical stops) along a first-order lag
-//!   `q ← g + (q − g)·e^(−dt/τ)`, with the step limited to `v_max·dt` (`v_max` = the configured
-//!   speed limit, lowered by a non-zero Profile Velocity). Torque off = limp, modelled as
-//!   holding the present position.
+//! * **Servos**: position-controlled; each joint follows its goal `g` (clamped to the robot's
+//!   joint limits, the mechanical stops) as the closed position loop of a motor driving an inertia,
+//!   a second-order system `q̈ = ω²·(g − q) − 2ζω·q̇` (ω = 2π·`servo_frequency_hz`, ζ =
+//!   `servo_damping`) with `|q̇| ≤ v_max` (`v_max` = the configured speed limit, lowered by a
+//!   non-zero Profile Velocity), integrated in sub-steps of at most 1/(100 ω). The joint velocity
+//!   is continuous and the acceleration finite, so a goal staircase (the firmware's 1-tick =
+//!   1.5 mrad rounding) does not kick the body: a first-order lag `q̇ = (g − q)/τ` would jump the
+//!   velocity by Δ/τ at every goal change, an impulsive acceleration that the ZMP turns into
+//!   ±0.2 m spikes at the tick rate. Torque off = limp, modelled as holding the present position.
 //! * **Body**: the stance sole stays where it is (no slip). The pelvis pose is the inverse of
 //!   the stance leg's forward kinematics from that fixed sole pose, so pelvis roll and pitch
 //!   follow from the joints. The other foot is placed by its own forward kinematics from the
@@ -21,9 +25,12 @@
 //! * **Masses**: upper body M_u at l_u above the pelvis point P (rotated with the pelvis and the
 //!   disturbance pitch φ_d), each leg's thigh, calf and sole masses from `gait-core`'s
 //!   `LegPoints` — both legs, the swing leg included.
-//! * **Accelerations** are second-order central differences over the positions at
-//!   `t − h, t, t + h` on the fixed physics grid (`h` = the acceleration window), so the ground
-//!   truth at `t` is known at `t + h`: every sensor sample lags by `h` (default 5 ms).
+//! * **Accelerations** are those of the present motion state, not finite differences of the
+//!   trajectory: the positions are evaluated along the second-order Taylor path
+//!   `q(t ± ε) = q ± q̇·ε + ½·q̈·ε²` of every state variable (joint angles, waist deflection φ_d,
+//!   fall angle) and differenced, `r̈ = (r₊ − 2r + r₋)/ε² = J·q̈ + q̇ᵀ·H·q̇ + O(ε²)` (ε = 0.1 ms):
+//!   the exact acceleration of the point masses at `t`, with no lag and no smoothing (the sensors
+//!   sample the truth of the present physics step). Angular rates likewise `(R₊ − R₋)/2ε`.
 //! * **ZMP**: see [`super::zmp`], with `L̇_y = J·φ̈ − τ` (upper-body pitch inertia J, external
 //!   disturbance torque τ); other link rotational inertia is neglected.
 //! * **Disturbance**: an external pitch torque τ on the upper body, which is joined to the
@@ -34,8 +41,6 @@
 //!   polygon, else towards the ZMP; the pelvis tilt direction; or the configured heading) as an inverted pendulum
 //!   `θ̈ = (g/L)·(sin θ + 0.05)`, until it lies on the ground (θ = π/2 − 0.05). While it falls the
 //!   whole load sits on the edge; once it lies, the feet carry nothing.
-
-use std::collections::VecDeque;
 
 use gait_core::kinematics::{LegKinematics, Pose};
 use gait_core::plan::Place;
@@ -54,6 +59,8 @@ type M3 = [[f64; 3]; 3];
 const I3: M3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 /// Fall angle at which the robot lies on the ground, rad.
 const LYING: f64 = core::f64::consts::FRAC_PI_2 - 0.05;
+/// Half-width of the Taylor stencil for the accelerations, s.
+const STENCIL_S: f64 = 1e-4;
 
 fn add(a: V3, b: V3) -> V3 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
@@ -130,7 +137,7 @@ impl Support {
     }
 }
 
-/// Ground truth at one physics time (the centre of the acceleration window).
+/// Ground truth at one physics time.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Truth {
     /// Time, µs.
@@ -181,6 +188,25 @@ struct Snapshot {
     fall_pivot: Option<[f64; 2]>,
 }
 
+impl Default for Snapshot {
+    fn default() -> Self {
+        Snapshot {
+            t_us: 0,
+            points: [[0.0; 3]; 7],
+            pelvis: [0.0; 3],
+            r_pelvis: I3,
+            r_ub: I3,
+            ground_z: 0.0,
+            contact: [true; 2],
+            feet: [FootContact::default(); 2],
+            stance: Side::Left,
+            tau: 0.0,
+            fall_angle: 0.0,
+            fall_pivot: None,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Fall {
     pivot: V3,
@@ -200,6 +226,8 @@ pub struct Physics {
     pub q: [f64; 12],
     /// Joint velocities, rad/s.
     pub qd: [f64; 12],
+    /// Joint accelerations, rad/s² (at the present state with the last goals).
+    pub qdd: [f64; 12],
     stance: Side,
     stance_place: (V3, M3),
     contact: [bool; 2],
@@ -210,8 +238,10 @@ pub struct Physics {
     fallen_at_us: Option<u64>,
     fall_started_us: Option<u64>,
     outside_us: u64,
-    history: VecDeque<Snapshot>,
-    window: usize,
+    /// Goals of the last step (rad, clamped to the joint limits; `None` = limp).
+    goals: [Option<f64>; 12],
+    speed_limits: [f64; 12],
+    current: Snapshot,
     /// Physics time, µs.
     pub time_us: u64,
     dt_us: u64,
@@ -234,7 +264,6 @@ impl Physics {
             let l = robot.joint_limit(side, j % 6);
             *qj = qj.clamp(l.min, l.max);
         }
-        let window = (cfg.accel_window_us / cfg.physics_dt_us.max(1)).max(1) as usize;
         let mut p = Physics {
             robot,
             kin,
@@ -249,6 +278,7 @@ impl Physics {
             ],
             q,
             qd: [0.0; 12],
+            qdd: [0.0; 12],
             stance: Side::Left,
             stance_place: ([0.0; 3], I3),
             contact: [true; 2],
@@ -259,8 +289,9 @@ impl Physics {
             fallen_at_us: None,
             fall_started_us: None,
             outside_us: 0,
-            history: VecDeque::with_capacity(2 * window + 1),
-            window,
+            goals: [None; 12],
+            speed_limits: [cfg.servo_speed_limit; 12],
+            current: Snapshot::default(),
             time_us: 0,
             dt_us: cfg.physics_dt_us.max(1),
             truth: Truth::default(),
@@ -269,7 +300,7 @@ impl Physics {
             max_outside: 0.0,
         };
         // Upright pelvis, lower sole on the ground at z = 0.
-        let rel = [p.foot_rel(Side::Left), p.foot_rel(Side::Right)];
+        let rel = [Side::Left, Side::Right].map(|s| p.foot_rel(s, &p.q));
         let stance = if rel[1].0[2] < rel[0].0[2] - 1e-12 {
             Side::Right
         } else {
@@ -279,28 +310,20 @@ impl Physics {
         p.stance = stance;
         p.stance_place = ([s0[0], s0[1], 0.0], r0);
         p.update_contacts();
-        let snap = p.snapshot();
-        for _ in 0..2 * window + 1 {
-            p.history.push_back(snap);
-        }
+        p.current = p.snapshot_at(&p.q, p.phi_d, 0.0);
         p.truth = p.compute_truth();
         p
     }
 
-    fn leg_q(&self, side: Side) -> [f64; 6] {
-        let o = 6 * side.index();
-        [0, 1, 2, 3, 4, 5].map(|j| self.q[o + j])
-    }
-
-    /// Sole pose relative to a pelvis at the origin, upright.
-    fn foot_rel(&self, side: Side) -> (V3, M3) {
-        let f = self.kin.fk(side, &Pose::default(), &self.leg_q(side));
+    /// Sole pose relative to a pelvis at the origin, upright, for joint angles `q`.
+    fn foot_rel(&self, side: Side, q: &[f64; 12]) -> (V3, M3) {
+        let f = self.kin.fk(side, &Pose::default(), &leg_q(q, side));
         (f.position(), f.rotation())
     }
 
-    /// Pelvis position and rotation with the sole of `side` at `place`.
-    fn pelvis_from(&self, side: Side, place: &(V3, M3)) -> (V3, M3) {
-        let (s0, r0) = self.foot_rel(side);
+    /// Pelvis position and rotation with the sole of `side` at `place`, for joint angles `q`.
+    fn pelvis_from(&self, side: Side, place: &(V3, M3), q: &[f64; 12]) -> (V3, M3) {
+        let (s0, r0) = self.foot_rel(side, q);
         let rp = mul(&place.1, &tr(&r0));
         (sub(place.0, mv(&rp, s0)), rp)
     }
@@ -308,8 +331,8 @@ impl Physics {
     fn update_contacts(&mut self) {
         let st = self.stance;
         let ot = st.other();
-        let (p, rp) = self.pelvis_from(st, &self.stance_place);
-        let fo = self.kin.fk(ot, &to_pose(p, &rp), &self.leg_q(ot));
+        let (p, rp) = self.pelvis_from(st, &self.stance_place, &self.q);
+        let fo = self.kin.fk(ot, &to_pose(p, &rp), &leg_q(&self.q, ot));
         let dz = fo.z - self.stance_place.0[2];
         if dz < -self.cfg.switch_threshold {
             self.stance = ot;
@@ -322,12 +345,14 @@ impl Physics {
         }
     }
 
-    fn snapshot(&self) -> Snapshot {
-        let (mut p, rp) = self.pelvis_from(self.stance, &self.stance_place);
+    /// Positions of the body for joint angles `q`, waist deflection `phi_d` and fall angle
+    /// `fall_angle`, with the stance foot, contacts and fall pivot as they are now.
+    fn snapshot_at(&self, q: &[f64; 12], phi_d: f64, fall_angle: f64) -> Snapshot {
+        let (mut p, rp) = self.pelvis_from(self.stance, &self.stance_place, q);
         let pose = to_pose(p, &rp);
-        let legs = [Side::Left, Side::Right].map(|s| self.kin.points(s, &pose, &self.leg_q(s)));
-        let feet_pose = [Side::Left, Side::Right].map(|s| self.kin.fk(s, &pose, &self.leg_q(s)));
-        let mut r_ub = mul(&rp, &ry(self.phi_d));
+        let legs = [Side::Left, Side::Right].map(|s| self.kin.points(s, &pose, &leg_q(q, s)));
+        let feet_pose = [Side::Left, Side::Right].map(|s| self.kin.fk(s, &pose, &leg_q(q, s)));
+        let mut r_ub = mul(&rp, &ry(phi_d));
         let ub = add(
             p,
             mv(&r_ub, [0.0, 0.0, self.robot.masses.upper_body_height]),
@@ -342,10 +367,10 @@ impl Physics {
             legs[1].sole_mass,
         ];
         let mut r_pelvis = rp;
-        let mut fall_angle = 0.0;
+        let mut angle = 0.0;
         let mut fall_pivot = None;
         if let Some(f) = &self.fall {
-            let rf = rodrigues(f.axis, f.angle);
+            let rf = rodrigues(f.axis, fall_angle);
             let tf = |x: V3| add(f.pivot, mv(&rf, sub(x, f.pivot)));
             for pt in points.iter_mut() {
                 *pt = tf(*pt);
@@ -353,7 +378,7 @@ impl Physics {
             p = tf(p);
             r_pelvis = mul(&rf, &r_pelvis);
             r_ub = mul(&rf, &r_ub);
-            fall_angle = f.angle;
+            angle = fall_angle;
             fall_pivot = Some([f.pivot[0], f.pivot[1]]);
         }
         Snapshot {
@@ -370,9 +395,30 @@ impl Physics {
             }),
             stance: self.stance,
             tau: self.tau,
-            fall_angle,
+            fall_angle: angle,
             fall_pivot,
         }
+    }
+
+    /// Fall angle, rate and acceleration now (zeros when not falling).
+    fn fall_state(&self) -> [f64; 3] {
+        match &self.fall {
+            Some(f) if f.angle < LYING => [
+                f.angle,
+                f.rate,
+                self.robot.gravity / f.length * (f.angle.sin() + 0.05),
+            ],
+            Some(f) => [f.angle, 0.0, 0.0],
+            None => [0.0; 3],
+        }
+    }
+
+    /// Waist deflection acceleration now, rad/s².
+    fn phi_d_acc(&self) -> f64 {
+        let d = &self.cfg.disturbance;
+        let j = self.robot.masses.upper_body_inertia.max(1e-6);
+        let wn = core::f64::consts::TAU * d.waist_frequency_hz;
+        (self.tau - j * wn * wn * self.phi_d - 2.0 * d.waist_damping * j * wn * self.phi_d_rate) / j
     }
 
     /// The support polygon of the feet in contact.
@@ -389,9 +435,16 @@ impl Physics {
     }
 
     fn compute_truth(&self) -> Truth {
-        let n = self.window;
-        let (a, c, b) = (&self.history[0], &self.history[n], &self.history[2 * n]);
-        let h = (n as u64 * self.dt_us) as f64 * 1e-6;
+        // The present positions and those along the Taylor path at ∓ε (see the module docs).
+        let h = STENCIL_S;
+        let [th, th_d, th_dd] = self.fall_state();
+        let path = |sign: f64| {
+            let at = |x: f64, v: f64, a: f64| x + sign * v * h + 0.5 * a * h * h;
+            let q: [f64; 12] = std::array::from_fn(|j| at(self.q[j], self.qd[j], self.qdd[j]));
+            let phi = at(self.phi_d, self.phi_d_rate, self.phi_d_acc());
+            self.snapshot_at(&q, phi, at(th, th_d, th_dd))
+        };
+        let (a, c, b) = (&path(-1.0), &self.current, &path(1.0));
         let g = self.robot.gravity;
         let dd =
             |pa: V3, pc: V3, pb: V3| [0, 1, 2].map(|k| (pb[k] - 2.0 * pc[k] + pa[k]) / (h * h));
@@ -472,7 +525,7 @@ impl Physics {
         }
     }
 
-    /// The latest ground truth (at `time_us − accel_window`).
+    /// The ground truth at `time_us`.
     pub fn truth(&self) -> &Truth {
         &self.truth
     }
@@ -501,12 +554,7 @@ impl Physics {
         } else if !active {
             self.tau = 0.0;
         }
-        let j = self.robot.masses.upper_body_inertia.max(1e-6);
-        let wn = core::f64::consts::TAU * d.waist_frequency_hz;
-        let acc = (self.tau
-            - j * wn * wn * self.phi_d
-            - 2.0 * d.waist_damping * j * wn * self.phi_d_rate)
-            / j;
+        let acc = self.phi_d_acc();
         self.phi_d_rate += acc * dt;
         self.phi_d += self.phi_d_rate * dt;
     }
@@ -519,8 +567,8 @@ impl Physics {
             [1.0, 0.0]
         };
         let com = self.truth.com;
-        let cur = self.history.back().copied();
-        let poly = cur.and_then(|s| self.polygon(&s.feet, s.contact));
+        let cur = self.current;
+        let poly = self.polygon(&cur.feet, cur.contact);
         let far = [com[0] + d[0], com[1] + d[1]];
         let piv = poly
             .as_ref()
@@ -554,13 +602,10 @@ impl Physics {
             } else {
                 self.outside_us = 0;
             }
-            let tilt_axis = self.history.back().map(|s| s.r_pelvis).unwrap_or(I3);
+            let tilt_axis = self.current.r_pelvis;
             let tilt = tilt_axis[2][2].clamp(-1.0, 1.0).acos();
             if self.outside_us as f64 * 1e-6 >= f.zmp_time_s {
-                let poly = self
-                    .history
-                    .back()
-                    .and_then(|s| self.polygon(&s.feet, s.contact));
+                let poly = self.polygon(&self.current.feet, self.current.contact);
                 // Towards the CoM if it is outside (a static tip-over), else towards the ZMP.
                 let com = [tr.com[0], tr.com[1]];
                 let com_in = poly.as_ref().map_or(com, |p| clamp_to_polygon(p, com));
@@ -594,39 +639,72 @@ impl Physics {
     pub fn step(&mut self, cmds: &[ServoCmd; 12]) {
         let dt = self.dt_us as f64 * 1e-6;
         self.time_us += self.dt_us;
-        let lag = self.cfg.servo_lag;
         for (j, cmd) in cmds.iter().enumerate() {
-            let Some(goal) = cmd.goal else {
-                self.qd[j] = 0.0;
-                continue;
-            };
             let side = if j < 6 { Side::Left } else { Side::Right };
             let l = self.robot.joint_limit(side, j % 6);
-            let g = goal.clamp(l.min, l.max);
-            let q = self.q[j];
-            let target = if lag > 0.0 {
-                g + (q - g) * (-dt / lag).exp()
-            } else {
-                g
-            };
-            let vmax = cmd.speed_limit.max(0.0) * dt;
-            let dq = (target - q).clamp(-vmax, vmax);
-            self.q[j] = q + dq;
-            self.qd[j] = dq / dt;
+            self.goals[j] = cmd.goal.map(|g| g.clamp(l.min, l.max));
+            self.speed_limits[j] = cmd.speed_limit.max(0.0);
+            self.servo_step(j, dt);
         }
         self.update_disturbance(dt);
         self.update_contacts();
         self.update_fall(dt);
-        let s = self.snapshot();
-        self.history.push_back(s);
-        while self.history.len() > 2 * self.window + 1 {
-            self.history.pop_front();
-        }
+        self.current = self.snapshot_at(&self.q, self.phi_d, self.fall_state()[0]);
         self.truth = self.compute_truth();
         if self.truth.margin.is_finite() && !self.truth.falling {
             self.max_outside = self.max_outside.max(-self.truth.margin);
         }
     }
+
+    /// Servo `j`'s acceleration at angle `q` and velocity `v` toward its goal.
+    fn servo_acc(&self, j: usize, q: f64, v: f64) -> f64 {
+        let Some(g) = self.goals[j] else {
+            return 0.0;
+        };
+        let wn = core::f64::consts::TAU * self.cfg.servo_frequency_hz;
+        let a = wn * wn * (g - q) - 2.0 * self.cfg.servo_damping * wn * v;
+        // At the speed limit the motor cannot accelerate further.
+        let vmax = self.speed_limits[j];
+        if (v >= vmax && a > 0.0) || (v <= -vmax && a < 0.0) {
+            0.0
+        } else {
+            a
+        }
+    }
+
+    /// Moves servo `j` over `dt` (semi-implicit Euler sub-steps of at most 1/(100 ω)).
+    fn servo_step(&mut self, j: usize, dt: f64) {
+        if self.goals[j].is_none() {
+            self.qd[j] = 0.0;
+            self.qdd[j] = 0.0;
+            return;
+        }
+        let wn = core::f64::consts::TAU * self.cfg.servo_frequency_hz;
+        let n = (dt * wn * 100.0).ceil().clamp(1.0, 10_000.0) as usize;
+        let h = dt / n as f64;
+        let vmax = self.speed_limits[j];
+        let side = if j < 6 { Side::Left } else { Side::Right };
+        let l = self.robot.joint_limit(side, j % 6);
+        let (mut q, mut v) = (self.q[j], self.qd[j].clamp(-vmax, vmax));
+        for _ in 0..n {
+            let a = self.servo_acc(j, q, v);
+            v = (v + a * h).clamp(-vmax, vmax);
+            q += v * h;
+            // The mechanical stops.
+            if q < l.min || q > l.max {
+                q = q.clamp(l.min, l.max);
+                v = 0.0;
+            }
+        }
+        self.q[j] = q;
+        self.qd[j] = v;
+        self.qdd[j] = self.servo_acc(j, q, v);
+    }
+}
+
+fn leg_q(q: &[f64; 12], side: Side) -> [f64; 6] {
+    let o = 6 * side.index();
+    [0, 1, 2, 3, 4, 5].map(|j| q[o + j])
 }
 
 /// The point of the polygon nearest to `q` (`q` itself when inside).

@@ -1,7 +1,7 @@
 //! Ground-truth CSV log.
 //!
-//! One row per `log_every_us` of physics time (time = the centre of the acceleration window,
-//! i.e. the instant the values describe). Columns:
+//! One row per `log_every_us` of physics time (the instant the values describe; accelerations
+//! are those of the motion state at that instant). Columns:
 //!
 //! `t_s, zmp_x, zmp_y, fz_n, com_x, com_y, com_z, pelvis_x, pelvis_y, pelvis_z, pelvis_roll,
 //! pelvis_pitch, pelvis_yaw, support (L/R/D), stance (L/R), margin_m, l_f0..l_f3, r_f0..r_f3
