@@ -1,0 +1,636 @@
+//! The two-leg inverse kinematics in fixed point, for cores without an FPU (Cortex-M0/M3):
+//! with [`crate::fixed_point::FixedSampler`] the whole path sampler → IK → joint targets needs
+//! no floating point per sample.
+//!
+//! # Method
+//!
+//! The chain, conventions, clamping and report are those of [`crate::kinematics`] (see its
+//! module documentation for the equations); only the arithmetic differs:
+//!
+//! - Inputs and outputs are [`Fx`] (`I16F16`): positions in m, angles in rad (resolution
+//!   2⁻¹⁶ ≈ 1.5e-5 rad, so an output angle is within 7.6e-6 rad of the exact one plus the
+//!   method error below).
+//! - Internally every length is an `i64` in 2⁻³⁰ m units ("P30", resolution 9.3e-10 m) and every
+//!   rotation-matrix entry, sine and cosine an `i64` in 2⁻³⁰ units (`Fac` bits); products are
+//!   formed in `i64` (at most 2⁶² in magnitude, bounds noted at each step) and shifted back.
+//! - Square roots: [`isqrt`], exact digit-by-digit integer square root (shifts, adds, compares).
+//! - Angles: [`atan2_fac`], octant reduction, one 32-bit division seeding a Newton reciprocal
+//!   step (`i64` multiplications only) for the ratio in [0, 1], then a degree-17 odd polynomial
+//!   (Chebyshev fit in t², measured |error| < 1.6e-8 rad). No 64-bit division anywhere: the
+//!   Cortex-M3 build of the per-sample path has one `udiv` and no division or float calls.
+//! - Sines and cosines: [`crate::fixed_point::sin_cos`] (|error| < 4e-7).
+//! - The knee and the ankle pitch come without any division:
+//!   `a = √((L1+L2)² − D²)`, `b = √(D² − (L1−L2)²)` (exact integer differences, so there is no
+//!   cancellation near the straight leg), `q3 = 2·atan2(a, b)` and, since
+//!   `L1·sin q3 = 2ab/(4L2)` and `L2 + L1·cos q3 = (4L2² + b² − a²)/(4L2)`,
+//!   `q4 = −atan2(2ab, 4L2² + b² − a²) − atan2(r_x, w_z)` (atan2 ignores the common factor).
+//! - The reach clamp does not rescale `r`: every later use of `r` is a ratio (atan2), so only the
+//!   clamped distance D enters the knee.
+//!
+//! Full poses are supported: pelvis and feet roll, pitch and yaw (the walk uses level poses).
+//!
+//! # Totality
+//!
+//! Every input is a valid number in fixed point. Positions beyond ±[`MAX_POSITION`] m are
+//! clamped and flagged (`invalid_input`), like the float IK; the hip–ankle vector is scaled down
+//! by a power of two when it exceeds 1 m so that every product stays inside `i64`; the leg
+//! lengths, hip offset and ankle height are limited to 0.5 m at construction (a kid-size leg is
+//! 0.1 m). The result is always within the joint limits (converted inward, so the `Fx` limits
+//! are inside the `f64` ones), and nothing panics.
+//!
+//! # Accuracy (tests/fixed_ik.rs)
+//!
+//! Against `LegKinematics::<f64>` on the same (fixed-point) targets: within 1.6e-5 rad per joint
+//! for level poses and 2.3e-5 rad with ±0.15 rad pelvis/foot roll and pitch (the 2e-4 rad budget;
+//! half of it is the 2⁻¹⁶ rad output resolution); the `f64` forward kinematics of the fixed-point
+//! angles lands within 4 µm of the target. The Table 2 walk through
+//! [`crate::fixed_point::FixedSampler`] and this IK stays within 4.5e-4 rad of the `f64`
+//! sampler and IK (mostly the sampler's share).
+
+use crate::fixed_point::{sin_cos, FixedFoot, FixedSample, Fx};
+use crate::kinematics::{KNEE_MIN_BEND, MAX_POSITION};
+use crate::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
+
+const ONE: i64 = 1 << 30;
+/// π in 2⁻³⁰ rad units.
+const PI_30: i64 = 3_373_259_426;
+/// π/2 in 2⁻³⁰ rad units.
+const HALF_PI_30: i64 = 1_686_629_713;
+/// 2π in 2⁻¹⁶ rad units (Fx bits).
+const TWO_PI_16: i64 = 411_775;
+/// π in 2⁻¹⁶ rad units (Fx bits).
+const PI_16: i64 = 205_887;
+
+/// A pose in fixed point: position (m) and ZYX angles (rad), `R = Rz(yaw)·Ry(pitch)·Rx(roll)`
+/// (the convention of [`crate::kinematics::Pose`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FixedPose {
+    /// Position x (forward), m.
+    pub x: Fx,
+    /// Position y (left), m.
+    pub y: Fx,
+    /// Position z (up), m.
+    pub z: Fx,
+    /// Roll about x, rad (applied first).
+    pub roll: Fx,
+    /// Pitch about y, rad.
+    pub pitch: Fx,
+    /// Yaw about z, rad (applied last).
+    pub yaw: Fx,
+}
+
+impl FixedPose {
+    /// A pose from position and ZYX angles.
+    pub fn new(x: Fx, y: Fx, z: Fx, roll: Fx, pitch: Fx, yaw: Fx) -> Self {
+        FixedPose {
+            x,
+            y,
+            z,
+            roll,
+            pitch,
+            yaw,
+        }
+    }
+
+    /// A level pose (roll = pitch = 0) with the given heading.
+    pub fn level(x: Fx, y: Fx, z: Fx, yaw: Fx) -> Self {
+        FixedPose {
+            x,
+            y,
+            z,
+            roll: Fx::ZERO,
+            pitch: Fx::ZERO,
+            yaw,
+        }
+    }
+}
+
+/// Report of a fixed-point two-leg IK (the meaning of [`crate::kinematics::LegsIkReport`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FixedIkReport {
+    /// Reach deficit of the left and right leg, m (0 when reachable).
+    pub reach_deficit: [Fx; 2],
+    /// Bit i set when joint i of the 12 (left leg 0..6, right leg 6..12) was clamped.
+    pub limited: u16,
+    /// True when a position was beyond ±[`MAX_POSITION`] m and was clamped.
+    pub invalid_input: bool,
+}
+
+impl FixedIkReport {
+    /// True when either leg's target was not met exactly.
+    pub fn clamped(&self) -> bool {
+        self.limited != 0
+            || self.reach_deficit[0] > Fx::ZERO
+            || self.reach_deficit[1] > Fx::ZERO
+            || self.invalid_input
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Primitives.
+
+/// Floor of the square root of `n`, exact (digit-by-digit: 32 steps of shift, add, compare at
+/// most; no multiplication or division).
+pub fn isqrt(n: u64) -> u64 {
+    if n == 0 {
+        return 0;
+    }
+    let mut rem = n;
+    let mut res = 0u64;
+    // Highest power of four ≤ n.
+    let mut bit = 1u64 << ((63 - n.leading_zeros()) & !1);
+    while bit != 0 {
+        // res < 2³³ and bit ≤ 2⁶²: no overflow.
+        if rem >= res + bit {
+            rem -= res + bit;
+            res = (res >> 1) + bit;
+        } else {
+            res >>= 1;
+        }
+        bit >>= 2;
+    }
+    res
+}
+
+/// √x for x in Fx (negative counts as 0), rounded down to the Fx resolution.
+pub fn sqrt(x: Fx) -> Fx {
+    let b = x.to_bits().max(0) as u64;
+    // √(b·2⁻¹⁶) = √(b·2¹⁶)·2⁻¹⁶; √(2⁴⁷) < 2³¹ fits.
+    Fx::from_bits(isqrt(b << 16) as i32)
+}
+
+/// Degree-8 Chebyshev fit of atan(√u)/√u on u ∈ [0, 1], monomial coefficients × 2³⁰
+/// (atan(t) = t·P(t²), |error| < 1e-8 rad before rounding).
+const ATAN_COEF: [i64; 9] = [
+    1_073_741_804,
+    -357_910_756,
+    214_661_091,
+    -152_447_693,
+    114_013_887,
+    -80_067_369,
+    45_244_929,
+    -16_891_300,
+    2_970_274,
+];
+
+/// (a·b) >> 30; callers keep |a·b| < 2⁶³.
+#[inline(always)]
+fn mul30(a: i64, b: i64) -> i64 {
+    (a * b) >> 30
+}
+
+/// num/den in 2⁻³⁰ units for 0 ≤ num ≤ den, den > 0 (result in [0, 2³⁰]). One 32-bit division
+/// seeds 2⁶¹/den to 2⁻¹⁴; a Newton step (i64 multiplications) takes it to 2⁻²⁸.
+fn ratio30(num: u64, den: u64) -> i64 {
+    // Normalise den to [2³⁰, 2³¹) (num ≤ den shifts along and stays < 2³¹).
+    let sh = den.leading_zeros() as i32 - 33;
+    let (n, d) = if sh >= 0 {
+        (num << sh, den << sh)
+    } else {
+        (num >> -sh, den >> -sh)
+    };
+    let (n, d) = (n as i64, d as i64);
+    // Seed: 2³¹ / (d >> 15), d >> 15 ∈ [2¹⁵, 2¹⁶): a u32 division, quotient ≈ 2⁴⁶/d.
+    let d16 = (d >> 15) as u32;
+    let r0 = ((1u32 << 31) / d16.max(1)) as i64;
+    // ≈ 2⁶¹/d ∈ (2³⁰, 2³¹].
+    let r = r0 << 15;
+    // Newton: r ← r + r·(2⁶¹ − d·r)/2⁶¹; d·r < 2⁶², |e| ≲ 2⁴⁸, r·(e >> 16) < 2⁶³.
+    let e = (1i64 << 61) - d * r;
+    let r = r + ((r * (e >> 16)) >> 45);
+    // n < 2³¹, r ≤ 2³¹ + small: n·r < 2⁶³.
+    ((n * r) >> 31).clamp(0, ONE)
+}
+
+/// atan(t) for t ∈ [0, 1] in 2⁻³⁰ units, result in [0, π/4] (2⁻³⁰ rad).
+fn atan_unit(t: i64) -> i64 {
+    let u = mul30(t, t);
+    let mut acc = 0i64;
+    for c in ATAN_COEF.iter().rev() {
+        acc = c + mul30(acc, u);
+    }
+    mul30(acc, t)
+}
+
+/// atan2(y, x) in 2⁻³⁰ rad, in [−π, π] (y and x in any common scale; atan2(0, 0) = 0,
+/// atan2(0, x < 0) = π). |error| < 2e-8 rad; no 64-bit division.
+pub fn atan2_fac(y: i64, x: i64) -> i64 {
+    let (ay, ax) = (y.unsigned_abs(), x.unsigned_abs());
+    let (num, den, swapped) = if ay > ax {
+        (ax, ay, true)
+    } else {
+        (ay, ax, false)
+    };
+    if den == 0 {
+        return 0;
+    }
+    let mut a = atan_unit(ratio30(num, den));
+    if swapped {
+        a = HALF_PI_30 - a;
+    }
+    if x < 0 {
+        a = PI_30 - a;
+    }
+    if y < 0 {
+        -a
+    } else {
+        a
+    }
+}
+
+/// atan2(y, x) rounded to Fx rad (y and x in any common scale).
+pub fn atan2(y: i64, x: i64) -> Fx {
+    round_angle(atan2_fac(y, x))
+}
+
+/// 2⁻³⁰ rad → Fx, rounded to nearest (|a| ≤ π + small, so it fits).
+#[inline(always)]
+fn round_angle(a: i64) -> Fx {
+    Fx::from_bits(((a + (1 << 13)) >> 14) as i32)
+}
+
+/// `a` wrapped into [−π, π] in Fx bits (0 for |a| ≥ 64 rad, like [`crate::swing::wrap_pi`]).
+fn wrap_pi(a: i64) -> i64 {
+    if a.abs() >= 64 << 16 {
+        return 0;
+    }
+    let mut x = a;
+    for _ in 0..16 {
+        if x > PI_16 {
+            x -= TWO_PI_16;
+        } else if x < -PI_16 {
+            x += TWO_PI_16;
+        } else {
+            break;
+        }
+    }
+    x
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rotations: columns of 3×3 matrices with entries in 2⁻³⁰ units.
+
+type V3 = [i64; 3];
+type Cols = [V3; 3];
+
+/// sin, cos (Fac bits) with the exact (0, 1) for a zero angle.
+#[inline(always)]
+fn sc(a: Fx) -> (i64, i64) {
+    if a == Fx::ZERO {
+        (0, ONE)
+    } else {
+        sin_cos(a)
+    }
+}
+
+/// `cu·u + cv·v` for unit-scale factors and columns (each product < 2⁶¹).
+#[inline(always)]
+fn comb(cu: i64, u: &V3, cv: i64, v: &V3) -> V3 {
+    [
+        (cu * u[0] + cv * v[0]) >> 30,
+        (cu * u[1] + cv * v[1]) >> 30,
+        (cu * u[2] + cv * v[2]) >> 30,
+    ]
+}
+
+/// `a·b` >> 30 for |a_i|, |b_i| ≤ 2³¹ with one side ≤ ~2³⁰ (the sum stays < 2⁶³).
+#[inline(always)]
+fn dot(a: &V3, b: &V3) -> i64 {
+    (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) >> 30
+}
+
+/// Columns of `M·Ry(a)` given (sin a, cos a).
+fn post_ry(m: &Cols, (s, c): (i64, i64)) -> Cols {
+    [comb(c, &m[0], -s, &m[2]), m[1], comb(s, &m[0], c, &m[2])]
+}
+
+/// Columns of `M·Rx(a)` given (sin a, cos a).
+fn post_rx(m: &Cols, (s, c): (i64, i64)) -> Cols {
+    [m[0], comb(c, &m[1], s, &m[2]), comb(-s, &m[1], c, &m[2])]
+}
+
+/// Columns of `Rz(yaw)·Ry(pitch)·Rx(roll)`.
+fn rot_cols(p: &FixedPose) -> Cols {
+    let (sr, cr) = sc(p.roll);
+    let (sp, cp) = sc(p.pitch);
+    let (sy, cy) = sc(p.yaw);
+    let (cysp, sysp) = (mul30(cy, sp), mul30(sy, sp));
+    [
+        [mul30(cy, cp), mul30(sy, cp), -sp],
+        [
+            mul30(cysp, sr) - mul30(sy, cr),
+            mul30(sysp, sr) + mul30(cy, cr),
+            mul30(cp, sr),
+        ],
+        [
+            mul30(cysp, cr) + mul30(sy, sr),
+            mul30(sysp, cr) - mul30(cy, sr),
+            mul30(cp, cr),
+        ],
+    ]
+}
+
+/// Positions clamped to ±[`MAX_POSITION`] (flagged); angles are used as they are.
+fn sanitize(p: &FixedPose) -> (FixedPose, bool) {
+    let lim = Fx::from_bits((MAX_POSITION as i32) << 16);
+    let mut bad = false;
+    let mut pos = |v: Fx| {
+        if v > lim {
+            bad = true;
+            lim
+        } else if v < -lim {
+            bad = true;
+            -lim
+        } else {
+            v
+        }
+    };
+    let (x, y, z) = (pos(p.x), pos(p.y), pos(p.z));
+    (FixedPose { x, y, z, ..*p }, bad)
+}
+
+/// f64 → i64 bits at scale 2^`frac`, rounded; non-finite → 0, clamped to ±`max`.
+fn bits(v: f64, frac: i32, max: i64) -> i64 {
+    if !v.is_finite() {
+        return 0;
+    }
+    let s = libm::round(v * libm::exp2(frac as f64));
+    if s >= max as f64 {
+        max
+    } else if s <= -max as f64 {
+        -max
+    } else {
+        s as i64
+    }
+}
+
+/// `v` clamped to `lim` (Fx bits), setting `bit` in `flags` when changed.
+#[inline(always)]
+fn limit(v: Fx, lim: &[Fx; 2], bit: u8, flags: &mut u8) -> Fx {
+    if v < lim[0] {
+        *flags |= bit;
+        lim[0]
+    } else if v > lim[1] {
+        *flags |= bit;
+        lim[1]
+    } else {
+        v
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The IK.
+
+/// Longest link length accepted (m): keeps every product of the knee step inside `i64`.
+const MAX_LINK: f64 = 0.5;
+
+/// The robot's leg description in fixed point, converted once, for the per-sample IK.
+#[derive(Clone, Copy, Debug)]
+pub struct FixedLegKinematics {
+    /// Hip offset and ankle height, 2⁻³⁰ m.
+    hip_offset_y: i64,
+    ankle_height: i64,
+    /// (L1 + L2)², (L1 − L2)², 4·L2², 2⁻⁶⁰ m².
+    sum2: i64,
+    diff2: i64,
+    four_calf2: i64,
+    /// Shortest and longest hip–ankle distance, 2⁻³⁰ m.
+    d_min: i64,
+    d_max: i64,
+    /// [min, max] per joint, left leg then right leg, rounded inward.
+    limits: [[[Fx; 2]; JOINTS_PER_LEG]; 2],
+}
+
+/// Output of one leg.
+struct LegOut {
+    q: [Fx; JOINTS_PER_LEG],
+    deficit: Fx,
+    limited: u8,
+}
+
+impl FixedLegKinematics {
+    /// Converts the robot's geometry (lengths limited to 0.5 m) and joint limits (mirrored for
+    /// the right leg as in [`Robot::joint_limit`]) to fixed point; the reach bounds are those of
+    /// [`crate::kinematics::LegKinematics`].
+    pub fn new(robot: &Robot) -> Self {
+        let g = &robot.geometry;
+        let len = |v: f64| -> f64 {
+            if v.is_finite() {
+                v.abs().min(MAX_LINK)
+            } else {
+                0.0
+            }
+        };
+        let (l1, l2) = (len(g.thigh), len(g.calf));
+        let p30 = |v: f64| bits(v, 30, 1 << 62);
+        let (t, c) = (p30(l1), p30(l2));
+        let knee = robot.joint_limit(Side::Left, 3);
+        let reach = |q: f64| -> f64 {
+            let d2 = l1 * l1 + l2 * l2 + 2.0 * l1 * l2 * libm::cos(q);
+            if d2 > 0.0 {
+                libm::sqrt(d2)
+            } else {
+                0.0
+            }
+        };
+        let kmin = if knee.min.is_finite() { knee.min } else { 0.0 };
+        let kmax = if knee.max.is_finite() {
+            knee.max
+        } else {
+            core::f64::consts::PI
+        };
+        let d_max = reach(kmin.max(KNEE_MIN_BEND));
+        let d_min = reach(kmax.min(core::f64::consts::PI)).max((l1 - l2).abs());
+        let lim = |side: Side| -> [[Fx; 2]; JOINTS_PER_LEG] {
+            core::array::from_fn(|j| {
+                let l = robot.joint_limit(side, j);
+                let m = i32::MAX as f64;
+                let lo = if l.min.is_finite() {
+                    libm::ceil(l.min * 65536.0).clamp(-m, m) as i32
+                } else {
+                    0
+                };
+                let hi = if l.max.is_finite() {
+                    libm::floor(l.max * 65536.0).clamp(-m, m) as i32
+                } else {
+                    0
+                };
+                [Fx::from_bits(lo), Fx::from_bits(hi.max(lo))]
+            })
+        };
+        FixedLegKinematics {
+            hip_offset_y: p30(len(g.hip_offset_y)),
+            ankle_height: p30(len(g.ankle_height)),
+            sum2: (t + c) * (t + c),
+            diff2: (t - c) * (t - c),
+            four_calf2: 4 * c * c,
+            d_min: p30(d_min),
+            d_max: p30(d_max),
+            limits: [lim(Side::Left), lim(Side::Right)],
+        }
+    }
+
+    /// The [min, max] limits (Fx, rounded inward) of the leg's six joints.
+    pub fn limits(&self, side: Side) -> &[[Fx; 2]; JOINTS_PER_LEG] {
+        match side {
+            Side::Left => &self.limits[0],
+            Side::Right => &self.limits[1],
+        }
+    }
+
+    /// Longest hip–ankle distance the IK reaches (knee bent [`KNEE_MIN_BEND`]), m.
+    pub fn max_reach(&self) -> Fx {
+        Fx::from_bits((self.d_max >> 14) as i32)
+    }
+
+    /// Shortest hip–ankle distance the IK reaches, m.
+    pub fn min_reach(&self) -> Fx {
+        Fx::from_bits((self.d_min >> 14) as i32)
+    }
+
+    /// Inverse kinematics of both legs: 12 angles (left leg then right leg, rad) and the report.
+    /// Integer arithmetic only; total for every input.
+    pub fn legs_ik(
+        &self,
+        pelvis: &FixedPose,
+        left: &FixedPose,
+        right: &FixedPose,
+    ) -> ([Fx; LEG_JOINTS], FixedIkReport) {
+        let (pelvis, bad_p) = sanitize(pelvis);
+        let (left, bad_l) = sanitize(left);
+        let (right, bad_r) = sanitize(right);
+        let rp = rot_cols(&pelvis);
+        let l = self.leg(Side::Left, &pelvis, &rp, &left);
+        let r = self.leg(Side::Right, &pelvis, &rp, &right);
+        let [a0, a1, a2, a3, a4, a5] = l.q;
+        let [b0, b1, b2, b3, b4, b5] = r.q;
+        let report = FixedIkReport {
+            reach_deficit: [l.deficit, r.deficit],
+            limited: u16::from(l.limited) | (u16::from(r.limited) << JOINTS_PER_LEG),
+            invalid_input: bad_p || bad_l || bad_r,
+        };
+        ([a0, a1, a2, a3, a4, a5, b0, b1, b2, b3, b4, b5], report)
+    }
+
+    /// One leg on sanitized inputs (|positions| ≤ 1000 m).
+    fn leg(&self, side: Side, pelvis: &FixedPose, rp: &Cols, foot: &FixedPose) -> LegOut {
+        let lims = self.limits(side);
+        let rf = rot_cols(foot);
+        let hip = match side {
+            Side::Left => self.hip_offset_y,
+            Side::Right => -self.hip_offset_y,
+        };
+
+        // d = H − A = (P − S) + σd·R_P·e_y − h·R_F·e_z in 2⁻³⁰ m: |P − S| ≤ 2000 m → < 2⁴²,
+        // the offsets < 2²⁹.
+        let ps = [
+            pelvis.x.to_bits() as i64 - foot.x.to_bits() as i64,
+            pelvis.y.to_bits() as i64 - foot.y.to_bits() as i64,
+            pelvis.z.to_bits() as i64 - foot.z.to_bits() as i64,
+        ];
+        let d: V3 = core::array::from_fn(|i| {
+            (ps[i] << 14) + ((hip * rp[1][i]) >> 30) - ((self.ankle_height * rf[2][i]) >> 30)
+        });
+        // Scale down by 2^k so that every component is ≤ 2³⁰ (1 m): then r = R_Fᵀ·d and |r|²
+        // stay below 3·2⁶⁰.
+        let m = d[0]
+            .unsigned_abs()
+            .max(d[1].unsigned_abs())
+            .max(d[2].unsigned_abs());
+        let k = (64 - m.leading_zeros()).saturating_sub(30);
+        let d = d.map(|v| v >> k);
+        let r = [dot(&rf[0], &d), dot(&rf[1], &d), dot(&rf[2], &d)];
+        let n2 = r.iter().fold(0u64, |acc, v| {
+            acc.saturating_add(v.unsigned_abs() * v.unsigned_abs())
+        });
+        let dist = isqrt(n2) as i64;
+        // Back to 2⁻³⁰ m: dist < 2³², k ≤ 13.
+        let dist_full = dist << k;
+
+        // 1. Reach (r is not rescaled: only its direction is used below).
+        let (dd, deficit, r) = if dist_full > self.d_max {
+            (self.d_max, dist_full - self.d_max, r)
+        } else if dist_full < self.d_min {
+            let r = if dist > 1 { r } else { [0, 0, 1] };
+            (self.d_min, self.d_min - dist_full, r)
+        } else {
+            (dist_full, 0, r)
+        };
+        // To Fx, rounded, but never to 0 when the reach was clamped (so `clamped()` sees it).
+        let deficit_fx = if deficit > 0 {
+            ((deficit + (1 << 13)) >> 14).clamp(1, i32::MAX as i64)
+        } else {
+            0
+        };
+        let deficit = Fx::from_bits(deficit_fx as i32);
+
+        // 2. Knee: exact integer differences (2⁻⁶⁰ m², all < 2⁶⁰ since the links ≤ 0.5 m).
+        let dd2 = dd * dd;
+        let a = isqrt((self.sum2 - dd2).max(0) as u64) as i64;
+        let b = isqrt((dd2 - self.diff2).max(0) as u64) as i64;
+        let q3 = round_angle(2 * atan2_fac(a, b));
+
+        // 3. Ankle roll, 4. ankle pitch.
+        let wz = isqrt((r[1] * r[1] + r[2] * r[2]) as u64) as i64;
+        let q5 = if wz > 0 { atan2_fac(r[1], r[2]) } else { 0 };
+        let q4 = -atan2_fac(2 * a * b, self.four_calf2 + b * b - a * a) - atan2_fac(r[0], wz);
+        let (q4, q5) = (round_angle(q4), round_angle(q5));
+
+        let mut flags = 0u8;
+        let [lim0, lim1, lim2, lim3, lim4, lim5] = lims;
+        let q3 = limit(q3, lim3, 1 << 3, &mut flags);
+        let q4 = limit(q4, lim4, 1 << 4, &mut flags);
+        let q5 = limit(q5, lim5, 1 << 5, &mut flags);
+
+        // 5. Hip: M = R_Pᵀ·R_F·Rx(−q5)·Ry(−(q3 + q4)).
+        let (s5, c5) = sc(q5);
+        let (s34, c34) = sc(q3.saturating_add(q4));
+        let n = post_ry(&post_rx(&rf, (-s5, c5)), (-s34, c34));
+        let m01 = dot(&rp[0], &n[1]);
+        let m11 = dot(&rp[1], &n[1]);
+        let m21 = dot(&rp[2], &n[1]);
+        let m20 = dot(&rp[2], &n[0]);
+        let m22 = dot(&rp[2], &n[2]);
+        let q0 = atan2(-m01, m11);
+        let q1 = atan2(m21, isqrt((m01 * m01 + m11 * m11) as u64) as i64);
+        let q2 = atan2(-m20, m22);
+        let q0 = limit(q0, lim0, 1, &mut flags);
+        let q1 = limit(q1, lim1, 1 << 1, &mut flags);
+        let q2 = limit(q2, lim2, 1 << 2, &mut flags);
+
+        LegOut {
+            q: [q0, q1, q2, q3, q4, q5],
+            deficit,
+            limited: flags,
+        }
+    }
+}
+
+/// The pelvis pose of a fixed-point sample: (com_x, com_y, z_c), level, heading between the
+/// feet (the [`crate::pipeline::pelvis_pose`] rule).
+pub fn pelvis_pose(sample: &FixedSample) -> FixedPose {
+    let [l, r] = sample.feet;
+    let half = wrap_pi(r.yaw.to_bits() as i64 - l.yaw.to_bits() as i64) >> 1;
+    let yaw = Fx::from_bits(
+        (l.yaw.to_bits() as i64 + half).clamp(i32::MIN as i64, i32::MAX as i64) as i32,
+    );
+    FixedPose::level(sample.com[0], sample.com[1], sample.com[2], yaw)
+}
+
+/// A foot's pose for the IK: sole flat, at the sample's position and heading.
+pub fn foot_pose(f: &FixedFoot) -> FixedPose {
+    FixedPose::level(f.x, f.y, f.z, f.yaw)
+}
+
+/// The 12 joint targets (left leg then right leg, rad) of a fixed-point sample and what the IK
+/// had to clamp, like [`crate::pipeline::joint_targets`], with integer arithmetic only.
+pub fn joint_targets(
+    kin: &FixedLegKinematics,
+    sample: &FixedSample,
+) -> ([Fx; LEG_JOINTS], FixedIkReport) {
+    kin.legs_ik(
+        &pelvis_pose(sample),
+        &foot_pose(&sample.feet[0]),
+        &foot_pose(&sample.feet[1]),
+    )
+}
