@@ -82,7 +82,11 @@ fn cos_poly(r: f32) -> f32 {
 /// Sine and cosine of `x` together (one range reduction), f32.
 #[inline]
 pub fn sin_cos(x: f32) -> (f32, f32) {
-    let x = if x.abs() > FAST_RANGE || x.is_nan() { wrap_large(x) } else { x };
+    let x = if x.abs() > FAST_RANGE || x.is_nan() {
+        wrap_large(x)
+    } else {
+        x
+    };
     if x.is_nan() {
         return (x, x);
     }

@@ -71,11 +71,20 @@ fn fast_sin_cos_large_and_special_arguments() {
     assert!(e <= 1e-6, "max error {e:e} at x = {at}");
     for x in [1.0e4f32, -3.3e5, 1.0e20, f32::MAX] {
         let (s, c) = sin_cos(x);
-        assert!(s.abs() <= 1.0 && c.abs() <= 1.0 && (s * s + c * c - 1.0).abs() < 1e-5, "{x}");
+        assert!(
+            s.abs() <= 1.0 && c.abs() <= 1.0 && (s * s + c * c - 1.0).abs() < 1e-5,
+            "{x}"
+        );
         if x.abs() < 1e6 {
             let tol = f64::from(x.abs()) * 1.8e-7 + 1e-6;
-            assert!((f64::from(s) - libm::sin(f64::from(x))).abs() < tol, "sin {x}");
-            assert!((f64::from(c) - libm::cos(f64::from(x))).abs() < tol, "cos {x}");
+            assert!(
+                (f64::from(s) - libm::sin(f64::from(x))).abs() < tol,
+                "sin {x}"
+            );
+            assert!(
+                (f64::from(c) - libm::cos(f64::from(x))).abs() < tol,
+                "cos {x}"
+            );
         }
     }
     for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
