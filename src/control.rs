@@ -11,9 +11,16 @@
 //! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp`, feet placed where the previous
 //!    gait sample put them, feet under [`Config::min_load_n`] ignored); φ̈ from the gyro pitch
 //!    rate through [`PitchAccel`], τ = J·φ̈; tilt from the accelerometer (fall → stop).
-//! 5. One gait sample with τ, the two-leg IK ([`LegKinematics`], built once),
-//!    [`safe_targets`] → servo ticks (a non-finite target holds the previous tick and stops),
-//!    ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes each).
+//! 5. One gait sample with τ; with `stab=on` the feedback stabilizer (gait-core
+//!    [`gait_core::stabilizer`]) turns the measured ZMP error and the gyro into a bounded shift
+//!    δ of the commanded CoM (‖δ‖ ≤ `stab_max` ≤ 2 cm, rate-limited, ZMP command inside the
+//!    support polygon with margin; a missing or non-finite measurement never reaches it);
+//!    then [`Targets`] (built once): the paper's pipeline (pelvis on the model's CoM + δ, two-leg
+//!    IK) or, with `comp=wholebody`, whole-body compensation (pelvis placed so the multi-body
+//!    CoM is on the model's CoM + δ, gait-core [`gait_core::wholebody`]); the IK clamps to
+//!    reach and joint limits, [`safe_targets`] to the servo ticks (a non-finite target holds
+//!    the previous tick and stops); ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes
+//!    each).
 //! 6. The tick log record (nominal time, ZMP reference, measured ZMP, CoM, τ, support phase,
 //!    fault state, bus error counters, overruns); the watchdog is fed.
 //!
@@ -22,6 +29,10 @@
 //! bytes out and 95 in, ≈ 1.94 ms of line time (+ the Return Delay Times, 0 after start-up).
 //!
 //! # Phases
+//! * Servo-speed check (before the bus is touched for motion): the plan is run through the
+//!   sampler and [`Targets`] at dt ([`startup::servo_timing`]); when a joint would need more
+//!   than the servo's speed limit, the step timing is stretched or the swing lowered
+//!   ([`Config::feasibility`]), logged as a fault record after the start-up record.
 //! * Ramp: [`Config::ramp_us`] of minimum-jerk motion from the present pose to the first gait
 //!   sample's joint targets (same tick structure: sensors are read and supervised).
 //! * Walk: one gait sample per tick until the sampler is done.
@@ -61,13 +72,16 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, ids, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
-use gait_core::kinematics::LegKinematics;
+use gait_core::kinematics::{LegKinematics, LegsIkReport};
 use gait_core::measured::{measured_zmp, ForceReading};
 use gait_core::pipeline::joint_targets;
 use gait_core::plan::SwingShape;
 use gait_core::robot::LEG_JOINTS;
+use gait_core::stabilizer::{Stabilizer, StabilizerInput};
+use gait_core::support::SupportPolygon;
+use gait_core::wholebody::WholeBody;
 use gait_core::zmp::ZmpShape;
-use gait_core::{GaitError, GaitSample, Model, Robot, Sampler, Side};
+use gait_core::{GaitError, GaitSample, Model, Place, Robot, Sampler, Side};
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::Bus;
@@ -88,6 +102,88 @@ pub type GaitSampler = Sampler<f32, MAX_STEPS>;
 pub const SENSOR_IDS: [u8; 3] = [ids::FOOT_LEFT, ids::FOOT_RIGHT, ids::IMU];
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;
+
+/// Fixed-point steps of the whole-body compensation per sample (cost: that + 1 two-leg IK and
+/// FK evaluations).
+pub const WHOLEBODY_ITERATIONS: u8 = 2;
+
+/// How the pelvis is placed (`comp=` token).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Compensation {
+    /// The paper's pipeline: the pelvis point on the model's CoM.
+    None,
+    /// Whole-body compensation: the multi-body CoM (swing leg included) on the model's CoM.
+    WholeBody,
+}
+
+/// What start-up does when the plan needs a joint faster than the servo (`feasibility=`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feasibility {
+    /// Stretch t1, t2 and T by the needed factor × 1.05 (re-checked).
+    Stretch,
+    /// Lower the swing height by the needed factor × 1.05 (re-checked).
+    Lower,
+    /// Only log the warning.
+    Off,
+}
+
+/// Sample → 12 joint targets, built once: the paper's pipeline or whole-body compensation.
+#[derive(Clone, Debug)]
+pub enum Targets {
+    /// Pelvis point on the (shifted) model CoM, two-leg IK.
+    Plain(LegKinematics<f32>),
+    /// Multi-body CoM on the (shifted) model CoM.
+    WholeBody(WholeBody<f32>),
+}
+
+impl Targets {
+    /// The pipeline of `comp` for `robot`.
+    pub fn new(robot: &Robot, comp: Compensation) -> Self {
+        match comp {
+            Compensation::None => Targets::Plain(LegKinematics::new(robot)),
+            Compensation::WholeBody => {
+                Targets::WholeBody(WholeBody::new(robot, WHOLEBODY_ITERATIONS))
+            }
+        }
+    }
+
+    /// The joint targets of `s` with its CoM shifted by `shift` (m), and what the IK clamped.
+    pub fn joints(
+        &self,
+        s: &GaitSample<f32>,
+        shift: [f32; 2],
+    ) -> ([f32; LEG_JOINTS], LegsIkReport<f32>) {
+        match self {
+            Targets::Plain(kin) => {
+                let mut shifted = *s;
+                shifted.com[0] += shift[0];
+                shifted.com[1] += shift[1];
+                joint_targets(kin, &shifted)
+            }
+            Targets::WholeBody(wb) => {
+                let c = wb.pelvis_for_com(s, [s.com[0] + shift[0], s.com[1] + shift[1]]);
+                (c.joints, c.report)
+            }
+        }
+    }
+}
+
+/// The support polygon of a sample: the support sole in single support, both soles otherwise.
+pub fn support_of(robot: &Robot, s: &GaitSample<f32>) -> Option<SupportPolygon<f32>> {
+    let place = |i: usize| {
+        s.feet.get(i).map(|f| Place {
+            x: f.x,
+            y: f.y,
+            yaw: f.yaw,
+        })
+    };
+    match s.phase {
+        gait_core::SupportPhase::Single(side) => {
+            SupportPolygon::single(&place(side.index())?, robot).ok()
+        }
+        _ => SupportPolygon::double(&place(0)?, &place(1)?, robot).ok(),
+    }
+}
 
 /// Exit codes (see the module docs).
 pub mod exit_code {
@@ -291,7 +387,19 @@ struct SensorState {
 pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let robot = Robot::reference();
     let mut log = LogWriter::new();
-    let mut sampler = match build_sampler(cfg, &robot) {
+    let targets = Targets::new(&robot, cfg.compensation);
+    // The servo-speed check (a dry run) adjusts the walk before anything moves.
+    let timing =
+        build_sampler(cfg, &robot).and_then(|_| startup::servo_timing(cfg, &robot, &targets));
+    let walk_cfg = match &timing {
+        Ok(t) => Config {
+            walk: t.walk,
+            ..*cfg
+        },
+        Err(_) => *cfg,
+    };
+    let cfg = &walk_cfg;
+    let mut sampler = match timing.and_then(|_| build_sampler(cfg, &robot)) {
         Ok(s) => s,
         Err(e) => {
             crate::fw_log!(error, "walk rejected by gait-core: error {}", e as u8);
@@ -317,6 +425,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         let b = bus.board();
         let rec = startup_record(&*b, cfg, Some(&missing));
         log.write(b, rec);
+    }
+    if let Ok(t) = &timing {
+        for (kind, id, value) in t.records() {
+            let now = bus.board().now_us();
+            log.write(bus.board(), fault(now, kind, id, value));
+        }
     }
     let mut critical: heapless::Vec<u8, { crate::log::MAX_MISSING }> = heapless::Vec::new();
     for &id in missing.iter() {
@@ -363,10 +477,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     };
 
     // 5. The initial pose and the ramp to it.
-    let kin = LegKinematics::<f32>::new(&robot);
     let map = JointMap::from_robot(&robot);
     let first = sampler.next(0.0);
-    let (q0, _) = joint_targets(&kin, &first);
+    let (q0, _) = targets.joints(&first, [0.0; 2]);
     let mut from = [0.0f32; LEG_JOINTS];
     for (j, (f, &t)) in from.iter_mut().zip(present.iter()).enumerate() {
         *f = map.rad_of_tick(j, t);
@@ -385,6 +498,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         inertia: robot.masses.upper_body_inertia as f32,
     });
     let mut tilt = TiltEstimator::new();
+    let mut stab =
+        Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
     let mut ramp_k: Option<u32> = Some(0);
     let mut pending = Some(first);
@@ -431,16 +546,19 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 _ => {}
             }
         }
-        match imu_fresh {
+        // A non-finite or missing gyro sample never reaches the stabilizer.
+        let gyro = match imu_fresh {
             Some(s) => {
-                let [_, rate, _] = s.gyro_rad_s();
+                let [roll_rate, rate, _] = s.gyro_rad_s();
                 pitch.update(rate);
                 tilt.update(s.accel_m_s2());
+                Some([roll_rate, rate]).filter(|g| g.iter().all(|v| v.is_finite()))
             }
             None => {
                 pitch.update(f32::NAN);
+                None
             }
-        }
+        };
         sup.tilt(tilt.last().tilt);
         let tau = pitch.torque();
         let reading = |f: &Option<FootForces>| {
@@ -477,7 +595,19 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         let k = walk_tick;
                         walk_tick = walk_tick.saturating_add(1);
                         let s = pending.take().unwrap_or_else(|| sampler.next(tau));
-                        let (mut q, _) = joint_targets(&kin, &s);
+                        let shift = if cfg.stabilizer_on {
+                            // The measurement answers the previous command: compare with it.
+                            let poly = support_of(&robot, &prev);
+                            stab.update(&StabilizerInput {
+                                zmp_ref: prev.zmp,
+                                zmp_meas: meas.zmp,
+                                gyro,
+                                support: poly.as_ref(),
+                            })
+                        } else {
+                            [0.0; 2]
+                        };
+                        let (mut q, _) = targets.joints(&s, shift);
                         if sampler.is_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);
                         }
@@ -491,7 +621,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         }
                         let ([zx, zy], [cx, cy, _]) = (s.zmp, s.com);
                         rec.set_zmp_ref_m(zx, zy);
-                        rec.set_com_m(cx, cy);
+                        rec.set_com_m(cx + shift[0], cy + shift[1]);
                         rec.phase = phase_of(&s);
                         prev = s;
                         q

@@ -126,6 +126,14 @@ pub struct Config {
     pub feet_required: bool,
     /// Modelled compute time per tick on the QEMU board, µs (ignored by real boards).
     pub compute_us: u32,
+    /// How the pelvis is placed: the paper's pipeline or whole-body compensation.
+    pub compensation: control::Compensation,
+    /// The ZMP/DCM feedback stabilizer is on.
+    pub stabilizer_on: bool,
+    /// The stabilizer's gains and limits.
+    pub stabilizer: gait_core::stabilizer::StabilizerConfig,
+    /// What start-up does when the plan needs joints faster than the servos.
+    pub feasibility: control::Feasibility,
     /// Fault injection: replace joint 0's target by NaN at this walk tick.
     pub fault_nan_tick: Option<u32>,
     /// Fault injection: request a stop at this walk tick.
@@ -134,7 +142,8 @@ pub struct Config {
 
 impl Config {
     /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
-    /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load.
+    /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
+    /// compensation, stabilizer off, servo-speed feasibility by stretching the timing.
     pub const fn default_config() -> Self {
         Config {
             tick_period_us: 5_000,
@@ -161,6 +170,10 @@ impl Config {
             min_load_n: 2.0,
             feet_required: true,
             compute_us: 150,
+            compensation: control::Compensation::None,
+            stabilizer_on: false,
+            stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
+            feasibility: control::Feasibility::Stretch,
             fault_nan_tick: None,
             stop_at_tick: None,
         }

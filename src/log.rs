@@ -44,7 +44,18 @@
 //!   tick period u32 µs, bus baud u32, device count u8, flags u8 (bit 0 = bus probed),
 //!   missing count u8 (≤ 16), missing ids [u8; count]`.
 //! * 0x03 stop: `time u32, reason code u8, device id u8, value i32` ([`StopReason::code`]).
-//! * 0x04 fault: `time u32, kind u8 ([`FaultKind`]), device id u8, value i32`.
+//! * 0x04 fault: `time u32, kind u8 ([`FaultKind`]), device id u8, value i32`. Kinds (code:
+//!   meaning, id, value): 1 device holding (device, ticks); 2 device recovered (device, ticks
+//!   held); 3 target clamped (first joint, joint mask); 4 IMU non-finite (200, count); 5
+//!   configuration rejected (key index, token position or `GaitError`); 6 start-up step failed
+//!   (device, step code); 7 step timing stretched for the servo speed limit (worst joint
+//!   index 0–11, total factor applied to t1, t2, T in 1/1000); 8 swing lowered for the servo
+//!   speed limit (worst joint, new swing height in µm); 9 servo speed warning: the walk still
+//!   needs a joint faster than the servo after the adjustment, or `feasibility=off` (worst
+//!   joint, its peak speed in mrad/s).
+//!
+//! The tick record's CoM is the *commanded* CoM: the gait sample's CoM plus the feedback
+//! stabilizer's shift when `stab=on`.
 //!
 //! Host tools decode with [`Decoder`] by depending on this crate (`walker-firmware` builds on
 //! the host without any board feature's ARM dependencies).
@@ -173,6 +184,15 @@ pub enum FaultKind {
     /// A start-up step failed after the probe (`id` = device, `value` = step code of
     /// `startup::StartupStep`).
     StartupFailed,
+    /// The step timing was stretched for the servo speed limit (`id` = worst joint index,
+    /// `value` = total factor on t1, t2, T in 1/1000).
+    TimingStretched,
+    /// The swing was lowered for the servo speed limit (`id` = worst joint index, `value` =
+    /// new swing height, µm).
+    SwingLowered,
+    /// A joint still needs more than the servo speed limit (`id` = worst joint index, `value`
+    /// = its peak speed, mrad/s); the walk goes on, the servo will lag.
+    SpeedLimit,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -187,6 +207,9 @@ impl FaultKind {
             Self::ImuNonFinite => 4,
             Self::ConfigRejected => 5,
             Self::StartupFailed => 6,
+            Self::TimingStretched => 7,
+            Self::SwingLowered => 8,
+            Self::SpeedLimit => 9,
             Self::Other(c) => c,
         }
     }
@@ -199,6 +222,9 @@ impl FaultKind {
             4 => Self::ImuNonFinite,
             5 => Self::ConfigRejected,
             6 => Self::StartupFailed,
+            7 => Self::TimingStretched,
+            8 => Self::SwingLowered,
+            9 => Self::SpeedLimit,
             c => Self::Other(c),
         }
     }

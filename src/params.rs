@@ -31,18 +31,31 @@
 //! | `hold_ticks`, `stopping_ticks`, `overrun_burst` | u16 | supervisor limits |
 //! | `tilt_limit` | rad, 0 < x ≤ π | fall threshold |
 //! | `imu_cutoff` | Hz, > 0 | φ̈ low-pass cutoff |
+//! | `comp` | `none` \| `wholebody` | pelvis placement: the paper's pipeline / whole-body compensation |
+//! | `stab` | `off` \| `on` | ZMP/DCM feedback stabilizer (gait-core `stabilizer`) |
+//! | `stab_kp` | 0 ..= 10 | proportional gain k_p on the DCM error estimate |
+//! | `stab_ki` | 1/s, 0 ..= 100 | integral gain k_i |
+//! | `stab_leak` | 1/s, 0 ..= 100 | leak λ of the integral |
+//! | `stab_kg` | s, 0 ..= 1 | gyro gain k_g |
+//! | `stab_k` | 0 ..= 100 | DCM gain k of p − p_ref = (1 + k)(ξ − ξ_ref) |
+//! | `stab_max` | m, 0 ..= 0.02 | saturation of the CoM shift |
+//! | `stab_rate` | m/s, 0 < x ≤ 1 | rate limit of the CoM shift |
+//! | `stab_margin` | m, 0 ..= 0.05 | ZMP command margin inside the support polygon |
+//! | `stab_cutoff` | Hz, 0 < x ≤ 1000 | ZMP error low-pass cutoff |
+//! | `feasibility` | `stretch` \| `lower` \| `off` | servo-speed check at start-up: stretch the step timing, lower the swing, or only warn |
 //! | `fault_nan` | walk tick | inject a NaN joint target (test) |
 //! | `stop_at` | walk tick | request a stop (test) |
 //!
 //! Values are range-checked here; the walk as a whole is checked by gait-core when the plan
 //! is built (a rejected plan is a configuration error too, see [`crate::control`]).
 
+use crate::control::{Compensation, Feasibility};
 use crate::Config;
 use gait_core::ModelKind;
 
 /// Every key, in the order of their index in [`ArgError::key_index`] and the log's
 /// `ConfigRejected` fault record.
-pub const KEYS: [&str; 36] = [
+pub const KEYS: [&str; 48] = [
     "model",
     "dt",
     "steps",
@@ -79,6 +92,18 @@ pub const KEYS: [&str; 36] = [
     "overrun_burst",
     "tilt_limit",
     "imu_cutoff",
+    "comp",
+    "stab",
+    "stab_kp",
+    "stab_ki",
+    "stab_leak",
+    "stab_kg",
+    "stab_k",
+    "stab_max",
+    "stab_rate",
+    "stab_margin",
+    "stab_cutoff",
+    "feasibility",
 ];
 
 /// Extra keys beyond [`KEYS`] (fault injection), indices continue after it.
@@ -165,6 +190,15 @@ fn int_in(v: &str, lo: u32, hi: u32) -> Result<u32, ArgErrorKind> {
 fn u16_in(v: &str, lo: u16) -> Result<u16, ArgErrorKind> {
     let x: u16 = v.parse().map_err(|_| ArgErrorKind::BadValue)?;
     if x >= lo {
+        Ok(x)
+    } else {
+        Err(ArgErrorKind::OutOfRange)
+    }
+}
+
+/// `x` when it is > 0.
+fn positive(x: f64) -> Result<f64, ArgErrorKind> {
+    if x > 0.0 {
         Ok(x)
     } else {
         Err(ArgErrorKind::OutOfRange)
@@ -262,6 +296,39 @@ fn apply_one(cfg: &mut Config, key: &str, v: &str) -> Result<(), ArgErrorKind> {
             }
             cfg.imu_cutoff_hz = x as f32;
         }
+        "comp" => {
+            cfg.compensation = match v {
+                "none" => Compensation::None,
+                "wholebody" => Compensation::WholeBody,
+                _ => return Err(ArgErrorKind::BadValue),
+            }
+        }
+        "stab" => {
+            cfg.stabilizer_on = match v {
+                "off" => false,
+                "on" => true,
+                _ => return Err(ArgErrorKind::BadValue),
+            }
+        }
+        "stab_kp" => cfg.stabilizer.kp = num_in(v, 0.0, 10.0)?,
+        "stab_ki" => cfg.stabilizer.ki = num_in(v, 0.0, 100.0)?,
+        "stab_leak" => cfg.stabilizer.leak = num_in(v, 0.0, 100.0)?,
+        "stab_kg" => cfg.stabilizer.kg = num_in(v, 0.0, 1.0)?,
+        "stab_k" => cfg.stabilizer.dcm_k = num_in(v, 0.0, 100.0)?,
+        "stab_max" => {
+            cfg.stabilizer.max_shift = num_in(v, 0.0, gait_core::stabilizer::MAX_SHIFT_CEILING_M)?
+        }
+        "stab_rate" => cfg.stabilizer.max_rate = positive(num_in(v, 0.0, 1.0)?)?,
+        "stab_margin" => cfg.stabilizer.margin = num_in(v, 0.0, 0.05)?,
+        "stab_cutoff" => cfg.stabilizer.cutoff_hz = positive(num_in(v, 0.0, 1000.0)?)?,
+        "feasibility" => {
+            cfg.feasibility = match v {
+                "stretch" => Feasibility::Stretch,
+                "lower" => Feasibility::Lower,
+                "off" => Feasibility::Off,
+                _ => return Err(ArgErrorKind::BadValue),
+            }
+        }
         "fault_nan" => cfg.fault_nan_tick = Some(int_in(v, 0, u32::MAX)?),
         "stop_at" => cfg.stop_at_tick = Some(int_in(v, 0, u32::MAX)?),
         _ => return Err(ArgErrorKind::UnknownKey),
@@ -339,9 +406,19 @@ mod tests {
              hold=2 min_load=3.5 feet=optional reply_timeout_us=800 read_poll_us=10 \
              attempts=2 baud=3000000 return_delay_us=4 compute_us=300 watchdog_ms=40 \
              hold_ticks=7 stopping_ticks=50 overrun_burst=3 tilt_limit=0.5 imu_cutoff=10 \
-             fault_nan=12 stop_at=99 b=0.002",
+             fault_nan=12 stop_at=99 b=0.002 comp=wholebody stab=on stab_kp=0.5 stab_ki=3 \
+             stab_leak=0.1 stab_kg=0.15 stab_k=2 stab_max=0.015 stab_rate=0.1 stab_margin=0.004 \
+             stab_cutoff=20 feasibility=lower",
         )
         .unwrap();
+        assert_eq!(c.compensation, Compensation::WholeBody);
+        assert!(c.stabilizer_on);
+        let st = c.stabilizer;
+        assert_eq!((st.kp, st.ki, st.leak, st.kg), (0.5, 3.0, 0.1, 0.15));
+        assert_eq!((st.dcm_k, st.max_shift, st.max_rate), (2.0, 0.015, 0.1));
+        assert_eq!((st.margin, st.cutoff_hz), (0.004, 20.0));
+        assert!(st.is_valid());
+        assert_eq!(c.feasibility, Feasibility::Lower);
         assert_eq!(c.model, ModelKind::Lipm);
         assert_eq!(c.tick_period_us, 2000);
         assert_eq!(c.walk.steps, 4);
@@ -412,6 +489,20 @@ mod tests {
         assert_eq!(e.key(), "a_very_long_key_name_tha");
         let e = parse("elf =1").unwrap_err();
         assert_eq!((e.kind, e.key()), (ArgErrorKind::UnknownKey, ""));
+        let e = parse("elf stab_max=0.03").unwrap_err();
+        assert_eq!((e.kind, e.key()), (ArgErrorKind::OutOfRange, "stab_max"));
+        let e = parse("elf stab_rate=0").unwrap_err();
+        assert_eq!(e.kind, ArgErrorKind::OutOfRange);
+        let e = parse("elf comp=full").unwrap_err();
+        assert_eq!((e.kind, e.key()), (ArgErrorKind::BadValue, "comp"));
+        let d = Config::default();
+        assert_eq!(
+            d.compensation,
+            Compensation::None,
+            "the paper's methods by default"
+        );
+        assert!(!d.stabilizer_on);
+        assert_eq!(d.feasibility, Feasibility::Stretch);
         let e = parse("elf tilt_limit=0").unwrap_err();
         assert_eq!(e.kind, ArgErrorKind::OutOfRange);
         assert!(parse("model=dlipm").is_ok(), "first token may be a pair");

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::planfile::{ModelName, SwingKind, WalkSpec, ZmpKind};
+use crate::planfile::{CompensationName, ModelName, SwingKind, WalkSpec, ZmpKind};
 use crate::sim::{self, SimConfig, SimSummary};
 
 /// What to run.
@@ -91,6 +91,16 @@ pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
     }
     t.push(format!("steps={}", spec.steps));
     t.push(format!("s_first={}", spec.s_first));
+    t.push(
+        match spec.compensation {
+            CompensationName::None => "comp=none",
+            CompensationName::Wholebody => "comp=wholebody",
+        }
+        .to_string(),
+    );
+    if spec.stabilizer {
+        t.push("stab=on".to_string());
+    }
     Ok(t)
 }
 
@@ -118,11 +128,6 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
     cfg.lockstep_port = Some(0);
     cfg.connect = false;
     cfg.log_truth = Some(truth.clone());
-    let dt_us = (opts.spec.dt * 1e6).round() as u64;
-    if dt_us > 0 {
-        // A whole number of ticks cancels the servo-kick ripple in the finite differences.
-        cfg.accel_window_us = dt_us;
-    }
     let handle = sim::spawn(cfg).map_err(|e| format!("simulator: {e}"))?;
     let bus = handle.bus_addr();
     let lockstep = handle

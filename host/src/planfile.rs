@@ -25,6 +25,8 @@
 //! zmp = "natural"         # natural (d1, d2, a) | continuous (b)
 //! b = 0.004               # continuous ZMP: half travel under the sole, m (default: a)
 //! swing = "cycloid"       # cycloid (h_z, w_y) | sinusoid (h_z)
+//! compensation = "none"   # none (the paper's pipeline) | wholebody (multi-body CoM on the model CoM; firmware `comp=`)
+//! stabilizer = false      # the firmware's ZMP/DCM feedback stabilizer (`stab=on`, default gains)
 //!
 //! # Instead of the forward walk (step_length, s_first, steps are then ignored):
 //! # feet start side by side at x = 0, y = ±step_width; each entry is one step.
@@ -122,6 +124,17 @@ pub enum SwingKind {
     Cycloid,
     /// Seed 001 sinusoid (h_z).
     Sinusoid,
+}
+
+/// How the pelvis is placed (plan-file spelling; the firmware's `comp=` token).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum CompensationName {
+    /// The paper's pipeline: the pelvis point on the model's CoM.
+    #[default]
+    None,
+    /// Whole-body compensation: the multi-body CoM on the model's CoM.
+    Wholebody,
 }
 
 /// The model name of a plan file.
@@ -227,6 +240,10 @@ pub struct WalkSpec {
     pub swing: SwingKind,
     /// Explicit footsteps (replace the forward walk when present).
     pub footsteps: Option<Vec<FootstepSpec>>,
+    /// Pelvis placement (firmware only; host exports plot the model's plan).
+    pub compensation: CompensationName,
+    /// The firmware's feedback stabilizer on (firmware only).
+    pub stabilizer: bool,
 }
 
 impl Default for WalkSpec {
@@ -254,6 +271,8 @@ impl Default for WalkSpec {
             b: None,
             swing: SwingKind::Cycloid,
             footsteps: None,
+            compensation: CompensationName::None,
+            stabilizer: false,
         }
     }
 }

@@ -180,3 +180,94 @@ fn a_fall_stops_the_walk_and_turns_torque_off() {
         "stopped at {stop_t:?}, fell at {fall_t}"
     );
 }
+
+// ---- The feedback stabilizer under disturbances (issue 7) ----
+
+/// Whole-body compensation + the stabilizer (default gains), 4 steps.
+const STAB: &[&str] = &["comp=wholebody", "stab=on"];
+
+/// The walk with the stabilizer stayed bounded: plan done (exit 0), no fall in the simulator,
+/// no joint target clamped to a servo limit or non-finite (a non-finite one stops with exit
+/// 15), the true ZMP never more than 2 cm outside the support polygon (a sudden τ moves the
+/// ZMP at once by τ/(m·g) — no controller can stop that — but not for the 50 ms the simulator
+/// needs to call it a fall), and the commanded CoM finite and within the walk's area.
+fn assert_bounded(name: &str, r: &FilResult, log: &DecodedLog) {
+    assert_eq!(r.exit_code, Some(0), "{name}: exit code");
+    assert_eq!(stop_reason(log), Some(StopReason::PlanDone), "{name}");
+    assert_eq!(
+        r.sim.fall_started_us, None,
+        "{name}: the simulator saw a fall"
+    );
+    let clamped: Vec<_> = log
+        .events
+        .iter()
+        .filter(|e| {
+            matches!(e, Record::Fault(f)
+                if f.kind == walker_firmware::log::FaultKind::TargetClamped)
+        })
+        .collect();
+    assert!(clamped.is_empty(), "{name}: targets clamped: {clamped:?}");
+    assert!(
+        r.sim.max_zmp_outside_m < 0.02,
+        "{name}: true ZMP {} m outside the support polygon",
+        r.sim.max_zmp_outside_m
+    );
+    // Every commanded CoM (tick record) is finite and within the walk's area.
+    for t in &log.ticks {
+        if t.com[0] != walker_firmware::log::POS_NA {
+            let (x, y) = (t.com[0] as f64 * 1e-5, t.com[1] as f64 * 1e-5);
+            assert!(
+                (-0.05..0.15).contains(&x) && y.abs() < 0.06,
+                "{name}: com {x} {y}"
+            );
+        }
+    }
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn stabilizer_survives_a_push() {
+    let mut sim = SimConfig {
+        seed: 21,
+        ..SimConfig::default()
+    };
+    // A sudden forward pitch torque on the upper body for 0.3 s in the middle of the walk.
+    sim.disturbance.constant_nm = 0.8;
+    sim.disturbance.start_s = 4.0;
+    sim.disturbance.end_s = Some(4.3);
+    let (r, log) = fil("stab-push", short_walk(4), sim, STAB);
+    assert_bounded("push", &r, &log);
+    // τ reached the firmware (the IMU saw the push).
+    assert!(log
+        .ticks
+        .iter()
+        .any(|t| t.tau_mnm != walker_firmware::log::TAU_NA && t.tau_mnm.unsigned_abs() > 50));
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn stabilizer_survives_sensor_bias_and_noise() {
+    let mut sim = SimConfig {
+        seed: 22,
+        ..SimConfig::default()
+    };
+    sim.noise.gyro_bias_rad_s = [0.05, -0.05, 0.02];
+    sim.noise.accel_bias_m_s2 = [0.3, -0.2, 0.0];
+    sim.noise.gyro_std_rad_s = 0.02;
+    sim.noise.force_std_n = 0.3;
+    let (r, log) = fil("stab-bias", short_walk(4), sim, STAB);
+    assert_bounded("bias", &r, &log);
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn stabilizer_survives_five_percent_dropped_packets() {
+    let mut sim = SimConfig {
+        seed: 23,
+        ..SimConfig::default()
+    };
+    sim.faults.p_drop = 0.05;
+    let (r, log) = fil("stab-drops", short_walk(4), sim, STAB);
+    assert!(r.sim.bus.dropped > 10, "{:?}", r.sim.bus);
+    assert_bounded("drops", &r, &log);
+}

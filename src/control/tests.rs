@@ -23,8 +23,15 @@ fn per_tick(b: &FakeBoard) -> Vec<&[Pkt]> {
         .collect()
 }
 
+/// Walk ticks of `cfg` after the start-up servo-speed check.
 fn expected_walk_ticks(cfg: &Config) -> usize {
-    let mut s = build_sampler(cfg, &Robot::reference()).unwrap();
+    let robot = Robot::reference();
+    let t = startup::servo_timing(cfg, &robot, &Targets::new(&robot, cfg.compensation)).unwrap();
+    let cfg = Config {
+        walk: t.walk,
+        ..*cfg
+    };
+    let mut s = build_sampler(&cfg, &robot).unwrap();
     let mut n = 0;
     while !s.is_done() {
         s.next(0.0);
@@ -480,4 +487,164 @@ fn other_rates_and_shapes() {
     assert_eq!(b.ticks.iter().filter(|t| t.tick.overrun).count(), 0);
     assert_eq!(ticks.len(), 100 + expected_walk_ticks(&cfg) + 50 + 1);
     assert_goals_in_limits(&b);
+}
+
+fn faults_of(recs: &[Record], kind: FaultKind) -> Vec<FaultRecord> {
+    recs.iter()
+        .filter_map(|r| match r {
+            Record::Fault(f) if f.kind == kind => Some(*f),
+            _ => None,
+        })
+        .collect()
+}
+
+fn cfg_with(tokens: &str) -> Config {
+    let mut cfg = Config::default();
+    crate::params::apply(&mut cfg, tokens.as_bytes()).unwrap();
+    cfg
+}
+
+#[test]
+fn table2_is_stretched_for_the_servo_speed_limit() {
+    // Default `feasibility=stretch`: the Table 2 swing needs ≈ 5.8 rad/s > 4.8 rad/s.
+    let robot = Robot::reference();
+    let cfg = Config::default();
+    let plain = Targets::new(&robot, Compensation::None);
+    let off = startup::dry_run(&cfg, &robot, &plain).unwrap();
+    assert!(off.worst_speed > 5.0 && off.worst_speed < 7.0, "{off:?}");
+    let t = startup::servo_timing(&cfg, &robot, &plain).unwrap();
+    assert!(t.feasible() && t.rounds >= 1, "{t:?}");
+    let need = off.worst_speed / off.limit * startup::TIMING_MARGIN;
+    assert!(f64::from(t.factor_milli) >= 1000.0 * need - 1.0, "{t:?}");
+    assert!(f64::from(t.factor_milli) < 1000.0 * need * 1.2, "{t:?}");
+    assert_eq!(t.walk, startup::stretched(&cfg.walk, t.factor_milli));
+    assert!(t.report.worst_speed <= robot.servo.max_speed);
+
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    let recs = b.records();
+    let st = faults_of(&recs, FaultKind::TimingStretched);
+    assert_eq!(st.len(), 1, "{recs:?}");
+    assert_eq!(st[0].value, t.factor_milli as i32);
+    assert!(faults_of(&recs, FaultKind::SpeedLimit).is_empty());
+    // After the start-up record, before the first tick.
+    let pos = |k: FaultKind| {
+        recs.iter()
+            .position(|r| matches!(r, Record::Fault(f) if f.kind == k))
+    };
+    let first_tick = recs.iter().position(|r| matches!(r, Record::Tick(_)));
+    assert!(pos(FaultKind::TimingStretched) < first_tick);
+}
+
+#[test]
+fn feasibility_off_warns_and_lower_lowers_the_swing() {
+    let robot = Robot::reference();
+    let cfg = cfg_with("elf feasibility=off steps=3");
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    let recs = b.records();
+    let w = faults_of(&recs, FaultKind::SpeedLimit);
+    assert_eq!(w.len(), 1);
+    assert!(w[0].value > 4800, "{w:?}");
+    assert!(faults_of(&recs, FaultKind::TimingStretched).is_empty());
+    // The paper's timing unchanged.
+    let mut s = build_sampler(&cfg, &robot).unwrap();
+    let mut n = 0;
+    while !s.is_done() {
+        s.next(0.0);
+        n += 1;
+    }
+    assert_eq!(expected_walk_ticks(&cfg), n);
+
+    let cfg = cfg_with("elf feasibility=lower steps=3");
+    let t = startup::servo_timing(&cfg, &robot, &Targets::new(&robot, cfg.compensation)).unwrap();
+    assert_eq!(t.factor_milli, 1000);
+    let h = t.lowered_um.expect("lowered");
+    assert!(h < 30_000 && h > 5_000, "{t:?}");
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    let recs = b.records();
+    let l = faults_of(&recs, FaultKind::SwingLowered);
+    assert_eq!(l.len(), 1);
+    assert_eq!(l[0].value, h as i32);
+    // A lowered swing that is still too fast is reported, never hidden.
+    assert_eq!(
+        faults_of(&recs, FaultKind::SpeedLimit).is_empty(),
+        t.feasible()
+    );
+}
+
+#[test]
+fn wholebody_and_stabilizer_walk_to_plan_done_within_limits() {
+    for tokens in [
+        "elf comp=wholebody steps=4",
+        "elf comp=wholebody stab=on steps=4",
+        "elf stab=on steps=4",
+        // Extreme gains: the stabilizer saturates, the targets stay in the limits.
+        "elf comp=wholebody stab=on stab_kp=10 stab_ki=100 stab_kg=1 stab_rate=1 stab_max=0.02 steps=4",
+    ] {
+        let cfg = cfg_with(tokens);
+        let mut b = board(&cfg);
+        assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone), "{tokens}");
+        assert_goals_in_limits(&b);
+        let ticks = ticks_of(&b.records());
+        assert_eq!(
+            ticks.len(),
+            300 + expected_walk_ticks(&cfg) + 200 + 1,
+            "{tokens}"
+        );
+        // The logged (commanded) CoM stays within 2 cm of the same run without feedback
+        // (the fake IMU's τ does not depend on the goals, so the plans agree).
+        let mut off = cfg;
+        off.stabilizer_on = false;
+        let mut b0 = board(&off);
+        assert_eq!(run(&mut b0, &off), RunEnd::Stopped(StopReason::PlanDone));
+        let ticks0 = ticks_of(&b0.records());
+        assert_eq!(ticks0.len(), ticks.len());
+        for (k, (a, b)) in ticks.iter().zip(ticks0.iter()).enumerate() {
+            let dx = (a.com[0] - b.com[0]) as f64 * 1e-5;
+            let dy = (a.com[1] - b.com[1]) as f64 * 1e-5;
+            assert!((dx * dx + dy * dy).sqrt() <= 0.02 + 2e-5, "{tokens}: tick {k}: {dx} {dy}");
+        }
+    }
+}
+
+#[test]
+fn no_shift_can_push_a_target_outside_the_limits() {
+    // Every sample of the Table 2 walk, both pipelines, the largest shift in 8 directions:
+    // the IK clamps to the joint limits and safe_targets to the servo ticks.
+    let robot = Robot::reference();
+    let map = JointMap::from_robot(&robot);
+    let cfg = Config::default();
+    for comp in [Compensation::None, Compensation::WholeBody] {
+        let targets = Targets::new(&robot, comp);
+        let mut s = build_sampler(&cfg, &robot).unwrap();
+        let mut last = [2048i32; 12];
+        let mut k = 0u32;
+        while !s.is_done() {
+            let g = s.next(0.0);
+            k += 1;
+            if !k.is_multiple_of(3) {
+                continue;
+            }
+            for d in 0..8 {
+                let a = d as f32 * core::f32::consts::FRAC_PI_4;
+                let m = gait_core::stabilizer::MAX_SHIFT_CEILING_M as f32;
+                let (q, _) = targets.joints(&g, [m * a.cos(), m * a.sin()]);
+                for (j, v) in q.iter().enumerate() {
+                    assert!(v.is_finite());
+                    assert!(
+                        *v >= map.min_rad[j] - 1e-4 && *v <= map.max_rad[j] + 1e-4,
+                        "{comp:?} joint {j}: {v}"
+                    );
+                }
+                let t = safe_targets(&q, &map, &last).unwrap();
+                assert!(t
+                    .ticks
+                    .iter()
+                    .all(|t| (map.tick_min..=map.tick_max).contains(t)));
+                last = t.ticks;
+            }
+        }
+    }
 }

@@ -1,0 +1,559 @@
+//! `walker beyond`: the paper's open-loop methods and the two additions of issue 7 walked side
+//! by side in the firmware-in-the-loop setup, scored against the simulator's ground truth.
+//!
+//! Five runs of the same plan: LIPM, DLIPM, TLIPFM (the paper's pipeline), TLIPFM + whole-body
+//! compensation (`comp=wholebody`), TLIPFM + compensation + the feedback stabilizer
+//! (`comp=wholebody stab=on`). The simulator's servos are XM430-like: speed limit 4.8 rad/s
+//! (`SimConfig::servo_speed_limit`); the simulator has **no torque limit** option (its servos
+//! follow their goal with a first-order lag and the speed limit only), so none is applied.
+//!
+//! Per run, over the walking ticks (the log's support phase double / single, lead-in and
+//! lead-out standing excluded), with the truth sampled at each tick's time (nearest row at or
+//! before it, `report::Truth::at`):
+//! * ZMP error against the firmware's reference: mean and max |e| per axis for the true ZMP
+//!   (truth.csv) and for the measured one (foot sensors, ticks with a valid measurement);
+//! * the fraction of walking ticks whose true ZMP is inside the support polygon of the plan's
+//!   sample at that tick with a 5 mm margin (`gait_core::support`; the k-th walking tick of the
+//!   log is the k-th sample of the firmware's sampler, rebuilt here from the same tokens and
+//!   the start-up timing adjustment);
+//! * distance walked: truth pelvis x at the last gait sample the firmware commanded minus at
+//!   the first (before torque off), against the plan's CoM travel over the same samples;
+//! * peak joint speeds: the simulator's truth has no joint angles, so these are the peaks of
+//!   the firmware's own joint targets for the walk it ran (its pipeline run on the host at dt,
+//!   `walker_firmware::startup::dry_run`: no τ, no feedback shift — the shift is rate-limited
+//!   to `stab_rate`).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
+use gait_core::{Robot, SupportPhase as PlanPhase};
+use walker_firmware::control::{build_sampler, support_of, Targets};
+use walker_firmware::log::{FaultKind, Record, SupportPhase, POS_NA};
+use walker_firmware::{params, startup, Config};
+
+use crate::fil::{self, FilOptions};
+use crate::planfile::{CompensationName, ModelName, WalkSpec};
+use crate::report::{self, tick_rows};
+use crate::sim::SimConfig;
+
+/// XM430-class no-load speed, rad/s.
+pub const XM430_SPEED_RAD_S: f64 = 4.8;
+/// Margin of the "inside the support polygon" statistic, m.
+pub const INSIDE_MARGIN_M: f64 = 0.005;
+
+/// One of the five runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    /// Short name (also the output sub-folder).
+    pub name: &'static str,
+    /// Pendulum model.
+    pub model: ModelName,
+    /// Whole-body compensation.
+    pub compensation: CompensationName,
+    /// Feedback stabilizer.
+    pub stabilizer: bool,
+}
+
+/// The five runs of the report, in table order.
+pub fn variants() -> [Variant; 5] {
+    let v = |name, model, compensation, stabilizer| Variant {
+        name,
+        model,
+        compensation,
+        stabilizer,
+    };
+    use CompensationName::{None as Plain, Wholebody};
+    [
+        v("lipm", ModelName::Lipm, Plain, false),
+        v("dlipm", ModelName::Dlipm, Plain, false),
+        v("tlipfm", ModelName::Tlipfm, Plain, false),
+        v("tlipfm-wb", ModelName::Tlipfm, Wholebody, false),
+        v("tlipfm-wb-fb", ModelName::Tlipfm, Wholebody, true),
+    ]
+}
+
+/// Mean and max |e| of one axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AxisError {
+    /// Samples.
+    pub n: usize,
+    /// Mean |e|, m.
+    pub mean: f64,
+    /// Max |e|, m.
+    pub max: f64,
+}
+
+impl AxisError {
+    /// From the errors (NaN skipped).
+    pub fn of(e: impl Iterator<Item = f64>) -> Self {
+        let (mut n, mut sum, mut max) = (0usize, 0.0, 0.0f64);
+        for v in e.filter(|v| v.is_finite()) {
+            n += 1;
+            sum += v.abs();
+            max = max.max(v.abs());
+        }
+        AxisError {
+            n,
+            mean: if n > 0 { sum / n as f64 } else { f64::NAN },
+            max: if n > 0 { max } else { f64::NAN },
+        }
+    }
+}
+
+/// The numbers of one run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunMetrics {
+    /// The variant.
+    pub variant: Variant,
+    /// Firmware exit code.
+    pub exit_code: Option<i32>,
+    /// The simulator saw a fall (time, s).
+    pub fell_at: Option<f64>,
+    /// Timing factor applied at start-up (1 = the plan's timing).
+    pub timing_factor: f64,
+    /// True ZMP − reference, x and y.
+    pub true_err: [AxisError; 2],
+    /// Measured ZMP − reference, x and y.
+    pub meas_err: [AxisError; 2],
+    /// Fraction of walking ticks with the true ZMP inside the support polygon (5 mm margin).
+    pub inside: f64,
+    /// Walking ticks scored.
+    pub walking_ticks: usize,
+    /// Truth pelvis x travel, m.
+    pub walked: f64,
+    /// Planned CoM x travel, m.
+    pub planned: f64,
+    /// Peak joint speed of the firmware's targets per joint, rad/s.
+    pub peak_speed: [f64; LEG_JOINTS],
+    /// Reference samples that disagreed with the host's rebuild of the firmware's sampler.
+    pub ref_mismatch: usize,
+}
+
+impl RunMetrics {
+    /// The worst joint: (name, rad/s).
+    pub fn worst_joint(&self) -> (&'static str, f64) {
+        let (j, v) = self
+            .peak_speed
+            .iter()
+            .enumerate()
+            .fold((0, 0.0f64), |a, (j, &v)| if v > a.1 { (j, v) } else { a });
+        (JOINT_NAMES.get(j).copied().unwrap_or("?"), v)
+    }
+}
+
+/// The firmware configuration the tokens give (as the firmware parses them).
+pub fn firmware_config(tokens: &[String]) -> Result<Config, String> {
+    let mut cfg = Config::default();
+    let line = tokens.join(" ");
+    params::apply(&mut cfg, line.as_bytes())
+        .map_err(|e| format!("firmware token {:?}: {:?}", e.key(), e.kind))?;
+    Ok(cfg)
+}
+
+/// `cfg` with the start-up timing adjustments the log reports (stretch factor, lowered swing).
+pub fn adjusted_config(cfg: &Config, events: &[Record]) -> Config {
+    let mut out = *cfg;
+    for e in events {
+        if let Record::Fault(f) = e {
+            match f.kind {
+                FaultKind::TimingStretched => {
+                    out.walk = startup::stretched(&cfg.walk, f.value.max(1) as u32);
+                }
+                FaultKind::SwingLowered => out.walk.h_z = f64::from(f.value.max(0)) * 1e-6,
+                _ => {}
+            }
+        }
+    }
+    out
+}
+
+/// The plan file's walk with the start-up timing adjustments the log reports (for the
+/// report's support bounds).
+pub fn adjusted_spec(spec: &WalkSpec, events: &[Record]) -> WalkSpec {
+    let mut out = spec.clone();
+    for e in events {
+        if let Record::Fault(f) = e {
+            match f.kind {
+                FaultKind::TimingStretched => {
+                    let k = f64::from(f.value.max(1)) / 1000.0;
+                    out.t1 = spec.t1 * k;
+                    out.t2 = spec.t2 * k;
+                    out.period = spec.period * k;
+                }
+                FaultKind::SwingLowered => out.h_z = f64::from(f.value.max(0)) * 1e-6,
+                _ => {}
+            }
+        }
+    }
+    out
+}
+
+/// Truth columns used here.
+#[derive(Clone, Debug, Default)]
+struct TruthRows {
+    t: Vec<f64>,
+    zmp: Vec<[f64; 2]>,
+    pelvis_x: Vec<f64>,
+}
+
+impl TruthRows {
+    fn index_at(&self, t: f64) -> Option<usize> {
+        let (first, last) = (*self.t.first()?, *self.t.last()?);
+        if t < first - 1e-9 || t > last + 1e-9 {
+            return None;
+        }
+        Some(self.t.partition_point(|&v| v <= t + 1e-9).saturating_sub(1))
+    }
+}
+
+fn read_truth(path: &Path) -> Result<TruthRows, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .ok_or_else(|| format!("{}: empty", path.display()))?
+        .split(',')
+        .collect();
+    let col = |n: &str| {
+        header
+            .iter()
+            .position(|h| h.trim() == n)
+            .ok_or_else(|| format!("{}: no column {n}", path.display()))
+    };
+    let (ct, cx, cy, cp) = (col("t_s")?, col("zmp_x")?, col("zmp_y")?, col("pelvis_x")?);
+    let mut out = TruthRows::default();
+    for l in lines {
+        let f: Vec<&str> = l.split(',').collect();
+        let g = |i: usize| {
+            f.get(i)
+                .and_then(|s| s.trim().parse::<f64>().ok())
+                .unwrap_or(f64::NAN)
+        };
+        if !g(ct).is_finite() {
+            continue;
+        }
+        out.t.push(g(ct));
+        out.zmp.push([g(cx), g(cy)]);
+        out.pelvis_x.push(g(cp));
+    }
+    Ok(out)
+}
+
+/// Scores one finished run (log + truth) of `cfg`'s walk (the tokens the firmware got).
+pub fn score(
+    variant: &Variant,
+    cfg: &Config,
+    log_path: &Path,
+    truth_path: &Path,
+    exit_code: Option<i32>,
+    fell_at: Option<f64>,
+) -> Result<RunMetrics, String> {
+    let robot = Robot::reference();
+    let log = report::decode_file(log_path)?;
+    let truth = read_truth(truth_path)?;
+    let cfg = adjusted_config(cfg, &log.events);
+    let timing_factor = stretch_factor(&log.events);
+    let targets = Targets::new(&robot, cfg.compensation);
+    let peak = startup::dry_run(&cfg, &robot, &targets).map_err(|e| e.to_string())?;
+    let mut sampler = build_sampler(&cfg, &robot).map_err(|e| e.to_string())?;
+    let rows = tick_rows(&log.ticks);
+
+    let (mut te, mut me) = ([vec![], vec![]], [vec![], vec![]]);
+    let (mut inside, mut walking, mut mismatch) = (0usize, 0usize, 0usize);
+    let (mut first_com, mut last_com) = (None, None);
+    let (mut t_first, mut t_last) = (None, None);
+    for r in rows.iter().filter(|r| r.rec.zmp_ref[0] != POS_NA) {
+        if sampler.is_done() {
+            break;
+        }
+        let g = sampler.next(0.0);
+        t_first.get_or_insert(r.t);
+        t_last = Some(r.t);
+        first_com.get_or_insert(g.com[0]);
+        last_com = Some(g.com[0]);
+        let walk_phase = matches!(
+            r.rec.phase,
+            SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
+        );
+        if (f64::from(g.zmp[0]) - r.zmp_ref[0]).abs() > 1e-3
+            || (f64::from(g.zmp[1]) - r.zmp_ref[1]).abs() > 1e-3
+            || walk_phase != (g.phase != PlanPhase::Standing)
+        {
+            mismatch += 1;
+        }
+        if !walk_phase {
+            continue;
+        }
+        walking += 1;
+        let Some(i) = truth.index_at(r.t) else {
+            continue;
+        };
+        let z = truth.zmp[i];
+        for k in 0..2 {
+            te[k].push(z[k] - r.zmp_ref[k]);
+            if let Some(m) = r.measured() {
+                me[k].push(m[k] - r.zmp_ref[k]);
+            }
+        }
+        if let Some(poly) = support_of(&robot, &g) {
+            if poly.contains_with_margin([z[0] as f32, z[1] as f32], INSIDE_MARGIN_M as f32) {
+                inside += 1;
+            }
+        }
+    }
+    // The rest of the plan (the final hold) for the planned travel.
+    while !sampler.is_done() {
+        last_com = Some(sampler.next(0.0).com[0]);
+    }
+    // From the first to the last gait sample the firmware commanded (torque is off later).
+    let pelvis_at = |t: Option<f64>| {
+        t.and_then(|t| truth.index_at(t))
+            .and_then(|i| truth.pelvis_x.get(i).copied())
+    };
+    let walked = match (pelvis_at(t_first), pelvis_at(t_last)) {
+        (Some(a), Some(b)) => b - a,
+        _ => f64::NAN,
+    };
+    let ax = |v: &Vec<f64>| AxisError::of(v.iter().copied());
+    Ok(RunMetrics {
+        variant: variant.clone(),
+        exit_code,
+        fell_at,
+        timing_factor,
+        true_err: [ax(&te[0]), ax(&te[1])],
+        meas_err: [ax(&me[0]), ax(&me[1])],
+        inside: if walking > 0 {
+            inside as f64 / walking as f64
+        } else {
+            f64::NAN
+        },
+        walking_ticks: walking,
+        walked,
+        planned: match (first_com, last_com) {
+            (Some(a), Some(b)) => f64::from(b - a),
+            _ => f64::NAN,
+        },
+        peak_speed: peak.peak_speed,
+        ref_mismatch: mismatch,
+    })
+}
+
+/// The start-up stretch factor the log reports (1 when none).
+pub fn stretch_factor(events: &[Record]) -> f64 {
+    events
+        .iter()
+        .find_map(|e| match e {
+            Record::Fault(f) if f.kind == FaultKind::TimingStretched => {
+                Some(f64::from(f.value) / 1000.0)
+            }
+            _ => None,
+        })
+        .unwrap_or(1.0)
+}
+
+/// Options of [`run`].
+#[derive(Clone, Debug)]
+pub struct BeyondOptions {
+    /// Firmware ELF.
+    pub elf: PathBuf,
+    /// The plan.
+    pub spec: WalkSpec,
+    /// Output folder (one sub-folder per run, `beyond.md`, `beyond.csv`).
+    pub out_dir: PathBuf,
+    /// QEMU machine.
+    pub machine: String,
+    /// Simulator seed.
+    pub seed: u64,
+    /// Extra firmware tokens for every run (e.g. `feasibility=off`).
+    pub extra_tokens: Vec<String>,
+    /// Extra firmware tokens for the feedback run only (e.g. gains).
+    pub feedback_tokens: Vec<String>,
+    /// Wall-clock limit per run.
+    pub timeout: Duration,
+}
+
+/// Walks the five variants and scores them; `progress(name)` before each run.
+pub fn run(opts: &BeyondOptions, progress: impl Fn(&str)) -> Result<Vec<RunMetrics>, String> {
+    let mut out = Vec::new();
+    for v in variants() {
+        progress(v.name);
+        let spec = WalkSpec {
+            model: v.model,
+            compensation: v.compensation,
+            stabilizer: v.stabilizer,
+            ..opts.spec.clone()
+        };
+        let mut extra = opts.extra_tokens.clone();
+        if v.stabilizer {
+            extra.extend(opts.feedback_tokens.iter().cloned());
+        }
+        let mut tokens = fil::firmware_tokens(&spec)?;
+        tokens.extend(extra.iter().cloned());
+        let cfg = firmware_config(&tokens)?;
+        let sim = SimConfig {
+            seed: opts.seed,
+            servo_speed_limit: XM430_SPEED_RAD_S,
+            ..SimConfig::default()
+        };
+        let fopts = FilOptions {
+            elf: opts.elf.clone(),
+            spec,
+            out_dir: opts.out_dir.join(v.name),
+            machine: opts.machine.clone(),
+            timeout: opts.timeout,
+            sim,
+            extra_tokens: extra,
+        };
+        let r = fil::run(&fopts, |_, _| {})?;
+        let fell = r.sim.fall_started_us.map(|t| t as f64 * 1e-6);
+        out.push(score(&v, &cfg, &r.log, &r.truth, r.exit_code, fell)?);
+    }
+    Ok(out)
+}
+
+fn mm(v: f64) -> String {
+    if v.is_finite() {
+        format!("{:.1}", v * 1e3)
+    } else {
+        "–".into()
+    }
+}
+
+/// The side-by-side table (Markdown).
+pub fn table(runs: &[RunMetrics]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| run | exit | timing × | true ZMP mean \\|e\\| x / y (mm) | true max \\|e\\| x / y (mm) | measured mean \\|e\\| x / y (mm) | measured max x / y (mm) | true ZMP inside (5 mm margin) | walked / planned (m) | peak joint speed (rad/s) |"
+    );
+    let _ = writeln!(
+        s,
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"
+    );
+    for r in runs {
+        let (jn, jv) = r.worst_joint();
+        let exit = match (r.exit_code, r.fell_at) {
+            (c, Some(t)) => format!("{c:?}, fell {t:.2} s"),
+            (Some(c), None) => c.to_string(),
+            (None, None) => "killed".into(),
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.3} | {} / {} | {} / {} | {} / {} | {} / {} | {:.1} % | {:.3} / {:.3} | {:.2} ({}) |",
+            r.variant.name,
+            exit,
+            r.timing_factor,
+            mm(r.true_err[0].mean),
+            mm(r.true_err[1].mean),
+            mm(r.true_err[0].max),
+            mm(r.true_err[1].max),
+            mm(r.meas_err[0].mean),
+            mm(r.meas_err[1].mean),
+            mm(r.meas_err[0].max),
+            mm(r.meas_err[1].max),
+            r.inside * 100.0,
+            r.walked,
+            r.planned,
+            jv,
+            jn
+        );
+    }
+    s
+}
+
+/// One CSV row per run.
+pub fn csv(runs: &[RunMetrics]) -> String {
+    let mut s = String::from("run,exit,fell_at,timing_factor,true_mean_x,true_mean_y,true_max_x,true_max_y,meas_mean_x,meas_mean_y,meas_max_x,meas_max_y,inside,walking_ticks,walked,planned,peak_speed_max,ref_mismatch\n");
+    for r in runs {
+        let _ = writeln!(
+            s,
+            "{},{},{},{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{},{:.4},{:.4},{:.3},{}",
+            r.variant.name,
+            r.exit_code.map_or(String::new(), |c| c.to_string()),
+            r.fell_at.map_or(String::new(), |t| format!("{t:.3}")),
+            r.timing_factor,
+            r.true_err[0].mean,
+            r.true_err[1].mean,
+            r.true_err[0].max,
+            r.true_err[1].max,
+            r.meas_err[0].mean,
+            r.meas_err[1].mean,
+            r.meas_err[0].max,
+            r.meas_err[1].max,
+            r.inside,
+            r.walking_ticks,
+            r.walked,
+            r.planned,
+            r.worst_joint().1,
+            r.ref_mismatch
+        );
+    }
+    s
+}
+
+/// The issue's goal for compensation + feedback: mean |e| < 1.1 cm sagittal, 1.4 cm lateral.
+pub fn meets_goal(r: &RunMetrics) -> bool {
+    r.true_err[0].mean < 0.011 && r.true_err[1].mean < 0.014
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_error_skips_nan() {
+        let e = AxisError::of([0.01, -0.03, f64::NAN].into_iter());
+        assert_eq!(e.n, 2);
+        assert!((e.mean - 0.02).abs() < 1e-12 && (e.max - 0.03).abs() < 1e-12);
+        assert!(AxisError::of(std::iter::empty()).mean.is_nan());
+    }
+
+    #[test]
+    fn variants_map_to_firmware_tokens() {
+        let spec = WalkSpec::default();
+        for v in variants() {
+            let s = WalkSpec {
+                model: v.model,
+                compensation: v.compensation,
+                stabilizer: v.stabilizer,
+                ..spec.clone()
+            };
+            let cfg = firmware_config(&fil::firmware_tokens(&s).unwrap()).unwrap();
+            assert_eq!(cfg.stabilizer_on, v.stabilizer, "{}", v.name);
+            assert_eq!(
+                cfg.compensation == walker_firmware::control::Compensation::WholeBody,
+                v.compensation == CompensationName::Wholebody
+            );
+            assert_eq!(cfg.model, gait_core::ModelKind::from(v.model));
+        }
+    }
+
+    #[test]
+    fn the_log_adjustment_reproduces_the_firmware_walk() {
+        let robot = Robot::reference();
+        let cfg = Config::default();
+        let t =
+            startup::servo_timing(&cfg, &robot, &Targets::new(&robot, cfg.compensation)).unwrap();
+        let events: Vec<Record> = t
+            .records()
+            .iter()
+            .map(|&(kind, id, value)| {
+                Record::Fault(walker_firmware::log::FaultRecord {
+                    seq: 0,
+                    time_us: 0,
+                    kind,
+                    id,
+                    value,
+                })
+            })
+            .collect();
+        assert_eq!(adjusted_config(&cfg, &events).walk, t.walk);
+        let spec = adjusted_spec(&WalkSpec::default(), &events);
+        assert_eq!(
+            (spec.t1, spec.t2, spec.period),
+            (t.walk.t1, t.walk.t2, t.walk.period)
+        );
+    }
+}
