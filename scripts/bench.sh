@@ -151,7 +151,7 @@ read -r q_flash q_ram q_text q_ro q_data q_bss < <(elf_sizes target/thumbv7em-no
 read -r o_flash o_ram o_text o_ro o_data o_bss < <(elf_sizes target/thumbv7em-none-eabihf/release/opencr)
 kib() { calc "$1 / 1024" 2; }
 verdict() { # value limit
-    if [ "$1" -le "$2" ]; then printf 'within'; else printf '**over**'; fi
+    if awk "BEGIN { exit !(($1) <= ($2)) }"; then printf 'within'; else printf '**over**'; fi
 }
 
 # ---- 4. bus budget ----
@@ -191,10 +191,37 @@ h() { printf '%s' "${H[$1]:-not run}"; }
 rustc_v=$(rustc --version | awk '{ print $2 }')
 qemu_v=$(qemu-system-arm --version | head -1 | sed -E 's/.*version ([^ ]+).*/\1/')
 t7=${M7[tick.f32.tlipfm.avg]}
+t4=${M4[tick.f32.tlipfm.avg]}
 t3=${M3[tick.fixed.tlipfm.avg]}
-codec7=$(calc "${M7[dxl.decode3.avg]} + ${M7[dxl.sync_write12.avg]} + ${M7[dxl.bulk_read3.avg]}")
-codec3=$(calc "${M3[dxl.decode3.avg]} + ${M3[dxl.sync_write12.avg]} + ${M3[dxl.bulk_read3.avg]}")
+t3f=${M3[tick.f32.tlipfm.avg]}
+t7cs=${M7[tick.comp_stab.tlipfm.avg]}
+t3cs=${M3[tick.comp_stab.tlipfm.avg]}
+codec() { # array → Dynamixel codec instructions per tick (decode 3 replies + 2 encodes)
+    local -n a=$1
+    calc "${a[dxl.decode3.avg]} + ${a[dxl.sync_write12.avg]} + ${a[dxl.bulk_read3.avg]}"
+}
+codec7=$(codec M7)
+codec3=$(codec M3)
 pct() { calc "100 * ($1) / ($2)"; }
+ratio() { calc "($1) / ($2)" "${3:-1}"; }
+# more/less: how a compares with b, in words.
+than() { if awk "BEGIN { exit !(($1) < ($2)) }"; then printf 'less'; else printf 'more'; fi; }
+# breakdown total "label|value" ... → "label value (p %), …" sorted by value, then the rest.
+breakdown() {
+    local total=$1 rest parts=() sum=0 l v
+    shift
+    for p in "$@"; do
+        l=${p%%|*}
+        v=${p#*|}
+        sum=$(calc "$sum + $v" 1)
+        parts+=("$(calc "$v" 1)|$l")
+    done
+    rest=$(calc "$total - $sum")
+    printf '%s\n' "${parts[@]}" | sort -t'|' -k1,1 -g -r | while IFS='|' read -r v l; do
+        printf '%s %s (%s %%), ' "$l" "$(n "$v")" "$(pct "$v" "$total")"
+    done
+    printf 'the rest (glue, conversions, goal ticks) %s (%s %%)' "$(n "$rest")" "$(pct "$rest" "$total")"
+}
 # Transcendental calls per two-leg IK, counted in gait-core/src/kinematics.rs (legs_ik):
 # 3 rot_cols × 3 sin_cos + 2 legs × 2 sin_cos, 2 legs × 7 atan2, 2 legs × 5 sqrt.
 ik_sc=13 ik_at=14 ik_sq=10
@@ -204,8 +231,12 @@ ik_tr() { # array → instructions in the IK's sin_cos/atan2/sqrt (primitive fig
 }
 ik7=$(ik_tr M7)
 ik3=$(ik_tr M3)
+# The fixed-point IK (gait-core/src/fixed_ik.rs, legs_ik): 2 legs × 7 atan2 and 5 isqrt; its
+# sin_cos calls skip zero angles (the forward walk is level and straight: 2 legs × 2).
+fik_at=14 fik_sc=4
+fik3=$(calc "$fik_at * ${M3[prim.fx_atan2.avg]} + $fik_sc * ${M3[prim.fx_sin_cos.avg]}")
 exp3=$(calc "2 * ${M3[prim.fx_exp_neg.avg]}")
-exp7=$(calc "2 * ${M7[prim.fx_exp_neg.avg]}")
+opt_level=$(sed -n '/^\[profile\.release\]/,/^\[/ s/^opt-level *= *"\{0,1\}\([^"]*\)"\{0,1\}.*/\1/p' Cargo.toml)
 
 section=$out/section.md
 {
@@ -226,8 +257,9 @@ own overhead (an empty call: ${M7[overhead.avg]} instructions per iteration); **
 single call, resolution 40 instructions (one count), call and timer reads included. QEMU counts
 instructions, not cycles: the M7 and M4F run the same ELF and give the same counts (a real M7
 dual-issues; cycles are not modelled). Inputs a stage takes from an earlier stage (the IK's gait
-samples) are computed beforehand, so each stage is timed alone. Release profile of Cargo.toml
-(opt-level "s", fat LTO).
+samples) are computed beforehand, so each stage is timed alone. Release profile of Cargo.toml:
+**opt-level "$opt_level"** (chosen for flash, to fit the 64 KiB target; "s" or 3 would give
+fewer instructions per tick and a larger ELF), fat LTO, one codegen unit.
 
 Reproduce one machine by hand:
 
@@ -245,52 +277,92 @@ qemu-system-arm -M mps2-an385 -nographic -monitor none -serial null \\
 ### Full control tick, instructions (avg over the walk, max per tick in parentheses)
 
 A tick = decode the three status replies byte by byte (\`dxl::Decoder\`) → pitch-rate filter,
-τ = J·φ̈ (\`imu::PitchAccel\`) → one gait sample with that τ → measured ZMP from the 8 forces →
-two-leg IK (\`pipeline::joint_targets\`) → 12 × \`rad_to_ticks\` → encode the SYNC WRITE of 12
-goal positions and the BULK READ of feet + IMU. These are the library calls alone; the
-firmware's own loop is measured below.
+τ = J·φ̈ (\`imu::PitchAccel\`, f32) → one gait sample with that τ → measured ZMP from the 8
+forces (f32) → joint targets → 12 goal positions in ticks → encode the SYNC WRITE of 12 goal
+positions and the BULK READ of feet + IMU. The paths differ in the middle:
 
-| machine | path | LIPM | DLIPM | TLIPFM | target (issue 6) |
-| --- | --- | --- | --- | --- | --- |
-| Cortex-M7, mps2-an500 | f32 (exact sampler) | $(cell M7 tick.f32.lipm) | $(cell M7 tick.f32.dlipm) | $(cell M7 tick.f32.tlipfm) | ≤ 3,000: **$(calc "$t7 / 3000" 1)× over** |
-| Cortex-M4F, mps2-an386 | f32 (exact sampler) | $(cell M4 tick.f32.lipm) | $(cell M4 tick.f32.dlipm) | $(cell M4 tick.f32.tlipfm) | |
-| Cortex-M7, mps2-an500 | fixed sampler + f32 IK | $(cell M7 tick.fixed.lipm) | $(cell M7 tick.fixed.dlipm) | $(cell M7 tick.fixed.tlipfm) | |
-| Cortex-M3, mps2-an385 | fixed sampler + soft-float IK | $(cell M3 tick.fixed.lipm) | $(cell M3 tick.fixed.dlipm) | $(cell M3 tick.fixed.tlipfm) | ≤ 3 × M7: **$(calc "$t3 / $t7" 1)× the M7 tick**, $(calc "$t3 / 9000" 1)× the 9,000 target |
-| Cortex-M3, mps2-an385 | f32 soft float (exact sampler) | $(cell M3 tick.f32.lipm) | $(cell M3 tick.f32.dlipm) | $(cell M3 tick.f32.tlipfm) | |
+- **f32**: exact f32 sampler (\`Sampler::next\`), f32 two-leg IK (\`pipeline::joint_targets\`),
+  \`x_series::rad_to_ticks\`.
+- **f32 + compensation + stabilizer** (the firmware's \`comp=wholebody stab=on\`): as f32, then
+  the stabilizer's per-tick call (support polygon of the previous sample, \`Stabilizer::update\`
+  with the measured ZMP and the gyro) and the whole-body compensation with its shift
+  (\`control::Targets::WholeBody\`, 2 iterations: 4 two-leg IK and 3 FK/CoM evaluations).
+- **fixed**: fixed-point sampler (\`FixedSampler::next\`, τ in mN·m), integer-only two-leg IK
+  (\`fixed_ik::joint_targets\`) and an integer rad → tick conversion; the pitch-rate filter
+  and the measured ZMP stay f32 (the soles' places converted from fixed point), so on the M3
+  these two are the only soft-float work left in the tick.
+
+These are the library calls alone; the firmware's own loop is measured below.
+
+| machine | path | LIPM | DLIPM | TLIPFM |
+| --- | --- | --- | --- | --- |
+| Cortex-M7, mps2-an500 | f32 | $(cell M7 tick.f32.lipm) | $(cell M7 tick.f32.dlipm) | $(cell M7 tick.f32.tlipfm) |
+| Cortex-M7, mps2-an500 | f32 + compensation + stabilizer | $(cell M7 tick.comp_stab.lipm) | $(cell M7 tick.comp_stab.dlipm) | $(cell M7 tick.comp_stab.tlipfm) |
+| Cortex-M7, mps2-an500 | fixed | $(cell M7 tick.fixed.lipm) | $(cell M7 tick.fixed.dlipm) | $(cell M7 tick.fixed.tlipfm) |
+| Cortex-M4F, mps2-an386 | f32 | $(cell M4 tick.f32.lipm) | $(cell M4 tick.f32.dlipm) | $(cell M4 tick.f32.tlipfm) |
+| Cortex-M4F, mps2-an386 | f32 + compensation + stabilizer | $(cell M4 tick.comp_stab.lipm) | $(cell M4 tick.comp_stab.dlipm) | $(cell M4 tick.comp_stab.tlipfm) |
+| Cortex-M3, mps2-an385 | fixed | $(cell M3 tick.fixed.lipm) | $(cell M3 tick.fixed.dlipm) | $(cell M3 tick.fixed.tlipfm) |
+| Cortex-M3, mps2-an385 | f32 (soft float) | $(cell M3 tick.f32.lipm) | $(cell M3 tick.f32.dlipm) | $(cell M3 tick.f32.tlipfm) |
+| Cortex-M3, mps2-an385 | f32 + compensation + stabilizer (soft float) | $(cell M3 tick.comp_stab.lipm) | $(cell M3 tick.comp_stab.dlipm) | $(cell M3 tick.comp_stab.tlipfm) |
 
 The firmware's control loop itself: \`control::run\` with the default configuration
-(${M7[control.model]}, ramp and final hold cut to one tick) on an in-memory bus of emulated
-devices (12 servos, two loaded foot boards, the IMU). Per walking tick = SysTick from the return
-of one \`wait_tick\` to the next, minus the time inside the board's methods (device emulation
-behind \`send\`, byte queue behind \`recv\`, log sink; the calls themselves count), over
-$(n "${M7[control.tick.n]}") ticks (the first 2 and last 4 of ${M7[control.ticks]} left out). It adds to the
-library calls above: the dxl master driver (one BULK READ transaction, byte-by-byte reads
-through \`bus::Link\`), the supervisor, the tilt estimate, \`safe_targets\` and the log record
-(≈ $(calc "${M7[control.log_bytes]} / ${M7[control.ticks]}") bytes per tick).
+(${M7[control.model]}, paper pipeline, stabilizer off, ramp and final hold cut to one tick) on an
+in-memory bus of emulated devices (12 servos, two loaded foot boards, the IMU). Per walking tick
+= SysTick from the return of one \`wait_tick\` to the next, minus the time inside the board's
+methods (device emulation behind \`send\`, byte queue behind \`recv\`, log sink; the calls
+themselves count), over $(n "${M7[control.tick.n]}") ticks (the first 2 and last 4 of
+${M7[control.ticks]} left out). It adds to the library calls above: the dxl master driver (one
+BULK READ transaction, byte-by-byte reads through \`bus::Link\`), the supervisor, the tilt
+estimate, \`safe_targets\` and the log record (≈ $(calc "${M7[control.log_bytes]} / ${M7[control.ticks]}") bytes per tick).
 
-| machine | control-loop tick, avg (max) | vs the library-call tick above (TLIPFM) |
+| machine | control-loop tick, avg (max) | vs the f32 library-call tick above (TLIPFM) |
 | --- | --- | --- |
-| Cortex-M7, mps2-an500 | $(cell M7 control.tick) | $(calc "${M7[control.tick.avg]} / $t7" 2)× |
-| Cortex-M4F, mps2-an386 | $(cell M4 control.tick) | $(calc "${M4[control.tick.avg]} / ${M4[tick.f32.tlipfm.avg]}" 2)× |
-| Cortex-M3, mps2-an385 (f32 soft float; the loop has no fixed-point path) | $(cell M3 control.tick) | $(calc "${M3[control.tick.avg]} / ${M3[tick.f32.tlipfm.avg]}" 2)× |
+| Cortex-M7, mps2-an500 | $(cell M7 control.tick) | $(ratio "${M7[control.tick.avg]}" "$t7" 2)× |
+| Cortex-M4F, mps2-an386 | $(cell M4 control.tick) | $(ratio "${M4[control.tick.avg]}" "$t4" 2)× |
+| Cortex-M3, mps2-an385 (f32 soft float; the loop has no fixed-point path) | $(cell M3 control.tick) | $(ratio "${M3[control.tick.avg]}" "$t3f" 2)× |
 
-What dominates (TLIPFM, avg):
+What dominates (TLIPFM, avg; the parts are the stage figures below, the rest is the tick minus
+their sum):
 
-- **M7, f32 tick $(n "$t7")**: the Dynamixel codec $(n "$codec7") ($(pct "$codec7" "$t7") %: decoding the
-  95 reply bytes $(n "${M7[dxl.decode3.avg]}") ≈ $(calc "${M7[dxl.decode3.avg]} / 95") per byte, the 74-byte SYNC WRITE
-  $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") — against $(n "${M7[dxl.crc16_72.avg]}") for a 72-byte CRC), then the
-  IK $(n "${M7[ik.tlipfm.avg]}") ($(pct "${M7[ik.tlipfm.avg]}" "$t7") %; its $ik_sc sin_cos + $ik_at \`atan2f\` + $ik_sq \`sqrtf\` are ≈ $(n "$ik7") by the
-  primitive figures below, \`sqrtf\` being libm's software square root), the measured ZMP
-  $(n "${M7[mzmp.tlipfm.avg]}") and the gait sample $(n "${M7[sample.f32.tlipfm.avg]}"). Even without the codec the tick
-  ($(n "$t7 - $codec7")) is above 3,000.
-- **M3, fixed-path tick $(n "$t3")**: the fixed-point sampler $(n "${M3[sample.fixed.tlipfm.avg]}") — its two
-  \`fixed_point::exp_neg\` calls alone are $(n "$exp3") (10 \`i128\` divisions each, \`__divti3\` ≈
-  $(n "${M3[prim.i128_div.avg]}") per division); the soft-float IK $(n "${M3[ik.tlipfm.avg]}") (sin_cos/atan2/sqrt ≈ $(n "$ik3")),
-  the codec $(n "$codec3"), the measured ZMP $(n "${M3[mzmp.tlipfm.avg]}"). The fixed-point sampler is **slower** than
-  the f32 sampler in soft float ($(n "${M3[sample.f32.tlipfm.avg]}")); on the M7 it costs
-  $(n "${M7[sample.fixed.tlipfm.avg]}") ($(n "$exp7") in \`exp_neg\`) against $(n "${M7[sample.f32.tlipfm.avg]}") for the f32 sampler.
-- **Control loop, M7 $(n "${M7[control.tick.avg]}")**: $(n "${M7[control.tick.avg]} - $t7") more than the library calls: the loop's
-  own work listed above (not broken down further by this bench).
+- **M7, f32 tick $(n "$t7")**: $(breakdown "$t7" "Dynamixel codec|$codec7" \
+        "IK|${M7[ik.tlipfm.avg]}" "measured ZMP|${M7[mzmp.tlipfm.avg]}" \
+        "gait sample|${M7[sample.f32.tlipfm.avg]}" "pitch filter|${M7[imu.pitch_accel.avg]}").
+  The codec: decoding the 95 reply bytes $(n "${M7[dxl.decode3.avg]}") ≈ $(calc "${M7[dxl.decode3.avg]} / 95") per byte, the
+  74-byte SYNC WRITE $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") — against $(n "${M7[dxl.crc16_72.avg]}") for a 72-byte
+  CRC, so the per-byte state machine and packet assembly cost far more than the CRC. The IK's
+  $ik_sc sin_cos + $ik_at \`atan2f\` + $ik_sq \`sqrtf\` are ≈ $(n "$ik7") by the primitive figures below
+  (\`sqrtf\` is libm's software square root, $(n "${M7[prim.sqrtf.avg]}") a call). Without the codec the tick
+  is $(n "$t7 - $codec7").
+- **M7, f32 + compensation + stabilizer $(n "$t7cs")** ($(ratio "$t7cs" "$t7")× the f32 tick):
+  $(breakdown "$t7cs" "whole-body compensation|${M7[wholebody.tlipfm.avg]}" \
+        "stabilizer step|${M7[stab.tlipfm.avg]}" "Dynamixel codec|$codec7" \
+        "measured ZMP|${M7[mzmp.tlipfm.avg]}" "gait sample|${M7[sample.f32.tlipfm.avg]}" \
+        "pitch filter|${M7[imu.pitch_accel.avg]}"). Of the stabilizer step, building the support polygon
+  (\`control::support_of\`) is $(n "${M7[support.tlipfm.avg]}").
+- **M3, fixed tick $(n "$t3")**: $(breakdown "$t3" "Dynamixel codec|$codec3" \
+        "fixed-point IK|${M3[ik.fixed.tlipfm.avg]}" "measured ZMP (soft float)|${M3[mzmp.tlipfm.avg]}" \
+        "fixed-point sample|${M3[sample.fixed.tlipfm.avg]}" "pitch filter (soft float)|${M3[imu.pitch_accel.avg]}").
+  The fixed-point IK's $fik_at \`atan2\` + $fik_sc \`sin_cos\` are ≈ $(n "$fik3") by the primitives, plus 10 exact
+  integer square roots of up to 62-bit operands (\`isqrt\`; the \`fixed_ik::sqrt\` primitive,
+  $(n "${M3[prim.fx_sqrt.avg]}"), takes a shorter operand). The fixed-point IK costs $(n "${M3[ik.fixed.tlipfm.avg]}") against
+  $(n "${M3[ik.tlipfm.avg]}") for the f32 IK in soft float ($(ratio "${M3[ik.tlipfm.avg]}" "${M3[ik.fixed.tlipfm.avg]}")× less) and against $(n "${M7[ik.tlipfm.avg]}")
+  for the f32 IK on the M7's FPU. The fixed-point sampler's two \`exp_neg\` (reciprocal tables,
+  \`i64\` only, no division) are $(n "$exp3") of its $(n "${M3[sample.fixed.tlipfm.avg]}"); it costs $(ratio "${M3[sample.f32.tlipfm.avg]}" "${M3[sample.fixed.tlipfm.avg]}")× less than the f32
+  sampler in soft float ($(n "${M3[sample.f32.tlipfm.avg]}")) and $(n "${M7[sample.fixed.tlipfm.avg]}") on the M7, $(than "${M7[sample.fixed.tlipfm.avg]}" "${M7[sample.f32.tlipfm.avg]}") than the M7's f32
+  sampler ($(n "${M7[sample.f32.tlipfm.avg]}")). The tick's worst case, $(n "${M3[tick.fixed.tlipfm.max]}"), is the sampler's once-per-segment
+  plan bookkeeping, still f32 in soft float (the fixed-point sample's max is $(n "${M3[sample.fixed.tlipfm.max]}")). The fixed path saves $(n "$t3f - $t3") instructions per tick on the M3 against
+  f32 soft float ($(n "$t3f")).
+- **Control loop, M7 $(n "${M7[control.tick.avg]}")**: $(n "${M7[control.tick.avg]} - $t7") more than the f32 library calls: the
+  loop's own work listed above (not broken down further by this bench).
+
+### Issue 6 targets
+
+| target | measured | verdict |
+| --- | --- | --- |
+| M7 full tick ≤ 3,000 instructions | f32 library tick $(n "$t7"); firmware control loop $(n "${M7[control.tick.avg]}"); with compensation + stabilizer $(n "$t7cs") | $(verdict "$t7" 3000): **$(ratio "$t7" 3000)×** the target (the codec alone, $(n "$codec7"), is $(ratio "$codec7" 3000)×) |
+| M3 fixed path within 3× of the M7 tick | $(n "$t3") = $(ratio "$t3" "$t7" 2)× the measured M7 f32 tick; $(ratio "$t3" 9000 2)× the 9,000 of 3 × 3,000 | $(verdict "$t3" "$(calc "3 * $t7")") 3× the measured M7 tick; $(verdict "$t3" 9000) 3× the 3,000 target |
+| flash ≤ 64 KiB (65,536 B) | \`qemu\` $(commas "$q_flash") B, \`opencr\` $(commas "$o_flash") B | qemu $(verdict "$q_flash" 65536) ($(commas "$((65536 - q_flash))") B left), opencr $(verdict "$o_flash" 65536) ($(commas "$((65536 - o_flash))") B left) |
+| static RAM ≤ 16 KiB (16,384 B) | \`qemu\` $(commas "$q_ram") B, \`opencr\` $(commas "$o_ram") B (stack not included) | qemu $(verdict "$q_ram" 16384), opencr $(verdict "$o_ram" 16384) |
 
 ### Stages, instructions per call: avg (max)
 
@@ -301,9 +373,14 @@ EOF
         "sample.fixed:fixed-point sample (\`FixedSampler::next\`)" \
         "fourier24:Fourier CoM, 24 terms, f32 (\`FourierCom::sample\`)" \
         "ik:two-leg IK, f32 (\`pipeline::joint_targets\`)" \
+        "ik.fixed:two-leg IK, fixed point (\`fixed_ik::joint_targets\`)" \
+        "wholebody:whole-body compensation, f32, 2 iterations (\`WholeBody::joint_targets\`)" \
+        "support:support polygon of a sample (\`control::support_of\`)" \
+        "stab:stabilizer step: support polygon + \`Stabilizer::update\`" \
         "mzmp:measured ZMP, f32 (\`measured::measured_zmp\`)" \
-        "tick.f32:full tick, f32 sampler" \
-        "tick.fixed:full tick, fixed sampler"; do
+        "tick.f32:full tick, f32" \
+        "tick.comp_stab:full tick, f32 + compensation + stabilizer" \
+        "tick.fixed:full tick, fixed"; do
         key=${st%%:*}
         label=${st#*:}
         for m in lipm dlipm tlipfm; do
@@ -311,7 +388,6 @@ EOF
         done
     done
     for st in "swing.cycloid:swing foot alone, cycloid (\`swing::swing_foot\`)" \
-        "fixed.to_f32:fixed sample → f32 sample (for the IK)" \
         "imu.pitch_accel:pitch-rate filter and τ (\`imu::PitchAccel\`)" \
         "dxl.sync_write12:encode SYNC WRITE, 12 goal positions (${sw} bytes)" \
         "dxl.bulk_read3:encode BULK READ, feet + IMU (${br} bytes)" \
@@ -323,6 +399,9 @@ EOF
     done
     cat <<EOF
 
+The stabilizer rows feed it a measured ZMP off the reference by a deterministic ±12.6 mm
+pattern and a constant gyro, so its saturation, rate limit and support-polygon limit all act.
+
 Primitives (per call, including a \`black_box\` store and load of the argument and result):
 
 | function | Cortex-M7 | Cortex-M4F | Cortex-M3 |
@@ -332,7 +411,8 @@ EOF
         "prim.atan2f:\`libm::atan2f\`" "prim.sin_cos_fast:\`gait_core::fastmath::sin_cos\`" \
         "prim.sinf_libm:\`libm::sinf\` (software doubles)" "prim.fmul:f32 multiply" \
         "prim.fdiv:f32 divide" "prim.fx_exp_neg:\`fixed_point::exp_neg\`" \
-        "prim.fx_sin_cos:\`fixed_point::sin_cos\`" "prim.i128_div:\`i128\` division"; do
+        "prim.fx_sin_cos:\`fixed_point::sin_cos\`" "prim.fx_sqrt:\`fixed_ik::sqrt\` (Fx)" \
+        "prim.fx_atan2:\`fixed_ik::atan2\`"; do
         key=${st%%:*}
         label=${st#*:}
         echo "| $label | $(cell M7 "$key") | $(cell M4 "$key") | $(cell M3 "$key") |"

@@ -160,12 +160,136 @@ fn key_index(key: &str) -> u8 {
         .map_or(UNKNOWN_KEY, |i| i as u8)
 }
 
-fn num(v: &str) -> Result<f64, ArgErrorKind> {
-    let x: f64 = v.parse().map_err(|_| ArgErrorKind::BadValue)?;
-    if x.is_finite() {
-        Ok(x)
+/// Significant digits kept by [`decimal`] (a `u64` holds any 19-digit number); later digits
+/// only move the decimal exponent (before the point) or are dropped (after it), a relative
+/// change below 1e-18, far under f64's 1.1e-16.
+const MAX_DIGITS: u32 = 19;
+
+/// Decimal exponents beyond this give ±∞ / 0 (f64 ends at 1.8e308 and 4.9e-324).
+const MAX_EXP10: i32 = 400;
+
+/// `10^e` for `0 ≤ e ≤ 22`, exact (every power of ten up to 1e22 is an f64, and so is each
+/// product of the loop).
+fn pow10_exact(e: u32) -> f64 {
+    let mut p = 1.0f64;
+    for _ in 0..e.min(22) {
+        p *= 10.0;
+    }
+    p
+}
+
+/// `mant · 10^exp` as f64. Correctly rounded (the same f64 as `str::parse`) when
+/// `mant ≤ 2⁵³` and `|exp| ≤ 22` (Clinger's fast path: one exact operand pair, one rounding),
+/// which covers every ordinary parameter (≤ 15 significant digits, e.g. `0.005`, `-1e-3`,
+/// `3000000`); otherwise within a few ulp (one rounding per factor of 1e22).
+fn scale10(mant: u64, exp: i32) -> f64 {
+    const EXACT: u64 = 1 << 53;
+    if mant == 0 || exp < -MAX_EXP10 {
+        return 0.0;
+    }
+    if exp > MAX_EXP10 {
+        return f64::INFINITY;
+    }
+    let (mut mant, mut exp) = (mant, exp);
+    // Move surplus exponent into the mantissa while it stays exact (e.g. `123e25`).
+    while exp > 22 {
+        match mant.checked_mul(10) {
+            Some(m) if m <= EXACT => {
+                mant = m;
+                exp -= 1;
+            }
+            _ => break,
+        }
+    }
+    let mut x = mant as f64;
+    while exp > 22 {
+        x *= pow10_exact(22);
+        exp -= 22;
+    }
+    while exp < -22 {
+        x /= pow10_exact(22);
+        exp += 22;
+    }
+    if exp >= 0 {
+        x * pow10_exact(exp as u32)
     } else {
-        Err(ArgErrorKind::BadValue)
+        x / pow10_exact(exp.unsigned_abs())
+    }
+}
+
+/// A decimal number: `[+-] digits [. digits] [(e|E) [+-] digits]`, at least one digit in the
+/// mantissa (`.5` and `5.` are fine, `.`, `e3`, `1e`, `inf`, `nan`, `0x1`, spaces are not).
+/// The digits accumulate in a `u64` ([`MAX_DIGITS`]), the exponent in an `i32`, and the value
+/// is converted once ([`scale10`]) — no `core::num::dec2flt` (≈ 13 KB of tables and code).
+fn decimal(v: &str) -> Option<f64> {
+    let b = v.as_bytes();
+    let (neg, mut i) = match b.first() {
+        Some(b'-') => (true, 1),
+        Some(b'+') => (false, 1),
+        _ => (false, 0),
+    };
+    let (mut mant, mut digits, mut exp) = (0u64, 0u32, 0i32);
+    let (mut any, mut dot) = (false, false);
+    while let Some(&c) = b.get(i) {
+        match c {
+            b'0'..=b'9' => {
+                any = true;
+                if mant == 0 && c == b'0' {
+                    // A leading zero: only its place counts.
+                    exp -= i32::from(dot);
+                } else if digits < MAX_DIGITS {
+                    mant = mant * 10 + u64::from(c - b'0');
+                    digits += 1;
+                    exp -= i32::from(dot);
+                } else {
+                    exp += i32::from(!dot);
+                }
+                exp = exp.clamp(-2 * MAX_EXP10, 2 * MAX_EXP10);
+            }
+            b'.' if !dot => dot = true,
+            b'e' | b'E' => break,
+            _ => return None,
+        }
+        i += 1;
+    }
+    if !any {
+        return None;
+    }
+    if i < b.len() {
+        // b[i] is the exponent letter.
+        i += 1;
+        let eneg = match b.get(i) {
+            Some(b'-') => {
+                i += 1;
+                true
+            }
+            Some(b'+') => {
+                i += 1;
+                false
+            }
+            _ => false,
+        };
+        let rest = b.get(i..).unwrap_or(&[]);
+        if rest.is_empty() {
+            return None;
+        }
+        let mut e = 0i32;
+        for &c in rest {
+            if !c.is_ascii_digit() {
+                return None;
+            }
+            e = (e * 10 + i32::from(c - b'0')).min(4 * MAX_EXP10);
+        }
+        exp += if eneg { -e } else { e };
+    }
+    let x = scale10(mant, exp);
+    Some(if neg { -x } else { x })
+}
+
+fn num(v: &str) -> Result<f64, ArgErrorKind> {
+    match decimal(v) {
+        Some(x) if x.is_finite() => Ok(x),
+        _ => Err(ArgErrorKind::BadValue),
     }
 }
 
@@ -447,6 +571,136 @@ mod tests {
         assert_eq!(c.supervisor.tilt_limit_rad, 0.5);
         assert_eq!(c.imu_cutoff_hz, 10.0);
         assert_eq!((c.fault_nan_tick, c.stop_at_tick), (Some(12), Some(99)));
+    }
+
+    /// A small deterministic generator for the decimal tests (xorshift64*).
+    struct Gen(u64);
+    impl Gen {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+        fn below(&mut self, n: u64) -> u64 {
+            self.next() % n
+        }
+        fn digits(&mut self, s: &mut String, n: u64) {
+            for _ in 0..n {
+                s.push(char::from(b'0' + self.below(10) as u8));
+            }
+        }
+    }
+
+    #[test]
+    fn decimal_matches_str_parse() {
+        let fixed = [
+            "0.005",
+            "0.217",
+            "-1e-3",
+            "3000000",
+            "0",
+            "-0",
+            "+1",
+            ".5",
+            "5.",
+            "1E+5",
+            "2e0",
+            "0.0001",
+            "100000",
+            "4500000",
+            "0.170962",
+            "0.970934",
+            "9.81",
+            "1e22",
+            "1e-22",
+            "123e25",
+            "0.1",
+            "0.2",
+            "0.3",
+            "1.7976931348623157e308",
+            "2.2250738585072014e-308",
+            "1e-400",
+            "00012.5000",
+            "0.000000000000000000000000123",
+            "12345678901234567890123",
+            "1.2345678901234567890123e-5",
+        ];
+        let mut g = Gen(0x9E37_79B9_7F4A_7C15);
+        let mut cases: Vec<String> = fixed.iter().map(|s| s.to_string()).collect();
+        for _ in 0..6000 {
+            let mut s = String::new();
+            match g.below(3) {
+                0 => s.push('-'),
+                1 if g.below(4) == 0 => s.push('+'),
+                _ => {}
+            }
+            let int = g.below(7);
+            let frac = g.below(9);
+            g.digits(&mut s, int);
+            if frac > 0 || int == 0 || g.below(5) == 0 {
+                s.push('.');
+                g.digits(&mut s, frac.max(u64::from(int == 0)));
+            }
+            if g.below(3) == 0 {
+                s.push(if g.below(2) == 0 { 'e' } else { 'E' });
+                match g.below(3) {
+                    0 => s.push('-'),
+                    1 => s.push('+'),
+                    _ => {}
+                }
+                s.push_str(&g.below(13).to_string());
+            }
+            cases.push(s);
+        }
+        let mut fast = 0;
+        for s in &cases {
+            let ours = decimal(s).unwrap_or_else(|| panic!("{s} rejected"));
+            let theirs32: f32 = s.parse().unwrap();
+            let theirs64: f64 = s.parse().unwrap();
+            assert_eq!(
+                (ours as f32).to_bits(),
+                theirs32.to_bits(),
+                "{s}: {ours} as f32 vs {theirs32}"
+            );
+            // ≤ 15 significant digits and a small exponent: the very same f64.
+            let sig = s
+                .split(['e', 'E'])
+                .next()
+                .unwrap()
+                .trim_start_matches(['+', '-', '0', '.'])
+                .replace('.', "");
+            let sig = sig.trim_end_matches('0');
+            if sig.len() <= 15 && theirs64.abs() < 1e15 && theirs64.abs() > 1e-7 {
+                assert_eq!(
+                    ours.to_bits(),
+                    theirs64.to_bits(),
+                    "{s}: {ours} vs {theirs64}"
+                );
+                fast += 1;
+            } else if theirs64 != 0.0 {
+                let rel = ((ours - theirs64) / theirs64).abs();
+                assert!(rel < 1e-15, "{s}: {ours} vs {theirs64}");
+            }
+        }
+        assert!(fast > 5000, "{fast}");
+    }
+
+    #[test]
+    fn decimal_rejects_what_is_not_a_finite_decimal() {
+        for s in [
+            "", "+", "-", ".", "-.", "e5", ".e1", "1e", "1e+", "1e-", "1.2.3", "1e5.0", "1e1e1",
+            "inf", "-inf", "infinity", "nan", "NaN", "0x10", " 1", "1 ", "1_000", "--1", "+-1",
+            "1,5", "١", "1e400", "-1e309", "1ee3", "1e+-3",
+        ] {
+            assert_eq!(num(s), Err(ArgErrorKind::BadValue), "{s:?}");
+            if let Ok(x) = s.parse::<f64>() {
+                assert!(!x.is_finite(), "{s:?} parses to {x} in core");
+            }
+        }
+        assert_eq!(num("1e-400"), Ok(0.0));
+        assert_eq!(num_in("-0.001", 0.0, 1.0), Err(ArgErrorKind::OutOfRange));
+        assert_eq!(num_in("0.5e1", 0.0, 10.0), Ok(5.0));
     }
 
     #[test]

@@ -49,13 +49,16 @@ mod firmware {
     use dxl::table::imu::ImuSample;
     use dxl::table::{foot, imu, x_series};
     use dxl::{BulkReadRequest, Decoder, Status, StatusError};
+    use gait_core::fixed_ik::{self, FixedLegKinematics};
     use gait_core::fixed_point::{FixedSample, FixedSampler, Fx};
     use gait_core::fourier::FourierCom;
     use gait_core::kinematics::LegKinematics;
-    use gait_core::measured::{measured_zmp, ForceReading};
+    use gait_core::measured::{measured_zmp, ForceReading, MeasuredZmp, SolePose};
     use gait_core::pipeline::joint_targets;
     use gait_core::plan::SwingShape;
-    use gait_core::swing::{swing_foot, FootSample};
+    use gait_core::stabilizer::{Stabilizer, StabilizerInput};
+    use gait_core::swing::swing_foot;
+    use gait_core::wholebody::WholeBody;
     use gait_core::{
         ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
     };
@@ -64,7 +67,7 @@ mod firmware {
         Watchdog,
     };
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
-    use walker_firmware::control::{self, RunEnd};
+    use walker_firmware::control::{self, support_of, Compensation, RunEnd, Targets};
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
     use walker_firmware::log::BoardId;
     use walker_firmware::supervisor::StopReason;
@@ -90,6 +93,8 @@ mod firmware {
 
     /// The gait samples of one walk, computed before the stages that consume them are timed.
     static mut SAMPLES: MaybeUninit<[GaitSample<f32>; MAX_TICKS]> = MaybeUninit::uninit();
+    /// The same walk from the fixed-point sampler (input of the fixed-point IK stage).
+    static mut FX_SAMPLES: MaybeUninit<[FixedSample; MAX_TICKS]> = MaybeUninit::uninit();
 
     fn now() -> u32 {
         SYST::get_current()
@@ -153,10 +158,10 @@ mod firmware {
     }
 
     /// Fills `buf` with the samples `next` yields (until `None` or full); the filled part.
-    fn record(
-        buf: &mut [MaybeUninit<GaitSample<f32>>; MAX_TICKS],
-        mut next: impl FnMut() -> Option<GaitSample<f32>>,
-    ) -> &[GaitSample<f32>] {
+    fn record<T>(
+        buf: &mut [MaybeUninit<T>; MAX_TICKS],
+        mut next: impl FnMut() -> Option<T>,
+    ) -> &[T] {
         let mut n = 0;
         for slot in buf.iter_mut() {
             match next() {
@@ -169,27 +174,62 @@ mod firmware {
         }
         // SAFETY: the first `n` elements were initialised just above; MaybeUninit<T> has the
         // layout of T; the slice borrows `buf` for its lifetime.
-        unsafe { core::slice::from_raw_parts(buf.as_ptr().cast::<GaitSample<f32>>(), n) }
+        unsafe { core::slice::from_raw_parts(buf.as_ptr().cast::<T>(), n) }
     }
 
-    /// A fixed-point sample as the f32 sample the (f32) IK and measured ZMP take.
-    fn to_f32(s: &FixedSample) -> GaitSample<f32> {
-        let foot = |f: &gait_core::fixed_point::FixedFoot| FootSample {
+    /// A static sample buffer as an array of `MaybeUninit` (call once per buffer).
+    ///
+    /// # Safety
+    /// `buf` must not be referred to anywhere else while the result lives.
+    unsafe fn slots<T>(
+        buf: *mut MaybeUninit<[T; MAX_TICKS]>,
+    ) -> &'static mut [MaybeUninit<T>; MAX_TICKS] {
+        // SAFETY: (caller) exclusive; an array of MaybeUninit needs no initialisation and has
+        // the layout of the uninitialised array.
+        unsafe { &mut *buf.cast::<[MaybeUninit<T>; MAX_TICKS]>() }
+    }
+
+    /// Ticks per rad × 2⁻¹⁶ (an `Fx` angle's bits) × 2³²: 4096/2π/65536·2³², rounded.
+    const TICKS_PER_FX_RAD_32: i64 = 42_722_830;
+
+    /// A fixed-point joint angle (rad) → Goal Position ticks, integer only (round half up;
+    /// the IK keeps every angle within its joint limits, far inside the tick range).
+    fn fx_rad_to_ticks(a: Fx) -> i32 {
+        let t = (i64::from(a.to_bits()) * TICKS_PER_FX_RAD_32 + (1 << 31)) >> 32;
+        t as i32 + x_series::CENTER_TICK
+    }
+
+    /// The ground place of a fixed-point foot, for the (f32) measured ZMP.
+    fn fx_place(f: &gait_core::fixed_point::FixedFoot) -> Place<f32> {
+        Place {
             x: f.x.to_num::<f32>(),
             y: f.y.to_num::<f32>(),
-            z: f.z.to_num::<f32>(),
             yaw: f.yaw.to_num::<f32>(),
-        };
-        GaitSample {
-            time_ns: s.time_ns,
-            zmp: s.zmp.map(|v| v.to_num::<f32>()),
-            com: s.com.map(|v| v.to_num::<f32>()),
-            com_vel: s.com_vel.map(|v| v.to_num::<f32>()),
-            feet: [foot(&s.feet[0]), foot(&s.feet[1])],
-            phase: s.phase,
-            support_foot: s.support_foot,
-            steps_done: s.steps_done,
         }
+    }
+
+    /// The stabilizer's per-tick call in `control::run`: the support polygon of the reference
+    /// sample, then `Stabilizer::update` with the measured ZMP and the gyro.
+    fn stab_step(
+        robot: &Robot,
+        stab: &mut Stabilizer<f32>,
+        reference: &GaitSample<f32>,
+        zmp_meas: Option<[f32; 2]>,
+        gyro: Option<[f32; 2]>,
+    ) -> [f32; 2] {
+        let poly = support_of(robot, reference);
+        stab.update(&StabilizerInput {
+            zmp_ref: reference.zmp,
+            zmp_meas,
+            gyro,
+            support: poly.as_ref(),
+        })
+    }
+
+    /// The firmware's stabilizer ([`Config::default_config`] gains, the bench's tick).
+    fn new_stabilizer(robot: &Robot) -> Stabilizer<f32> {
+        let cfg = Config::default_config();
+        Stabilizer::new(&cfg.stabilizer, DT_S, robot.masses.upper_body_height)
     }
 
     /// The BULK READ of one tick: both foot boards' and the IMU's sample blocks.
@@ -302,13 +342,18 @@ mod firmware {
         dxl::encode_bulk_read(buf, &BULK).unwrap_or(0)
     }
 
-    /// State of the f32 full tick shared by both paths.
+    /// State of a full tick, shared by every path.
     struct TickIo {
         robot: Robot,
         kin: LegKinematics<f32>,
+        fkin: FixedLegKinematics,
+        /// The firmware's whole-body pipeline (`comp=wholebody`, 2 iterations).
+        wholebody: Targets,
+        stab: Stabilizer<f32>,
         pitch: PitchAccel,
         dec: Decoder<64>,
         sensors: Sensors,
+        gyro: Option<[f32; 2]>,
         goals: [i32; 12],
         sw: [u8; 128],
         br: [u8; 64],
@@ -320,9 +365,13 @@ mod firmware {
             TickIo {
                 robot,
                 kin: LegKinematics::new(&robot),
+                fkin: FixedLegKinematics::new(&robot),
+                wholebody: Targets::new(&robot, Compensation::WholeBody),
+                stab: new_stabilizer(&robot),
                 pitch: PitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
                 dec: Decoder::new(),
                 sensors: Sensors::default(),
+                gyro: None,
                 goals: [x_series::CENTER_TICK; 12],
                 sw: [0; 128],
                 br: [0; 64],
@@ -332,33 +381,65 @@ mod firmware {
         /// Start of a tick: the replies of the last BULK READ → τ (N·m).
         fn sense(&mut self, replies: &[u8]) -> f32 {
             decode_replies(&mut self.dec, replies, &mut self.sensors);
-            let rate = self.sensors.imu.gyro_rad_s()[1];
+            let [roll_rate, rate, _] = self.sensors.imu.gyro_rad_s();
+            self.gyro = Some([roll_rate, rate]);
             self.pitch.update(rate);
             self.pitch.torque()
         }
 
-        /// Rest of a tick: measured ZMP, IK, goal positions out, next BULK READ.
-        fn act(&mut self, s: &GaitSample<f32>) -> usize {
+        /// Measured ZMP from the 8 forces, the soles at `l` and `r`.
+        fn measured<L: SolePose<f32>, Q: SolePose<f32>>(&self, l: &L, r: &Q) -> MeasuredZmp<f32> {
             let f = self
                 .sensors
                 .feet
                 .map(|f| ForceReading::new(f.forces_mn.map(|v| v as f32 * 1e-3)));
-            let m = measured_zmp(
-                &self.robot,
-                (&s.feet[0], &f[0]),
-                (&s.feet[1], &f[1]),
-                MIN_LOAD_N,
-            );
-            black_box(&m);
-            let (q, rep) = joint_targets(&self.kin, s);
-            black_box(&rep);
-            for (g, a) in self.goals.iter_mut().zip(q) {
+            measured_zmp(&self.robot, (l, &f[0]), (r, &f[1]), MIN_LOAD_N)
+        }
+
+        /// End of a tick: 12 goal positions out, next BULK READ; bytes encoded.
+        fn send(&mut self, q: &[f32; 12]) -> usize {
+            for (g, &a) in self.goals.iter_mut().zip(q) {
                 if let Some(t) = x_series::rad_to_ticks(a) {
                     *g = t;
                 }
             }
+            self.encode()
+        }
+
+        fn encode(&mut self) -> usize {
             let n = encode_goals(&mut self.sw, &self.goals);
             n + encode_bulk(&mut self.br)
+        }
+
+        /// Rest of an f32 tick: measured ZMP, IK, goal positions out, next BULK READ.
+        fn act(&mut self, s: &GaitSample<f32>) -> usize {
+            black_box(self.measured(&s.feet[0], &s.feet[1]));
+            let (q, rep) = joint_targets(&self.kin, s);
+            black_box(&rep);
+            self.send(&q)
+        }
+
+        /// Rest of an f32 tick as `control::run` does it with `comp=wholebody stab=on`:
+        /// measured ZMP on the previous sample's soles, stabilizer against the previous
+        /// sample's ZMP reference, whole-body compensation of `s` with the shift, goals out.
+        fn act_comp_stab(&mut self, s: &GaitSample<f32>, prev: &GaitSample<f32>) -> usize {
+            let meas = self.measured(&prev.feet[0], &prev.feet[1]);
+            let shift = stab_step(&self.robot, &mut self.stab, prev, meas.zmp, self.gyro);
+            let (q, rep) = self.wholebody.joints(s, shift);
+            black_box(&rep);
+            self.send(&q)
+        }
+
+        /// Rest of a fixed-point tick: measured ZMP (f32, on the soles converted from fixed
+        /// point), integer-only IK, integer tick conversion, goals out, next BULK READ.
+        fn act_fixed(&mut self, s: &FixedSample) -> usize {
+            black_box(self.measured(&fx_place(&s.feet[0]), &fx_place(&s.feet[1])));
+            let (q, rep) = fixed_ik::joint_targets(&self.fkin, s);
+            black_box(&rep);
+            for (g, &a) in self.goals.iter_mut().zip(&q) {
+                *g = fx_rad_to_ticks(a);
+            }
+            self.encode()
         }
     }
 
@@ -372,12 +453,10 @@ mod firmware {
         cp.SYST.clear_current();
         cp.SYST.enable_counter();
 
-        // SAFETY: taken once, here, before anything else can refer to the buffer.
-        let buf = unsafe { &mut *core::ptr::addr_of_mut!(SAMPLES) };
-        // SAFETY: an array of MaybeUninit needs no initialisation; same layout as the
-        // uninitialised array.
-        let buf: &mut [MaybeUninit<GaitSample<f32>>; MAX_TICKS] =
-            unsafe { &mut *(buf as *mut MaybeUninit<[GaitSample<f32>; MAX_TICKS]>).cast() };
+        // SAFETY: taken once each, here, before anything else can refer to the buffers.
+        let buf = unsafe { slots(core::ptr::addr_of_mut!(SAMPLES)) };
+        // SAFETY: as above.
+        let fx_buf = unsafe { slots(core::ptr::addr_of_mut!(FX_SAMPLES)) };
 
         hprintln!(
             "target {}",
@@ -483,10 +562,20 @@ mod firmware {
             ovh,
         );
         report(
-            "prim.i128_div",
+            "prim.fx_sqrt",
             measure(K, &mut |i| {
-                let a = black_box(i128::from(fxx(i).to_bits()) << 40);
-                black_box(a / black_box(i128::from(i % 9 + 2)));
+                black_box(fixed_ik::sqrt(fxx(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.fx_atan2",
+            measure(K, &mut |i| {
+                let y = i64::from(fxx(i).to_bits()) << 14;
+                black_box(fixed_ik::atan2(
+                    black_box(y - (1 << 29)),
+                    black_box(1 << 29),
+                ));
             }),
             ovh,
         );
@@ -562,6 +651,8 @@ mod firmware {
         // ---- per model: samplers, Fourier, IK, measured ZMP, full ticks ----
         let robot = Robot::reference();
         let kin = LegKinematics::<f32>::new(&robot);
+        let fkin = FixedLegKinematics::new(&robot);
+        let wholebody = WholeBody::<f32>::new(&robot, control::WHOLEBODY_ITERATIONS);
         let walk = ForwardWalk::table2();
         for kind in ModelKind::ALL {
             let m = kind.name();
@@ -625,6 +716,40 @@ mod firmware {
                 }),
                 ovh,
             );
+            report(
+                name.set("wholebody.", m),
+                measure(samples.len() as u32, &mut |i| {
+                    black_box(wholebody.joint_targets(black_box(&samples[i as usize])));
+                }),
+                ovh,
+            );
+            report(
+                name.set("support.", m),
+                measure(samples.len() as u32, &mut |i| {
+                    black_box(support_of(&robot, black_box(&samples[i as usize])));
+                }),
+                ovh,
+            );
+            // The stabilizer on the walk: the measured ZMP off the reference by a
+            // deterministic ±12 mm pattern (saturation, rate limit and the support-polygon
+            // limit all take part), a constant gyro.
+            let mut stab = new_stabilizer(&robot);
+            report(
+                name.set("stab.", m),
+                measure(samples.len() as u32, &mut |i| {
+                    let smp = black_box(&samples[i as usize]);
+                    let e = ((i % 64) as f32 - 31.5) * 4e-4;
+                    let meas = Some([smp.zmp[0] + e, smp.zmp[1] - 0.5 * e]);
+                    black_box(stab_step(
+                        &robot,
+                        &mut stab,
+                        smp,
+                        meas,
+                        black_box(Some([0.02, -0.01])),
+                    ));
+                }),
+                ovh,
+            );
             let lf = ForceReading::new([4.1f32, 3.9, 4.3, 3.7]);
             let rf = ForceReading::new([3.8f32, 4.2, 3.6, 4.4]);
             report(
@@ -655,8 +780,39 @@ mod firmware {
                 ovh,
             );
 
-            // Full tick, fixed path: the same with the fixed-point sampler (τ in mN·m), its
-            // sample converted to f32 for the measured ZMP and the (f32-only) IK.
+            // Full tick, f32 with whole-body compensation and the stabilizer (the firmware's
+            // `comp=wholebody stab=on`).
+            let mut io = TickIo::new();
+            let mut s = fresh.clone();
+            let mut prev = s.clone().next(0.0);
+            report(
+                name.set("tick.comp_stab.", m),
+                measure(n, &mut |_| {
+                    let tau = io.sense(black_box(replies));
+                    let smp = s.next(tau);
+                    black_box(io.act_comp_stab(&smp, &prev));
+                    prev = smp;
+                }),
+                ovh,
+            );
+
+            // The fixed-point IK alone on the fixed-point samples of the whole walk.
+            let mut fs = fresh_fx.clone();
+            let fx_samples = record(fx_buf, || (!fs.is_done()).then(|| fs.next(0)));
+            report(
+                name.set("ik.fixed.", m),
+                measure(fx_samples.len() as u32, &mut |i| {
+                    black_box(fixed_ik::joint_targets(
+                        &fkin,
+                        black_box(&fx_samples[i as usize]),
+                    ));
+                }),
+                ovh,
+            );
+
+            // Full tick, fixed path: the same with the fixed-point sampler (τ in mN·m), the
+            // fixed-point IK and an integer rad → tick conversion; the measured ZMP stays f32
+            // (on the soles converted from fixed point), as does the pitch-rate filter.
             let mut io = TickIo::new();
             let mut fs = fresh_fx.clone();
             report(
@@ -664,28 +820,10 @@ mod firmware {
                 measure(n, &mut |_| {
                     let tau = io.sense(black_box(replies));
                     let smp = fs.next((tau * 1000.0) as i32);
-                    black_box(io.act(&to_f32(&smp)));
+                    black_box(io.act_fixed(&smp));
                 }),
                 ovh,
             );
-
-            if kind == ModelKind::Tlipfm {
-                // The fixed → f32 sample conversion alone (part of tick.fixed).
-                let mut fs = fresh_fx.clone();
-                let fx_samples: [FixedSample; 16] = core::array::from_fn(|_| {
-                    for _ in 0..200 {
-                        fs.next(0);
-                    }
-                    fs.next(0)
-                });
-                report(
-                    "fixed.to_f32",
-                    measure(K, &mut |i| {
-                        black_box(to_f32(black_box(&fx_samples[(i % 16) as usize])));
-                    }),
-                    ovh,
-                );
-            }
         }
 
         control_loop();
