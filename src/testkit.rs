@@ -1,4 +1,4 @@
-//! Test-only fake board: a virtual clock (1 Mbps byte times, a modelled compute time per tick),
+//! Test-only (`lib.rs` declares it under #[cfg(test)]) fake board: a virtual clock (1 Mbps byte times, a modelled compute time per tick),
 //! and a scripted in-memory Dynamixel bus of fake devices built with `dxl`'s device-side
 //! helpers: 12 servos that store goal positions (and reach them at once while torque is on),
 //! two foot boards whose forces put the centre of pressure under the sole of every foot that

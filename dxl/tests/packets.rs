@@ -3,21 +3,8 @@
 use dxl::instruction::{BulkRead, SyncWrite};
 use dxl::*;
 
-/// Independent bitwise CRC-16/BUYPASS, to cross-check every vector.
-fn bitwise_crc(data: &[u8]) -> u16 {
-    let mut crc = 0u16;
-    for &b in data {
-        crc ^= u16::from(b) << 8;
-        for _ in 0..8 {
-            crc = if crc & 0x8000 != 0 {
-                (crc << 1) ^ 0x8005
-            } else {
-                crc << 1
-            };
-        }
-    }
-    crc
-}
+mod common;
+use common::bitwise_crc;
 
 fn hex(s: &str) -> Vec<u8> {
     s.split_whitespace()

@@ -11,20 +11,8 @@ use proptest::prelude::*;
 
 const CAP: usize = 64;
 
-fn bitwise_crc(data: &[u8]) -> u16 {
-    let mut crc = 0u16;
-    for &b in data {
-        crc ^= u16::from(b) << 8;
-        for _ in 0..8 {
-            crc = if crc & 0x8000 != 0 {
-                (crc << 1) ^ 0x8005
-            } else {
-                crc << 1
-            };
-        }
-    }
-    crc
-}
+mod common;
+use common::bitwise_crc;
 
 /// An accepted packet: index of its last byte, ID, instruction, parameters.
 type Accepted = (usize, u8, u8, Vec<u8>);

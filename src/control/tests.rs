@@ -1,4 +1,5 @@
-//! Host tests of the whole run (start-up, ramp, walk, stop) on the fake board.
+//! Host tests of the whole run (start-up, ramp, walk, stop) on the fake board; test-only:
+//! `control.rs` declares this module under #[cfg(test)].
 #![allow(clippy::field_reassign_with_default)]
 
 use super::*;
