@@ -471,6 +471,21 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
         Ok(results.iter().filter(|r| r.is_ok()).count())
     }
 
+    /// Checks a SYNC READ / FAST SYNC READ request; returns the per-device length.
+    fn check_sync(
+        ids: &[u8],
+        len: u16,
+        out: &[u8],
+        results: &[DeviceResult],
+    ) -> Result<usize, Error> {
+        Self::check_group(ids, results)?;
+        let l = usize::from(len);
+        if out.len() < ids.len().saturating_mul(l) {
+            return Err(Error::BufferTooSmall);
+        }
+        Ok(l)
+    }
+
     fn check_group(ids: &[u8], results: &[DeviceResult]) -> Result<(), Error> {
         if ids.is_empty() || ids.len() > 253 || ids.len() != results.len() {
             return Err(Error::InvalidArgument);
@@ -494,11 +509,7 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
         out: &mut [u8],
         results: &mut [DeviceResult],
     ) -> Result<usize, Error> {
-        Self::check_group(ids, results)?;
-        let l = usize::from(len);
-        if out.len() < ids.len().saturating_mul(l) {
-            return Err(Error::BufferTooSmall);
-        }
+        let l = Self::check_sync(ids, len, out, results)?;
         let n = Instruction::SyncRead { addr, len, ids }.encode(&mut self.tx, BROADCAST_ID)?;
         self.send(n)?;
         let id_at = |i: usize| ids.get(i).copied();
@@ -548,11 +559,7 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
         out: &mut [u8],
         results: &mut [DeviceResult],
     ) -> Result<usize, Error> {
-        Self::check_group(ids, results)?;
-        let l = usize::from(len);
-        if out.len() < ids.len().saturating_mul(l) {
-            return Err(Error::BufferTooSmall);
-        }
+        let l = Self::check_sync(ids, len, out, results)?;
         let inst = Instruction::FastSyncRead { addr, len, ids };
         let n = inst.encode(&mut self.tx, BROADCAST_ID)?;
         self.send(n)?;
