@@ -126,10 +126,41 @@ pub fn panic_torque_off() {
     gpiof.bsrr.write(|w| w.br15().set_bit());
 }
 
+/// Marker left in RAM that is not zeroed at start-up (`.uninit`) by a panic, so that the next
+/// boot knows the reset was a panic and not a debugger's or the user's.
+#[link_section = ".uninit.WALKER_PANIC_MARK"]
+static mut PANIC_MARK: core::mem::MaybeUninit<u32> = core::mem::MaybeUninit::uninit();
+/// Value of [`PANIC_MARK`] after a panic.
+const PANIC_MAGIC: u32 = 0x5741_4C4B; // "WALK"
+
+/// Records that the firmware is about to reset because of a panic.
+pub fn mark_panic() {
+    // SAFETY: single-core, called from the panic handler only; a plain volatile u32 store.
+    unsafe {
+        core::ptr::write_volatile(
+            core::ptr::addr_of_mut!(PANIC_MARK).cast::<u32>(),
+            PANIC_MAGIC,
+        )
+    }
+}
+
+/// True when the last reset came from a panic; clears the mark. Meaningless after a power-on
+/// (the RAM content is random), which the caller excludes with the reset flags.
+pub fn take_panic_mark() -> bool {
+    let p = core::ptr::addr_of_mut!(PANIC_MARK).cast::<u32>();
+    // SAFETY: single-core, called once at boot before anything else touches the marker.
+    unsafe {
+        let v = core::ptr::read_volatile(p);
+        core::ptr::write_volatile(p, 0);
+        v == PANIC_MAGIC
+    }
+}
+
 /// Panic path of the OpenCR binary: log, torque off, reset.
 pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
     defmt::error!("panic: {}", defmt::Display2Format(info));
     panic_torque_off();
+    mark_panic();
     SCB::sys_reset()
 }
 
