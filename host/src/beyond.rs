@@ -5,7 +5,7 @@
 //! compensation (`comp=wholebody`), TLIPFM + compensation + the feedback stabilizer
 //! (`comp=wholebody stab=on`). The simulator's servos are XM430-like: speed limit 4.8 rad/s
 //! (`SimConfig::servo_speed_limit`); the simulator has **no torque limit** option (its servos
-//! follow their goal with a first-order lag and the speed limit only), so none is applied.
+//! follow their goal through a second-order position loop with the speed limit only), so none is applied.
 //!
 //! Per run, over the walking ticks (the log's support phase double / single, lead-in and
 //! lead-out standing excluded), with the truth sampled at each tick's time (nearest row at or

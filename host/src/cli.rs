@@ -634,7 +634,7 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
     let runs = crate::beyond::run(&opts, |name| eprintln!("  walking {name} …"))?;
     let table = crate::beyond::table(&runs);
     let mut md = format!(
-        "# Beyond the paper: {plan_name}\n\nSimulator servos: speed limit {} rad/s (XM430-class), first-order lag; the simulator has no torque limit.\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the firmware's targets (the simulator's truth has no joint angles).\n\n",
+        "# Beyond the paper: {plan_name}\n\nSimulator servos: speed limit {} rad/s (XM430-class), second-order position loop; the simulator has no torque limit.\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the firmware's targets (the simulator's truth has no joint angles).\n\n",
         crate::beyond::XM430_SPEED_RAD_S
     );
     md.push_str(&table);
