@@ -185,6 +185,39 @@ pub fn support_of(robot: &Robot, s: &GaitSample<f32>) -> Option<SupportPolygon<f
     }
 }
 
+/// The support polygon of the gait samples, rebuilt only when the support phase or a
+/// supporting foot changes (a few times per step) instead of every tick: building the hull costs
+/// thousands of instructions and the supporting feet stand still while they support.
+#[derive(Clone, Debug, Default)]
+pub struct SupportCache {
+    key: Option<(gait_core::SupportPhase, [[f32; 3]; 2])>,
+    poly: Option<SupportPolygon<f32>>,
+}
+
+impl SupportCache {
+    /// The support polygon of `s` (as [`support_of`]).
+    pub fn get(&mut self, robot: &Robot, s: &GaitSample<f32>) -> Option<&SupportPolygon<f32>> {
+        let foot = |i: usize| s.feet.get(i).map_or([0.0; 3], |f| [f.x, f.y, f.yaw]);
+        // Only the feet that support enter the key: a swinging foot does not change the polygon.
+        let feet = match s.phase {
+            gait_core::SupportPhase::Single(side) => {
+                let mut k = [[0.0; 3]; 2];
+                if let Some(slot) = k.get_mut(side.index()) {
+                    *slot = foot(side.index());
+                }
+                k
+            }
+            _ => [foot(0), foot(1)],
+        };
+        let key = (s.phase, feet);
+        if self.key != Some(key) {
+            self.poly = support_of(robot, s);
+            self.key = Some(key);
+        }
+        self.poly.as_ref()
+    }
+}
+
 /// Exit codes (see the module docs).
 pub mod exit_code {
     /// Plan done.
@@ -504,6 +537,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut ramp_k: Option<u32> = Some(0);
     let mut pending = Some(first);
     let mut prev = first;
+    let mut support_cache = SupportCache::default();
     let mut walk_tick: u32 = 0;
     let mut clamped_seen = 0u16;
 
@@ -597,12 +631,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         let s = pending.take().unwrap_or_else(|| sampler.next(tau));
                         let shift = if cfg.stabilizer_on {
                             // The measurement answers the previous command: compare with it.
-                            let poly = support_of(&robot, &prev);
                             stab.update(&StabilizerInput {
                                 zmp_ref: prev.zmp,
                                 zmp_meas: meas.zmp,
                                 gyro,
-                                support: poly.as_ref(),
+                                support: support_cache.get(&robot, &prev),
                             })
                         } else {
                             [0.0; 2]

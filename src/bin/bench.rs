@@ -67,7 +67,7 @@ mod firmware {
         Watchdog,
     };
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
-    use walker_firmware::control::{self, support_of, Compensation, RunEnd, Targets};
+    use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache, Targets};
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
     use walker_firmware::log::BoardId;
     use walker_firmware::supervisor::StopReason;
@@ -208,21 +208,21 @@ mod firmware {
         }
     }
 
-    /// The stabilizer's per-tick call in `control::run`: the support polygon of the reference
-    /// sample, then `Stabilizer::update` with the measured ZMP and the gyro.
+    /// The stabilizer's per-tick call in `control::run`: the (cached) support polygon of the
+    /// reference sample, then `Stabilizer::update` with the measured ZMP and the gyro.
     fn stab_step(
         robot: &Robot,
         stab: &mut Stabilizer<f32>,
+        cache: &mut SupportCache,
         reference: &GaitSample<f32>,
         zmp_meas: Option<[f32; 2]>,
         gyro: Option<[f32; 2]>,
     ) -> [f32; 2] {
-        let poly = support_of(robot, reference);
         stab.update(&StabilizerInput {
             zmp_ref: reference.zmp,
             zmp_meas,
             gyro,
-            support: poly.as_ref(),
+            support: cache.get(robot, reference),
         })
     }
 
@@ -350,6 +350,7 @@ mod firmware {
         /// The firmware's whole-body pipeline (`comp=wholebody`, 2 iterations).
         wholebody: Targets,
         stab: Stabilizer<f32>,
+        support: SupportCache,
         pitch: PitchAccel,
         dec: Decoder<64>,
         sensors: Sensors,
@@ -368,6 +369,7 @@ mod firmware {
                 fkin: FixedLegKinematics::new(&robot),
                 wholebody: Targets::new(&robot, Compensation::WholeBody),
                 stab: new_stabilizer(&robot),
+                support: SupportCache::default(),
                 pitch: PitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
                 dec: Decoder::new(),
                 sensors: Sensors::default(),
@@ -424,7 +426,14 @@ mod firmware {
         /// sample's ZMP reference, whole-body compensation of `s` with the shift, goals out.
         fn act_comp_stab(&mut self, s: &GaitSample<f32>, prev: &GaitSample<f32>) -> usize {
             let meas = self.measured(&prev.feet[0], &prev.feet[1]);
-            let shift = stab_step(&self.robot, &mut self.stab, prev, meas.zmp, self.gyro);
+            let shift = stab_step(
+                &self.robot,
+                &mut self.stab,
+                &mut self.support,
+                prev,
+                meas.zmp,
+                self.gyro,
+            );
             let (q, rep) = self.wholebody.joints(s, shift);
             black_box(&rep);
             self.send(&q)
@@ -734,6 +743,7 @@ mod firmware {
             // deterministic ±12 mm pattern (saturation, rate limit and the support-polygon
             // limit all take part), a constant gyro.
             let mut stab = new_stabilizer(&robot);
+            let mut cache = SupportCache::default();
             report(
                 name.set("stab.", m),
                 measure(samples.len() as u32, &mut |i| {
@@ -743,6 +753,7 @@ mod firmware {
                     black_box(stab_step(
                         &robot,
                         &mut stab,
+                        &mut cache,
                         smp,
                         meas,
                         black_box(Some([0.02, -0.01])),

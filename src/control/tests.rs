@@ -649,3 +649,38 @@ fn no_shift_can_push_a_target_outside_the_limits() {
         }
     }
 }
+
+#[test]
+fn support_cache_equals_the_fresh_polygon_every_tick_and_rebuilds_rarely() {
+    let cfg = Config::default();
+    let robot = gait_core::Robot::reference();
+    let mut s = build_sampler(&cfg, &robot).unwrap();
+    let mut cache = SupportCache::default();
+    let (mut rebuilds, mut ticks) = (0usize, 0usize);
+    while !s.is_done() {
+        let smp = s.next(0.0);
+        let fresh = support_of(&robot, &smp).expect("polygon");
+        let cached = cache.get(&robot, &smp).expect("cached polygon");
+        assert_eq!(cached.vertices(), fresh.vertices(), "tick {ticks}");
+        ticks += 1;
+    }
+    // How many distinct polygons the walk has (what the cache must rebuild at least).
+    let mut s = build_sampler(&cfg, &robot).unwrap();
+    let mut prev: Option<SupportPolygon<f32>> = None;
+    while !s.is_done() {
+        let smp = s.next(0.0);
+        let p = support_of(&robot, &smp).expect("polygon");
+        if prev
+            .as_ref()
+            .map(|q| q.vertices() != p.vertices())
+            .unwrap_or(true)
+        {
+            rebuilds += 1;
+        }
+        prev = Some(p);
+    }
+    // Standing, then three phases per step (14 steps): a few dozen distinct polygons over
+    // thousands of ticks, so the cache saves the hull on almost every tick.
+    assert!(rebuilds <= 3 * 14 + 4, "{rebuilds} distinct polygons");
+    assert!(ticks > 2000, "{ticks}");
+}
