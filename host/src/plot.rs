@@ -284,18 +284,7 @@ impl Figure {
             );
             // Lines.
             for ser in &p.series {
-                let dash = ser.dash.pattern();
-                let dash_attr = if dash.is_empty() {
-                    String::new()
-                } else {
-                    format!(
-                        r#" stroke-dasharray="{}""#,
-                        dash.iter()
-                            .map(|d| format!("{d}"))
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                    )
-                };
+                let dash_attr = dash_attr(ser);
                 let color = hex(ser.color);
                 for run in runs(&ser.points) {
                     let run = decimate(run, |x| f.px(x));
@@ -336,18 +325,7 @@ impl Figure {
             }
             for (k, ser) in legend.iter().enumerate() {
                 let y = ly0 + 14.0 + 16.0 * k as f64;
-                let dash = ser.dash.pattern();
-                let dash_attr = if dash.is_empty() {
-                    String::new()
-                } else {
-                    format!(
-                        r#" stroke-dasharray="{}""#,
-                        dash.iter()
-                            .map(|d| format!("{d}"))
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                    )
-                };
+                let dash_attr = dash_attr(ser);
                 let _ = writeln!(
                     s,
                     r#"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{}" stroke-width="{}"{dash_attr}/><text x="{:.1}" y="{:.1}">{}</text>"#,
@@ -672,6 +650,16 @@ fn glyph(c: char) -> Option<[u8; 7]> {
         '.' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x0C, 0x0C],
         _ => return None,
     })
+}
+
+/// The SVG `stroke-dasharray` attribute of a series ("" for a solid line).
+fn dash_attr(ser: &Series) -> String {
+    let dash = ser.dash.pattern();
+    if dash.is_empty() {
+        return String::new();
+    }
+    let parts: Vec<String> = dash.iter().map(|d| format!("{d}")).collect();
+    format!(r#" stroke-dasharray="{}""#, parts.join(" "))
 }
 
 #[cfg(test)]

@@ -222,6 +222,24 @@ fn truth_csv_is_written() {
     assert!(lines[1..].iter().all(|l| l.split(',').count() == cols));
 }
 
+/// BULK READ request of foot board `id`'s sensor block.
+fn foot_request(id: u8) -> BulkReadRequest {
+    BulkReadRequest {
+        id,
+        addr: foot::SAMPLE.addr,
+        len: foot::SAMPLE.len,
+    }
+}
+
+/// BULK READ request of the IMU's sensor block.
+fn imu_request() -> BulkReadRequest {
+    BulkReadRequest {
+        id: 200,
+        addr: imu::SAMPLE.addr,
+        len: imu::SAMPLE.len,
+    }
+}
+
 fn ping(id: u8) -> Vec<u8> {
     let mut buf = [0u8; 16];
     let n = Instruction::Ping.encode(&mut buf, id).unwrap();
@@ -322,22 +340,7 @@ fn in_process_determinism() {
         let mut buf = [0u8; 64];
         for k in 0..200u64 {
             sim.advance_to(k * 10_000).unwrap();
-            let n = encode_bulk_read(
-                &mut buf,
-                &[
-                    BulkReadRequest {
-                        id: 111,
-                        addr: foot::SAMPLE.addr,
-                        len: foot::SAMPLE.len,
-                    },
-                    BulkReadRequest {
-                        id: 200,
-                        addr: imu::SAMPLE.addr,
-                        len: imu::SAMPLE.len,
-                    },
-                ],
-            )
-            .unwrap();
+            let n = encode_bulk_read(&mut buf, &[foot_request(111), imu_request()]).unwrap();
             for r in sim.feed(&buf[..n]) {
                 out.extend(r);
             }
@@ -492,23 +495,7 @@ fn tcp_bus_conversation_with_lockstep() {
     // BULK READ the sensors.
     let n = encode_bulk_read(
         &mut buf,
-        &[
-            BulkReadRequest {
-                id: 111,
-                addr: foot::SAMPLE.addr,
-                len: foot::SAMPLE.len,
-            },
-            BulkReadRequest {
-                id: 112,
-                addr: foot::SAMPLE.addr,
-                len: foot::SAMPLE.len,
-            },
-            BulkReadRequest {
-                id: 200,
-                addr: imu::SAMPLE.addr,
-                len: imu::SAMPLE.len,
-            },
-        ],
+        &[foot_request(111), foot_request(112), imu_request()],
     )
     .unwrap();
     let st = statuses(&c.send(&buf[..n]));
@@ -605,16 +592,8 @@ fn tcp_session(seed: u64) -> Vec<u8> {
                     addr: x_series::PRESENT_POSITION.addr,
                     len: 4,
                 },
-                BulkReadRequest {
-                    id: 111,
-                    addr: foot::SAMPLE.addr,
-                    len: foot::SAMPLE.len,
-                },
-                BulkReadRequest {
-                    id: 200,
-                    addr: imu::SAMPLE.addr,
-                    len: imu::SAMPLE.len,
-                },
+                foot_request(111),
+                imu_request(),
             ],
         )
         .unwrap();
