@@ -337,8 +337,9 @@ their sum):
   $(breakdown "$t7cs" "whole-body compensation|${M7[wholebody.tlipfm.avg]}" \
         "stabilizer step|${M7[stab.tlipfm.avg]}" "Dynamixel codec|$codec7" \
         "measured ZMP|${M7[mzmp.tlipfm.avg]}" "gait sample|${M7[sample.f32.tlipfm.avg]}" \
-        "pitch filter|${M7[imu.pitch_accel.avg]}"). Of the stabilizer step, building the support polygon
-  (\`control::support_of\`) is $(n "${M7[support.tlipfm.avg]}").
+        "pitch filter|${M7[imu.pitch_accel.avg]}"). The stabilizer step takes the support polygon
+  from \`control::SupportCache\`; building one (\`control::support_of\`, $(n "${M7[support.tlipfm.avg]}")) is paid
+  only when the support phase or a supporting foot changes.
 - **M3, fixed tick $(n "$t3")**: $(breakdown "$t3" "Dynamixel codec|$codec3" \
         "fixed-point IK|${M3[ik.fixed.tlipfm.avg]}" "measured ZMP (soft float)|${M3[mzmp.tlipfm.avg]}" \
         "fixed-point sample|${M3[sample.fixed.tlipfm.avg]}" "pitch filter (soft float)|${M3[imu.pitch_accel.avg]}").
