@@ -7,7 +7,8 @@
 # The paper's timing is walked as published (feasibility=off): Table 2's swing asks the swing
 # knee for ≈ 5.8 rad/s, above the simulated XM430-class servos' 4.8 rad/s; the firmware logs that
 # warning and the servos saturate, as on the real robot. FEASIBILITY=stretch lets the firmware
-# stretch the timing instead (its default on the robot).
+# stretch the timing instead (its default on the robot). The simulated servos are XM430-class in
+# torque too (3.5 N·m stall on the torque–speed line; `walker fil --stall-torque NM`, 0 = off).
 # Options: PLAN=plans/other.toml bash scripts/walk.sh; MODELS="tlipfm" for one model only.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."

@@ -3,9 +3,10 @@
 //!
 //! Five runs of the same plan: LIPM, DLIPM, TLIPFM (the paper's pipeline), TLIPFM + whole-body
 //! compensation (`comp=wholebody`), TLIPFM + compensation + the feedback stabilizer
-//! (`comp=wholebody stab=on`). The simulator's servos are XM430-like: speed limit 4.8 rad/s
-//! (`SimConfig::servo_speed_limit`); the simulator has **no torque limit** option (its servos
-//! follow their goal through a second-order position loop with the speed limit only), so none is applied.
+//! (`comp=wholebody stab=on`). The simulator's servos are XM430-class: speed limit 4.8 rad/s
+//! (`SimConfig::servo_speed_limit`) and the torque–speed line of a 3.5 N·m stall torque with
+//! 4.8 rad/s no-load speed (`SimConfig::servo_torque`, [`crate::sim::servo`]; `--stall-torque`
+//! changes it, 0 turns it off).
 //!
 //! Per run, over the walking ticks (the log's support phase double / single, lead-in and
 //! lead-out standing excluded), with the truth sampled at each tick's time (nearest row at or
@@ -18,10 +19,12 @@
 //!   the start-up timing adjustment);
 //! * distance walked: truth pelvis x at the last gait sample the firmware commanded minus at
 //!   the first (before torque off), against the plan's CoM travel over the same samples;
-//! * peak joint speeds: the simulator's truth has no joint angles, so these are the peaks of
-//!   the firmware's own joint targets for the walk it ran (its pipeline run on the host at dt,
-//!   `walker_firmware::startup::dry_run`: no τ, no feedback shift — the shift is rate-limited
-//!   to `stab_rate`).
+//! * peak joint speeds: the simulator's (true joint speeds over the walking ticks, at the truth
+//!   rows) and those of the firmware's own joint targets for the walk it ran (its pipeline run
+//!   on the host at dt, `walker_firmware::startup::dry_run`: no τ, no feedback shift — the shift
+//!   is rate-limited to `stab_rate`);
+//! * servo load: the peak |motor torque| per joint over the walking ticks and the fraction of
+//!   walking ticks at which some motor was at its torque bound.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -36,7 +39,7 @@ use walker_firmware::{params, startup, Config};
 use crate::fil::{self, FilOptions};
 use crate::planfile::{CompensationName, ModelName, WalkSpec};
 use crate::report::{self, tick_rows};
-use crate::sim::SimConfig;
+use crate::sim::{ServoTorque, SimConfig};
 
 /// XM430-class no-load speed, rad/s.
 pub const XM430_SPEED_RAD_S: f64 = 4.8;
@@ -127,19 +130,46 @@ pub struct RunMetrics {
     pub planned: f64,
     /// Peak joint speed of the firmware's targets per joint, rad/s.
     pub peak_speed: [f64; LEG_JOINTS],
+    /// Peak true joint speed per joint (both legs), rad/s (NaN: no truth columns).
+    pub true_peak_speed: [f64; LEG_JOINTS],
+    /// Peak |motor torque| per joint (both legs), N·m (NaN: no torque model).
+    pub peak_torque: [f64; LEG_JOINTS],
+    /// Fraction of walking ticks with some motor at its torque bound.
+    pub torque_limited: f64,
     /// Reference samples that disagreed with the host's rebuild of the firmware's sampler.
     pub ref_mismatch: usize,
 }
 
+/// The largest entry of a per-joint array and its joint's name (NaN entries skipped).
+fn worst(per_joint: &[f64; LEG_JOINTS]) -> (&'static str, f64) {
+    let (j, v) = per_joint
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.is_finite())
+        .fold((usize::MAX, f64::NAN), |a, (j, &v)| {
+            if a.1.is_nan() || v > a.1 {
+                (j, v)
+            } else {
+                a
+            }
+        });
+    (JOINT_NAMES.get(j).copied().unwrap_or("–"), v)
+}
+
 impl RunMetrics {
-    /// The worst joint: (name, rad/s).
+    /// The joint with the fastest target: (name, rad/s).
     pub fn worst_joint(&self) -> (&'static str, f64) {
-        let (j, v) = self
-            .peak_speed
-            .iter()
-            .enumerate()
-            .fold((0, 0.0f64), |a, (j, &v)| if v > a.1 { (j, v) } else { a });
-        (JOINT_NAMES.get(j).copied().unwrap_or("?"), v)
+        worst(&self.peak_speed)
+    }
+
+    /// The joint with the fastest true motion: (name, rad/s).
+    pub fn worst_true_joint(&self) -> (&'static str, f64) {
+        worst(&self.true_peak_speed)
+    }
+
+    /// The most loaded joint: (name, N·m).
+    pub fn worst_torque_joint(&self) -> (&'static str, f64) {
+        worst(&self.peak_torque)
     }
 }
 
@@ -196,6 +226,12 @@ struct TruthRows {
     t: Vec<f64>,
     zmp: Vec<[f64; 2]>,
     pelvis_x: Vec<f64>,
+    /// Joint speeds by servo ID − 1, rad/s (NaN when the column is missing).
+    joint_speed: Vec<[f64; 12]>,
+    /// Motor torques by servo ID − 1, N·m (NaN: no torque model or missing).
+    joint_torque: Vec<[f64; 12]>,
+    /// Bitmask of motors at their torque bound.
+    torque_limited: Vec<u16>,
 }
 
 impl TruthRows {
@@ -223,6 +259,11 @@ fn read_truth(path: &Path) -> Result<TruthRows, String> {
             .ok_or_else(|| format!("{}: no column {n}", path.display()))
     };
     let (ct, cx, cy, cp) = (col("t_s")?, col("zmp_x")?, col("zmp_y")?, col("pelvis_x")?);
+    // Optional (older truth files lack them).
+    let opt = |n: String| header.iter().position(|h| h.trim() == n);
+    let cqd: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("qd_{}", j + 1)));
+    let ctq: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("tq_{}", j + 1)));
+    let clim = opt("tq_limited".into());
     let mut out = TruthRows::default();
     for l in lines {
         let f: Vec<&str> = l.split(',').collect();
@@ -237,6 +278,14 @@ fn read_truth(path: &Path) -> Result<TruthRows, String> {
         out.t.push(g(ct));
         out.zmp.push([g(cx), g(cy)]);
         out.pelvis_x.push(g(cp));
+        let opt_g = |c: Option<usize>| c.map_or(f64::NAN, g);
+        out.joint_speed.push(cqd.map(opt_g));
+        out.joint_torque.push(ctq.map(opt_g));
+        out.torque_limited.push(
+            clim.and_then(|c| f.get(c))
+                .and_then(|s| s.trim().parse().ok())
+                .unwrap_or(0),
+        );
     }
     Ok(out)
 }
@@ -256,12 +305,23 @@ pub fn score(
     let cfg = adjusted_config(cfg, &log.events);
     let timing_factor = stretch_factor(&log.events);
     let targets = Targets::new(&robot, cfg.compensation);
-    let peak = startup::dry_run(&cfg, &robot, &targets).map_err(|e| e.to_string())?;
+    let dry = startup::dry_run(&cfg, &robot, &targets).map_err(|e| e.to_string())?;
     let mut sampler = build_sampler(&cfg, &robot).map_err(|e| e.to_string())?;
     let rows = tick_rows(&log.ticks);
 
     let (mut te, mut me) = ([vec![], vec![]], [vec![], vec![]]);
     let (mut inside, mut walking, mut mismatch) = (0usize, 0usize, 0usize);
+    let mut true_peak_speed = [f64::NAN; LEG_JOINTS];
+    let mut peak_torque = [f64::NAN; LEG_JOINTS];
+    let mut limited_ticks = 0usize;
+    let peak = |acc: &mut [f64; LEG_JOINTS], v: &[f64; 12]| {
+        for (j, x) in v.iter().enumerate() {
+            let a = &mut acc[j % LEG_JOINTS];
+            if x.is_finite() && (a.is_nan() || x.abs() > *a) {
+                *a = x.abs();
+            }
+        }
+    };
     let (mut first_com, mut last_com) = (None, None);
     let (mut t_first, mut t_last) = (None, None);
     for r in rows.iter().filter(|r| r.rec.zmp_ref[0] != POS_NA) {
@@ -291,6 +351,11 @@ pub fn score(
             continue;
         };
         let z = truth.zmp[i];
+        peak(&mut true_peak_speed, &truth.joint_speed[i]);
+        peak(&mut peak_torque, &truth.joint_torque[i]);
+        if truth.torque_limited[i] != 0 {
+            limited_ticks += 1;
+        }
         for k in 0..2 {
             te[k].push(z[k] - r.zmp_ref[k]);
             if let Some(m) = r.measured() {
@@ -335,7 +400,14 @@ pub fn score(
             (Some(a), Some(b)) => f64::from(b - a),
             _ => f64::NAN,
         },
-        peak_speed: peak.peak_speed,
+        peak_speed: dry.peak_speed,
+        true_peak_speed,
+        peak_torque,
+        torque_limited: if walking > 0 {
+            limited_ticks as f64 / walking as f64
+        } else {
+            f64::NAN
+        },
         ref_mismatch: mismatch,
     })
 }
@@ -372,6 +444,8 @@ pub struct BeyondOptions {
     pub feedback_tokens: Vec<String>,
     /// Wall-clock limit per run.
     pub timeout: Duration,
+    /// The simulator's servo torque model (`None`: unlimited torque).
+    pub servo_torque: Option<ServoTorque>,
 }
 
 /// Walks the five variants and scores them; `progress(name)` before each run.
@@ -395,6 +469,7 @@ pub fn run(opts: &BeyondOptions, progress: impl Fn(&str)) -> Result<Vec<RunMetri
         let sim = SimConfig {
             seed: opts.seed,
             servo_speed_limit: XM430_SPEED_RAD_S,
+            servo_torque: opts.servo_torque,
             ..SimConfig::default()
         };
         let fopts = FilOptions {
@@ -426,14 +501,23 @@ pub fn table(runs: &[RunMetrics]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "| run | exit | timing × | true ZMP mean \\|e\\| x / y (mm) | true max \\|e\\| x / y (mm) | measured mean \\|e\\| x / y (mm) | measured max x / y (mm) | true ZMP inside (5 mm margin) | walked / planned (m) | peak joint speed (rad/s) |"
+        "| run | exit | timing × | true ZMP mean \\|e\\| x / y (mm) | true max \\|e\\| x / y (mm) | measured mean \\|e\\| x / y (mm) | measured max x / y (mm) | true ZMP inside (5 mm margin) | walked / planned (m) | peak joint speed, true / target (rad/s) | peak motor torque (N·m) | time at torque bound |"
     );
     let _ = writeln!(
         s,
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- | ---: |"
     );
+    let num = |v: f64, d: usize| {
+        if v.is_finite() {
+            format!("{v:.d$}")
+        } else {
+            "–".into()
+        }
+    };
     for r in runs {
         let (jn, jv) = r.worst_joint();
+        let (tn, tv) = r.worst_true_joint();
+        let (qn, qv) = r.worst_torque_joint();
         let exit = match (r.exit_code, r.fell_at) {
             (c, Some(t)) => format!("{c:?}, fell {t:.2} s"),
             (Some(c), None) => c.to_string(),
@@ -441,7 +525,7 @@ pub fn table(runs: &[RunMetrics]) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {:.3} | {} / {} | {} / {} | {} / {} | {} / {} | {:.1} % | {:.3} / {:.3} | {:.2} ({}) |",
+            "| {} | {} | {:.3} | {} / {} | {} / {} | {} / {} | {} / {} | {:.1} % | {:.3} / {:.3} | {} ({}) / {:.2} ({}) | {} ({}) | {} % |",
             r.variant.name,
             exit,
             r.timing_factor,
@@ -456,8 +540,13 @@ pub fn table(runs: &[RunMetrics]) -> String {
             r.inside * 100.0,
             r.walked,
             r.planned,
+            num(tv, 2),
+            tn,
             jv,
-            jn
+            jn,
+            num(qv, 2),
+            qn,
+            num(r.torque_limited * 100.0, 1)
         );
     }
     s
@@ -465,11 +554,11 @@ pub fn table(runs: &[RunMetrics]) -> String {
 
 /// One CSV row per run.
 pub fn csv(runs: &[RunMetrics]) -> String {
-    let mut s = String::from("run,exit,fell_at,timing_factor,true_mean_x,true_mean_y,true_max_x,true_max_y,meas_mean_x,meas_mean_y,meas_max_x,meas_max_y,inside,walking_ticks,walked,planned,peak_speed_max,ref_mismatch\n");
+    let mut s = String::from("run,exit,fell_at,timing_factor,true_mean_x,true_mean_y,true_max_x,true_max_y,meas_mean_x,meas_mean_y,meas_max_x,meas_max_y,inside,walking_ticks,walked,planned,peak_speed_max,true_peak_speed_max,peak_torque_max,torque_limited,ref_mismatch\n");
     for r in runs {
         let _ = writeln!(
             s,
-            "{},{},{},{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{},{:.4},{:.4},{:.3},{}",
+            "{},{},{},{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.4},{}",
             r.variant.name,
             r.exit_code.map_or(String::new(), |c| c.to_string()),
             r.fell_at.map_or(String::new(), |t| format!("{t:.3}")),
@@ -487,6 +576,9 @@ pub fn csv(runs: &[RunMetrics]) -> String {
             r.walked,
             r.planned,
             r.worst_joint().1,
+            r.worst_true_joint().1,
+            r.worst_torque_joint().1,
+            r.torque_limited,
             r.ref_mismatch
         );
     }
@@ -508,6 +600,52 @@ mod tests {
         assert_eq!(e.n, 2);
         assert!((e.mean - 0.02).abs() < 1e-12 && (e.max - 0.03).abs() < 1e-12);
         assert!(AxisError::of(std::iter::empty()).mean.is_nan());
+    }
+
+    #[test]
+    fn worst_joint_skips_nan_and_names_the_peak() {
+        assert_eq!(worst(&[f64::NAN; LEG_JOINTS]).0, "–");
+        let mut v = [f64::NAN; LEG_JOINTS];
+        v[1] = 0.5;
+        v[3] = 2.0;
+        v[4] = 1.0;
+        assert_eq!(worst(&v), (JOINT_NAMES[3], 2.0));
+    }
+
+    #[test]
+    fn truth_joint_columns_are_read_by_name() {
+        let dir = std::env::temp_dir().join(format!("walker-beyond-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("truth.csv");
+        // The simulator's header, two rows; joint 4 (ID 4, left knee) loaded and at its bound.
+        let row = |t: f64, lim: u16| {
+            let mut s = format!("{t}");
+            for _ in 1..crate::sim::truth::HEADER.split(',').count() - 25 {
+                s.push_str(",0");
+            }
+            for j in 1..=12 {
+                s.push_str(&format!(",{}", if j == 4 { -3.0 } else { 0.1 }));
+            }
+            for j in 1..=12 {
+                s.push_str(&format!(",{}", if j == 4 { 1.5 } else { -0.2 }));
+            }
+            s.push_str(&format!(",{lim}"));
+            s
+        };
+        let text = format!(
+            "{}\n{}\n{}\n",
+            crate::sim::truth::HEADER,
+            row(0.0, 0),
+            row(0.001, 8)
+        );
+        std::fs::write(&path, text).unwrap();
+        let t = read_truth(&path).unwrap();
+        assert_eq!(t.t, vec![0.0, 0.001]);
+        assert_eq!(t.joint_speed[1][3], -3.0);
+        assert_eq!(t.joint_torque[1][3], 1.5);
+        assert_eq!(t.joint_torque[0][11], -0.2);
+        assert_eq!(t.torque_limited, vec![0, 8]);
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

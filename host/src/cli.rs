@@ -221,11 +221,12 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
     Subcommand {
         name: "simulate",
         summary: "serve the simulated robot on the servo bus (TCP) for the firmware",
-        usage: "walker simulate [--port 5760] [--lockstep-port 5761] [--connect] [--seed N] [--truth out/truth.csv] [--timeout S]\n\
+        usage: "walker simulate [--port 5760] [--lockstep-port 5761] [--connect] [--seed N] [--stall-torque NM] [--truth out/truth.csv] [--timeout S]\n\
                 \n  --port           bus TCP port on 127.0.0.1 (QEMU -serial tcp:127.0.0.1:PORT)\
                 \n  --lockstep-port  lock-step time channel (default: free-running)\
                 \n  --connect        connect to a listening QEMU instead of listening\
                 \n  --seed           seed of the noise and fault streams\
+                \n  --stall-torque   servo stall torque, N·m (default 3.5, XM430-class; 0 = unlimited torque)\
                 \n  --truth          write the ground truth (true ZMP, …) to this CSV (for `walker report --truth`)\
                 \n  --timeout        seconds to wait for the firmware (default 30)",
         run: run_simulate,
@@ -235,7 +236,7 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
         summary: "firmware-in-the-loop: the firmware in QEMU against the simulated robot",
         usage: "walker fil [--plan plans/table2.toml] [--model lipm|dlipm|tlipfm] [--out out/fil]\n\
                 [--elf target/thumbv7em-none-eabihf/release/qemu] [--machine mps2-an500|mps2-an386]\n\
-                [--seed N] [--p-drop P] [--p-corrupt P] [--dead ID,ID] [--fall-at S]\n\
+                [--seed N] [--stall-torque NM] [--p-drop P] [--p-corrupt P] [--dead ID,ID] [--fall-at S]\n\
                 [--tau-constant NM] [--tau-random NM] [--firmware-args 'k=v ...'] [--timeout S]\n\
          Runs the firmware ELF in QEMU in lock-step with the simulated robot, captures its log\n\
          to OUT/walk.log and writes the report to OUT/report. Exit code 3: the firmware failed.",
@@ -245,11 +246,12 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
         name: "beyond",
         summary: "LIPM, DLIPM, TLIPFM, + whole-body compensation, + feedback: side by side in the FIL walk",
         usage: "walker beyond [--plan plans/table2.toml] [--out out/beyond] [--elf target/thumbv7em-none-eabihf/release/qemu]\n\
-                [--machine mps2-an500] [--seed N] [--firmware-args 'k=v ...'] [--feedback-args 'stab_ki=2 ...'] [--timeout S]\n\
-         Walks the plan five times in the firmware-in-the-loop setup (servo speed limit 4.8 rad/s;\n\
-         the simulator has no torque limit) and prints per run the true and measured ZMP errors,\n\
-         the time the true ZMP is inside the support polygon (5 mm margin), distance walked vs\n\
-         planned and peak joint speeds; writes OUT/beyond.md, OUT/beyond.csv and OUT/<run>/.\n\
+                [--machine mps2-an500] [--seed N] [--stall-torque NM] [--firmware-args 'k=v ...'] [--feedback-args 'stab_ki=2 ...'] [--timeout S]\n\
+         Walks the plan five times in the firmware-in-the-loop setup (XM430-class servos: speed\n\
+         limit 4.8 rad/s, stall torque 3.5 N·m unless --stall-torque, 0 = unlimited) and prints per\n\
+         run the true and measured ZMP errors, the time the true ZMP is inside the support polygon\n\
+         (5 mm margin), distance walked vs planned, peak joint speeds and motor torques; writes\n\
+         OUT/beyond.md, OUT/beyond.csv and OUT/<run>/.\n\
          --firmware-args go to every run (e.g. feasibility=off), --feedback-args to the feedback run.",
         run: run_beyond,
     },
@@ -562,15 +564,36 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
     Ok(())
 }
 
+/// `--stall-torque NM`: the simulated servos' torque model (default XM430-class, 0 = none).
+fn stall_torque_arg(a: &mut Args) -> Result<Option<crate::sim::ServoTorque>, CliError> {
+    let xm430 = crate::sim::ServoTorque::XM430;
+    match a.parsed::<f64>("--stall-torque")? {
+        None => Ok(Some(xm430)),
+        Some(0.0) => Ok(None),
+        Some(t) if t.is_finite() && t > 0.0 => Ok(Some(crate::sim::ServoTorque {
+            stall_torque: t,
+            ..xm430
+        })),
+        Some(t) => Err(CliError::usage(format!(
+            "walker {}: --stall-torque must be >= 0 N·m (got {t})",
+            a.cmd
+        ))),
+    }
+}
+
 fn run_simulate(a: &mut Args) -> Result<(), CliError> {
     let port: Option<u16> = a.parsed("--port")?;
     let lockstep: Option<u16> = a.parsed("--lockstep-port")?;
     let connect = a.flag("--connect");
     let seed: Option<u64> = a.parsed("--seed")?;
+    let servo_torque = stall_torque_arg(a)?;
     let truth = a.value("--truth")?.map(PathBuf::from);
     let timeout: Option<f64> = a.parsed("--timeout")?;
     a.finish()?;
-    let mut cfg = crate::sim::SimConfig::default();
+    let mut cfg = crate::sim::SimConfig {
+        servo_torque,
+        ..Default::default()
+    };
     if let Some(p) = port {
         cfg.port = p;
     }
@@ -610,6 +633,7 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
     );
     let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/beyond".into()));
     let seed: Option<u64> = a.parsed("--seed")?;
+    let servo_torque = stall_torque_arg(a)?;
     let machine = a.value("--machine")?.unwrap_or_else(|| "mps2-an500".into());
     let timeout: Option<f64> = a.parsed("--timeout")?;
     let split = |t: Option<String>| -> Vec<String> {
@@ -629,13 +653,18 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
         extra_tokens: extra,
         feedback_tokens: feedback,
         timeout: std::time::Duration::from_secs_f64(timeout.unwrap_or(1800.0)),
+        servo_torque,
     };
     eprintln!("walker beyond: {plan_name}, five firmware-in-the-loop walks");
     let runs = crate::beyond::run(&opts, |name| eprintln!("  walking {name} …"))?;
     let table = crate::beyond::table(&runs);
     let mut md = format!(
-        "# Beyond the paper: {plan_name}\n\nSimulator servos: speed limit {} rad/s (XM430-class), second-order position loop; the simulator has no torque limit.\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the firmware's targets (the simulator's truth has no joint angles).\n\n",
-        crate::beyond::XM430_SPEED_RAD_S
+        "# Beyond the paper: {plan_name}\n\nSimulator servos: speed limit {} rad/s (XM430-class), second-order position loop, {}.\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the simulator's (true) and the firmware's targets'.\n\n",
+        crate::beyond::XM430_SPEED_RAD_S,
+        servo_torque.map_or("no torque limit".to_string(), |t| format!(
+            "torque–speed line of a {} N·m stall torque and {} rad/s no-load speed, rotor inertia {} kg·m²",
+            t.stall_torque, t.no_load_speed, t.armature
+        ))
     );
     md.push_str(&table);
     if let Some(fb) = runs.last() {
@@ -675,6 +704,7 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
     let model = a.value("--model")?;
     let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/fil".into()));
     let seed: Option<u64> = a.parsed("--seed")?;
+    let servo_torque = stall_torque_arg(a)?;
     let p_drop: Option<f64> = a.parsed("--p-drop")?;
     let p_corrupt: Option<f64> = a.parsed("--p-corrupt")?;
     let dead = a.value("--dead")?;
@@ -689,7 +719,10 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
     if let Some(m) = model {
         spec.model = model_name("fil", &m)?;
     }
-    let mut sim = crate::sim::SimConfig::default();
+    let mut sim = crate::sim::SimConfig {
+        servo_torque,
+        ..Default::default()
+    };
     if let Some(s) = seed {
         sim.seed = s;
     }

@@ -12,7 +12,7 @@ use gait_core::kinematics::{leg_points, Pose};
 use gait_core::{Robot, Side};
 use walker_host::sim::forces::{center_of_pressure, distribute, FootContact};
 use walker_host::sim::zmp::{whole_body_zmp, MassPoint};
-use walker_host::sim::{spawn, FaultConfig, SimConfig, Simulator, Support};
+use walker_host::sim::{spawn, FaultConfig, ServoTorque, SimConfig, Simulator, Support};
 
 const G: f64 = 9.80665;
 const TOTAL_MASS: f64 = 4.95;
@@ -701,8 +701,8 @@ fn stepping_switches_support_without_jumps() {
     for k in 0..3000u64 {
         let t = k as f64 * 1e-3;
         if k % 10 == 0 {
-            // Sway right (negative roll shifts the pelvis right), then lift the left leg.
-            let th = -0.2 * (std::f64::consts::PI * (t / 3.0)).sin().powi(2);
+            // Sway right (positive hip roll shifts the pelvis right), then lift the left leg.
+            let th = 0.2 * (std::f64::consts::PI * (t / 3.0)).sin().powi(2);
             let lift = 0.3 * (std::f64::consts::PI * ((t - 1.0) / 1.0).clamp(0.0, 1.0)).sin();
             let mut q = [0.0; 12];
             q[1] = th;
@@ -984,4 +984,235 @@ fn tick_staircase_crouch_keeps_zmp_near_com() {
     }
     eprintln!("IMU vs differences {worst} m/s²");
     assert!(worst < 2e-3, "IMU vs differences {worst} m/s²");
+}
+
+/// Drives the simulator at 1 ms steps through `secs` seconds of goals `goal(t)` (sent every 10 ms).
+fn drive(sim: &mut Simulator, from_s: f64, secs: f64, goal: impl Fn(f64) -> [f64; 12]) {
+    let k0 = (from_s * 1000.0).round() as u64;
+    for k in k0..k0 + (secs * 1000.0).round() as u64 {
+        if k % 10 == 0 {
+            set_goals(sim, &goal(k as f64 * 1e-3));
+        }
+        sim.advance_to((k + 1) * 1000).unwrap();
+    }
+}
+
+/// Sway the pelvis over the right foot (parallel legs: hip roll θ, ankle roll −θ), then lift the
+/// left foot by bending its knee: the goals at time `t` (s).
+fn sway_and_lift(t: f64) -> [f64; 12] {
+    let th = 0.2 * min_jerk(t);
+    let lift = 0.3 * min_jerk(t - 1.0);
+    let mut q = [0.0; 12];
+    q[1] = th;
+    q[5] = -th;
+    q[7] = th;
+    q[11] = -th;
+    q[2] = -lift;
+    q[3] = 2.0 * lift;
+    q[4] = -lift;
+    q
+}
+
+/// The robot standing still on its right foot, left foot lifted (`sway_and_lift` held).
+fn standing_on_right_foot(cfg: &SimConfig) -> Simulator {
+    let mut sim = Simulator::new(cfg).unwrap();
+    torque_on(&mut sim);
+    drive(&mut sim, 0.0, 3.5, sway_and_lift);
+    sim
+}
+
+#[test]
+fn static_torques_match_moment_balance() {
+    // Standing still on the right foot, each motor carries the gravity moment of the links on
+    // the far side of its joint from the ground, summed here by hand from the mass points:
+    // |τ| = |Σ mᵢ·g·(lever arm of mᵢ about the joint axis)|.
+    let mut cfg = SimConfig::default();
+    cfg.fall.enabled = false;
+    let sim = standing_on_right_foot(&cfg);
+    let tr = *sim.physics.truth();
+    assert_eq!(tr.support, Support::Right);
+    assert!(
+        tr.margin > 0.005,
+        "the ZMP is inside the right sole: {}",
+        tr.margin
+    );
+    assert!(tr.joint_speed.iter().all(|v| v.abs() < 1e-3), "at rest");
+    let robot = Robot::reference();
+    let m = robot.masses;
+    let pelvis = Pose::new(
+        tr.pelvis[0],
+        tr.pelvis[1],
+        tr.pelvis[2],
+        tr.pelvis_rpy[0],
+        tr.pelvis_rpy[1],
+        tr.pelvis_rpy[2],
+    );
+    assert!(tr.pelvis_rpy[0].abs() < 0.01 && tr.pelvis_rpy[1].abs() < 0.01);
+    let q = sim.physics.q;
+    let left = leg_points(&robot, Side::Left, &pelvis, &q[..6].try_into().unwrap());
+    let right = leg_points(&robot, Side::Right, &pelvis, &q[6..].try_into().unwrap());
+    let upper = [
+        tr.pelvis[0],
+        tr.pelvis[1],
+        tr.pelvis[2] + m.upper_body_height,
+    ];
+    let swing = [
+        (m.thigh, left.thigh_mass),
+        (m.calf, left.calf_mass),
+        (m.sole, left.sole_mass),
+    ];
+    let mut above_stance_hip = swing.to_vec();
+    above_stance_hip.push((m.upper_body, upper));
+    let mut above_stance_ankle = above_stance_hip.clone();
+    above_stance_ankle.push((m.thigh, right.thigh_mass));
+    above_stance_ankle.push((m.calf, right.calf_mass));
+    // Moment of gravity about an axis along x (roll) or y (pitch) through `p`.
+    let g = robot.gravity;
+    let roll = |pts: &[(f64, [f64; 3])], p: [f64; 3]| -> f64 {
+        pts.iter().map(|(mi, r)| mi * g * (r[1] - p[1])).sum()
+    };
+    let pitch = |pts: &[(f64, [f64; 3])], p: [f64; 3]| -> f64 {
+        pts.iter().map(|(mi, r)| mi * g * (r[0] - p[0])).sum()
+    };
+    let cases = [
+        (
+            "right ankle roll",
+            11,
+            roll(&above_stance_ankle, right.ankle),
+        ),
+        (
+            "right ankle pitch",
+            10,
+            pitch(&above_stance_ankle, right.ankle),
+        ),
+        ("right hip roll", 7, roll(&above_stance_hip, right.hip)),
+        ("left hip roll", 1, roll(&swing, left.hip)),
+    ];
+    for (name, j, expect) in cases {
+        let got = tr.joint_torque[j];
+        assert!(
+            (got.abs() - expect.abs()).abs() < 0.01 * expect.abs() + 0.01,
+            "{name}: simulator {got:.4} N·m, moment balance {expect:.4} N·m"
+        );
+    }
+    // The stance hip roll carries the upper body and the swing leg: a real load, not ≈ 0.
+    assert!(tr.joint_torque[7].abs() > 1.5);
+    assert_eq!(tr.torque_limited, 0, "an XM430 holds this pose");
+}
+
+#[test]
+fn weak_servos_sag_under_load() {
+    // The same motion with 1 N·m servos: the stance hip roll needs ≈ 2.4 N·m once the left foot
+    // is off the ground, so it sits at its bound and the joint sags away from its goal until the
+    // pelvis has rolled far enough for the lifted foot to land again; XM430-class servos hold
+    // the one-foot stance.
+    let mut cfg = SimConfig::default();
+    cfg.fall.enabled = false;
+    let strong = standing_on_right_foot(&cfg);
+    let goal = sway_and_lift(3.5);
+    assert!((strong.physics.q[7] - goal[7]).abs() < 0.01);
+    assert_eq!(strong.physics.truth().support, Support::Right);
+    cfg.servo_torque = Some(ServoTorque {
+        stall_torque: 1.0,
+        ..ServoTorque::XM430
+    });
+    let mut weak = Simulator::new(&cfg).unwrap();
+    torque_on(&mut weak);
+    let mut worst: f64 = 0.0;
+    let mut hip_at_bound = false;
+    for k in 0..3500u64 {
+        if k % 10 == 0 {
+            set_goals(&mut weak, &sway_and_lift(k as f64 * 1e-3));
+        }
+        weak.advance_to((k + 1) * 1000).unwrap();
+        let tr = weak.physics.truth();
+        for (j, t) in tr.joint_torque.iter().enumerate() {
+            let (lo, hi) = ServoTorque {
+                stall_torque: 1.0,
+                ..ServoTorque::XM430
+            }
+            .range(tr.joint_speed[j]);
+            // The torque line is frozen within a step: allow what one step's speed change moves.
+            assert!(
+                *t >= lo - 0.05 && *t <= hi + 0.05,
+                "joint {j}: {t} not in [{lo}, {hi}]"
+            );
+        }
+        worst = worst.max((weak.physics.q[7] - sway_and_lift(k as f64 * 1e-3)[7]).abs());
+        hip_at_bound |= tr.torque_limited & (1 << 7) != 0;
+    }
+    assert!(hip_at_bound, "the stance hip roll never reached its bound");
+    assert_eq!(
+        weak.physics.truth().support,
+        Support::Double,
+        "the lifted foot came down"
+    );
+    assert!(worst > 0.05, "the hip roll sagged only {worst} rad");
+}
+
+#[test]
+fn slack_torque_limits_change_nothing() {
+    // Servos far stronger than any load, and no rotor inertia: the motion is the servo loop's
+    // own, step for step, as without the torque model.
+    let a_cfg = SimConfig {
+        servo_torque: None,
+        ..SimConfig::default()
+    };
+    let mut b_cfg = a_cfg.clone();
+    b_cfg.servo_torque = Some(ServoTorque {
+        stall_torque: 1e6,
+        no_load_speed: 1e6,
+        armature: 0.0,
+    });
+    let (mut a, mut b) = (
+        Simulator::new(&a_cfg).unwrap(),
+        Simulator::new(&b_cfg).unwrap(),
+    );
+    torque_on(&mut a);
+    torque_on(&mut b);
+    drive(&mut a, 0.0, 2.5, sway_and_lift);
+    drive(&mut b, 0.0, 2.5, sway_and_lift);
+    for j in 0..12 {
+        assert!((a.physics.q[j] - b.physics.q[j]).abs() < 1e-9);
+    }
+    assert!(a.physics.truth().joint_torque.iter().all(|t| t.is_nan()));
+    assert!(b.physics.truth().joint_torque.iter().all(|t| t.is_finite()));
+}
+
+#[test]
+fn a_fast_swing_is_torque_limited_and_keeps_to_the_motor_line() {
+    // Standing on the right foot, the left knee is asked to jump 0.6 rad: the loop's wish needs
+    // more than the motor gives, so the knee follows slower than without the limit, and the
+    // applied torque stays inside the torque–speed range.
+    let mut cfg = SimConfig::default();
+    cfg.fall.enabled = false;
+    let mut limited = standing_on_right_foot(&cfg);
+    cfg.servo_torque = None;
+    let mut free = standing_on_right_foot(&cfg);
+    let mut goal = sway_and_lift(3.5);
+    goal[3] += 0.6;
+    set_goals(&mut limited, &goal);
+    set_goals(&mut free, &goal);
+    let model = ServoTorque::XM430;
+    let mut saw_limit = false;
+    let mut lag: f64 = 0.0;
+    for k in 3500..3800u64 {
+        limited.advance_to((k + 1) * 1000).unwrap();
+        free.advance_to((k + 1) * 1000).unwrap();
+        let tr = limited.physics.truth();
+        let (lo, hi) = model.range(tr.joint_speed[3]);
+        let t = tr.joint_torque[3];
+        assert!(
+            t >= lo - 0.05 && t <= hi + 0.05,
+            "knee torque {t} not in [{lo}, {hi}]"
+        );
+        assert!(tr.joint_speed[3].abs() <= model.no_load_speed + 1e-9);
+        saw_limit |= tr.torque_limited & (1 << 3) != 0;
+        lag = lag.max(free.physics.q[3] - limited.physics.q[3]);
+    }
+    assert!(saw_limit, "the knee never reached its torque bound");
+    assert!(
+        lag > 0.01,
+        "the torque limit slowed the knee by only {lag} rad"
+    );
 }

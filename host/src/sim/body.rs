@@ -12,6 +12,20 @@
 //!   1.5 mrad rounding) does not kick the body: a first-order lag `q̇ = (g − q)/τ` would jump the
 //!   velocity by Δ/τ at every goal change, an impulsive acceleration that the ZMP turns into
 //!   ±0.2 m spikes at the tick rate. Torque off = limp, modelled as holding the present position.
+//! * **Servo torque** (`SimConfig::servo_torque`, XM430-class by default; see [`super::servo`]):
+//!   once per physics step the torques the motors must deliver are computed by virtual work
+//!   with the stance sole fixed (the joint angles are then the generalised coordinates):
+//!   `τ_k = Σᵢ mᵢ·(r̈ᵢ + g·ẑ)·∂rᵢ/∂q_k + (J·θ̈_u − τ_d)·∂θ_u/∂q_k − F_o·∂c_o/∂q_k + I_a·q̈_k`
+//!   over the seven mass points `rᵢ` (both legs and the upper body), the upper body's pitch θ_u
+//!   (inertia J, disturbance torque τ_d), the other foot's ground reaction `F_o` at its centre
+//!   of pressure `c_o` in double support (its vertical share from the last step's force split,
+//!   its horizontal share in the same proportion of `Σ mᵢ·r̈ᵢ`), and the reflected rotor inertia
+//!   `I_a`. With `r̈ᵢ = Σ_l ∂rᵢ/∂q_l·q̈_l + (q̇ᵀ·H·q̇)ᵢ` this is `τ = M·q̈ + b`; the Jacobians
+//!   are central differences (δ = 1 µrad) of the positions, the bias `b` the Taylor stencil
+//!   below with `q̈ = 0`. Each motor's torque is limited to its torque–speed range; the joints
+//!   get the accelerations those torques allow ([`super::servo::limit_accelerations`]; within a
+//!   step, sub-step accelerations are clamped with the other joints' torque share frozen). A
+//!   servo that cannot carry its load sags. Not modelled while the robot falls.
 //! * **Body**: the stance sole stays where it is (no slip). The pelvis pose is the inverse of
 //!   the stance leg's forward kinematics from that fixed sole pose, so pelvis roll and pitch
 //!   follow from the joints. The other foot is placed by its own forward kinematics from the
@@ -49,6 +63,7 @@ use gait_core::{Robot, Side};
 
 use super::forces::{distribute, FootContact};
 use super::rng::Rng;
+use super::servo::limit_accelerations;
 use super::zmp::{center_of_mass, whole_body_zmp, MassPoint};
 use super::SimConfig;
 
@@ -61,6 +76,8 @@ const I3: M3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 const LYING: f64 = core::f64::consts::FRAC_PI_2 - 0.05;
 /// Half-width of the Taylor stencil for the accelerations, s.
 const STENCIL_S: f64 = 1e-4;
+/// Joint-angle step of the Jacobians' central differences, rad.
+const JACOBIAN_STEP: f64 = 1e-6;
 
 fn add(a: V3, b: V3) -> V3 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
@@ -170,6 +187,20 @@ pub struct Truth {
     pub falling: bool,
     /// Fall angle, rad (0 upright).
     pub fall_angle: f64,
+    /// Joint speeds, rad/s (left leg then right leg).
+    pub joint_speed: [f64; 12],
+    /// Motor torques, N·m (NaN without the torque model or while falling).
+    pub joint_torque: [f64; 12],
+    /// Bit `j` set: servo `j`'s motor is at its torque bound.
+    pub torque_limited: u16,
+}
+
+/// One joint's torque line for a physics step: `τ = rest + m_kk·q̈` with the other joints'
+/// share `rest` frozen.
+#[derive(Clone, Copy, Debug, Default)]
+struct TorqueLine {
+    rest: f64,
+    m_kk: f64,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -241,6 +272,10 @@ pub struct Physics {
     /// Goals of the last step (rad, clamped to the joint limits; `None` = limp).
     goals: [Option<f64>; 12],
     speed_limits: [f64; 12],
+    /// Torque lines of this step (`None`: no torque model, or falling).
+    torque_lines: Option<[TorqueLine; 12]>,
+    joint_torque: [f64; 12],
+    torque_limited: u16,
     current: Snapshot,
     /// Physics time, µs.
     pub time_us: u64,
@@ -291,6 +326,9 @@ impl Physics {
             outside_us: 0,
             goals: [None; 12],
             speed_limits: [cfg.servo_speed_limit; 12],
+            torque_lines: None,
+            joint_torque: [f64::NAN; 12],
+            torque_limited: 0,
             current: Snapshot::default(),
             time_us: 0,
             dt_us: cfg.physics_dt_us.max(1),
@@ -522,6 +560,9 @@ impl Physics {
             tau: c.tau,
             falling: c.fall_pivot.is_some(),
             fall_angle: c.fall_angle,
+            joint_speed: self.qd,
+            joint_torque: self.joint_torque,
+            torque_limited: self.torque_limited,
         }
     }
 
@@ -644,8 +685,12 @@ impl Physics {
             let l = self.robot.joint_limit(side, j % 6);
             self.goals[j] = cmd.goal.map(|g| g.clamp(l.min, l.max));
             self.speed_limits[j] = cmd.speed_limit.max(0.0);
+        }
+        self.update_torque_lines();
+        for j in 0..12 {
             self.servo_step(j, dt);
         }
+        self.finish_torques();
         self.update_disturbance(dt);
         self.update_contacts();
         self.update_fall(dt);
@@ -656,8 +701,16 @@ impl Physics {
         }
     }
 
-    /// Servo `j`'s acceleration at angle `q` and velocity `v` toward its goal.
+    /// Servo `j`'s acceleration at angle `q` and velocity `v` toward its goal (its position
+    /// loop and speed limit, then its torque limit).
     fn servo_acc(&self, j: usize, q: f64, v: f64) -> f64 {
+        let a = self.servo_loop_acc(j, q, v);
+        self.torque_limited_acc(j, v, a).0
+    }
+
+    /// The acceleration servo `j`'s position loop asks for at angle `q` and velocity `v`
+    /// (0 at the speed limit in the direction of motion).
+    fn servo_loop_acc(&self, j: usize, q: f64, v: f64) -> f64 {
         let Some(g) = self.goals[j] else {
             return 0.0;
         };
@@ -669,6 +722,172 @@ impl Physics {
             0.0
         } else {
             a
+        }
+    }
+
+    /// The acceleration servo `j` reaches at speed `v` when its loop asks for `a`, and whether
+    /// its motor is at a torque bound (this step's torque line, see the module docs).
+    fn torque_limited_acc(&self, j: usize, v: f64, a: f64) -> (f64, bool) {
+        let (Some(lines), Some(model)) = (&self.torque_lines, &self.cfg.servo_torque) else {
+            return (a, false);
+        };
+        let TorqueLine { rest, m_kk } = lines[j];
+        if m_kk <= 0.0 {
+            return (a, false);
+        }
+        let (lo, hi) = model.range(v);
+        let tau = rest + m_kk * a;
+        if tau > hi {
+            ((hi - rest) / m_kk, true)
+        } else if tau < lo {
+            ((lo - rest) / m_kk, true)
+        } else {
+            (a, false)
+        }
+    }
+
+    /// The mass points, the upper body's pitch and the other foot's centre-of-pressure point
+    /// (`cop`: foot frame, m) for joint angles `q` and waist deflection `phi_d` (no fall).
+    fn loaded_points(&self, q: &[f64; 12], phi_d: f64, cop: [f64; 2]) -> ([V3; 7], f64, V3) {
+        let s = self.snapshot_at(q, phi_d, 0.0);
+        let ot = self.stance.other();
+        let (p, rp) = self.pelvis_from(self.stance, &self.stance_place, q);
+        let f = self.kin.fk(ot, &to_pose(p, &rp), &leg_q(q, ot));
+        let c = add(f.position(), mv(&f.rotation(), [cop[0], cop[1], 0.0]));
+        (s.points, rpy(&s.r_ub)[1], c)
+    }
+
+    /// The joint-space dynamics `τ = M·q̈ + b` at the present state and this step's torque lines
+    /// (see the module docs); `None` without the torque model or while falling.
+    fn update_torque_lines(&mut self) {
+        self.torque_lines = None;
+        let Some(model) = self.cfg.servo_torque else {
+            return;
+        };
+        if self.fall.is_some() {
+            return;
+        }
+        // The other foot's load in double support (last step's split).
+        let ot = self.stance.other();
+        let sensors = self.robot.geometry.force_sensors;
+        let f_other = self.truth.forces[ot.index()];
+        let fz_other: f64 = if self.contact[ot.index()] {
+            f_other.iter().sum()
+        } else {
+            0.0
+        };
+        let cop = if fz_other > 0.0 {
+            [0, 1].map(|a| {
+                f_other
+                    .iter()
+                    .zip(&sensors)
+                    .map(|(f, s)| f * s[a])
+                    .sum::<f64>()
+                    / fz_other
+            })
+        } else {
+            [0.0; 2]
+        };
+        // Jacobians by central differences.
+        let mut jr = [[[0.0; 3]; 12]; 7];
+        let mut jt = [0.0; 12];
+        let mut jc = [[0.0; 3]; 12];
+        for k in 0..12 {
+            let (mut qp, mut qm) = (self.q, self.q);
+            qp[k] += JACOBIAN_STEP;
+            qm[k] -= JACOBIAN_STEP;
+            let (pp, tp, cp) = self.loaded_points(&qp, self.phi_d, cop);
+            let (pm, tm, cm) = self.loaded_points(&qm, self.phi_d, cop);
+            let d = 2.0 * JACOBIAN_STEP;
+            for i in 0..7 {
+                jr[i][k] = [0, 1, 2].map(|a| (pp[i][a] - pm[i][a]) / d);
+            }
+            jt[k] = (tp - tm) / d;
+            jc[k] = [0, 1, 2].map(|a| (cp[a] - cm[a]) / d);
+        }
+        // Bias accelerations: the Taylor stencil with q̈ = 0 (the waist keeps its motion).
+        let h = STENCIL_S;
+        let phi_acc = self.phi_d_acc();
+        let path = |sign: f64| {
+            let q: [f64; 12] = std::array::from_fn(|j| self.q[j] + sign * self.qd[j] * h);
+            let phi = self.phi_d + sign * self.phi_d_rate * h + 0.5 * phi_acc * h * h;
+            self.loaded_points(&q, phi, cop)
+        };
+        let (a, c, b) = (
+            path(-1.0),
+            self.loaded_points(&self.q, self.phi_d, cop),
+            path(1.0),
+        );
+        let bias_r: [V3; 7] = std::array::from_fn(|i| {
+            [0, 1, 2].map(|x| (b.0[i][x] - 2.0 * c.0[i][x] + a.0[i][x]) / (h * h))
+        });
+        let bias_t = (b.1 - 2.0 * c.1 + a.1) / (h * h);
+        // The position loops' wishes.
+        let desired: [f64; 12] = std::array::from_fn(|j| {
+            self.goals[j].map_or(0.0, |_| self.servo_loop_acc(j, self.q[j], self.qd[j]))
+        });
+        let g = self.robot.gravity;
+        let jub = self.robot.masses.upper_body_inertia;
+        // The other foot's ground reaction: its vertical share, the same share of Σ m·r̈ (h).
+        let fz_total = self.truth.fz;
+        let share = if fz_total > 0.0 && fz_other > 0.0 {
+            (fz_other / fz_total).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let mut f_h = [0.0; 2];
+        for i in 0..7 {
+            for (x, fx) in f_h.iter_mut().enumerate() {
+                let acc = bias_r[i][x] + (0..12).map(|l| jr[i][l][x] * desired[l]).sum::<f64>();
+                *fx += self.masses[i] * acc;
+            }
+        }
+        let f_o = [share * f_h[0], share * f_h[1], fz_other];
+        let dot = |u: V3, v: V3| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+        let mut m = [[0.0; 12]; 12];
+        let mut bv = [0.0; 12];
+        for k in 0..12 {
+            for l in 0..12 {
+                m[k][l] = (0..7)
+                    .map(|i| self.masses[i] * dot(jr[i][k], jr[i][l]))
+                    .sum::<f64>()
+                    + jub * jt[k] * jt[l];
+            }
+            m[k][k] += model.armature;
+            bv[k] = (0..7)
+                .map(|i| self.masses[i] * dot(add(bias_r[i], [0.0, 0.0, g]), jr[i][k]))
+                .sum::<f64>()
+                + (jub * bias_t - self.tau) * jt[k]
+                - dot(f_o, jc[k]);
+        }
+        let range: [(f64, f64); 12] = std::array::from_fn(|j| model.range(self.qd[j]));
+        let free: [bool; 12] = std::array::from_fn(|j| self.goals[j].is_some());
+        let (x, _, _) = limit_accelerations(&m, &bv, &desired, &range, &free);
+        let lines: [TorqueLine; 12] = std::array::from_fn(|k| TorqueLine {
+            rest: bv[k]
+                + (0..12)
+                    .filter(|&l| l != k)
+                    .map(|l| m[k][l] * x[l])
+                    .sum::<f64>(),
+            m_kk: if free[k] { m[k][k] } else { 0.0 },
+        });
+        self.torque_lines = Some(lines);
+    }
+
+    /// The motor torques and torque-limit flags at the end of the step.
+    fn finish_torques(&mut self) {
+        self.torque_limited = 0;
+        let Some(lines) = self.torque_lines else {
+            self.joint_torque = [f64::NAN; 12];
+            return;
+        };
+        for (j, line) in lines.iter().enumerate() {
+            let a = self.goals[j].map_or(0.0, |_| self.servo_loop_acc(j, self.q[j], self.qd[j]));
+            let (acc, limited) = self.torque_limited_acc(j, self.qd[j], a);
+            self.joint_torque[j] = line.rest + line.m_kk * acc;
+            if limited {
+                self.torque_limited |= 1 << j;
+            }
         }
     }
 

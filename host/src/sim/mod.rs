@@ -22,6 +22,7 @@ pub mod bus;
 pub mod device;
 pub mod forces;
 pub mod rng;
+pub mod servo;
 pub mod transport;
 pub mod truth;
 pub mod zmp;
@@ -37,6 +38,7 @@ use gait_core::Robot;
 pub use body::{Physics, ServoCmd, Support, Truth};
 pub use bus::{Bus, BusCounters, BusFaults, OwnedPacket};
 pub use device::{Device, DeviceKind};
+pub use servo::ServoTorque;
 pub use transport::{run, spawn, SimHandle, SimProgress, LOCKSTEP_ACK, LOCKSTEP_TIME};
 
 /// Fault injection on the bus (drops, corruption, dead devices); forced falls are in
@@ -148,6 +150,8 @@ pub struct SimConfig {
     pub seed: u64,
     /// Servo speed limit, rad/s.
     pub servo_speed_limit: f64,
+    /// Servo torque model (`None`: unlimited torque; see [`servo`]).
+    pub servo_torque: Option<ServoTorque>,
     /// Natural frequency of a servo's closed position loop with its load, Hz (see [`body`]: a
     /// second-order response, so the joint velocity never jumps when a goal changes).
     pub servo_frequency_hz: f64,
@@ -188,6 +192,7 @@ impl Default for SimConfig {
             connect_timeout: Duration::from_secs(30),
             seed: 0,
             servo_speed_limit: robot.servo.max_speed,
+            servo_torque: Some(ServoTorque::XM430),
             servo_frequency_hz: SERVO_FREQUENCY_HZ,
             servo_damping: 1.0,
             physics_dt_us: 1000,
@@ -226,6 +231,9 @@ impl SimConfig {
             || !positive(self.servo_damping)
         {
             return bad("servo speed limit, frequency and damping must be > 0");
+        }
+        if self.servo_torque.is_some_and(|t| !t.is_valid()) {
+            return bad("servo stall torque and no-load speed must be > 0, armature >= 0");
         }
         if self.physics_dt_us == 0 {
             return bad("physics step must be > 0");

@@ -6,7 +6,9 @@
 //! `t_s, zmp_x, zmp_y, fz_n, com_x, com_y, com_z, pelvis_x, pelvis_y, pelvis_z, pelvis_roll,
 //! pelvis_pitch, pelvis_yaw, support (L/R/D), stance (L/R), margin_m, l_f0..l_f3, r_f0..r_f3
 //! (N, noiseless, sensor order front-left, front-right, rear-left, rear-right), gyro_x..z
-//! (rad/s), acc_x..z (m/s²), tau_nm, falling (0/1), fall_angle`.
+//! (rad/s), acc_x..z (m/s²), tau_nm, falling (0/1), fall_angle, qd_1..qd_12` (joint speeds,
+//! rad/s, by servo ID), `tq_1..tq_12` (motor torques, N·m; NaN without the torque model or while
+//! falling), `tq_limited` (bit `ID − 1` set: that motor is at its torque bound).
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -17,7 +19,9 @@ use super::body::Truth;
 /// Header line of the truth CSV (without newline).
 pub const HEADER: &str = "t_s,zmp_x,zmp_y,fz_n,com_x,com_y,com_z,pelvis_x,pelvis_y,pelvis_z,\
 pelvis_roll,pelvis_pitch,pelvis_yaw,support,stance,margin_m,l_f0,l_f1,l_f2,l_f3,r_f0,r_f1,r_f2,r_f3,\
-gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z,tau_nm,falling,fall_angle";
+gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z,tau_nm,falling,fall_angle,\
+qd_1,qd_2,qd_3,qd_4,qd_5,qd_6,qd_7,qd_8,qd_9,qd_10,qd_11,qd_12,\
+tq_1,tq_2,tq_3,tq_4,tq_5,tq_6,tq_7,tq_8,tq_9,tq_10,tq_11,tq_12,tq_limited";
 
 /// Writer of the truth CSV.
 #[derive(Debug)]
@@ -66,6 +70,10 @@ impl TruthLog {
         }
         put(t.tau);
         s.push_str(&format!(",{},{:.6}", u8::from(t.falling), t.fall_angle));
+        for v in t.joint_speed.iter().chain(&t.joint_torque) {
+            s.push_str(&format!(",{v:.5}"));
+        }
+        s.push_str(&format!(",{}", t.torque_limited));
         writeln!(self.out, "{s}")?;
         self.rows += 1;
         Ok(())
