@@ -585,9 +585,57 @@ pub fn csv(runs: &[RunMetrics]) -> String {
     s
 }
 
+/// The issue's goal for compensation + feedback (the paper's TLIPFM figures on its real robot):
+/// true ZMP mean |e| below these, m (sagittal, lateral).
+pub const GOAL_MEAN_M: [f64; 2] = [0.011, 0.014];
+
 /// The issue's goal for compensation + feedback: mean |e| < 1.1 cm sagittal, 1.4 cm lateral.
 pub fn meets_goal(r: &RunMetrics) -> bool {
-    r.true_err[0].mean < 0.011 && r.true_err[1].mean < 0.014
+    r.true_err[0].mean < GOAL_MEAN_M[0] && r.true_err[1].mean < GOAL_MEAN_M[1]
+}
+
+/// Every run's true mean |e| against the goal (Markdown): the verdict for compensation +
+/// feedback (the last run) and, per run, each axis as a share of its goal.
+pub fn goal_section(runs: &[RunMetrics]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Goal (issue 7): true ZMP mean |e| < {:.0} mm sagittal and < {:.0} mm lateral (the paper's TLIPFM on its real robot).",
+        GOAL_MEAN_M[0] * 1e3,
+        GOAL_MEAN_M[1] * 1e3
+    );
+    if let Some(fb) = runs.last() {
+        let _ = writeln!(
+            s,
+            "Compensation + feedback ({}): {}.\n",
+            fb.variant.name,
+            if meets_goal(fb) { "met" } else { "NOT met" }
+        );
+    }
+    let _ = writeln!(s, "| run | sagittal: mean \\|e\\| (share of goal) | lateral: mean \\|e\\| (share of goal) | within goal |");
+    let _ = writeln!(s, "| --- | ---: | ---: | --- |");
+    let share = |e: &AxisError, k: usize| {
+        if e.mean.is_finite() {
+            format!(
+                "{:.1} mm ({:.0} %)",
+                e.mean * 1e3,
+                e.mean / GOAL_MEAN_M[k] * 100.0
+            )
+        } else {
+            "–".into()
+        }
+    };
+    for r in runs {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} |",
+            r.variant.name,
+            share(&r.true_err[0], 0),
+            share(&r.true_err[1], 1),
+            if meets_goal(r) { "yes" } else { "no" }
+        );
+    }
+    s
 }
 
 #[cfg(test)]
@@ -600,6 +648,52 @@ mod tests {
         assert_eq!(e.n, 2);
         assert!((e.mean - 0.02).abs() < 1e-12 && (e.max - 0.03).abs() < 1e-12);
         assert!(AxisError::of(std::iter::empty()).mean.is_nan());
+    }
+
+    fn metrics(name: &'static str, mean: [f64; 2]) -> RunMetrics {
+        let mut v = variants()[0].clone();
+        v.name = name;
+        RunMetrics {
+            variant: v,
+            exit_code: Some(0),
+            fell_at: None,
+            timing_factor: 1.0,
+            true_err: mean.map(|m| AxisError {
+                n: 1,
+                mean: m,
+                max: m,
+            }),
+            meas_err: [AxisError::default(); 2],
+            inside: 1.0,
+            walking_ticks: 1,
+            walked: 0.0,
+            planned: 0.0,
+            peak_speed: [0.0; LEG_JOINTS],
+            true_peak_speed: [0.0; LEG_JOINTS],
+            peak_torque: [0.0; LEG_JOINTS],
+            torque_limited: 0.0,
+            ref_mismatch: 0,
+        }
+    }
+
+    #[test]
+    fn goal_section_judges_each_run_against_the_papers_figures() {
+        let runs = [
+            metrics("a", [0.0055, 0.0154]),
+            metrics("b", [0.0036, 0.0035]),
+        ];
+        let s = goal_section(&runs);
+        assert!(s.contains("Compensation + feedback (b): met."), "{s}");
+        assert!(
+            s.contains("| a | 5.5 mm (50 %) | 15.4 mm (110 %) | no |"),
+            "{s}"
+        );
+        assert!(
+            s.contains("| b | 3.6 mm (33 %) | 3.5 mm (25 %) | yes |"),
+            "{s}"
+        );
+        let s = goal_section(&runs[..1]);
+        assert!(s.contains("Compensation + feedback (a): NOT met."), "{s}");
     }
 
     #[test]

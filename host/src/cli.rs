@@ -667,12 +667,8 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
         ))
     );
     md.push_str(&table);
-    if let Some(fb) = runs.last() {
-        md.push_str(&format!(
-            "\nGoal (issue 7) for compensation + feedback, true ZMP mean |e| < 11 mm sagittal and < 14 mm lateral: {}.\n",
-            if crate::beyond::meets_goal(fb) { "met" } else { "NOT met" }
-        ));
-    }
+    md.push('\n');
+    md.push_str(&crate::beyond::goal_section(&runs));
     let mism: usize = runs.iter().map(|r| r.ref_mismatch).sum();
     if mism > 0 {
         md.push_str(&format!(
