@@ -1216,3 +1216,86 @@ fn a_fast_swing_is_torque_limited_and_keeps_to_the_motor_line() {
         "the torque limit slowed the knee by only {lag} rad"
     );
 }
+
+#[test]
+fn swinging_knee_torque_is_inertia_times_acceleration_plus_gravity() {
+    // Standing on the right foot, only the lifted left knee moves (0.1 rad at 1 Hz): its motor
+    // torque must be a rigid pendulum's about the knee axis, derived here from the link points
+    // alone: τ = (Σ m·|a × (r − p)|² + I_a)·q̈ + a·Σ (r − p) × m·g·ẑ over the calf and sole
+    // masses (p the knee, a its axis oriented so that +q̈ turns the calf about +a).
+    let mut cfg = SimConfig::default();
+    cfg.fall.enabled = false;
+    let mut sim = standing_on_right_foot(&cfg);
+    let robot = Robot::reference();
+    let m = robot.masses;
+    let g = robot.gravity;
+    let base = sway_and_lift(3.5);
+    let cross = |u: [f64; 3], v: [f64; 3]| {
+        [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ]
+    };
+    let sub = |u: [f64; 3], v: [f64; 3]| [u[0] - v[0], u[1] - v[1], u[2] - v[2]];
+    let dot = |u: [f64; 3], v: [f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    let mut checked = 0;
+    let mut inertial: f64 = 0.0;
+    for k in 3500..5500u64 {
+        if k % 10 == 0 {
+            let mut q = base;
+            q[3] += 0.1 * (std::f64::consts::TAU * (k - 3500) as f64 * 1e-3).sin();
+            set_goals(&mut sim, &q);
+        }
+        sim.advance_to((k + 1) * 1000).unwrap();
+        if k < 4000 || k % 50 != 0 {
+            continue;
+        }
+        let tr = *sim.physics.truth();
+        assert_eq!(tr.support, Support::Right);
+        let pelvis = Pose::new(
+            tr.pelvis[0],
+            tr.pelvis[1],
+            tr.pelvis[2],
+            tr.pelvis_rpy[0],
+            tr.pelvis_rpy[1],
+            tr.pelvis_rpy[2],
+        );
+        let mut ql: [f64; 6] = sim.physics.q[..6].try_into().unwrap();
+        let lp = leg_points(&robot, Side::Left, &pelvis, &ql);
+        let p = lp.knee;
+        let mut a = cross(sub(lp.hip, p), sub(lp.ankle, p));
+        let n = dot(a, a).sqrt();
+        a = a.map(|v| v / n);
+        ql[3] += 1e-6;
+        let moved = leg_points(&robot, Side::Left, &pelvis, &ql).calf_mass;
+        if dot(sub(moved, lp.calf_mass), cross(a, sub(lp.calf_mass, p))) < 0.0 {
+            a = a.map(|v| -v);
+        }
+        let links = [(m.calf, lp.calf_mass), (m.sole, lp.sole_mass)];
+        let inertia: f64 = links
+            .iter()
+            .map(|(mi, r)| {
+                let c = cross(a, sub(*r, p));
+                mi * dot(c, c)
+            })
+            .sum::<f64>()
+            + ServoTorque::XM430.armature;
+        let gravity: f64 = links
+            .iter()
+            .map(|(mi, r)| dot(a, cross(sub(*r, p), [0.0, 0.0, mi * g])))
+            .sum();
+        let expect = inertia * sim.physics.qdd[3] + gravity;
+        inertial = inertial.max((inertia * sim.physics.qdd[3]).abs());
+        let got = tr.joint_torque[3];
+        assert!(
+            (got - expect).abs() < 0.02 * expect.abs() + 0.005,
+            "t {:.3}: simulator {got:.4} N·m, pendulum {expect:.4} N·m",
+            tr.t_us as f64 * 1e-6
+        );
+        checked += 1;
+    }
+    assert!(checked >= 30);
+    // The inertia term is well above the tolerance: leaving it out would fail.
+    assert!(inertial > 0.025, "inertia term only {inertial} N·m");
+}
