@@ -234,18 +234,20 @@ struct Core {
     params_len: usize,
     crc: u16,
     crc_low: u8,
-    /// Last three raw region bytes, for unstuffing.
-    hist: [u8; 3],
-    /// Progress of a header match inside the body and CRC (for resynchronisation).
+    /// Progress of a header match inside the body and CRC (for resynchronisation); in the
+    /// body also the unstuffing state: 3 = the last raw bytes were FF FF FD (an FD now is the
+    /// stuffing byte). A dropped stuffing byte leaves it at 0, so FF FF FD FD FD keeps the
+    /// second FD.
     nested: usize,
     stuffing: bool,
     complete: bool,
     stats: DecoderStats,
 }
 
-/// Returns whether `p` can still be the beginning of a valid packet preamble.
-fn check_preamble(p: &[u8], capacity: usize) -> Result<(), Option<DecodeError>> {
-    for (i, &b) in p.iter().enumerate() {
+/// Returns whether `p` can still be the beginning of a valid packet preamble, given that
+/// `p[..from]` already passed this check.
+fn check_preamble(p: &[u8], from: usize, capacity: usize) -> Result<(), Option<DecodeError>> {
+    for (i, &b) in p.iter().enumerate().skip(from) {
         match i {
             0..=3 if HEADER.get(i) != Some(&b) => return Err(None),
             4 if b == 0xFD || b == 0xFF => return Err(Some(DecodeError::BadId)),
@@ -265,6 +267,7 @@ fn check_preamble(p: &[u8], capacity: usize) -> Result<(), Option<DecodeError>> 
 }
 
 /// One step of matching [`HEADER`] in a byte stream: `state` = header bytes matched so far.
+#[inline(always)]
 fn header_step(state: usize, byte: u8) -> usize {
     match (state, byte) {
         (1 | 2, 0xFF) => 2,
@@ -288,7 +291,6 @@ impl Core {
             params_len: 0,
             crc: 0,
             crc_low: 0,
-            hist: [0; 3],
             nested: 0,
             stuffing: true,
             complete: false,
@@ -320,17 +322,21 @@ impl Core {
 
     fn push(&mut self, buf: &mut [u8], byte: u8) -> Option<Result<(), DecodeError>> {
         self.complete = false;
+        if self.state == State::Preamble {
+            return self.push_preamble(buf.len(), byte);
+        }
+        // Body and CRC bytes: track a header starting inside the frame (one call site, inlined).
+        let before = self.nested;
+        self.nested = header_step(before, byte);
         match self.state {
-            State::Preamble => self.push_preamble(buf.len(), byte),
-            State::Body => self.push_body(buf, byte),
+            State::Preamble => None,
+            State::Body => self.push_body(buf, byte, before == 3),
             State::CrcLow => {
-                self.nested = header_step(self.nested, byte);
                 self.crc_low = byte;
                 self.state = State::CrcHigh;
                 None
             }
             State::CrcHigh => {
-                self.nested = header_step(self.nested, byte);
                 self.reset();
                 if u16::from_le_bytes([self.crc_low, byte]) == self.crc {
                     self.complete = true;
@@ -347,16 +353,20 @@ impl Core {
         }
     }
 
+    // Out of line: the body bytes, the common case, then need fewer registers saved per byte.
+    #[inline(never)]
     fn push_preamble(&mut self, capacity: usize, byte: u8) -> Option<Result<(), DecodeError>> {
         if let Some(slot) = self.pre.get_mut(self.pre_len) {
             *slot = byte;
             self.pre_len += 1;
         }
         let mut first_error = None;
-        // Keep the longest suffix of the received bytes that can still start a packet.
+        // Keep the longest suffix of the received bytes that can still start a packet. The
+        // bytes before the new one passed already; after a shift, all are checked again.
+        let mut from = self.pre_len.saturating_sub(1);
         while self.pre_len > 0 {
             let p = self.pre.get(..self.pre_len).unwrap_or(&[]);
-            match check_preamble(p, capacity) {
+            match check_preamble(p, from, capacity) {
                 Ok(()) => break,
                 Err(e) => {
                     if let Some(e) = e {
@@ -367,6 +377,7 @@ impl Core {
                     }
                     self.pre.copy_within(1.., 0);
                     self.pre_len -= 1;
+                    from = 0;
                 }
             }
         }
@@ -378,20 +389,25 @@ impl Core {
             self.crc = crc::crc16(&self.pre);
             self.params_len = 0;
             self.have_instruction = false;
-            self.hist = [0; 3];
             self.nested = 0;
             self.state = State::Body;
         }
         first_error.map(Err)
     }
 
-    fn push_body(&mut self, buf: &mut [u8], byte: u8) -> Option<Result<(), DecodeError>> {
+    /// One body byte (`nested` already advanced past it; `after_ff_ff_fd`: the raw bytes
+    /// before it were FF FF FD).
+    fn push_body(
+        &mut self,
+        buf: &mut [u8],
+        byte: u8,
+        after_ff_ff_fd: bool,
+    ) -> Option<Result<(), DecodeError>> {
         self.crc = crc::update_byte(self.crc, byte);
         self.remaining = self.remaining.saturating_sub(1);
         if self.remaining == 0 {
             self.state = State::CrcLow;
         }
-        self.nested = header_step(self.nested, byte);
         if self.stuffing {
             // A correctly stuffed region never contains FF FF FD 00: it is a new packet.
             if self.nested == 4 {
@@ -401,11 +417,10 @@ impl Core {
                 self.pre_len = 4;
                 return Some(Err(DecodeError::Interrupted));
             }
-            if self.hist == [0xFF, 0xFF, 0xFD] && byte == 0xFD {
-                self.hist = [0; 3];
+            // FF FF FD FD: drop the stuffing FD (`header_step` left `nested` at 0).
+            if after_ff_ff_fd && byte == 0xFD {
                 return None;
             }
-            self.hist = [self.hist[1], self.hist[2], byte];
         }
         if !self.have_instruction {
             self.instruction = byte;
