@@ -570,6 +570,49 @@ fn write_file(path: &Path, data: &[u8], files: &mut Vec<PathBuf>) -> Result<(), 
     Ok(())
 }
 
+/// Points (t, value) of one plotted line.
+pub type Polyline = Vec<(f64, f64)>;
+
+/// One axis of the support bounds (min, max) on the log's clock over `[t0, t1]`. Before the
+/// plan (the firmware's move to the initial pose) and after it (the final hold) both feet stand
+/// where the plan starts and ends, so the first and the last bounds extend to the log's ends.
+pub fn bounds_on_log_clock(
+    bounds: &SupportBounds,
+    axis: usize,
+    offset: f64,
+    t0: f64,
+    t1: f64,
+) -> (Polyline, Polyline) {
+    let (mut lo, mut hi) = (Vec::new(), Vec::new());
+    let pick = |i: usize| if axis == 0 { bounds.x[i] } else { bounds.y[i] };
+    let n = bounds.t.len();
+    if n == 0 {
+        return (lo, hi);
+    }
+    let first = bounds.t[0] - offset;
+    if first > t0 + 1e-9 {
+        let b = pick(0);
+        lo.push((t0, b[0]));
+        hi.push((t0, b[1]));
+    }
+    for (i, &tp) in bounds.t.iter().enumerate() {
+        let t = tp - offset;
+        if t < t0 - 1e-9 || t > t1 + 1e-9 {
+            continue;
+        }
+        let b = pick(i);
+        lo.push((t, b[0]));
+        hi.push((t, b[1]));
+    }
+    let last = bounds.t[n - 1] - offset;
+    if last < t1 - 1e-9 {
+        let b = pick(n - 1);
+        lo.push((t1.max(t0), b[0]));
+        hi.push((t1.max(t0), b[1]));
+    }
+    (lo, hi)
+}
+
 /// The ZMP figure: reference (dash-dot), response (solid), support bounds (dashed), truth
 /// (dotted) in the sagittal and the lateral plane over time.
 pub fn zmp_figure(
@@ -586,16 +629,7 @@ pub fn zmp_figure(
     let mut panels = Vec::new();
     for (axis, name) in [(0usize, "sagittal plane (x)"), (1, "lateral plane (y)")] {
         let mut series = Vec::new();
-        let (mut lo, mut hi) = (Vec::new(), Vec::new());
-        for (i, &tp) in bounds.t.iter().enumerate() {
-            let t = tp - offset;
-            if t < t0 - 1e-9 || t > t1 + 1e-9 {
-                continue;
-            }
-            let b = if axis == 0 { bounds.x[i] } else { bounds.y[i] };
-            lo.push((t, b[0]));
-            hi.push((t, b[1]));
-        }
+        let (lo, hi) = bounds_on_log_clock(bounds, axis, offset, t0, t1);
         let gray = [110, 110, 110];
         series.push(Series {
             label: "support polygon min/max".into(),
@@ -881,4 +915,49 @@ pub fn ranking(
     let mut v: Vec<(&str, f64)> = runs.iter().map(|r| (r.0.as_str(), get(&r.2))).collect();
     v.sort_by(|a, b| a.1.total_cmp(&b.1));
     v.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(" < ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bounds() -> SupportBounds {
+        SupportBounds {
+            t: vec![1.0, 1.5, 2.0],
+            x: vec![[-0.05, 0.05], [0.0, 0.1], [0.02, 0.12]],
+            y: vec![[-0.1, 0.1], [-0.1, 0.0], [-0.09, 0.09]],
+            walk_start: 1.2,
+        }
+    }
+
+    #[test]
+    fn bounds_cover_the_ramp_and_the_final_hold() {
+        // Log clock = plan clock − 0.5: the plan spans 0.5..1.5 s of a log from 0 to 3 s.
+        let (lo, hi) = bounds_on_log_clock(&bounds(), 0, 0.5, 0.0, 3.0);
+        assert_eq!(
+            lo,
+            vec![
+                (0.0, -0.05),
+                (0.5, -0.05),
+                (1.0, 0.0),
+                (1.5, 0.02),
+                (3.0, 0.02)
+            ]
+        );
+        assert_eq!(hi.first(), Some(&(0.0, 0.05)));
+        assert_eq!(hi.last(), Some(&(3.0, 0.12)));
+        let (lo, _) = bounds_on_log_clock(&bounds(), 1, 0.5, 0.0, 3.0);
+        assert_eq!(lo.last(), Some(&(3.0, -0.09)));
+    }
+
+    #[test]
+    fn bounds_inside_the_log_window_are_not_padded() {
+        let (lo, _) = bounds_on_log_clock(&bounds(), 0, 0.0, 1.0, 2.0);
+        assert_eq!(lo, vec![(1.0, -0.05), (1.5, 0.0), (2.0, 0.02)]);
+        // A log window inside the plan: clipped, no padding.
+        let (lo, _) = bounds_on_log_clock(&bounds(), 0, 0.0, 1.2, 1.7);
+        assert_eq!(lo, vec![(1.5, 0.0)]);
+        let empty = SupportBounds::default();
+        assert!(bounds_on_log_clock(&empty, 0, 0.0, 0.0, 1.0).0.is_empty());
+    }
 }
