@@ -1,5 +1,6 @@
-//! Minimal line plots: hand-written SVG (with all labels) and PNG (a small rasteriser; tick
-//! labels in a built-in 5×7 digit font, titles and legends only in the SVG).
+//! Minimal line plots: hand-written SVG and PNG (a small rasteriser with a built-in 5×7 font:
+//! digits, capital letters — lower case is drawn in capitals — and common punctuation; the
+//! y-axis label sits above the axis instead of being rotated).
 //!
 //! A [`Figure`] is a column of [`Panel`]s sharing nothing but the width; each panel has its own
 //! axis ranges (from the data, padded by 5 %) and any number of [`Series`]. A NaN point breaks a
@@ -383,19 +384,59 @@ impl Figure {
                     c.polyline(&pts, ser.color, ser.width, ser.dash, clip);
                 }
             }
-            // Legend swatches (no text in the PNG): colour and style, top right.
-            for (k, ser) in p.series.iter().filter(|s| !s.label.is_empty()).enumerate() {
-                let y = f.y0 + 12.0 + 12.0 * k as f64;
-                let x1 = f.x0 + f.w - 50.0;
-                c.polyline(
-                    &[(x1, y), (x1 + 40.0, y)],
-                    ser.color,
-                    ser.width,
-                    ser.dash,
-                    clip,
-                );
+            // Panel title above the frame, axis labels, legend box (top right, as in the SVG).
+            let tw = text_width(&p.title, 2);
+            c.text(
+                &p.title,
+                (f.x0 + (f.w - tw) / 2.0) as i64,
+                (f.y0 - 22.0) as i64,
+                2,
+            );
+            let tw = text_width(&p.x_label, 2);
+            c.text(
+                &p.x_label,
+                (f.x0 + (f.w - tw) / 2.0) as i64,
+                (f.y0 + f.h + 28.0) as i64,
+                2,
+            );
+            c.text(&p.y_label, 4, (f.y0 - 12.0) as i64, 1);
+            let legend: Vec<&Series> = p.series.iter().filter(|s| !s.label.is_empty()).collect();
+            if !legend.is_empty() {
+                let longest = legend
+                    .iter()
+                    .map(|s| text_width(&s.label, 1))
+                    .fold(0.0, f64::max);
+                let (lw, lh) = (longest + 54.0, 12.0 * legend.len() as f64 + 6.0);
+                let (lx0, ly0) = (f.x0 + f.w - lw - 6.0, f.y0 + 6.0);
+                c.fill_rect(lx0, ly0, lw, lh, [255, 255, 255]);
+                let border = [
+                    (lx0, ly0),
+                    (lx0 + lw, ly0),
+                    (lx0 + lw, ly0 + lh),
+                    (lx0, ly0 + lh),
+                    (lx0, ly0),
+                ];
+                c.polyline(&border, [153, 153, 153], 1.0, Dash::Solid, full);
+                for (k, ser) in legend.iter().enumerate() {
+                    let y = ly0 + 9.0 + 12.0 * k as f64;
+                    c.polyline(
+                        &[(lx0 + 6.0, y), (lx0 + 40.0, y)],
+                        ser.color,
+                        ser.width,
+                        ser.dash,
+                        full,
+                    );
+                    c.text(&ser.label, (lx0 + 46.0) as i64, (y - 3.0) as i64, 1);
+                }
             }
         }
+        let tw = text_width(&self.title, 2);
+        c.text(
+            &self.title,
+            ((f64::from(self.width) - tw) / 2.0) as i64,
+            12,
+            2,
+        );
         c.encode_png()
     }
 }
@@ -558,7 +599,18 @@ impl Canvas {
         }
     }
 
-    /// Draws text in the built-in font (digits, '-', '.'; other characters are blanks).
+    /// Fills a rectangle (clipped to the canvas).
+    pub fn fill_rect(&mut self, x: f64, y: f64, w: f64, h: f64, c: [u8; 3]) {
+        let (x0, y0) = (x.round() as i64, y.round() as i64);
+        let (x1, y1) = ((x + w).round() as i64, (y + h).round() as i64);
+        for yy in y0..y1 {
+            for xx in x0..x1 {
+                self.set(xx, yy, c);
+            }
+        }
+    }
+
+    /// Draws text in the built-in font (see [`glyph`]; characters without a glyph are blanks).
     pub fn text(&mut self, s: &str, x: i64, y: i64, scale: i64) {
         let mut cx = x;
         for ch in s.chars() {
@@ -633,8 +685,15 @@ fn text_width(s: &str, scale: i64) -> f64 {
     (s.chars().count() as i64 * 6 * scale - scale) as f64
 }
 
-/// 5×7 glyphs (rows top to bottom, bit 4 = leftmost column).
+/// 5×7 glyphs (rows top to bottom, bit 4 = leftmost column): digits, capitals (lower case maps
+/// to them), space and common punctuation; `None` for anything else.
 fn glyph(c: char) -> Option<[u8; 7]> {
+    let c = match c {
+        '−' => '-',
+        '×' => 'X',
+        'µ' | 'μ' => 'U',
+        c => c.to_ascii_uppercase(),
+    };
     Some(match c {
         '0' => [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E],
         '1' => [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E],
@@ -646,8 +705,50 @@ fn glyph(c: char) -> Option<[u8; 7]> {
         '7' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
         '8' => [0x0E, 0x11, 0x11, 0x0E, 0x11, 0x11, 0x0E],
         '9' => [0x0E, 0x11, 0x11, 0x0F, 0x01, 0x02, 0x0C],
+        'A' => [0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
+        'B' => [0x1E, 0x11, 0x11, 0x1E, 0x11, 0x11, 0x1E],
+        'C' => [0x0E, 0x11, 0x10, 0x10, 0x10, 0x11, 0x0E],
+        'D' => [0x1C, 0x12, 0x11, 0x11, 0x11, 0x12, 0x1C],
+        'E' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x1F],
+        'F' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x10],
+        'G' => [0x0E, 0x11, 0x10, 0x17, 0x11, 0x11, 0x0F],
+        'H' => [0x11, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
+        'I' => [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
+        'J' => [0x07, 0x02, 0x02, 0x02, 0x02, 0x12, 0x0C],
+        'K' => [0x11, 0x12, 0x14, 0x18, 0x14, 0x12, 0x11],
+        'L' => [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F],
+        'M' => [0x11, 0x1B, 0x15, 0x15, 0x11, 0x11, 0x11],
+        'N' => [0x11, 0x11, 0x19, 0x15, 0x13, 0x11, 0x11],
+        'O' => [0x0E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
+        'P' => [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10],
+        'Q' => [0x0E, 0x11, 0x11, 0x11, 0x15, 0x12, 0x0D],
+        'R' => [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11],
+        'S' => [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E],
+        'T' => [0x1F, 0x04, 0x04, 0x04, 0x04, 0x04, 0x04],
+        'U' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
+        'V' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x0A, 0x04],
+        'W' => [0x11, 0x11, 0x11, 0x15, 0x15, 0x15, 0x0A],
+        'X' => [0x11, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0x11],
+        'Y' => [0x11, 0x11, 0x11, 0x0A, 0x04, 0x04, 0x04],
+        'Z' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x10, 0x1F],
+        ' ' => [0x00; 7],
         '-' => [0x00, 0x00, 0x00, 0x1F, 0x00, 0x00, 0x00],
         '.' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x0C, 0x0C],
+        ',' => [0x00, 0x00, 0x00, 0x00, 0x0C, 0x04, 0x08],
+        ':' => [0x00, 0x0C, 0x0C, 0x00, 0x0C, 0x0C, 0x00],
+        '(' => [0x02, 0x04, 0x08, 0x08, 0x08, 0x04, 0x02],
+        ')' => [0x08, 0x04, 0x02, 0x02, 0x02, 0x04, 0x08],
+        '[' => [0x0E, 0x08, 0x08, 0x08, 0x08, 0x08, 0x0E],
+        ']' => [0x0E, 0x02, 0x02, 0x02, 0x02, 0x02, 0x0E],
+        '/' => [0x00, 0x01, 0x02, 0x04, 0x08, 0x10, 0x00],
+        '%' => [0x18, 0x19, 0x02, 0x04, 0x08, 0x13, 0x03],
+        '+' => [0x00, 0x04, 0x04, 0x1F, 0x04, 0x04, 0x00],
+        '=' => [0x00, 0x00, 0x1F, 0x00, 0x1F, 0x00, 0x00],
+        '_' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x1F],
+        '<' => [0x02, 0x04, 0x08, 0x10, 0x08, 0x04, 0x02],
+        '>' => [0x08, 0x04, 0x02, 0x01, 0x02, 0x04, 0x08],
+        '|' => [0x04; 7],
+        '\'' => [0x04, 0x04, 0x08, 0x00, 0x00, 0x00, 0x00],
         _ => return None,
     })
 }
@@ -678,6 +779,37 @@ mod tests {
         assert!(a.ticks.len() >= 4 && a.ticks.len() <= 12);
         let a = Axis::new(0.1, 0.1, true);
         assert!(a.hi > a.lo);
+    }
+
+    #[test]
+    fn font_covers_letters_digits_and_labels_distinctly() {
+        let chars: Vec<char> = ('0'..='9').chain('A'..='Z').collect();
+        let glyphs: Vec<[u8; 7]> = chars.iter().map(|&c| glyph(c).unwrap()).collect();
+        for i in 0..glyphs.len() {
+            assert!(glyphs[i].iter().all(|r| *r < 0x20), "{}", chars[i]);
+            for j in i + 1..glyphs.len() {
+                // Every glyph is its own (O and 0 too).
+                assert_ne!(glyphs[i], glyphs[j], "{} and {}", chars[i], chars[j]);
+            }
+        }
+        assert_eq!(glyph('a'), glyph('A'));
+        assert_eq!(glyph('−'), glyph('-'));
+        for c in "ZMP reference vs response (tlipfm), t (s) / 5 % [m]: x_y".chars() {
+            assert!(glyph(c).is_some(), "no glyph for {c:?}");
+        }
+    }
+
+    #[test]
+    fn text_draws_the_glyph_bits() {
+        let mut c = Canvas::new(20, 10);
+        c.text("T", 1, 2, 1);
+        let g = glyph('T').unwrap();
+        for (row, bits) in g.iter().enumerate() {
+            for col in 0..5u32 {
+                let ink = c.get(1 + col, 2 + row as u32) == [0, 0, 0];
+                assert_eq!(ink, bits & (0x10 >> col) != 0, "row {row} col {col}");
+            }
+        }
     }
 
     #[test]
