@@ -271,3 +271,68 @@ fn stabilizer_survives_five_percent_dropped_packets() {
     assert!(r.sim.bus.dropped > 10, "{:?}", r.sim.bus);
     assert_bounded("drops", &r, &log);
 }
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn compensation_and_feedback_meet_the_goal_under_xm430_limits() {
+    // Issue 7's "done when": the Table 2 walk (14 steps, the firmware's default timing) in the
+    // simulator with XM430-class speed and torque limits; TLIPFM + whole-body compensation +
+    // feedback tracks the reference with a true mean |e| below 11 mm sagittal and 14 mm lateral,
+    // and laterally better than TLIPFM alone on the same setup.
+    use walker_host::beyond::{firmware_config, meets_goal, score, variants};
+    let sim = SimConfig::default();
+    assert_eq!(
+        sim.servo_torque,
+        Some(walker_host::sim::ServoTorque::XM430),
+        "the default simulator has the torque limit"
+    );
+    let mut scored = Vec::new();
+    for v in variants()
+        .into_iter()
+        .filter(|v| v.name == "tlipfm" || v.name == "tlipfm-wb-fb")
+    {
+        let spec = WalkSpec {
+            model: v.model,
+            compensation: v.compensation,
+            stabilizer: v.stabilizer,
+            ..WalkSpec::default()
+        };
+        let tokens = walker_host::fil::firmware_tokens(&spec).unwrap();
+        let cfg = firmware_config(&tokens).unwrap();
+        let (r, log) = fil(&format!("goal-{}", v.name), spec, sim.clone(), &[]);
+        assert_eq!(r.exit_code, Some(0), "{}", v.name);
+        assert_eq!(stop_reason(&log), Some(StopReason::PlanDone), "{}", v.name);
+        let m = score(&v, &cfg, &r.log, &r.truth, r.exit_code, None).unwrap();
+        assert!(
+            m.walking_ticks > 2000,
+            "{}: {} walking ticks",
+            v.name,
+            m.walking_ticks
+        );
+        assert!(m.inside > 0.99, "{}: inside {}", v.name, m.inside);
+        assert!(
+            (m.walked - m.planned).abs() < 0.01,
+            "{}: walked {}",
+            v.name,
+            m.walked
+        );
+        assert!(
+            m.peak_torque.iter().all(|t| *t <= 3.5 + 1e-6),
+            "{:?}",
+            m.peak_torque
+        );
+        scored.push(m);
+    }
+    let (plain, full) = (&scored[0], &scored[1]);
+    assert!(
+        meets_goal(full),
+        "compensation + feedback: {:?}",
+        full.true_err
+    );
+    assert!(
+        full.true_err[1].mean < 0.6 * plain.true_err[1].mean,
+        "lateral: {} vs TLIPFM {}",
+        full.true_err[1].mean,
+        plain.true_err[1].mean
+    );
+}
