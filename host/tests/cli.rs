@@ -321,6 +321,12 @@ fn usage_errors_exit_2() {
         walker(&["compare", "--runs", "lipm"]).status.code(),
         Some(2)
     );
+    for bad in ["-1", "abc", "NaN", "inf"] {
+        for cmd in ["simulate", "fil", "beyond"] {
+            let out = walker(&[cmd, "--stall-torque", bad]);
+            assert_eq!(out.status.code(), Some(2), "{cmd} --stall-torque {bad}");
+        }
+    }
     assert!(walker(&["--help"]).status.success());
     assert!(walker(&["report", "--help"]).status.success());
 }
