@@ -757,8 +757,8 @@ impl Physics {
         (s.points, rpy(&s.r_ub)[1], c)
     }
 
-    /// The joint-space dynamics `τ = M·q̈ + b` at the present state and this step's torque lines
-    /// (see the module docs); `None` without the torque model or while falling.
+    /// Sets this step's torque lines from the joint-space dynamics `τ = M·q̈ + b` at the present
+    /// state (see the module docs); none without the torque model or while falling.
     fn update_torque_lines(&mut self) {
         self.torque_lines = None;
         let Some(model) = self.cfg.servo_torque else {
