@@ -610,7 +610,7 @@ impl Canvas {
         }
     }
 
-    /// Draws text in the built-in font (see [`glyph`]; characters without a glyph are blanks).
+    /// Draws text in the built-in 5×7 font (digits, capitals, punctuation; others are blanks).
     pub fn text(&mut self, s: &str, x: i64, y: i64, scale: i64) {
         let mut cx = x;
         for ch in s.chars() {
