@@ -329,7 +329,7 @@ impl Core {
         let before = self.nested;
         self.nested = header_step(before, byte);
         match self.state {
-            State::Preamble => None,
+            State::Preamble => None, // returned above; here only for exhaustiveness
             State::Body => self.push_body(buf, byte, before == 3),
             State::CrcLow => {
                 self.crc_low = byte;

@@ -1112,10 +1112,11 @@ fn weak_servos_sag_under_load() {
     let goal = sway_and_lift(3.5);
     assert!((strong.physics.q[7] - goal[7]).abs() < 0.01);
     assert_eq!(strong.physics.truth().support, Support::Right);
-    cfg.servo_torque = Some(ServoTorque {
+    let weak_servo = ServoTorque {
         stall_torque: 1.0,
         ..ServoTorque::XM430
-    });
+    };
+    cfg.servo_torque = Some(weak_servo);
     let mut weak = Simulator::new(&cfg).unwrap();
     torque_on(&mut weak);
     let mut worst: f64 = 0.0;
@@ -1127,11 +1128,7 @@ fn weak_servos_sag_under_load() {
         weak.advance_to((k + 1) * 1000).unwrap();
         let tr = weak.physics.truth();
         for (j, t) in tr.joint_torque.iter().enumerate() {
-            let (lo, hi) = ServoTorque {
-                stall_torque: 1.0,
-                ..ServoTorque::XM430
-            }
-            .range(tr.joint_speed[j]);
+            let (lo, hi) = weak_servo.range(tr.joint_speed[j]);
             // The torque line is frozen within a step: allow what one step's speed change moves.
             assert!(
                 *t >= lo - 0.05 && *t <= hi + 0.05,

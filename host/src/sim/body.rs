@@ -61,7 +61,7 @@ use gait_core::plan::Place;
 use gait_core::support::SupportPolygon;
 use gait_core::{Robot, Side};
 
-use super::forces::{distribute, FootContact};
+use super::forces::{center_of_pressure, distribute, FootContact};
 use super::rng::Rng;
 use super::servo::limit_accelerations;
 use super::zmp::{center_of_mass, whole_body_zmp, MassPoint};
@@ -213,6 +213,8 @@ struct Snapshot {
     ground_z: f64,
     contact: [bool; 2],
     feet: [FootContact; 2],
+    /// Sole point and rotation of each foot (before a fall's rotation), m.
+    soles: [(V3, M3); 2],
     stance: Side,
     tau: f64,
     fall_angle: f64,
@@ -230,6 +232,7 @@ impl Default for Snapshot {
             ground_z: 0.0,
             contact: [true; 2],
             feet: [FootContact::default(); 2],
+            soles: [([0.0; 3], I3); 2],
             stance: Side::Left,
             tau: 0.0,
             fall_angle: 0.0,
@@ -431,6 +434,7 @@ impl Physics {
                 xy: [feet_pose[i].x, feet_pose[i].y],
                 yaw: feet_pose[i].yaw,
             }),
+            soles: [0, 1].map(|i| (feet_pose[i].position(), feet_pose[i].rotation())),
             stance: self.stance,
             tau: self.tau,
             fall_angle: angle,
@@ -750,10 +754,8 @@ impl Physics {
     /// (`cop`: foot frame, m) for joint angles `q` and waist deflection `phi_d` (no fall).
     fn loaded_points(&self, q: &[f64; 12], phi_d: f64, cop: [f64; 2]) -> ([V3; 7], f64, V3) {
         let s = self.snapshot_at(q, phi_d, 0.0);
-        let ot = self.stance.other();
-        let (p, rp) = self.pelvis_from(self.stance, &self.stance_place, q);
-        let f = self.kin.fk(ot, &to_pose(p, &rp), &leg_q(q, ot));
-        let c = add(f.position(), mv(&f.rotation(), [cop[0], cop[1], 0.0]));
+        let (sole, r) = s.soles[self.stance.other().index()];
+        let c = add(sole, mv(&r, [cop[0], cop[1], 0.0]));
         (s.points, rpy(&s.r_ub)[1], c)
     }
 
@@ -769,24 +771,16 @@ impl Physics {
         }
         // The other foot's load in double support (last step's split).
         let ot = self.stance.other();
-        let sensors = self.robot.geometry.force_sensors;
-        let f_other = self.truth.forces[ot.index()];
-        let fz_other: f64 = if self.contact[ot.index()] {
-            f_other.iter().sum()
+        // Its centre of pressure in its own frame: the foot placed at the origin, heading 0.
+        let (cop, fz_other) = if self.contact[ot.index()] {
+            center_of_pressure(
+                &[self.truth.forces[ot.index()], [0.0; 4]],
+                [Some(FootContact::default()), None],
+                &self.robot.geometry.force_sensors,
+            )
+            .unwrap_or(([0.0; 2], 0.0))
         } else {
-            0.0
-        };
-        let cop = if fz_other > 0.0 {
-            [0, 1].map(|a| {
-                f_other
-                    .iter()
-                    .zip(&sensors)
-                    .map(|(f, s)| f * s[a])
-                    .sum::<f64>()
-                    / fz_other
-            })
-        } else {
-            [0.0; 2]
+            ([0.0; 2], 0.0)
         };
         // Jacobians by central differences.
         let mut jr = [[[0.0; 3]; 12]; 7];
@@ -823,9 +817,8 @@ impl Physics {
         });
         let bias_t = (b.1 - 2.0 * c.1 + a.1) / (h * h);
         // The position loops' wishes.
-        let desired: [f64; 12] = std::array::from_fn(|j| {
-            self.goals[j].map_or(0.0, |_| self.servo_loop_acc(j, self.q[j], self.qd[j]))
-        });
+        let desired: [f64; 12] =
+            std::array::from_fn(|j| self.servo_loop_acc(j, self.q[j], self.qd[j]));
         let g = self.robot.gravity;
         let jub = self.robot.masses.upper_body_inertia;
         // The other foot's ground reaction: its vertical share, the same share of Σ m·r̈ (h).
@@ -862,13 +855,10 @@ impl Physics {
         }
         let range: [(f64, f64); 12] = std::array::from_fn(|j| model.range(self.qd[j]));
         let free: [bool; 12] = std::array::from_fn(|j| self.goals[j].is_some());
-        let (x, _, _) = limit_accelerations(&m, &bv, &desired, &range, &free);
+        let (x, tau, _) = limit_accelerations(&m, &bv, &desired, &range, &free);
+        // τ_k = rest_k + M_kk·q̈_k with the other joints' share at the solved accelerations.
         let lines: [TorqueLine; 12] = std::array::from_fn(|k| TorqueLine {
-            rest: bv[k]
-                + (0..12)
-                    .filter(|&l| l != k)
-                    .map(|l| m[k][l] * x[l])
-                    .sum::<f64>(),
+            rest: tau[k] - m[k][k] * x[k],
             m_kk: if free[k] { m[k][k] } else { 0.0 },
         });
         self.torque_lines = Some(lines);
@@ -882,7 +872,7 @@ impl Physics {
             return;
         };
         for (j, line) in lines.iter().enumerate() {
-            let a = self.goals[j].map_or(0.0, |_| self.servo_loop_acc(j, self.q[j], self.qd[j]));
+            let a = self.servo_loop_acc(j, self.q[j], self.qd[j]);
             let (acc, limited) = self.torque_limited_acc(j, self.qd[j], a);
             self.joint_torque[j] = line.rest + line.m_kk * acc;
             if limited {
