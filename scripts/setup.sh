@@ -21,3 +21,27 @@ if ! command -v qemu-system-arm >/dev/null 2>&1; then
         exit 1
     fi
 fi
+
+# MuJoCo 3.17.0 (the physics of the simulated robot, linked by the `mujoco-rs` crate): the C
+# library comes from PyPI's `mujoco==3.17.0` wheel, which ships a self-contained
+# `libmujoco.so.3.17.0` (libc, libm, libdl, libpthread, librt only). It is unpacked into
+# `.mujoco/lib/` (ignored by git); `.cargo/config.toml` points `MUJOCO_DYNAMIC_LINK_DIR` there
+# and `host/build.rs` adds an rpath, so `walker` runs without environment variables.
+mujoco_lib=.mujoco/lib
+if [ ! -f "$mujoco_lib/libmujoco.so.3.17.0" ]; then
+    echo "setup: fetching MuJoCo 3.17.0 (PyPI wheel mujoco==3.17.0) into $mujoco_lib" >&2
+    wheel_dir=$(mktemp -d)
+    python3 -m pip download --quiet --no-deps --only-binary=:all: --platform manylinux_2_28_x86_64 \
+        --python-version 3.11 mujoco==3.17.0 -d "$wheel_dir" >&2
+    mkdir -p "$mujoco_lib"
+    python3 - "$wheel_dir" "$mujoco_lib" <<'PY'
+import glob, os, shutil, sys, zipfile
+wheel = glob.glob(os.path.join(sys.argv[1], "mujoco-3.17.0-*.whl"))[0]
+with zipfile.ZipFile(wheel) as z, z.open("mujoco/libmujoco.so.3.17.0") as src, \
+        open(os.path.join(sys.argv[2], "libmujoco.so.3.17.0.part"), "wb") as dst:
+    shutil.copyfileobj(src, dst)
+PY
+    mv "$mujoco_lib/libmujoco.so.3.17.0.part" "$mujoco_lib/libmujoco.so.3.17.0"
+    rm -rf "$wheel_dir"
+fi
+ln -sf libmujoco.so.3.17.0 "$mujoco_lib/libmujoco.so"

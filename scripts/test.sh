@@ -43,7 +43,15 @@ if [ "$code" != 11 ]; then
     exit 1
 fi
 
-step "firmware in the loop: short walks in QEMU against the simulated robot (determinism, faults, fall)"
+step "the official ROBOTIS dynamixel-sdk (PyPI) reads and writes every simulated device"
+cargo build --release --target host-tuple -p walker-host --bin walker
+bash scripts/sdk-test.sh "target/$(rustc -vV | sed -n 's/^host: //p')/release/walker"
+
+step "video: MuJoCo renders a walk headless (EGL) into an MP4"
+render_py=$(bash scripts/render-setup.sh | tail -n 1)
+"$render_py" scripts/render_selftest.py
+
+step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism, faults, falls, a 14-step walk with its video)"
 WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu \
     cargo test --release --target host-tuple -p walker-host --test fil -- --ignored --test-threads 1
 

@@ -9,13 +9,22 @@
 # warning and the servos saturate, as on the real robot. FEASIBILITY=stretch lets the firmware
 # stretch the timing instead (its default on the robot). The simulated servos are XM430-class in
 # torque too (3.5 N·m stall on the torque–speed line; `walker fil --stall-torque NM`, 0 = off).
-# Options: PLAN=plans/other.toml bash scripts/walk.sh; MODELS="tlipfm" for one model only.
+# The simulated robot is MuJoCo 3.17 in full dynamics (host/src/sim/mujoco.rs): it can tip, slip
+# and fall by itself; each run also renders a video of the walk (out/fil-MODEL/walk.mp4).
+# Options: PLAN=plans/other.toml bash scripts/walk.sh; MODELS="tlipfm" for one model only;
+# VIDEO=0 skips the videos.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source scripts/setup.sh
 plan=${PLAN:-plans/table2.toml}
 models=${MODELS:-"lipm dlipm tlipfm"}
 feasibility=${FEASIBILITY:-off}
+
+video=${VIDEO:-1}
+if [ "$video" = 1 ]; then
+    echo "== the renderer (ffmpeg, EGL, PyPI mujoco==3.17.0 in .venv-render/)"
+    bash scripts/render-setup.sh >/dev/null
+fi
 
 echo "== building the firmware (board-qemu) and the host tools"
 cargo build --release --no-default-features --features board-qemu --bin qemu
@@ -26,8 +35,10 @@ runs=()
 for model in $models; do
     echo
     echo "== $plan with $model: firmware in QEMU against the simulated robot"
+    video_args=()
+    [ "$video" = 1 ] && video_args=(--video "out/fil-$model/walk.mp4")
     "$walker" fil --plan "$plan" --model "$model" --out "out/fil-$model" \
-        --firmware-args "feasibility=$feasibility"
+        --firmware-args "feasibility=$feasibility" "${video_args[@]}"
     runs+=("$model=out/fil-$model/walk.log")
 done
 

@@ -51,6 +51,12 @@ pub mod x_series {
     pub const RETURN_DELAY_TIME: Field = f(9, 1);
     /// Operating Mode (u8, EEPROM; 3 = position, 4 = extended position).
     pub const OPERATING_MODE: Field = f(11, 1);
+    /// PWM Limit (u16, EEPROM, 0..885 = 0..100 % duty; default 885).
+    pub const PWM_LIMIT: Field = f(36, 2);
+    /// Current Limit (u16, EEPROM, unit [`CURRENT_UNIT_MA`]; XM430-W350 default 1193).
+    pub const CURRENT_LIMIT: Field = f(38, 2);
+    /// Velocity Limit (u32, EEPROM, unit [`VELOCITY_UNIT_RPM`]; XM430-W350 default 200).
+    pub const VELOCITY_LIMIT: Field = f(44, 4);
     /// Torque Enable (u8; 1 = on, locks the EEPROM area).
     pub const TORQUE_ENABLE: Field = f(64, 1);
     /// LED (u8).
@@ -59,6 +65,16 @@ pub mod x_series {
     pub const STATUS_RETURN_LEVEL: Field = f(68, 1);
     /// Hardware Error Status (u8 bit field, read-only).
     pub const HARDWARE_ERROR_STATUS: Field = f(70, 1);
+    /// Position D Gain (u16; K_PD = value / 16; default 0).
+    pub const POSITION_D_GAIN: Field = f(80, 2);
+    /// Position I Gain (u16; K_PI = value / 65536; default 0).
+    pub const POSITION_I_GAIN: Field = f(82, 2);
+    /// Position P Gain (u16; K_PP = value / 128; XM430-W350 default 800).
+    pub const POSITION_P_GAIN: Field = f(84, 2);
+    /// Feedforward 2nd Gain (u16; K_FF2 = value / 4; default 0).
+    pub const FEEDFORWARD_2ND_GAIN: Field = f(88, 2);
+    /// Feedforward 1st Gain (u16; K_FF1 = value / 4; default 0).
+    pub const FEEDFORWARD_1ST_GAIN: Field = f(90, 2);
     /// Goal Velocity (i32, unit [`VELOCITY_UNIT_RPM`]).
     pub const GOAL_VELOCITY: Field = f(104, 4);
     /// Profile Acceleration (u32).
@@ -69,12 +85,16 @@ pub mod x_series {
     pub const GOAL_POSITION: Field = f(116, 4);
     /// Moving (u8, read-only).
     pub const MOVING: Field = f(122, 1);
+    /// Present PWM (i16, ±885 = ±100 % duty, read-only).
+    pub const PRESENT_PWM: Field = f(124, 2);
     /// Present Current (i16, unit [`CURRENT_UNIT_MA`], read-only).
     pub const PRESENT_CURRENT: Field = f(126, 2);
     /// Present Velocity (i32, unit [`VELOCITY_UNIT_RPM`], read-only).
     pub const PRESENT_VELOCITY: Field = f(128, 4);
     /// Present Position (i32, ticks, read-only).
     pub const PRESENT_POSITION: Field = f(132, 4);
+    /// Present Input Voltage (u16, unit 0.1 V, read-only).
+    pub const PRESENT_INPUT_VOLTAGE: Field = f(144, 2);
     /// Present Temperature (u8, °C, read-only).
     pub const PRESENT_TEMPERATURE: Field = f(146, 1);
 
@@ -88,6 +108,10 @@ pub mod x_series {
     pub const MODE_POSITION: u8 = 3;
     /// Operating Mode value for extended position control.
     pub const MODE_EXTENDED_POSITION: u8 = 4;
+    /// Full-scale PWM value (100 % duty) of PWM Limit, Goal PWM and Present PWM.
+    pub const PWM_FULL_SCALE: u16 = 885;
+    /// Profile Acceleration unit in rev/min² per LSB.
+    pub const ACCELERATION_UNIT_RPM2: f32 = 214.577;
     /// Velocity unit in rpm per LSB.
     pub const VELOCITY_UNIT_RPM: f32 = 0.229;
     /// Current unit in mA per LSB (XM430).

@@ -446,6 +446,9 @@ pub struct BeyondOptions {
     pub timeout: Duration,
     /// The simulator's servo torque model (`None`: unlimited torque).
     pub servo_torque: Option<ServoTorque>,
+    /// The simulated robot (physics, floor, pushes); seed and servo torque are set per run
+    /// from the fields above.
+    pub sim: SimConfig,
 }
 
 /// Walks the five variants and scores them; `progress(name)` before each run.
@@ -470,7 +473,7 @@ pub fn run(opts: &BeyondOptions, progress: impl Fn(&str)) -> Result<Vec<RunMetri
             seed: opts.seed,
             servo_speed_limit: XM430_SPEED_RAD_S,
             servo_torque: opts.servo_torque,
-            ..SimConfig::default()
+            ..opts.sim.clone()
         };
         let fopts = FilOptions {
             elf: opts.elf.clone(),
@@ -714,7 +717,9 @@ mod tests {
         // The simulator's header, two rows; joint 4 (ID 4, left knee) loaded and at its bound.
         let row = |t: f64, lim: u16| {
             let mut s = format!("{t}");
-            for _ in 1..crate::sim::truth::HEADER.split(',').count() - 25 {
+            let cols: Vec<&str> = crate::sim::truth::HEADER.split(',').collect();
+            let lim_at = cols.iter().position(|c| *c == "tq_limited").unwrap();
+            for _ in 1..lim_at - 24 {
                 s.push_str(",0");
             }
             for j in 1..=12 {
@@ -724,6 +729,9 @@ mod tests {
                 s.push_str(&format!(",{}", if j == 4 { 1.5 } else { -0.2 }));
             }
             s.push_str(&format!(",{lim}"));
+            for _ in lim_at + 1..cols.len() {
+                s.push_str(",0");
+            }
             s
         };
         let text = format!(

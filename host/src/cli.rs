@@ -181,6 +181,20 @@ pub struct Subcommand {
     pub run: fn(&mut Args) -> Result<(), CliError>,
 }
 
+/// The simulated robot's physics options shared by `simulate`, `fil` and `beyond` (usage text).
+macro_rules! physics_options {
+    () => {
+        "\n  --physics        mujoco (default: full dynamics) | kinematic (idealised: stance sole bolted down)\
+\n  --push LIST      pushes on the torso, T:IMPULSE_NS:DIRECTION_DEG[,…] (0° forward, 90° left), e.g. 3.2:1.5:0\
+\n  --floor-friction sole–floor friction coefficient (default 1.0)\
+\n  --floor-steps MM floor of square 5 cm tiles with random heights within ±MM (seeded; level under the start)\
+\n  --slope DEG      floor slope, uphill forward\
+\n  --payload KG     extra mass on the torso, 15 cm above the pelvis\
+\n  --sensor-latency-ms MS  latency of the foot boards' and the IMU's samples\
+\n  --servo-voltage V       servo supply voltage (default 12; XM430-W350 datasheet at 12 V)"
+    };
+}
+
 /// Every subcommand, in the order of the help text.
 pub const SUBCOMMANDS: &[Subcommand] = &[
     Subcommand {
@@ -221,38 +235,43 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
     Subcommand {
         name: "simulate",
         summary: "serve the simulated robot on the servo bus (TCP) for the firmware",
-        usage: "walker simulate [--port 5760] [--lockstep-port 5761] [--connect] [--seed N] [--stall-torque NM] [--truth out/truth.csv] [--timeout S]\n\
+        usage: concat!("walker simulate [--port 5760] [--lockstep-port 5761] [--connect] [--seed N] [--stall-torque NM] [--truth out/truth.csv] [--timeout S]\n\
                 \n  --port           bus TCP port on 127.0.0.1 (QEMU -serial tcp:127.0.0.1:PORT)\
                 \n  --lockstep-port  lock-step time channel (default: free-running)\
                 \n  --connect        connect to a listening QEMU instead of listening\
                 \n  --seed           seed of the noise and fault streams\
                 \n  --stall-torque   servo stall torque, N·m (default 3.5, XM430-class; 0 = unlimited torque)\
                 \n  --truth          write the ground truth (true ZMP, …) to this CSV (for `walker report --truth`)\
-                \n  --timeout        seconds to wait for the firmware (default 30)",
+                \n  --timeout        seconds to wait for the firmware (default 30)\
+                \n  physics options:", physics_options!()),
         run: run_simulate,
     },
     Subcommand {
         name: "fil",
         summary: "firmware-in-the-loop: the firmware in QEMU against the simulated robot",
-        usage: "walker fil [--plan plans/table2.toml] [--model lipm|dlipm|tlipfm] [--out out/fil]\n\
+        usage: concat!("walker fil [--plan plans/table2.toml] [--model lipm|dlipm|tlipfm] [--out out/fil]\n\
                 [--elf target/thumbv7em-none-eabihf/release/qemu] [--machine mps2-an500|mps2-an386]\n\
                 [--seed N] [--stall-torque NM] [--p-drop P] [--p-corrupt P] [--dead ID,ID] [--fall-at S]\n\
                 [--tau-constant NM] [--tau-random NM] [--firmware-args 'k=v ...'] [--timeout S]\n\
+                [--video OUT/walk.mp4] [physics options]\n\
          Runs the firmware ELF in QEMU in lock-step with the simulated robot, captures its log\n\
-         to OUT/walk.log and writes the report to OUT/report. Exit code 3: the firmware failed.",
+         to OUT/walk.log and writes the report to OUT/report. Exit code 3: the firmware failed.\n\
+         --video renders the walk (MuJoCo, headless; needs `bash scripts/render-setup.sh`).\n\
+         physics options:", physics_options!()),
         run: run_fil,
     },
     Subcommand {
         name: "beyond",
         summary: "LIPM, DLIPM, TLIPFM, + whole-body compensation, + feedback: side by side in the FIL walk",
-        usage: "walker beyond [--plan plans/table2.toml] [--out out/beyond] [--elf target/thumbv7em-none-eabihf/release/qemu]\n\
+        usage: concat!("walker beyond [--plan plans/table2.toml] [--out out/beyond] [--elf target/thumbv7em-none-eabihf/release/qemu]\n\
                 [--machine mps2-an500] [--seed N] [--stall-torque NM] [--firmware-args 'k=v ...'] [--feedback-args 'stab_ki=2 ...'] [--timeout S]\n\
          Walks the plan five times in the firmware-in-the-loop setup (XM430-class servos: speed\n\
          limit 4.8 rad/s, stall torque 3.5 N·m unless --stall-torque, 0 = unlimited) and prints per\n\
          run the true and measured ZMP errors, the time the true ZMP is inside the support polygon\n\
          (5 mm margin), distance walked vs planned, peak joint speeds and motor torques; writes\n\
          OUT/beyond.md, OUT/beyond.csv and OUT/<run>/.\n\
-         --firmware-args go to every run (e.g. feasibility=off), --feedback-args to the feedback run.",
+         --firmware-args go to every run (e.g. feasibility=off), --feedback-args to the feedback run.\n\
+         physics options:", physics_options!()),
         run: run_beyond,
     },
 ];
@@ -564,6 +583,66 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
     Ok(())
 }
 
+/// Applies the shared physics options to `cfg`.
+fn physics_args(a: &mut Args, cfg: &mut crate::sim::SimConfig) -> Result<(), CliError> {
+    let cmd = a.cmd;
+    let bad = |m: String| CliError::usage(format!("walker {cmd}: {m}"));
+    if let Some(p) = a.value("--physics")? {
+        cfg.physics = match p.as_str() {
+            "mujoco" => crate::sim::PhysicsModel::MuJoCo,
+            "kinematic" => crate::sim::PhysicsModel::Kinematic,
+            other => {
+                return Err(bad(format!(
+                    "--physics: mujoco or kinematic (got {other:?})"
+                )))
+            }
+        };
+    }
+    if let Some(list) = a.value("--push")? {
+        for item in list.split(',').filter(|s| !s.trim().is_empty()) {
+            cfg.pushes.push(
+                crate::sim::Push::parse(item.trim()).map_err(|e| bad(format!("--push: {e}")))?,
+            );
+        }
+    }
+    let finite = |name: &str, v: Option<f64>| -> Result<Option<f64>, CliError> {
+        match v {
+            Some(x) if !x.is_finite() => Err(bad(format!("{name} must be a finite number"))),
+            other => Ok(other),
+        }
+    };
+    if let Some(v) = finite("--floor-friction", a.parsed("--floor-friction")?)? {
+        cfg.env.floor_friction = v;
+    }
+    if let Some(v) = finite("--floor-steps", a.parsed("--floor-steps")?)? {
+        cfg.env.step_height_m = v * 1e-3;
+    }
+    if let Some(v) = finite("--slope", a.parsed("--slope")?)? {
+        cfg.env.slope_deg = v;
+    }
+    if let Some(v) = finite("--payload", a.parsed("--payload")?)? {
+        cfg.env.payload_kg = v;
+    }
+    if let Some(v) = finite("--sensor-latency-ms", a.parsed("--sensor-latency-ms")?)? {
+        if !(0.0..=1000.0).contains(&v) {
+            return Err(bad(format!(
+                "--sensor-latency-ms must be in 0..=1000 (got {v})"
+            )));
+        }
+        cfg.noise.latency_us = (v * 1e3).round() as u64;
+    }
+    if let Some(v) = finite("--servo-voltage", a.parsed("--servo-voltage")?)? {
+        cfg.xservo.supply_voltage = v;
+    }
+    if let Err(e) = cfg.env.validate() {
+        return Err(bad(e));
+    }
+    if !cfg.xservo.is_valid() {
+        return Err(bad("--servo-voltage must be > 0".into()));
+    }
+    Ok(())
+}
+
 /// `--stall-torque NM`: the simulated servos' torque model (default XM430-class, 0 = none).
 fn stall_torque_arg(a: &mut Args) -> Result<Option<crate::sim::ServoTorque>, CliError> {
     let xm430 = crate::sim::ServoTorque::XM430;
@@ -581,6 +660,15 @@ fn stall_torque_arg(a: &mut Args) -> Result<Option<crate::sim::ServoTorque>, Cli
     }
 }
 
+/// `--stall-torque` reaches the MuJoCo servo model too (0 = unlimited keeps its datasheet value).
+fn apply_stall_torque(cfg: &mut crate::sim::SimConfig) {
+    if let Some(t) = cfg.servo_torque {
+        if t.stall_torque != crate::sim::ServoTorque::XM430.stall_torque {
+            cfg.xservo.stall_torque = t.stall_torque;
+        }
+    }
+}
+
 fn run_simulate(a: &mut Args) -> Result<(), CliError> {
     let port: Option<u16> = a.parsed("--port")?;
     let lockstep: Option<u16> = a.parsed("--lockstep-port")?;
@@ -589,11 +677,13 @@ fn run_simulate(a: &mut Args) -> Result<(), CliError> {
     let servo_torque = stall_torque_arg(a)?;
     let truth = a.value("--truth")?.map(PathBuf::from);
     let timeout: Option<f64> = a.parsed("--timeout")?;
-    a.finish()?;
     let mut cfg = crate::sim::SimConfig {
         servo_torque,
         ..Default::default()
     };
+    apply_stall_torque(&mut cfg);
+    physics_args(a, &mut cfg)?;
+    a.finish()?;
     if let Some(p) = port {
         cfg.port = p;
     }
@@ -643,8 +733,15 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
     let extra = split(a.value("--firmware-args")?);
     let feedback = split(a.value("--feedback-args")?);
     let (spec, plan_name) = plan_arg(a)?;
+    let mut sim = crate::sim::SimConfig {
+        servo_torque,
+        ..Default::default()
+    };
+    apply_stall_torque(&mut sim);
+    physics_args(a, &mut sim)?;
     a.finish()?;
     let opts = crate::beyond::BeyondOptions {
+        sim,
         elf,
         spec,
         out_dir: out.clone(),
@@ -710,15 +807,27 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
     let machine = a.value("--machine")?.unwrap_or_else(|| "mps2-an500".into());
     let timeout: Option<f64> = a.parsed("--timeout")?;
     let tokens = a.value("--firmware-args")?;
+    let video = a.value("--video")?.map(PathBuf::from);
     let (mut spec, plan_name) = plan_arg(a)?;
-    a.finish()?;
-    if let Some(m) = model {
-        spec.model = model_name("fil", &m)?;
-    }
     let mut sim = crate::sim::SimConfig {
         servo_torque,
         ..Default::default()
     };
+    apply_stall_torque(&mut sim);
+    physics_args(a, &mut sim)?;
+    a.finish()?;
+    if let Some(m) = model {
+        spec.model = model_name("fil", &m)?;
+    }
+    if video.is_some() && sim.physics != crate::sim::PhysicsModel::MuJoCo {
+        return Err(CliError::usage(
+            "walker fil: --video needs the MuJoCo robot (--physics mujoco)",
+        ));
+    }
+    if video.is_some() {
+        sim.model_out = Some(out.join("model.xml"));
+        sim.qpos_out = Some(out.join("qpos.csv"));
+    }
     if let Some(s) = seed {
         sim.seed = s;
     }
@@ -803,7 +912,16 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
         println!("\nmeasured − true (simulator) ZMP:\n");
         print!("{}", report::stats_table(ts));
     }
+    if let Ok(w) = crate::fil::walk_figures(&r.truth, &spec) {
+        println!("\nin the physics: {}", w.line());
+    }
     println!("\nreport: {}", out.join("report").display());
+    if let Some(v) = &video {
+        eprintln!("  rendering {} …", v.display());
+        crate::video::render(&out.join("model.xml"), &out.join("qpos.csv"), v)
+            .map_err(|e| CliError::failed(format!("walker fil: --video: {e}")))?;
+        println!("video: {}", v.display());
+    }
     match r.exit_code {
         Some(0) => Ok(()),
         code => Err(CliError {

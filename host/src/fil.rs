@@ -221,3 +221,91 @@ fn which(name: &str) -> Option<PathBuf> {
 fn is_exe(p: &Path) -> bool {
     p.is_file()
 }
+
+/// What the physics says of a walk: did the robot fall, how far did it go, how straight.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WalkFigures {
+    /// When the truth first marked a fall, s.
+    pub fell_at: Option<f64>,
+    /// Pelvis travel along x from the first to the last truth row, m.
+    pub walked: f64,
+    /// The plan's CoM travel along x, m.
+    pub planned: f64,
+    /// Pelvis yaw at the end minus at the start, rad.
+    pub heading_drift: f64,
+    /// Largest torso tilt from the vertical, rad.
+    pub max_tilt: f64,
+}
+
+impl WalkFigures {
+    /// One line for the terminal and the reports.
+    pub fn line(&self) -> String {
+        format!(
+            "{}; walked {:.3} m of {:.3} m planned ({:.0} %); heading drift {:+.1}°; torso tilt up to {:.1}°",
+            self.fell_at
+                .map_or("no fall".to_string(), |t| format!("FELL at {t:.2} s")),
+            self.walked,
+            self.planned,
+            100.0 * self.walked / self.planned,
+            self.heading_drift.to_degrees(),
+            self.max_tilt.to_degrees()
+        )
+    }
+}
+
+/// Reads the walk's figures off the simulator's truth CSV and the plan.
+pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String> {
+    let text = std::fs::read_to_string(truth).map_err(|e| format!("{}: {e}", truth.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let col = |n: &str| {
+        header
+            .iter()
+            .position(|h| *h == n)
+            .ok_or_else(|| format!("{}: no `{n}` column", truth.display()))
+    };
+    let (ct, cx, cyaw, cf, ca) = (
+        col("t_s")?,
+        col("pelvis_x")?,
+        col("pelvis_yaw")?,
+        col("falling")?,
+        col("fall_angle")?,
+    );
+    let mut first: Option<(f64, f64)> = None;
+    let mut last = (0.0, 0.0);
+    let mut fell_at = None;
+    let mut max_tilt: f64 = 0.0;
+    for line in lines {
+        let v: Vec<&str> = line.split(',').collect();
+        let num = |i: usize| {
+            v.get(i)
+                .and_then(|s| s.parse::<f64>().ok())
+                .unwrap_or(f64::NAN)
+        };
+        let (x, yaw) = (num(cx), num(cyaw));
+        first.get_or_insert((x, yaw));
+        last = (x, yaw);
+        if fell_at.is_none() && v.get(cf) == Some(&"1") {
+            fell_at = Some(num(ct));
+        }
+        let a = num(ca);
+        if a.is_finite() {
+            max_tilt = max_tilt.max(a);
+        }
+    }
+    let first = first.ok_or_else(|| format!("{}: no rows", truth.display()))?;
+    let robot = gait_core::Robot::reference();
+    let mut s = spec.sampler(&robot, spec.dt).map_err(|e| e.to_string())?;
+    let start = s.next(0.0).com[0];
+    let mut end = start;
+    while !s.is_done() {
+        end = s.next(0.0).com[0];
+    }
+    Ok(WalkFigures {
+        fell_at,
+        walked: last.0 - first.0,
+        planned: end - start,
+        heading_drift: last.1 - first.1,
+        max_tilt,
+    })
+}

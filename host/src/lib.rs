@@ -9,3 +9,4 @@ pub mod planfile;
 pub mod plot;
 pub mod report;
 pub mod sim;
+pub mod video;

@@ -182,6 +182,21 @@ fn a_fall_stops_the_walk_and_turns_torque_off() {
 }
 
 // ---- The feedback stabilizer under disturbances (issue 7) ----
+//
+// These run on the idealised kinematic robot (stance sole bolted down): they check that the
+// firmware's compensation and feedback paths stay bounded (no clamped or non-finite target, the
+// commanded CoM in the walk's area), not how well the robot walks. On the MuJoCo robot the
+// open-loop whole-body compensation + stabilizer of issue 7 falls within seconds (exit 13), as
+// the full-dynamics issue predicted; making it walk there is the closed-loop issue's work.
+
+/// The idealised kinematic robot, for the bounded-feedback tests below.
+fn idealised(seed: u64) -> SimConfig {
+    SimConfig {
+        seed,
+        physics: walker_host::sim::PhysicsModel::Kinematic,
+        ..SimConfig::default()
+    }
+}
 
 /// Whole-body compensation + the stabilizer (default gains), 4 steps.
 const STAB: &[&str] = &["comp=wholebody", "stab=on"];
@@ -227,10 +242,7 @@ fn assert_bounded(name: &str, r: &FilResult, log: &DecodedLog) {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn stabilizer_survives_a_push() {
-    let mut sim = SimConfig {
-        seed: 21,
-        ..SimConfig::default()
-    };
+    let mut sim = idealised(21);
     // A sudden forward pitch torque on the upper body for 0.3 s in the middle of the walk.
     sim.disturbance.constant_nm = 0.8;
     sim.disturbance.start_s = 4.0;
@@ -247,10 +259,7 @@ fn stabilizer_survives_a_push() {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn stabilizer_survives_sensor_bias_and_noise() {
-    let mut sim = SimConfig {
-        seed: 22,
-        ..SimConfig::default()
-    };
+    let mut sim = idealised(22);
     sim.noise.gyro_bias_rad_s = [0.05, -0.05, 0.02];
     sim.noise.accel_bias_m_s2 = [0.3, -0.2, 0.0];
     sim.noise.gyro_std_rad_s = 0.02;
@@ -262,10 +271,7 @@ fn stabilizer_survives_sensor_bias_and_noise() {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn stabilizer_survives_five_percent_dropped_packets() {
-    let mut sim = SimConfig {
-        seed: 23,
-        ..SimConfig::default()
-    };
+    let mut sim = idealised(23);
     sim.faults.p_drop = 0.05;
     let (r, log) = fil("stab-drops", short_walk(4), sim, STAB);
     assert!(r.sim.bus.dropped > 10, "{:?}", r.sim.bus);
@@ -274,13 +280,14 @@ fn stabilizer_survives_five_percent_dropped_packets() {
 
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
-fn compensation_and_feedback_meet_the_goal_under_xm430_limits() {
+fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_model() {
     // Issue 7's "done when": the Table 2 walk (14 steps, the firmware's default timing) in the
     // simulator with XM430-class speed and torque limits; TLIPFM + whole-body compensation +
     // feedback tracks the reference with a true mean |e| below 11 mm sagittal and 14 mm lateral,
     // and laterally better than TLIPFM alone on the same setup.
+    // Idealised kinematic robot: see the note above the stabilizer tests.
     use walker_host::beyond::{firmware_config, meets_goal, score, variants};
-    let sim = SimConfig::default();
+    let sim = idealised(0);
     assert_eq!(
         sim.servo_torque,
         Some(walker_host::sim::ServoTorque::XM430),
@@ -335,4 +342,52 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits() {
         full.true_err[1].mean,
         plain.true_err[1].mean
     );
+}
+
+// ---- The MuJoCo robot (full dynamics) ----
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
+    // The paper's open-loop TLIPFM walk, 14 steps at the paper's timing, on the MuJoCo robot
+    // with XM430-W350 servo models. Figures when this test was written (seed 0): no fall,
+    // walked 0.255 of 0.260 m, heading drift −2.9°, torso tilt ≤ 9.1°, measured − reference
+    // mean |e| 10.3 mm sagittal / 28.2 mm lateral. The bounds leave room for tuning, not for
+    // a fall or a walk that goes nowhere.
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mujoco-table2");
+    let sim = SimConfig {
+        model_out: Some(out.join("model.xml")),
+        qpos_out: Some(out.join("qpos.csv")),
+        ..SimConfig::default()
+    };
+    let spec = WalkSpec::default();
+    let (r, log) = fil("mujoco-table2", spec.clone(), sim, &["feasibility=off"]);
+    assert_eq!(r.exit_code, Some(0));
+    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
+    let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
+    assert_eq!(w.fell_at, None, "{}", w.line());
+    assert!(w.walked > 0.9 * w.planned, "{}", w.line());
+    assert!(w.heading_drift.abs() < 5f64.to_radians(), "{}", w.line());
+    assert!(w.max_tilt < 0.35, "{}", w.line());
+    let stats = walker_host::report::run(
+        &walker_host::report::ReportOptions {
+            log: r.log.clone(),
+            out_dir: out.join("report"),
+            truth: Some(r.truth.clone()),
+            spec: spec.clone(),
+            plan_name: "Table 2".into(),
+        },
+        &gait_core::Robot::reference(),
+    )
+    .unwrap()
+    .stats;
+    let (ex, ey) = (stats.x.mean_abs, stats.y.mean_abs);
+    assert!(
+        ex < 0.02 && ey < 0.04,
+        "measured − reference mean |e| {ex} / {ey} m"
+    );
+    // The whole walk rendered headless (the test command installs the renderer).
+    let video = out.join("walk.mp4");
+    walker_host::video::render(&out.join("model.xml"), &out.join("qpos.csv"), &video).unwrap();
+    assert!(std::fs::metadata(&video).unwrap().len() > 50_000);
 }

@@ -12,9 +12,20 @@ use gait_core::kinematics::{leg_points, Pose};
 use gait_core::{Robot, Side};
 use walker_host::sim::forces::{center_of_pressure, distribute, FootContact};
 use walker_host::sim::zmp::{whole_body_zmp, MassPoint};
-use walker_host::sim::{spawn, FaultConfig, ServoTorque, SimConfig, Simulator, Support};
+use walker_host::sim::{
+    spawn, FaultConfig, PhysicsModel, ServoTorque, SimConfig, Simulator, Support,
+};
 
 const G: f64 = 9.80665;
+
+/// These tests check the idealised kinematic model (exact, hand-checkable numbers) and the bus;
+/// the MuJoCo robot's physics is tested in `tests/mujoco.rs`.
+fn kin() -> SimConfig {
+    SimConfig {
+        physics: PhysicsModel::Kinematic,
+        ..SimConfig::default()
+    }
+}
 const TOTAL_MASS: f64 = 4.95;
 /// Σ mᵢ zᵢ at the zero pose, by hand: upper body 3.05 kg at 0.23 + 0.09 = 0.32 m; per leg
 /// thigh 0.20 kg at 0.18 m, calf 0.50 kg at 0.08 m, sole 0.25 kg at 0.015 m.
@@ -78,7 +89,7 @@ fn horizontal_acceleration_shifts_zmp() {
 
 #[test]
 fn simulated_static_robot_zmp_and_forces() {
-    let mut sim = Simulator::new(&SimConfig::default()).unwrap();
+    let mut sim = Simulator::new(&kin()).unwrap();
     sim.advance_to(100_000).unwrap();
     let t = *sim.physics.truth();
     assert_eq!(t.support, Support::Double);
@@ -122,7 +133,7 @@ fn static_crouch_zmp_equals_com_projection() {
     q[10] = -0.2;
     let cfg = SimConfig {
         initial_q: q,
-        ..SimConfig::default()
+        ..kin()
     };
     let mut sim = Simulator::new(&cfg).unwrap();
     sim.advance_to(50_000).unwrap();
@@ -171,7 +182,7 @@ fn force_distribution_matches_zmp_and_weight() {
 
 #[test]
 fn disturbance_torque_shifts_zmp() {
-    let mut cfg = SimConfig::default();
+    let mut cfg = kin();
     cfg.disturbance.constant_nm = 0.5;
     cfg.fall.enabled = false;
     let mut sim = Simulator::new(&cfg).unwrap();
@@ -186,7 +197,7 @@ fn disturbance_torque_shifts_zmp() {
 
 #[test]
 fn forced_fall_tilts_imu_and_unloads_feet() {
-    let mut cfg = SimConfig::default();
+    let mut cfg = kin();
     cfg.fall.forced_at_s = Some(0.1);
     let mut sim = Simulator::new(&cfg).unwrap();
     sim.advance_to(3_000_000).unwrap();
@@ -207,7 +218,7 @@ fn truth_csv_is_written() {
     let cfg = SimConfig {
         log_truth: Some(path.clone()),
         log_every_us: 10_000,
-        ..SimConfig::default()
+        ..kin()
     };
     let mut sim = Simulator::new(&cfg).unwrap();
     sim.advance_to(1_000_000).unwrap();
@@ -267,11 +278,11 @@ fn fault_rates_and_dead_device() {
             p_corrupt: 0.05,
             dead_ids: vec![111],
         },
-        ..SimConfig::default()
+        ..kin()
     };
     let mut sim = Simulator::new(&cfg).unwrap();
     let clean = {
-        let mut s = Simulator::new(&SimConfig::default()).unwrap();
+        let mut s = Simulator::new(&kin()).unwrap();
         s.feed(&ping(1)).remove(0)
     };
     let (mut dropped, mut corrupted) = (0, 0);
@@ -306,7 +317,7 @@ fn fault_rates_and_dead_device() {
             dead_ids: vec![111],
             ..FaultConfig::default()
         },
-        ..SimConfig::default()
+        ..kin()
     })
     .unwrap();
     assert_eq!(sim.feed(&ping(111)), vec![Vec::<u8>::new()]);
@@ -327,10 +338,7 @@ fn fault_rates_and_dead_device() {
 #[test]
 fn in_process_determinism() {
     let run = |seed: u64| {
-        let mut cfg = SimConfig {
-            seed,
-            ..SimConfig::default()
-        };
+        let mut cfg = SimConfig { seed, ..kin() };
         cfg.faults.p_drop = 0.2;
         cfg.faults.p_corrupt = 0.2;
         cfg.noise.force_std_n = 0.5;
@@ -420,7 +428,7 @@ fn i32_of(b: &[u8]) -> i32 {
 
 #[test]
 fn tcp_bus_conversation_with_lockstep() {
-    let (mut c, h) = Client::connect(SimConfig::default());
+    let (mut c, h) = Client::connect(kin());
     c.time(0);
     // PING every device.
     let expect: Vec<(u8, u16)> = (1..=12)
@@ -558,10 +566,7 @@ fn tcp_bus_conversation_with_lockstep() {
 }
 
 fn tcp_session(seed: u64) -> Vec<u8> {
-    let mut cfg = SimConfig {
-        seed,
-        ..SimConfig::default()
-    };
+    let mut cfg = SimConfig { seed, ..kin() };
     cfg.faults.p_drop = 0.1;
     cfg.faults.p_corrupt = 0.1;
     cfg.noise.force_std_n = 0.2;
@@ -638,7 +643,7 @@ fn lateral_sway_zmp_follows_cart_table() {
     // Parallelogram sway: hip roll θ, ankle roll −θ on both legs: the pelvis stays upright and
     // moves sideways by ≈ 0.2·sin θ. Cart-table check: ZMP_y ≈ y_com − (z/g)·ÿ_com.
     // Goals every 10 ms.
-    let mut sim = Simulator::new(&SimConfig::default()).unwrap();
+    let mut sim = Simulator::new(&kin()).unwrap();
     torque_on(&mut sim);
     let mut rows = Vec::new();
     for k in 0..2000u64 {
@@ -691,7 +696,7 @@ fn lateral_sway_zmp_follows_cart_table() {
 #[test]
 fn stepping_switches_support_without_jumps() {
     // Shift the weight over the right foot, lift the left foot, put it down, shift back.
-    let mut cfg = SimConfig::default();
+    let mut cfg = kin();
     cfg.fall.enabled = false;
     let mut sim = Simulator::new(&cfg).unwrap();
     torque_on(&mut sim);
@@ -740,7 +745,7 @@ fn stepping_switches_support_without_jumps() {
 #[test]
 fn zmp_outside_support_starts_a_fall() {
     // Lift the left leg without shifting the weight: the CoM is outside the right sole.
-    let mut sim = Simulator::new(&SimConfig::default()).unwrap();
+    let mut sim = Simulator::new(&kin()).unwrap();
     torque_on(&mut sim);
     // Ramp the goals so that the three pitch joints move together (the foot stays flat).
     for k in 1..=20u64 {
@@ -793,11 +798,7 @@ fn read_statuses(bus: &mut TcpStream, count: usize) -> Vec<(u8, u8, Vec<u8>)> {
 
 #[test]
 fn free_running_follows_wall_clock() {
-    let h = spawn(SimConfig {
-        port: 0,
-        ..SimConfig::default()
-    })
-    .unwrap();
+    let h = spawn(SimConfig { port: 0, ..kin() }).unwrap();
     let mut bus = TcpStream::connect(h.bus_addr()).unwrap();
     bus.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
     bus.write_all(&ping(12)).unwrap();
@@ -848,7 +849,7 @@ fn connect_mode_reaches_a_listening_master() {
     let h = spawn(SimConfig {
         port,
         connect: true,
-        ..SimConfig::default()
+        ..kin()
     })
     .unwrap();
     let (mut bus, _) = l.accept().unwrap();
@@ -865,11 +866,7 @@ fn connect_mode_reaches_a_listening_master() {
 
 #[test]
 fn stop_while_waiting_for_a_connection() {
-    let h = spawn(SimConfig {
-        port: 0,
-        ..SimConfig::default()
-    })
-    .unwrap();
+    let h = spawn(SimConfig { port: 0, ..kin() }).unwrap();
     h.stop();
     assert!(matches!(
         h.join(),
@@ -887,7 +884,7 @@ fn min_jerk(u: f64) -> f64 {
 fn servo_follows_a_goal_step_smoothly() {
     // A 100-tick step on the left hip yaw: the critically damped second-order response
     // Δ·(1 − (1 + ωt)·e^(−ωt)), starting from rest (no velocity jump), |q̈| ≤ ω²·Δ.
-    let cfg = SimConfig::default();
+    let cfg = kin();
     let w = std::f64::consts::TAU * cfg.servo_frequency_hz;
     let mut sim = Simulator::new(&cfg).unwrap();
     torque_on(&mut sim);
@@ -900,7 +897,11 @@ fn servo_follows_a_goal_step_smoothly() {
         sim.advance_to(k * 1000).unwrap();
         let t = k as f64 * 1e-3;
         let expect = d * (1.0 - (1.0 + w * t) * (-w * t).exp());
-        let (qj, vj, aj) = (sim.physics.q[0], sim.physics.qd[0], sim.physics.qdd[0]);
+        let (qj, vj, aj) = (
+            sim.physics.q()[0],
+            sim.physics.qd()[0],
+            sim.physics.kinematic().unwrap().qdd[0],
+        );
         assert!((qj - expect).abs() < 0.01 * d, "t {t}: {qj} vs {expect}");
         assert!(vj.abs() <= cfg.servo_speed_limit + 1e-12);
         assert!(aj.abs() <= w * w * d * 1.0001, "t {t}: q̈ {aj}");
@@ -911,7 +912,7 @@ fn servo_follows_a_goal_step_smoothly() {
         );
         prev_v = vj;
     }
-    assert!((sim.physics.q[0] - d).abs() < 1e-3 * d);
+    assert!((sim.physics.q()[0] - d).abs() < 1e-3 * d);
 }
 
 #[test]
@@ -921,7 +922,7 @@ fn tick_staircase_crouch_keeps_zmp_near_com() {
     // the pelvis pitch follows a ±1-tick (1.5 mrad) staircase of rounding errors. A first-order
     // servo lag turned every goal change into a velocity jump and the true ZMP swung by ±0.27 m
     // at the tick rate; a continuous-velocity servo leaves a ripple of about a centimetre.
-    let cfg = SimConfig::default();
+    let cfg = kin();
     let mut sim = Simulator::new(&cfg).unwrap();
     torque_on(&mut sim);
     let knee = walker_host::sim::ticks_to_rad(2521);
@@ -1026,7 +1027,7 @@ fn static_torques_match_moment_balance() {
     // Standing still on the right foot, each motor carries the gravity moment of the links on
     // the far side of its joint from the ground, summed here by hand from the mass points:
     // |τ| = |Σ mᵢ·g·(lever arm of mᵢ about the joint axis)|.
-    let mut cfg = SimConfig::default();
+    let mut cfg = kin();
     cfg.fall.enabled = false;
     let sim = standing_on_right_foot(&cfg);
     let tr = *sim.physics.truth();
@@ -1048,7 +1049,7 @@ fn static_torques_match_moment_balance() {
         tr.pelvis_rpy[2],
     );
     assert!(tr.pelvis_rpy[0].abs() < 0.01 && tr.pelvis_rpy[1].abs() < 0.01);
-    let q = sim.physics.q;
+    let q = sim.physics.q();
     let left = leg_points(&robot, Side::Left, &pelvis, &q[..6].try_into().unwrap());
     let right = leg_points(&robot, Side::Right, &pelvis, &q[6..].try_into().unwrap());
     let upper = [
@@ -1106,11 +1107,11 @@ fn weak_servos_sag_under_load() {
     // is off the ground, so it sits at its bound and the joint sags away from its goal until the
     // pelvis has rolled far enough for the lifted foot to land again; XM430-class servos hold
     // the one-foot stance.
-    let mut cfg = SimConfig::default();
+    let mut cfg = kin();
     cfg.fall.enabled = false;
     let strong = standing_on_right_foot(&cfg);
     let goal = sway_and_lift(3.5);
-    assert!((strong.physics.q[7] - goal[7]).abs() < 0.01);
+    assert!((strong.physics.q()[7] - goal[7]).abs() < 0.01);
     assert_eq!(strong.physics.truth().support, Support::Right);
     let weak_servo = ServoTorque {
         stall_torque: 1.0,
@@ -1135,7 +1136,7 @@ fn weak_servos_sag_under_load() {
                 "joint {j}: {t} not in [{lo}, {hi}]"
             );
         }
-        worst = worst.max((weak.physics.q[7] - sway_and_lift(k as f64 * 1e-3)[7]).abs());
+        worst = worst.max((weak.physics.q()[7] - sway_and_lift(k as f64 * 1e-3)[7]).abs());
         hip_at_bound |= tr.torque_limited & (1 << 7) != 0;
     }
     assert!(hip_at_bound, "the stance hip roll never reached its bound");
@@ -1153,7 +1154,7 @@ fn slack_torque_limits_change_nothing() {
     // own, step for step, as without the torque model.
     let a_cfg = SimConfig {
         servo_torque: None,
-        ..SimConfig::default()
+        ..kin()
     };
     let mut b_cfg = a_cfg.clone();
     b_cfg.servo_torque = Some(ServoTorque {
@@ -1170,7 +1171,7 @@ fn slack_torque_limits_change_nothing() {
     drive(&mut a, 0.0, 2.5, sway_and_lift);
     drive(&mut b, 0.0, 2.5, sway_and_lift);
     for j in 0..12 {
-        assert!((a.physics.q[j] - b.physics.q[j]).abs() < 1e-9);
+        assert!((a.physics.q()[j] - b.physics.q()[j]).abs() < 1e-9);
     }
     assert!(a.physics.truth().joint_torque.iter().all(|t| t.is_nan()));
     assert!(b.physics.truth().joint_torque.iter().all(|t| t.is_finite()));
@@ -1181,7 +1182,7 @@ fn a_fast_swing_is_torque_limited_and_keeps_to_the_motor_line() {
     // Standing on the right foot, the left knee is asked to jump 0.6 rad: the loop's wish needs
     // more than the motor gives, so the knee follows slower than without the limit, and the
     // applied torque stays inside the torque–speed range.
-    let mut cfg = SimConfig::default();
+    let mut cfg = kin();
     cfg.fall.enabled = false;
     let mut limited = standing_on_right_foot(&cfg);
     cfg.servo_torque = None;
@@ -1205,7 +1206,7 @@ fn a_fast_swing_is_torque_limited_and_keeps_to_the_motor_line() {
         );
         assert!(tr.joint_speed[3].abs() <= model.no_load_speed + 1e-9);
         saw_limit |= tr.torque_limited & (1 << 3) != 0;
-        lag = lag.max(free.physics.q[3] - limited.physics.q[3]);
+        lag = lag.max(free.physics.q()[3] - limited.physics.q()[3]);
     }
     assert!(saw_limit, "the knee never reached its torque bound");
     assert!(
@@ -1220,7 +1221,7 @@ fn swinging_knee_torque_is_inertia_times_acceleration_plus_gravity() {
     // torque must be a rigid pendulum's about the knee axis, derived here from the link points
     // alone: τ = (Σ m·|a × (r − p)|² + I_a)·q̈ + a·Σ (r − p) × m·g·ẑ over the calf and sole
     // masses (p the knee, a its axis oriented so that +q̈ turns the calf about +a).
-    let mut cfg = SimConfig::default();
+    let mut cfg = kin();
     cfg.fall.enabled = false;
     let mut sim = standing_on_right_foot(&cfg);
     let robot = Robot::reference();
@@ -1258,7 +1259,7 @@ fn swinging_knee_torque_is_inertia_times_acceleration_plus_gravity() {
             tr.pelvis_rpy[1],
             tr.pelvis_rpy[2],
         );
-        let mut ql: [f64; 6] = sim.physics.q[..6].try_into().unwrap();
+        let mut ql: [f64; 6] = sim.physics.q()[..6].try_into().unwrap();
         let lp = leg_points(&robot, Side::Left, &pelvis, &ql);
         let p = lp.knee;
         let mut a = cross(sub(lp.hip, p), sub(lp.ankle, p));
@@ -1282,8 +1283,8 @@ fn swinging_knee_torque_is_inertia_times_acceleration_plus_gravity() {
             .iter()
             .map(|(mi, r)| dot(a, cross(sub(*r, p), [0.0, 0.0, mi * g])))
             .sum();
-        let expect = inertia * sim.physics.qdd[3] + gravity;
-        inertial = inertial.max((inertia * sim.physics.qdd[3]).abs());
+        let expect = inertia * sim.physics.kinematic().unwrap().qdd[3] + gravity;
+        inertial = inertial.max((inertia * sim.physics.kinematic().unwrap().qdd[3]).abs());
         let got = tr.joint_torque[3];
         assert!(
             (got - expect).abs() < 0.02 * expect.abs() + 0.005,

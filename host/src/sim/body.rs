@@ -193,6 +193,13 @@ pub struct Truth {
     pub joint_torque: [f64; 12],
     /// Bit `j` set: servo `j`'s motor is at its torque bound.
     pub torque_limited: u16,
+    /// Each sole (left, right) touches the ground.
+    pub sole_contact: [bool; 2],
+    /// Each sole's contact wrench in the world frame about its sole point: force (N) then
+    /// moment (N·m); zero in the kinematic model.
+    pub sole_wrench: [[f64; 6]; 2],
+    /// A robot part other than a sole touches the ground.
+    pub other_contact: bool,
 }
 
 /// One joint's torque line for a physics step: `τ = rest + m_kk·q̈` with the other joints'
@@ -567,6 +574,9 @@ impl Physics {
             joint_speed: self.qd,
             joint_torque: self.joint_torque,
             torque_limited: self.torque_limited,
+            sole_contact: c.contact,
+            sole_wrench: [[0.0; 6]; 2],
+            other_contact: false,
         }
     }
 

@@ -83,6 +83,12 @@ impl Device {
         d.set(x_series::OPERATING_MODE, &[x_series::MODE_POSITION]);
         d.set(x_series::STATUS_RETURN_LEVEL, &[2]);
         d.set(x_series::PRESENT_TEMPERATURE, &[36]);
+        // Factory defaults of the XM430-W350 control table (ROBOTIS e-manual).
+        d.set(x_series::PWM_LIMIT, &x_series::PWM_FULL_SCALE.to_le_bytes());
+        d.set(x_series::CURRENT_LIMIT, &1193u16.to_le_bytes());
+        d.set_i32(x_series::VELOCITY_LIMIT, 200);
+        d.set(x_series::POSITION_P_GAIN, &800u16.to_le_bytes());
+        d.set(x_series::PRESENT_INPUT_VOLTAGE, &120u16.to_le_bytes());
         d.set_i32(x_series::GOAL_POSITION, ticks);
         d.set_i32(x_series::PRESENT_POSITION, ticks);
         d
@@ -145,6 +151,14 @@ impl Device {
     pub fn get_i32(&self, field: Field) -> i32 {
         match self.mem.get(range(field)) {
             Some(&[a, b, c, d]) => i32::from_le_bytes([a, b, c, d]),
+            _ => 0,
+        }
+    }
+
+    /// Reads a u16 field (0 if the field is not 2 bytes long).
+    pub fn get_u16(&self, field: Field) -> u16 {
+        match self.mem.get(range(field)) {
+            Some(&[a, b]) => u16::from_le_bytes([a, b]),
             _ => 0,
         }
     }

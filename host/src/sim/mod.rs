@@ -20,7 +20,10 @@
 pub mod body;
 pub mod bus;
 pub mod device;
+pub mod dynamixel;
 pub mod forces;
+pub mod mjcf;
+pub mod mujoco;
 pub mod rng;
 pub mod servo;
 pub mod transport;
@@ -38,6 +41,9 @@ use gait_core::Robot;
 pub use body::{Physics, ServoCmd, Support, Truth};
 pub use bus::{Bus, BusCounters, BusFaults, OwnedPacket};
 pub use device::{Device, DeviceKind};
+pub use dynamixel::{XServoOutput, XServoParams, XServoRegisters};
+pub use mjcf::EnvConfig;
+pub use mujoco::{MjBody, Push};
 pub use servo::ServoTorque;
 pub use transport::{run, spawn, SimHandle, SimProgress, LOCKSTEP_ACK, LOCKSTEP_TIME};
 
@@ -58,6 +64,8 @@ pub struct NoiseConfig {
     pub gyro_bias_rad_s: [f64; 3],
     /// Constant accelerometer bias, m/s².
     pub accel_bias_m_s2: [f64; 3],
+    /// Latency of the foot boards' and the IMU's samples, µs (rounded to physics steps).
+    pub latency_us: u64,
 }
 
 /// External pitch torque on the upper body (the angular-momentum disturbance).
@@ -130,6 +138,19 @@ impl Default for FallConfig {
 /// 10 Hz), while the servos' tracking delay 2ζ/ω (53 ms at 6 Hz, ζ = 1) grows as 1/f.
 pub const SERVO_FREQUENCY_HZ: f64 = 6.0;
 
+/// Which physics moves the simulated robot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PhysicsModel {
+    /// MuJoCo full dynamics ([`mujoco`]): the robot can tip, slip, bounce and fall. The default,
+    /// and the only source of walking-quality figures.
+    #[default]
+    MuJoCo,
+    /// The idealised kinematic model ([`body`]): the stance sole bolted to the floor, scripted
+    /// falls. Kept for its exact, hand-checkable servo and ZMP tests; its walking figures are
+    /// several times better than physics gives.
+    Kinematic,
+}
+
 /// Everything the simulator needs; `SimConfig::default()` is the reference robot with
 /// XM430-class servos (4.8 rad/s, 3.5 N·m on the torque–speed line) on port 5760 without
 /// lock-step, faults or noise.
@@ -137,6 +158,20 @@ pub const SERVO_FREQUENCY_HZ: f64 = 6.0;
 pub struct SimConfig {
     /// Robot description.
     pub robot: Robot,
+    /// Which physics moves the robot.
+    pub physics: PhysicsModel,
+    /// The X-series servo model of the MuJoCo robot ([`dynamixel`]).
+    pub xservo: XServoParams,
+    /// Floor, payload and mass scale of the MuJoCo robot ([`mjcf`]).
+    pub env: EnvConfig,
+    /// Pushes on the torso (MuJoCo robot).
+    pub pushes: Vec<Push>,
+    /// Hold the torso (a weld to the world) until all 12 servos have torque on (MuJoCo robot).
+    pub hold_until_torque: bool,
+    /// Write the generated MJCF model here (MuJoCo robot).
+    pub model_out: Option<PathBuf>,
+    /// Write the MuJoCo state (`t_s, qpos_0 …`) here at 100 Hz, for `scripts/render_walk.py`.
+    pub qpos_out: Option<PathBuf>,
     /// Bus TCP port on 127.0.0.1 (0 = any free port; see [`SimHandle::bus_addr`]).
     pub port: u16,
     /// Lock-step channel TCP port (`None`: free-running on the wall clock).
@@ -187,6 +222,13 @@ impl Default for SimConfig {
         let robot = Robot::reference();
         SimConfig {
             robot,
+            physics: PhysicsModel::MuJoCo,
+            xservo: XServoParams::XM430_W350,
+            env: EnvConfig::default(),
+            pushes: Vec::new(),
+            hold_until_torque: true,
+            model_out: None,
+            qpos_out: None,
             port: 5760,
             lockstep_port: None,
             connect: false,
@@ -244,6 +286,15 @@ impl SimConfig {
         }
         if self.initial_q.iter().any(|q| !q.is_finite()) {
             return bad("initial joint angles must be finite");
+        }
+        if !self.xservo.is_valid() {
+            return bad("servo model: torques, speeds, currents and voltages must be > 0");
+        }
+        if let Err(m) = self.env.validate() {
+            return bad(&m);
+        }
+        if self.noise.latency_us > 1_000_000 {
+            return bad("sensor latency must be at most 1 s");
         }
         Ok(())
     }
@@ -317,17 +368,112 @@ pub enum Incoming {
     CrcError(u8),
 }
 
+/// The simulated robot's body: full dynamics or the idealised kinematic model.
+#[derive(Debug)]
+pub enum Body {
+    /// MuJoCo full dynamics.
+    MuJoCo(Box<MjBody>),
+    /// The idealised kinematic model.
+    Kinematic(Box<Physics>),
+}
+
+impl Body {
+    /// A body at rest at `cfg.initial_q`.
+    pub fn new(cfg: &SimConfig) -> Result<Self, SimError> {
+        Ok(match cfg.physics {
+            PhysicsModel::MuJoCo => Body::MuJoCo(Box::new(MjBody::new(cfg)?)),
+            PhysicsModel::Kinematic => Body::Kinematic(Box::new(Physics::new(cfg))),
+        })
+    }
+
+    /// Physics time, µs.
+    pub fn time_us(&self) -> u64 {
+        match self {
+            Body::MuJoCo(b) => b.time_us,
+            Body::Kinematic(p) => p.time_us,
+        }
+    }
+
+    /// Joint angles, rad (left leg then right leg).
+    pub fn q(&self) -> &[f64; 12] {
+        match self {
+            Body::MuJoCo(b) => b.q(),
+            Body::Kinematic(p) => &p.q,
+        }
+    }
+
+    /// Joint speeds, rad/s.
+    pub fn qd(&self) -> &[f64; 12] {
+        match self {
+            Body::MuJoCo(b) => b.qd(),
+            Body::Kinematic(p) => &p.qd,
+        }
+    }
+
+    /// The ground truth.
+    pub fn truth(&self) -> &Truth {
+        match self {
+            Body::MuJoCo(b) => b.truth(),
+            Body::Kinematic(p) => p.truth(),
+        }
+    }
+
+    /// When a fall started, µs.
+    pub fn fall_started_us(&self) -> Option<u64> {
+        match self {
+            Body::MuJoCo(b) => b.fall_started_us(),
+            Body::Kinematic(p) => p.fall_started_us(),
+        }
+    }
+
+    /// When the robot came to lie on the ground, µs.
+    pub fn fallen_at_us(&self) -> Option<u64> {
+        match self {
+            Body::MuJoCo(b) => b.fallen_at_us(),
+            Body::Kinematic(p) => p.fallen_at_us(),
+        }
+    }
+
+    /// Largest distance of the true ZMP outside the support polygon before any fall, m.
+    pub fn max_outside(&self) -> f64 {
+        match self {
+            Body::MuJoCo(b) => b.max_outside,
+            Body::Kinematic(p) => p.max_outside,
+        }
+    }
+
+    /// The kinematic model, if that is the body.
+    pub fn kinematic(&self) -> Option<&Physics> {
+        match self {
+            Body::Kinematic(p) => Some(p),
+            Body::MuJoCo(_) => None,
+        }
+    }
+
+    /// The MuJoCo robot, if that is the body.
+    pub fn mujoco(&mut self) -> Option<&mut MjBody> {
+        match self {
+            Body::MuJoCo(b) => Some(b),
+            Body::Kinematic(_) => None,
+        }
+    }
+}
+
 /// Bus devices plus body, independent of the transport (used by [`transport`] and tests).
 pub struct Simulator {
     /// The bus and its devices.
     pub bus: Bus,
     /// The body.
-    pub physics: Physics,
+    pub physics: Body,
     decoder: Box<Decoder<4096>>,
     noise_rng: rng::Rng,
     cfg: SimConfig,
     log: Option<truth::TruthLog>,
     next_log_us: u64,
+    qpos_log: Option<std::io::BufWriter<std::fs::File>>,
+    next_qpos_us: u64,
+    /// Sensor samples waiting out the configured latency: (time µs, foot samples, IMU sample).
+    delayed: std::collections::VecDeque<(u64, [FootForces; 2], ImuSample)>,
     counter: u16,
     steps: u64,
     bytes_in: u64,
@@ -336,7 +482,7 @@ pub struct Simulator {
 impl fmt::Debug for Simulator {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("Simulator")
-            .field("time_us", &self.physics.time_us)
+            .field("time_us", &self.physics.time_us())
             .field("counters", &self.bus.counters)
             .finish_non_exhaustive()
     }
@@ -350,11 +496,11 @@ impl Simulator {
     /// A simulator at time 0 (opens the truth CSV if asked).
     pub fn new(cfg: &SimConfig) -> Result<Self, SimError> {
         cfg.validate()?;
-        let physics = Physics::new(cfg);
+        let physics = Body::new(cfg)?;
         let mut devices: Vec<Device> = ids::LEGS
             .iter()
             .enumerate()
-            .map(|(j, &id)| Device::servo(id, j, rad_to_ticks(physics.q[j])))
+            .map(|(j, &id)| Device::servo(id, j, rad_to_ticks(physics.q()[j])))
             .collect();
         devices.push(Device::foot(ids::FOOT_LEFT, 0));
         devices.push(Device::foot(ids::FOOT_RIGHT, 1));
@@ -364,6 +510,16 @@ impl Simulator {
             Some(p) => Some(truth::TruthLog::create(p)?),
             None => None,
         };
+        let qpos_log = match (&cfg.qpos_out, &physics) {
+            (Some(p), Body::MuJoCo(b)) => {
+                use std::io::Write;
+                let mut w = std::io::BufWriter::new(std::fs::File::create(p)?);
+                let cols: Vec<String> = (0..b.qpos().len()).map(|i| format!("qpos_{i}")).collect();
+                writeln!(w, "t_s,{}", cols.join(","))?;
+                Some(w)
+            }
+            _ => None,
+        };
         let mut sim = Simulator {
             bus,
             physics,
@@ -372,6 +528,9 @@ impl Simulator {
             cfg: cfg.clone(),
             log,
             next_log_us: 0,
+            qpos_log,
+            next_qpos_us: 0,
+            delayed: std::collections::VecDeque::new(),
             counter: 0,
             steps: 0,
             bytes_in: 0,
@@ -382,31 +541,61 @@ impl Simulator {
 
     /// Simulated time, µs.
     pub fn time_us(&self) -> u64 {
-        self.physics.time_us
+        self.physics.time_us()
+    }
+
+    /// The servo registers the MuJoCo servo model reads (`None`: dead device).
+    fn servo_registers(&self) -> [Option<XServoRegisters>; 12] {
+        std::array::from_fn(|j| {
+            let d = &self.bus.devices[j];
+            let u16f = |f: dxl::table::Field| d.get_u16(f);
+            (!d.dead).then(|| XServoRegisters {
+                torque_on: d.torque_on(),
+                goal: d.get_i32(x_series::GOAL_POSITION),
+                p_gain: u16f(x_series::POSITION_P_GAIN),
+                i_gain: u16f(x_series::POSITION_I_GAIN),
+                d_gain: u16f(x_series::POSITION_D_GAIN),
+                pwm_limit: u16f(x_series::PWM_LIMIT),
+                profile_velocity: d.get_i32(x_series::PROFILE_VELOCITY) as u32,
+                profile_acceleration: d.get_i32(x_series::PROFILE_ACCELERATION) as u32,
+            })
+        })
     }
 
     /// Runs the physics up to `t_us` (whole steps; earlier times are ignored).
     pub fn advance_to(&mut self, t_us: u64) -> Result<(), SimError> {
         let dt = self.cfg.physics_dt_us;
-        while self.physics.time_us + dt <= t_us {
-            let cmds: [ServoCmd; 12] = std::array::from_fn(|j| {
-                let d = &self.bus.devices[j];
-                let profile = d.get_i32(x_series::PROFILE_VELOCITY);
-                let mut limit = self.cfg.servo_speed_limit;
-                if profile > 0 {
-                    let rad_s = profile as f64
-                        * f64::from(x_series::VELOCITY_UNIT_RPM)
-                        * std::f64::consts::TAU
-                        / 60.0;
-                    limit = limit.min(rad_s);
+        while self.physics.time_us() + dt <= t_us {
+            match &mut self.physics {
+                Body::MuJoCo(_) => {
+                    let regs = self.servo_registers();
+                    if let Body::MuJoCo(b) = &mut self.physics {
+                        b.step(&regs);
+                    }
                 }
-                ServoCmd {
-                    goal: (d.torque_on() && !d.dead)
-                        .then(|| ticks_to_rad(d.get_i32(x_series::GOAL_POSITION))),
-                    speed_limit: limit,
+                Body::Kinematic(_) => {
+                    let cmds: [ServoCmd; 12] = std::array::from_fn(|j| {
+                        let d = &self.bus.devices[j];
+                        let profile = d.get_i32(x_series::PROFILE_VELOCITY);
+                        let mut limit = self.cfg.servo_speed_limit;
+                        if profile > 0 {
+                            let rad_s = profile as f64
+                                * f64::from(x_series::VELOCITY_UNIT_RPM)
+                                * std::f64::consts::TAU
+                                / 60.0;
+                            limit = limit.min(rad_s);
+                        }
+                        ServoCmd {
+                            goal: (d.torque_on() && !d.dead)
+                                .then(|| ticks_to_rad(d.get_i32(x_series::GOAL_POSITION))),
+                            speed_limit: limit,
+                        }
+                    });
+                    if let Body::Kinematic(p) = &mut self.physics {
+                        p.step(&cmds);
+                    }
                 }
-            });
-            self.physics.step(&cmds);
+            }
             self.steps += 1;
             self.publish()?;
         }
@@ -415,8 +604,13 @@ impl Simulator {
 
     /// Writes the present state into the device tables and the truth log.
     fn publish(&mut self) -> Result<(), SimError> {
+        let volts = self.cfg.xservo.supply_voltage;
         for j in 0..12 {
-            let (q, qd) = (self.physics.q[j], self.physics.qd[j]);
+            let (q, qd) = (self.physics.q()[j], self.physics.qd()[j]);
+            let out = match &mut self.physics {
+                Body::MuJoCo(b) => b.outputs()[j],
+                Body::Kinematic(_) => XServoOutput::default(),
+            };
             let d = &mut self.bus.devices[j];
             let ticks = rad_to_ticks(q);
             d.set_i32(x_series::PRESENT_POSITION, ticks);
@@ -425,15 +619,28 @@ impl Simulator {
                 x_series::PRESENT_VELOCITY,
                 (rpm / f64::from(x_series::VELOCITY_UNIT_RPM)).round() as i32,
             );
+            let ma = out.current * 1000.0 / f64::from(x_series::CURRENT_UNIT_MA);
+            d.set(
+                x_series::PRESENT_CURRENT,
+                &(ma.round().clamp(-32768.0, 32767.0) as i16).to_le_bytes(),
+            );
+            d.set(x_series::PRESENT_PWM, &out.pwm.to_le_bytes());
+            d.set(
+                x_series::PRESENT_INPUT_VOLTAGE,
+                &((volts * 10.0).round() as u16).to_le_bytes(),
+            );
             let moving = d.torque_on() && (d.get_i32(x_series::GOAL_POSITION) - ticks).abs() > 1;
             d.set(x_series::MOVING, &[u8::from(moving)]);
         }
         let t = *self.physics.truth();
         self.counter = self.counter.wrapping_add(1);
         let nz = self.cfg.noise.clone();
-        for (index, side_forces) in FOOT_INDEX.into_iter().zip(t.forces) {
-            let mut f = [0i32; 4];
-            for (fi, v) in f.iter_mut().zip(side_forces) {
+        let mut feet = [FootForces {
+            forces_mn: [0; 4],
+            counter: self.counter,
+        }; 2];
+        for (foot, side_forces) in feet.iter_mut().zip(t.forces) {
+            for (fi, v) in foot.forces_mn.iter_mut().zip(side_forces) {
                 let noise = if nz.force_std_n > 0.0 {
                     self.noise_rng.gaussian() * nz.force_std_n
                 } else {
@@ -441,11 +648,6 @@ impl Simulator {
                 };
                 *fi = ((v + noise) * 1000.0).round() as i32;
             }
-            let s = FootForces {
-                forces_mn: f,
-                counter: self.counter,
-            };
-            self.bus.devices[index].set(dxl::table::foot::SAMPLE, &s.to_bytes());
         }
         let mut gyro = [0f32; 3];
         let mut accel = [0f32; 3];
@@ -463,12 +665,39 @@ impl Simulator {
             gyro[k] = (t.gyro[k] + nz.gyro_bias_rad_s[k] + ng) as f32;
             accel[k] = (t.accel[k] + nz.accel_bias_m_s2[k] + na) as f32;
         }
-        let s = ImuSample::from_si(gyro, accel, self.counter);
-        self.bus.devices[IMU_INDEX].set(dxl::table::imu::SAMPLE, &s.to_bytes());
+        let imu = ImuSample::from_si(gyro, accel, self.counter);
+        // Latency: publish the newest sample at least `latency_us` old.
+        let now = self.physics.time_us();
+        self.delayed.push_back((now, feet, imu));
+        let mut out = None;
+        while let Some(&(ts, _, _)) = self.delayed.front() {
+            if ts + nz.latency_us <= now {
+                out = self.delayed.pop_front();
+            } else {
+                break;
+            }
+        }
+        if let Some((_, feet, imu)) = out {
+            for (index, s) in FOOT_INDEX.into_iter().zip(feet) {
+                self.bus.devices[index].set(dxl::table::foot::SAMPLE, &s.to_bytes());
+            }
+            self.bus.devices[IMU_INDEX].set(dxl::table::imu::SAMPLE, &imu.to_bytes());
+        }
         if let Some(log) = &mut self.log {
             if t.t_us >= self.next_log_us {
                 log.row(&t)?;
                 self.next_log_us = t.t_us + self.cfg.log_every_us.max(1);
+            }
+        }
+        if let (Some(w), Body::MuJoCo(b)) = (&mut self.qpos_log, &self.physics) {
+            if now >= self.next_qpos_us {
+                use std::io::Write;
+                let mut row = format!("{:.4}", now as f64 * 1e-6);
+                for v in b.qpos() {
+                    row.push_str(&format!(",{v:.5}"));
+                }
+                writeln!(w, "{row}")?;
+                self.next_qpos_us = now + 10_000;
             }
         }
         Ok(())
@@ -512,8 +741,12 @@ impl Simulator {
             let _ = l.flush();
             l.rows()
         });
+        if let Some(w) = &mut self.qpos_log {
+            use std::io::Write;
+            let _ = w.flush();
+        }
         SimSummary {
-            sim_time_us: self.physics.time_us,
+            sim_time_us: self.physics.time_us(),
             physics_steps: self.steps,
             bus: self.bus.counters,
             bytes_in: self.bytes_in,
@@ -522,7 +755,7 @@ impl Simulator {
             lockstep_errors: 0,
             fall_started_us: self.physics.fall_started_us(),
             fallen_at_us: self.physics.fallen_at_us(),
-            max_zmp_outside_m: self.physics.max_outside,
+            max_zmp_outside_m: self.physics.max_outside(),
             truth_rows: rows,
         }
     }

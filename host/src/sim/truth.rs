@@ -8,7 +8,12 @@
 //! (N, noiseless, sensor order front-left, front-right, rear-left, rear-right), gyro_x..z
 //! (rad/s), acc_x..z (m/s²), tau_nm, falling (0/1), fall_angle, qd_1..qd_12` (joint speeds,
 //! rad/s, by servo ID), `tq_1..tq_12` (motor torques, N·m; NaN without the torque model or while
-//! falling), `tq_limited` (bit `ID − 1` set: that motor is at its torque bound).
+//! falling), `tq_limited` (bit `ID − 1` set: that motor is at its torque bound), `l_contact,
+//! r_contact` (each sole touches the ground, 0/1), `l_fx … l_mz, r_fx … r_mz` (each sole's
+//! contact wrench in the world frame about its sole point, N and N·m; 0 in the kinematic
+//! model), `other_contact` (a robot part other than a sole touches the ground, 0/1). With the
+//! MuJoCo robot `zmp_x, zmp_y` is the true centre of pressure of the contact forces and
+//! `fz_n` their vertical sum.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -21,7 +26,8 @@ pub const HEADER: &str = "t_s,zmp_x,zmp_y,fz_n,com_x,com_y,com_z,pelvis_x,pelvis
 pelvis_roll,pelvis_pitch,pelvis_yaw,support,stance,margin_m,l_f0,l_f1,l_f2,l_f3,r_f0,r_f1,r_f2,r_f3,\
 gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z,tau_nm,falling,fall_angle,\
 qd_1,qd_2,qd_3,qd_4,qd_5,qd_6,qd_7,qd_8,qd_9,qd_10,qd_11,qd_12,\
-tq_1,tq_2,tq_3,tq_4,tq_5,tq_6,tq_7,tq_8,tq_9,tq_10,tq_11,tq_12,tq_limited";
+tq_1,tq_2,tq_3,tq_4,tq_5,tq_6,tq_7,tq_8,tq_9,tq_10,tq_11,tq_12,tq_limited,\
+l_contact,r_contact,l_fx,l_fy,l_fz,l_mx,l_my,l_mz,r_fx,r_fy,r_fz,r_mx,r_my,r_mz,other_contact";
 
 /// Writer of the truth CSV.
 #[derive(Debug)]
@@ -74,6 +80,15 @@ impl TruthLog {
             s.push_str(&format!(",{v:.5}"));
         }
         s.push_str(&format!(",{}", t.torque_limited));
+        s.push_str(&format!(
+            ",{},{}",
+            u8::from(t.sole_contact[0]),
+            u8::from(t.sole_contact[1])
+        ));
+        for v in t.sole_wrench.iter().flatten() {
+            s.push_str(&format!(",{v:.4}"));
+        }
+        s.push_str(&format!(",{}", u8::from(t.other_contact)));
         writeln!(self.out, "{s}")?;
         self.rows += 1;
         Ok(())

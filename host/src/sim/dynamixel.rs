@@ -1,0 +1,347 @@
+//! A ROBOTIS X-series servo in position mode (Operating Mode 3): the control table's position
+//! controller, the PWM drive and the DC motor behind the gear train, as the MuJoCo robot's
+//! joint actuators ([`super::mujoco`]).
+//!
+//! # Model
+//!
+//! Every control period (one physics step) the servo reads its encoder (whole ticks, 4096 per
+//! turn), moves its desired position along the velocity-based profile towards Goal Position,
+//! and runs the position PID of the e-manual's position-mode block diagram:
+//!
+//! ```text
+//! e    = p_desired − p_present                               (ticks)
+//! PWM  = K_PP·e + K_PI·Σe + K_PD·Δe                          (K_PP = P/128, K_PI = I/65536, K_PD = D/16)
+//! PWM  ← clamp(PWM, ±PWM Limit)                              (885 = 100 % duty)
+//! u    = PWM / 885
+//! τ_m  = τ_s·(V/V_n)·u − (τ_s/ω_0)·ω                          (DC motor on its torque–speed line)
+//! ```
+//!
+//! `τ_m` is the torque at the output shaft: the motor's stall torque `τ_s` and no-load speed
+//! `ω_0` are the datasheet's at the nominal voltage `V_n`; at supply voltage `V` the line moves
+//! parallel (stall torque and no-load speed both scale with `V`), and its slope `τ_s/ω_0` is the
+//! back-EMF damping, present whenever the H-bridge drives (torque on; torque off = coasting,
+//! `τ_m = 0`). The gear train's viscous and Coulomb friction and the rotor inertia reflected
+//! through the gear (armature) are joint properties of the MuJoCo model, where the physics
+//! integrates them exactly. Present Current is `τ_m/τ_s·I_stall` (output-torque equivalent).
+//!
+//! The profile (Profile Velocity / Profile Acceleration non-zero) is the e-manual's
+//! velocity-based trapezoid, simplified to a desired position that chases Goal Position with
+//! `|v| ≤ v_profile` and `|a| ≤ a_profile`, braking so that it stops at the goal
+//! (`v² ≤ 2·a·|goal − p|`); with both registers 0 (the factory default) the desired position is
+//! Goal Position itself (a step).
+//!
+//! # Sources of the numbers ([`XServoParams::XM430_W350`])
+//!
+//! * Stall torque 4.1 N·m at 12 V, stall current 2.3 A, no-load speed 46 rpm at 12 V, gear ratio
+//!   353.5 : 1: ROBOTIS XM430-W350 datasheet / e-manual "Specifications".
+//! * Control-table defaults Position P Gain 800, I 0, D 0, PWM Limit 885, Current Limit 1193,
+//!   Velocity Limit 200, Profile Velocity/Acceleration 0; K_PP = P/128, K_PI = I/65536,
+//!   K_PD = D/16, PWM full scale 885: ROBOTIS e-manual, XM430-W350 control table and its
+//!   "Position P/I/D Gain" section.
+//! * Armature 0.045 kg·m², joint damping 1.084 N·m·s/rad (of which `τ_s/ω_0` = 0.851 is the
+//!   back-EMF part modelled here; the remaining 0.233 is the gear's viscous friction) and friction
+//!   loss 0.03 N·m: MuJoCo Menagerie `robotis_op3/op3.xml`, identified on XM430 servos of the
+//!   ROBOTIS OP3. K_PP·τ_s/885 per tick = 18.9 N·m/rad agrees with its identified kp = 21.1.
+//! * Control period: 1 physics step (the servo's internal loop is faster than the bus; the
+//!   e-manual does not state its period).
+
+use dxl::table::x_series;
+
+/// Parameters of one servo model (motor, gear and drive).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct XServoParams {
+    /// Stall torque at the output at the nominal voltage, N·m.
+    pub stall_torque: f64,
+    /// No-load speed at the output at the nominal voltage, rad/s.
+    pub no_load_speed: f64,
+    /// Stall current at the nominal voltage, A.
+    pub stall_current: f64,
+    /// Nominal (datasheet) voltage, V.
+    pub nominal_voltage: f64,
+    /// Supply voltage, V.
+    pub supply_voltage: f64,
+    /// Rotor inertia reflected through the gear (MuJoCo joint armature), kg·m².
+    pub armature: f64,
+    /// Viscous friction of the gear train (MuJoCo joint damping), N·m·s/rad.
+    pub gear_damping: f64,
+    /// Coulomb friction of the gear train (MuJoCo joint frictionloss), N·m.
+    pub friction_loss: f64,
+}
+
+impl XServoParams {
+    /// ROBOTIS XM430-W350 at 12 V (sources in the module doc).
+    pub const XM430_W350: XServoParams = XServoParams {
+        stall_torque: 4.1,
+        no_load_speed: 46.0 * core::f64::consts::TAU / 60.0,
+        stall_current: 2.3,
+        nominal_voltage: 12.0,
+        supply_voltage: 12.0,
+        armature: 0.045,
+        gear_damping: 0.233,
+        friction_loss: 0.03,
+    };
+
+    /// Back-EMF damping `τ_s/ω_0`, N·m·s/rad.
+    pub fn back_emf_damping(&self) -> f64 {
+        self.stall_torque / self.no_load_speed
+    }
+
+    /// This model with its torque and speed scaled by `torque` and its gains left alone (for
+    /// robustness sweeps: a weaker or stronger servo of the same family).
+    pub fn scaled(&self, torque: f64) -> XServoParams {
+        XServoParams {
+            stall_torque: self.stall_torque * torque,
+            stall_current: self.stall_current * torque,
+            ..*self
+        }
+    }
+
+    /// Every number finite, torques, speeds and voltages > 0, the rest ≥ 0.
+    pub fn is_valid(&self) -> bool {
+        let pos = [
+            self.stall_torque,
+            self.no_load_speed,
+            self.stall_current,
+            self.nominal_voltage,
+            self.supply_voltage,
+        ];
+        let non_neg = [self.armature, self.gear_damping, self.friction_loss];
+        pos.iter().all(|v| v.is_finite() && *v > 0.0)
+            && non_neg.iter().all(|v| v.is_finite() && *v >= 0.0)
+    }
+}
+
+/// The control-table registers the position controller reads, in register units.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct XServoRegisters {
+    /// Torque Enable.
+    pub torque_on: bool,
+    /// Goal Position, ticks.
+    pub goal: i32,
+    /// Position P Gain.
+    pub p_gain: u16,
+    /// Position I Gain.
+    pub i_gain: u16,
+    /// Position D Gain.
+    pub d_gain: u16,
+    /// PWM Limit (0..885).
+    pub pwm_limit: u16,
+    /// Profile Velocity (unit 0.229 rpm; 0 = none).
+    pub profile_velocity: u32,
+    /// Profile Acceleration (unit 214.577 rev/min²; 0 = none).
+    pub profile_acceleration: u32,
+}
+
+impl XServoRegisters {
+    /// Factory defaults of an XM430-W350 (torque off) holding `goal`.
+    pub fn defaults(goal: i32) -> Self {
+        XServoRegisters {
+            torque_on: false,
+            goal,
+            p_gain: 800,
+            i_gain: 0,
+            d_gain: 0,
+            pwm_limit: x_series::PWM_FULL_SCALE,
+            profile_velocity: 0,
+            profile_acceleration: 0,
+        }
+    }
+}
+
+/// What the servo publishes after a control period.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct XServoOutput {
+    /// Motor torque at the output shaft, N·m.
+    pub torque: f64,
+    /// Present PWM (±885).
+    pub pwm: i16,
+    /// Present Current, A (output-torque equivalent).
+    pub current: f64,
+    /// The PWM is at PWM Limit (the motor gives all it can at this speed).
+    pub saturated: bool,
+}
+
+/// One servo's controller state.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct XServo {
+    /// Desired position of the profile, ticks (continuous).
+    desired: f64,
+    /// Desired velocity of the profile, ticks/s.
+    desired_rate: f64,
+    /// Σe of the I term, ticks·periods.
+    integral: f64,
+    /// Last error (for the D term), ticks.
+    last_error: f64,
+    /// Whether the last period had torque on.
+    was_on: bool,
+}
+
+const TICKS_PER_RAD: f64 = x_series::TICKS_PER_TURN as f64 / core::f64::consts::TAU;
+
+/// The encoder's reading of joint angle `q`: whole ticks.
+pub fn encoder_ticks(q: f64) -> i32 {
+    let t = (q * TICKS_PER_RAD).round() + f64::from(x_series::CENTER_TICK);
+    let lim = f64::from(x_series::MAX_EXTENDED_TICKS);
+    if t.is_finite() {
+        t.clamp(-lim, lim) as i32
+    } else {
+        x_series::CENTER_TICK
+    }
+}
+
+impl XServo {
+    /// One control period of `dt` seconds at joint angle `q` (rad) and speed `qd` (rad/s).
+    pub fn update(
+        &mut self,
+        params: &XServoParams,
+        regs: &XServoRegisters,
+        q: f64,
+        qd: f64,
+        dt: f64,
+    ) -> XServoOutput {
+        let present = f64::from(encoder_ticks(q));
+        if !regs.torque_on {
+            *self = XServo {
+                desired: present,
+                ..XServo::default()
+            };
+            return XServoOutput::default();
+        }
+        if !self.was_on {
+            // Torque on: the profile starts at the present position, at rest.
+            self.desired = present;
+            self.desired_rate = 0.0;
+            self.integral = 0.0;
+            self.last_error = 0.0;
+            self.was_on = true;
+        }
+        self.advance_profile(regs, dt);
+        let e = self.desired - present;
+        self.integral += e;
+        let kp = f64::from(regs.p_gain) / 128.0;
+        let ki = f64::from(regs.i_gain) / 65536.0;
+        let kd = f64::from(regs.d_gain) / 16.0;
+        let limit = f64::from(regs.pwm_limit.min(x_series::PWM_FULL_SCALE));
+        let raw = kp * e + ki * self.integral + kd * (e - self.last_error);
+        self.last_error = e;
+        let pwm = raw.clamp(-limit, limit);
+        let saturated = raw.abs() >= limit;
+        if saturated && ki > 0.0 {
+            // Anti-windup: the integral does not grow while the output is clamped.
+            self.integral -= e;
+        }
+        let u = pwm / f64::from(x_series::PWM_FULL_SCALE);
+        let v = params.supply_voltage / params.nominal_voltage;
+        let torque = params.stall_torque * v * u - params.back_emf_damping() * qd;
+        XServoOutput {
+            torque,
+            pwm: pwm.round() as i16,
+            current: torque / params.stall_torque * params.stall_current,
+            saturated,
+        }
+    }
+
+    /// Moves the desired position one period along the profile towards the goal.
+    fn advance_profile(&mut self, regs: &XServoRegisters, dt: f64) {
+        let goal = f64::from(regs.goal);
+        let rpm_to_ticks = f64::from(x_series::TICKS_PER_TURN) / 60.0;
+        let v_max = f64::from(regs.profile_velocity)
+            * f64::from(x_series::VELOCITY_UNIT_RPM)
+            * rpm_to_ticks;
+        let a_max = f64::from(regs.profile_acceleration)
+            * f64::from(x_series::ACCELERATION_UNIT_RPM2)
+            * f64::from(x_series::TICKS_PER_TURN)
+            / 3600.0;
+        if v_max <= 0.0 && a_max <= 0.0 {
+            self.desired = goal;
+            self.desired_rate = 0.0;
+            return;
+        }
+        let to_go = goal - self.desired;
+        let dir = to_go.signum();
+        // Fastest speed towards the goal that can still stop there.
+        let mut v_target = if a_max > 0.0 {
+            dir * (2.0 * a_max * to_go.abs()).sqrt()
+        } else {
+            dir * f64::INFINITY
+        };
+        if v_max > 0.0 {
+            v_target = v_target.clamp(-v_max, v_max);
+        }
+        let mut v = v_target;
+        if a_max > 0.0 {
+            let dv = (v_target - self.desired_rate).clamp(-a_max * dt, a_max * dt);
+            v = self.desired_rate + dv;
+        }
+        let step = v * dt;
+        if step.abs() >= to_go.abs() || !step.is_finite() {
+            self.desired = goal;
+            self.desired_rate = 0.0;
+        } else {
+            self.desired += step;
+            self.desired_rate = v;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torque_off_coasts_and_torque_on_holds_without_a_kick() {
+        let p = XServoParams::XM430_W350;
+        let mut s = XServo::default();
+        let mut r = XServoRegisters::defaults(2048);
+        let out = s.update(&p, &r, 0.3, 1.0, 1e-3);
+        assert_eq!(out, XServoOutput::default());
+        r.torque_on = true;
+        r.goal = encoder_ticks(0.3);
+        let out = s.update(&p, &r, 0.3, 0.0, 1e-3);
+        assert_eq!(out.pwm, 0);
+    }
+
+    #[test]
+    fn stiffness_matches_the_gain_and_the_stall_torque() {
+        // 10 ticks of error at rest: PWM = 800/128·10 = 62.5 → τ = 4.1·62.5/885.
+        let p = XServoParams::XM430_W350;
+        let mut s = XServo::default();
+        let mut r = XServoRegisters::defaults(2048);
+        r.torque_on = true;
+        s.update(&p, &r, 0.0, 0.0, 1e-3);
+        r.goal = 2058;
+        let out = s.update(&p, &r, 0.0, 0.0, 1e-3);
+        assert!((out.torque - 4.1 * 62.5 / 885.0).abs() < 1e-12);
+        // Saturation: a large error gives the stall torque minus the back-EMF torque.
+        r.goal = 4000;
+        let out = s.update(&p, &r, 0.0, 2.0, 1e-3);
+        assert!(out.saturated);
+        assert!((out.torque - (4.1 - 4.1 / p.no_load_speed * 2.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn profile_reaches_the_goal_within_its_limits() {
+        let p = XServoParams::XM430_W350;
+        let mut s = XServo::default();
+        let mut r = XServoRegisters::defaults(2048);
+        r.torque_on = true;
+        r.profile_velocity = 100; // 22.9 rpm
+        r.profile_acceleration = 50;
+        s.update(&p, &r, 0.0, 0.0, 1e-3);
+        r.goal = 2048 + 1000;
+        let v_max = 100.0 * 0.229 * 4096.0 / 60.0;
+        let a_max = 50.0 * 214.577 * 4096.0 / 3600.0;
+        let (mut last, mut last_v) = (2048.0, 0.0);
+        for _ in 0..5000 {
+            s.update(&p, &r, 0.0, 0.0, 1e-3);
+            let v = (s.desired - last) / 1e-3;
+            assert!(v <= v_max * (1.0 + 1e-6), "{v} > {v_max}");
+            assert!(
+                (v - last_v).abs() <= a_max * 1e-3 * (1.0 + 1e-6) + 1e-6 || s.desired == 3048.0
+            );
+            last = s.desired;
+            last_v = v;
+        }
+        assert_eq!(s.desired, 3048.0);
+    }
+}

@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# The official ROBOTIS Dynamixel SDK (PyPI `dynamixel-sdk`) against `walker simulate`:
+# installs the SDK and pyserial in a project-local venv (.venv-sdk/, reused when present) and runs
+# host/tests/sdk/test_dynamixel_sdk.py, which pings, reads and writes every simulated device.
+#
+#   scripts/sdk-test.sh [path/to/walker]     (default target/x86_64-unknown-linux-gnu/release/walker)
+#
+# Needs python3 (3.8+) with pip. Without the venv module's ensurepip (Debian's python3-venv not
+# installed), the packages are installed with `pip install --target .venv-sdk/site-packages`
+# instead. The last line of the output is `N passed, M failed`; the exit status is non-zero on
+# any failure.
+set -euo pipefail
+# A walker path given as argument is relative to the caller's directory, the default to the repo.
+if [[ $# -ge 1 && "$1" != /* ]]; then
+    set -- "$PWD/$1"
+fi
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+WALKER="${1:-$PWD/target/x86_64-unknown-linux-gnu/release/walker}"
+PYTHON="${PYTHON:-python3}"
+VENV=.venv-sdk
+# Versions the test was written against (the test subclasses the SDK's PortHandler).
+PACKAGES=(dynamixel-sdk==4.1.0 pyserial==3.5)
+
+if [[ ! -x "$WALKER" ]]; then
+    echo "sdk-test: walker binary not found: $WALKER (build it or pass its path)" >&2
+    exit 2
+fi
+
+py=()
+if [[ -x "$VENV/bin/python" ]] && "$VENV/bin/python" -m pip --version >/dev/null 2>&1; then
+    py=("$VENV/bin/python")
+elif [[ -d "$VENV/site-packages" ]]; then
+    py=(env "PYTHONPATH=$PWD/$VENV/site-packages${PYTHONPATH:+:$PYTHONPATH}" "$PYTHON")
+else
+    rm -rf "$VENV"
+    if "$PYTHON" -m venv "$VENV" >/dev/null 2>&1 && "$VENV/bin/python" -m pip --version >/dev/null 2>&1; then
+        py=("$VENV/bin/python")
+    else
+        # No ensurepip: a plain package directory (--target is allowed even in an externally
+        # managed, PEP 668, system Python).
+        echo "sdk-test: '$PYTHON -m venv' unavailable; installing into $VENV/site-packages" >&2
+        rm -rf "$VENV"
+        mkdir -p "$VENV/site-packages"
+        py=(env "PYTHONPATH=$PWD/$VENV/site-packages${PYTHONPATH:+:$PYTHONPATH}" "$PYTHON")
+    fi
+    echo '*' >"$VENV/.gitignore"
+fi
+
+if [[ "${py[0]}" == "$VENV/bin/python" ]]; then
+    "${py[@]}" -m pip install --quiet --disable-pip-version-check "${PACKAGES[@]}"
+elif ! "${py[@]}" -c 'import dynamixel_sdk, serial' >/dev/null 2>&1; then
+    "$PYTHON" -m pip install --quiet --disable-pip-version-check --upgrade \
+        --target "$VENV/site-packages" "${PACKAGES[@]}"
+fi
+
+WALKER="$WALKER" exec "${py[@]}" host/tests/sdk/test_dynamixel_sdk.py
