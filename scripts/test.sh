@@ -22,8 +22,8 @@ cargo build -p gait-core --target thumbv7em-none-eabihf
 step "host tests"
 cargo test --target host-tuple --workspace
 
-step "Dynamixel codec: 10^6 random and mutated byte streams (release)"
-DXL_FUZZ_CASES=1000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams
+step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (release)"
+DXL_FUZZ_CASES=10000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams
 
 step "firmware: clippy and release builds for both boards"
 cargo clippy --release --no-deps --no-default-features --features board-qemu --bins -- -D warnings

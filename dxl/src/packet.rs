@@ -16,14 +16,28 @@
 //! [`PacketWriter`] encodes into a caller-supplied `&mut [u8]`; [`Decoder`] is fed one byte
 //! at a time, skips garbage, resynchronises on the next header and reports typed errors.
 //!
-//! Resynchronisation: while looking for a packet the decoder keeps the longest suffix of the
-//! input that can still start one, so a false header with an impossible ID or LEN never
-//! hides a real packet behind it; a header appearing inside a (stuffed) packet body aborts
-//! that packet ([`DecodeError::Interrupted`]) and decoding restarts from it; after a CRC
-//! failure decoding resumes from any header prefix seen in the rejected frame's last bytes.
-//! Hence a valid packet after arbitrary garbage is always found, unless the garbage and the
-//! packet's first bytes happen to form a frame with a valid CRC (a 2⁻¹⁶ coincidence the
-//! protocol cannot rule out). Every accepted packet is a CRC-valid frame.
+//! Resynchronisation: when a candidate frame fails, decoding goes on as if the input were
+//! scanned again from the byte after the failed frame's first byte, its body and CRC
+//! included, without keeping that input:
+//! * while looking for a packet the decoder keeps the longest suffix of the input that can
+//!   still start one, so a false header with an impossible ID or LEN never hides a real
+//!   packet behind it;
+//! * a header appearing inside a (stuffed) packet body aborts that packet
+//!   ([`DecodeError::Interrupted`]) and decoding restarts from it;
+//! * so after a CRC failure a packet can only start in the rejected frame's last five bytes
+//!   (a header that ends on a CRC byte, or a prefix of one; none starts in the header, ID or
+//!   LEN), and decoding resumes from there — e.g. after a packet cut short by five bytes,
+//!   whose CRC bytes are the next packet's `00` and ID.
+//!
+//! Hence a valid packet after arbitrary garbage or after broken (truncated, corrupted)
+//! packets is always found, when its last byte arrives, unless the garbage and the packet's
+//! first bytes happen to form a frame with a valid CRC (a 2⁻¹⁶ coincidence the protocol
+//! cannot rule out). Every accepted packet is a CRC-valid frame.
+//!
+//! Without stuffing ([`Decoder::set_stuffing`]`(false)`, FAST SYNC READ replies) a header
+//! inside a body is legal data and cannot abort the frame, so this guarantee does not hold:
+//! a packet that starts inside a rejected frame is found only if it starts in its last six
+//! bytes (a reply after an echo cut short by up to six bytes, but not by more).
 
 use crate::crc;
 
@@ -190,7 +204,8 @@ pub enum DecodeError {
     BadId,
     /// LEN is smaller than 3 (instruction + CRC).
     LenTooSmall,
-    /// LEN announces more parameter bytes than the decoder buffer holds.
+    /// LEN announces more parameter bytes than the decoder buffer holds (or is 0xFF00 or
+    /// more, whatever the buffer).
     LenTooLarge,
     /// A new header appeared inside a packet body; decoding restarted from it.
     Interrupted,
@@ -224,6 +239,7 @@ enum State {
 #[derive(Debug, Clone)]
 struct Core {
     state: State,
+    /// The preamble received so far; the frame's whole preamble in the other states.
     pre: [u8; PREAMBLE_LEN],
     pre_len: usize,
     id: u8,
@@ -234,10 +250,10 @@ struct Core {
     params_len: usize,
     crc: u16,
     crc_low: u8,
-    /// Progress of a header match inside the body and CRC (for resynchronisation); in the
-    /// body also the unstuffing state: 3 = the last raw bytes were FF FF FD (an FD now is the
-    /// stuffing byte). A dropped stuffing byte leaves it at 0, so FF FF FD FD FD keeps the
-    /// second FD.
+    /// Progress of a header match inside the body (see [`header_step`]; for
+    /// resynchronisation), also the unstuffing state: 3 = the last raw bytes were FF FF FD (an
+    /// FD now is the stuffing byte). A dropped stuffing byte leaves it at 0, so FF FF FD FD FD
+    /// keeps the second FD.
     nested: usize,
     stuffing: bool,
     complete: bool,
@@ -256,7 +272,9 @@ fn check_preamble(p: &[u8], from: usize, capacity: usize) -> Result<(), Option<D
                 if len < 3 {
                     return Err(Some(DecodeError::LenTooSmall));
                 }
-                if len - 3 > capacity {
+                // LEN_H = FF is refused too: a header could then start inside LEN, where the
+                // body's header check does not see it.
+                if len - 3 > capacity.min(0xFEFC) {
                     return Err(Some(DecodeError::LenTooLarge));
                 }
             }
@@ -325,12 +343,14 @@ impl Core {
         if self.state == State::Preamble {
             return self.push_preamble(buf.len(), byte);
         }
-        // Body and CRC bytes: track a header starting inside the frame (one call site, inlined).
-        let before = self.nested;
-        self.nested = header_step(before, byte);
         match self.state {
             State::Preamble => None, // returned above; here only for exhaustiveness
-            State::Body => self.push_body(buf, byte, before == 3),
+            State::Body => {
+                // Track a header starting inside the frame (one call site, inlined).
+                let before = self.nested;
+                self.nested = header_step(before, byte);
+                self.push_body(buf, byte, before == 3)
+            }
             State::CrcLow => {
                 self.crc_low = byte;
                 self.state = State::CrcHigh;
@@ -343,14 +363,28 @@ impl Core {
                     self.stats.packets = self.stats.packets.wrapping_add(1);
                     Some(Ok(()))
                 } else {
-                    self.stats.crc_errors = self.stats.crc_errors.wrapping_add(1);
-                    // Resume on a header (prefix) that began inside the rejected frame.
-                    self.pre = [0xFF, 0xFF, 0xFD, 0x00, 0, 0, 0];
-                    self.pre_len = self.nested;
-                    Some(Err(DecodeError::Crc { id: self.id }))
+                    self.crc_failed(buf.len(), byte)
                 }
             }
         }
+    }
+
+    /// Rejects the frame whose last byte, `byte`, did not match the CRC.
+    #[cold]
+    #[inline(never)]
+    fn crc_failed(&mut self, capacity: usize, byte: u8) -> Option<Result<(), DecodeError>> {
+        self.stats.crc_errors = self.stats.crc_errors.wrapping_add(1);
+        let id = self.id;
+        // Scan the rejected frame again from its second byte. No packet starts in its header
+        // or ID (FF FD 00 and the ID are not FF FF), nor in LEN (`check_preamble` refuses
+        // LEN_H = FF), nor wholly inside a stuffed body (that is `Interrupted`): only in the
+        // last bytes, as the header prefix that ended on the last body byte (`nested` bytes of
+        // it) followed by the two CRC bytes. `pre` still starts with the rejected header.
+        self.pre_len = self.nested;
+        // A bad ID found here is counted; the CRC error is what is reported.
+        let _ = self.push_preamble(capacity, self.crc_low);
+        let _ = self.push_preamble(capacity, byte);
+        Some(Err(DecodeError::Crc { id }))
     }
 
     // Out of line: the body bytes, the common case, then need fewer registers saved per byte.
@@ -413,7 +447,7 @@ impl Core {
             if self.nested == 4 {
                 self.stats.framing_errors = self.stats.framing_errors.wrapping_add(1);
                 self.state = State::Preamble;
-                self.pre = [0xFF, 0xFF, 0xFD, 0x00, 0, 0, 0];
+                // `pre` still starts with this frame's header, the same bytes.
                 self.pre_len = 4;
                 return Some(Err(DecodeError::Interrupted));
             }
@@ -437,8 +471,8 @@ impl Core {
 /// Streaming packet decoder holding at most `N` parameter bytes.
 ///
 /// Feed it bytes with [`push`](Self::push). `N` bounds the *raw* (stuffed) parameter length
-/// (`LEN - 3`); longer packets are rejected with [`DecodeError::LenTooLarge`] as soon as
-/// their LEN field arrives.
+/// (`LEN - 3`); longer packets, and any with LEN ≥ 0xFF00, are rejected with
+/// [`DecodeError::LenTooLarge`] as soon as their LEN field arrives.
 #[derive(Debug, Clone)]
 pub struct Decoder<const N: usize> {
     core: Core,

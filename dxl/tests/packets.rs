@@ -406,6 +406,103 @@ fn decoder_errors() {
     assert!(dec.packet().is_none() || dec.is_idle());
 }
 
+/// A decoder event: index of the byte that caused it; ID, instruction, parameters or error.
+type Event = (usize, Result<(u8, u8, Vec<u8>), DecodeError>);
+
+/// Feeds `stream` byte by byte: every event.
+fn events<const N: usize>(dec: &mut Decoder<N>, stream: &[u8]) -> Vec<Event> {
+    let mut got = Vec::new();
+    for (i, &b) in stream.iter().enumerate() {
+        if let Some(r) = dec.push(b) {
+            got.push((i, r.map(|p| (p.id, p.instruction, p.params.to_vec()))));
+        }
+    }
+    got
+}
+
+#[test]
+fn decoder_finds_header_ending_in_crc_of_broken_packet() {
+    // Issue 16: ID 1's packet is 5 bytes short, so ID 2's header ends on its first CRC byte
+    // and ID 2's ID is its second CRC byte.
+    let stream = hex("FF FF FD 00 01 06 00 55 FF FF FD 00 02 04 00 55 00 29 0C");
+    let mut dec = Decoder::<32>::new();
+    let got = events(&mut dec, &stream);
+    let (last, rest) = got.split_last().unwrap();
+    assert!(
+        rest.iter()
+            .all(|(i, e)| *i == 12 && *e == Err(DecodeError::Crc { id: 1 })),
+        "{got:?}"
+    );
+    assert_eq!(*last, (18, Ok((2, opcode::STATUS, vec![0x00]))), "{got:?}");
+    let p = Packet {
+        id: 2,
+        instruction: opcode::STATUS,
+        params: &[0x00],
+    };
+    let st = Status::from_packet(&p).unwrap();
+    assert_eq!((st.id, st.error, st.data), (2, StatusError::OK, &[][..]));
+    assert_eq!(dec.stats().packets, 1);
+    assert!(dec.is_idle());
+    // The same packet alone, and through the one-shot decoder.
+    assert_eq!(decode_one(&stream[8..]), (2, opcode::STATUS, vec![0x00]));
+}
+
+#[test]
+fn decoder_keeps_packet_after_truncated_one() {
+    let mut b = [0u8; 64];
+    let mut p = [0u8; 64];
+    for stuffing in [true, false] {
+        let encode = |buf: &mut [u8], id, inst, params: &[u8]| {
+            let mut w = PacketWriter::with_stuffing(buf, id, inst, stuffing)?;
+            w.extend(params)?;
+            w.finish()
+        };
+        // A packet with stuffing bytes, so that the cut can fall anywhere in its body.
+        let n = encode(&mut b, 1, 0x03, &hex("10 FF FF FD 20 FF FD 00 30 31 32")).unwrap();
+        let status = hex("00 FF FF FD 07");
+        let pn = encode(&mut p, 2, opcode::STATUS, &status).unwrap();
+        // Unstuffed, a header inside a body is data: only a packet that starts in the last
+        // six bytes of the broken frame can be recovered (see the `packet` module docs).
+        let cuts = if stuffing { 1..=n } else { 1..=6 };
+        for k in cuts {
+            let mut stream = b[..n - k].to_vec();
+            stream.extend_from_slice(&p[..pn]);
+            let mut dec = Decoder::<64>::new();
+            dec.set_stuffing(stuffing);
+            let got = events(&mut dec, &stream);
+            let packets: Vec<_> = got
+                .iter()
+                .filter_map(|(i, e)| e.as_ref().ok().map(|p| (*i, p.clone())))
+                .collect();
+            let want = (stream.len() - 1, (2, opcode::STATUS, status.clone()));
+            assert_eq!(packets, vec![want], "stuffing {stuffing}, cut {k}: {got:?}");
+        }
+    }
+}
+
+#[test]
+fn decoder_refuses_len_ff00_and_more() {
+    // A header can start inside such a LEN (here LEN_H), and the ping must not vanish into
+    // the body, although the buffer could hold LEN = 0xFF05.
+    let mut stream = hex("FF FF FD 00 01 05");
+    let mut b = [0u8; 16];
+    let n = Instruction::Ping.encode(&mut b, 9).unwrap();
+    stream.extend_from_slice(&b[..n]);
+    let mut dec = Decoder::<0xFF10>::new();
+    let got = events(&mut dec, &stream);
+    assert_eq!(
+        got,
+        vec![
+            (6, Err(DecodeError::LenTooLarge)),
+            (stream.len() - 1, Ok((9, opcode::PING, vec![])))
+        ]
+    );
+    assert_eq!(
+        decode(&hex("FF FF FD 00 01 00 FF"), &mut [0u8; 0xFF10]),
+        Err(DecodeError::LenTooLarge)
+    );
+}
+
 #[test]
 fn decoder_reset_and_idle() {
     let mut dec = Decoder::<8>::new();

@@ -1,9 +1,14 @@
 //! Property tests and the long-running fuzz loop.
 //!
 //! The proptest cases honour `PROPTEST_CASES` (default 256). `fuzz_streams` runs
-//! `DXL_FUZZ_CASES` random/mutated streams (default 20 000); CI runs it with 1 000 000 in
-//! release mode: `DXL_FUZZ_CASES=1000000 cargo test --release --target host-tuple -p dxl
-//! --test props fuzz_streams`.
+//! `DXL_FUZZ_CASES` random, mutated and junk-between-packets streams (default 20 000); CI runs
+//! it with 1 000 000 in release mode: `DXL_FUZZ_CASES=1000000 cargo test --release --target
+//! host-tuple -p dxl --test props fuzz_streams`.
+//!
+//! The central property: in a stream of intact packets with junk between them (random bytes,
+//! header fragments, corrupted packets, packets cut short by any number of bytes), every
+//! intact packet is decoded when its last byte arrives — unless other bytes happen to form a
+//! CRC-valid frame overlapping it (a 2⁻¹⁶ coincidence the protocol cannot rule out).
 
 use dxl::instruction::SyncWrite;
 use dxl::*;
@@ -14,33 +19,79 @@ const CAP: usize = 64;
 mod common;
 use common::bitwise_crc;
 
-/// An accepted packet: index of its last byte, ID, instruction, parameters.
-type Accepted = (usize, u8, u8, Vec<u8>);
+/// A packet: ID, instruction, parameters (unstuffed).
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Pkt {
+    id: u8,
+    inst: u8,
+    params: Vec<u8>,
+}
 
-/// Whether a CRC-valid frame for `id` ends at `end` in `stream` (independent check).
-fn frame_ok(stream: &[u8], end: usize, id: u8) -> bool {
-    (0..end.saturating_sub(8)).any(|s| {
-        stream[s..s + 4] == HEADER
-            && stream[s + 4] == id
+/// A packet found in (accepted) or put into (intact) a stream: its first and last byte.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Placed {
+    start: usize,
+    end: usize,
+    pkt: Pkt,
+}
+
+/// Removes the stuffing bytes from an instruction + parameter region, written from the
+/// protocol's rule independently of the decoder: an FD right after FF FF FD is dropped, and
+/// the bytes before a dropped FD do not count for the next match.
+fn unstuff(raw: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut last = [0u8; 3];
+    for &b in raw {
+        if last == [0xFF, 0xFF, 0xFD] && b == 0xFD {
+            last = [0; 3];
+            continue;
+        }
+        out.push(b);
+        last = [last[1], last[2], b];
+    }
+    out
+}
+
+/// The start of a CRC-valid frame that ends at `end` in `stream` and carries `pkt` (with or
+/// without unstuffing), checked independently of the decoder.
+fn frame_start(stream: &[u8], end: usize, pkt: &Pkt, stuffed: bool) -> Option<usize> {
+    (0..end.saturating_sub(8)).find(|&s| {
+        let ok = stream[s..s + 4] == HEADER
+            && stream[s + 4] == pkt.id
             && s + 7 + usize::from(u16::from_le_bytes([stream[s + 5], stream[s + 6]])) == end + 1
-            && bitwise_crc(&stream[s..end - 1]).to_le_bytes() == [stream[end - 1], stream[end]]
+            && bitwise_crc(&stream[s..end - 1]).to_le_bytes() == [stream[end - 1], stream[end]];
+        ok && {
+            let raw = &stream[s + 7..end - 1];
+            let region = if stuffed { unstuff(raw) } else { raw.to_vec() };
+            region[0] == pkt.inst && region[1..] == pkt.params[..]
+        }
     })
 }
 
-/// Feeds `stream` byte by byte; checks that every accepted packet is a CRC-valid frame.
-fn run<const N: usize>(dec: &mut Decoder<N>, stream: &[u8]) -> Vec<Accepted> {
+/// Feeds `stream` byte by byte; checks that every accepted packet is a CRC-valid frame that
+/// ends with the byte that completed it and decodes to what the decoder returned.
+fn run<const N: usize>(dec: &mut Decoder<N>, stream: &[u8], stuffed: bool) -> Vec<Placed> {
     let mut out = Vec::new();
     for (i, &b) in stream.iter().enumerate() {
         if let Some(Ok(p)) = dec.push(b) {
-            assert!(
-                frame_ok(stream, i, p.id),
-                "accepted a frame without a valid CRC at {i}"
-            );
+            let pkt = Pkt {
+                id: p.id,
+                inst: p.instruction,
+                params: p.params.to_vec(),
+            };
             assert!(p.params.len() <= N);
-            out.push((i, p.id, p.instruction, p.params.to_vec()));
+            let Some(start) = frame_start(stream, i, &pkt, stuffed) else {
+                panic!("accepted {pkt:02X?} at {i}, not a CRC-valid frame of {stream:02X?}");
+            };
+            out.push(Placed { start, end: i, pkt });
         }
     }
     out
+}
+
+/// Whether `a` overlaps the bytes `p.start..=p.end`.
+fn overlaps(a: &Placed, p: &Placed) -> bool {
+    a.start <= p.end && a.end >= p.start
 }
 
 /// Checks the decoder on `stream` = garbage + packet (`start..=end`) + garbage, where byte
@@ -54,9 +105,9 @@ fn check_case(
     original: (u8, u8, &[u8]),
 ) {
     dec.reset();
-    let got = run(dec, stream);
+    let got = run(dec, stream, true);
     let is_original =
-        |a: &Accepted| a.0 == end && a.1 == original.0 && a.2 == original.1 && a.3 == original.2;
+        |a: &Placed| a.end == end && (a.pkt.id, a.pkt.inst, &a.pkt.params[..]) == original;
     let found = got.iter().any(is_original);
     match mutated {
         Some(m) if (start..=end).contains(&m) => {
@@ -73,12 +124,126 @@ fn check_case(
     }
 }
 
+/// Checks the decoder on a stream of intact packets (`placed`) with junk between them: each
+/// is decoded exactly when its last byte arrives, unless an accepted frame made of other bytes
+/// (a CRC-valid coincidence, checked by `run`) overlaps it.
+fn check_stream(dec: &mut Decoder<CAP>, stream: &[u8], placed: &[Placed]) {
+    dec.reset();
+    let got = run(dec, stream, true);
+    for p in placed {
+        if got.contains(p) {
+            continue;
+        }
+        let hidden = got.iter().any(|a| !placed.contains(a) && overlaps(a, p));
+        assert!(
+            hidden,
+            "intact packet {p:02X?} lost in {stream:02X?}; decoded {got:02X?}"
+        );
+    }
+    let stray = got.iter().filter(|a| !placed.contains(a)).count();
+    let expected = placed.iter().filter(|p| got.contains(p)).count();
+    assert_eq!(got.len(), stray + expected, "a packet was decoded twice");
+}
+
+/// Junk between intact packets.
+#[derive(Debug, Clone)]
+enum Junk {
+    /// Arbitrary bytes.
+    Bytes(Vec<u8>),
+    /// The first `len` (1..=7) bytes of a preamble: header, ID, LEN.
+    Preamble { len: usize, id: u8, plen: u16 },
+    /// A valid packet without its last `1 + cut % length` bytes.
+    Truncated { pkt: Pkt, cut: usize },
+    /// A valid packet with byte `pos % length` XORed with `flip` (non-zero).
+    Corrupted { pkt: Pkt, pos: usize, flip: u8 },
+}
+
+fn encode_pkt(pkt: &Pkt) -> Vec<u8> {
+    let mut buf = [0u8; 2 * CAP + 16];
+    let n = encode(&mut buf, pkt.id, pkt.inst, &pkt.params).unwrap();
+    buf[..n].to_vec()
+}
+
+fn push_junk(stream: &mut Vec<u8>, junk: &Junk) {
+    match junk {
+        Junk::Bytes(b) => stream.extend_from_slice(b),
+        Junk::Preamble { len, id, plen } => {
+            let [lo, hi] = plen.to_le_bytes();
+            let pre = [0xFF, 0xFF, 0xFD, 0x00, *id, lo, hi];
+            stream.extend_from_slice(&pre[..(*len).clamp(1, 7)]);
+        }
+        Junk::Truncated { pkt, cut } => {
+            let bytes = encode_pkt(pkt);
+            let n = bytes.len();
+            stream.extend_from_slice(&bytes[..n - 1 - cut % n]);
+        }
+        Junk::Corrupted { pkt, pos, flip } => {
+            let mut bytes = encode_pkt(pkt);
+            let n = bytes.len();
+            bytes[pos % n] ^= flip;
+            stream.extend_from_slice(&bytes);
+        }
+    }
+}
+
+/// Builds `junk packet junk packet ... junk`: the stream and where its intact packets are.
+fn build_stream(parts: &[(Vec<Junk>, Pkt)], trailer: &[Junk]) -> (Vec<u8>, Vec<Placed>) {
+    let mut stream = Vec::new();
+    let mut placed = Vec::new();
+    for (junk, pkt) in parts {
+        junk.iter().for_each(|j| push_junk(&mut stream, j));
+        let start = stream.len();
+        stream.extend_from_slice(&encode_pkt(pkt));
+        placed.push(Placed {
+            start,
+            end: stream.len() - 1,
+            pkt: pkt.clone(),
+        });
+    }
+    trailer.iter().for_each(|j| push_junk(&mut stream, j));
+    (stream, placed)
+}
+
 fn byte() -> impl Strategy<Value = u8> {
     prop_oneof![any::<u8>(), Just(0xFF), Just(0xFD), Just(0x00)]
 }
 
 fn id() -> impl Strategy<Value = u8> {
     prop_oneof![0u8..=0xFC, Just(0xFE)]
+}
+
+fn pkt() -> impl Strategy<Value = Pkt> {
+    (id(), byte(), prop::collection::vec(byte(), 0..40)).prop_map(|(id, inst, params)| Pkt {
+        id,
+        inst,
+        params,
+    })
+}
+
+fn junk() -> impl Strategy<Value = Junk> {
+    prop_oneof![
+        prop::collection::vec(byte(), 1..12).prop_map(Junk::Bytes),
+        (1usize..=7, byte(), prop_oneof![0u16..80, any::<u16>()])
+            .prop_map(|(len, id, plen)| Junk::Preamble { len, id, plen }),
+        (pkt(), any::<usize>()).prop_map(|(pkt, cut)| Junk::Truncated { pkt, cut }),
+        (pkt(), any::<usize>(), 1u8..=255).prop_map(|(pkt, pos, flip)| Junk::Corrupted {
+            pkt,
+            pos,
+            flip
+        }),
+    ]
+}
+
+/// Junk before a packet; half the time it ends with a truncated packet (the issue 16 family).
+fn junk_before() -> impl Strategy<Value = Vec<Junk>> {
+    (
+        prop::collection::vec(junk(), 0..3),
+        prop::option::of((pkt(), any::<usize>())),
+    )
+        .prop_map(|(mut junk, cut)| {
+            junk.extend(cut.map(|(pkt, cut)| Junk::Truncated { pkt, cut }));
+            junk
+        })
 }
 
 proptest! {
@@ -105,6 +270,20 @@ proptest! {
     }
 
     #[test]
+    fn intact_packets_survive_junk(
+        parts in prop::collection::vec((junk_before(), pkt()), 1..4),
+        trailer in prop::collection::vec(junk(), 0..2),
+    ) {
+        let (stream, placed) = build_stream(&parts, &trailer);
+        let mut dec = Decoder::<CAP>::new();
+        check_stream(&mut dec, &stream, &placed);
+        // Without unstuffing nothing is guaranteed here, but all it accepts must be frames.
+        dec.reset();
+        dec.set_stuffing(false);
+        run(&mut dec, &stream, false);
+    }
+
+    #[test]
     fn mutated_packets_are_rejected(
         id in id(),
         inst in any::<u8>(),
@@ -126,14 +305,14 @@ proptest! {
     #[test]
     fn random_streams_never_panic(stream in prop::collection::vec(byte(), 0..400)) {
         let mut dec = Decoder::<CAP>::new();
-        run(&mut dec, &stream);
+        run(&mut dec, &stream, true);
         let mut raw = Decoder::<CAP>::new();
         raw.set_stuffing(false);
-        run(&mut raw, &stream);
+        run(&mut raw, &stream, false);
         let mut out = [0u8; 16];
         let _ = decode(&stream, &mut out);
         let mut small = Decoder::<0>::new();
-        run(&mut small, &stream);
+        run(&mut small, &stream, true);
     }
 
     #[test]
@@ -211,6 +390,47 @@ impl XorShift {
             _ => self.next() as u8,
         }
     }
+
+    fn pkt(&mut self) -> Pkt {
+        let id = if self.below(16) == 0 {
+            0xFE
+        } else {
+            self.below(0xFD) as u8
+        };
+        let inst = self.byte();
+        let plen = self.below(40);
+        let params = (0..plen).map(|_| self.byte()).collect();
+        Pkt { id, inst, params }
+    }
+
+    fn junk(&mut self) -> Junk {
+        match self.below(4) {
+            0 => Junk::Bytes((0..1 + self.below(11)).map(|_| self.byte()).collect()),
+            1 => Junk::Preamble {
+                len: 1 + self.below(7),
+                id: self.byte(),
+                plen: if self.below(2) == 0 {
+                    self.below(80) as u16
+                } else {
+                    self.next() as u16
+                },
+            },
+            2 => self.truncated(),
+            _ => Junk::Corrupted {
+                pkt: self.pkt(),
+                pos: self.next() as usize,
+                flip: (self.below(255) + 1) as u8,
+            },
+        }
+    }
+
+    /// A packet cut short by 1 ..= its length bytes, uniformly.
+    fn truncated(&mut self) -> Junk {
+        Junk::Truncated {
+            pkt: self.pkt(),
+            cut: self.next() as usize,
+        }
+    }
 }
 
 #[test]
@@ -228,15 +448,37 @@ fn fuzz_streams() {
     let mut stream = Vec::with_capacity(4 * CAP);
     for case in 0..cases {
         stream.clear();
-        if case % 10 == 0 {
-            // Pure random stream: must not panic; anything accepted must be a valid frame.
-            let len = rng.below(300);
-            stream.extend((0..len).map(|_| rng.byte()));
-            dec.reset();
-            run(&mut dec, &stream);
-            raw_dec.reset();
-            run(&mut raw_dec, &stream);
-            continue;
+        match case % 10 {
+            0 => {
+                // Pure random stream: must not panic; anything accepted must be a valid frame.
+                let len = rng.below(300);
+                stream.extend((0..len).map(|_| rng.byte()));
+                dec.reset();
+                run(&mut dec, &stream, true);
+                raw_dec.reset();
+                run(&mut raw_dec, &stream, false);
+                continue;
+            }
+            1..=4 => {} // one packet between random bytes, below
+            _ => {
+                // Intact packets with junk between them; before a packet, half the time a
+                // truncated one (issue 16: its LEN swallows the intact packet's first bytes).
+                let parts: Vec<_> = (0..1 + rng.below(3))
+                    .map(|_| {
+                        let mut junk: Vec<_> = (0..rng.below(3)).map(|_| rng.junk()).collect();
+                        if rng.below(2) == 0 {
+                            junk.push(rng.truncated());
+                        }
+                        (junk, rng.pkt())
+                    })
+                    .collect();
+                let trailer: Vec<_> = (0..rng.below(2)).map(|_| rng.junk()).collect();
+                let (stream, placed) = build_stream(&parts, &trailer);
+                check_stream(&mut dec, &stream, &placed);
+                raw_dec.reset();
+                run(&mut raw_dec, &stream, false);
+                continue;
+            }
         }
         let id = if rng.below(16) == 0 {
             0xFE
