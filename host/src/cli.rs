@@ -240,7 +240,7 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
                 \n  --lockstep-port  lock-step time channel (default: free-running)\
                 \n  --connect        connect to a listening QEMU instead of listening\
                 \n  --seed           seed of the noise and fault streams\
-                \n  --stall-torque   servo stall torque, N·m (default 3.5, XM430-class; 0 = unlimited torque)\
+                \n  --stall-torque   servo stall torque, N·m (MuJoCo: XM430-W350 4.1 by default; kinematic: 3.5, 0 = unlimited)\
                 \n  --truth          write the ground truth (true ZMP, …) to this CSV (for `walker report --truth`)\
                 \n  --timeout        seconds to wait for the firmware (default 30)\
                 \n  physics options:", physics_options!()),
@@ -265,8 +265,8 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
         summary: "LIPM, DLIPM, TLIPFM, + whole-body compensation, + feedback: side by side in the FIL walk",
         usage: concat!("walker beyond [--plan plans/table2.toml] [--out out/beyond] [--elf target/thumbv7em-none-eabihf/release/qemu]\n\
                 [--machine mps2-an500] [--seed N] [--stall-torque NM] [--firmware-args 'k=v ...'] [--feedback-args 'stab_ki=2 ...'] [--timeout S]\n\
-         Walks the plan five times in the firmware-in-the-loop setup (XM430-class servos: speed\n\
-         limit 4.8 rad/s, stall torque 3.5 N·m unless --stall-torque, 0 = unlimited) and prints per\n\
+         Walks the plan five times in the firmware-in-the-loop setup (the MuJoCo robot with\n\
+         XM430-W350 servo models; --stall-torque changes their stall torque) and prints per\n\
          run the true and measured ZMP errors, the time the true ZMP is inside the support polygon\n\
          (5 mm margin), distance walked vs planned, peak joint speeds and motor torques; writes\n\
          OUT/beyond.md, OUT/beyond.csv and OUT/<run>/.\n\
@@ -515,15 +515,8 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
     let port = a.value("--port")?.map(PathBuf::from);
     let baud: Option<u32> = a.parsed("--baud")?;
     let out = a.value("--out")?.map(PathBuf::from);
-    let seconds: Option<f64> = a.parsed("--seconds")?;
+    let seconds = seconds_arg(a, "--seconds")?.map(|d| d.as_secs_f64());
     a.finish()?;
-    if let Some(s) = seconds {
-        if !(s.is_finite() && s > 0.0) {
-            return Err(CliError::usage(format!(
-                "walker capture: --seconds must be positive (got {s})"
-            )));
-        }
-    }
     let log = match (from, port) {
         (Some(_), Some(_)) => {
             return Err(CliError::usage(
@@ -643,16 +636,41 @@ fn physics_args(a: &mut Args, cfg: &mut crate::sim::SimConfig) -> Result<(), Cli
     Ok(())
 }
 
-/// `--stall-torque NM`: the simulated servos' torque model (default XM430-class, 0 = none).
-fn stall_torque_arg(a: &mut Args) -> Result<Option<crate::sim::ServoTorque>, CliError> {
+/// The longest duration any option takes, s (11.6 days; `Duration::from_secs_f64` panics on
+/// non-finite or huge values, so every duration is checked against this first).
+const MAX_SECONDS: f64 = 1e6;
+
+/// A duration option `name` in seconds: finite, > 0 and at most [`MAX_SECONDS`], else a usage
+/// error (exit 2) naming the option.
+fn seconds_arg(a: &mut Args, name: &str) -> Result<Option<std::time::Duration>, CliError> {
+    match a.parsed::<f64>(name)? {
+        None => Ok(None),
+        Some(s) if s.is_finite() && s > 0.0 && s <= MAX_SECONDS => {
+            Ok(Some(std::time::Duration::from_secs_f64(s)))
+        }
+        Some(s) => Err(CliError::usage(format!(
+            "walker {}: {name} must be a number of seconds in (0, {MAX_SECONDS}] (got {s})",
+            a.cmd
+        ))),
+    }
+}
+
+/// `--stall-torque NM`: the kinematic model's servo torque model (default XM430-class, 0 =
+/// none) and the value given (for the MuJoCo servo model, see [`apply_stall_torque`]).
+fn stall_torque_arg(
+    a: &mut Args,
+) -> Result<(Option<crate::sim::ServoTorque>, Option<f64>), CliError> {
     let xm430 = crate::sim::ServoTorque::XM430;
     match a.parsed::<f64>("--stall-torque")? {
-        None => Ok(Some(xm430)),
-        Some(0.0) => Ok(None),
-        Some(t) if t.is_finite() && t > 0.0 => Ok(Some(crate::sim::ServoTorque {
-            stall_torque: t,
-            ..xm430
-        })),
+        None => Ok((Some(xm430), None)),
+        Some(0.0) => Ok((None, Some(0.0))),
+        Some(t) if t.is_finite() && t > 0.0 => Ok((
+            Some(crate::sim::ServoTorque {
+                stall_torque: t,
+                ..xm430
+            }),
+            Some(t),
+        )),
         Some(t) => Err(CliError::usage(format!(
             "walker {}: --stall-torque must be >= 0 N·m (got {t})",
             a.cmd
@@ -660,13 +678,23 @@ fn stall_torque_arg(a: &mut Args) -> Result<Option<crate::sim::ServoTorque>, Cli
     }
 }
 
-/// `--stall-torque` reaches the MuJoCo servo model too (0 = unlimited keeps its datasheet value).
-fn apply_stall_torque(cfg: &mut crate::sim::SimConfig) {
-    if let Some(t) = cfg.servo_torque {
-        if t.stall_torque != crate::sim::ServoTorque::XM430.stall_torque {
-            cfg.xservo.stall_torque = t.stall_torque;
+/// `--stall-torque` for the MuJoCo servo model: its stall torque (0, "unlimited", is the
+/// kinematic model's option only).
+fn apply_stall_torque(
+    cmd: &str,
+    cfg: &mut crate::sim::SimConfig,
+    raw: Option<f64>,
+) -> Result<(), CliError> {
+    match raw {
+        Some(t) if t > 0.0 => cfg.xservo.stall_torque = t,
+        Some(_) if cfg.physics == crate::sim::PhysicsModel::MuJoCo => {
+            return Err(CliError::usage(format!(
+                "walker {cmd}: --stall-torque 0 (unlimited) is for --physics kinematic; a MuJoCo servo needs a stall torque > 0"
+            )))
         }
+        _ => {}
     }
+    Ok(())
 }
 
 fn run_simulate(a: &mut Args) -> Result<(), CliError> {
@@ -674,15 +702,15 @@ fn run_simulate(a: &mut Args) -> Result<(), CliError> {
     let lockstep: Option<u16> = a.parsed("--lockstep-port")?;
     let connect = a.flag("--connect");
     let seed: Option<u64> = a.parsed("--seed")?;
-    let servo_torque = stall_torque_arg(a)?;
+    let (servo_torque, stall_raw) = stall_torque_arg(a)?;
     let truth = a.value("--truth")?.map(PathBuf::from);
-    let timeout: Option<f64> = a.parsed("--timeout")?;
+    let timeout = seconds_arg(a, "--timeout")?;
     let mut cfg = crate::sim::SimConfig {
         servo_torque,
         ..Default::default()
     };
-    apply_stall_torque(&mut cfg);
     physics_args(a, &mut cfg)?;
+    apply_stall_torque(a.cmd, &mut cfg, stall_raw)?;
     a.finish()?;
     if let Some(p) = port {
         cfg.port = p;
@@ -693,12 +721,7 @@ fn run_simulate(a: &mut Args) -> Result<(), CliError> {
         cfg.seed = s;
     }
     if let Some(t) = timeout {
-        if !(t.is_finite() && t > 0.0) {
-            return Err(CliError::usage(format!(
-                "walker simulate: --timeout must be positive (got {t})"
-            )));
-        }
-        cfg.connect_timeout = std::time::Duration::from_secs_f64(t);
+        cfg.connect_timeout = t;
     }
     if let Some(t) = &truth {
         create_parent(t)?;
@@ -723,9 +746,9 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
     );
     let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/beyond".into()));
     let seed: Option<u64> = a.parsed("--seed")?;
-    let servo_torque = stall_torque_arg(a)?;
+    let (servo_torque, stall_raw) = stall_torque_arg(a)?;
     let machine = a.value("--machine")?.unwrap_or_else(|| "mps2-an500".into());
-    let timeout: Option<f64> = a.parsed("--timeout")?;
+    let timeout = seconds_arg(a, "--timeout")?;
     let split = |t: Option<String>| -> Vec<String> {
         t.map(|t| t.split_whitespace().map(String::from).collect())
             .unwrap_or_default()
@@ -737,8 +760,8 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
         servo_torque,
         ..Default::default()
     };
-    apply_stall_torque(&mut sim);
     physics_args(a, &mut sim)?;
+    apply_stall_torque(a.cmd, &mut sim, stall_raw)?;
     a.finish()?;
     let opts = crate::beyond::BeyondOptions {
         sim,
@@ -749,19 +772,31 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
         seed: seed.unwrap_or(0),
         extra_tokens: extra,
         feedback_tokens: feedback,
-        timeout: std::time::Duration::from_secs_f64(timeout.unwrap_or(1800.0)),
+        timeout: timeout.unwrap_or(std::time::Duration::from_secs(1800)),
         servo_torque,
     };
     eprintln!("walker beyond: {plan_name}, five firmware-in-the-loop walks");
     let runs = crate::beyond::run(&opts, |name| eprintln!("  walking {name} …"))?;
     let table = crate::beyond::table(&runs);
+    let servos = match opts.sim.physics {
+        crate::sim::PhysicsModel::MuJoCo => {
+            let x = &opts.sim.xservo;
+            format!(
+                "Simulated robot: MuJoCo 3.17 full dynamics (the robot can tip, slip and fall). Servos: XM430-W350 position-mode model (Position P gain 800, PWM limit 885; DC motor line {} N·m stall, {:.2} rad/s no load at {} V; armature {} kg·m², gear damping {} N·m·s/rad, friction {} N·m; `host/src/sim/dynamixel.rs`).",
+                x.stall_torque, x.no_load_speed, x.supply_voltage, x.armature, x.gear_damping, x.friction_loss
+            )
+        }
+        crate::sim::PhysicsModel::Kinematic => format!(
+            "Simulated robot: the IDEALISED kinematic model (stance sole bolted down; not a walking-quality figure). Servos: speed limit {} rad/s, second-order position loop, {}.",
+            crate::beyond::XM430_SPEED_RAD_S,
+            servo_torque.map_or("no torque limit".to_string(), |t| format!(
+                "torque–speed line of a {} N·m stall torque and {} rad/s no-load speed, rotor inertia {} kg·m²",
+                t.stall_torque, t.no_load_speed, t.armature
+            ))
+        ),
+    };
     let mut md = format!(
-        "# Beyond the paper: {plan_name}\n\nSimulator servos: speed limit {} rad/s (XM430-class), second-order position loop, {}.\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the simulator's (true) and the firmware's targets'.\n\n",
-        crate::beyond::XM430_SPEED_RAD_S,
-        servo_torque.map_or("no torque limit".to_string(), |t| format!(
-            "torque–speed line of a {} N·m stall torque and {} rad/s no-load speed, rotor inertia {} kg·m²",
-            t.stall_torque, t.no_load_speed, t.armature
-        ))
+        "# Beyond the paper: {plan_name}\n\n{servos}\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the simulator's (true) and the firmware's targets'.\n\n"
     );
     md.push_str(&table);
     md.push('\n');
@@ -797,7 +832,7 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
     let model = a.value("--model")?;
     let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/fil".into()));
     let seed: Option<u64> = a.parsed("--seed")?;
-    let servo_torque = stall_torque_arg(a)?;
+    let (servo_torque, stall_raw) = stall_torque_arg(a)?;
     let p_drop: Option<f64> = a.parsed("--p-drop")?;
     let p_corrupt: Option<f64> = a.parsed("--p-corrupt")?;
     let dead = a.value("--dead")?;
@@ -805,7 +840,7 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
     let tau_const: Option<f64> = a.parsed("--tau-constant")?;
     let tau_random: Option<f64> = a.parsed("--tau-random")?;
     let machine = a.value("--machine")?.unwrap_or_else(|| "mps2-an500".into());
-    let timeout: Option<f64> = a.parsed("--timeout")?;
+    let timeout = seconds_arg(a, "--timeout")?;
     let tokens = a.value("--firmware-args")?;
     let video = a.value("--video")?.map(PathBuf::from);
     let (mut spec, plan_name) = plan_arg(a)?;
@@ -813,8 +848,8 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
         servo_torque,
         ..Default::default()
     };
-    apply_stall_torque(&mut sim);
     physics_args(a, &mut sim)?;
+    apply_stall_torque(a.cmd, &mut sim, stall_raw)?;
     a.finish()?;
     if let Some(m) = model {
         spec.model = model_name("fil", &m)?;
@@ -862,7 +897,7 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
         spec: spec.clone(),
         out_dir: out.clone(),
         machine,
-        timeout: std::time::Duration::from_secs_f64(timeout.unwrap_or(1800.0)),
+        timeout: timeout.unwrap_or(std::time::Duration::from_secs(1800)),
         sim,
         extra_tokens: tokens
             .map(|t| t.split_whitespace().map(String::from).collect())

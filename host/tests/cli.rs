@@ -327,6 +327,32 @@ fn usage_errors_exit_2() {
             assert_eq!(out.status.code(), Some(2), "{cmd} --stall-torque {bad}");
         }
     }
+    // Every duration is checked before anything starts (issue 16: NaN, negative and huge
+    // values aborted with SIGABRT in Duration::from_secs_f64).
+    for bad in ["nan", "-5", "1e300", "0", "inf"] {
+        for (cmd, opt) in [
+            ("fil", "--timeout"),
+            ("beyond", "--timeout"),
+            ("simulate", "--timeout"),
+            ("capture", "--seconds"),
+        ] {
+            let out = walker(&[cmd, opt, bad]);
+            assert_eq!(out.status.code(), Some(2), "{cmd} {opt} {bad}");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(err.contains(opt), "{cmd} {opt} {bad}: {err}");
+        }
+    }
+    // The physics options are checked too.
+    for (opt, bad) in [
+        ("--physics", "bullet"),
+        ("--push", "1:2"),
+        ("--floor-friction", "-1"),
+        ("--floor-steps", "500"),
+        ("--payload", "nan"),
+    ] {
+        let out = walker(&["fil", opt, bad]);
+        assert_eq!(out.status.code(), Some(2), "fil {opt} {bad}");
+    }
     assert!(walker(&["--help"]).status.success());
     assert!(walker(&["report", "--help"]).status.success());
 }

@@ -596,19 +596,10 @@ impl Physics {
     }
 
     fn update_disturbance(&mut self, dt: f64) {
-        let d = &self.cfg.disturbance;
-        let t = self.time_us as f64 * 1e-6;
-        let active = t >= d.start_s && d.end_s.is_none_or(|e| t < e);
-        let hold_us = ((d.hold_s * 1e6) as u64).max(self.dt_us);
-        if d.random_std_nm > 0.0 && self.time_us.is_multiple_of(hold_us) {
-            // Resampled on a fixed time grid (independent of `active`, so streams stay aligned).
-            let r = self.dist_rng.gaussian() * d.random_std_nm;
-            self.tau = if active { d.constant_nm + r } else { 0.0 };
-        } else if d.random_std_nm <= 0.0 {
-            self.tau = if active { d.constant_nm } else { 0.0 };
-        } else if !active {
-            self.tau = 0.0;
-        }
+        self.tau =
+            self.cfg
+                .disturbance
+                .torque_at(self.time_us, self.dt_us, &mut self.dist_rng, self.tau);
         let acc = self.phi_d_acc();
         self.phi_d_rate += acc * dt;
         self.phi_d += self.phi_d_rate * dt;

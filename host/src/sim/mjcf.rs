@@ -139,6 +139,23 @@ fn box_inertia(m: f64, x: f64, y: f64, z: f64) -> [f64; 3] {
     ]
 }
 
+/// A leg link hanging from its joint: a uniform rod of `len` and `mass` (radius 2 cm) and its
+/// capsule geom.
+fn rod_link(out: &mut String, pad: &str, len: f64, mass: f64) {
+    inertial(
+        out,
+        pad,
+        [0.0, 0.0, -len / 2.0],
+        mass,
+        rod_inertia(mass, len, 0.02),
+    );
+    let _ = writeln!(
+        out,
+        "{pad}<geom type=\"capsule\" fromto=\"0 0 -0.012 0 0 {}\" size=\"0.018\"/>",
+        -len + 0.012
+    );
+}
+
 /// Writes `<inertial>`; MuJoCo needs a positive mass and inertia on moving bodies.
 fn inertial(out: &mut String, pad: &str, pos: [f64; 3], mass: f64, diag: [f64; 3]) {
     let m = mass.max(1e-4);
@@ -282,36 +299,14 @@ pub fn model_xml(
         joint(&mut x, "        ", 0, "0 0 1");
         joint(&mut x, "        ", 1, "1 0 0");
         joint(&mut x, "        ", 2, "0 1 0");
-        inertial(
-            &mut x,
-            "        ",
-            [0.0, 0.0, -g.thigh / 2.0],
-            m.thigh * ms,
-            rod_inertia(m.thigh * ms, g.thigh, 0.02),
-        );
-        let _ = writeln!(
-            x,
-            "        <geom type=\"capsule\" fromto=\"0 0 -0.012 0 0 {}\" size=\"0.018\"/>",
-            -g.thigh + 0.012
-        );
+        rod_link(&mut x, "        ", g.thigh, m.thigh * ms);
         let _ = writeln!(
             x,
             "        <body name=\"{pfx}_calf\" pos=\"0 0 {}\">",
             -g.thigh
         );
         joint(&mut x, "          ", 3, "0 1 0");
-        inertial(
-            &mut x,
-            "          ",
-            [0.0, 0.0, -g.calf / 2.0],
-            m.calf * ms,
-            rod_inertia(m.calf * ms, g.calf, 0.02),
-        );
-        let _ = writeln!(
-            x,
-            "          <geom type=\"capsule\" fromto=\"0 0 -0.012 0 0 {}\" size=\"0.018\"/>",
-            -g.calf + 0.012
-        );
+        rod_link(&mut x, "          ", g.calf, m.calf * ms);
         let _ = writeln!(
             x,
             "          <body name=\"{pfx}_foot\" pos=\"0 0 {}\">",

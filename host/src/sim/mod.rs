@@ -101,6 +101,35 @@ impl Default for DisturbanceConfig {
     }
 }
 
+impl DisturbanceConfig {
+    /// The disturbance torque at `time_us` (N·m), given the last one: constant while active,
+    /// plus a random part resampled every `hold_s` on a fixed time grid (drawn whether active
+    /// or not, so the random streams of runs stay aligned).
+    pub fn torque_at(&self, time_us: u64, dt_us: u64, rng: &mut rng::Rng, last: f64) -> f64 {
+        let t = time_us as f64 * 1e-6;
+        let active = t >= self.start_s && self.end_s.is_none_or(|e| t < e);
+        let hold_us = ((self.hold_s * 1e6) as u64).max(dt_us.max(1));
+        if self.random_std_nm > 0.0 && time_us.is_multiple_of(hold_us) {
+            let r = rng.gaussian() * self.random_std_nm;
+            if active {
+                self.constant_nm + r
+            } else {
+                0.0
+            }
+        } else if self.random_std_nm <= 0.0 {
+            if active {
+                self.constant_nm
+            } else {
+                0.0
+            }
+        } else if !active {
+            0.0
+        } else {
+            last
+        }
+    }
+}
+
 /// Fall detection and forced falls.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FallConfig {

@@ -346,22 +346,6 @@ impl MjBody {
         self.data.eq_active_mut()[self.ids.hold] = false;
     }
 
-    /// The disturbance torque at the present time (updated once per step).
-    fn update_disturbance(&mut self) {
-        let d = &self.cfg.disturbance;
-        let t = self.time_us as f64 * 1e-6;
-        let active = t >= d.start_s && d.end_s.is_none_or(|e| t < e);
-        let hold_us = ((d.hold_s * 1e6) as u64).max(self.dt_us);
-        if d.random_std_nm > 0.0 && self.time_us.is_multiple_of(hold_us) {
-            let r = self.dist_rng.gaussian() * d.random_std_nm;
-            self.tau = if active { d.constant_nm + r } else { 0.0 };
-        } else if d.random_std_nm <= 0.0 {
-            self.tau = if active { d.constant_nm } else { 0.0 };
-        } else if !active {
-            self.tau = 0.0;
-        }
-    }
-
     /// The horizontal force on the torso from pushes and a forced fall at time `t`, N.
     fn push_force(&self, t: f64) -> [f64; 2] {
         let mut f = [0.0; 2];
@@ -405,7 +389,10 @@ impl MjBody {
         if self.held && all_on {
             self.release();
         }
-        self.update_disturbance();
+        self.tau =
+            self.cfg
+                .disturbance
+                .torque_at(self.time_us, self.dt_us, &mut self.dist_rng, self.tau);
         let push = self.push_force(t);
         let torso = self.ids.torso;
         let r = self.data.xmat()[torso];
