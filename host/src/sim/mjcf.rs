@@ -26,7 +26,7 @@
 //! # Environment
 //!
 //! A floor plane named `floor` (checker texture for the video), optionally tilted
-//! ([`EnvConfig::slope_deg`], uphill forward) or covered with square tiles of random heights in
+//! ([`EnvConfig::slope_deg`], uphill forward) or covered (x from −0.15 to 0.6 m, y within ±0.2 m) with square tiles of random heights in
 //! ±[`EnvConfig::step_height_m`] (deterministic from the seed; the tiles under the start pose are
 //! level), a payload on the torso, and a weld `hold` of the torso to the world (a person holding
 //! the robot until its servos are powered; released by [`super::mujoco`]).
@@ -222,8 +222,8 @@ pub fn model_xml(
         let h = env.step_height_m;
         let s = env.tile_size_m;
         let mut rng = Rng::new(seed, 7);
-        let (nx0, nx1) = ((-0.3 / s).floor() as i64, (1.0 / s).ceil() as i64);
-        let (ny0, ny1) = ((-0.3 / s).floor() as i64, (0.3 / s).ceil() as i64);
+        let (nx0, nx1) = ((-0.15 / s).floor() as i64, (0.6 / s).ceil() as i64);
+        let (ny0, ny1) = ((-0.2 / s).floor() as i64, (0.2 / s).ceil() as i64);
         for ix in nx0..nx1 {
             for iy in ny0..ny1 {
                 let (cx, cy) = ((ix as f64 + 0.5) * s, (iy as f64 + 0.5) * s);

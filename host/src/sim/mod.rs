@@ -3,11 +3,14 @@
 //! A kid-size humanoid ([`gait_core::Robot::reference`] by default) whose 12 leg servos
 //! (IDs 1–6 left leg, 7–12 right leg), two foot force-sensor boards (111 left, 112 right) and
 //! IMU board (200) answer Dynamixel Protocol 2.0 instructions over TCP, with the control tables
-//! of `dxl::table`. The body follows the servos' positions ([`body`]); the whole-body ZMP
-//! computed from all link masses and accelerations is the ground truth ([`zmp`]); the foot
-//! boards report forces whose centre of pressure is that ZMP ([`forces`]); the IMU reports the
-//! upper body's rate and specific force. See [`transport`] for the TCP endpoints and the
-//! lock-step protocol used with the firmware in QEMU.
+//! of `dxl::table`. The body ([`Body`]) is, by default, MuJoCo in full dynamics ([`mujoco`]:
+//! the MJCF of [`mjcf`] generated from the robot description, X-series servo models of
+//! [`dynamixel`], load cells from the soles' contact wrenches, the IMU from MuJoCo sensors,
+//! falls as the physics makes them); [`PhysicsModel::Kinematic`] selects the idealised
+//! kinematic model ([`body`]: stance sole bolted down, whole-body ZMP from the link
+//! accelerations [`zmp`], forces from that ZMP [`forces`], scripted falls), kept for its
+//! exact, hand-checkable tests. See [`transport`] for the TCP endpoints and the lock-step
+//! protocol used with the firmware in QEMU.
 //!
 //! ```no_run
 //! use walker_host::sim::{spawn, SimConfig};

@@ -8,7 +8,11 @@
 //! first ([`spawn`] returns once the sockets are bound), then QEMU with
 //! `-serial tcp:127.0.0.1:PORT,nodelay=on` (and the lock-step UART likewise). With
 //! [`SimConfig::connect`] the simulator connects instead (QEMU `server=on,wait=off`), retrying
-//! until [`SimConfig::connect_timeout`]. TCP_NODELAY is set on every connection.
+//! until [`SimConfig::connect_timeout`]. TCP_NODELAY is set on every connection; a master on a
+//! socket should set it too (pyserial's `socket://` does not: `host/tests/sdk/` shows how),
+//! else a read sent right after a SYNC WRITE waits ≈ 40 ms for a delayed ACK. Free-running (no
+//! lock-step), the physics runs before each reply, so on a loaded machine replies can be tens of
+//! ms late: give such a master a packet-timeout margin.
 //!
 //! # Lock-step channel (fixed protocol)
 //!
