@@ -164,7 +164,7 @@ impl Config {
             swing_sinusoid: false,
             reply_timeout_us: 1_000,
             read_poll_us: bus::DEFAULT_READ_POLL_US,
-            startup_attempts: 3,
+            startup_attempts: 8,
             ramp_us: 1_500_000,
             final_hold_us: 1_000_000,
             min_load_n: 2.0,

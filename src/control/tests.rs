@@ -264,8 +264,8 @@ fn unconnected_bus_reports_everything_missing_quickly() {
     assert_eq!(end, RunEnd::Stopped(StopReason::DeviceMissing { id: 1 }));
     assert_eq!(end.exit_code(), 11);
     assert_eq!(&startup_of(&b.records()).missing[..], &DEVICE_IDS[..]);
-    // 15 devices × 3 attempts × (PING 100 µs + 1 ms timeout), plus the torque off.
-    assert!(b.now_us() < 60_000, "{} µs", b.now_us());
+    // 15 devices × 8 attempts × (PING 100 µs + 1 ms timeout) = 132 ms, plus the torque off.
+    assert!(b.now_us() < 150_000, "{} µs", b.now_us());
 }
 
 #[test]
