@@ -85,7 +85,7 @@ use gait_core::{GaitError, GaitSample, Model, Place, Robot, Sampler, Side};
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::Bus;
-use crate::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
+use crate::imu::{AttitudeFilter, PitchAccel, PitchAccelConfig};
 use crate::log::{
     FaultKind, FaultRecord, FaultState, LogWriter, Record, StopRecord, SupportPhase, TickRecord,
 };
@@ -530,7 +530,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         cutoff_hz: cfg.imu_cutoff_hz,
         inertia: robot.masses.upper_body_inertia as f32,
     });
-    let mut tilt = TiltEstimator::new();
+    let mut attitude = AttitudeFilter::new();
     let mut stab =
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
@@ -585,7 +585,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             Some(s) => {
                 let [roll_rate, rate, _] = s.gyro_rad_s();
                 pitch.update(rate);
-                tilt.update(s.accel_m_s2());
+                attitude.update(s.gyro_rad_s(), s.accel_m_s2(), cfg.dt_s() as f32);
                 Some([roll_rate, rate]).filter(|g| g.iter().all(|v| v.is_finite()))
             }
             None => {
@@ -593,7 +593,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 None
             }
         };
-        sup.tilt(tilt.last().tilt);
+        sup.tilt(attitude.tilt().tilt);
         let tau = pitch.torque();
         let reading = |f: &Option<FootForces>| {
             ForceReading::new(f.map_or([f32::NAN; 4], |f| f.forces_mn.map(|v| v as f32 * 1e-3)))

@@ -24,6 +24,21 @@
 //! roll = atan2(a_y, a_z), pitch = atan2(−a_x, √(a_y² + a_z²)), tilt from vertical =
 //! atan2(√(a_x² + a_y²), a_z). A sample that is non-finite or whose norm is outside
 //! [0.25 g, 4 g] (free fall, impact) is rejected and the last good tilt is held.
+//!
+//! # Attitude (fall detection)
+//! The accelerometer alone mistakes the walk's accelerations for tilt and, while the robot tips
+//! over, reads less than g (it detected falls 90-210 ms late in full dynamics). [`AttitudeFilter`]
+//! integrates the gyro (body rates p, q, r) through the ZYX Euler-angle kinematics
+//!
+//! ```text
+//! φ̇ = p + (q sin φ + r cos φ) tan θ,     θ̇ = q cos φ − r sin φ
+//! ```
+//!
+//! and pulls the result towards the accelerometer's roll and pitch (above) with the
+//! complementary gain `k = dt/(τ + dt)` (τ = [`ATTITUDE_TAU_S`]), only when the specific force's
+//! norm is within [0.8 g, 1.2 g] (the robot is not accelerating much): a rotation is tracked at
+//! once, a gyro bias `b` leaves a steady error of `b·τ` only. Tilt from vertical:
+//! `cos(tilt) = cos φ · cos θ`.
 
 /// Default low-pass cutoff of the φ̈ filter, Hz.
 pub const DEFAULT_CUTOFF_HZ: f32 = 15.0;
@@ -161,6 +176,98 @@ pub struct Tilt {
     pub pitch: f32,
     /// Angle between the body z axis and vertical (≥ 0).
     pub tilt: f32,
+}
+
+/// Time constant of the attitude filter's accelerometer correction, s.
+pub const ATTITUDE_TAU_S: f32 = 0.5;
+
+/// Gyro + accelerometer complementary filter for roll and pitch (see the module doc).
+#[derive(Clone, Debug, Default)]
+pub struct AttitudeFilter {
+    roll: f32,
+    pitch: f32,
+    started: bool,
+}
+
+impl AttitudeFilter {
+    /// Upright until the first good accelerometer sample.
+    pub const fn new() -> Self {
+        AttitudeFilter {
+            roll: 0.0,
+            pitch: 0.0,
+            started: false,
+        }
+    }
+
+    /// Feeds one IMU sample: body rates (rad/s) and specific force (m/s²) over `dt_s` seconds;
+    /// non-finite parts are ignored. Returns the attitude.
+    pub fn update(&mut self, gyro: [f32; 3], accel: [f32; 3], dt_s: f32) -> Tilt {
+        let [ax, ay, az] = accel;
+        let n2 = ax * ax + ay * ay + az * az;
+        let accel_ok =
+            n2.is_finite() && n2 >= (0.25 * G) * (0.25 * G) && n2 <= (4.0 * G) * (4.0 * G);
+        if !self.started {
+            if accel_ok {
+                self.roll = libm::atan2f(ay, az);
+                self.pitch = libm::atan2f(-ax, libm::sqrtf(ay * ay + az * az));
+                self.started = true;
+            }
+            return self.tilt();
+        }
+        let [p, q, r] = gyro;
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            dt_s
+        } else {
+            0.0
+        };
+        if p.is_finite() && q.is_finite() && r.is_finite() {
+            let (sr, cr) = (libm::sinf(self.roll), libm::cosf(self.roll));
+            // tan θ, bounded away from the gimbal singularity (θ = ±π/2: the robot lies).
+            let cp = libm::fmaxf(libm::cosf(self.pitch), 0.05);
+            let tp = libm::sinf(self.pitch) / cp;
+            self.roll += (p + (q * sr + r * cr) * tp) * dt;
+            self.pitch += (q * cr - r * sr) * dt;
+        }
+        let quiet = accel_ok && n2 >= (0.8 * G) * (0.8 * G) && n2 <= (1.2 * G) * (1.2 * G);
+        if quiet {
+            let k = dt / (ATTITUDE_TAU_S + dt);
+            let roll_a = libm::atan2f(ay, az);
+            let pitch_a = libm::atan2f(-ax, libm::sqrtf(ay * ay + az * az));
+            self.roll += k * wrap(roll_a - self.roll);
+            self.pitch += k * (pitch_a - self.pitch);
+        }
+        self.roll = wrap(self.roll);
+        self.pitch = self
+            .pitch
+            .clamp(-core::f32::consts::FRAC_PI_2, core::f32::consts::FRAC_PI_2);
+        self.tilt()
+    }
+
+    /// The present attitude.
+    pub fn tilt(&self) -> Tilt {
+        let c = libm::cosf(self.roll) * libm::cosf(self.pitch);
+        Tilt {
+            roll: self.roll,
+            pitch: self.pitch,
+            tilt: libm::acosf(c.clamp(-1.0, 1.0)),
+        }
+    }
+}
+
+/// Wraps an angle to (−π, π].
+fn wrap(a: f32) -> f32 {
+    use core::f32::consts::{PI, TAU};
+    if !a.is_finite() {
+        return 0.0;
+    }
+    let mut x = a;
+    while x > PI {
+        x -= TAU;
+    }
+    while x <= -PI {
+        x += TAU;
+    }
+    x
 }
 
 /// Tilt from the accelerometer with last-good hold.
@@ -355,6 +462,66 @@ mod tests {
         // Lying on the back: tilt ≈ π/2.
         let l = t.update([G, 0.0, 0.0]);
         assert!((l.tilt - core::f32::consts::FRAC_PI_2).abs() < 1e-5);
+    }
+
+    #[test]
+    fn attitude_tracks_a_fast_rotation_without_lag() {
+        // Tipping forward at 2 rad/s; the accelerometer of a tipping robot reads less than g
+        // (here 0.7 g, still pointing "up" in the body): outside the quiet band it is not
+        // used, and the gyro integration follows the true pitch exactly.
+        let mut f = AttitudeFilter::new();
+        f.update([0.0; 3], [0.0, 0.0, G], 0.005);
+        let dt = 0.005;
+        let mut t = Tilt::default();
+        for _ in 0..60 {
+            t = f.update([0.0, 2.0, 0.0], [0.0, 0.0, 0.7 * G], dt);
+        }
+        assert!((t.pitch - 0.6).abs() < 1e-4, "{t:?}");
+        assert!((t.tilt - t.pitch).abs() < 1e-4);
+        // The accelerometer-only estimate saw nothing.
+        let mut a = TiltEstimator::new();
+        assert!(a.update([0.0, 0.0, 0.7 * G]).tilt < 1e-6);
+        // With a quiet accelerometer that reads the true tilted gravity, no error either.
+        let mut f = AttitudeFilter::new();
+        f.update([0.0; 3], [0.0, 0.0, G], dt);
+        for k in 1..=60 {
+            let th = 2.0 * dt * k as f32;
+            t = f.update(
+                [0.0, 2.0, 0.0],
+                [-G * libm::sinf(th), 0.0, G * libm::cosf(th)],
+                dt,
+            );
+        }
+        assert!((t.pitch - 0.6).abs() < 1e-3, "{t:?}");
+    }
+
+    #[test]
+    fn attitude_converges_to_gravity_and_rejects_accelerations() {
+        let mut f = AttitudeFilter::new();
+        let th = 0.3f32;
+        // Started upright, then held pitched by 0.3 rad with a still gyro: converges with τ.
+        f.update([0.0; 3], [0.0, 0.0, G], 0.005);
+        let tilted = [-G * libm::sinf(th), 0.0, G * libm::cosf(th)];
+        let mut t = Tilt::default();
+        for _ in 0..(5.0 * ATTITUDE_TAU_S / 0.005) as usize {
+            t = f.update([0.0; 3], tilted, 0.005);
+        }
+        assert!((t.pitch - th).abs() < 0.01 * th, "{t:?}");
+        // A 0.5 g forward acceleration (norm 1.12 g) pulls little; a 2 g shock not at all.
+        let before = f.tilt();
+        let shock = f.update([0.0; 3], [2.0 * G, 0.0, G], 0.005);
+        assert_eq!(shock.pitch, before.pitch);
+        // Non-finite parts are ignored.
+        let n = f.update([f32::NAN; 3], [f32::NAN; 3], 0.005);
+        assert_eq!(n, before);
+        // Roll, with a bias-free gyro: φ̇ = p at θ = 0.
+        let mut f = AttitudeFilter::new();
+        f.update([0.0; 3], [0.0, 0.0, G], 0.01);
+        let r = f.update([1.0, 0.0, 0.0], [0.0, 0.0, G], 0.01);
+        assert!(
+            (r.roll - 0.01 * (1.0 - 0.01 / (ATTITUDE_TAU_S + 0.01))).abs() < 1e-6,
+            "{r:?}"
+        );
     }
 
     #[test]

@@ -278,11 +278,12 @@ impl<const N: usize> Supervisor<N> {
     }
 
     /// Reports the trunk tilt from vertical, rad (non-finite values are ignored: the IMU
-    /// filter already holds its last good value).
+    /// filter already holds its last good value). Beyond the limit the robot is falling: the
+    /// servos go limp at once (no pose hold: stiff legs would only lever the fall).
     pub fn tilt(&mut self, tilt_rad: f32) {
         if tilt_rad.is_finite() && libm::fabsf(tilt_rad) > self.cfg.tilt_limit_rad {
             let mrad = libm::fminf(libm::fabsf(tilt_rad) * 1000.0, 65535.0) as u16;
-            self.stop(StopReason::Fall { tilt_mrad: mrad });
+            self.stop_with_hold(StopReason::Fall { tilt_mrad: mrad }, 0);
         }
     }
 
@@ -572,7 +573,8 @@ mod tests {
         // The first reason wins.
         s.plan_done();
         assert_eq!(s.stop_reason(), Some(StopReason::Fall { tilt_mrad: 750 }));
-        assert_eq!(s.fault_state(), crate::log::FaultState::Stopping);
+        // Limp at once: the very next action is torque off, no pose hold.
+        assert_eq!(s.step(), Action::SendTorqueOff);
         run_to_off(&mut s);
         assert_eq!(s.fault_state(), crate::log::FaultState::TorqueOff);
     }

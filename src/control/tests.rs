@@ -355,29 +355,42 @@ fn a_short_dropout_recovers() {
 
 #[test]
 fn fall_stops_and_turns_torque_off() {
+    // The fake IMU's accelerometer jumps to a 1 rad tilt with no rotation rate (an unphysical
+    // fall): the attitude filter follows it with its accelerometer time constant and stops the
+    // walk when the estimate passes the 0.6 rad limit (k = dt/(τ + dt) per tick: the estimate
+    // is 1 − (1 − k)ⁿ of the way after n ticks, 0.6 after n ≈ 91 at 5 ms and τ = 0.5 s).
     let cfg = Config::default();
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
     b.fall_at = Some(1 + ramp + 100);
     let end = run(&mut b, &cfg);
-    assert_eq!(end, RunEnd::Stopped(StopReason::Fall { tilt_mrad: 1000 }));
+    let RunEnd::Stopped(StopReason::Fall { tilt_mrad }) = end else {
+        panic!("{end:?}");
+    };
+    assert!((600..650).contains(&tilt_mrad), "{tilt_mrad}");
     assert_eq!(end.exit_code(), 13);
     assert!(torque_off_sent(&b));
     assert!(b.servos().all(|d| !d.torque));
     let tr = ticks_of(&b.records());
-    assert_eq!(
-        tr.iter().position(|t| t.fault == FaultState::Stopping),
-        Some(ramp + 100)
+    let stopped = tr
+        .iter()
+        .position(|t| t.fault != FaultState::Ok)
+        .expect("a stop");
+    let k = cfg.dt_s() / (f64::from(crate::imu::ATTITUDE_TAU_S) + cfg.dt_s());
+    let n = (0.4f64.ln() / (1.0 - k).ln()).ceil() as usize;
+    assert!(
+        stopped >= ramp + 100 + n - 3 && stopped <= ramp + 100 + n + 3,
+        "stopped at tick {stopped}, fall at {}, expected ≈ {n} ticks later",
+        ramp + 100
     );
-    assert!(tr[ramp + 100..]
+    assert!(tr[stopped..]
         .iter()
         .all(|t| t.phase == SupportPhase::Stopped));
-    // The pose is held: every goal after the fall equals the last one before it.
-    let held = b.goals[1 + ramp + 100];
-    assert!(b.goals[1 + ramp + 100..].iter().all(|g| *g == held));
-    assert_eq!(
-        b.goals.len(),
-        1 + ramp + 100 + usize::from(cfg.supervisor.stopping_ticks)
+    // Limp at once: no goal is written after the tick that detected the fall.
+    assert!(
+        b.goals.len() <= stopped + 2,
+        "{} goal writes, stop at tick {stopped}",
+        b.goals.len()
     );
 }
 
