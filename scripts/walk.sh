@@ -1,16 +1,16 @@
 #!/usr/bin/env bash
 # Main job: the firmware, built for the emulated board (QEMU mps2-an500, Cortex-M7), walks the
 # seed's Table 2 plan (14 steps) against the simulated robot in lock-step, once per model (LIPM,
-# DLIPM, TLIPFM); each run writes its captured log, the simulator's ground truth and the
+# DLIPM, TLIPFM) open loop as the paper (gyro feedback off), then TLIPFM with the firmware's
+# default closed loop (gyro balance feedback, src/balance.rs); each run writes its captured log, the simulator's ground truth and the
 # ZMP-response report (CSV, SVG/PNG plots like seed 000 Figs. 14-16, Table 3 statistics) to
-# out/fil-MODEL/, and the three models are compared side by side in out/compare.md.
+# out/fil-MODEL/ (out/fil-tlipfm-closed/), and the four runs are compared in out/compare.md.
 # The paper's timing is walked as published (feasibility=off): Table 2's swing asks the swing
 # knee for ≈ 5.8 rad/s, above the simulated XM430-class servos' 4.8 rad/s; the firmware logs that
 # warning and the servos saturate, as on the real robot. FEASIBILITY=stretch lets the firmware
-# stretch the timing instead (its default on the robot). The simulated servos are XM430-class in
-# torque too (3.5 N·m stall on the torque–speed line; `walker fil --stall-torque NM`, 0 = off).
-# The simulated robot is MuJoCo 3.17 in full dynamics (host/src/sim/mujoco.rs): it can tip, slip
-# and fall by itself; each run also renders a video of the walk (out/fil-MODEL/walk.mp4).
+# stretch the timing instead (its default on the robot). The simulated robot is MuJoCo 3.17 in
+# full dynamics (host/src/sim/mujoco.rs) with XM430-W350 servo models (host/src/sim/dynamixel.rs):
+# it can tip, slip and fall by itself; each run also renders a video (out/fil-MODEL/walk.mp4).
 # Options: PLAN=plans/other.toml bash scripts/walk.sh; MODELS="tlipfm" for one model only;
 # VIDEO=0 skips the videos.
 set -euo pipefail
@@ -34,13 +34,21 @@ walker=target/$(rustc -vV | sed -n 's/^host: //p')/release/walker
 runs=()
 for model in $models; do
     echo
-    echo "== $plan with $model: firmware in QEMU against the simulated robot"
+    echo "== $plan with $model, open loop as the paper: firmware in QEMU against the simulated robot"
     video_args=()
     [ "$video" = 1 ] && video_args=(--video "out/fil-$model/walk.mp4")
     "$walker" fil --plan "$plan" --model "$model" --out "out/fil-$model" \
-        --firmware-args "feasibility=$feasibility" "${video_args[@]}"
+        --firmware-args "feasibility=$feasibility gyro_ankle=0 gyro_hip=0" "${video_args[@]}"
     runs+=("$model=out/fil-$model/walk.log")
 done
+
+echo
+echo "== $plan with tlipfm and the firmware's closed loop (gyro balance feedback, its default)"
+video_args=()
+[ "$video" = 1 ] && video_args=(--video "out/fil-tlipfm-closed/walk.mp4")
+"$walker" fil --plan "$plan" --model tlipfm --out out/fil-tlipfm-closed \
+    --firmware-args "feasibility=$feasibility" "${video_args[@]}"
+runs+=("tlipfm-closed=out/fil-tlipfm-closed/walk.log")
 
 echo
 echo "== side by side"

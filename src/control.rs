@@ -641,6 +641,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             [0.0; 2]
                         };
                         let (mut q, _) = targets.joints(&s, shift);
+                        cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                         if sampler.is_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);
                         }

@@ -205,7 +205,7 @@ impl AttitudeFilter {
         let [ax, ay, az] = accel;
         let n2 = ax * ax + ay * ay + az * az;
         let accel_ok =
-            n2.is_finite() && n2 >= (0.25 * G) * (0.25 * G) && n2 <= (4.0 * G) * (4.0 * G);
+            n2.is_finite() && ((0.25 * G) * (0.25 * G)..=(4.0 * G) * (4.0 * G)).contains(&n2);
         if !self.started {
             if accel_ok {
                 self.roll = libm::atan2f(ay, az);
@@ -228,7 +228,7 @@ impl AttitudeFilter {
             self.roll += (p + (q * sr + r * cr) * tp) * dt;
             self.pitch += (q * cr - r * sr) * dt;
         }
-        let quiet = accel_ok && n2 >= (0.8 * G) * (0.8 * G) && n2 <= (1.2 * G) * (1.2 * G);
+        let quiet = accel_ok && ((0.8 * G) * (0.8 * G)..=(1.2 * G) * (1.2 * G)).contains(&n2);
         if quiet {
             let k = dt / (ATTITUDE_TAU_S + dt);
             let roll_a = libm::atan2f(ay, az);

@@ -43,6 +43,9 @@
 //! | `stab_margin` | m, 0 ..= 0.05 | ZMP command margin inside the support polygon |
 //! | `stab_cutoff` | Hz, 0 < x ≤ 1000 | ZMP error low-pass cutoff |
 //! | `feasibility` | `stretch` \| `lower` \| `off` | servo-speed check at start-up: stretch the step timing, lower the swing, or only warn |
+//! | `gyro_ankle` | s, 0 ..= 1 | gyro damping gain at the ankles of the legs on the ground ([`crate::balance`]) |
+//! | `gyro_hip` | s, 0 ..= 1 | gyro damping gain at the hips of the legs on the ground |
+//! | `gyro_max` | rad, 0 ..= 0.3 | largest gyro correction of one joint |
 //! | `fault_nan` | walk tick | inject a NaN joint target (test) |
 //! | `stop_at` | walk tick | request a stop (test) |
 //!
@@ -55,7 +58,7 @@ use gait_core::ModelKind;
 
 /// Every key, in the order of their index in [`ArgError::key_index`] and the log's
 /// `ConfigRejected` fault record.
-pub const KEYS: [&str; 48] = [
+pub const KEYS: [&str; 51] = [
     "model",
     "dt",
     "steps",
@@ -104,6 +107,9 @@ pub const KEYS: [&str; 48] = [
     "stab_margin",
     "stab_cutoff",
     "feasibility",
+    "gyro_ankle",
+    "gyro_hip",
+    "gyro_max",
 ];
 
 /// Extra keys beyond [`KEYS`] (fault injection), indices continue after it.
@@ -445,6 +451,9 @@ fn apply_one(cfg: &mut Config, key: &str, v: &str) -> Result<(), ArgErrorKind> {
         "stab_rate" => cfg.stabilizer.max_rate = positive(num_in(v, 0.0, 1.0)?)?,
         "stab_margin" => cfg.stabilizer.margin = num_in(v, 0.0, 0.05)?,
         "stab_cutoff" => cfg.stabilizer.cutoff_hz = positive(num_in(v, 0.0, 1000.0)?)?,
+        "gyro_ankle" => cfg.gyro_feedback.ankle = num_in(v, 0.0, 1.0)? as f32,
+        "gyro_hip" => cfg.gyro_feedback.hip = num_in(v, 0.0, 1.0)? as f32,
+        "gyro_max" => cfg.gyro_feedback.max_rad = num_in(v, 0.0, 0.3)? as f32,
         "feasibility" => {
             cfg.feasibility = match v {
                 "stretch" => Feasibility::Stretch,

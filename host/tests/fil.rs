@@ -349,7 +349,8 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_m
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
-    // The paper's open-loop TLIPFM walk, 14 steps at the paper's timing, on the MuJoCo robot
+    // The paper's open-loop TLIPFM walk (the firmware's gyro feedback off), 14 steps at the
+    // paper's timing, on the MuJoCo robot
     // with XM430-W350 servo models. Figures when this test was written (seed 0): no fall,
     // walked 0.255 of 0.260 m, heading drift −2.9°, torso tilt ≤ 9.1°, measured − reference
     // mean |e| 10.3 mm sagittal / 28.2 mm lateral. The bounds leave room for tuning, not for
@@ -361,7 +362,12 @@ fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
         ..SimConfig::default()
     };
     let spec = WalkSpec::default();
-    let (r, log) = fil("mujoco-table2", spec.clone(), sim, &["feasibility=off"]);
+    let (r, log) = fil(
+        "mujoco-table2",
+        spec.clone(),
+        sim,
+        &["feasibility=off", "gyro_ankle=0", "gyro_hip=0"],
+    );
     assert_eq!(r.exit_code, Some(0));
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
@@ -411,4 +417,46 @@ fn table2_completes_with_twenty_percent_reply_loss() {
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
     assert_eq!(w.fell_at, None, "{}", w.line());
     assert!(w.walked > 0.9 * w.planned, "{}", w.line());
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn closed_loop_walk_survives_a_sagittal_push() {
+    // The firmware's default closed loop (gyro damping at the ankles and hips of the legs on
+    // the ground, the gyro + accelerometer attitude filter) on the MuJoCo robot: the Table 2
+    // walk at the paper's timing with a 1.5 N·s forward push on the torso at 6 s (single
+    // support on the left foot). Open loop (`gyro_ankle=0 gyro_hip=0`) the same push makes the
+    // robot fall.
+    let sim = SimConfig {
+        pushes: vec![walker_host::sim::Push::parse("6:1.5:0").unwrap()],
+        ..SimConfig::default()
+    };
+    let spec = WalkSpec::default();
+    let (r, log) = fil(
+        "closed-loop-push",
+        spec.clone(),
+        sim.clone(),
+        &["feasibility=off"],
+    );
+    let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
+    assert_eq!(r.exit_code, Some(0), "{}", w.line());
+    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
+    assert_eq!(w.fell_at, None, "{}", w.line());
+    assert!(w.walked > 0.9 * w.planned, "{}", w.line());
+    // Bounds: no target clamped to a joint limit, none non-finite (that stops with exit 15).
+    assert!(
+        !log.events.iter().any(|e| matches!(e, Record::Fault(f)
+            if f.kind == walker_firmware::log::FaultKind::TargetClamped)),
+        "{:?}",
+        log.events
+    );
+    // The same push open loop: the robot falls and the firmware says so.
+    let (r, log) = fil(
+        "open-loop-push",
+        spec.clone(),
+        sim,
+        &["feasibility=off", "gyro_ankle=0", "gyro_hip=0"],
+    );
+    assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
+    assert!(r.sim.fall_started_us.is_some());
 }
