@@ -57,11 +57,18 @@ impl GyroFeedback {
             return;
         };
         let m = if self.max_rad.is_finite() {
-            self.max_rad.max(0.0)
+            libm::fmaxf(self.max_rad, 0.0)
         } else {
             0.0
         };
-        let sat = |v: f32| if v.is_finite() { v.clamp(-m, m) } else { 0.0 };
+        // fmin/fmax, not f32::clamp: no panic path (clamp asserts min ≤ max).
+        let sat = |v: f32| {
+            if v.is_finite() {
+                libm::fminf(libm::fmaxf(v, -m), m)
+            } else {
+                0.0
+            }
+        };
         let (ankle_pitch, ankle_roll) = (sat(self.ankle * wy), sat(self.ankle * wx));
         let (hip_pitch, hip_roll) = (sat(self.hip * wy), sat(self.hip * wx));
         let legs: [bool; 2] = match phase {

@@ -178,6 +178,8 @@ pub struct Tilt {
     pub tilt: f32,
 }
 
+use gait_core::fastmath::sin_cos;
+
 /// Time constant of the attitude filter's accelerometer correction, s.
 pub const ATTITUDE_TAU_S: f32 = 0.5;
 
@@ -221,10 +223,10 @@ impl AttitudeFilter {
             0.0
         };
         if p.is_finite() && q.is_finite() && r.is_finite() {
-            let (sr, cr) = (libm::sinf(self.roll), libm::cosf(self.roll));
+            let (sr, cr) = sin_cos(self.roll);
             // tan θ, bounded away from the gimbal singularity (θ = ±π/2: the robot lies).
-            let cp = libm::fmaxf(libm::cosf(self.pitch), 0.05);
-            let tp = libm::sinf(self.pitch) / cp;
+            let (sp, cp) = sin_cos(self.pitch);
+            let tp = sp / libm::fmaxf(cp, 0.05);
             self.roll += (p + (q * sr + r * cr) * tp) * dt;
             self.pitch += (q * cr - r * sr) * dt;
         }
@@ -245,11 +247,11 @@ impl AttitudeFilter {
 
     /// The present attitude.
     pub fn tilt(&self) -> Tilt {
-        let c = libm::cosf(self.roll) * libm::cosf(self.pitch);
+        let c = (sin_cos(self.roll).1 * sin_cos(self.pitch).1).clamp(-1.0, 1.0);
         Tilt {
             roll: self.roll,
             pitch: self.pitch,
-            tilt: libm::acosf(c.clamp(-1.0, 1.0)),
+            tilt: libm::atan2f(libm::sqrtf(1.0 - c * c), c),
         }
     }
 }
