@@ -42,7 +42,6 @@ macro_rules! fw_log {
     }};
 }
 
-pub mod balance;
 pub mod board;
 pub mod bus;
 pub mod control;
@@ -133,8 +132,9 @@ pub struct Config {
     pub stabilizer_on: bool,
     /// The stabilizer's gains and limits.
     pub stabilizer: gait_core::stabilizer::StabilizerConfig,
-    /// Gyro damping through the ankles and hips of the legs on the ground ([`balance`]).
-    pub gyro_feedback: balance::GyroFeedback,
+    /// Gyro damping through the ankles and hips of the legs on the ground
+    /// ([`gait_core::balance`]).
+    pub gyro_feedback: gait_core::balance::GyroFeedback,
     /// What start-up does when the plan needs joints faster than the servos.
     pub feasibility: control::Feasibility,
     /// Fault injection: replace joint 0's target by NaN at this walk tick.
@@ -176,7 +176,7 @@ impl Config {
             compensation: control::Compensation::None,
             stabilizer_on: false,
             stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
-            gyro_feedback: balance::GyroFeedback::DEFAULT,
+            gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
             feasibility: control::Feasibility::Stretch,
             fault_nan_tick: None,
             stop_at_tick: None,

@@ -43,7 +43,7 @@
 //! | `stab_margin` | m, 0 ..= 0.05 | ZMP command margin inside the support polygon |
 //! | `stab_cutoff` | Hz, 0 < x ≤ 1000 | ZMP error low-pass cutoff |
 //! | `feasibility` | `stretch` \| `lower` \| `off` | servo-speed check at start-up: stretch the step timing, lower the swing, or only warn |
-//! | `gyro_ankle` | s, 0 ..= 1 | gyro damping gain at the ankles of the legs on the ground ([`crate::balance`]) |
+//! | `gyro_ankle` | s, 0 ..= 1 | gyro damping gain at the ankles of the legs on the ground ([`gait_core::balance`]) |
 //! | `gyro_hip` | s, 0 ..= 1 | gyro damping gain at the hips of the legs on the ground |
 //! | `gyro_max` | rad, 0 ..= 0.3 | largest gyro correction of one joint |
 //! | `fault_nan` | walk tick | inject a NaN joint target (test) |

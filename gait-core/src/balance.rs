@@ -1,9 +1,10 @@
 //! Gyro balance feedback: damping of the trunk's rotation through the joints of the legs on the
-//! ground (the classic ankle/hip gyro feedback of kid-size walking engines).
+//! ground (the classic ankle/hip gyro feedback of kid-size walking engines), applied by the firmware to
+//! the joint targets of every walking tick.
 //!
 //! # Law
 //! With the trunk's roll and pitch rates ω_x, ω_y (gyro, rad/s, body frame) and the joint
-//! conventions of [`gait_core::kinematics`] (positive = right-hand rule about the pelvis axes,
+//! conventions of [`crate::kinematics`] (positive = right-hand rule about the pelvis axes,
 //! the same on both legs), each leg in contact with the ground gets
 //!
 //! ```text
@@ -19,7 +20,8 @@
 //! (rad of joint per rad/s of trunk rate); 0 turns a term off. A missing or non-finite gyro
 //! sample gives no correction.
 
-use gait_core::{Side, SupportPhase};
+use crate::robot::Side;
+use crate::sampler::SupportPhase;
 
 /// Gyro feedback gains and limit.
 #[derive(Clone, Copy, Debug, PartialEq)]
