@@ -30,11 +30,11 @@ use embedded_hal::digital::{ErrorType, OutputPin};
 use embedded_io::ErrorKind;
 
 use crate::board::{BusError, Clock, ServoBus};
-use crate::log::BusCounters;
+use crate::record::BusCounters;
 use crate::Config;
 
 /// Default longest wait for one reply byte, µs.
-pub const DEFAULT_READ_POLL_US: u32 = 20;
+pub use walker_contract::config::DEFAULT_READ_POLL_US;
 /// Size of the master's transmit and receive buffers and of the link's packet buffer, bytes.
 pub const PACKET_BUF: usize = 256;
 

@@ -49,28 +49,16 @@
 //! measurement instruments for the ZMP-response log. A foot board that stops answering
 //! *during* the walk is a device loss (stop), whatever this setting.
 //!
-//! # Exit codes ([`RunEnd::exit_code`]; QEMU passes them to the host through semihosting)
-//! | code | meaning |
-//! | --- | --- |
-//! | 0 | plan done |
-//! | 2 | configuration rejected (bad `key=value` token, or gait-core rejected the plan) |
-//! | 3 | virtual watchdog (QEMU board) |
-//! | 11 | device missing at start-up (stop record `DeviceMissing`, first missing id) |
-//! | 12 | device lost while running |
-//! | 13 | fall (tilt beyond the limit) |
-//! | 14 | overrun burst |
-//! | 15 | non-finite joint target |
-//! | 17 | stop requested |
-//! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
-//! | 101 | panic |
-//!
-//! i.e. 10 + the stop record's reason code for supervisor stops.
+//! # Exit codes
+//! [`RunEnd::exit_code`] maps an end to the contract's [`walker_contract::ExitCode`] table (the
+//! one table of the codes and their meanings; QEMU passes them to the host through
+//! semihosting).
 
 use core::cell::Cell;
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
-use dxl::table::{foot, ids, imu as imu_table, x_series};
+use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::kinematics::{LegKinematics, LegsIkReport};
 use gait_core::measured::{measured_zmp, ForceReading};
@@ -82,50 +70,30 @@ use gait_core::support::SupportPolygon;
 use gait_core::wholebody::WholeBody;
 use gait_core::zmp::ZmpShape;
 use gait_core::{GaitError, GaitSample, Model, Place, Robot, Sampler, Side};
+use walker_contract::bus_map::{self as ids, DEVICE_IDS};
+use walker_contract::ExitCode;
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::Bus;
 use crate::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
-use crate::log::{
+use crate::params::ArgError;
+use crate::record::{
     FaultKind, FaultRecord, FaultState, LogWriter, Record, StopRecord, SupportPhase, TickRecord,
 };
-use crate::params::ArgError;
 use crate::startup::{self, Ramp, StartupError};
 use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
-use crate::{startup_record, Config, DEVICE_IDS};
+use crate::{startup_record, Config};
 
-/// Most footsteps a plan may have.
-pub const MAX_STEPS: usize = 64;
+pub use walker_contract::config::{Compensation, Feasibility, MAX_STEPS};
 /// The sampler type of the firmware.
 pub type GaitSampler = Sampler<f32, MAX_STEPS>;
-/// Devices read every tick, in bulk-read order.
-pub const SENSOR_IDS: [u8; 3] = [ids::FOOT_LEFT, ids::FOOT_RIGHT, ids::IMU];
+pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;
 
 /// Fixed-point steps of the whole-body compensation per sample (cost: that + 1 two-leg IK and
 /// FK evaluations).
 pub const WHOLEBODY_ITERATIONS: u8 = 2;
-
-/// How the pelvis is placed (`comp=` token).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Compensation {
-    /// The paper's pipeline: the pelvis point on the model's CoM.
-    None,
-    /// Whole-body compensation: the multi-body CoM (swing leg included) on the model's CoM.
-    WholeBody,
-}
-
-/// What start-up does when the plan needs a joint faster than the servo (`feasibility=`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Feasibility {
-    /// Stretch t1, t2 and T by the needed factor × 1.05 (re-checked).
-    Stretch,
-    /// Lower the swing height by the needed factor × 1.05 (re-checked).
-    Lower,
-    /// Only log the warning.
-    Off,
-}
 
 /// Sample → 12 joint targets, built once: the paper's pipeline or whole-body compensation.
 #[derive(Clone, Debug)]
@@ -218,22 +186,6 @@ impl SupportCache {
     }
 }
 
-/// Exit codes (see the module docs).
-pub mod exit_code {
-    /// Plan done.
-    pub const OK: i32 = 0;
-    /// Configuration rejected.
-    pub const CONFIG: i32 = 2;
-    /// Virtual watchdog (QEMU board).
-    pub const WATCHDOG: i32 = 3;
-    /// Base of supervisor stops: 10 + stop reason code.
-    pub const STOP_BASE: i32 = 10;
-    /// A start-up step failed after the probe.
-    pub const STARTUP: i32 = 20;
-    /// Panic.
-    pub const PANIC: i32 = 101;
-}
-
 /// How a run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RunEnd {
@@ -246,14 +198,18 @@ pub enum RunEnd {
 }
 
 impl RunEnd {
-    /// The exit code (QEMU) of this end.
-    pub fn exit_code(&self) -> i32 {
+    /// The exit code of this end (the contract's table).
+    pub fn exit(&self) -> ExitCode {
         match self {
-            RunEnd::Stopped(StopReason::PlanDone) => exit_code::OK,
-            RunEnd::Stopped(r) => exit_code::STOP_BASE + i32::from(r.code().0),
-            RunEnd::Startup(_) => exit_code::STARTUP,
-            RunEnd::Config(_) => exit_code::CONFIG,
+            RunEnd::Stopped(r) => r.kind().exit(),
+            RunEnd::Startup(_) => ExitCode::StartupFailed,
+            RunEnd::Config(_) => ExitCode::ConfigRejected,
         }
+    }
+
+    /// The process exit status of this end (QEMU semihosting).
+    pub fn exit_code(&self) -> i32 {
+        self.exit().status()
     }
 }
 
@@ -465,7 +421,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             log.write(bus.board(), fault(now, kind, id, value));
         }
     }
-    let mut critical: heapless::Vec<u8, { crate::log::MAX_MISSING }> = heapless::Vec::new();
+    let mut critical: heapless::Vec<u8, { crate::record::MAX_MISSING }> = heapless::Vec::new();
     for &id in missing.iter() {
         if cfg.feet_required || !is_foot(id) {
             let _ = critical.push(id);

@@ -2,7 +2,7 @@
 //! the smooth move from the present pose to the gait's initial pose.
 //!
 //! Sequence (run by [`crate::control::run`]):
-//! 1. [`probe`]: PING every id of [`crate::DEVICE_IDS`] (each up to
+//! 1. [`probe`]: PING every id of [`walker_contract::bus_map::DEVICE_IDS`] (each up to
 //!    [`Config::startup_attempts`] times); the ids that never answer are reported in the
 //!    start-up log record. A missing servo or IMU stops (exit code 11, stop record
 //!    `DeviceMissing`); a missing foot board too unless [`Config::feet_required`] is false
@@ -29,12 +29,13 @@
 //! Steps 2–4 report the first failing device as a [`StartupError`] (log fault record
 //! `StartupFailed`, exit code 20).
 
-use dxl::table::{ids, x_series};
+use dxl::table::x_series;
+use walker_contract::bus_map as ids;
 
 use crate::board::{Clock, ServoBus};
 use crate::bus::Bus;
 use crate::control::{build_sampler, Feasibility, Targets};
-use crate::log::{FaultKind, MAX_MISSING};
+use crate::record::{FaultKind, MAX_MISSING};
 use crate::Config;
 use gait_core::kinematics::{JointSpeedMonitor, JointSpeedReport};
 use gait_core::robot::LEG_JOINTS;
@@ -396,18 +397,18 @@ mod tests {
         let time = Cell::new(0);
         let cfg = Config::default();
         let mut bus = Bus::new(&mut board, &time, &cfg);
-        let missing = probe(&mut bus, &crate::DEVICE_IDS, &cfg);
+        let missing = probe(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert!(missing.is_empty());
-        let written = set_return_delay(&mut bus, &crate::DEVICE_IDS, &cfg);
+        let written = set_return_delay(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert_eq!(written, Ok(15));
         // Second time: already 0, nothing written.
-        assert_eq!(set_return_delay(&mut bus, &crate::DEVICE_IDS, &cfg), Ok(0));
+        assert_eq!(set_return_delay(&mut bus, &ids::DEVICE_IDS, &cfg), Ok(0));
         let ticks = read_positions(&mut bus, &cfg).unwrap();
         assert_eq!(ticks, FakeBoard::initial_ticks());
         enable_torque(&mut bus, &cfg).unwrap();
         drop(bus);
         // Every device pinged, written (addr 9 = 0) and read back.
-        for id in crate::DEVICE_IDS {
+        for id in ids::DEVICE_IDS {
             let pk = |op: u8| {
                 board
                     .packets
@@ -445,7 +446,7 @@ mod tests {
         let time = Cell::new(0);
         let cfg = Config::default();
         let mut bus = Bus::new(&mut board, &time, &cfg);
-        let missing = probe(&mut bus, &crate::DEVICE_IDS, &cfg);
+        let missing = probe(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert_eq!(&missing[..], &[7, 200]);
         let e = set_return_delay(&mut bus, &[1, 2, 3], &cfg).unwrap_err();
         assert_eq!(e.step, StartupStep::ReturnDelayVerify);

@@ -32,9 +32,10 @@ use std::time::Duration;
 
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
 use gait_core::{Robot, SupportPhase as PlanPhase};
+use walker_contract::record::{FaultKind, Record, SupportPhase, POS_NA};
+use walker_contract::{params, Config};
 use walker_firmware::control::{build_sampler, support_of, Targets};
-use walker_firmware::log::{FaultKind, Record, SupportPhase, POS_NA};
-use walker_firmware::{params, startup, Config};
+use walker_firmware::startup;
 
 use crate::fil::{self, FilOptions};
 use crate::planfile::{CompensationName, ModelName, WalkSpec};
@@ -763,7 +764,7 @@ mod tests {
             let cfg = firmware_config(&fil::firmware_tokens(&s).unwrap()).unwrap();
             assert_eq!(cfg.stabilizer_on, v.stabilizer, "{}", v.name);
             assert_eq!(
-                cfg.compensation == walker_firmware::control::Compensation::WholeBody,
+                cfg.compensation == walker_contract::config::Compensation::WholeBody,
                 v.compensation == CompensationName::Wholebody
             );
             assert_eq!(cfg.model, gait_core::ModelKind::from(v.model));
@@ -780,7 +781,7 @@ mod tests {
             .records()
             .iter()
             .map(|&(kind, id, value)| {
-                Record::Fault(walker_firmware::log::FaultRecord {
+                Record::Fault(walker_contract::record::FaultRecord {
                     seq: 0,
                     time_us: 0,
                     kind,

@@ -1,5 +1,5 @@
 //! ZMP-response report: decode a captured firmware log (with the firmware's own
-//! [`walker_firmware::log::Decoder`]), write it as CSV, plot reference vs response with the
+//! [`walker_contract::record::Decoder`]), write it as CSV, plot reference vs response with the
 //! support-polygon bounds (seed 000 Figs. 14-16), and compute the Table 3 error statistics.
 //!
 //! Record counts: *good* = frames the decoder accepted (tick and event records), *bad* = frames
@@ -22,7 +22,7 @@ use gait_core::{Robot, SupportPhase as PlanPhase};
 use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use walker_firmware::log::{
+use walker_contract::record::{
     DecodeError, Decoder, DecoderStats, FaultState, Record, SupportPhase, TickRecord, POS_NA,
     TAU_NA,
 };

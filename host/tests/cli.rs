@@ -5,10 +5,10 @@ use gait_core::kinematics::{leg_fk, Pose};
 use gait_core::{Robot, Side};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use walker_firmware::log::{
+use walker_contract::record::{
     encode, BoardId, Record, StartupRecord, StopRecord, SupportPhase, TickRecord, MAX_FRAME,
 };
-use walker_firmware::supervisor::StopReason;
+use walker_contract::StopReason;
 use walker_host::export;
 use walker_host::planfile::{self, WalkSpec};
 use walker_host::report;

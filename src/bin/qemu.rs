@@ -30,7 +30,8 @@ mod firmware {
     use cortex_m_rt::entry;
     use walker_firmware::board::{Board, Clock};
     use walker_firmware::boards::qemu_mps2::{self, QemuBoard, CMDLINE_MAX};
-    use walker_firmware::control::{self, exit_code};
+    use walker_firmware::control;
+    use walker_firmware::ExitCode;
     use walker_firmware::{params, Config};
 
     #[entry]
@@ -43,7 +44,7 @@ mod firmware {
             cfg = Config::default();
         }
         let Some(cp) = cortex_m::Peripherals::take() else {
-            qemu_mps2::semihosting_exit(exit_code::CONFIG);
+            qemu_mps2::semihosting_exit(ExitCode::ConfigRejected.status());
         };
         let mut board = QemuBoard::new(cp.SYST, &cfg);
         board.set_compute_us(cfg.compute_us);
@@ -55,7 +56,7 @@ mod firmware {
                 e.kind
             );
             control::report_arg_error(&mut board, &cfg, &e);
-            board.exit(exit_code::CONFIG)
+            board.exit(ExitCode::ConfigRejected.status())
         }
         defmt::info!(
             "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, lockstep {=bool}, model {=str}, {=usize} steps",

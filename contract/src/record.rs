@@ -1,4 +1,4 @@
-//! The ZMP-response log: one compact binary record per control tick plus a few event records,
+//! The ZMP-response log's wire format: one compact binary record per control tick plus a few event records,
 //! framed so that a decoder fed an arbitrary byte stream finds every intact frame.
 //!
 //! # Framing
@@ -43,7 +43,7 @@
 //! * 0x02 start-up: `time u32, board u8 ([`BoardId`]), fw major u8, minor u8, patch u8,
 //!   tick period u32 µs, bus baud u32, device count u8, flags u8 (bit 0 = bus probed),
 //!   missing count u8 (≤ 16), missing ids [u8; count]`.
-//! * 0x03 stop: `time u32, reason code u8, device id u8, value i32` ([`StopReason::code`]).
+//! * 0x03 stop: `time u32, reason code u8, device id u8, value i32` ([`StopReason::code`], codes in [`crate::codes::StopCode`]).
 //! * 0x04 fault: `time u32, kind u8 ([`FaultKind`]), device id u8, value i32`. Kinds (code:
 //!   meaning, id, value): 1 device holding (device, ticks); 2 device recovered (device, ticks
 //!   held); 3 target clamped (first joint, joint mask); 4 IMU non-finite (200, count); 5
@@ -57,10 +57,10 @@
 //! The tick record's CoM is the *commanded* CoM: the gait sample's CoM plus the feedback
 //! stabilizer's shift when `stab=on`.
 //!
-//! Host tools decode with [`Decoder`] by depending on this crate (`walker-firmware` builds on
-//! the host without any board feature's ARM dependencies).
+//! The firmware writes with [`LogWriter`] into its board's [`LogSink`]; host tools decode with
+//! [`Decoder`] (this record decoder reads the log stream; `dxl::Decoder` reads bus packets).
 
-use crate::supervisor::StopReason;
+pub use crate::codes::{FaultKind, StopReason};
 
 /// Largest payload (type + seq + body + CRC) of any record, bytes.
 pub const MAX_PAYLOAD: usize = 48;
@@ -106,14 +106,28 @@ pub enum SupportPhase {
 }
 
 impl SupportPhase {
-    fn from_bits(b: u8) -> Option<Self> {
-        Some(match b {
+    /// The 3-bit wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Double => 0,
+            Self::SingleLeft => 1,
+            Self::SingleRight => 2,
+            Self::Standing => 3,
+            Self::Stopped => 4,
+        }
+    }
+}
+
+impl TryFrom<u8> for SupportPhase {
+    type Error = crate::codes::UnknownCode;
+    fn try_from(b: u8) -> Result<Self, Self::Error> {
+        Ok(match b {
             0 => Self::Double,
             1 => Self::SingleLeft,
             2 => Self::SingleRight,
             3 => Self::Standing,
             4 => Self::Stopped,
-            _ => return None,
+            other => return Err(crate::codes::UnknownCode(other)),
         })
     }
 }
@@ -133,7 +147,17 @@ pub enum FaultState {
 }
 
 impl FaultState {
-    fn from_bits(b: u8) -> Self {
+    /// The 2-bit wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Ok => 0,
+            Self::Holding => 1,
+            Self::Stopping => 2,
+            Self::TorqueOff => 3,
+        }
+    }
+    /// From the 2 bits of the status byte (every value decodes).
+    pub const fn from_bits(b: u8) -> Self {
         match b & 3 {
             0 => Self::Ok,
             1 => Self::Holding,
@@ -156,76 +180,20 @@ pub enum BoardId {
 }
 
 impl BoardId {
-    fn from_u8(b: u8) -> Self {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Unknown => 0,
+            Self::QemuMps2 => 1,
+            Self::OpenCr => 2,
+        }
+    }
+    /// From the wire code (unknown codes decode as [`BoardId::Unknown`]).
+    pub const fn from_code(b: u8) -> Self {
         match b {
             1 => Self::QemuMps2,
             2 => Self::OpenCr,
             _ => Self::Unknown,
-        }
-    }
-}
-
-/// Kind of a fault event record.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum FaultKind {
-    /// A device missed its reply; the firmware holds its last good value (`value` = ticks).
-    DeviceHolding,
-    /// A held device answered again (`value` = ticks it was held).
-    DeviceRecovered,
-    /// A target was clamped to its joint limit (`id` = joint index, `value` = mask).
-    TargetClamped,
-    /// A non-finite IMU sample was replaced by the last good one (`value` = count).
-    ImuNonFinite,
-    /// A run-time parameter was rejected before start-up (`id` = key index in
-    /// `params::KEYS`, 0xFF unknown key, 0xFE plan rejected by gait-core; `value` = token
-    /// position, or the `GaitError` discriminant for 0xFE).
-    ConfigRejected,
-    /// A start-up step failed after the probe (`id` = device, `value` = step code of
-    /// `startup::StartupStep`).
-    StartupFailed,
-    /// The step timing was stretched for the servo speed limit (`id` = worst joint index,
-    /// `value` = total factor on t1, t2, T in 1/1000).
-    TimingStretched,
-    /// The swing was lowered for the servo speed limit (`id` = worst joint index, `value` =
-    /// new swing height, µm).
-    SwingLowered,
-    /// A joint still needs more than the servo speed limit (`id` = worst joint index, `value`
-    /// = its peak speed, mrad/s); the walk goes on, the servo will lag.
-    SpeedLimit,
-    /// Other kind (code kept for forward compatibility).
-    Other(u8),
-}
-
-impl FaultKind {
-    /// Wire code.
-    pub fn code(self) -> u8 {
-        match self {
-            Self::DeviceHolding => 1,
-            Self::DeviceRecovered => 2,
-            Self::TargetClamped => 3,
-            Self::ImuNonFinite => 4,
-            Self::ConfigRejected => 5,
-            Self::StartupFailed => 6,
-            Self::TimingStretched => 7,
-            Self::SwingLowered => 8,
-            Self::SpeedLimit => 9,
-            Self::Other(c) => c,
-        }
-    }
-    /// From a wire code.
-    pub fn from_code(c: u8) -> Self {
-        match c {
-            1 => Self::DeviceHolding,
-            2 => Self::DeviceRecovered,
-            3 => Self::TargetClamped,
-            4 => Self::ImuNonFinite,
-            5 => Self::ConfigRejected,
-            6 => Self::StartupFailed,
-            7 => Self::TimingStretched,
-            8 => Self::SwingLowered,
-            9 => Self::SpeedLimit,
-            c => Self::Other(c),
         }
     }
 }
@@ -569,10 +537,10 @@ fn clamp_i24(v: i32) -> i32 {
 }
 
 fn status_byte(r: &TickRecord) -> u8 {
-    (r.phase as u8 & 7)
+    (r.phase.code() & 7)
         | (u8::from(r.zmp_valid) << 3)
         | (u8::from(r.overrun) << 4)
-        | ((r.fault as u8 & 3) << 5)
+        | ((r.fault.code() & 3) << 5)
 }
 
 /// Builds the payload (without CRC) of a record; returns its length or None if it does not fit.
@@ -602,7 +570,7 @@ fn build_payload(rec: &Record, out: &mut [u8]) -> Option<usize> {
             c.u8(record_type::STARTUP);
             c.u16(r.seq);
             c.u32(r.time_us);
-            c.u8(r.board as u8);
+            c.u8(r.board.code());
             c.put(&r.fw);
             c.u32(r.tick_period_us);
             c.u32(r.bus_baud);
@@ -727,7 +695,7 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             }
             let tau = r.i16().ok_or(DecodeError::Length)?;
             let st = r.u8().ok_or(DecodeError::Length)?;
-            let phase = SupportPhase::from_bits(st & 7).ok_or(DecodeError::Field)?;
+            let phase = SupportPhase::try_from(st & 7).map_err(|_| DecodeError::Field)?;
             if st & 0x80 != 0 {
                 return Err(DecodeError::Field);
             }
@@ -755,7 +723,7 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             })
         }
         record_type::STARTUP => {
-            let board = BoardId::from_u8(r.u8().ok_or(DecodeError::Length)?);
+            let board = BoardId::from_code(r.u8().ok_or(DecodeError::Length)?);
             let fw = r.take::<3>().ok_or(DecodeError::Length)?;
             let tick_period_us = r.u32().ok_or(DecodeError::Length)?;
             let bus_baud = r.u32().ok_or(DecodeError::Length)?;
@@ -959,7 +927,14 @@ impl Decoder {
     }
 }
 
-/// Assigns sequence numbers and writes encoded records to a [`crate::board::LogSink`].
+/// Sink of the encoded record frames (a board's log UART); best effort, never blocks for
+/// long and never fails: a sink that cannot keep up drops bytes (the decoder resynchronises).
+pub trait LogSink {
+    /// Writes encoded log bytes.
+    fn write_log(&mut self, bytes: &[u8]);
+}
+
+/// Assigns sequence numbers and writes encoded records to a [`LogSink`].
 #[derive(Clone, Debug, Default)]
 pub struct LogWriter {
     next_seq: u16,
@@ -981,7 +956,7 @@ impl LogWriter {
     }
 
     /// Stamps `rec` with the next sequence number, encodes it and writes it to `sink`.
-    pub fn write(&mut self, sink: &mut impl crate::board::LogSink, mut rec: Record) {
+    pub fn write(&mut self, sink: &mut impl LogSink, mut rec: Record) {
         rec.set_seq(self.next_seq);
         self.next_seq = self.next_seq.wrapping_add(1);
         let mut frame = [0u8; MAX_FRAME];
@@ -1158,7 +1133,7 @@ mod tests {
     fn stream(n: u16) -> Vec<u8> {
         let mut w = LogWriter::new();
         struct V(Vec<u8>);
-        impl crate::board::LogSink for V {
+        impl LogSink for V {
             fn write_log(&mut self, b: &[u8]) {
                 self.0.extend_from_slice(b)
             }
