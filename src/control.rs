@@ -60,16 +60,10 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
-use gait_core::kinematics::{LegKinematics, LegsIkReport};
 use gait_core::measured::{measured_zmp, ForceReading};
-use gait_core::pipeline::joint_targets;
-use gait_core::plan::SwingShape;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
-use gait_core::support::SupportPolygon;
-use gait_core::wholebody::WholeBody;
-use gait_core::zmp::ZmpShape;
-use gait_core::{GaitError, GaitSample, Model, Place, Robot, Sampler, Side};
+use gait_core::{GaitError, GaitSample, Robot, Sampler, Side};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 use walker_contract::ExitCode;
 
@@ -91,100 +85,7 @@ pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;
 
-/// Fixed-point steps of the whole-body compensation per sample (cost: that + 1 two-leg IK and
-/// FK evaluations).
-pub const WHOLEBODY_ITERATIONS: u8 = 2;
-
-/// Sample → 12 joint targets, built once: the paper's pipeline or whole-body compensation.
-#[derive(Clone, Debug)]
-pub enum Targets {
-    /// Pelvis point on the (shifted) model CoM, two-leg IK.
-    Plain(LegKinematics<f32>),
-    /// Multi-body CoM on the (shifted) model CoM.
-    WholeBody(WholeBody<f32>),
-}
-
-impl Targets {
-    /// The pipeline of `comp` for `robot`.
-    pub fn new(robot: &Robot, comp: Compensation) -> Self {
-        match comp {
-            Compensation::None => Targets::Plain(LegKinematics::new(robot)),
-            Compensation::WholeBody => {
-                Targets::WholeBody(WholeBody::new(robot, WHOLEBODY_ITERATIONS))
-            }
-        }
-    }
-
-    /// The joint targets of `s` with its CoM shifted by `shift` (m), and what the IK clamped.
-    pub fn joints(
-        &self,
-        s: &GaitSample<f32>,
-        shift: [f32; 2],
-    ) -> ([f32; LEG_JOINTS], LegsIkReport<f32>) {
-        match self {
-            Targets::Plain(kin) => {
-                let mut shifted = *s;
-                shifted.com[0] += shift[0];
-                shifted.com[1] += shift[1];
-                joint_targets(kin, &shifted)
-            }
-            Targets::WholeBody(wb) => {
-                let c = wb.pelvis_for_com(s, [s.com[0] + shift[0], s.com[1] + shift[1]]);
-                (c.joints, c.report)
-            }
-        }
-    }
-}
-
-/// The support polygon of a sample: the support sole in single support, both soles otherwise.
-pub fn support_of(robot: &Robot, s: &GaitSample<f32>) -> Option<SupportPolygon<f32>> {
-    let place = |i: usize| {
-        s.feet.get(i).map(|f| Place {
-            x: f.x,
-            y: f.y,
-            yaw: f.yaw,
-        })
-    };
-    match s.phase {
-        gait_core::SupportPhase::Single(side) => {
-            SupportPolygon::single(&place(side.index())?, robot).ok()
-        }
-        _ => SupportPolygon::double(&place(0)?, &place(1)?, robot).ok(),
-    }
-}
-
-/// The support polygon of the gait samples, rebuilt only when the support phase or a
-/// supporting foot changes (a few times per step) instead of every tick: building the hull costs
-/// thousands of instructions and the supporting feet stand still while they support.
-#[derive(Clone, Debug, Default)]
-pub struct SupportCache {
-    key: Option<(gait_core::SupportPhase, [[f32; 3]; 2])>,
-    poly: Option<SupportPolygon<f32>>,
-}
-
-impl SupportCache {
-    /// The support polygon of `s` (as [`support_of`]).
-    pub fn get(&mut self, robot: &Robot, s: &GaitSample<f32>) -> Option<&SupportPolygon<f32>> {
-        let foot = |i: usize| s.feet.get(i).map_or([0.0; 3], |f| [f.x, f.y, f.yaw]);
-        // Only the feet that support enter the key: a swinging foot does not change the polygon.
-        let feet = match s.phase {
-            gait_core::SupportPhase::Single(side) => {
-                let mut k = [[0.0; 3]; 2];
-                if let Some(slot) = k.get_mut(side.index()) {
-                    *slot = foot(side.index());
-                }
-                k
-            }
-            _ => [foot(0), foot(1)],
-        };
-        let key = (s.phase, feet);
-        if self.key != Some(key) {
-            self.poly = support_of(robot, s);
-            self.key = Some(key);
-        }
-        self.poly.as_ref()
-    }
-}
+pub use gait_core::gait::{support_of, SupportCache, Targets, WHOLEBODY_ITERATIONS};
 
 /// How a run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -213,22 +114,9 @@ impl RunEnd {
     }
 }
 
-/// The gait sampler of `cfg` (model, walk, ZMP and swing shape, dt).
+/// The gait sampler of `cfg` (model, walk, ZMP and swing shape, dt; gait-core decides).
 pub fn build_sampler(cfg: &Config, robot: &Robot) -> Result<GaitSampler, GaitError> {
-    let w = &cfg.walk;
-    let model = Model::<f32>::new(cfg.model, robot, w.z_c)?;
-    let mut params = w.params(model);
-    if cfg.zmp_continuous {
-        let b = cfg.zmp_b.unwrap_or(w.a);
-        params.zmp = ZmpShape::Continuous { b: b as f32 };
-    }
-    if cfg.swing_sinusoid {
-        params.swing = SwingShape::Sinusoid {
-            height: w.h_z as f32,
-        };
-    }
-    let plan = w.plan::<f32, MAX_STEPS>(robot, params)?;
-    Sampler::new(plan, cfg.dt_s())
+    gait_core::gait::build_sampler::<MAX_STEPS>(&cfg.walk_config(), robot)
 }
 
 /// Logs a rejected command line: the start-up record (bus not probed) and a
@@ -416,7 +304,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         log.write(b, rec);
     }
     if let Ok(t) = &timing {
-        for (kind, id, value) in t.records() {
+        for (kind, id, value) in t.notes().into_iter().map(startup::note_record) {
             let now = bus.board().now_us();
             log.write(bus.board(), fault(now, kind, id, value));
         }

@@ -34,139 +34,35 @@ use walker_contract::bus_map as ids;
 
 use crate::board::{Clock, ServoBus};
 use crate::bus::Bus;
-use crate::control::{build_sampler, Feasibility, Targets};
-use crate::record::{FaultKind, MAX_MISSING};
+use crate::control::{Targets, MAX_STEPS};
+use crate::record::MAX_MISSING;
 use crate::Config;
-use gait_core::kinematics::{JointSpeedMonitor, JointSpeedReport};
+use gait_core::kinematics::JointSpeedReport;
 use gait_core::robot::LEG_JOINTS;
-use gait_core::{ForwardWalk, GaitError, Robot};
+use gait_core::{GaitError, Robot};
 
-/// Most adjustments of the servo-speed check.
-pub const MAX_TIMING_ROUNDS: u8 = 4;
-/// Safety factor on the needed slow-down.
-pub const TIMING_MARGIN: f64 = 1.05;
-/// Most samples of one dry run (a 64-step plan of 4 s steps at 1 kHz is below).
-pub const MAX_DRY_RUN_SAMPLES: u32 = 400_000;
+pub use gait_core::gait::{
+    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_SAMPLES, MAX_TIMING_ROUNDS, TIMING_MARGIN,
+};
 
-/// The outcome of [`servo_timing`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TimingCheck {
-    /// The walk to use (the configured one, possibly adjusted).
-    pub walk: ForwardWalk,
-    /// Total factor applied to t1, t2 and T, in 1/1000 (1000 = unchanged).
-    pub factor_milli: u32,
-    /// Swing height after lowering, µm (`None` = unchanged).
-    pub lowered_um: Option<u32>,
-    /// The worst joint that triggered the (last) adjustment.
-    pub trigger_joint: u8,
-    /// Peak speeds of the walk that will run.
-    pub report: JointSpeedReport,
-    /// Number of adjustments made.
-    pub rounds: u8,
-}
+pub use walker_contract::record::timing_fault as note_record;
 
-impl TimingCheck {
-    /// True when the walk that will run stays within the servo limit.
-    pub fn feasible(&self) -> bool {
-        self.report.worst_speed <= self.report.limit
-    }
-
-    /// The fault records to log: (kind, id, value) — stretched / lowered, then the warning.
-    pub fn records(&self) -> heapless::Vec<(FaultKind, u8, i32), 2> {
-        let mut v = heapless::Vec::new();
-        if self.factor_milli != 1000 {
-            let f = i32::try_from(self.factor_milli).unwrap_or(i32::MAX);
-            let _ = v.push((FaultKind::TimingStretched, self.trigger_joint, f));
-        }
-        if let Some(h) = self.lowered_um {
-            let h = i32::try_from(h).unwrap_or(i32::MAX);
-            let _ = v.push((FaultKind::SwingLowered, self.trigger_joint, h));
-        }
-        if !self.feasible() {
-            let mrad = self.report.worst_speed * 1000.0;
-            let mrad = if mrad.is_finite() {
-                mrad.clamp(0.0, i32::MAX as f64) as i32
-            } else {
-                i32::MAX
-            };
-            let j = u8::try_from(self.report.worst_joint).unwrap_or(u8::MAX);
-            let _ = v.push((FaultKind::SpeedLimit, j, mrad));
-        }
-        v
-    }
-}
-
-/// `walk` with t1, t2 and T multiplied by `milli`/1000 (the host reproduces it from the log).
-pub fn stretched(walk: &ForwardWalk, milli: u32) -> ForwardWalk {
-    let f = f64::from(milli) / 1000.0;
-    ForwardWalk {
-        t1: walk.t1 * f,
-        t2: walk.t2 * f,
-        period: walk.period * f,
-        ..*walk
-    }
-}
-
-/// Peak joint speeds of `cfg`'s walk through `targets` at dt (dry run, no τ, no feedback).
+/// Peak joint speeds of `cfg`'s walk through `targets` at dt (gait-core's dry run).
 pub fn dry_run(
     cfg: &Config,
     robot: &Robot,
     targets: &Targets,
 ) -> Result<JointSpeedReport, GaitError> {
-    let mut s = build_sampler(cfg, robot)?;
-    let mut mon = JointSpeedMonitor::new(robot, cfg.dt_s())?;
-    let mut n = 0u32;
-    while !s.is_done() && n < MAX_DRY_RUN_SAMPLES {
-        let g = s.next(0.0);
-        let (q, _) = targets.joints(&g, [0.0; 2]);
-        mon.push(g.time_ns as f64 * 1e-9, &q);
-        n += 1;
-    }
-    Ok(mon.report())
+    gait_core::gait::dry_run::<MAX_STEPS>(&cfg.walk_config(), robot, targets)
 }
 
-/// The servo-speed check of `cfg`'s walk (see the module docs): the walk to run and what was
-/// done. Errors are gait-core's rejections of the (adjusted) plan.
+/// The servo-speed check of `cfg`'s walk (gait-core's [`gait_core::gait::servo_timing`]).
 pub fn servo_timing(
     cfg: &Config,
     robot: &Robot,
     targets: &Targets,
 ) -> Result<TimingCheck, GaitError> {
-    let base = cfg.walk;
-    let mut run = *cfg;
-    let mut out = TimingCheck {
-        walk: base,
-        factor_milli: 1000,
-        lowered_um: None,
-        trigger_joint: 0,
-        report: dry_run(&run, robot, targets)?,
-        rounds: 0,
-    };
-    while !out.feasible() && out.rounds < MAX_TIMING_ROUNDS && cfg.feasibility != Feasibility::Off {
-        let r = &out.report;
-        let need = r.worst_speed / r.limit * TIMING_MARGIN;
-        if !(need.is_finite() && need > 1.0) {
-            break;
-        }
-        out.trigger_joint = u8::try_from(r.worst_joint).unwrap_or(u8::MAX);
-        match cfg.feasibility {
-            Feasibility::Stretch => {
-                let f = libm::ceil(f64::from(out.factor_milli) * need);
-                out.factor_milli = if f < 100_000.0 { f as u32 } else { 100_000 };
-                out.walk = stretched(&base, out.factor_milli);
-            }
-            Feasibility::Lower | Feasibility::Off => {
-                let h = libm::floor(out.walk.h_z / need * 1e6);
-                let um = if h > 0.0 { h as u32 } else { 0 };
-                out.lowered_um = Some(um);
-                out.walk.h_z = f64::from(um) * 1e-6;
-            }
-        }
-        out.rounds += 1;
-        run.walk = out.walk;
-        out.report = dry_run(&run, robot, targets)?;
-    }
-    Ok(out)
+    gait_core::gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, robot, targets)
 }
 
 /// Which start-up step failed (wire code in the fault record's `value`).

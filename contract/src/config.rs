@@ -9,25 +9,7 @@ pub const DEFAULT_IMU_CUTOFF_HZ: f32 = 15.0;
 /// Default longest single wait for one reply byte, µs (see the firmware's `bus` module).
 pub const DEFAULT_READ_POLL_US: u32 = 20;
 
-/// How the pelvis is placed (`comp=` token).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Compensation {
-    /// The paper's pipeline: the pelvis point on the model's CoM.
-    None,
-    /// Whole-body compensation: the multi-body CoM (swing leg included) on the model's CoM.
-    WholeBody,
-}
-
-/// What start-up does when the plan needs a joint faster than the servo (`feasibility=`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Feasibility {
-    /// Stretch t1, t2 and T by the needed factor × 1.05 (re-checked).
-    Stretch,
-    /// Lower the swing height by the needed factor × 1.05 (re-checked).
-    Lower,
-    /// Only log the warning.
-    Off,
-}
+pub use gait_core::gait::{Compensation, Feasibility};
 
 /// Supervisor limits.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -155,6 +137,18 @@ impl Config {
     /// The tick period in seconds (the gait's dt).
     pub fn dt_s(&self) -> f64 {
         f64::from(self.tick_period_us) * 1e-6
+    }
+
+    /// The gait part of the configuration (gait-core's [`gait_core::gait::WalkConfig`]).
+    pub fn walk_config(&self) -> gait_core::gait::WalkConfig {
+        gait_core::gait::WalkConfig {
+            model: self.model,
+            walk: self.walk,
+            zmp_continuous: self.zmp_continuous,
+            zmp_b: self.zmp_b,
+            swing_sinusoid: self.swing_sinusoid,
+            dt_s: self.dt_s(),
+        }
     }
 
     /// Number of whole ticks covering `us` microseconds (at least 1).

@@ -61,6 +61,7 @@
 //! [`Decoder`] (this record decoder reads the log stream; `dxl::Decoder` reads bus packets).
 
 pub use crate::codes::{FaultKind, StopReason};
+use gait_core::gait::TimingNote;
 
 /// Largest payload (type + seq + body + CRC) of any record, bytes.
 pub const MAX_PAYLOAD: usize = 48;
@@ -924,6 +925,23 @@ impl Decoder {
                 f(r);
             }
         }
+    }
+}
+
+/// The fault record (kind, id, value) that logs a note of the servo-speed check.
+pub fn timing_fault(n: TimingNote) -> (FaultKind, u8, i32) {
+    match n {
+        TimingNote::Stretched { joint, milli } => (
+            FaultKind::TimingStretched,
+            joint,
+            i32::try_from(milli).unwrap_or(i32::MAX),
+        ),
+        TimingNote::Lowered { joint, um } => (
+            FaultKind::SwingLowered,
+            joint,
+            i32::try_from(um).unwrap_or(i32::MAX),
+        ),
+        TimingNote::TooFast { joint, mrad_s } => (FaultKind::SpeedLimit, joint, mrad_s),
     }
 }
 

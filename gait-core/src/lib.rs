@@ -28,6 +28,7 @@ pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
 pub use sampler::{GaitSample, Sampler, SupportPhase};
 pub mod fixed_ik;
 pub mod fixed_point;
+pub mod gait;
 pub mod pipeline;
 pub mod stabilizer;
 pub mod wholebody;

@@ -21,7 +21,7 @@
 //!   the first (before torque off), against the plan's CoM travel over the same samples;
 //! * peak joint speeds: the simulator's (true joint speeds over the walking ticks, at the truth
 //!   rows) and those of the firmware's own joint targets for the walk it ran (its pipeline run
-//!   on the host at dt, `walker_firmware::startup::dry_run`: no τ, no feedback shift — the shift
+//!   on the host at dt, `gait_core::gait::dry_run`: no τ, no feedback shift — the shift
 //!   is rate-limited to `stab_rate`);
 //! * servo load: the peak |motor torque| per joint over the walking ticks and the fraction of
 //!   walking ticks at which some motor was at its torque bound.
@@ -30,12 +30,12 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use gait_core::gait::{self, stretched, support_of, Targets};
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
 use gait_core::{Robot, SupportPhase as PlanPhase};
+use walker_contract::config::MAX_STEPS;
 use walker_contract::record::{FaultKind, Record, SupportPhase, POS_NA};
 use walker_contract::{params, Config};
-use walker_firmware::control::{build_sampler, support_of, Targets};
-use walker_firmware::startup;
 
 use crate::fil::{self, FilOptions};
 use crate::planfile::{CompensationName, ModelName, WalkSpec};
@@ -190,7 +190,7 @@ pub fn adjusted_config(cfg: &Config, events: &[Record]) -> Config {
         if let Record::Fault(f) = e {
             match f.kind {
                 FaultKind::TimingStretched => {
-                    out.walk = startup::stretched(&cfg.walk, f.value.max(1) as u32);
+                    out.walk = stretched(&cfg.walk, f.value.max(1) as u32);
                 }
                 FaultKind::SwingLowered => out.walk.h_z = f64::from(f.value.max(0)) * 1e-6,
                 _ => {}
@@ -306,8 +306,9 @@ pub fn score(
     let cfg = adjusted_config(cfg, &log.events);
     let timing_factor = stretch_factor(&log.events);
     let targets = Targets::new(&robot, cfg.compensation);
-    let dry = startup::dry_run(&cfg, &robot, &targets).map_err(|e| e.to_string())?;
-    let mut sampler = build_sampler(&cfg, &robot).map_err(|e| e.to_string())?;
+    let walk = cfg.walk_config();
+    let dry = gait::dry_run::<MAX_STEPS>(&walk, &robot, &targets).map_err(|e| e.to_string())?;
+    let mut sampler = gait::build_sampler::<MAX_STEPS>(&walk, &robot).map_err(|e| e.to_string())?;
     let rows = tick_rows(&log.ticks);
 
     let (mut te, mut me) = ([vec![], vec![]], [vec![], vec![]]);
@@ -775,12 +776,15 @@ mod tests {
     fn the_log_adjustment_reproduces_the_firmware_walk() {
         let robot = Robot::reference();
         let cfg = Config::default();
+        let targets = Targets::new(&robot, cfg.compensation);
         let t =
-            startup::servo_timing(&cfg, &robot, &Targets::new(&robot, cfg.compensation)).unwrap();
+            gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, &robot, &targets)
+                .unwrap();
         let events: Vec<Record> = t
-            .records()
-            .iter()
-            .map(|&(kind, id, value)| {
+            .notes()
+            .into_iter()
+            .map(walker_contract::record::timing_fault)
+            .map(|(kind, id, value)| {
                 Record::Fault(walker_contract::record::FaultRecord {
                     seq: 0,
                     time_us: 0,

@@ -67,10 +67,10 @@ mod firmware {
         Watchdog,
     };
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
+    use walker_firmware::bus_map::{self, TickMap};
     use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache, Targets};
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
     use walker_firmware::record::BoardId;
-    use walker_firmware::bus_map::{self, TickMap};
     use walker_firmware::supervisor::StopReason;
     use walker_firmware::Config;
 
@@ -189,7 +189,6 @@ mod firmware {
         // the layout of the uninitialised array.
         unsafe { &mut *buf.cast::<[MaybeUninit<T>; MAX_TICKS]>() }
     }
-
 
     /// The ground place of a fixed-point foot, for the (f32) measured ZMP.
     fn fx_place(f: &gait_core::fixed_point::FixedFoot) -> Place<f32> {

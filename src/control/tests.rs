@@ -3,6 +3,7 @@
 #![allow(clippy::field_reassign_with_default)]
 
 use super::*;
+use gait_core::support::SupportPolygon;
 use crate::board::{Clock, ServoBus};
 use crate::record::{FaultState, StartupRecord};
 use crate::testkit::{FakeBoard, Pkt};
