@@ -3,11 +3,11 @@
 #![allow(clippy::field_reassign_with_default)]
 
 use super::*;
-use gait_core::support::SupportPolygon;
 use crate::board::{Clock, ServoBus};
 use crate::record::{FaultState, StartupRecord};
 use crate::testkit::{FakeBoard, Pkt};
 use dxl::opcode;
+use gait_core::support::SupportPolygon;
 use std::vec::Vec;
 
 fn board(cfg: &Config) -> FakeBoard {
