@@ -72,7 +72,7 @@ use crate::bus::Bus;
 use crate::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
 use crate::params::ArgError;
 use crate::record::{
-    FaultKind, FaultRecord, FaultState, LogWriter, Record, StopRecord, SupportPhase, TickRecord,
+    FaultKind, FaultRecord, FaultState, LogWriter, LoggedPhase, Record, StopRecord, TickRecord,
 };
 use crate::startup::{self, Ramp, StartupError};
 use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
@@ -148,12 +148,12 @@ fn is_foot(id: u8) -> bool {
     id == ids::FOOT_LEFT || id == ids::FOOT_RIGHT
 }
 
-fn phase_of(s: &GaitSample<f32>) -> SupportPhase {
+fn phase_of(s: &GaitSample<f32>) -> LoggedPhase {
     match s.phase {
-        gait_core::SupportPhase::Standing => SupportPhase::Standing,
-        gait_core::SupportPhase::Double => SupportPhase::Double,
-        gait_core::SupportPhase::Single(Side::Left) => SupportPhase::SingleLeft,
-        gait_core::SupportPhase::Single(Side::Right) => SupportPhase::SingleRight,
+        gait_core::SupportPhase::Standing => LoggedPhase::Standing,
+        gait_core::SupportPhase::Double => LoggedPhase::Double,
+        gait_core::SupportPhase::Single(Side::Left) => LoggedPhase::SingleLeft,
+        gait_core::SupportPhase::Single(Side::Right) => LoggedPhase::SingleRight,
     }
 }
 
@@ -535,8 +535,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             rec.set_zmp_ref_m(zx, zy);
             rec.set_com_m(cx, cy);
             rec.phase = match sup.stop_reason() {
-                Some(StopReason::PlanDone) => SupportPhase::Standing,
-                _ => SupportPhase::Stopped,
+                Some(StopReason::PlanDone) => LoggedPhase::Standing,
+                _ => LoggedPhase::Stopped,
             };
         }
         if let Some([zx, zy]) = meas.zmp {

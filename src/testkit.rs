@@ -16,7 +16,7 @@ use gait_core::{Robot, Side};
 use crate::board::{
     Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
 };
-use crate::record::{BoardId, Decoder, Record};
+use crate::record::{BoardId, Record, RecordDecoder};
 use walker_contract::bus_map::TickMap;
 
 /// One instruction packet seen on the bus.
@@ -216,7 +216,7 @@ impl FakeBoard {
 
     /// Every record of the log.
     pub fn records(&self) -> Vec<Record> {
-        let mut d = Decoder::new();
+        let mut d = RecordDecoder::new();
         let mut out = Vec::new();
         d.feed(&self.log, |r| out.push(r.expect("log frame")));
         out

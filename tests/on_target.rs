@@ -33,7 +33,7 @@ mod tests {
     use walker_firmware::board::{Clock, ServoBus, TickTimer, TORQUE_OFF_PACKET};
     use walker_firmware::boards::qemu_mps2::QemuBoard;
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
-    use walker_firmware::record::{self as log, Decoder, Record, TickRecord};
+    use walker_firmware::record::{self as log, Record, RecordDecoder, TickRecord};
     use walker_firmware::supervisor::{safe_targets, JointMap};
     use walker_firmware::Config;
 
@@ -90,7 +90,7 @@ mod tests {
         let mut stream = [0u8; 3 * log::TICK_FRAME_LEN];
         stream[..n].copy_from_slice(&buf[..n]);
         stream[n..2 * n].copy_from_slice(&buf[..n]);
-        let mut d = Decoder::new();
+        let mut d = RecordDecoder::new();
         let mut found = 0;
         d.feed(&stream[5..2 * n], |r| {
             if let Ok(r) = r {

@@ -27,7 +27,7 @@
 //! | 19 | 3 | CoM x, i24, 10 µm |
 //! | 22 | 3 | CoM y, i24, 10 µm |
 //! | 25 | 2 | τ = J·φ̈, i16, mN·m (saturating; −32768 = not available) |
-//! | 27 | 1 | status: bits 0–2 support phase ([`SupportPhase`]), bit 3 measured ZMP valid, bit 4 this tick overran, bits 5–6 fault state ([`FaultState`]), bit 7 reserved (0) |
+//! | 27 | 1 | status: bits 0–2 support phase ([`LoggedPhase`]), bit 3 measured ZMP valid, bit 4 this tick overran, bits 5–6 fault state ([`FaultState`]), bit 7 reserved (0) |
 //! | 28 | 2 | bus timeouts, u16 (cumulative, saturating) |
 //! | 30 | 2 | bus CRC errors, u16 (cumulative, saturating) |
 //! | 32 | 2 | servo status-packet errors, u16 (cumulative, saturating) |
@@ -58,7 +58,7 @@
 //! stabilizer's shift when `stab=on`.
 //!
 //! The firmware writes with [`LogWriter`] into its board's [`LogSink`]; host tools decode with
-//! [`Decoder`] (this record decoder reads the log stream; `dxl::Decoder` reads bus packets).
+//! [`RecordDecoder`] (log records; `dxl::Decoder` is the bus packets' decoder).
 
 pub use crate::codes::{FaultKind, StopReason};
 use gait_core::gait::TimingNote;
@@ -93,7 +93,7 @@ pub mod record_type {
 /// Support phase of the gait (3 bits in the status byte).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum SupportPhase {
+pub enum LoggedPhase {
     /// Both feet on the ground, walking.
     Double = 0,
     /// Left foot supporting, right foot swinging.
@@ -106,7 +106,7 @@ pub enum SupportPhase {
     Stopped = 4,
 }
 
-impl SupportPhase {
+impl LoggedPhase {
     /// The 3-bit wire code.
     pub const fn code(self) -> u8 {
         match self {
@@ -119,7 +119,7 @@ impl SupportPhase {
     }
 }
 
-impl TryFrom<u8> for SupportPhase {
+impl TryFrom<u8> for LoggedPhase {
     type Error = crate::codes::UnknownCode;
     fn try_from(b: u8) -> Result<Self, Self::Error> {
         Ok(match b {
@@ -228,7 +228,7 @@ pub struct TickRecord {
     /// τ = J·φ̈, mN·m, [`TAU_NA`] when not available.
     pub tau_mnm: i16,
     /// Support phase.
-    pub phase: SupportPhase,
+    pub phase: LoggedPhase,
     /// Measured ZMP valid (enough load on the foot sensors).
     pub zmp_valid: bool,
     /// This tick overran its deadline.
@@ -250,7 +250,7 @@ impl Default for TickRecord {
             zmp_meas: [POS_NA; 2],
             com: [POS_NA; 2],
             tau_mnm: TAU_NA,
-            phase: SupportPhase::Standing,
+            phase: LoggedPhase::Standing,
             zmp_valid: false,
             overrun: false,
             fault: FaultState::Ok,
@@ -683,27 +683,27 @@ pub fn encode(rec: &Record, out: &mut [u8]) -> usize {
     cobs_encode(&payload[..n + 2], out)
 }
 
-fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
+fn parse_payload(p: &[u8]) -> Result<Record, RecordError> {
     let mut r = Reader { buf: p, pos: 0 };
-    let ty = r.u8().ok_or(DecodeError::Length)?;
-    let seq = r.u16().ok_or(DecodeError::Length)?;
-    let time_us = r.u32().ok_or(DecodeError::Length)?;
+    let ty = r.u8().ok_or(RecordError::Length)?;
+    let seq = r.u16().ok_or(RecordError::Length)?;
+    let time_us = r.u32().ok_or(RecordError::Length)?;
     let rec = match ty {
         record_type::TICK => {
             let mut v = [0i32; 6];
             for x in v.iter_mut() {
-                *x = r.i24().ok_or(DecodeError::Length)?;
+                *x = r.i24().ok_or(RecordError::Length)?;
             }
-            let tau = r.i16().ok_or(DecodeError::Length)?;
-            let st = r.u8().ok_or(DecodeError::Length)?;
-            let phase = SupportPhase::try_from(st & 7).map_err(|_| DecodeError::Field)?;
+            let tau = r.i16().ok_or(RecordError::Length)?;
+            let st = r.u8().ok_or(RecordError::Length)?;
+            let phase = LoggedPhase::try_from(st & 7).map_err(|_| RecordError::Field)?;
             if st & 0x80 != 0 {
-                return Err(DecodeError::Field);
+                return Err(RecordError::Field);
             }
-            let timeouts = r.u16().ok_or(DecodeError::Length)?;
-            let crc = r.u16().ok_or(DecodeError::Length)?;
-            let status = r.u16().ok_or(DecodeError::Length)?;
-            let overruns = r.u16().ok_or(DecodeError::Length)?;
+            let timeouts = r.u16().ok_or(RecordError::Length)?;
+            let crc = r.u16().ok_or(RecordError::Length)?;
+            let status = r.u16().ok_or(RecordError::Length)?;
+            let overruns = r.u16().ok_or(RecordError::Length)?;
             Record::Tick(TickRecord {
                 seq,
                 time_us,
@@ -724,20 +724,20 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             })
         }
         record_type::STARTUP => {
-            let board = BoardId::from_code(r.u8().ok_or(DecodeError::Length)?);
-            let fw = r.take::<3>().ok_or(DecodeError::Length)?;
-            let tick_period_us = r.u32().ok_or(DecodeError::Length)?;
-            let bus_baud = r.u32().ok_or(DecodeError::Length)?;
-            let device_count = r.u8().ok_or(DecodeError::Length)?;
-            let probed = r.u8().ok_or(DecodeError::Length)? & 1 != 0;
-            let count = usize::from(r.u8().ok_or(DecodeError::Length)?);
+            let board = BoardId::from_code(r.u8().ok_or(RecordError::Length)?);
+            let fw = r.take::<3>().ok_or(RecordError::Length)?;
+            let tick_period_us = r.u32().ok_or(RecordError::Length)?;
+            let bus_baud = r.u32().ok_or(RecordError::Length)?;
+            let device_count = r.u8().ok_or(RecordError::Length)?;
+            let probed = r.u8().ok_or(RecordError::Length)? & 1 != 0;
+            let count = usize::from(r.u8().ok_or(RecordError::Length)?);
             if count > MAX_MISSING {
-                return Err(DecodeError::Field);
+                return Err(RecordError::Field);
             }
             let mut missing = heapless::Vec::new();
             for _ in 0..count {
-                let id = r.u8().ok_or(DecodeError::Length)?;
-                missing.push(id).map_err(|_| DecodeError::Field)?;
+                let id = r.u8().ok_or(RecordError::Length)?;
+                missing.push(id).map_err(|_| RecordError::Field)?;
             }
             Record::Startup(StartupRecord {
                 seq,
@@ -752,10 +752,10 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             })
         }
         record_type::STOP => {
-            let code = r.u8().ok_or(DecodeError::Length)?;
-            let id = r.u8().ok_or(DecodeError::Length)?;
-            let value = r.i32().ok_or(DecodeError::Length)?;
-            let reason = StopReason::from_code(code, id, value).ok_or(DecodeError::Field)?;
+            let code = r.u8().ok_or(RecordError::Length)?;
+            let id = r.u8().ok_or(RecordError::Length)?;
+            let value = r.i32().ok_or(RecordError::Length)?;
+            let reason = StopReason::from_code(code, id, value).ok_or(RecordError::Field)?;
             Record::Stop(StopRecord {
                 seq,
                 time_us,
@@ -763,9 +763,9 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             })
         }
         record_type::FAULT => {
-            let kind = FaultKind::from_code(r.u8().ok_or(DecodeError::Length)?);
-            let id = r.u8().ok_or(DecodeError::Length)?;
-            let value = r.i32().ok_or(DecodeError::Length)?;
+            let kind = FaultKind::from_code(r.u8().ok_or(RecordError::Length)?);
+            let id = r.u8().ok_or(RecordError::Length)?;
+            let value = r.i32().ok_or(RecordError::Length)?;
             Record::Fault(FaultRecord {
                 seq,
                 time_us,
@@ -774,19 +774,19 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
                 value,
             })
         }
-        other => return Err(DecodeError::UnknownType(other)),
+        other => return Err(RecordError::UnknownType(other)),
     };
     if r.done() {
         Ok(rec)
     } else {
-        Err(DecodeError::Length)
+        Err(RecordError::Length)
     }
 }
 
 /// Why a frame was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum DecodeError {
+pub enum RecordError {
     /// Malformed COBS (a zero code or a run past the end).
     Cobs,
     /// CRC mismatch.
@@ -803,10 +803,10 @@ pub enum DecodeError {
 
 /// What the decoder has seen.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct DecoderStats {
+pub struct RecordDecoderStats {
     /// Frames decoded.
     pub frames: u32,
-    /// Frames rejected (any [`DecodeError`]).
+    /// Frames rejected (any [`RecordError`]).
     pub rejected: u32,
     /// Of those, CRC mismatches.
     pub crc_errors: u32,
@@ -819,29 +819,29 @@ pub struct DecoderStats {
 /// Streaming, allocation-free frame decoder. Feed it any byte stream; it never panics and
 /// its memory is bounded by [`MAX_FRAME`].
 #[derive(Clone, Debug)]
-pub struct Decoder {
+pub struct RecordDecoder {
     buf: [u8; MAX_FRAME],
     len: usize,
     overlong: bool,
     last_seq: Option<u16>,
-    stats: DecoderStats,
+    stats: RecordDecoderStats,
 }
 
-impl Default for Decoder {
+impl Default for RecordDecoder {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl Decoder {
+impl RecordDecoder {
     /// A fresh decoder (may start mid-frame: the first partial frame is then rejected).
     pub const fn new() -> Self {
-        Decoder {
+        RecordDecoder {
             buf: [0; MAX_FRAME],
             len: 0,
             overlong: false,
             last_seq: None,
-            stats: DecoderStats {
+            stats: RecordDecoderStats {
                 frames: 0,
                 rejected: 0,
                 crc_errors: 0,
@@ -852,13 +852,13 @@ impl Decoder {
     }
 
     /// Counters so far.
-    pub fn stats(&self) -> DecoderStats {
+    pub fn stats(&self) -> RecordDecoderStats {
         self.stats
     }
 
-    fn reject(&mut self, e: DecodeError, bytes: usize) -> Option<Result<Record, DecodeError>> {
+    fn reject(&mut self, e: RecordError, bytes: usize) -> Option<Result<Record, RecordError>> {
         self.stats.rejected = self.stats.rejected.saturating_add(1);
-        if e == DecodeError::Crc {
+        if e == RecordError::Crc {
             self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
         }
         self.stats.skipped_bytes = self.stats.skipped_bytes.saturating_add(bytes as u32);
@@ -866,7 +866,7 @@ impl Decoder {
     }
 
     /// Feeds one byte; returns a decoded record or a rejection at each frame end.
-    pub fn push(&mut self, byte: u8) -> Option<Result<Record, DecodeError>> {
+    pub fn push(&mut self, byte: u8) -> Option<Result<Record, RecordError>> {
         if byte != 0 {
             if let Some(slot) = self.buf.get_mut(self.len) {
                 *slot = byte;
@@ -881,7 +881,7 @@ impl Decoder {
         let n = self.len;
         self.len = 0;
         if core::mem::take(&mut self.overlong) {
-            return self.reject(DecodeError::Overlong, n + 1);
+            return self.reject(RecordError::Overlong, n + 1);
         }
         if n == 0 {
             return None; // Empty frame (repeated delimiters): idle line, not an error.
@@ -892,15 +892,15 @@ impl Decoder {
             .get(..n)
             .and_then(|src| cobs_decode(src, &mut payload))
         else {
-            return self.reject(DecodeError::Cobs, n + 1);
+            return self.reject(RecordError::Cobs, n + 1);
         };
         if m < 3 {
-            return self.reject(DecodeError::Length, n + 1);
+            return self.reject(RecordError::Length, n + 1);
         }
         let (body, crc_bytes) = payload[..m].split_at(m - 2);
         let crc = u16::from_le_bytes([crc_bytes[0], crc_bytes[1]]);
         if crc16_ccitt(body) != crc {
-            return self.reject(DecodeError::Crc, n + 1);
+            return self.reject(RecordError::Crc, n + 1);
         }
         match parse_payload(body) {
             Ok(rec) => {
@@ -919,7 +919,7 @@ impl Decoder {
     }
 
     /// Feeds a slice, calling `f` for every frame end (record or rejection).
-    pub fn feed(&mut self, bytes: &[u8], mut f: impl FnMut(Result<Record, DecodeError>)) {
+    pub fn feed(&mut self, bytes: &[u8], mut f: impl FnMut(Result<Record, RecordError>)) {
         for &b in bytes {
             if let Some(r) = self.push(b) {
                 f(r);
@@ -995,7 +995,7 @@ mod tests {
         let mut r = TickRecord {
             seq,
             time_us: 123_456 + u32::from(seq) * 1000,
-            phase: SupportPhase::SingleLeft,
+            phase: LoggedPhase::SingleLeft,
             zmp_valid: true,
             overrun: seq.is_multiple_of(7),
             fault: FaultState::Holding,
@@ -1053,8 +1053,8 @@ mod tests {
         ]
     }
 
-    fn decode_all(bytes: &[u8]) -> (Vec<Record>, DecoderStats) {
-        let mut d = Decoder::new();
+    fn decode_all(bytes: &[u8]) -> (Vec<Record>, RecordDecoderStats) {
+        let mut d = RecordDecoder::new();
         let mut out = Vec::new();
         d.feed(bytes, |r| {
             if let Ok(r) = r {
@@ -1226,7 +1226,7 @@ mod tests {
             x
         };
         let good = stream(50);
-        let mut d = Decoder::new();
+        let mut d = RecordDecoder::new();
         let mut ok = 0;
         for round in 0..200 {
             let len = (rnd() % 500) as usize;

@@ -34,7 +34,7 @@ use gait_core::gait::{self, stretched, support_of, Targets};
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
 use gait_core::{Robot, SupportPhase as PlanPhase};
 use walker_contract::config::MAX_STEPS;
-use walker_contract::record::{FaultKind, Record, SupportPhase, POS_NA};
+use walker_contract::record::{FaultKind, LoggedPhase, Record, POS_NA};
 use walker_contract::{params, Config};
 
 use crate::fil::{self, FilOptions};
@@ -337,7 +337,7 @@ pub fn score(
         last_com = Some(g.com[0]);
         let walk_phase = matches!(
             r.rec.phase,
-            SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
+            LoggedPhase::Double | LoggedPhase::SingleLeft | LoggedPhase::SingleRight
         );
         if (f64::from(g.zmp[0]) - r.zmp_ref[0]).abs() > 1e-3
             || (f64::from(g.zmp[1]) - r.zmp_ref[1]).abs() > 1e-3

@@ -1,5 +1,5 @@
 //! ZMP-response report: decode a captured firmware log (with the firmware's own
-//! [`walker_contract::record::Decoder`]), write it as CSV, plot reference vs response with the
+//! [`walker_contract::record::RecordDecoder`]), write it as CSV, plot reference vs response with the
 //! support-polygon bounds (seed 000 Figs. 14-16), and compute the Table 3 error statistics.
 //!
 //! Record counts: *good* = frames the decoder accepted (tick and event records), *bad* = frames
@@ -23,8 +23,8 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use walker_contract::record::{
-    DecodeError, Decoder, DecoderStats, FaultState, Record, SupportPhase, TickRecord, POS_NA,
-    TAU_NA,
+    FaultState, LoggedPhase, Record, RecordDecoder, RecordDecoderStats, RecordError, TickRecord,
+    POS_NA, TAU_NA,
 };
 
 /// Rejections by cause.
@@ -45,14 +45,14 @@ pub struct RejectCounts {
 }
 
 impl RejectCounts {
-    fn add(&mut self, e: DecodeError) {
+    fn add(&mut self, e: RecordError) {
         match e {
-            DecodeError::Cobs => self.cobs += 1,
-            DecodeError::Crc => self.crc += 1,
-            DecodeError::UnknownType(_) => self.unknown_type += 1,
-            DecodeError::Length => self.length += 1,
-            DecodeError::Field => self.field += 1,
-            DecodeError::Overlong => self.overlong += 1,
+            RecordError::Cobs => self.cobs += 1,
+            RecordError::Crc => self.crc += 1,
+            RecordError::UnknownType(_) => self.unknown_type += 1,
+            RecordError::Length => self.length += 1,
+            RecordError::Field => self.field += 1,
+            RecordError::Overlong => self.overlong += 1,
         }
     }
 }
@@ -65,7 +65,7 @@ pub struct DecodedLog {
     /// Event records (start-up, stop, fault) in stream order.
     pub events: Vec<Record>,
     /// The decoder's counters.
-    pub decoder: DecoderStats,
+    pub decoder: RecordDecoderStats,
     /// Rejections by cause.
     pub rejects: RejectCounts,
     /// Bytes after the last delimiter (an unterminated frame at the end).
@@ -88,7 +88,7 @@ impl DecodedLog {
 /// A streaming log decoder that keeps everything (for captures and files).
 #[derive(Clone, Debug, Default)]
 pub struct LogCollector {
-    dec: Decoder,
+    dec: RecordDecoder,
     log: DecodedLog,
 }
 
@@ -157,13 +157,13 @@ pub fn tau_nm(v: i16) -> f64 {
 }
 
 /// Lower-case phase name.
-pub fn phase_name(p: SupportPhase) -> &'static str {
+pub fn phase_name(p: LoggedPhase) -> &'static str {
     match p {
-        SupportPhase::Double => "double",
-        SupportPhase::SingleLeft => "single_left",
-        SupportPhase::SingleRight => "single_right",
-        SupportPhase::Standing => "standing",
-        SupportPhase::Stopped => "stopped",
+        LoggedPhase::Double => "double",
+        LoggedPhase::SingleLeft => "single_left",
+        LoggedPhase::SingleRight => "single_right",
+        LoggedPhase::Standing => "standing",
+        LoggedPhase::Stopped => "stopped",
     }
 }
 
@@ -379,14 +379,14 @@ pub struct Alignment {
 
 /// Aligns the log on the plan's walk start (first tick leaving `standing`).
 pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
-    let walking = |p: SupportPhase| {
+    let walking = |p: LoggedPhase| {
         matches!(
             p,
-            SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
+            LoggedPhase::Double | LoggedPhase::SingleLeft | LoggedPhase::SingleRight
         )
     };
     for w in rows.windows(2) {
-        if w[0].rec.phase == SupportPhase::Standing && walking(w[1].rec.phase) {
+        if w[0].rec.phase == LoggedPhase::Standing && walking(w[1].rec.phase) {
             return Alignment {
                 offset: walk_start - w[1].t,
                 how: format!("walk start (first walking tick at t = {:.3} s = plan's end of lead-in {walk_start:.3} s)", w[1].t),

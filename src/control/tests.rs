@@ -177,12 +177,7 @@ fn table2_walk_runs_to_plan_done() {
     // both feet are within 2 mm of the ground and share the load).
     let single: Vec<_> = walk_recs
         .iter()
-        .filter(|t| {
-            matches!(
-                t.phase,
-                SupportPhase::SingleLeft | SupportPhase::SingleRight
-            )
-        })
+        .filter(|t| matches!(t.phase, LoggedPhase::SingleLeft | LoggedPhase::SingleRight))
         .collect();
     assert!(single.len() > 500);
     let under = single
@@ -191,7 +186,7 @@ fn table2_walk_runs_to_plan_done() {
             let dx = crate::record::pos_to_m(t.zmp_meas[0]) - crate::record::pos_to_m(t.zmp_ref[0]);
             let dy = crate::record::pos_to_m(t.zmp_meas[1]) - crate::record::pos_to_m(t.zmp_ref[1]);
             let side_ok = match t.phase {
-                SupportPhase::SingleLeft => t.zmp_meas[1] > 0,
+                LoggedPhase::SingleLeft => t.zmp_meas[1] > 0,
                 _ => t.zmp_meas[1] < 0,
             };
             dx.abs() < 0.006 && dy.abs() < 0.002 && side_ok
@@ -374,7 +369,7 @@ fn fall_stops_and_turns_torque_off() {
     );
     assert!(tr[ramp + 100..]
         .iter()
-        .all(|t| t.phase == SupportPhase::Stopped));
+        .all(|t| t.phase == LoggedPhase::Stopped));
     // The pose is held: every goal after the fall equals the last one before it.
     let held = b.goals[1 + ramp + 100];
     assert!(b.goals[1 + ramp + 100..].iter().all(|g| *g == held));
