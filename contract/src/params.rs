@@ -852,6 +852,8 @@ impl fmt::Display for ArgError {
 }
 
 /// The index of `key` in `keys` at compile time ([`UNKNOWN_KEY`] when absent).
+// Evaluated in `const` items only (an out-of-range index would be a build error); `i < len`.
+#[allow(clippy::indexing_slicing)]
 const fn key_position(keys: &[&str], key: &str) -> u8 {
     let mut i = 0;
     while i < keys.len() {
@@ -864,6 +866,8 @@ const fn key_position(keys: &[&str], key: &str) -> u8 {
 }
 
 /// Byte-wise equality usable in `const` evaluation.
+// `i < a.len() == b.len()`: both indexings are in range.
+#[allow(clippy::indexing_slicing)]
 const fn const_eq(a: &[u8], b: &[u8]) -> bool {
     if a.len() != b.len() {
         return false;
