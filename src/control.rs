@@ -68,7 +68,7 @@ use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 use walker_contract::ExitCode;
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
-use crate::bus::Bus;
+use crate::bus::BoardMaster;
 use crate::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
 use crate::params::ArgError;
 use crate::record::{
@@ -159,7 +159,7 @@ fn phase_of(s: &GaitSample<f32>) -> LoggedPhase {
 
 /// Broadcast Torque Enable = 0 through the master (lock-step aware); the board's
 /// best-effort raw packet if that fails.
-fn torque_off<B: Board>(bus: &mut Bus<'_, B>) {
+fn torque_off<B: Board>(bus: &mut BoardMaster<'_, B>) {
     if bus
         .master()
         .write(BROADCAST_ID, TORQUE_ENABLE_ADDR, &[0])
@@ -169,7 +169,7 @@ fn torque_off<B: Board>(bus: &mut Bus<'_, B>) {
     }
 }
 
-fn write_stop<B: Board>(bus: &mut Bus<'_, B>, log: &mut LogWriter, reason: StopReason) {
+fn write_stop<B: Board>(bus: &mut BoardMaster<'_, B>, log: &mut LogWriter, reason: StopReason) {
     let b = bus.board();
     let rec = Record::Stop(StopRecord {
         seq: 0,
@@ -180,7 +180,7 @@ fn write_stop<B: Board>(bus: &mut Bus<'_, B>, log: &mut LogWriter, reason: StopR
 }
 
 /// ONE SYNC WRITE of the 12 Goal Positions.
-fn write_goals<B: Board>(bus: &mut Bus<'_, B>, ticks: &[i32; LEG_JOINTS]) {
+fn write_goals<B: Board>(bus: &mut BoardMaster<'_, B>, ticks: &[i32; LEG_JOINTS]) {
     let mut data = [[0u8; 4]; LEG_JOINTS];
     for (d, t) in data.iter_mut().zip(ticks.iter()) {
         *d = t.to_le_bytes();
@@ -234,7 +234,7 @@ impl Sensors {
     }
 
     /// ONE BULK READ; afterwards `results[i]` is request i's outcome.
-    fn read<B: Board>(&mut self, bus: &mut Bus<'_, B>) {
+    fn read<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>) {
         let n = self.reqs.len();
         let Some(results) = self.results.get_mut(..n) else {
             return;
@@ -294,7 +294,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     };
 
     let time = Cell::new(0);
-    let mut bus = Bus::new(board, &time, cfg);
+    let mut bus = BoardMaster::new(board, &time, cfg);
 
     // 1. Probe.
     let missing = startup::probe(&mut bus, &DEVICE_IDS, cfg);

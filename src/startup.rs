@@ -33,7 +33,7 @@ use dxl::table::x_series;
 use walker_contract::bus_map as ids;
 
 use crate::board::{Clock, ServoBus};
-use crate::bus::Bus;
+use crate::bus::BoardMaster;
 use crate::control::{Targets, MAX_STEPS};
 use crate::record::MAX_MISSING;
 use crate::Config;
@@ -107,7 +107,7 @@ fn retry<T>(attempts: u8, mut f: impl FnMut() -> Result<T, dxl::Error>) -> Resul
 /// PINGs every id of `devices`; returns the ids that never answered (at most
 /// [`MAX_MISSING`], in bus order).
 pub fn probe<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     devices: &[u8],
     cfg: &Config,
 ) -> heapless::Vec<u8, MAX_MISSING> {
@@ -124,7 +124,7 @@ pub fn probe<B: ServoBus + Clock>(
 /// Sets Return Delay Time to 0 on every device of `devices` (write only when needed) and
 /// verifies it by reading it back; returns how many devices were written.
 pub fn set_return_delay<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     devices: &[u8],
     cfg: &Config,
 ) -> Result<u8, StartupError> {
@@ -154,7 +154,7 @@ pub fn set_return_delay<B: ServoBus + Clock>(
 
 /// Present positions (ticks) of the 12 leg servos, one SYNC READ (retried as a whole).
 pub fn read_positions<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     cfg: &Config,
 ) -> Result<[i32; LEG_JOINTS], StartupError> {
     let f = x_series::PRESENT_POSITION;
@@ -192,7 +192,7 @@ pub fn read_positions<B: ServoBus + Clock>(
 
 /// WRITE Torque Enable = 1 to each leg servo (status checked).
 pub fn enable_torque<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     cfg: &Config,
 ) -> Result<(), StartupError> {
     let addr = x_series::TORQUE_ENABLE.addr;
@@ -292,7 +292,7 @@ mod tests {
         let mut board = FakeBoard::robot();
         let time = Cell::new(0);
         let cfg = Config::default();
-        let mut bus = Bus::new(&mut board, &time, &cfg);
+        let mut bus = BoardMaster::new(&mut board, &time, &cfg);
         let missing = probe(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert!(missing.is_empty());
         let written = set_return_delay(&mut bus, &ids::DEVICE_IDS, &cfg);
@@ -341,7 +341,7 @@ mod tests {
         board.device_mut(3).unwrap().rdt_stuck = true;
         let time = Cell::new(0);
         let cfg = Config::default();
-        let mut bus = Bus::new(&mut board, &time, &cfg);
+        let mut bus = BoardMaster::new(&mut board, &time, &cfg);
         let missing = probe(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert_eq!(&missing[..], &[7, 200]);
         let e = set_return_delay(&mut bus, &[1, 2, 3], &cfg).unwrap_err();

@@ -10,7 +10,7 @@
 //!
 //! Per run, over the walking ticks (the log's support phase double / single, lead-in and
 //! lead-out standing excluded), with the truth sampled at each tick's time (nearest row at or
-//! before it, `report::Truth::at`):
+//! before it, `report::TruthTable::at`):
 //! * ZMP error against the firmware's reference: mean and max |e| per axis for the true ZMP
 //!   (truth.csv) and for the measured one (foot sensors, ticks with a valid measurement);
 //! * the fraction of walking ticks whose true ZMP is inside the support polygon of the plan's

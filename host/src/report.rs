@@ -401,14 +401,14 @@ pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
 
 /// A ground-truth ZMP trace (e.g. from the simulator), on the log's clock.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Truth {
+pub struct TruthTable {
     /// Time, s.
     pub t: Vec<f64>,
     /// ZMP (x, y), m.
     pub zmp: Vec<[f64; 2]>,
 }
 
-impl Truth {
+impl TruthTable {
     /// The ZMP at time `t` (nearest sample at or before `t`, none outside the trace).
     pub fn at(&self, t: f64) -> Option<[f64; 2]> {
         let first = *self.t.first()?;
@@ -423,7 +423,7 @@ impl Truth {
 
 /// Reads a truth CSV: a header with `t` (or `time`) and `zmp_x`/`zmp_y` (or `zmp_true_x`,
 /// `true_zmp_x`), s and m, on the log's clock.
-pub fn read_truth(path: &Path) -> Result<Truth, String> {
+pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read the truth file {}: {e}", path.display()))?;
     let mut lines = text
@@ -442,7 +442,7 @@ pub fn read_truth(path: &Path) -> Result<Truth, String> {
         .ok_or_else(|| format!("{}: no `zmp_x` column in {header:?}", path.display()))?;
     let cy = col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
         .ok_or_else(|| format!("{}: no `zmp_y` column in {header:?}", path.display()))?;
-    let mut out = Truth::default();
+    let mut out = TruthTable::default();
     for (n, line) in lines.enumerate() {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
         let get = |i: usize| -> Result<f64, String> {
@@ -620,7 +620,7 @@ pub fn zmp_figure(
     rows: &[TickRow],
     bounds: &SupportBounds,
     offset: f64,
-    truth: Option<&Truth>,
+    truth: Option<&TruthTable>,
 ) -> Figure {
     let (t0, t1) = match (rows.first(), rows.last()) {
         (Some(a), Some(b)) => (a.t, b.t),

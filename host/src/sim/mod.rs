@@ -43,7 +43,7 @@ use walker_contract::bus_map::{self as ids, TickMap};
 const TICKS: TickMap = TickMap::reference();
 
 pub use body::{Physics, ServoCmd, Support, Truth};
-pub use bus::{Bus, BusCounters, BusFaults, OwnedPacket};
+pub use bus::{BusCounters, BusFaults, DeviceBus, OwnedPacket};
 pub use device::{Device, DeviceKind};
 pub use dynamixel::{XServoOutput, XServoParams, XServoRegisters};
 pub use mjcf::EnvConfig;
@@ -466,7 +466,7 @@ impl Body {
 /// Bus devices plus body, independent of the transport (used by [`transport`] and tests).
 pub struct Simulator {
     /// The bus and its devices.
-    pub bus: Bus,
+    pub bus: DeviceBus,
     /// The body.
     pub physics: Body,
     decoder: Box<Decoder<4096>>,
@@ -492,7 +492,7 @@ impl fmt::Debug for Simulator {
     }
 }
 
-/// Index of the foot boards and the IMU in [`Bus::devices`] (after the 12 servos).
+/// Index of the foot boards and the IMU in [`DeviceBus::devices`] (after the 12 servos).
 const FOOT_INDEX: [usize; 2] = [12, 13];
 const IMU_INDEX: usize = 14;
 
@@ -509,7 +509,7 @@ impl Simulator {
         devices.push(Device::foot(ids::FOOT_LEFT, 0));
         devices.push(Device::foot(ids::FOOT_RIGHT, 1));
         devices.push(Device::imu(ids::IMU));
-        let bus = Bus::new(devices, cfg.faults.clone(), rng::Rng::new(cfg.seed, 1));
+        let bus = DeviceBus::new(devices, cfg.faults.clone(), rng::Rng::new(cfg.seed, 1));
         let log = match &cfg.log_truth {
             Some(p) => Some(truth::TruthLog::create(p)?),
             None => None,
