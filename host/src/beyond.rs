@@ -246,31 +246,22 @@ impl TruthRows {
 }
 
 fn read_truth(path: &Path) -> Result<TruthRows, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines
-        .next()
-        .ok_or_else(|| format!("{}: empty", path.display()))?
-        .split(',')
-        .collect();
+    let csv = report::CsvText::read(path, "truth file")?;
     let col = |n: &str| {
-        header
-            .iter()
-            .position(|h| h.trim() == n)
+        csv.col(&[n])
             .ok_or_else(|| format!("{}: no column {n}", path.display()))
     };
     let (ct, cx, cy, cp) = (col("t_s")?, col("zmp_x")?, col("zmp_y")?, col("pelvis_x")?);
     // Optional (older truth files lack them).
-    let opt = |n: String| header.iter().position(|h| h.trim() == n);
+    let opt = |n: String| csv.col(&[n.as_str()]);
     let cqd: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("qd_{}", j + 1)));
     let ctq: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("tq_{}", j + 1)));
     let clim = opt("tq_limited".into());
     let mut out = TruthRows::default();
-    for l in lines {
-        let f: Vec<&str> = l.split(',').collect();
+    for f in &csv.rows {
         let g = |i: usize| {
             f.get(i)
-                .and_then(|s| s.trim().parse::<f64>().ok())
+                .and_then(|s| s.parse::<f64>().ok())
                 .unwrap_or(f64::NAN)
         };
         if !g(ct).is_finite() {
@@ -284,7 +275,7 @@ fn read_truth(path: &Path) -> Result<TruthRows, String> {
         out.joint_torque.push(ctq.map(opt_g));
         out.torque_limited.push(
             clim.and_then(|c| f.get(c))
-                .and_then(|s| s.trim().parse().ok())
+                .and_then(|s| s.parse().ok())
                 .unwrap_or(0),
         );
     }

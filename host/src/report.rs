@@ -421,32 +421,61 @@ impl TruthTable {
     }
 }
 
+/// A CSV file as text: its header and its data lines split into trimmed fields (blank lines
+/// and `#` comments skipped). The one reader of the simulator's truth CSV ([`read_truth`] and
+/// `beyond`'s per-joint columns).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CsvText {
+    /// Column names.
+    pub header: Vec<String>,
+    /// Data lines, fields trimmed.
+    pub rows: Vec<Vec<String>>,
+}
+
+impl CsvText {
+    /// Reads `path` (`what` names it in errors: "truth file").
+    pub fn read(path: &Path, what: &str) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read the {what} {}: {e}", path.display()))?;
+        let mut lines = text
+            .lines()
+            .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+        let header = lines
+            .next()
+            .ok_or_else(|| format!("{}: empty {what}", path.display()))?
+            .split(',')
+            .map(|s| s.trim().to_string())
+            .collect();
+        let rows = lines
+            .map(|l| l.split(',').map(|f| f.trim().to_string()).collect())
+            .collect();
+        Ok(CsvText { header, rows })
+    }
+
+    /// The index of the first column named one of `names`.
+    pub fn col(&self, names: &[&str]) -> Option<usize> {
+        self.header.iter().position(|h| names.contains(&h.as_str()))
+    }
+}
+
 /// Reads a truth CSV: a header with `t` (or `time`) and `zmp_x`/`zmp_y` (or `zmp_true_x`,
 /// `true_zmp_x`), s and m, on the log's clock.
 pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("cannot read the truth file {}: {e}", path.display()))?;
-    let mut lines = text
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
-    let header: Vec<String> = lines
-        .next()
-        .ok_or_else(|| format!("{}: empty truth file", path.display()))?
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
-    let col = |names: &[&str]| header.iter().position(|h| names.contains(&h.as_str()));
-    let ct = col(&["t", "time", "t_s"])
+    let csv = CsvText::read(path, "truth file")?;
+    let header = &csv.header;
+    let ct = csv
+        .col(&["t", "time", "t_s"])
         .ok_or_else(|| format!("{}: no `t` column in {header:?}", path.display()))?;
-    let cx = col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
+    let cx = csv
+        .col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
         .ok_or_else(|| format!("{}: no `zmp_x` column in {header:?}", path.display()))?;
-    let cy = col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
+    let cy = csv
+        .col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
         .ok_or_else(|| format!("{}: no `zmp_y` column in {header:?}", path.display()))?;
     let mut out = TruthTable::default();
-    for (n, line) in lines.enumerate() {
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+    for (n, f) in csv.rows.iter().enumerate() {
         let get = |i: usize| -> Result<f64, String> {
-            let s = f.get(i).copied().unwrap_or("");
+            let s = f.get(i).map_or("", String::as_str);
             if s.is_empty() {
                 return Ok(f64::NAN);
             }
@@ -455,7 +484,7 @@ pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
                     "{}: data line {}: column {}: {e}",
                     path.display(),
                     n + 1,
-                    header[i]
+                    header.get(i).map_or("?", String::as_str)
                 )
             })
         };
