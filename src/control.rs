@@ -279,14 +279,14 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut sampler = match timing.and_then(|_| build_sampler(cfg, &robot)) {
         Ok(s) => s,
         Err(e) => {
-            crate::fw_log!(error, "walk rejected by gait-core: error {}", e as u8);
+            crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
             let rec = startup_record(board, cfg, None);
             log.write(board, rec);
             let rec = fault(
                 board.now_us(),
                 FaultKind::ConfigRejected,
                 PLAN_REJECTED_ID,
-                e as i32,
+                i32::from(e.code()),
             );
             log.write(board, rec);
             return RunEnd::Config(e);
@@ -346,7 +346,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             crate::fw_log!(error, "start-up failed at device {}", e.id);
             let t = bus.board().now_us();
             let b = bus.board();
-            log.write(b, fault(t, FaultKind::StartupFailed, e.id, e.step as i32));
+            log.write(
+                b,
+                fault(t, FaultKind::StartupFailed, e.id, i32::from(e.step.code())),
+            );
             torque_off(&mut bus);
             write_stop(&mut bus, &mut log, StopReason::DeviceLost { id: e.id });
             return RunEnd::Startup(e);

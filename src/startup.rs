@@ -65,21 +65,7 @@ pub fn servo_timing(
     gait_core::gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, robot, targets)
 }
 
-/// Which start-up step failed (wire code in the fault record's `value`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum StartupStep {
-    /// Reading Return Delay Time.
-    ReturnDelayRead = 1,
-    /// Writing Return Delay Time = 0.
-    ReturnDelayWrite = 2,
-    /// The read-back value was not 0.
-    ReturnDelayVerify = 3,
-    /// SYNC READ of the present positions.
-    ReadPositions = 4,
-    /// WRITE Torque Enable = 1.
-    TorqueEnable = 5,
-}
+pub use walker_contract::codes::StartupStep;
 
 /// A start-up step failed for device `id`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -250,6 +250,49 @@ impl From<u8> for FaultKind {
     }
 }
 
+/// Which start-up step failed (its code is the `StartupFailed` fault record's `value`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum StartupStep {
+    /// 1: reading Return Delay Time.
+    ReturnDelayRead,
+    /// 2: writing Return Delay Time = 0.
+    ReturnDelayWrite,
+    /// 3: the read-back value was not 0.
+    ReturnDelayVerify,
+    /// 4: SYNC READ of the present positions.
+    ReadPositions,
+    /// 5: WRITE Torque Enable = 1.
+    TorqueEnable,
+}
+
+impl StartupStep {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            StartupStep::ReturnDelayRead => 1,
+            StartupStep::ReturnDelayWrite => 2,
+            StartupStep::ReturnDelayVerify => 3,
+            StartupStep::ReadPositions => 4,
+            StartupStep::TorqueEnable => 5,
+        }
+    }
+}
+
+impl TryFrom<u8> for StartupStep {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => StartupStep::ReturnDelayRead,
+            2 => StartupStep::ReturnDelayWrite,
+            3 => StartupStep::ReturnDelayVerify,
+            4 => StartupStep::ReadPositions,
+            5 => StartupStep::TorqueEnable,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
 /// The firmware's exit code (see the module docs' table).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
@@ -368,6 +411,9 @@ mod tests {
                 assert_eq!(e.code(), c);
             }
             assert_eq!(FaultKind::from_code(c).code(), c);
+            if let Ok(s) = StartupStep::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
         }
         assert_eq!(
             (0..=255u8)
