@@ -73,12 +73,7 @@ impl<T: Clock + ?Sized> Clock for &mut T {
     }
 }
 
-/// Sink of the binary ZMP-response log (see [`crate::log`]); best effort, never blocks for
-/// long and never fails: a board that cannot keep up drops bytes (the decoder resynchronises).
-pub trait LogSink {
-    /// Writes encoded log bytes.
-    fn write_log(&mut self, bytes: &[u8]);
-}
+pub use walker_contract::record::LogSink;
 
 /// One control tick as returned by [`TickTimer::wait_tick`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -119,8 +114,8 @@ pub trait Watchdog {
 pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
     /// Board name for the start-up report.
     const NAME: &'static str;
-    /// Board id in log start-up records ([`crate::log::BoardId`]).
-    const ID: crate::log::BoardId;
+    /// Board id in log start-up records ([`crate::record::BoardId`]).
+    const ID: crate::record::BoardId;
     /// Best-effort torque off of every servo: sends [`TORQUE_OFF_PACKET`] (broadcast WRITE of
     /// Torque Enable = 0) on the bus, waiting for no reply. Safe to call from the panic handler.
     fn torque_off_best_effort(&mut self);
@@ -133,28 +128,6 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
 pub const TORQUE_ENABLE_ADDR: u16 = 64;
 /// Dynamixel broadcast id.
 pub const BROADCAST_ID: u8 = 0xFE;
-
-/// CRC-16 of Dynamixel Protocol 2.0 (CRC-16/BUYPASS: poly 0x8005, init 0, no reflection),
-/// bitwise and `const` so that [`TORQUE_OFF_PACKET`] is built at compile time. (The `dxl`
-/// crate has the table-driven version for the hot path.)
-pub const fn dxl_crc16(data: &[u8]) -> u16 {
-    let mut crc: u16 = 0;
-    let mut i = 0;
-    while i < data.len() {
-        crc ^= (data[i] as u16) << 8;
-        let mut bit = 0;
-        while bit < 8 {
-            crc = if crc & 0x8000 != 0 {
-                (crc << 1) ^ 0x8005
-            } else {
-                crc << 1
-            };
-            bit += 1;
-        }
-        i += 1;
-    }
-    crc
-}
 
 const fn torque_off_packet() -> [u8; 13] {
     // Header, reserved, id, length (instr + 2 addr + 1 data + 2 crc = 6), WRITE, addr, data.
@@ -179,7 +152,7 @@ const fn torque_off_packet() -> [u8; 13] {
         body[i] = p[i];
         i += 1;
     }
-    let crc = dxl_crc16(&body);
+    let crc = dxl::crc::crc16(&body);
     p[11] = (crc & 0xFF) as u8;
     p[12] = (crc >> 8) as u8;
     p
@@ -284,20 +257,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn crc_matches_the_protocol_example() {
-        // ROBOTIS e-manual example: WRITE id 1, address 116, 4 bytes 512 → CRC 0x89CA.
-        let p = [
-            0xFF, 0xFF, 0xFD, 0x00, 0x01, 0x09, 0x00, 0x03, 0x74, 0x00, 0x00, 0x02, 0x00, 0x00,
-        ];
-        assert_eq!(dxl_crc16(&p), 0x89CA);
-    }
-
-    #[test]
     fn torque_off_packet_layout() {
         let p = TORQUE_OFF_PACKET;
         assert_eq!(&p[..8], &[0xFF, 0xFF, 0xFD, 0x00, 0xFE, 0x06, 0x00, 0x03]);
         assert_eq!(&p[8..11], &[64, 0, 0]);
-        let crc = dxl_crc16(&p[..11]);
+        let crc = dxl::crc::crc16(&p[..11]);
         assert_eq!(p[11], (crc & 0xFF) as u8);
         assert_eq!(p[12], (crc >> 8) as u8);
     }

@@ -2,13 +2,13 @@
 //!
 //! # Ownership
 //! `dxl::Master` owns its transport, but the board that provides the bus also provides the
-//! tick timer, the log sink and the watchdog. [`Bus`] therefore wraps a master whose transport
+//! tick timer, the log sink and the watchdog. [`BoardMaster`] therefore wraps a master whose transport
 //! ([`Link`]) holds `&mut B` for the whole run, and gives the board back through
-//! [`Bus::board`] between transactions. The master's clock ([`LinkClock`]) reads a
+//! [`BoardMaster::board`] between transactions. The master's clock ([`LinkClock`]) reads a
 //! `Cell<u64>` that the link refreshes from the board after every transport call, so the
 //! master always sees the board's time (virtual under QEMU, where the bus transport itself
 //! advances the clock) without a second borrow of the board. Every transaction goes through
-//! [`Bus::master`], which re-reads the clock first.
+//! [`BoardMaster::master`], which re-reads the clock first.
 //!
 //! # Bytes and timeouts
 //! * [`dxl::Transport::write_all`] collects the packet, [`dxl::Transport::flush`] sends it
@@ -30,11 +30,11 @@ use embedded_hal::digital::{ErrorType, OutputPin};
 use embedded_io::ErrorKind;
 
 use crate::board::{BusError, Clock, ServoBus};
-use crate::log::BusCounters;
+use crate::record::BusCounters;
 use crate::Config;
 
 /// Default longest wait for one reply byte, µs.
-pub const DEFAULT_READ_POLL_US: u32 = 20;
+pub use walker_contract::config::DEFAULT_READ_POLL_US;
 /// Size of the master's transmit and receive buffers and of the link's packet buffer, bytes.
 pub const PACKET_BUF: usize = 256;
 
@@ -134,13 +134,13 @@ impl<B: ServoBus + Clock> dxl::Transport for Link<'_, B> {
 pub type BusMaster<'b, B> = Master<Link<'b, B>, NoDir, LinkClock<'b>, PACKET_BUF>;
 
 /// The Dynamixel master bound to a board for the whole run (see the module docs).
-pub struct Bus<'b, B: ServoBus + Clock> {
+pub struct BoardMaster<'b, B: ServoBus + Clock> {
     master: BusMaster<'b, B>,
 }
 
-impl<'b, B: ServoBus + Clock> Bus<'b, B> {
+impl<'b, B: ServoBus + Clock> BoardMaster<'b, B> {
     /// Binds a master to `board`; `time` is the clock cell shared with the master (declare it
-    /// before the bus: `let time = Cell::new(0); let bus = Bus::new(&mut board, &time, &cfg);`).
+    /// before the bus: `let time = Cell::new(0); let bus = BoardMaster::new(&mut board, &time, &cfg);`).
     pub fn new(board: &'b mut B, time: &'b Cell<u64>, cfg: &Config) -> Self {
         time.set(board.now_us());
         let link = Link {
@@ -152,7 +152,7 @@ impl<'b, B: ServoBus + Clock> Bus<'b, B> {
         };
         let mut master = Master::new(link, NoDir, LinkClock(time));
         master.set_timeout_us(u64::from(cfg.reply_timeout_us.max(1)));
-        Bus { master }
+        BoardMaster { master }
     }
 
     /// The master, ready for one transaction (the clock is re-read from the board).
@@ -202,7 +202,7 @@ mod tests {
         board.remove(5);
         let time = Cell::new(0);
         let cfg = Config::default();
-        let mut bus = Bus::new(&mut board, &time, &cfg);
+        let mut bus = BoardMaster::new(&mut board, &time, &cfg);
         let info = bus.master().ping(1);
         assert!(info.is_ok(), "{info:?}");
         let t0 = bus.board().now_us();

@@ -49,190 +49,43 @@
 //! measurement instruments for the ZMP-response log. A foot board that stops answering
 //! *during* the walk is a device loss (stop), whatever this setting.
 //!
-//! # Exit codes ([`RunEnd::exit_code`]; QEMU passes them to the host through semihosting)
-//! | code | meaning |
-//! | --- | --- |
-//! | 0 | plan done |
-//! | 2 | configuration rejected (bad `key=value` token, or gait-core rejected the plan) |
-//! | 3 | virtual watchdog (QEMU board) |
-//! | 11 | device missing at start-up (stop record `DeviceMissing`, first missing id) |
-//! | 12 | device lost while running |
-//! | 13 | fall (tilt beyond the limit) |
-//! | 14 | overrun burst |
-//! | 15 | non-finite joint target |
-//! | 17 | stop requested |
-//! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
-//! | 101 | panic |
-//!
-//! i.e. 10 + the stop record's reason code for supervisor stops.
+//! # Exit codes
+//! [`RunEnd::exit_code`] maps an end to the contract's [`walker_contract::ExitCode`] table (the
+//! one table of the codes and their meanings; QEMU passes them to the host through
+//! semihosting).
 
 use core::cell::Cell;
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
-use dxl::table::{foot, ids, imu as imu_table, x_series};
+use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
-use gait_core::kinematics::{LegKinematics, LegsIkReport};
 use gait_core::measured::{measured_zmp, ForceReading};
-use gait_core::pipeline::joint_targets;
-use gait_core::plan::SwingShape;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
-use gait_core::support::SupportPolygon;
-use gait_core::wholebody::WholeBody;
-use gait_core::zmp::ZmpShape;
-use gait_core::{GaitError, GaitSample, Model, Place, Robot, Sampler, Side};
+use gait_core::{GaitError, GaitSample, Robot, Sampler, Side};
+use walker_contract::bus_map::{self as ids, DEVICE_IDS};
+use walker_contract::ExitCode;
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
-use crate::bus::Bus;
+use crate::bus::BoardMaster;
 use crate::imu::{AttitudeFilter, PitchAccel, PitchAccelConfig};
-use crate::log::{
-    FaultKind, FaultRecord, FaultState, LogWriter, Record, StopRecord, SupportPhase, TickRecord,
-};
 use crate::params::ArgError;
+use crate::record::{
+    FaultKind, FaultRecord, FaultState, LogWriter, LoggedPhase, Record, StopRecord, TickRecord,
+};
 use crate::startup::{self, Ramp, StartupError};
 use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
-use crate::{startup_record, Config, DEVICE_IDS};
+use crate::{startup_record, Config};
 
-/// Most footsteps a plan may have.
-pub const MAX_STEPS: usize = 64;
+pub use walker_contract::config::{Compensation, Feasibility, MAX_STEPS};
 /// The sampler type of the firmware.
 pub type GaitSampler = Sampler<f32, MAX_STEPS>;
-/// Devices read every tick, in bulk-read order.
-pub const SENSOR_IDS: [u8; 3] = [ids::FOOT_LEFT, ids::FOOT_RIGHT, ids::IMU];
+pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;
 
-/// Fixed-point steps of the whole-body compensation per sample (cost: that + 1 two-leg IK and
-/// FK evaluations).
-pub const WHOLEBODY_ITERATIONS: u8 = 2;
-
-/// How the pelvis is placed (`comp=` token).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Compensation {
-    /// The paper's pipeline: the pelvis point on the model's CoM.
-    None,
-    /// Whole-body compensation: the multi-body CoM (swing leg included) on the model's CoM.
-    WholeBody,
-}
-
-/// What start-up does when the plan needs a joint faster than the servo (`feasibility=`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Feasibility {
-    /// Stretch t1, t2 and T by the needed factor × 1.05 (re-checked).
-    Stretch,
-    /// Lower the swing height by the needed factor × 1.05 (re-checked).
-    Lower,
-    /// Only log the warning.
-    Off,
-}
-
-/// Sample → 12 joint targets, built once: the paper's pipeline or whole-body compensation.
-#[derive(Clone, Debug)]
-pub enum Targets {
-    /// Pelvis point on the (shifted) model CoM, two-leg IK.
-    Plain(LegKinematics<f32>),
-    /// Multi-body CoM on the (shifted) model CoM.
-    WholeBody(WholeBody<f32>),
-}
-
-impl Targets {
-    /// The pipeline of `comp` for `robot`.
-    pub fn new(robot: &Robot, comp: Compensation) -> Self {
-        match comp {
-            Compensation::None => Targets::Plain(LegKinematics::new(robot)),
-            Compensation::WholeBody => {
-                Targets::WholeBody(WholeBody::new(robot, WHOLEBODY_ITERATIONS))
-            }
-        }
-    }
-
-    /// The joint targets of `s` with its CoM shifted by `shift` (m), and what the IK clamped.
-    pub fn joints(
-        &self,
-        s: &GaitSample<f32>,
-        shift: [f32; 2],
-    ) -> ([f32; LEG_JOINTS], LegsIkReport<f32>) {
-        match self {
-            Targets::Plain(kin) => {
-                let mut shifted = *s;
-                shifted.com[0] += shift[0];
-                shifted.com[1] += shift[1];
-                joint_targets(kin, &shifted)
-            }
-            Targets::WholeBody(wb) => {
-                let c = wb.pelvis_for_com(s, [s.com[0] + shift[0], s.com[1] + shift[1]]);
-                (c.joints, c.report)
-            }
-        }
-    }
-}
-
-/// The support polygon of a sample: the support sole in single support, both soles otherwise.
-pub fn support_of(robot: &Robot, s: &GaitSample<f32>) -> Option<SupportPolygon<f32>> {
-    let place = |i: usize| {
-        s.feet.get(i).map(|f| Place {
-            x: f.x,
-            y: f.y,
-            yaw: f.yaw,
-        })
-    };
-    match s.phase {
-        gait_core::SupportPhase::Single(side) => {
-            SupportPolygon::single(&place(side.index())?, robot).ok()
-        }
-        _ => SupportPolygon::double(&place(0)?, &place(1)?, robot).ok(),
-    }
-}
-
-/// The support polygon of the gait samples, rebuilt only when the support phase or a
-/// supporting foot changes (a few times per step) instead of every tick: building the hull costs
-/// thousands of instructions and the supporting feet stand still while they support.
-#[derive(Clone, Debug, Default)]
-pub struct SupportCache {
-    key: Option<(gait_core::SupportPhase, [[f32; 3]; 2])>,
-    poly: Option<SupportPolygon<f32>>,
-}
-
-impl SupportCache {
-    /// The support polygon of `s` (as [`support_of`]).
-    pub fn get(&mut self, robot: &Robot, s: &GaitSample<f32>) -> Option<&SupportPolygon<f32>> {
-        let foot = |i: usize| s.feet.get(i).map_or([0.0; 3], |f| [f.x, f.y, f.yaw]);
-        // Only the feet that support enter the key: a swinging foot does not change the polygon.
-        let feet = match s.phase {
-            gait_core::SupportPhase::Single(side) => {
-                let mut k = [[0.0; 3]; 2];
-                if let Some(slot) = k.get_mut(side.index()) {
-                    *slot = foot(side.index());
-                }
-                k
-            }
-            _ => [foot(0), foot(1)],
-        };
-        let key = (s.phase, feet);
-        if self.key != Some(key) {
-            self.poly = support_of(robot, s);
-            self.key = Some(key);
-        }
-        self.poly.as_ref()
-    }
-}
-
-/// Exit codes (see the module docs).
-pub mod exit_code {
-    /// Plan done.
-    pub const OK: i32 = 0;
-    /// Configuration rejected.
-    pub const CONFIG: i32 = 2;
-    /// Virtual watchdog (QEMU board).
-    pub const WATCHDOG: i32 = 3;
-    /// Base of supervisor stops: 10 + stop reason code.
-    pub const STOP_BASE: i32 = 10;
-    /// A start-up step failed after the probe.
-    pub const STARTUP: i32 = 20;
-    /// Panic.
-    pub const PANIC: i32 = 101;
-}
+pub use gait_core::gait::{support_of, SupportCache, Targets, WHOLEBODY_ITERATIONS};
 
 /// How a run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -246,33 +99,24 @@ pub enum RunEnd {
 }
 
 impl RunEnd {
-    /// The exit code (QEMU) of this end.
-    pub fn exit_code(&self) -> i32 {
+    /// The exit code of this end (the contract's table).
+    pub fn exit(&self) -> ExitCode {
         match self {
-            RunEnd::Stopped(StopReason::PlanDone) => exit_code::OK,
-            RunEnd::Stopped(r) => exit_code::STOP_BASE + i32::from(r.code().0),
-            RunEnd::Startup(_) => exit_code::STARTUP,
-            RunEnd::Config(_) => exit_code::CONFIG,
+            RunEnd::Stopped(r) => r.kind().exit(),
+            RunEnd::Startup(_) => ExitCode::StartupFailed,
+            RunEnd::Config(_) => ExitCode::ConfigRejected,
         }
+    }
+
+    /// The process exit status of this end (QEMU semihosting).
+    pub fn exit_code(&self) -> i32 {
+        self.exit().status()
     }
 }
 
-/// The gait sampler of `cfg` (model, walk, ZMP and swing shape, dt).
+/// The gait sampler of `cfg` (model, walk, ZMP and swing shape, dt; gait-core decides).
 pub fn build_sampler(cfg: &Config, robot: &Robot) -> Result<GaitSampler, GaitError> {
-    let w = &cfg.walk;
-    let model = Model::<f32>::new(cfg.model, robot, w.z_c)?;
-    let mut params = w.params(model);
-    if cfg.zmp_continuous {
-        let b = cfg.zmp_b.unwrap_or(w.a);
-        params.zmp = ZmpShape::Continuous { b: b as f32 };
-    }
-    if cfg.swing_sinusoid {
-        params.swing = SwingShape::Sinusoid {
-            height: w.h_z as f32,
-        };
-    }
-    let plan = w.plan::<f32, MAX_STEPS>(robot, params)?;
-    Sampler::new(plan, cfg.dt_s())
+    gait_core::gait::build_sampler::<MAX_STEPS>(&cfg.walk_config(), robot)
 }
 
 /// Logs a rejected command line: the start-up record (bus not probed) and a
@@ -304,18 +148,18 @@ fn is_foot(id: u8) -> bool {
     id == ids::FOOT_LEFT || id == ids::FOOT_RIGHT
 }
 
-fn phase_of(s: &GaitSample<f32>) -> SupportPhase {
+fn phase_of(s: &GaitSample<f32>) -> LoggedPhase {
     match s.phase {
-        gait_core::SupportPhase::Standing => SupportPhase::Standing,
-        gait_core::SupportPhase::Double => SupportPhase::Double,
-        gait_core::SupportPhase::Single(Side::Left) => SupportPhase::SingleLeft,
-        gait_core::SupportPhase::Single(Side::Right) => SupportPhase::SingleRight,
+        gait_core::SupportPhase::Standing => LoggedPhase::Standing,
+        gait_core::SupportPhase::Double => LoggedPhase::Double,
+        gait_core::SupportPhase::Single(Side::Left) => LoggedPhase::SingleLeft,
+        gait_core::SupportPhase::Single(Side::Right) => LoggedPhase::SingleRight,
     }
 }
 
 /// Broadcast Torque Enable = 0 through the master (lock-step aware); the board's
 /// best-effort raw packet if that fails.
-fn torque_off<B: Board>(bus: &mut Bus<'_, B>) {
+fn torque_off<B: Board>(bus: &mut BoardMaster<'_, B>) {
     if bus
         .master()
         .write(BROADCAST_ID, TORQUE_ENABLE_ADDR, &[0])
@@ -325,7 +169,7 @@ fn torque_off<B: Board>(bus: &mut Bus<'_, B>) {
     }
 }
 
-fn write_stop<B: Board>(bus: &mut Bus<'_, B>, log: &mut LogWriter, reason: StopReason) {
+fn write_stop<B: Board>(bus: &mut BoardMaster<'_, B>, log: &mut LogWriter, reason: StopReason) {
     let b = bus.board();
     let rec = Record::Stop(StopRecord {
         seq: 0,
@@ -336,7 +180,7 @@ fn write_stop<B: Board>(bus: &mut Bus<'_, B>, log: &mut LogWriter, reason: StopR
 }
 
 /// ONE SYNC WRITE of the 12 Goal Positions.
-fn write_goals<B: Board>(bus: &mut Bus<'_, B>, ticks: &[i32; LEG_JOINTS]) {
+fn write_goals<B: Board>(bus: &mut BoardMaster<'_, B>, ticks: &[i32; LEG_JOINTS]) {
     let mut data = [[0u8; 4]; LEG_JOINTS];
     for (d, t) in data.iter_mut().zip(ticks.iter()) {
         *d = t.to_le_bytes();
@@ -390,7 +234,7 @@ impl Sensors {
     }
 
     /// ONE BULK READ; afterwards `results[i]` is request i's outcome.
-    fn read<B: Board>(&mut self, bus: &mut Bus<'_, B>) {
+    fn read<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>) {
         let n = self.reqs.len();
         let Some(results) = self.results.get_mut(..n) else {
             return;
@@ -435,14 +279,14 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut sampler = match timing.and_then(|_| build_sampler(cfg, &robot)) {
         Ok(s) => s,
         Err(e) => {
-            crate::fw_log!(error, "walk rejected by gait-core: error {}", e as u8);
+            crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
             let rec = startup_record(board, cfg, None);
             log.write(board, rec);
             let rec = fault(
                 board.now_us(),
                 FaultKind::ConfigRejected,
                 PLAN_REJECTED_ID,
-                e as i32,
+                i32::from(e.code()),
             );
             log.write(board, rec);
             return RunEnd::Config(e);
@@ -450,7 +294,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     };
 
     let time = Cell::new(0);
-    let mut bus = Bus::new(board, &time, cfg);
+    let mut bus = BoardMaster::new(board, &time, cfg);
 
     // 1. Probe.
     let missing = startup::probe(&mut bus, &DEVICE_IDS, cfg);
@@ -460,12 +304,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         log.write(b, rec);
     }
     if let Ok(t) = &timing {
-        for (kind, id, value) in t.records() {
+        for (kind, id, value) in t.notes().into_iter().map(startup::note_record) {
             let now = bus.board().now_us();
             log.write(bus.board(), fault(now, kind, id, value));
         }
     }
-    let mut critical: heapless::Vec<u8, { crate::log::MAX_MISSING }> = heapless::Vec::new();
+    let mut critical: heapless::Vec<u8, { crate::record::MAX_MISSING }> = heapless::Vec::new();
     for &id in missing.iter() {
         if cfg.feet_required || !is_foot(id) {
             let _ = critical.push(id);
@@ -502,7 +346,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             crate::fw_log!(error, "start-up failed at device {}", e.id);
             let t = bus.board().now_us();
             let b = bus.board();
-            log.write(b, fault(t, FaultKind::StartupFailed, e.id, e.step as i32));
+            log.write(
+                b,
+                fault(t, FaultKind::StartupFailed, e.id, i32::from(e.step.code())),
+            );
             torque_off(&mut bus);
             write_stop(&mut bus, &mut log, StopReason::DeviceLost { id: e.id });
             return RunEnd::Startup(e);
@@ -692,8 +539,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             rec.set_zmp_ref_m(zx, zy);
             rec.set_com_m(cx, cy);
             rec.phase = match sup.stop_reason() {
-                Some(StopReason::PlanDone) => SupportPhase::Standing,
-                _ => SupportPhase::Stopped,
+                Some(StopReason::PlanDone) => LoggedPhase::Standing,
+                _ => LoggedPhase::Stopped,
             };
         }
         if let Some([zx, zy]) = meas.zmp {

@@ -41,7 +41,7 @@
 //! `cos(tilt) = cos φ · cos θ`.
 
 /// Default low-pass cutoff of the φ̈ filter, Hz.
-pub const DEFAULT_CUTOFF_HZ: f32 = 15.0;
+pub use walker_contract::config::DEFAULT_IMU_CUTOFF_HZ as DEFAULT_CUTOFF_HZ;
 /// Standard gravity used for the accelerometer plausibility window, m/s².
 const G: f32 = 9.80665;
 

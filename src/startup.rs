@@ -2,7 +2,7 @@
 //! the smooth move from the present pose to the gait's initial pose.
 //!
 //! Sequence (run by [`crate::control::run`]):
-//! 1. [`probe`]: PING every id of [`crate::DEVICE_IDS`] (each up to
+//! 1. [`probe`]: PING every id of [`walker_contract::bus_map::DEVICE_IDS`] (each up to
 //!    [`Config::startup_attempts`] times, default 8); the ids that never answer are reported in the
 //!    start-up log record. A missing servo or IMU stops (exit code 11, stop record
 //!    `DeviceMissing`); a missing foot board too unless [`Config::feet_required`] is false
@@ -29,160 +29,43 @@
 //! Steps 2–4 report the first failing device as a [`StartupError`] (log fault record
 //! `StartupFailed`, exit code 20).
 
-use dxl::table::{ids, x_series};
+use dxl::table::x_series;
+use walker_contract::bus_map as ids;
 
 use crate::board::{Clock, ServoBus};
-use crate::bus::Bus;
-use crate::control::{build_sampler, Feasibility, Targets};
-use crate::log::{FaultKind, MAX_MISSING};
+use crate::bus::BoardMaster;
+use crate::control::{Targets, MAX_STEPS};
+use crate::record::MAX_MISSING;
 use crate::Config;
-use gait_core::kinematics::{JointSpeedMonitor, JointSpeedReport};
+use gait_core::kinematics::JointSpeedReport;
 use gait_core::robot::LEG_JOINTS;
-use gait_core::{ForwardWalk, GaitError, Robot};
+use gait_core::{GaitError, Robot};
 
-/// Most adjustments of the servo-speed check.
-pub const MAX_TIMING_ROUNDS: u8 = 4;
-/// Safety factor on the needed slow-down.
-pub const TIMING_MARGIN: f64 = 1.05;
-/// Most samples of one dry run (a 64-step plan of 4 s steps at 1 kHz is below).
-pub const MAX_DRY_RUN_SAMPLES: u32 = 400_000;
+pub use gait_core::gait::{
+    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_SAMPLES, MAX_TIMING_ROUNDS, TIMING_MARGIN,
+};
 
-/// The outcome of [`servo_timing`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TimingCheck {
-    /// The walk to use (the configured one, possibly adjusted).
-    pub walk: ForwardWalk,
-    /// Total factor applied to t1, t2 and T, in 1/1000 (1000 = unchanged).
-    pub factor_milli: u32,
-    /// Swing height after lowering, µm (`None` = unchanged).
-    pub lowered_um: Option<u32>,
-    /// The worst joint that triggered the (last) adjustment.
-    pub trigger_joint: u8,
-    /// Peak speeds of the walk that will run.
-    pub report: JointSpeedReport,
-    /// Number of adjustments made.
-    pub rounds: u8,
-}
+pub use walker_contract::record::timing_fault as note_record;
 
-impl TimingCheck {
-    /// True when the walk that will run stays within the servo limit.
-    pub fn feasible(&self) -> bool {
-        self.report.worst_speed <= self.report.limit
-    }
-
-    /// The fault records to log: (kind, id, value) — stretched / lowered, then the warning.
-    pub fn records(&self) -> heapless::Vec<(FaultKind, u8, i32), 2> {
-        let mut v = heapless::Vec::new();
-        if self.factor_milli != 1000 {
-            let f = i32::try_from(self.factor_milli).unwrap_or(i32::MAX);
-            let _ = v.push((FaultKind::TimingStretched, self.trigger_joint, f));
-        }
-        if let Some(h) = self.lowered_um {
-            let h = i32::try_from(h).unwrap_or(i32::MAX);
-            let _ = v.push((FaultKind::SwingLowered, self.trigger_joint, h));
-        }
-        if !self.feasible() {
-            let mrad = self.report.worst_speed * 1000.0;
-            let mrad = if mrad.is_finite() {
-                mrad.clamp(0.0, i32::MAX as f64) as i32
-            } else {
-                i32::MAX
-            };
-            let j = u8::try_from(self.report.worst_joint).unwrap_or(u8::MAX);
-            let _ = v.push((FaultKind::SpeedLimit, j, mrad));
-        }
-        v
-    }
-}
-
-/// `walk` with t1, t2 and T multiplied by `milli`/1000 (the host reproduces it from the log).
-pub fn stretched(walk: &ForwardWalk, milli: u32) -> ForwardWalk {
-    let f = f64::from(milli) / 1000.0;
-    ForwardWalk {
-        t1: walk.t1 * f,
-        t2: walk.t2 * f,
-        period: walk.period * f,
-        ..*walk
-    }
-}
-
-/// Peak joint speeds of `cfg`'s walk through `targets` at dt (dry run, no τ, no feedback).
+/// Peak joint speeds of `cfg`'s walk through `targets` at dt (gait-core's dry run).
 pub fn dry_run(
     cfg: &Config,
     robot: &Robot,
     targets: &Targets,
 ) -> Result<JointSpeedReport, GaitError> {
-    let mut s = build_sampler(cfg, robot)?;
-    let mut mon = JointSpeedMonitor::new(robot, cfg.dt_s())?;
-    let mut n = 0u32;
-    while !s.is_done() && n < MAX_DRY_RUN_SAMPLES {
-        let g = s.next(0.0);
-        let (q, _) = targets.joints(&g, [0.0; 2]);
-        mon.push(g.time_ns as f64 * 1e-9, &q);
-        n += 1;
-    }
-    Ok(mon.report())
+    gait_core::gait::dry_run::<MAX_STEPS>(&cfg.walk_config(), robot, targets)
 }
 
-/// The servo-speed check of `cfg`'s walk (see the module docs): the walk to run and what was
-/// done. Errors are gait-core's rejections of the (adjusted) plan.
+/// The servo-speed check of `cfg`'s walk (gait-core's [`gait_core::gait::servo_timing`]).
 pub fn servo_timing(
     cfg: &Config,
     robot: &Robot,
     targets: &Targets,
 ) -> Result<TimingCheck, GaitError> {
-    let base = cfg.walk;
-    let mut run = *cfg;
-    let mut out = TimingCheck {
-        walk: base,
-        factor_milli: 1000,
-        lowered_um: None,
-        trigger_joint: 0,
-        report: dry_run(&run, robot, targets)?,
-        rounds: 0,
-    };
-    while !out.feasible() && out.rounds < MAX_TIMING_ROUNDS && cfg.feasibility != Feasibility::Off {
-        let r = &out.report;
-        let need = r.worst_speed / r.limit * TIMING_MARGIN;
-        if !(need.is_finite() && need > 1.0) {
-            break;
-        }
-        out.trigger_joint = u8::try_from(r.worst_joint).unwrap_or(u8::MAX);
-        match cfg.feasibility {
-            Feasibility::Stretch => {
-                let f = libm::ceil(f64::from(out.factor_milli) * need);
-                out.factor_milli = if f < 100_000.0 { f as u32 } else { 100_000 };
-                out.walk = stretched(&base, out.factor_milli);
-            }
-            Feasibility::Lower | Feasibility::Off => {
-                let h = libm::floor(out.walk.h_z / need * 1e6);
-                let um = if h > 0.0 { h as u32 } else { 0 };
-                out.lowered_um = Some(um);
-                out.walk.h_z = f64::from(um) * 1e-6;
-            }
-        }
-        out.rounds += 1;
-        run.walk = out.walk;
-        out.report = dry_run(&run, robot, targets)?;
-    }
-    Ok(out)
+    gait_core::gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, robot, targets)
 }
 
-/// Which start-up step failed (wire code in the fault record's `value`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum StartupStep {
-    /// Reading Return Delay Time.
-    ReturnDelayRead = 1,
-    /// Writing Return Delay Time = 0.
-    ReturnDelayWrite = 2,
-    /// The read-back value was not 0.
-    ReturnDelayVerify = 3,
-    /// SYNC READ of the present positions.
-    ReadPositions = 4,
-    /// WRITE Torque Enable = 1.
-    TorqueEnable = 5,
-}
+pub use walker_contract::codes::StartupStep;
 
 /// A start-up step failed for device `id`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -210,7 +93,7 @@ fn retry<T>(attempts: u8, mut f: impl FnMut() -> Result<T, dxl::Error>) -> Resul
 /// PINGs every id of `devices`; returns the ids that never answered (at most
 /// [`MAX_MISSING`], in bus order).
 pub fn probe<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     devices: &[u8],
     cfg: &Config,
 ) -> heapless::Vec<u8, MAX_MISSING> {
@@ -227,7 +110,7 @@ pub fn probe<B: ServoBus + Clock>(
 /// Sets Return Delay Time to 0 on every device of `devices` (write only when needed) and
 /// verifies it by reading it back; returns how many devices were written.
 pub fn set_return_delay<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     devices: &[u8],
     cfg: &Config,
 ) -> Result<u8, StartupError> {
@@ -260,7 +143,7 @@ pub fn set_return_delay<B: ServoBus + Clock>(
 /// one more attempt, not the whole transaction (with `attempts` = 8 and 20 % reply loss, a
 /// servo misses all attempts with probability 0.2⁸ ≈ 2.6·10⁻⁶).
 pub fn read_positions<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     cfg: &Config,
 ) -> Result<[i32; LEG_JOINTS], StartupError> {
     let f = x_series::PRESENT_POSITION;
@@ -314,7 +197,7 @@ pub fn read_positions<B: ServoBus + Clock>(
 
 /// WRITE Torque Enable = 1 to each leg servo (status checked).
 pub fn enable_torque<B: ServoBus + Clock>(
-    bus: &mut Bus<'_, B>,
+    bus: &mut BoardMaster<'_, B>,
     cfg: &Config,
 ) -> Result<(), StartupError> {
     let addr = x_series::TORQUE_ENABLE.addr;
@@ -421,7 +304,7 @@ mod tests {
         }
         let time = Cell::new(0);
         let cfg = Config::default();
-        let mut bus = Bus::new(&mut board, &time, &cfg);
+        let mut bus = BoardMaster::new(&mut board, &time, &cfg);
         let err = read_positions(&mut bus, &cfg).unwrap_err();
         drop(bus);
         assert_eq!(err.step, StartupStep::ReadPositions);
@@ -436,7 +319,7 @@ mod tests {
         assert!(sizes[1..].iter().all(|&n| n + 10 == sizes[0]), "{sizes:?}");
         // With all servos answering, one attempt reads all twelve.
         let mut board = FakeBoard::robot();
-        let mut bus = Bus::new(&mut board, &time, &cfg);
+        let mut bus = BoardMaster::new(&mut board, &time, &cfg);
         assert_eq!(
             read_positions(&mut bus, &cfg),
             Ok(FakeBoard::initial_ticks())
@@ -450,19 +333,19 @@ mod tests {
         let mut board = FakeBoard::robot();
         let time = Cell::new(0);
         let cfg = Config::default();
-        let mut bus = Bus::new(&mut board, &time, &cfg);
-        let missing = probe(&mut bus, &crate::DEVICE_IDS, &cfg);
+        let mut bus = BoardMaster::new(&mut board, &time, &cfg);
+        let missing = probe(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert!(missing.is_empty());
-        let written = set_return_delay(&mut bus, &crate::DEVICE_IDS, &cfg);
+        let written = set_return_delay(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert_eq!(written, Ok(15));
         // Second time: already 0, nothing written.
-        assert_eq!(set_return_delay(&mut bus, &crate::DEVICE_IDS, &cfg), Ok(0));
+        assert_eq!(set_return_delay(&mut bus, &ids::DEVICE_IDS, &cfg), Ok(0));
         let ticks = read_positions(&mut bus, &cfg).unwrap();
         assert_eq!(ticks, FakeBoard::initial_ticks());
         enable_torque(&mut bus, &cfg).unwrap();
         drop(bus);
         // Every device pinged, written (addr 9 = 0) and read back.
-        for id in crate::DEVICE_IDS {
+        for id in ids::DEVICE_IDS {
             let pk = |op: u8| {
                 board
                     .packets
@@ -499,8 +382,8 @@ mod tests {
         board.device_mut(3).unwrap().rdt_stuck = true;
         let time = Cell::new(0);
         let cfg = Config::default();
-        let mut bus = Bus::new(&mut board, &time, &cfg);
-        let missing = probe(&mut bus, &crate::DEVICE_IDS, &cfg);
+        let mut bus = BoardMaster::new(&mut board, &time, &cfg);
+        let missing = probe(&mut bus, &ids::DEVICE_IDS, &cfg);
         assert_eq!(&missing[..], &[7, 200]);
         let e = set_return_delay(&mut bus, &[1, 2, 3], &cfg).unwrap_err();
         assert_eq!(e.step, StartupStep::ReturnDelayVerify);

@@ -10,101 +10,10 @@
 //! [`SupervisorConfig::hold_ticks`] consecutive ticks; one more miss is `DeviceLost`.
 
 use gait_core::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
+use walker_contract::bus_map::TickMap;
 
-/// Why the supervisor stopped the robot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum StopReason {
-    /// A device did not answer the start-up probe.
-    DeviceMissing {
-        /// Its bus id.
-        id: u8,
-    },
-    /// A device missed more than `hold_ticks` replies in a row.
-    DeviceLost {
-        /// Its bus id.
-        id: u8,
-    },
-    /// The trunk tilted beyond the limit.
-    Fall {
-        /// Tilt from vertical, mrad.
-        tilt_mrad: u16,
-    },
-    /// Too many consecutive tick overruns.
-    OverrunBurst {
-        /// Consecutive overruns counted.
-        count: u16,
-    },
-    /// A joint target was NaN or infinite.
-    NonFiniteTarget {
-        /// Joint index 0..12 (left leg then right leg).
-        joint: u8,
-    },
-    /// The walking plan finished.
-    PlanDone,
-    /// Stop requested from outside (operator, host).
-    Requested,
-}
-
-impl StopReason {
-    /// Wire form (code, id, value) used by the log's stop record.
-    /// Codes: 1 device missing (id), 2 device lost (id), 3 fall (value = tilt mrad),
-    /// 4 overrun burst (value = count), 5 non-finite target (id = joint), 6 plan done,
-    /// 7 requested.
-    pub fn code(&self) -> (u8, u8, i32) {
-        match *self {
-            StopReason::DeviceMissing { id } => (1, id, 0),
-            StopReason::DeviceLost { id } => (2, id, 0),
-            StopReason::Fall { tilt_mrad } => (3, 0, i32::from(tilt_mrad)),
-            StopReason::OverrunBurst { count } => (4, 0, i32::from(count)),
-            StopReason::NonFiniteTarget { joint } => (5, joint, 0),
-            StopReason::PlanDone => (6, 0, 0),
-            StopReason::Requested => (7, 0, 0),
-        }
-    }
-
-    /// Inverse of [`StopReason::code`]; None for an unknown code or impossible value.
-    pub fn from_code(code: u8, id: u8, value: i32) -> Option<Self> {
-        Some(match code {
-            1 => StopReason::DeviceMissing { id },
-            2 => StopReason::DeviceLost { id },
-            3 => StopReason::Fall {
-                tilt_mrad: u16::try_from(value).ok()?,
-            },
-            4 => StopReason::OverrunBurst {
-                count: u16::try_from(value).ok()?,
-            },
-            5 => StopReason::NonFiniteTarget { joint: id },
-            6 => StopReason::PlanDone,
-            7 => StopReason::Requested,
-            _ => return None,
-        })
-    }
-}
-
-/// Supervisor limits.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SupervisorConfig {
-    /// Consecutive missed replies bridged with the last good value (then `DeviceLost`).
-    pub hold_ticks: u16,
-    /// Tilt from vertical that counts as a fall, rad.
-    pub tilt_limit_rad: f32,
-    /// Ticks the pose is held in `Stopping` before torque off.
-    pub stopping_ticks: u16,
-    /// Consecutive overruns that stop the robot.
-    pub overrun_burst: u16,
-}
-
-impl Default for SupervisorConfig {
-    fn default() -> Self {
-        SupervisorConfig {
-            hold_ticks: 10,
-            tilt_limit_rad: 0.6,
-            stopping_ticks: 200,
-            overrun_burst: 5,
-        }
-    }
-}
+pub use walker_contract::codes::StopReason;
+pub use walker_contract::config::SupervisorConfig;
 
 /// Supervisor state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -202,12 +111,12 @@ impl<const N: usize> Supervisor<N> {
     }
 
     /// State for the log's status byte.
-    pub fn fault_state(&self) -> crate::log::FaultState {
+    pub fn fault_state(&self) -> crate::record::FaultState {
         match self.state {
-            State::Running if self.any_holding() => crate::log::FaultState::Holding,
-            State::Running => crate::log::FaultState::Ok,
-            State::Stopping { .. } => crate::log::FaultState::Stopping,
-            State::TorqueOff { .. } => crate::log::FaultState::TorqueOff,
+            State::Running if self.any_holding() => crate::record::FaultState::Holding,
+            State::Running => crate::record::FaultState::Ok,
+            State::Stopping { .. } => crate::record::FaultState::Stopping,
+            State::TorqueOff { .. } => crate::record::FaultState::TorqueOff,
         }
     }
 
@@ -334,15 +243,12 @@ impl<const N: usize> Supervisor<N> {
     }
 }
 
-/// Joint angle → servo tick mapping and limits of the 12 leg joints.
+/// Joint limits of the 12 leg joints and the servos' tick range around the contract's
+/// rad ↔ tick map ([`TickMap`], the one definition of the conversion).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct JointMap {
-    /// Tick that stands for 0 rad.
-    pub zero_tick: i32,
-    /// Ticks per radian.
-    pub ticks_per_rad: f32,
-    /// +1 when joint-positive is servo-positive, −1 otherwise (mounting).
-    pub sign: [i8; LEG_JOINTS],
+    /// The rad ↔ tick map (zero tick, ticks per turn, mounting signs).
+    pub ticks: TickMap,
     /// Lower joint limits, rad.
     pub min_rad: [f32; LEG_JOINTS],
     /// Upper joint limits, rad.
@@ -368,41 +274,26 @@ impl JointMap {
             *lo = l.min as f32;
             *hi = l.max as f32;
         }
-        let tpt = robot.servo.ticks_per_turn as f32;
+        let ticks = TickMap::from_robot(robot);
         JointMap {
-            zero_tick: robot.servo.zero_tick,
-            ticks_per_rad: tpt / core::f32::consts::TAU,
-            sign: [1; LEG_JOINTS],
+            ticks,
             min_rad,
             max_rad,
             tick_min: 0,
-            tick_max: robot.servo.ticks_per_turn as i32 - 1,
+            tick_max: ticks.ticks_per_turn - 1,
         }
     }
 
     /// Joint angle (rad) of joint `j` at servo tick `tick` (inverse of the tick mapping,
     /// without clamping).
     pub fn rad_of_tick(&self, j: usize, tick: i32) -> f32 {
-        let sign = self
-            .sign
-            .get(j)
-            .map_or(1.0, |&s| if s < 0 { -1.0 } else { 1.0 });
-        let tpr = if self.ticks_per_rad.is_finite() && self.ticks_per_rad != 0.0 {
-            self.ticks_per_rad
-        } else {
-            1.0
-        };
-        sign * (tick.saturating_sub(self.zero_tick)) as f32 / tpr
+        self.ticks.rad_f32(j, tick)
     }
 
     /// Tick of joint `j` at `rad` (clamped to the joint and servo limits; `rad` must be finite).
     fn tick(&self, j: usize, rad: f32) -> (i32, bool) {
         let lo = self.min_rad.get(j).copied().map_or(0.0, |v| v);
         let hi = self.max_rad.get(j).copied().map_or(0.0, |v| v);
-        let sign = self
-            .sign
-            .get(j)
-            .map_or(1.0, |&s| if s < 0 { -1.0 } else { 1.0 });
         let c = if rad < lo {
             lo
         } else if rad > hi {
@@ -410,7 +301,7 @@ impl JointMap {
         } else {
             rad
         };
-        let t = self.zero_tick + libm::roundf(sign * c * self.ticks_per_rad) as i32;
+        let t = self.ticks.tick_f32(j, c);
         let tc = t.clamp(self.tick_min, self.tick_max);
         (tc, c != rad || tc != t)
     }
@@ -488,7 +379,7 @@ pub fn safe_targets(
 mod tests {
     use super::*;
 
-    const IDS: [u8; 15] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 111, 112, 200];
+    const IDS: [u8; 15] = walker_contract::bus_map::DEVICE_IDS;
 
     fn sup() -> Supervisor<15> {
         Supervisor::new(
@@ -516,7 +407,7 @@ mod tests {
             s.tick_timing(false);
             assert_eq!(s.step(), Action::Run);
         }
-        assert_eq!(s.fault_state(), crate::log::FaultState::Ok);
+        assert_eq!(s.fault_state(), crate::record::FaultState::Ok);
     }
 
     #[test]
@@ -539,7 +430,7 @@ mod tests {
         let mut s = sup();
         for k in 1..=10u16 {
             assert_eq!(s.report(200, false), Freshness::Held(k));
-            assert_eq!(s.fault_state(), crate::log::FaultState::Holding);
+            assert_eq!(s.fault_state(), crate::record::FaultState::Holding);
             assert_eq!(s.step(), Action::Run);
         }
         // A fresh reply resets the count.
@@ -576,7 +467,7 @@ mod tests {
         // Limp at once: the very next action is torque off, no pose hold.
         assert_eq!(s.step(), Action::SendTorqueOff);
         run_to_off(&mut s);
-        assert_eq!(s.fault_state(), crate::log::FaultState::TorqueOff);
+        assert_eq!(s.fault_state(), crate::record::FaultState::TorqueOff);
     }
 
     #[test]
@@ -628,10 +519,14 @@ mod tests {
         assert_eq!(z.step(), Action::SendTorqueOff);
     }
 
+    fn map() -> JointMap {
+        JointMap::from_robot(&Robot::reference())
+    }
+
     #[test]
     fn rad_of_tick_inverts_tick() {
         let mut m = map();
-        m.sign[4] = -1;
+        m.ticks.sign[4] = -1;
         for j in 0..12 {
             let (t, _) = m.tick(j, 0.3);
             assert!((m.rad_of_tick(j, t) - 0.3).abs() < 1e-3, "{j}");
@@ -639,33 +534,10 @@ mod tests {
     }
 
     #[test]
-    fn stop_reason_codes_round_trip() {
-        let all = [
-            StopReason::DeviceMissing { id: 3 },
-            StopReason::DeviceLost { id: 200 },
-            StopReason::Fall { tilt_mrad: 65535 },
-            StopReason::OverrunBurst { count: 5 },
-            StopReason::NonFiniteTarget { joint: 11 },
-            StopReason::PlanDone,
-            StopReason::Requested,
-        ];
-        for r in all {
-            let (c, i, v) = r.code();
-            assert_eq!(StopReason::from_code(c, i, v), Some(r));
-        }
-        assert_eq!(StopReason::from_code(0, 0, 0), None);
-        assert_eq!(StopReason::from_code(3, 0, -1), None);
-    }
-
-    fn map() -> JointMap {
-        JointMap::from_robot(&Robot::reference())
-    }
-
-    #[test]
     fn map_from_reference_robot() {
         let m = map();
-        assert_eq!(m.zero_tick, 2048);
-        assert!((m.ticks_per_rad - 651.8986).abs() < 1e-3);
+        assert_eq!(m.ticks.zero_tick, 2048);
+        assert!((m.ticks.ticks_per_rad_f32() - 651.8986).abs() < 1e-3);
         // Knee 0..2.5 on both legs; right hip roll mirrored.
         assert_eq!((m.min_rad[3], m.max_rad[3]), (0.0, 2.5));
         assert_eq!((m.min_rad[9], m.max_rad[9]), (0.0, 2.5));
@@ -688,7 +560,7 @@ mod tests {
         assert_eq!(ok.ticks[3], 2048);
         assert_eq!(
             ok.ticks[2],
-            2048 + libm::roundf(0.9 * m.ticks_per_rad) as i32
+            2048 + libm::roundf(0.9 * m.ticks.ticks_per_rad_f32()) as i32
         );
         assert_eq!(ok.clamped, (1 << 3) | (1 << 2));
     }
@@ -716,7 +588,7 @@ mod tests {
         let mut m = map();
         m.min_rad = [-100.0; 12];
         m.max_rad = [100.0; 12];
-        m.sign[0] = -1;
+        m.ticks.sign[0] = -1;
         let mut t = [0.0f32; 12];
         t[0] = 50.0;
         t[1] = 50.0;

@@ -16,7 +16,8 @@ use gait_core::{Robot, Side};
 use crate::board::{
     Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
 };
-use crate::log::{BoardId, Decoder, Record};
+use crate::record::{BoardId, Record, RecordDecoder};
+use walker_contract::bus_map::TickMap;
 
 /// One instruction packet seen on the bus.
 #[derive(Clone, Debug, PartialEq)]
@@ -186,7 +187,7 @@ impl FakeBoard {
         for (j, v) in t.iter_mut().enumerate() {
             let mirror = j >= 6 && matches!(j % 6, 0 | 1 | 5);
             let r = INITIAL_RAD[j % 6] * if mirror { -1.0 } else { 1.0 };
-            *v = x_series::rad_to_ticks(r).unwrap();
+            *v = TickMap::reference().tick_f32(j, r);
         }
         t
     }
@@ -215,7 +216,7 @@ impl FakeBoard {
 
     /// Every record of the log.
     pub fn records(&self) -> Vec<Record> {
-        let mut d = Decoder::new();
+        let mut d = RecordDecoder::new();
         let mut out = Vec::new();
         d.feed(&self.log, |r| out.push(r.expect("log frame")));
         out
@@ -242,7 +243,7 @@ impl FakeBoard {
                 let t = self
                     .device(1 + (6 * s + j) as u8)
                     .map_or(2048, |d| d.present);
-                *v = f64::from(x_series::ticks_to_rad(t));
+                *v = TickMap::reference().rad_f64(6 * s + j, t);
             }
             z[s] = leg_fk(&robot, side, &pelvis, &q).z;
         }

@@ -20,7 +20,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 /// A Dynamixel 2.0 PING instruction packet to `id`.
 fn ping(id: u8) -> [u8; 10] {
     let mut p = [0xFF, 0xFF, 0xFD, 0x00, id, 3, 0, 0x01, 0, 0];
-    let crc = walker_firmware::board::dxl_crc16(&p[..8]);
+    let crc = dxl::crc::crc16(&p[..8]);
     p[8] = (crc & 0xFF) as u8;
     p[9] = (crc >> 8) as u8;
     p
@@ -33,7 +33,7 @@ mod tests {
     use walker_firmware::board::{Clock, ServoBus, TickTimer, TORQUE_OFF_PACKET};
     use walker_firmware::boards::qemu_mps2::QemuBoard;
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
-    use walker_firmware::log::{self, Decoder, Record, TickRecord};
+    use walker_firmware::record::{self as log, Record, RecordDecoder, TickRecord};
     use walker_firmware::supervisor::{safe_targets, JointMap};
     use walker_firmware::Config;
 
@@ -90,7 +90,7 @@ mod tests {
         let mut stream = [0u8; 3 * log::TICK_FRAME_LEN];
         stream[..n].copy_from_slice(&buf[..n]);
         stream[n..2 * n].copy_from_slice(&buf[..n]);
-        let mut d = Decoder::new();
+        let mut d = RecordDecoder::new();
         let mut found = 0;
         d.feed(&stream[5..2 * n], |r| {
             if let Ok(r) = r {

@@ -46,9 +46,21 @@ pub fn update(crc: u16, data: &[u8]) -> u16 {
     data.iter().fold(crc, |c, &b| update_byte(c, b))
 }
 
-/// CRC-16 of `data` (initial value 0).
-pub fn crc16(data: &[u8]) -> u16 {
-    update(0, data)
+/// CRC-16 of `data` (initial value 0); `const`, so that fixed packets (the firmware's
+/// broadcast torque-off) are built at compile time with the same table.
+pub const fn crc16(data: &[u8]) -> u16 {
+    let mut crc = 0u16;
+    let mut i = 0;
+    while i < data.len() {
+        // `i < len` and a u8 index into a 256-entry table: neither can be out of range.
+        #[allow(clippy::indexing_slicing)]
+        let idx = (((crc >> 8) as u8) ^ data[i]) as usize;
+        #[allow(clippy::indexing_slicing)]
+        let t = TABLE[idx];
+        crc = (crc << 8) ^ t;
+        i += 1;
+    }
+    crc
 }
 
 #[cfg(test)]

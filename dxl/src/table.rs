@@ -5,7 +5,8 @@
 //! the foot force-sensor boards ([`foot`]) and the IMU board ([`imu`]). Both implement the
 //! Protocol 2.0 subset PING / READ / WRITE / SYNC READ / BULK READ and share the common
 //! header of the table (model number at 0, firmware version at 6, ID at 7, return delay at 9).
-//! Bus IDs are in [`ids`].
+//! Bus IDs and the joint-angle ↔ tick map are the robot's, not the protocol's: they are in the
+//! `walker-contract` crate (`bus_map`).
 
 /// A control-table field: start address and size in bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -123,27 +124,6 @@ pub mod x_series {
     pub const CENTER_TICK: i32 = 2048;
     /// Largest |Goal Position| in extended position mode.
     pub const MAX_EXTENDED_TICKS: i32 = 1_048_575;
-    /// Ticks per radian.
-    pub const TICKS_PER_RAD: f32 = TICKS_PER_TURN as f32 / core::f32::consts::TAU;
-
-    /// Joint angle (rad) to ticks, rounded to nearest.
-    ///
-    /// Returns `None` for non-finite input or results beyond ±[`MAX_EXTENDED_TICKS`].
-    pub fn rad_to_ticks(rad: f32) -> Option<i32> {
-        let t = rad * TICKS_PER_RAD + CENTER_TICK as f32;
-        let limit = MAX_EXTENDED_TICKS as f32;
-        if !t.is_finite() || !(-limit..=limit).contains(&t) {
-            return None;
-        }
-        // Round half away from zero; the cast cannot saturate within the limit.
-        let r = if t >= 0.0 { t + 0.5 } else { t - 0.5 };
-        Some(r as i32)
-    }
-
-    /// Ticks to joint angle (rad).
-    pub fn ticks_to_rad(ticks: i32) -> f32 {
-        (i64::from(ticks) - i64::from(CENTER_TICK)) as f32 / TICKS_PER_RAD
-    }
 }
 
 /// Foot force-sensor board (our device): four load cells under each sole.
@@ -338,51 +318,10 @@ pub mod imu {
     }
 }
 
-/// Bus IDs of the reference robot.
-pub mod ids {
-    /// Left-leg servos in joint order (see [`JOINT_NAMES`]).
-    pub const LEFT_LEG: [u8; 6] = [1, 2, 3, 4, 5, 6];
-    /// Right-leg servos in joint order.
-    pub const RIGHT_LEG: [u8; 6] = [7, 8, 9, 10, 11, 12];
-    /// All twelve leg servos, left then right.
-    pub const LEGS: [u8; 12] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
-    /// Joint names, in the order of [`LEFT_LEG`] / [`RIGHT_LEG`].
-    pub const JOINT_NAMES: [&str; 6] = [
-        "hip_yaw",
-        "hip_roll",
-        "hip_pitch",
-        "knee",
-        "ankle_pitch",
-        "ankle_roll",
-    ];
-    /// Left foot sensor board.
-    pub const FOOT_LEFT: u8 = 111;
-    /// Right foot sensor board.
-    pub const FOOT_RIGHT: u8 = 112;
-    /// IMU board.
-    pub const IMU: u8 = 200;
-}
-
 #[cfg(test)]
 mod tests {
     use super::foot::FootForces;
     use super::imu::ImuSample;
-    use super::x_series::*;
-
-    #[test]
-    fn ticks() {
-        assert_eq!(rad_to_ticks(0.0), Some(2048));
-        assert_eq!(rad_to_ticks(core::f32::consts::PI), Some(4096));
-        assert_eq!(rad_to_ticks(-core::f32::consts::FRAC_PI_2), Some(1024));
-        assert_eq!(rad_to_ticks(f32::NAN), None);
-        assert_eq!(rad_to_ticks(f32::INFINITY), None);
-        assert_eq!(rad_to_ticks(1e9), None);
-        assert!((ticks_to_rad(3072) - core::f32::consts::FRAC_PI_2).abs() < 1e-6);
-        let _ = ticks_to_rad(i32::MIN);
-        for t in [-5000, 0, 1, 2047, 2048, 4095, 100_000] {
-            assert_eq!(rad_to_ticks(ticks_to_rad(t)), Some(t));
-        }
-    }
 
     #[test]
     fn sensor_blocks() {

@@ -5,7 +5,14 @@ use std::collections::VecDeque;
 use std::convert::Infallible;
 use std::rc::Rc;
 
-use dxl::table::{foot::FootForces, ids, imu::ImuSample, x_series};
+use dxl::table::{foot::FootForces, imu::ImuSample, x_series};
+
+/// The reference robot's sensor boards (their IDs are the robot's: `walker-contract`).
+mod ids {
+    pub const FOOT_LEFT: u8 = 111;
+    pub const FOOT_RIGHT: u8 = 112;
+    pub const IMU: u8 = 200;
+}
 use dxl::*;
 use embedded_io::ErrorKind;
 

@@ -351,17 +351,6 @@ proptest! {
         let st = Status::from_packet(&p).unwrap();
         prop_assert_eq!((st.id, st.error.to_byte(), st.data), (id, err, &data[..]));
     }
-
-    #[test]
-    fn rad_ticks_total(rad in any::<f32>()) {
-        if let Some(t) = dxl::table::x_series::rad_to_ticks(rad) {
-            prop_assert!(t.abs() <= dxl::table::x_series::MAX_EXTENDED_TICKS);
-            let back = dxl::table::x_series::ticks_to_rad(t);
-            prop_assert!((back - rad).abs() <= 1e-3 + rad.abs() * 1e-6);
-        } else {
-            prop_assert!(!rad.is_finite() || rad.abs() > 1000.0);
-        }
-    }
 }
 
 /// Small xorshift64 generator (deterministic, fast).

@@ -40,6 +40,80 @@ pub enum GaitError {
     WalkEnded,
 }
 
+impl GaitError {
+    /// Every error, in the order of its code.
+    pub const ALL: [GaitError; 17] = [
+        GaitError::NonFinite,
+        GaitError::NonPositiveMass,
+        GaitError::NonPositiveLength,
+        GaitError::NonPositivePeriod,
+        GaitError::NonPositiveParameter,
+        GaitError::BadPhaseTimes,
+        GaitError::BadJointLimit,
+        GaitError::ZmpOffsetOffSole,
+        GaitError::StepOutOfReach,
+        GaitError::CapacityExceeded,
+        GaitError::EmptyPlan,
+        GaitError::BadSampleTime,
+        GaitError::BadTermCount,
+        GaitError::FixedPointOverflow,
+        GaitError::PeriodTooLong,
+        GaitError::BadStartFoot,
+        GaitError::WalkEnded,
+    ];
+
+    /// The wire code (the firmware's `ConfigRejected` fault record carries it), one explicit
+    /// value per variant: reordering the variants changes nothing on the wire.
+    pub const fn code(self) -> u8 {
+        match self {
+            GaitError::NonFinite => 0,
+            GaitError::NonPositiveMass => 1,
+            GaitError::NonPositiveLength => 2,
+            GaitError::NonPositivePeriod => 3,
+            GaitError::NonPositiveParameter => 4,
+            GaitError::BadPhaseTimes => 5,
+            GaitError::BadJointLimit => 6,
+            GaitError::ZmpOffsetOffSole => 7,
+            GaitError::StepOutOfReach => 8,
+            GaitError::CapacityExceeded => 9,
+            GaitError::EmptyPlan => 10,
+            GaitError::BadSampleTime => 11,
+            GaitError::BadTermCount => 12,
+            GaitError::FixedPointOverflow => 13,
+            GaitError::PeriodTooLong => 14,
+            GaitError::BadStartFoot => 15,
+            GaitError::WalkEnded => 16,
+        }
+    }
+}
+
+impl TryFrom<u8> for GaitError {
+    type Error = u8;
+    /// The error of a wire code; the unknown code itself otherwise.
+    fn try_from(c: u8) -> Result<Self, u8> {
+        Ok(match c {
+            0 => GaitError::NonFinite,
+            1 => GaitError::NonPositiveMass,
+            2 => GaitError::NonPositiveLength,
+            3 => GaitError::NonPositivePeriod,
+            4 => GaitError::NonPositiveParameter,
+            5 => GaitError::BadPhaseTimes,
+            6 => GaitError::BadJointLimit,
+            7 => GaitError::ZmpOffsetOffSole,
+            8 => GaitError::StepOutOfReach,
+            9 => GaitError::CapacityExceeded,
+            10 => GaitError::EmptyPlan,
+            11 => GaitError::BadSampleTime,
+            12 => GaitError::BadTermCount,
+            13 => GaitError::FixedPointOverflow,
+            14 => GaitError::PeriodTooLong,
+            15 => GaitError::BadStartFoot,
+            16 => GaitError::WalkEnded,
+            other => return Err(other),
+        })
+    }
+}
+
 impl core::fmt::Display for GaitError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let s = match self {
@@ -62,5 +136,19 @@ impl core::fmt::Display for GaitError {
             GaitError::WalkEnded => "the walk has ended; no more steps can be appended",
         };
         f.write_str(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_code_round_trips() {
+        for (i, e) in GaitError::ALL.iter().enumerate() {
+            assert_eq!(usize::from(e.code()), i);
+            assert_eq!(GaitError::try_from(e.code()), Ok(*e));
+        }
+        assert_eq!(GaitError::try_from(200), Err(200));
     }
 }

@@ -15,7 +15,7 @@
 use crate::error::GaitError;
 use crate::plan::{Place, Plan, SwingShape};
 use crate::robot::Side;
-use crate::sampler::{Sampler, SupportPhase, TAU_LIMIT};
+use crate::sampler::{Sampler, StepPhase, SupportPhase, TAU_LIMIT};
 use fixed::types::{I16F16, I2F30};
 
 /// A length (m), velocity (m/s) or time (s) in the sampler's fixed-point format.
@@ -188,6 +188,15 @@ impl FixedPlace {
     }
 }
 
+/// The step being walked, with its places in fixed point (see [`crate::sampler::CurrentStep`]).
+#[derive(Clone, Copy, Debug)]
+struct FixedStep {
+    swing: Side,
+    from: FixedPlace,
+    to: FixedPlace,
+    phase: StepPhase,
+}
+
 /// The streaming sampler with integer-only work per sample.
 #[derive(Clone, Debug)]
 pub struct FixedSampler<const N: usize> {
@@ -204,7 +213,7 @@ pub struct FixedSampler<const N: usize> {
     /// Feet on the ground and the current swing (side, from, to, phase), converted to fixed
     /// point once per segment.
     feet: [FixedPlace; 2],
-    step: Option<(Side, FixedPlace, FixedPlace, u8)>,
+    step: Option<FixedStep>,
 }
 
 impl<const N: usize> FixedSampler<N> {
@@ -257,10 +266,12 @@ impl<const N: usize> FixedSampler<N> {
         };
         let stance = self.inner.stance_feet();
         self.feet = [FixedPlace::of(&stance[0]), FixedPlace::of(&stance[1])];
-        self.step = self
-            .inner
-            .current_step()
-            .map(|(side, from, to, ph)| (side, FixedPlace::of(&from), FixedPlace::of(&to), ph));
+        self.step = self.inner.current_step().map(|c| FixedStep {
+            swing: c.swing,
+            from: FixedPlace::of(&c.from),
+            to: FixedPlace::of(&c.to),
+            phase: c.phase,
+        });
     }
 
     /// The sample now with the measured torque `tau_mnm` (mN·m, integer as read from the bus)
@@ -300,12 +311,12 @@ impl<const N: usize> FixedSampler<N> {
 
         let (phase, support) = self.inner.phase();
         let mut feet = [self.feet[0].foot(), self.feet[1].foot()];
-        if let Some((side, from, to, ph)) = self.step {
-            if let Some(slot) = feet.get_mut(side.index()) {
-                if ph == 2 {
-                    *slot = to.foot();
-                } else if ph == 1 {
-                    *slot = self.swing(&from, &to, s, side);
+        if let Some(st) = self.step {
+            if let Some(slot) = feet.get_mut(st.swing.index()) {
+                match st.phase {
+                    StepPhase::SecondDouble => *slot = st.to.foot(),
+                    StepPhase::Single => *slot = self.swing(&st.from, &st.to, s, st.swing),
+                    StepPhase::FirstDouble => {}
                 }
             }
         }

@@ -25,10 +25,11 @@ pub mod zmp;
 
 pub use model::{Model, ModelKind};
 pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
-pub use sampler::{GaitSample, Sampler, SupportPhase};
+pub use sampler::{CurrentStep, GaitSample, Sampler, StepPhase, SupportPhase};
 pub mod balance;
 pub mod fixed_ik;
 pub mod fixed_point;
+pub mod gait;
 pub mod pipeline;
 pub mod stabilizer;
 pub mod wholebody;

@@ -70,14 +70,59 @@ impl<R: Real> GaitSample<R> {
     }
 }
 
+/// The three segments of one step (seed 000: 0 … t1 … t2 … T).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StepPhase {
+    /// 0 … t1: double support, the swing foot still on its lift-off place.
+    FirstDouble,
+    /// t1 … t2: single support, the swing foot in the air.
+    Single,
+    /// t2 … T: double support, the swing foot on its touch-down place.
+    SecondDouble,
+}
+
+impl StepPhase {
+    /// The segment's index in the step's ZMP knots and phase durations (0, 1, 2).
+    pub const fn index(self) -> usize {
+        match self {
+            StepPhase::FirstDouble => 0,
+            StepPhase::Single => 1,
+            StepPhase::SecondDouble => 2,
+        }
+    }
+
+    /// The next segment of the same step (`None` after the second double support).
+    pub const fn next(self) -> Option<StepPhase> {
+        match self {
+            StepPhase::FirstDouble => Some(StepPhase::Single),
+            StepPhase::Single => Some(StepPhase::SecondDouble),
+            StepPhase::SecondDouble => None,
+        }
+    }
+}
+
+/// The step being walked: which foot swings, from where to where, and in which segment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CurrentStep<R> {
+    /// The swing foot.
+    pub swing: Side,
+    /// Its lift-off place.
+    pub from: Place<R>,
+    /// Its touch-down place.
+    pub to: Place<R>,
+    /// The segment of the step.
+    pub phase: StepPhase,
+}
+
 /// Where the sampler is on the timeline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Stage {
     /// Standing before the first step.
     LeadIn,
-    /// In the first queued step, phase 0 (double), 1 (single) or 2 (double).
-    Step(u8),
+    /// In the first queued step, in the given segment.
+    Step(StepPhase),
     /// Standing after the last step.
     LeadOut,
     /// The walk is over; the final pose is held.
@@ -232,11 +277,11 @@ impl<R: Real, const N: usize> Sampler<R, N> {
                     let w = self.plan.params().model.omega;
                     let mut xi = e.dcm_end;
                     let mut j = 2usize;
-                    while j > ph as usize {
+                    while j > ph.index() {
                         xi = dcm_back(w, k[j], k[j + 1], durs[j], xi);
                         j -= 1;
                     }
-                    (k[ph as usize + 1], xi)
+                    (k[ph.index() + 1], xi)
                 }
                 _ => (end, end),
             },
@@ -250,7 +295,7 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         let (p0, dur) = match stage {
             Stage::LeadIn => (self.plan.start_zmp(), p.lead_in),
             Stage::Step(ph) => match self.plan.knots(0) {
-                Some(k) => (k[ph as usize], self.phase_durations()[ph as usize]),
+                Some(k) => (k[ph.index()], self.phase_durations()[ph.index()]),
                 None => (self.plan.end_zmp(), p.lead_out),
             },
             Stage::LeadOut | Stage::Done => (self.plan.end_zmp(), p.lead_out),
@@ -271,23 +316,25 @@ impl<R: Real, const N: usize> Sampler<R, N> {
                 if self.plan.is_empty() {
                     Stage::LeadOut
                 } else {
-                    Stage::Step(0)
+                    Stage::Step(StepPhase::FirstDouble)
                 }
             }
-            Stage::Step(ph) if ph < 2 => Stage::Step(ph + 1),
-            Stage::Step(_) => {
-                if let Some(e) = self.plan.pop_front() {
-                    if let Some(f) = self.feet.get_mut(e.step.side.index()) {
-                        *f = e.step.place;
+            Stage::Step(ph) => match ph.next() {
+                Some(n) => Stage::Step(n),
+                None => {
+                    if let Some(e) = self.plan.pop_front() {
+                        if let Some(f) = self.feet.get_mut(e.step.side.index()) {
+                            *f = e.step.place;
+                        }
+                        self.steps_done = self.steps_done.saturating_add(1);
                     }
-                    self.steps_done = self.steps_done.saturating_add(1);
+                    if self.plan.is_empty() {
+                        Stage::LeadOut
+                    } else {
+                        Stage::Step(StepPhase::FirstDouble)
+                    }
                 }
-                if self.plan.is_empty() {
-                    Stage::LeadOut
-                } else {
-                    Stage::Step(0)
-                }
-            }
+            },
             Stage::LeadOut | Stage::Done => Stage::Done,
         };
         self.seg_start_ns = self.seg_start_ns.saturating_add(self.seg_len_ns);
@@ -337,10 +384,15 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         self.feet
     }
 
-    /// The swing of the current step: (swing foot, lift-off place, touch-down place, phase).
-    pub fn current_step(&self) -> Option<(Side, Place<R>, Place<R>, u8)> {
+    /// The step being walked (`None` while standing).
+    pub fn current_step(&self) -> Option<CurrentStep<R>> {
         match (self.stage, self.plan.step(0)) {
-            (Stage::Step(ph), Some(e)) => Some((e.step.side, e.from, e.step.place, ph)),
+            (Stage::Step(phase), Some(e)) => Some(CurrentStep {
+                swing: e.step.side,
+                from: e.from,
+                to: e.step.place,
+                phase,
+            }),
             _ => None,
         }
     }
@@ -380,8 +432,12 @@ impl<R: Real, const N: usize> Sampler<R, N> {
     /// Support phase and support foot now.
     pub fn phase(&self) -> (SupportPhase, Option<Side>) {
         match self.current_step() {
-            Some((side, _, _, 1)) => (SupportPhase::Single(side.other()), Some(side.other())),
-            Some((side, ..)) => (SupportPhase::Double, Some(side.other())),
+            Some(CurrentStep {
+                swing,
+                phase: StepPhase::Single,
+                ..
+            }) => (SupportPhase::Single(swing.other()), Some(swing.other())),
+            Some(step) => (SupportPhase::Double, Some(step.swing.other())),
             None => (SupportPhase::Standing, None),
         }
     }
@@ -395,7 +451,7 @@ impl<R: Real, const N: usize> Sampler<R, N> {
             (Stage::Step(ph), Some(e)) => {
                 let side = e.step.side;
                 let support = side.other();
-                let phase = if ph == 1 {
+                let phase = if ph == StepPhase::Single {
                     let u = if self.seg.duration > R::zero() {
                         s / self.seg.duration
                     } else {
@@ -413,7 +469,7 @@ impl<R: Real, const N: usize> Sampler<R, N> {
                     }
                     SupportPhase::Single(support)
                 } else {
-                    if ph == 2 {
+                    if ph == StepPhase::SecondDouble {
                         if let Some(slot) = feet.get_mut(side.index()) {
                             *slot = FootSample::on_ground(&e.step.place);
                         }

@@ -8,7 +8,8 @@ use std::time::Instant;
 
 use dxl::instruction::encode_sync_write;
 use dxl::table::x_series;
-use walker_host::sim::{rad_to_ticks, EnvConfig, SimConfig, Simulator};
+use walker_contract::bus_map::TickMap;
+use walker_host::sim::{EnvConfig, SimConfig, Simulator};
 
 fn run(name: &str, env: EnvConfig) {
     let leg = [0.0, 0.0, -0.3, 0.6, -0.3, 0.0];
@@ -21,7 +22,11 @@ fn run(name: &str, env: EnvConfig) {
         ..SimConfig::default()
     };
     let mut sim = Simulator::new(&cfg).expect("simulator");
-    let goals: Vec<[u8; 4]> = q.iter().map(|&a| rad_to_ticks(a).to_le_bytes()).collect();
+    let goals: Vec<[u8; 4]> = q
+        .iter()
+        .enumerate()
+        .map(|(j, &a)| TickMap::reference().tick_f64(j, a).to_le_bytes())
+        .collect();
     let mut buf = [0u8; 256];
     for (field, data) in [
         (

@@ -10,7 +10,7 @@
 //!
 //! Per run, over the walking ticks (the log's support phase double / single, lead-in and
 //! lead-out standing excluded), with the truth sampled at each tick's time (nearest row at or
-//! before it, `report::Truth::at`):
+//! before it, `report::TruthTable::at`):
 //! * ZMP error against the firmware's reference: mean and max |e| per axis for the true ZMP
 //!   (truth.csv) and for the measured one (foot sensors, ticks with a valid measurement);
 //! * the fraction of walking ticks whose true ZMP is inside the support polygon of the plan's
@@ -21,7 +21,7 @@
 //!   the first (before torque off), against the plan's CoM travel over the same samples;
 //! * peak joint speeds: the simulator's (true joint speeds over the walking ticks, at the truth
 //!   rows) and those of the firmware's own joint targets for the walk it ran (its pipeline run
-//!   on the host at dt, `walker_firmware::startup::dry_run`: no τ, no feedback shift — the shift
+//!   on the host at dt, `gait_core::gait::dry_run`: no τ, no feedback shift — the shift
 //!   is rate-limited to `stab_rate`);
 //! * servo load: the peak |motor torque| per joint over the walking ticks and the fraction of
 //!   walking ticks at which some motor was at its torque bound.
@@ -30,11 +30,12 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use gait_core::gait::{self, stretched, support_of, Targets};
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
 use gait_core::{Robot, SupportPhase as PlanPhase};
-use walker_firmware::control::{build_sampler, support_of, Targets};
-use walker_firmware::log::{FaultKind, Record, SupportPhase, POS_NA};
-use walker_firmware::{params, startup, Config};
+use walker_contract::config::MAX_STEPS;
+use walker_contract::record::{FaultKind, LoggedPhase, Record, POS_NA};
+use walker_contract::{params, Config};
 
 use crate::fil::{self, FilOptions};
 use crate::planfile::{CompensationName, ModelName, WalkSpec};
@@ -189,7 +190,7 @@ pub fn adjusted_config(cfg: &Config, events: &[Record]) -> Config {
         if let Record::Fault(f) = e {
             match f.kind {
                 FaultKind::TimingStretched => {
-                    out.walk = startup::stretched(&cfg.walk, f.value.max(1) as u32);
+                    out.walk = stretched(&cfg.walk, f.value.max(1) as u32);
                 }
                 FaultKind::SwingLowered => out.walk.h_z = f64::from(f.value.max(0)) * 1e-6,
                 _ => {}
@@ -245,31 +246,22 @@ impl TruthRows {
 }
 
 fn read_truth(path: &Path) -> Result<TruthRows, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines
-        .next()
-        .ok_or_else(|| format!("{}: empty", path.display()))?
-        .split(',')
-        .collect();
+    let csv = report::CsvText::read(path, "truth file")?;
     let col = |n: &str| {
-        header
-            .iter()
-            .position(|h| h.trim() == n)
+        csv.col(&[n])
             .ok_or_else(|| format!("{}: no column {n}", path.display()))
     };
     let (ct, cx, cy, cp) = (col("t_s")?, col("zmp_x")?, col("zmp_y")?, col("pelvis_x")?);
     // Optional (older truth files lack them).
-    let opt = |n: String| header.iter().position(|h| h.trim() == n);
+    let opt = |n: String| csv.col(&[n.as_str()]);
     let cqd: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("qd_{}", j + 1)));
     let ctq: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("tq_{}", j + 1)));
     let clim = opt("tq_limited".into());
     let mut out = TruthRows::default();
-    for l in lines {
-        let f: Vec<&str> = l.split(',').collect();
+    for f in &csv.rows {
         let g = |i: usize| {
             f.get(i)
-                .and_then(|s| s.trim().parse::<f64>().ok())
+                .and_then(|s| s.parse::<f64>().ok())
                 .unwrap_or(f64::NAN)
         };
         if !g(ct).is_finite() {
@@ -283,7 +275,7 @@ fn read_truth(path: &Path) -> Result<TruthRows, String> {
         out.joint_torque.push(ctq.map(opt_g));
         out.torque_limited.push(
             clim.and_then(|c| f.get(c))
-                .and_then(|s| s.trim().parse().ok())
+                .and_then(|s| s.parse().ok())
                 .unwrap_or(0),
         );
     }
@@ -305,8 +297,9 @@ pub fn score(
     let cfg = adjusted_config(cfg, &log.events);
     let timing_factor = stretch_factor(&log.events);
     let targets = Targets::new(&robot, cfg.compensation);
-    let dry = startup::dry_run(&cfg, &robot, &targets).map_err(|e| e.to_string())?;
-    let mut sampler = build_sampler(&cfg, &robot).map_err(|e| e.to_string())?;
+    let walk = cfg.walk_config();
+    let dry = gait::dry_run::<MAX_STEPS>(&walk, &robot, &targets).map_err(|e| e.to_string())?;
+    let mut sampler = gait::build_sampler::<MAX_STEPS>(&walk, &robot).map_err(|e| e.to_string())?;
     let rows = tick_rows(&log.ticks);
 
     let (mut te, mut me) = ([vec![], vec![]], [vec![], vec![]]);
@@ -335,7 +328,7 @@ pub fn score(
         last_com = Some(g.com[0]);
         let walk_phase = matches!(
             r.rec.phase,
-            SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
+            LoggedPhase::Double | LoggedPhase::SingleLeft | LoggedPhase::SingleRight
         );
         if (f64::from(g.zmp[0]) - r.zmp_ref[0]).abs() > 1e-3
             || (f64::from(g.zmp[1]) - r.zmp_ref[1]).abs() > 1e-3
@@ -763,7 +756,7 @@ mod tests {
             let cfg = firmware_config(&fil::firmware_tokens(&s).unwrap()).unwrap();
             assert_eq!(cfg.stabilizer_on, v.stabilizer, "{}", v.name);
             assert_eq!(
-                cfg.compensation == walker_firmware::control::Compensation::WholeBody,
+                cfg.compensation == walker_contract::config::Compensation::WholeBody,
                 v.compensation == CompensationName::Wholebody
             );
             assert_eq!(cfg.model, gait_core::ModelKind::from(v.model));
@@ -774,13 +767,16 @@ mod tests {
     fn the_log_adjustment_reproduces_the_firmware_walk() {
         let robot = Robot::reference();
         let cfg = Config::default();
+        let targets = Targets::new(&robot, cfg.compensation);
         let t =
-            startup::servo_timing(&cfg, &robot, &Targets::new(&robot, cfg.compensation)).unwrap();
+            gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, &robot, &targets)
+                .unwrap();
         let events: Vec<Record> = t
-            .records()
-            .iter()
-            .map(|&(kind, id, value)| {
-                Record::Fault(walker_firmware::log::FaultRecord {
+            .notes()
+            .into_iter()
+            .map(walker_contract::record::timing_fault)
+            .map(|(kind, id, value)| {
+                Record::Fault(walker_contract::record::FaultRecord {
                     seq: 0,
                     time_us: 0,
                     kind,

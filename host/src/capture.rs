@@ -1,7 +1,7 @@
 //! Log capture from the firmware's log UART (or a saved capture file).
 //!
 //! The firmware writes its ZMP-response log as binary COBS frames on a log sink (see
-//! `walker_firmware::log`): on the OpenCR board a UART at 921 600 baud (or USB CDC), in QEMU a
+//! `walker_contract::record`): on the OpenCR board a UART at 921 600 baud (or USB CDC), in QEMU a
 //! CMSDK UART that QEMU writes to a file or pipe. The records never go through defmt, so
 //! `defmt-print` output from probe-rs/RTT carries only the firmware's debug text, not the log:
 //! capture the UART (this command) or decode the QEMU serial file with `--from-file`.

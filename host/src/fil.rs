@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::planfile::{CompensationName, ModelName, SwingKind, WalkSpec, ZmpKind};
+use crate::planfile::WalkSpec;
 use crate::sim::{self, SimConfig, SimSummary};
 
 /// What to run.
@@ -51,7 +51,8 @@ pub struct FilResult {
     pub wall: Duration,
 }
 
-/// The firmware command-line tokens of a forward-walk plan.
+/// The firmware command-line tokens of a forward-walk plan (the contract's parameter table,
+/// [`WalkSpec::firmware_tokens`]).
 pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
     if spec.footsteps.is_some() {
         return Err(
@@ -59,49 +60,7 @@ pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
                 .into(),
         );
     }
-    if spec.zmp != ZmpKind::Natural || spec.swing != SwingKind::Cycloid {
-        return Err(
-            "the firmware walks the natural ZMP with the cycloid swing (seed 000) only".into(),
-        );
-    }
-    let model = match spec.model {
-        ModelName::Lipm => "lipm",
-        ModelName::Dlipm => "dlipm",
-        ModelName::Tlipfm => "tlipfm",
-    };
-    let mut t = vec![format!("model={model}")];
-    let nums: [(&str, f64); 14] = [
-        ("dt", spec.dt),
-        ("step_length", spec.step_length),
-        ("step_width", spec.step_width),
-        ("d1", spec.d1),
-        ("d2", spec.d2),
-        ("a", spec.a),
-        ("z_c", spec.z_c),
-        ("h_z", spec.h_z),
-        ("t1", spec.t1),
-        ("t2", spec.t2),
-        ("period", spec.period),
-        ("lead_in", spec.lead_in),
-        ("lead_out", spec.lead_out),
-        ("w_y", spec.w_y),
-    ];
-    for (k, v) in nums {
-        t.push(format!("{k}={v}"));
-    }
-    t.push(format!("steps={}", spec.steps));
-    t.push(format!("s_first={}", spec.s_first));
-    t.push(
-        match spec.compensation {
-            CompensationName::None => "comp=none",
-            CompensationName::Wholebody => "comp=wholebody",
-        }
-        .to_string(),
-    );
-    if spec.stabilizer {
-        t.push("stab=on".to_string());
-    }
-    Ok(t)
+    spec.firmware_tokens().map_err(|e| e.to_string())
 }
 
 /// Runs the firmware in QEMU against the simulator; blocks until the firmware exits.

@@ -28,6 +28,11 @@
 //! compensation = "none"   # none (the paper's pipeline) | wholebody (multi-body CoM on the model CoM; firmware `comp=`)
 //! stabilizer = false      # the firmware's ZMP/DCM feedback stabilizer (`stab=on`, default gains)
 //!
+//! # Any other firmware parameter, by its token key (docs/parameters.md lists them all):
+//! [firmware]
+//! feasibility = "off"
+//! baud = 3000000
+//!
 //! # Instead of the forward walk (step_length, s_first, steps are then ignored):
 //! # feet start side by side at x = 0, y = ±step_width; each entry is one step.
 //! [[footsteps]]
@@ -39,6 +44,11 @@
 //!
 //! Errors name the field and the reason: `plans/x.toml: field `t2`: phase times must satisfy
 //! 0 < t1 < t2 < T`. Unknown keys are errors (a typo must not silently fall back to Table 2).
+//!
+//! The keys, their ranges and the firmware tokens are the contract's parameter table
+//! (`walker_contract::params::PARAMS`): [`WalkSpec::firmware_tokens`] emits a plan's tokens
+//! from it, and [`WalkSpec::check`] runs the firmware's own parser on them first, so a value
+//! out of its physical range (`d2 = 1e38`, `h_z = 10`) is refused here as on the robot.
 
 use gait_core::plan::{SwingShape, Timing};
 use gait_core::zmp::ZmpShape;
@@ -49,6 +59,7 @@ use gait_core::{
 use serde::Deserialize;
 use std::fmt;
 use std::path::Path;
+use walker_contract::params::{self as fw_params, ArgErrorKind, PARAMS};
 
 /// Most footsteps a plan file may hold.
 pub const PLAN_CAPACITY: usize = 64;
@@ -244,6 +255,8 @@ pub struct WalkSpec {
     pub compensation: CompensationName,
     /// The firmware's feedback stabilizer on (firmware only).
     pub stabilizer: bool,
+    /// Any other firmware parameter by its token key (the plan's `[firmware]` table).
+    pub firmware: toml::Table,
 }
 
 impl Default for WalkSpec {
@@ -273,6 +286,7 @@ impl Default for WalkSpec {
             footsteps: None,
             compensation: CompensationName::None,
             stabilizer: false,
+            firmware: toml::Table::new(),
         }
     }
 }
@@ -366,6 +380,18 @@ fn footstep_index(text: &str, pos: usize) -> Option<usize> {
     idx
 }
 
+/// A TOML value as firmware token text (strings unquoted, booleans as `on` / `off`).
+fn toml_text(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        toml::Value::Boolean(b) => if *b { "on" } else { "off" }.to_string(),
+        toml::Value::Integer(i) => i.to_string(),
+        toml::Value::Float(x) => x.to_string(),
+        // Dates, arrays, tables: no firmware value is one (the parser refuses the text).
+        _ => "[not-a-number-or-word]".to_string(),
+    }
+}
+
 fn finite(field: &str, v: f64) -> Result<f64, PlanError> {
     if v.is_finite() {
         Ok(v)
@@ -433,9 +459,124 @@ impl WalkSpec {
         }
     }
 
-    /// Checks every field and builds the plan once (errors name the field).
+    /// Checks every field and builds the plan once (errors name the field): first the
+    /// firmware's parser on the plan's tokens (ranges of the parameter table), then the walk.
     pub fn check(&self, robot: &Robot) -> Result<(), PlanError> {
+        self.firmware_config()?;
         self.sampler(robot, self.dt).map(|_| ())
+    }
+
+    /// The value of a top-level plan key as firmware token text (`None`: unset).
+    fn plan_value(&self, plan_key: &str) -> Option<String> {
+        let word = |w: &str| Some(w.to_string());
+        match plan_key {
+            "model" => word(match self.model {
+                ModelName::Lipm => "lipm",
+                ModelName::Dlipm => "dlipm",
+                ModelName::Tlipfm => "tlipfm",
+            }),
+            "dt" => Some(self.dt.to_string()),
+            "step_length" => Some(self.step_length.to_string()),
+            "step_width" => Some(self.step_width.to_string()),
+            "s_first" => Some(self.s_first.to_string()),
+            "steps" => Some(self.steps.to_string()),
+            "d1" => Some(self.d1.to_string()),
+            "d2" => Some(self.d2.to_string()),
+            "a" => Some(self.a.to_string()),
+            "b" => self.b.map(|b| b.to_string()),
+            "zmp" => word(match self.zmp {
+                ZmpKind::Natural => "natural",
+                ZmpKind::Continuous => "continuous",
+            }),
+            "z_c" => Some(self.z_c.to_string()),
+            "w_y" => Some(self.w_y.to_string()),
+            "h_z" => Some(self.h_z.to_string()),
+            "swing" => word(match self.swing {
+                SwingKind::Cycloid => "cycloid",
+                SwingKind::Sinusoid => "sinusoid",
+            }),
+            "t1" => Some(self.t1.to_string()),
+            "t2" => Some(self.t2.to_string()),
+            "period" => Some(self.period.to_string()),
+            "lead_in" => Some(self.lead_in.to_string()),
+            "lead_out" => Some(self.lead_out.to_string()),
+            "compensation" => word(match self.compensation {
+                CompensationName::None => "none",
+                CompensationName::Wholebody => "wholebody",
+            }),
+            "stabilizer" => word(if self.stabilizer { "on" } else { "off" }),
+            _ => None,
+        }
+    }
+
+    /// The firmware's `key=value` tokens of this plan, in the order of the parameter table,
+    /// with the plan field each came from (`d2`, `firmware.baud`). Errors: a `[firmware]` key
+    /// that is not a firmware parameter, or one that has its own top-level plan key.
+    pub fn firmware_fields(&self) -> Result<Vec<(String, String)>, PlanError> {
+        for (k, _) in self.firmware.iter() {
+            match fw_params::find(k) {
+                None => {
+                    return Err(PlanError::new(
+                        format!("firmware.{k}"),
+                        "not a firmware parameter (see docs/parameters.md)",
+                    ))
+                }
+                Some(p) => {
+                    if let Some(pk) = p.plan_key {
+                        return Err(PlanError::new(
+                            format!("firmware.{k}"),
+                            format!("set it as the top-level plan key `{pk}`"),
+                        ));
+                    }
+                }
+            }
+        }
+        let mut out = Vec::new();
+        for p in PARAMS.iter() {
+            let (field, text) = match p.plan_key {
+                Some(pk) => match self.plan_value(pk) {
+                    Some(t) => (pk.to_string(), t),
+                    None => continue,
+                },
+                None => match self.firmware.get(p.key) {
+                    Some(v) => (format!("firmware.{}", p.key), toml_text(v)),
+                    None => continue,
+                },
+            };
+            out.push((field, format!("{}={text}", p.key)));
+        }
+        Ok(out)
+    }
+
+    /// The firmware's `key=value` tokens of this plan (see [`WalkSpec::firmware_fields`]).
+    pub fn firmware_tokens(&self) -> Result<Vec<String>, PlanError> {
+        Ok(self
+            .firmware_fields()?
+            .into_iter()
+            .map(|(_, t)| t)
+            .collect())
+    }
+
+    /// The firmware configuration of this plan, parsed by the firmware's own parser; an
+    /// error names the plan field and the parameter's range.
+    pub fn firmware_config(&self) -> Result<walker_contract::Config, PlanError> {
+        let mut cfg = walker_contract::Config::default();
+        for (field, token) in self.firmware_fields()? {
+            if let Err(e) = fw_params::apply(&mut cfg, token.as_bytes()) {
+                let reason = match e.kind {
+                    ArgErrorKind::OutOfRange | ArgErrorKind::BadValue => {
+                        let value = token.split_once('=').map_or("", |(_, v)| v);
+                        match value.parse::<f64>() {
+                            Ok(x) if value.len() > 24 => format!("{e} (got {x:e})"),
+                            _ => format!("{e} (got {value})"),
+                        }
+                    }
+                    _ => e.to_string(),
+                };
+                return Err(PlanError::new(field, reason));
+            }
+        }
+        Ok(cfg)
     }
 
     /// The gait parameters (field-by-field checks first).
@@ -639,5 +780,109 @@ impl WalkSpec {
             ),
             other => PlanError::gait("dt", other),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use walker_contract::params::Domain;
+
+    /// `value` as a TOML literal for the plan key / `[firmware]` key of `p`.
+    fn literal(p: &walker_contract::params::Param, text: &str) -> String {
+        match (p.plan_key, p.domain) {
+            (Some("stabilizer"), _) => (text == "on").to_string(),
+            (Some("s_first"), _) | (Some("steps"), _) => text.to_string(),
+            (_, Domain::Word(_)) => format!("\"{text}\""),
+            _ => text.to_string(),
+        }
+    }
+
+    fn plan_text(p: &walker_contract::params::Param, text: &str) -> String {
+        match p.plan_key {
+            Some(k) => format!("{k} = {}\n", literal(p, text)),
+            None => format!("[firmware]\n{} = {}\n", p.key, literal(p, text)),
+        }
+    }
+
+    /// Every parameter of the contract's table is a plan key (top level or `[firmware]`), is
+    /// emitted as its firmware token, is listed in docs/parameters.md, and is validated: a value
+    /// out of its domain is refused naming the plan field.
+    #[test]
+    fn every_parameter_is_planned_emitted_documented_and_validated() {
+        let docs = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../docs/parameters.md"
+        ))
+        .unwrap();
+        let robot = Robot::reference();
+        let d = walker_contract::Config::default();
+        for p in PARAMS.iter() {
+            assert!(
+                docs.contains(&format!("| `{}` |", p.key)),
+                "{} not in the docs",
+                p.key
+            );
+            let mut text = String::new();
+            match p.value(&d) {
+                Some(v) => p.write_value(v, &mut text).unwrap(),
+                None if p.key == "b" => text.push_str("0.004"),
+                None => text.push('7'),
+            }
+            let src = plan_text(p, &text);
+            let spec = parse(&src).unwrap_or_else(|e| panic!("{src}: {e}"));
+            spec.check(&robot).unwrap_or_else(|e| panic!("{src}: {e}"));
+            let tokens = spec.firmware_tokens().unwrap();
+            assert!(
+                tokens.contains(&format!("{}={text}", p.key)),
+                "{src}: {tokens:?}"
+            );
+            let mut bad = String::new();
+            p.out_of_domain(&mut bad).unwrap();
+            if p.plan_key == Some("stabilizer") {
+                continue; // a TOML bool has no third value
+            }
+            let src = plan_text(p, &bad);
+            let field = match p.plan_key {
+                Some(k) => k.to_string(),
+                None => format!("firmware.{}", p.key),
+            };
+            let e = parse(&src).and_then(|s| s.check(&robot)).expect_err(&src);
+            assert_eq!(e.field, field, "{src}: {e}");
+        }
+    }
+
+    #[test]
+    fn absurd_walks_are_refused_naming_the_key() {
+        let robot = Robot::reference();
+        for (src, field) in [
+            ("d2 = 1e38\n", "d2"),
+            ("d1 = 1.7976931348623157e308\n", "d1"),
+            ("h_z = 10\n", "h_z"),
+        ] {
+            let e = parse(src).unwrap().check(&robot).unwrap_err();
+            assert_eq!(e.field, field, "{src}: {e}");
+            assert!(e.reason.contains("out of range"), "{e}");
+        }
+    }
+
+    #[test]
+    fn firmware_table_keys_are_checked() {
+        let robot = Robot::reference();
+        let e = parse("[firmware]\nbaudd = 1\n")
+            .unwrap()
+            .check(&robot)
+            .unwrap_err();
+        assert_eq!(e.field, "firmware.baudd");
+        let e = parse("[firmware]\nd1 = 0.01\n")
+            .unwrap()
+            .check(&robot)
+            .unwrap_err();
+        assert_eq!(e.field, "firmware.d1");
+        let spec = parse("[firmware]\nfeasibility = \"off\"\nbaud = 3000000\n").unwrap();
+        let cfg = spec.firmware_config().unwrap();
+        assert_eq!(cfg.bus_baud, 3_000_000);
+        assert_eq!(cfg.feasibility, walker_contract::config::Feasibility::Off);
+        assert_eq!(cfg.walk, ForwardWalk::table2());
     }
 }

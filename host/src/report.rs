@@ -1,5 +1,5 @@
 //! ZMP-response report: decode a captured firmware log (with the firmware's own
-//! [`walker_firmware::log::Decoder`]), write it as CSV, plot reference vs response with the
+//! [`walker_contract::record::RecordDecoder`]), write it as CSV, plot reference vs response with the
 //! support-polygon bounds (seed 000 Figs. 14-16), and compute the Table 3 error statistics.
 //!
 //! Record counts: *good* = frames the decoder accepted (tick and event records), *bad* = frames
@@ -22,9 +22,9 @@ use gait_core::{Robot, SupportPhase as PlanPhase};
 use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use walker_firmware::log::{
-    DecodeError, Decoder, DecoderStats, FaultState, Record, SupportPhase, TickRecord, POS_NA,
-    TAU_NA,
+use walker_contract::record::{
+    FaultState, LoggedPhase, Record, RecordDecoder, RecordDecoderStats, RecordError, TickRecord,
+    POS_NA, TAU_NA,
 };
 
 /// Rejections by cause.
@@ -45,14 +45,14 @@ pub struct RejectCounts {
 }
 
 impl RejectCounts {
-    fn add(&mut self, e: DecodeError) {
+    fn add(&mut self, e: RecordError) {
         match e {
-            DecodeError::Cobs => self.cobs += 1,
-            DecodeError::Crc => self.crc += 1,
-            DecodeError::UnknownType(_) => self.unknown_type += 1,
-            DecodeError::Length => self.length += 1,
-            DecodeError::Field => self.field += 1,
-            DecodeError::Overlong => self.overlong += 1,
+            RecordError::Cobs => self.cobs += 1,
+            RecordError::Crc => self.crc += 1,
+            RecordError::UnknownType(_) => self.unknown_type += 1,
+            RecordError::Length => self.length += 1,
+            RecordError::Field => self.field += 1,
+            RecordError::Overlong => self.overlong += 1,
         }
     }
 }
@@ -65,7 +65,7 @@ pub struct DecodedLog {
     /// Event records (start-up, stop, fault) in stream order.
     pub events: Vec<Record>,
     /// The decoder's counters.
-    pub decoder: DecoderStats,
+    pub decoder: RecordDecoderStats,
     /// Rejections by cause.
     pub rejects: RejectCounts,
     /// Bytes after the last delimiter (an unterminated frame at the end).
@@ -88,7 +88,7 @@ impl DecodedLog {
 /// A streaming log decoder that keeps everything (for captures and files).
 #[derive(Clone, Debug, Default)]
 pub struct LogCollector {
-    dec: Decoder,
+    dec: RecordDecoder,
     log: DecodedLog,
 }
 
@@ -157,13 +157,13 @@ pub fn tau_nm(v: i16) -> f64 {
 }
 
 /// Lower-case phase name.
-pub fn phase_name(p: SupportPhase) -> &'static str {
+pub fn phase_name(p: LoggedPhase) -> &'static str {
     match p {
-        SupportPhase::Double => "double",
-        SupportPhase::SingleLeft => "single_left",
-        SupportPhase::SingleRight => "single_right",
-        SupportPhase::Standing => "standing",
-        SupportPhase::Stopped => "stopped",
+        LoggedPhase::Double => "double",
+        LoggedPhase::SingleLeft => "single_left",
+        LoggedPhase::SingleRight => "single_right",
+        LoggedPhase::Standing => "standing",
+        LoggedPhase::Stopped => "stopped",
     }
 }
 
@@ -379,14 +379,14 @@ pub struct Alignment {
 
 /// Aligns the log on the plan's walk start (first tick leaving `standing`).
 pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
-    let walking = |p: SupportPhase| {
+    let walking = |p: LoggedPhase| {
         matches!(
             p,
-            SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
+            LoggedPhase::Double | LoggedPhase::SingleLeft | LoggedPhase::SingleRight
         )
     };
     for w in rows.windows(2) {
-        if w[0].rec.phase == SupportPhase::Standing && walking(w[1].rec.phase) {
+        if w[0].rec.phase == LoggedPhase::Standing && walking(w[1].rec.phase) {
             return Alignment {
                 offset: walk_start - w[1].t,
                 how: format!("walk start (first walking tick at t = {:.3} s = plan's end of lead-in {walk_start:.3} s)", w[1].t),
@@ -401,14 +401,14 @@ pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
 
 /// A ground-truth ZMP trace (e.g. from the simulator), on the log's clock.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Truth {
+pub struct TruthTable {
     /// Time, s.
     pub t: Vec<f64>,
     /// ZMP (x, y), m.
     pub zmp: Vec<[f64; 2]>,
 }
 
-impl Truth {
+impl TruthTable {
     /// The ZMP at time `t` (nearest sample at or before `t`, none outside the trace).
     pub fn at(&self, t: f64) -> Option<[f64; 2]> {
         let first = *self.t.first()?;
@@ -421,32 +421,61 @@ impl Truth {
     }
 }
 
+/// A CSV file as text: its header and its data lines split into trimmed fields (blank lines
+/// and `#` comments skipped). The one reader of the simulator's truth CSV ([`read_truth`] and
+/// `beyond`'s per-joint columns).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CsvText {
+    /// Column names.
+    pub header: Vec<String>,
+    /// Data lines, fields trimmed.
+    pub rows: Vec<Vec<String>>,
+}
+
+impl CsvText {
+    /// Reads `path` (`what` names it in errors: "truth file").
+    pub fn read(path: &Path, what: &str) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read the {what} {}: {e}", path.display()))?;
+        let mut lines = text
+            .lines()
+            .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+        let header = lines
+            .next()
+            .ok_or_else(|| format!("{}: empty {what}", path.display()))?
+            .split(',')
+            .map(|s| s.trim().to_string())
+            .collect();
+        let rows = lines
+            .map(|l| l.split(',').map(|f| f.trim().to_string()).collect())
+            .collect();
+        Ok(CsvText { header, rows })
+    }
+
+    /// The index of the first column named one of `names`.
+    pub fn col(&self, names: &[&str]) -> Option<usize> {
+        self.header.iter().position(|h| names.contains(&h.as_str()))
+    }
+}
+
 /// Reads a truth CSV: a header with `t` (or `time`) and `zmp_x`/`zmp_y` (or `zmp_true_x`,
 /// `true_zmp_x`), s and m, on the log's clock.
-pub fn read_truth(path: &Path) -> Result<Truth, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("cannot read the truth file {}: {e}", path.display()))?;
-    let mut lines = text
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
-    let header: Vec<String> = lines
-        .next()
-        .ok_or_else(|| format!("{}: empty truth file", path.display()))?
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
-    let col = |names: &[&str]| header.iter().position(|h| names.contains(&h.as_str()));
-    let ct = col(&["t", "time", "t_s"])
+pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
+    let csv = CsvText::read(path, "truth file")?;
+    let header = &csv.header;
+    let ct = csv
+        .col(&["t", "time", "t_s"])
         .ok_or_else(|| format!("{}: no `t` column in {header:?}", path.display()))?;
-    let cx = col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
+    let cx = csv
+        .col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
         .ok_or_else(|| format!("{}: no `zmp_x` column in {header:?}", path.display()))?;
-    let cy = col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
+    let cy = csv
+        .col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
         .ok_or_else(|| format!("{}: no `zmp_y` column in {header:?}", path.display()))?;
-    let mut out = Truth::default();
-    for (n, line) in lines.enumerate() {
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+    let mut out = TruthTable::default();
+    for (n, f) in csv.rows.iter().enumerate() {
         let get = |i: usize| -> Result<f64, String> {
-            let s = f.get(i).copied().unwrap_or("");
+            let s = f.get(i).map_or("", String::as_str);
             if s.is_empty() {
                 return Ok(f64::NAN);
             }
@@ -455,7 +484,7 @@ pub fn read_truth(path: &Path) -> Result<Truth, String> {
                     "{}: data line {}: column {}: {e}",
                     path.display(),
                     n + 1,
-                    header[i]
+                    header.get(i).map_or("?", String::as_str)
                 )
             })
         };
@@ -620,7 +649,7 @@ pub fn zmp_figure(
     rows: &[TickRow],
     bounds: &SupportBounds,
     offset: f64,
-    truth: Option<&Truth>,
+    truth: Option<&TruthTable>,
 ) -> Figure {
     let (t0, t1) = match (rows.first(), rows.last()) {
         (Some(a), Some(b)) => (a.t, b.t),

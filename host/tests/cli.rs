@@ -5,10 +5,10 @@ use gait_core::kinematics::{leg_fk, Pose};
 use gait_core::{Robot, Side};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use walker_firmware::log::{
-    encode, BoardId, Record, StartupRecord, StopRecord, SupportPhase, TickRecord, MAX_FRAME,
+use walker_contract::record::{
+    encode, BoardId, LoggedPhase, Record, StartupRecord, StopRecord, TickRecord, MAX_FRAME,
 };
-use walker_firmware::supervisor::StopReason;
+use walker_contract::StopReason;
 use walker_host::export;
 use walker_host::planfile::{self, WalkSpec};
 use walker_host::report;
@@ -56,7 +56,7 @@ fn frame(rec: &Record) -> Vec<u8> {
     b[..n].to_vec()
 }
 
-fn tick(seq: u16, zmp_ref: [f32; 2], meas: Option<[f32; 2]>, phase: SupportPhase) -> Record {
+fn tick(seq: u16, zmp_ref: [f32; 2], meas: Option<[f32; 2]>, phase: LoggedPhase) -> Record {
     let mut r = TickRecord {
         seq,
         time_us: 1_000_000 + u32::from(seq) * 1000,
@@ -149,7 +149,7 @@ fn turning_export_round_trips_in_memory() {
 fn damaged_log() -> (Vec<u8>, Vec<u16>) {
     let mut bytes = Vec::new();
     // Mid-stream start: the tail of a frame.
-    let prev = frame(&tick(999, [0.0, 0.0], None, SupportPhase::Standing));
+    let prev = frame(&tick(999, [0.0, 0.0], None, LoggedPhase::Standing));
     bytes.extend_from_slice(&prev[prev.len() - 17..]);
     bytes.extend(frame(&Record::Startup(StartupRecord {
         seq: 0,
@@ -165,9 +165,9 @@ fn damaged_log() -> (Vec<u8>, Vec<u16>) {
     let mut kept = Vec::new();
     for seq in 1..=100u16 {
         let phase = if seq <= 20 {
-            SupportPhase::Standing
+            LoggedPhase::Standing
         } else {
-            SupportPhase::Double
+            LoggedPhase::Double
         };
         let x = f32::from(seq) * 1e-4;
         let mut f = frame(&tick(seq, [x, 0.01], Some([x + 0.001, 0.01]), phase));
@@ -194,7 +194,7 @@ fn damaged_log() -> (Vec<u8>, Vec<u16>) {
         reason: StopReason::PlanDone,
     })));
     // Unterminated frame at the end.
-    let last = frame(&tick(102, [0.0, 0.0], None, SupportPhase::Standing));
+    let last = frame(&tick(102, [0.0, 0.0], None, LoggedPhase::Standing));
     bytes.extend_from_slice(&last[..10]);
     (bytes, kept)
 }
@@ -364,9 +364,9 @@ fn hand_log(scale: f32) -> Vec<u8> {
     for (i, e) in errs.iter().enumerate() {
         let r = [0.01, -0.02];
         let m = [r[0] + e[0] * scale, r[1] + e[1] * scale];
-        bytes.extend(frame(&tick(i as u16, r, Some(m), SupportPhase::Double)));
+        bytes.extend(frame(&tick(i as u16, r, Some(m), LoggedPhase::Double)));
     }
-    bytes.extend(frame(&tick(3, [0.0, 0.0], None, SupportPhase::Double)));
+    bytes.extend(frame(&tick(3, [0.0, 0.0], None, LoggedPhase::Double)));
     bytes
 }
 

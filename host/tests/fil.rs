@@ -8,8 +8,8 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use walker_firmware::log::Record;
-use walker_firmware::supervisor::StopReason;
+use walker_contract::record::Record;
+use walker_contract::StopReason;
 use walker_host::fil::{run, FilOptions, FilResult};
 use walker_host::planfile::WalkSpec;
 use walker_host::report::{decode_file, DecodedLog};
@@ -198,8 +198,10 @@ fn idealised(seed: u64) -> SimConfig {
     }
 }
 
-/// Whole-body compensation + the stabilizer (default gains), 4 steps.
-const STAB: &[&str] = &["comp=wholebody", "stab=on"];
+/// Whole-body compensation + the stabilizer (default gains), 4 steps; the gyro balance
+/// feedback off: it is made for (and tested on) the MuJoCo robot, while the idealised model's
+/// scripted fall (its ZMP 5 mm outside the soles for 50 ms) is not physics.
+const STAB: &[&str] = &["comp=wholebody", "stab=on", "gyro_ankle=0", "gyro_hip=0"];
 
 /// The walk with the stabilizer stayed bounded: plan done (exit 0), no fall in the simulator,
 /// no joint target clamped to a servo limit or non-finite (a non-finite one stops with exit
@@ -218,7 +220,7 @@ fn assert_bounded(name: &str, r: &FilResult, log: &DecodedLog) {
         .iter()
         .filter(|e| {
             matches!(e, Record::Fault(f)
-                if f.kind == walker_firmware::log::FaultKind::TargetClamped)
+                if f.kind == walker_contract::record::FaultKind::TargetClamped)
         })
         .collect();
     assert!(clamped.is_empty(), "{name}: targets clamped: {clamped:?}");
@@ -229,7 +231,7 @@ fn assert_bounded(name: &str, r: &FilResult, log: &DecodedLog) {
     );
     // Every commanded CoM (tick record) is finite and within the walk's area.
     for t in &log.ticks {
-        if t.com[0] != walker_firmware::log::POS_NA {
+        if t.com[0] != walker_contract::record::POS_NA {
             let (x, y) = (t.com[0] as f64 * 1e-5, t.com[1] as f64 * 1e-5);
             assert!(
                 (-0.05..0.15).contains(&x) && y.abs() < 0.06,
@@ -253,7 +255,7 @@ fn stabilizer_survives_a_push() {
     assert!(log
         .ticks
         .iter()
-        .any(|t| t.tau_mnm != walker_firmware::log::TAU_NA && t.tau_mnm.unsigned_abs() > 50));
+        .any(|t| t.tau_mnm != walker_contract::record::TAU_NA && t.tau_mnm.unsigned_abs() > 50));
 }
 
 #[test]
@@ -446,7 +448,7 @@ fn closed_loop_walk_survives_a_sagittal_push() {
     // Bounds: no target clamped to a joint limit, none non-finite (that stops with exit 15).
     assert!(
         !log.events.iter().any(|e| matches!(e, Record::Fault(f)
-            if f.kind == walker_firmware::log::FaultKind::TargetClamped)),
+            if f.kind == walker_contract::record::FaultKind::TargetClamped)),
         "{:?}",
         log.events
     );

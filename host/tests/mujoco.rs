@@ -3,7 +3,12 @@
 
 use dxl::instruction::encode_sync_write;
 use dxl::table::x_series;
-use walker_host::sim::{rad_to_ticks, Push, SimConfig, Simulator, XServoParams};
+use walker_contract::bus_map::TickMap;
+use walker_host::sim::{Push, SimConfig, Simulator, XServoParams};
+
+fn rad_to_ticks(q: f64) -> i32 {
+    TickMap::reference().tick_f64(0, q)
+}
 
 const G: f64 = 9.80665;
 

@@ -10,6 +10,7 @@ use dxl::table::{foot, foot::FootForces, imu, imu::ImuSample, x_series};
 use dxl::{Decoder, Instruction, Status, BROADCAST_ID};
 use gait_core::kinematics::{leg_points, Pose};
 use gait_core::{Robot, Side};
+use walker_contract::bus_map::TickMap;
 use walker_host::sim::forces::{center_of_pressure, distribute, FootContact};
 use walker_host::sim::zmp::{whole_body_zmp, MassPoint};
 use walker_host::sim::{
@@ -623,7 +624,7 @@ fn tcp_runs_are_deterministic() {
 fn set_goals(sim: &mut Simulator, q: &[f64; 12]) {
     let data: Vec<[u8; 4]> = q
         .iter()
-        .map(|&a| walker_host::sim::rad_to_ticks(a).to_le_bytes())
+        .map(|&a| TickMap::reference().tick_f64(0, a).to_le_bytes())
         .collect();
     let entries: Vec<(u8, &[u8])> = (0..12).map(|j| (j as u8 + 1, &data[j][..])).collect();
     let mut buf = [0u8; 128];
@@ -889,7 +890,7 @@ fn servo_follows_a_goal_step_smoothly() {
     let mut sim = Simulator::new(&cfg).unwrap();
     torque_on(&mut sim);
     let mut q = [0.0; 12];
-    q[0] = walker_host::sim::ticks_to_rad(2148);
+    q[0] = TickMap::reference().rad_f64(0, 2148);
     set_goals(&mut sim, &q);
     let d = q[0];
     let mut prev_v = 0.0;
@@ -925,7 +926,7 @@ fn tick_staircase_crouch_keeps_zmp_near_com() {
     let cfg = kin();
     let mut sim = Simulator::new(&cfg).unwrap();
     torque_on(&mut sim);
-    let knee = walker_host::sim::ticks_to_rad(2521);
+    let knee = TickMap::reference().rad_f64(0, 2521);
     let mut rows = Vec::new();
     for k in 0..1600u64 {
         if k % 5 == 0 {

@@ -67,9 +67,10 @@ mod firmware {
         Watchdog,
     };
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
+    use walker_firmware::bus_map::{self, TickMap};
     use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache, Targets};
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
-    use walker_firmware::log::BoardId;
+    use walker_firmware::record::BoardId;
     use walker_firmware::supervisor::StopReason;
     use walker_firmware::Config;
 
@@ -187,16 +188,6 @@ mod firmware {
         // SAFETY: (caller) exclusive; an array of MaybeUninit needs no initialisation and has
         // the layout of the uninitialised array.
         unsafe { &mut *buf.cast::<[MaybeUninit<T>; MAX_TICKS]>() }
-    }
-
-    /// Ticks per rad × 2⁻¹⁶ (an `Fx` angle's bits) × 2³²: 4096/2π/65536·2³², rounded.
-    const TICKS_PER_FX_RAD_32: i64 = 42_722_830;
-
-    /// A fixed-point joint angle (rad) → Goal Position ticks, integer only (round half up;
-    /// the IK keeps every angle within its joint limits, far inside the tick range).
-    fn fx_rad_to_ticks(a: Fx) -> i32 {
-        let t = (i64::from(a.to_bits()) * TICKS_PER_FX_RAD_32 + (1 << 31)) >> 32;
-        t as i32 + x_series::CENTER_TICK
     }
 
     /// The ground place of a fixed-point foot, for the (f32) measured ZMP.
@@ -327,7 +318,7 @@ mod firmware {
         let bytes: [[u8; 4]; 12] = goals.map(|g| g.to_le_bytes());
         let mut entries: [(u8, &[u8]); 12] = [(0, &[]); 12];
         for (k, e) in entries.iter_mut().enumerate() {
-            *e = (dxl::table::ids::LEGS[k], &bytes[k][..]);
+            *e = (bus_map::LEGS[k], &bytes[k][..]);
         }
         dxl::encode_sync_write(
             buf,
@@ -400,9 +391,9 @@ mod firmware {
 
         /// End of a tick: 12 goal positions out, next BULK READ; bytes encoded.
         fn send(&mut self, q: &[f32; 12]) -> usize {
-            for (g, &a) in self.goals.iter_mut().zip(q) {
-                if let Some(t) = x_series::rad_to_ticks(a) {
-                    *g = t;
+            for (j, (g, &a)) in self.goals.iter_mut().zip(q).enumerate() {
+                if a.is_finite() {
+                    *g = TickMap::reference().tick_f32(j, a);
                 }
             }
             self.encode()
@@ -445,8 +436,8 @@ mod firmware {
             black_box(self.measured(&fx_place(&s.feet[0]), &fx_place(&s.feet[1])));
             let (q, rep) = fixed_ik::joint_targets(&self.fkin, s);
             black_box(&rep);
-            for (g, &a) in self.goals.iter_mut().zip(&q) {
-                *g = fx_rad_to_ticks(a);
+            for (j, (g, &a)) in self.goals.iter_mut().zip(&q).enumerate() {
+                *g = TickMap::reference().tick_fx(j, a.to_bits());
             }
             self.encode()
         }
@@ -901,7 +892,7 @@ mod firmware {
                 present: x_series::CENTER_TICK,
             }; 15];
             for (k, d) in devs.iter_mut().enumerate() {
-                d.id = walker_firmware::DEVICE_IDS[k];
+                d.id = bus_map::DEVICE_IDS[k];
                 d.kind = match d.id {
                     FOOT_L => Kind::Foot(0),
                     FOOT_R => Kind::Foot(1),

@@ -1,11 +1,9 @@
 //! Firmware for QEMU `mps2-an500` (firmware-in-the-loop): reads its run-time parameters from
 //! the semihosting command line, runs start-up and the walk ([`walker_firmware::control::run`])
-//! and exits through semihosting with the run's exit code (see `walker_firmware::control`:
-//! 0 plan done, 2 bad parameter, 11 device missing, 12 lost, 13 fall, 14 overrun burst,
-//! 15 non-finite target, 17 requested, 20 start-up failure; the board adds 3 watchdog and
-//! 101 panic).
+//! and exits through semihosting with the run's exit code (the one table:
+//! `walker_contract::ExitCode`; the board adds the watchdog and panic codes of that table).
 //!
-//! Parameters: `key=value` tokens after qemu's `-append` (see `walker_firmware::params`),
+//! Parameters: `key=value` tokens after qemu's `-append` (`docs/parameters.md`),
 //! e.g. `-append "lockstep model=lipm steps=6"`. A bad token writes the start-up record and a
 //! `ConfigRejected` fault record to the log and exits with 2 (the key is printed over defmt).
 //! Without a simulator (bus unconnected) every device is missing: exit 11 within ~50 ms of
@@ -30,7 +28,8 @@ mod firmware {
     use cortex_m_rt::entry;
     use walker_firmware::board::{Board, Clock};
     use walker_firmware::boards::qemu_mps2::{self, QemuBoard, CMDLINE_MAX};
-    use walker_firmware::control::{self, exit_code};
+    use walker_firmware::control;
+    use walker_firmware::ExitCode;
     use walker_firmware::{params, Config};
 
     #[entry]
@@ -43,7 +42,7 @@ mod firmware {
             cfg = Config::default();
         }
         let Some(cp) = cortex_m::Peripherals::take() else {
-            qemu_mps2::semihosting_exit(exit_code::CONFIG);
+            qemu_mps2::semihosting_exit(ExitCode::ConfigRejected.status());
         };
         let mut board = QemuBoard::new(cp.SYST, &cfg);
         board.set_compute_us(cfg.compute_us);
@@ -55,7 +54,7 @@ mod firmware {
                 e.kind
             );
             control::report_arg_error(&mut board, &cfg, &e);
-            board.exit(exit_code::CONFIG)
+            board.exit(ExitCode::ConfigRejected.status())
         }
         defmt::info!(
             "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, lockstep {=bool}, model {=str}, {=usize} steps",

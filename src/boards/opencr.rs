@@ -45,7 +45,7 @@ use crate::board::{
     Board, BusError, Clock, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
     TORQUE_OFF_PACKET,
 };
-use crate::log::BoardId;
+use crate::record::BoardId;
 use crate::Config;
 
 /// SYSCLK, Hz.

@@ -5,7 +5,7 @@
 //! | UART | base | use |
 //! | --- | --- | --- |
 //! | UART0 | 0x4000_4000 | the servo bus (`-serial tcp:127.0.0.1:PORT,nodelay=on` to the simulator; `null` = unconnected) |
-//! | UART1 | 0x4000_5000 | the binary ZMP-response log ([`crate::log`]; to a file or TCP) |
+//! | UART1 | 0x4000_5000 | the binary ZMP-response log ([`crate::record`]; to a file or TCP) |
 //! | UART2 | 0x4000_6000 | the lock-step channel (TCP to the simulator) |
 //!
 //! CMSDK APB UART registers: DATA 0x00, STATE 0x04 (bit 0 TX full, bit 1 RX full), CTRL 0x08
@@ -68,7 +68,7 @@ use crate::board::{
     Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
     TORQUE_OFF_PACKET,
 };
-use crate::log::BoardId;
+use crate::record::BoardId;
 use crate::Config;
 
 /// CMSDK UART0 (servo bus).
@@ -82,9 +82,9 @@ pub const SYSCLK_HZ: u32 = 25_000_000;
 /// Default modelled compute time per tick, µs.
 pub const DEFAULT_COMPUTE_US: u32 = 150;
 /// Exit code when the virtual watchdog bites.
-pub const EXIT_WATCHDOG: i32 = 3;
+pub const EXIT_WATCHDOG: i32 = walker_contract::ExitCode::Watchdog.status();
 /// Exit code after a panic.
-pub const EXIT_PANIC: i32 = 101;
+pub const EXIT_PANIC: i32 = walker_contract::ExitCode::Panic.status();
 /// Lock-step time frame marker (firmware → simulator).
 pub const LOCKSTEP_TIME: u8 = 0x5A;
 /// Lock-step reply announcement marker (simulator → firmware).

@@ -4,9 +4,10 @@
 
 use super::*;
 use crate::board::{Clock, ServoBus};
-use crate::log::{FaultState, StartupRecord};
+use crate::record::{FaultState, StartupRecord};
 use crate::testkit::{FakeBoard, Pkt};
 use dxl::opcode;
+use gait_core::support::SupportPolygon;
 use std::vec::Vec;
 
 fn board(cfg: &Config) -> FakeBoard {
@@ -158,12 +159,14 @@ fn table2_walk_runs_to_plan_done() {
     assert!(tr.iter().all(|t| t.zmp_valid));
     assert!(tr
         .iter()
-        .any(|t| t.tau_mnm != 0 && t.tau_mnm != crate::log::TAU_NA));
+        .any(|t| t.tau_mnm != 0 && t.tau_mnm != crate::record::TAU_NA));
     assert!(tr[..ramp]
         .iter()
-        .all(|t| t.zmp_ref[0] == crate::log::POS_NA));
+        .all(|t| t.zmp_ref[0] == crate::record::POS_NA));
     let walk_recs = &tr[ramp..ramp + walk];
-    assert!(walk_recs.iter().all(|t| t.zmp_ref[0] != crate::log::POS_NA));
+    assert!(walk_recs
+        .iter()
+        .all(|t| t.zmp_ref[0] != crate::record::POS_NA));
     assert_eq!(tr.last().unwrap().fault, FaultState::TorqueOff);
     // Times are the nominal tick times, one period apart.
     for w in tr.windows(2) {
@@ -174,21 +177,16 @@ fn table2_walk_runs_to_plan_done() {
     // both feet are within 2 mm of the ground and share the load).
     let single: Vec<_> = walk_recs
         .iter()
-        .filter(|t| {
-            matches!(
-                t.phase,
-                SupportPhase::SingleLeft | SupportPhase::SingleRight
-            )
-        })
+        .filter(|t| matches!(t.phase, LoggedPhase::SingleLeft | LoggedPhase::SingleRight))
         .collect();
     assert!(single.len() > 500);
     let under = single
         .iter()
         .filter(|t| {
-            let dx = crate::log::pos_to_m(t.zmp_meas[0]) - crate::log::pos_to_m(t.zmp_ref[0]);
-            let dy = crate::log::pos_to_m(t.zmp_meas[1]) - crate::log::pos_to_m(t.zmp_ref[1]);
+            let dx = crate::record::pos_to_m(t.zmp_meas[0]) - crate::record::pos_to_m(t.zmp_ref[0]);
+            let dy = crate::record::pos_to_m(t.zmp_meas[1]) - crate::record::pos_to_m(t.zmp_ref[1]);
             let side_ok = match t.phase {
-                SupportPhase::SingleLeft => t.zmp_meas[1] > 0,
+                LoggedPhase::SingleLeft => t.zmp_meas[1] > 0,
                 _ => t.zmp_meas[1] < 0,
             };
             dx.abs() < 0.006 && dy.abs() < 0.002 && side_ok
@@ -200,7 +198,7 @@ fn table2_walk_runs_to_plan_done() {
         single.len()
     );
     // Steps: the feet moved forward by the plan's length.
-    let end_x = crate::log::pos_to_m(walk_recs.last().unwrap().com[0]);
+    let end_x = crate::record::pos_to_m(walk_recs.last().unwrap().com[0]);
     assert!((end_x - 0.26).abs() < 0.02, "final CoM x {end_x}");
 }
 
@@ -385,7 +383,7 @@ fn fall_stops_and_turns_torque_off() {
     );
     assert!(tr[stopped..]
         .iter()
-        .all(|t| t.phase == SupportPhase::Stopped));
+        .all(|t| t.phase == LoggedPhase::Stopped));
     // Limp at once: no goal is written after the tick that detected the fall.
     assert!(
         b.goals.len() <= stopped + 2,

@@ -82,7 +82,7 @@ impl OwnedPacket {
 
 /// The devices on the bus plus the fault injector.
 #[derive(Clone, Debug)]
-pub struct Bus {
+pub struct DeviceBus {
     /// Devices, in ascending ID order at construction.
     pub devices: Vec<Device>,
     faults: BusFaults,
@@ -98,10 +98,10 @@ fn err(code: ErrorCode) -> StatusError {
     }
 }
 
-impl Bus {
+impl DeviceBus {
     /// A bus with these devices; `rng` drives the fault injection.
     pub fn new(devices: Vec<Device>, faults: BusFaults, rng: Rng) -> Self {
-        let mut bus = Bus {
+        let mut bus = DeviceBus {
             devices,
             faults,
             rng,

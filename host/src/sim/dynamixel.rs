@@ -46,6 +46,7 @@
 //!   e-manual does not state its period).
 
 use dxl::table::x_series;
+use walker_contract::bus_map::TickMap;
 
 /// Parameters of one servo model (motor, gear and drive).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -176,17 +177,10 @@ pub struct XServo {
     was_on: bool,
 }
 
-const TICKS_PER_RAD: f64 = x_series::TICKS_PER_TURN as f64 / core::f64::consts::TAU;
-
-/// The encoder's reading of joint angle `q`: whole ticks.
+/// The encoder's reading of joint angle `q`: whole ticks (the contract's rad ↔ tick map; the
+/// motor's frame is the joint's, every mounting sign being +1 on the reference robot).
 pub fn encoder_ticks(q: f64) -> i32 {
-    let t = (q * TICKS_PER_RAD).round() + f64::from(x_series::CENTER_TICK);
-    let lim = f64::from(x_series::MAX_EXTENDED_TICKS);
-    if t.is_finite() {
-        t.clamp(-lim, lim) as i32
-    } else {
-        x_series::CENTER_TICK
-    }
+    TickMap::reference().tick_f64(0, q)
 }
 
 impl XServo {

@@ -37,12 +37,16 @@ use std::fmt;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use dxl::table::{foot::FootForces, ids, imu::ImuSample, x_series};
+use dxl::table::{foot::FootForces, imu::ImuSample, x_series};
 use dxl::{DecodeError, Decoder};
 use gait_core::Robot;
+use walker_contract::bus_map::{self as ids, TickMap};
+
+/// The servos' rad ↔ tick map (the contract's one definition).
+const TICKS: TickMap = TickMap::reference();
 
 pub use body::{Physics, ServoCmd, Support, Truth};
-pub use bus::{Bus, BusCounters, BusFaults, OwnedPacket};
+pub use bus::{BusCounters, BusFaults, DeviceBus, OwnedPacket};
 pub use device::{Device, DeviceKind};
 pub use dynamixel::{XServoOutput, XServoParams, XServoRegisters};
 pub use mjcf::EnvConfig;
@@ -494,7 +498,7 @@ impl Body {
 /// Bus devices plus body, independent of the transport (used by [`transport`] and tests).
 pub struct Simulator {
     /// The bus and its devices.
-    pub bus: Bus,
+    pub bus: DeviceBus,
     /// The body.
     pub physics: Body,
     decoder: Box<Decoder<4096>>,
@@ -520,7 +524,7 @@ impl fmt::Debug for Simulator {
     }
 }
 
-/// Index of the foot boards and the IMU in [`Bus::devices`] (after the 12 servos).
+/// Index of the foot boards and the IMU in [`DeviceBus::devices`] (after the 12 servos).
 const FOOT_INDEX: [usize; 2] = [12, 13];
 const IMU_INDEX: usize = 14;
 
@@ -532,12 +536,12 @@ impl Simulator {
         let mut devices: Vec<Device> = ids::LEGS
             .iter()
             .enumerate()
-            .map(|(j, &id)| Device::servo(id, j, rad_to_ticks(physics.q()[j])))
+            .map(|(j, &id)| Device::servo(id, j, TICKS.tick_f64(j, physics.q()[j])))
             .collect();
         devices.push(Device::foot(ids::FOOT_LEFT, 0));
         devices.push(Device::foot(ids::FOOT_RIGHT, 1));
         devices.push(Device::imu(ids::IMU));
-        let bus = Bus::new(devices, cfg.faults.clone(), rng::Rng::new(cfg.seed, 1));
+        let bus = DeviceBus::new(devices, cfg.faults.clone(), rng::Rng::new(cfg.seed, 1));
         let log = match &cfg.log_truth {
             Some(p) => Some(truth::TruthLog::create(p)?),
             None => None,
@@ -619,7 +623,7 @@ impl Simulator {
                         }
                         ServoCmd {
                             goal: (d.torque_on() && !d.dead)
-                                .then(|| ticks_to_rad(d.get_i32(x_series::GOAL_POSITION))),
+                                .then(|| TICKS.rad_f64(j, d.get_i32(x_series::GOAL_POSITION))),
                             speed_limit: limit,
                         }
                     });
@@ -644,7 +648,7 @@ impl Simulator {
                 Body::Kinematic(_) => XServoOutput::default(),
             };
             let d = &mut self.bus.devices[j];
-            let ticks = rad_to_ticks(q);
+            let ticks = TICKS.tick_f64(j, q);
             d.set_i32(x_series::PRESENT_POSITION, ticks);
             let rpm = qd * 60.0 / std::f64::consts::TAU;
             d.set_i32(
@@ -791,22 +795,4 @@ impl Simulator {
             truth_rows: rows,
         }
     }
-}
-
-/// Joint angle to servo ticks (nearest; saturating at the extended-position range).
-pub fn rad_to_ticks(q: f64) -> i32 {
-    let t = q * f64::from(x_series::TICKS_PER_TURN) / std::f64::consts::TAU
-        + f64::from(x_series::CENTER_TICK);
-    let lim = f64::from(x_series::MAX_EXTENDED_TICKS);
-    if t.is_finite() {
-        t.round().clamp(-lim, lim) as i32
-    } else {
-        x_series::CENTER_TICK
-    }
-}
-
-/// Servo ticks to joint angle.
-pub fn ticks_to_rad(t: i32) -> f64 {
-    (f64::from(t) - f64::from(x_series::CENTER_TICK)) * std::f64::consts::TAU
-        / f64::from(x_series::TICKS_PER_TURN)
 }

@@ -1,4 +1,4 @@
-//! The ZMP-response log: one compact binary record per control tick plus a few event records,
+//! The ZMP-response log's wire format: one compact binary record per control tick plus a few event records,
 //! framed so that a decoder fed an arbitrary byte stream finds every intact frame.
 //!
 //! # Framing
@@ -27,7 +27,7 @@
 //! | 19 | 3 | CoM x, i24, 10 µm |
 //! | 22 | 3 | CoM y, i24, 10 µm |
 //! | 25 | 2 | τ = J·φ̈, i16, mN·m (saturating; −32768 = not available) |
-//! | 27 | 1 | status: bits 0–2 support phase ([`SupportPhase`]), bit 3 measured ZMP valid, bit 4 this tick overran, bits 5–6 fault state ([`FaultState`]), bit 7 reserved (0) |
+//! | 27 | 1 | status: bits 0–2 support phase ([`LoggedPhase`]), bit 3 measured ZMP valid, bit 4 this tick overran, bits 5–6 fault state ([`FaultState`]), bit 7 reserved (0) |
 //! | 28 | 2 | bus timeouts, u16 (cumulative, saturating) |
 //! | 30 | 2 | bus CRC errors, u16 (cumulative, saturating) |
 //! | 32 | 2 | servo status-packet errors, u16 (cumulative, saturating) |
@@ -43,7 +43,7 @@
 //! * 0x02 start-up: `time u32, board u8 ([`BoardId`]), fw major u8, minor u8, patch u8,
 //!   tick period u32 µs, bus baud u32, device count u8, flags u8 (bit 0 = bus probed),
 //!   missing count u8 (≤ 16), missing ids [u8; count]`.
-//! * 0x03 stop: `time u32, reason code u8, device id u8, value i32` ([`StopReason::code`]).
+//! * 0x03 stop: `time u32, reason code u8, device id u8, value i32` ([`StopReason::code`], codes in [`crate::codes::StopCode`]).
 //! * 0x04 fault: `time u32, kind u8 ([`FaultKind`]), device id u8, value i32`. Kinds (code:
 //!   meaning, id, value): 1 device holding (device, ticks); 2 device recovered (device, ticks
 //!   held); 3 target clamped (first joint, joint mask); 4 IMU non-finite (200, count); 5
@@ -57,10 +57,11 @@
 //! The tick record's CoM is the *commanded* CoM: the gait sample's CoM plus the feedback
 //! stabilizer's shift when `stab=on`.
 //!
-//! Host tools decode with [`Decoder`] by depending on this crate (`walker-firmware` builds on
-//! the host without any board feature's ARM dependencies).
+//! The firmware writes with [`LogWriter`] into its board's [`LogSink`]; host tools decode with
+//! [`RecordDecoder`] (log records; `dxl::Decoder` is the bus packets' decoder).
 
-use crate::supervisor::StopReason;
+pub use crate::codes::{FaultKind, StopReason};
+use gait_core::gait::TimingNote;
 
 /// Largest payload (type + seq + body + CRC) of any record, bytes.
 pub const MAX_PAYLOAD: usize = 48;
@@ -92,7 +93,7 @@ pub mod record_type {
 /// Support phase of the gait (3 bits in the status byte).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum SupportPhase {
+pub enum LoggedPhase {
     /// Both feet on the ground, walking.
     Double = 0,
     /// Left foot supporting, right foot swinging.
@@ -105,15 +106,29 @@ pub enum SupportPhase {
     Stopped = 4,
 }
 
-impl SupportPhase {
-    fn from_bits(b: u8) -> Option<Self> {
-        Some(match b {
+impl LoggedPhase {
+    /// The 3-bit wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Double => 0,
+            Self::SingleLeft => 1,
+            Self::SingleRight => 2,
+            Self::Standing => 3,
+            Self::Stopped => 4,
+        }
+    }
+}
+
+impl TryFrom<u8> for LoggedPhase {
+    type Error = crate::codes::UnknownCode;
+    fn try_from(b: u8) -> Result<Self, Self::Error> {
+        Ok(match b {
             0 => Self::Double,
             1 => Self::SingleLeft,
             2 => Self::SingleRight,
             3 => Self::Standing,
             4 => Self::Stopped,
-            _ => return None,
+            other => return Err(crate::codes::UnknownCode(other)),
         })
     }
 }
@@ -133,7 +148,17 @@ pub enum FaultState {
 }
 
 impl FaultState {
-    fn from_bits(b: u8) -> Self {
+    /// The 2-bit wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Ok => 0,
+            Self::Holding => 1,
+            Self::Stopping => 2,
+            Self::TorqueOff => 3,
+        }
+    }
+    /// From the 2 bits of the status byte (every value decodes).
+    pub const fn from_bits(b: u8) -> Self {
         match b & 3 {
             0 => Self::Ok,
             1 => Self::Holding,
@@ -156,76 +181,20 @@ pub enum BoardId {
 }
 
 impl BoardId {
-    fn from_u8(b: u8) -> Self {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Unknown => 0,
+            Self::QemuMps2 => 1,
+            Self::OpenCr => 2,
+        }
+    }
+    /// From the wire code (unknown codes decode as [`BoardId::Unknown`]).
+    pub const fn from_code(b: u8) -> Self {
         match b {
             1 => Self::QemuMps2,
             2 => Self::OpenCr,
             _ => Self::Unknown,
-        }
-    }
-}
-
-/// Kind of a fault event record.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum FaultKind {
-    /// A device missed its reply; the firmware holds its last good value (`value` = ticks).
-    DeviceHolding,
-    /// A held device answered again (`value` = ticks it was held).
-    DeviceRecovered,
-    /// A target was clamped to its joint limit (`id` = joint index, `value` = mask).
-    TargetClamped,
-    /// A non-finite IMU sample was replaced by the last good one (`value` = count).
-    ImuNonFinite,
-    /// A run-time parameter was rejected before start-up (`id` = key index in
-    /// `params::KEYS`, 0xFF unknown key, 0xFE plan rejected by gait-core; `value` = token
-    /// position, or the `GaitError` discriminant for 0xFE).
-    ConfigRejected,
-    /// A start-up step failed after the probe (`id` = device, `value` = step code of
-    /// `startup::StartupStep`).
-    StartupFailed,
-    /// The step timing was stretched for the servo speed limit (`id` = worst joint index,
-    /// `value` = total factor on t1, t2, T in 1/1000).
-    TimingStretched,
-    /// The swing was lowered for the servo speed limit (`id` = worst joint index, `value` =
-    /// new swing height, µm).
-    SwingLowered,
-    /// A joint still needs more than the servo speed limit (`id` = worst joint index, `value`
-    /// = its peak speed, mrad/s); the walk goes on, the servo will lag.
-    SpeedLimit,
-    /// Other kind (code kept for forward compatibility).
-    Other(u8),
-}
-
-impl FaultKind {
-    /// Wire code.
-    pub fn code(self) -> u8 {
-        match self {
-            Self::DeviceHolding => 1,
-            Self::DeviceRecovered => 2,
-            Self::TargetClamped => 3,
-            Self::ImuNonFinite => 4,
-            Self::ConfigRejected => 5,
-            Self::StartupFailed => 6,
-            Self::TimingStretched => 7,
-            Self::SwingLowered => 8,
-            Self::SpeedLimit => 9,
-            Self::Other(c) => c,
-        }
-    }
-    /// From a wire code.
-    pub fn from_code(c: u8) -> Self {
-        match c {
-            1 => Self::DeviceHolding,
-            2 => Self::DeviceRecovered,
-            3 => Self::TargetClamped,
-            4 => Self::ImuNonFinite,
-            5 => Self::ConfigRejected,
-            6 => Self::StartupFailed,
-            7 => Self::TimingStretched,
-            8 => Self::SwingLowered,
-            9 => Self::SpeedLimit,
-            c => Self::Other(c),
         }
     }
 }
@@ -259,7 +228,7 @@ pub struct TickRecord {
     /// τ = J·φ̈, mN·m, [`TAU_NA`] when not available.
     pub tau_mnm: i16,
     /// Support phase.
-    pub phase: SupportPhase,
+    pub phase: LoggedPhase,
     /// Measured ZMP valid (enough load on the foot sensors).
     pub zmp_valid: bool,
     /// This tick overran its deadline.
@@ -281,7 +250,7 @@ impl Default for TickRecord {
             zmp_meas: [POS_NA; 2],
             com: [POS_NA; 2],
             tau_mnm: TAU_NA,
-            phase: SupportPhase::Standing,
+            phase: LoggedPhase::Standing,
             zmp_valid: false,
             overrun: false,
             fault: FaultState::Ok,
@@ -447,6 +416,8 @@ impl Record {
 /// `CRC_NIBBLE[n]`: the CRC register after shifting the nibble `n` (in bits 15..12) through
 /// four rounds of the polynomial. Two lookups per byte; 32 bytes of flash instead of a 512-byte
 /// byte table (measured: the control tick with its 40 log bytes costs ≈ 180 instructions more).
+// Evaluated at compile time only (an out-of-range index would be a build error).
+#[allow(clippy::indexing_slicing)]
 const fn crc_nibble_table() -> [u16; 16] {
     let mut t = [0u16; 16];
     let mut i = 0;
@@ -569,10 +540,10 @@ fn clamp_i24(v: i32) -> i32 {
 }
 
 fn status_byte(r: &TickRecord) -> u8 {
-    (r.phase as u8 & 7)
+    (r.phase.code() & 7)
         | (u8::from(r.zmp_valid) << 3)
         | (u8::from(r.overrun) << 4)
-        | ((r.fault as u8 & 3) << 5)
+        | ((r.fault.code() & 3) << 5)
 }
 
 /// Builds the payload (without CRC) of a record; returns its length or None if it does not fit.
@@ -602,7 +573,7 @@ fn build_payload(rec: &Record, out: &mut [u8]) -> Option<usize> {
             c.u8(record_type::STARTUP);
             c.u16(r.seq);
             c.u32(r.time_us);
-            c.u8(r.board as u8);
+            c.u8(r.board.code());
             c.put(&r.fw);
             c.u32(r.tick_period_us);
             c.u32(r.bus_baud);
@@ -706,35 +677,41 @@ fn cobs_decode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
 /// Returns the frame length, or 0 when `out` is too small ([`MAX_FRAME`] always suffices).
 pub fn encode(rec: &Record, out: &mut [u8]) -> usize {
     let mut payload = [0u8; MAX_PAYLOAD];
-    let Some(n) = build_payload(rec, &mut payload[..MAX_PAYLOAD - 2]) else {
+    let Some(n) = payload
+        .get_mut(..MAX_PAYLOAD - 2)
+        .and_then(|p| build_payload(rec, p))
+    else {
         return 0;
     };
-    let crc = crc16_ccitt(&payload[..n]);
-    payload[n..n + 2].copy_from_slice(&crc.to_le_bytes());
-    cobs_encode(&payload[..n + 2], out)
+    let crc = payload.get(..n).map_or(0, crc16_ccitt);
+    match payload.get_mut(n..n + 2) {
+        Some(c) => c.copy_from_slice(&crc.to_le_bytes()),
+        None => return 0,
+    }
+    payload.get(..n + 2).map_or(0, |p| cobs_encode(p, out))
 }
 
-fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
+fn parse_payload(p: &[u8]) -> Result<Record, RecordError> {
     let mut r = Reader { buf: p, pos: 0 };
-    let ty = r.u8().ok_or(DecodeError::Length)?;
-    let seq = r.u16().ok_or(DecodeError::Length)?;
-    let time_us = r.u32().ok_or(DecodeError::Length)?;
+    let ty = r.u8().ok_or(RecordError::Length)?;
+    let seq = r.u16().ok_or(RecordError::Length)?;
+    let time_us = r.u32().ok_or(RecordError::Length)?;
     let rec = match ty {
         record_type::TICK => {
             let mut v = [0i32; 6];
             for x in v.iter_mut() {
-                *x = r.i24().ok_or(DecodeError::Length)?;
+                *x = r.i24().ok_or(RecordError::Length)?;
             }
-            let tau = r.i16().ok_or(DecodeError::Length)?;
-            let st = r.u8().ok_or(DecodeError::Length)?;
-            let phase = SupportPhase::from_bits(st & 7).ok_or(DecodeError::Field)?;
+            let tau = r.i16().ok_or(RecordError::Length)?;
+            let st = r.u8().ok_or(RecordError::Length)?;
+            let phase = LoggedPhase::try_from(st & 7).map_err(|_| RecordError::Field)?;
             if st & 0x80 != 0 {
-                return Err(DecodeError::Field);
+                return Err(RecordError::Field);
             }
-            let timeouts = r.u16().ok_or(DecodeError::Length)?;
-            let crc = r.u16().ok_or(DecodeError::Length)?;
-            let status = r.u16().ok_or(DecodeError::Length)?;
-            let overruns = r.u16().ok_or(DecodeError::Length)?;
+            let timeouts = r.u16().ok_or(RecordError::Length)?;
+            let crc = r.u16().ok_or(RecordError::Length)?;
+            let status = r.u16().ok_or(RecordError::Length)?;
+            let overruns = r.u16().ok_or(RecordError::Length)?;
             Record::Tick(TickRecord {
                 seq,
                 time_us,
@@ -755,20 +732,20 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             })
         }
         record_type::STARTUP => {
-            let board = BoardId::from_u8(r.u8().ok_or(DecodeError::Length)?);
-            let fw = r.take::<3>().ok_or(DecodeError::Length)?;
-            let tick_period_us = r.u32().ok_or(DecodeError::Length)?;
-            let bus_baud = r.u32().ok_or(DecodeError::Length)?;
-            let device_count = r.u8().ok_or(DecodeError::Length)?;
-            let probed = r.u8().ok_or(DecodeError::Length)? & 1 != 0;
-            let count = usize::from(r.u8().ok_or(DecodeError::Length)?);
+            let board = BoardId::from_code(r.u8().ok_or(RecordError::Length)?);
+            let fw = r.take::<3>().ok_or(RecordError::Length)?;
+            let tick_period_us = r.u32().ok_or(RecordError::Length)?;
+            let bus_baud = r.u32().ok_or(RecordError::Length)?;
+            let device_count = r.u8().ok_or(RecordError::Length)?;
+            let probed = r.u8().ok_or(RecordError::Length)? & 1 != 0;
+            let count = usize::from(r.u8().ok_or(RecordError::Length)?);
             if count > MAX_MISSING {
-                return Err(DecodeError::Field);
+                return Err(RecordError::Field);
             }
             let mut missing = heapless::Vec::new();
             for _ in 0..count {
-                let id = r.u8().ok_or(DecodeError::Length)?;
-                missing.push(id).map_err(|_| DecodeError::Field)?;
+                let id = r.u8().ok_or(RecordError::Length)?;
+                missing.push(id).map_err(|_| RecordError::Field)?;
             }
             Record::Startup(StartupRecord {
                 seq,
@@ -783,10 +760,10 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             })
         }
         record_type::STOP => {
-            let code = r.u8().ok_or(DecodeError::Length)?;
-            let id = r.u8().ok_or(DecodeError::Length)?;
-            let value = r.i32().ok_or(DecodeError::Length)?;
-            let reason = StopReason::from_code(code, id, value).ok_or(DecodeError::Field)?;
+            let code = r.u8().ok_or(RecordError::Length)?;
+            let id = r.u8().ok_or(RecordError::Length)?;
+            let value = r.i32().ok_or(RecordError::Length)?;
+            let reason = StopReason::from_code(code, id, value).ok_or(RecordError::Field)?;
             Record::Stop(StopRecord {
                 seq,
                 time_us,
@@ -794,9 +771,9 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
             })
         }
         record_type::FAULT => {
-            let kind = FaultKind::from_code(r.u8().ok_or(DecodeError::Length)?);
-            let id = r.u8().ok_or(DecodeError::Length)?;
-            let value = r.i32().ok_or(DecodeError::Length)?;
+            let kind = FaultKind::from_code(r.u8().ok_or(RecordError::Length)?);
+            let id = r.u8().ok_or(RecordError::Length)?;
+            let value = r.i32().ok_or(RecordError::Length)?;
             Record::Fault(FaultRecord {
                 seq,
                 time_us,
@@ -805,19 +782,19 @@ fn parse_payload(p: &[u8]) -> Result<Record, DecodeError> {
                 value,
             })
         }
-        other => return Err(DecodeError::UnknownType(other)),
+        other => return Err(RecordError::UnknownType(other)),
     };
     if r.done() {
         Ok(rec)
     } else {
-        Err(DecodeError::Length)
+        Err(RecordError::Length)
     }
 }
 
 /// Why a frame was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum DecodeError {
+pub enum RecordError {
     /// Malformed COBS (a zero code or a run past the end).
     Cobs,
     /// CRC mismatch.
@@ -834,10 +811,10 @@ pub enum DecodeError {
 
 /// What the decoder has seen.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct DecoderStats {
+pub struct RecordDecoderStats {
     /// Frames decoded.
     pub frames: u32,
-    /// Frames rejected (any [`DecodeError`]).
+    /// Frames rejected (any [`RecordError`]).
     pub rejected: u32,
     /// Of those, CRC mismatches.
     pub crc_errors: u32,
@@ -850,29 +827,29 @@ pub struct DecoderStats {
 /// Streaming, allocation-free frame decoder. Feed it any byte stream; it never panics and
 /// its memory is bounded by [`MAX_FRAME`].
 #[derive(Clone, Debug)]
-pub struct Decoder {
+pub struct RecordDecoder {
     buf: [u8; MAX_FRAME],
     len: usize,
     overlong: bool,
     last_seq: Option<u16>,
-    stats: DecoderStats,
+    stats: RecordDecoderStats,
 }
 
-impl Default for Decoder {
+impl Default for RecordDecoder {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl Decoder {
+impl RecordDecoder {
     /// A fresh decoder (may start mid-frame: the first partial frame is then rejected).
     pub const fn new() -> Self {
-        Decoder {
+        RecordDecoder {
             buf: [0; MAX_FRAME],
             len: 0,
             overlong: false,
             last_seq: None,
-            stats: DecoderStats {
+            stats: RecordDecoderStats {
                 frames: 0,
                 rejected: 0,
                 crc_errors: 0,
@@ -883,13 +860,13 @@ impl Decoder {
     }
 
     /// Counters so far.
-    pub fn stats(&self) -> DecoderStats {
+    pub fn stats(&self) -> RecordDecoderStats {
         self.stats
     }
 
-    fn reject(&mut self, e: DecodeError, bytes: usize) -> Option<Result<Record, DecodeError>> {
+    fn reject(&mut self, e: RecordError, bytes: usize) -> Option<Result<Record, RecordError>> {
         self.stats.rejected = self.stats.rejected.saturating_add(1);
-        if e == DecodeError::Crc {
+        if e == RecordError::Crc {
             self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
         }
         self.stats.skipped_bytes = self.stats.skipped_bytes.saturating_add(bytes as u32);
@@ -897,7 +874,7 @@ impl Decoder {
     }
 
     /// Feeds one byte; returns a decoded record or a rejection at each frame end.
-    pub fn push(&mut self, byte: u8) -> Option<Result<Record, DecodeError>> {
+    pub fn push(&mut self, byte: u8) -> Option<Result<Record, RecordError>> {
         if byte != 0 {
             if let Some(slot) = self.buf.get_mut(self.len) {
                 *slot = byte;
@@ -912,7 +889,7 @@ impl Decoder {
         let n = self.len;
         self.len = 0;
         if core::mem::take(&mut self.overlong) {
-            return self.reject(DecodeError::Overlong, n + 1);
+            return self.reject(RecordError::Overlong, n + 1);
         }
         if n == 0 {
             return None; // Empty frame (repeated delimiters): idle line, not an error.
@@ -923,15 +900,21 @@ impl Decoder {
             .get(..n)
             .and_then(|src| cobs_decode(src, &mut payload))
         else {
-            return self.reject(DecodeError::Cobs, n + 1);
+            return self.reject(RecordError::Cobs, n + 1);
         };
         if m < 3 {
-            return self.reject(DecodeError::Length, n + 1);
+            return self.reject(RecordError::Length, n + 1);
         }
-        let (body, crc_bytes) = payload[..m].split_at(m - 2);
-        let crc = u16::from_le_bytes([crc_bytes[0], crc_bytes[1]]);
+        let Some((body, crc_bytes)) = payload.get(..m).and_then(|f| f.split_at_checked(m - 2))
+        else {
+            return self.reject(RecordError::Length, n + 1);
+        };
+        let crc = match crc_bytes {
+            [lo, hi] => u16::from_le_bytes([*lo, *hi]),
+            _ => return self.reject(RecordError::Length, n + 1),
+        };
         if crc16_ccitt(body) != crc {
-            return self.reject(DecodeError::Crc, n + 1);
+            return self.reject(RecordError::Crc, n + 1);
         }
         match parse_payload(body) {
             Ok(rec) => {
@@ -950,7 +933,7 @@ impl Decoder {
     }
 
     /// Feeds a slice, calling `f` for every frame end (record or rejection).
-    pub fn feed(&mut self, bytes: &[u8], mut f: impl FnMut(Result<Record, DecodeError>)) {
+    pub fn feed(&mut self, bytes: &[u8], mut f: impl FnMut(Result<Record, RecordError>)) {
         for &b in bytes {
             if let Some(r) = self.push(b) {
                 f(r);
@@ -959,7 +942,31 @@ impl Decoder {
     }
 }
 
-/// Assigns sequence numbers and writes encoded records to a [`crate::board::LogSink`].
+/// The fault record (kind, id, value) that logs a note of the servo-speed check.
+pub fn timing_fault(n: TimingNote) -> (FaultKind, u8, i32) {
+    match n {
+        TimingNote::Stretched { joint, milli } => (
+            FaultKind::TimingStretched,
+            joint,
+            i32::try_from(milli).unwrap_or(i32::MAX),
+        ),
+        TimingNote::Lowered { joint, um } => (
+            FaultKind::SwingLowered,
+            joint,
+            i32::try_from(um).unwrap_or(i32::MAX),
+        ),
+        TimingNote::TooFast { joint, mrad_s } => (FaultKind::SpeedLimit, joint, mrad_s),
+    }
+}
+
+/// Sink of the encoded record frames (a board's log UART); best effort, never blocks for
+/// long and never fails: a sink that cannot keep up drops bytes (the decoder resynchronises).
+pub trait LogSink {
+    /// Writes encoded log bytes.
+    fn write_log(&mut self, bytes: &[u8]);
+}
+
+/// Assigns sequence numbers and writes encoded records to a [`LogSink`].
 #[derive(Clone, Debug, Default)]
 pub struct LogWriter {
     next_seq: u16,
@@ -981,7 +988,7 @@ impl LogWriter {
     }
 
     /// Stamps `rec` with the next sequence number, encodes it and writes it to `sink`.
-    pub fn write(&mut self, sink: &mut impl crate::board::LogSink, mut rec: Record) {
+    pub fn write(&mut self, sink: &mut impl LogSink, mut rec: Record) {
         rec.set_seq(self.next_seq);
         self.next_seq = self.next_seq.wrapping_add(1);
         let mut frame = [0u8; MAX_FRAME];
@@ -1002,7 +1009,7 @@ mod tests {
         let mut r = TickRecord {
             seq,
             time_us: 123_456 + u32::from(seq) * 1000,
-            phase: SupportPhase::SingleLeft,
+            phase: LoggedPhase::SingleLeft,
             zmp_valid: true,
             overrun: seq.is_multiple_of(7),
             fault: FaultState::Holding,
@@ -1060,8 +1067,8 @@ mod tests {
         ]
     }
 
-    fn decode_all(bytes: &[u8]) -> (Vec<Record>, DecoderStats) {
-        let mut d = Decoder::new();
+    fn decode_all(bytes: &[u8]) -> (Vec<Record>, RecordDecoderStats) {
+        let mut d = RecordDecoder::new();
         let mut out = Vec::new();
         d.feed(bytes, |r| {
             if let Ok(r) = r {
@@ -1158,7 +1165,7 @@ mod tests {
     fn stream(n: u16) -> Vec<u8> {
         let mut w = LogWriter::new();
         struct V(Vec<u8>);
-        impl crate::board::LogSink for V {
+        impl LogSink for V {
             fn write_log(&mut self, b: &[u8]) {
                 self.0.extend_from_slice(b)
             }
@@ -1233,7 +1240,7 @@ mod tests {
             x
         };
         let good = stream(50);
-        let mut d = Decoder::new();
+        let mut d = RecordDecoder::new();
         let mut ok = 0;
         for round in 0..200 {
             let len = (rnd() % 500) as usize;

@@ -1,0 +1,204 @@
+//! The robot's servo bus as both ends see it: device IDs, joint order and names, and the ONE
+//! joint-angle ↔ servo-tick map.
+//!
+//! # IDs (`shared/reference-robot.md`)
+//! Left leg 1–6, right leg 7–12, each in the joint order `hip_yaw`, `hip_roll`, `hip_pitch`,
+//! `knee`, `ankle_pitch`, `ankle_roll` ([`JOINT_NAMES`]); foot sensor boards 111 (left) and 112
+//! (right); the waist IMU board 200. Joint index j (0..12) ↔ servo ID j + 1.
+//!
+//! # rad ↔ tick ([`TickMap`])
+//! `tick = zero_tick + round(sign_j · q · ticks_per_rad)` and
+//! `q = sign_j · (tick − zero_tick) / ticks_per_rad`, with `ticks_per_rad = ticks_per_turn / 2π`
+//! (4096 / 2π ≈ 651.9 on X-series servos, `zero_tick` = 2048 = 0 rad) and `sign_j` = ±1 the
+//! mounting of joint j (all +1 on the reference robot). The firmware works in f32
+//! ([`TickMap::tick_f32`], [`TickMap::rad_f32`]), the simulator in f64 ([`TickMap::tick_f64`],
+//! [`TickMap::rad_f64`]), the fixed-point pipeline in I16F16 bits ([`TickMap::tick_fx`]); the
+//! four are the same map in three number types.
+
+pub use gait_core::robot::{JOINTS_PER_LEG, JOINT_NAMES, LEG_JOINTS};
+use gait_core::Robot;
+
+/// Left-leg servos in joint order (see [`JOINT_NAMES`]).
+pub const LEFT_LEG: [u8; JOINTS_PER_LEG] = [1, 2, 3, 4, 5, 6];
+/// Right-leg servos in joint order.
+pub const RIGHT_LEG: [u8; JOINTS_PER_LEG] = [7, 8, 9, 10, 11, 12];
+/// All twelve leg servos, left then right (joint index j ↔ `LEGS[j]`).
+pub const LEGS: [u8; LEG_JOINTS] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
+/// Left foot sensor board.
+pub const FOOT_LEFT: u8 = 111;
+/// Right foot sensor board.
+pub const FOOT_RIGHT: u8 = 112;
+/// Waist IMU board.
+pub const IMU: u8 = 200;
+/// Devices read every control tick, in bulk-read order.
+pub const SENSOR_IDS: [u8; 3] = [FOOT_LEFT, FOOT_RIGHT, IMU];
+/// Every device on the bus: the legs, the foot boards, the IMU.
+pub const DEVICE_IDS: [u8; 15] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 111, 112, 200];
+
+/// The servos' encoder facts (X-series control table): ticks per turn, 0 rad tick, extended
+/// position range.
+pub use dxl::table::x_series::{CENTER_TICK as ZERO_TICK, MAX_EXTENDED_TICKS, TICKS_PER_TURN};
+
+/// The servo ID of joint `j` (0..12), `None` beyond.
+pub fn servo_id(j: usize) -> Option<u8> {
+    LEGS.get(j).copied()
+}
+
+/// The joint index (0..12) of servo `id`, `None` for a non-leg device.
+pub fn joint_of(id: u8) -> Option<usize> {
+    LEGS.iter().position(|&x| x == id)
+}
+
+/// The name of joint `j` (`l_hip_yaw` … `r_ankle_roll`), `"?"` beyond.
+pub fn joint_name(j: usize) -> &'static str {
+    JOINT_NAMES.get(j).copied().unwrap_or("?")
+}
+
+/// The joint-angle ↔ servo-tick map of the 12 leg servos (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickMap {
+    /// Tick that stands for 0 rad.
+    pub zero_tick: i32,
+    /// Ticks per turn.
+    pub ticks_per_turn: i32,
+    /// +1 when joint-positive is servo-positive, −1 otherwise (mounting), per joint.
+    pub sign: [i8; LEG_JOINTS],
+}
+
+impl Default for TickMap {
+    fn default() -> Self {
+        Self::reference()
+    }
+}
+
+impl TickMap {
+    /// The reference robot's map: 4096 ticks per turn, 2048 = 0 rad, every sign +1.
+    pub const fn reference() -> Self {
+        TickMap {
+            zero_tick: ZERO_TICK,
+            ticks_per_turn: TICKS_PER_TURN,
+            sign: [1; LEG_JOINTS],
+        }
+    }
+
+    /// From a robot description's servo data (all signs +1: the mounting is not described).
+    pub fn from_robot(robot: &Robot) -> Self {
+        TickMap {
+            zero_tick: robot.servo.zero_tick,
+            ticks_per_turn: i32::try_from(robot.servo.ticks_per_turn).unwrap_or(TICKS_PER_TURN),
+            sign: [1; LEG_JOINTS],
+        }
+    }
+
+    /// The mounting sign of joint `j` as ±1.0 (+1 beyond the 12 joints).
+    fn sign_of(&self, j: usize) -> f32 {
+        match self.sign.get(j) {
+            Some(&s) if s < 0 => -1.0,
+            _ => 1.0,
+        }
+    }
+
+    /// Ticks per radian, f32 (1.0 for a degenerate map, so that nothing divides by 0).
+    pub fn ticks_per_rad_f32(&self) -> f32 {
+        let t = self.ticks_per_turn as f32 / core::f32::consts::TAU;
+        if t.is_finite() && t != 0.0 {
+            t
+        } else {
+            1.0
+        }
+    }
+
+    /// The tick of joint `j` at `rad` (f32; `rad` finite, the caller clamps the result).
+    pub fn tick_f32(&self, j: usize, rad: f32) -> i32 {
+        self.zero_tick + libm::roundf(self.sign_of(j) * rad * self.ticks_per_rad_f32()) as i32
+    }
+
+    /// The joint angle (rad, f32) of joint `j` at `tick`.
+    pub fn rad_f32(&self, j: usize, tick: i32) -> f32 {
+        self.sign_of(j) * (tick.saturating_sub(self.zero_tick)) as f32 / self.ticks_per_rad_f32()
+    }
+
+    /// The tick of joint `j` at `q` (f64, nearest, half away from zero), saturating at
+    /// ±[`MAX_EXTENDED_TICKS`]; a non-finite `q` gives `zero_tick`.
+    pub fn tick_f64(&self, j: usize, q: f64) -> i32 {
+        let t = f64::from(self.sign_of(j)) * q * f64::from(self.ticks_per_turn)
+            / core::f64::consts::TAU
+            + f64::from(self.zero_tick);
+        let lim = f64::from(MAX_EXTENDED_TICKS);
+        if t.is_finite() {
+            libm::round(t).clamp(-lim, lim) as i32
+        } else {
+            self.zero_tick
+        }
+    }
+
+    /// The joint angle (rad, f64) of joint `j` at `tick`.
+    pub fn rad_f64(&self, j: usize, tick: i32) -> f64 {
+        f64::from(self.sign_of(j))
+            * (f64::from(tick) - f64::from(self.zero_tick))
+            * core::f64::consts::TAU
+            / f64::from(self.ticks_per_turn)
+    }
+
+    /// The tick of joint `j` at a fixed-point angle given as its I16F16 bits (integer only,
+    /// round half up): `tick = zero + (bits · K + 2³¹) >> 32` with
+    /// K = round(ticks_per_turn · 2¹⁶ · 2³² / (2π · 2³²)) = ticks per rad · 2⁻¹⁶ · 2³².
+    pub fn tick_fx(&self, j: usize, bits: i32) -> i32 {
+        let k = self.ticks_per_fx_rad_32();
+        let s = i64::from(bits) * i64::from(self.sign_of(j) as i8);
+        let t = (s * k + (1 << 31)) >> 32;
+        (t as i32).saturating_add(self.zero_tick)
+    }
+
+    /// Ticks per rad × 2⁻¹⁶ × 2³² (42 722 830 for 4096 ticks per turn).
+    fn ticks_per_fx_rad_32(&self) -> i64 {
+        libm::round(f64::from(self.ticks_per_turn) * 65536.0 / core::f64::consts::TAU) as i64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_and_names_agree() {
+        assert_eq!(DEVICE_IDS[..12], LEGS);
+        assert_eq!(&DEVICE_IDS[12..], &SENSOR_IDS);
+        assert_eq!([LEFT_LEG, RIGHT_LEG].concat(), LEGS);
+        for (j, &id) in LEGS.iter().enumerate() {
+            assert_eq!(servo_id(j), Some(id));
+            assert_eq!(joint_of(id), Some(j));
+        }
+        assert_eq!(joint_of(IMU), None);
+        assert_eq!(joint_name(3), "l_knee");
+        assert_eq!(joint_name(12), "?");
+    }
+
+    #[test]
+    fn the_map_in_three_number_types() {
+        let m = TickMap::reference();
+        assert_eq!(m, TickMap::from_robot(&Robot::reference()));
+        assert_eq!(m.tick_f32(0, 0.0), 2048);
+        assert_eq!(m.tick_f32(3, 0.5), 2048 + 326);
+        assert_eq!(m.tick_f64(0, core::f64::consts::PI), 4096);
+        assert_eq!(m.tick_f64(0, -core::f64::consts::FRAC_PI_2), 1024);
+        assert_eq!(m.tick_f64(0, f64::NAN), 2048);
+        assert_eq!(m.tick_f64(0, 1e12), MAX_EXTENDED_TICKS);
+        assert!((m.rad_f64(0, 3072) - core::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert!((m.rad_f32(0, 3072) - core::f32::consts::FRAC_PI_2).abs() < 1e-6);
+        assert_eq!(m.ticks_per_fx_rad_32(), 42_722_830);
+        for t in [0, 1, 2047, 2048, 2049, 3000, 4095] {
+            assert_eq!(m.tick_f64(0, m.rad_f64(0, t)), t);
+            assert_eq!(m.tick_f32(0, m.rad_f32(0, t)), t);
+            let q = m.rad_f64(0, t);
+            let bits = libm::round(q * 65536.0) as i32;
+            assert_eq!(m.tick_fx(0, bits), t, "{t}");
+        }
+        let mut flipped = m;
+        flipped.sign[4] = -1;
+        assert_eq!(flipped.tick_f32(4, 0.5), 2048 - 326);
+        assert_eq!(flipped.tick_fx(4, 32768), 2048 - 326);
+        assert!((flipped.rad_f32(4, 2048 - 326) - 0.5).abs() < 1e-3);
+        assert!((flipped.rad_f64(4, 2048 + 326) + 0.5).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,462 @@
+//! Every numeric code that crosses the firmware–host boundary, each in ONE explicit table:
+//! the stop reasons of the log's stop record ([`StopCode`]), the fault kinds of its fault record
+//! ([`FaultKind`]) and the firmware's exit codes ([`ExitCode`]). Each has `code()` and
+//! `TryFrom<u8>` (or `from_code`) written out value by value: reordering variants changes
+//! nothing on the wire, and a round-trip test covers every value.
+//!
+//! # Exit codes (QEMU passes them to the host through semihosting)
+//! | code | meaning |
+//! | --- | --- |
+//! | 0 | plan done |
+//! | 2 | configuration rejected (bad `key=value` token, or gait-core rejected the plan) |
+//! | 3 | virtual watchdog (QEMU board) |
+//! | 11 | device missing at start-up (stop record `DeviceMissing`, first missing id) |
+//! | 12 | device lost while running |
+//! | 13 | fall (tilt beyond the limit) |
+//! | 14 | overrun burst |
+//! | 15 | non-finite joint target |
+//! | 17 | stop requested |
+//! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
+//! | 101 | panic |
+//!
+//! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0).
+
+/// An unknown code (the value that could not be decoded).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub struct UnknownCode(pub u8);
+
+/// The reason code of a stop record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum StopCode {
+    /// 1: a device did not answer the start-up probe (id).
+    DeviceMissing,
+    /// 2: a device missed more than `hold_ticks` replies in a row (id).
+    DeviceLost,
+    /// 3: the trunk tilted beyond the limit (value = tilt, mrad).
+    Fall,
+    /// 4: too many consecutive tick overruns (value = count).
+    OverrunBurst,
+    /// 5: a joint target was NaN or infinite (id = joint).
+    NonFiniteTarget,
+    /// 6: the walking plan finished.
+    PlanDone,
+    /// 7: stop requested from outside.
+    Requested,
+}
+
+impl StopCode {
+    /// Every stop code.
+    pub const ALL: [StopCode; 7] = [
+        StopCode::DeviceMissing,
+        StopCode::DeviceLost,
+        StopCode::Fall,
+        StopCode::OverrunBurst,
+        StopCode::NonFiniteTarget,
+        StopCode::PlanDone,
+        StopCode::Requested,
+    ];
+
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            StopCode::DeviceMissing => 1,
+            StopCode::DeviceLost => 2,
+            StopCode::Fall => 3,
+            StopCode::OverrunBurst => 4,
+            StopCode::NonFiniteTarget => 5,
+            StopCode::PlanDone => 6,
+            StopCode::Requested => 7,
+        }
+    }
+
+    /// The firmware's exit code for a run that stopped for this reason.
+    pub const fn exit(self) -> ExitCode {
+        match self {
+            StopCode::DeviceMissing => ExitCode::DeviceMissing,
+            StopCode::DeviceLost => ExitCode::DeviceLost,
+            StopCode::Fall => ExitCode::Fall,
+            StopCode::OverrunBurst => ExitCode::OverrunBurst,
+            StopCode::NonFiniteTarget => ExitCode::NonFiniteTarget,
+            StopCode::PlanDone => ExitCode::PlanDone,
+            StopCode::Requested => ExitCode::Requested,
+        }
+    }
+}
+
+impl TryFrom<u8> for StopCode {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => StopCode::DeviceMissing,
+            2 => StopCode::DeviceLost,
+            3 => StopCode::Fall,
+            4 => StopCode::OverrunBurst,
+            5 => StopCode::NonFiniteTarget,
+            6 => StopCode::PlanDone,
+            7 => StopCode::Requested,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
+/// Why the supervisor stopped the robot (the stop record's reason with its data).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum StopReason {
+    /// A device did not answer the start-up probe.
+    DeviceMissing {
+        /// Its bus id.
+        id: u8,
+    },
+    /// A device missed more than `hold_ticks` replies in a row.
+    DeviceLost {
+        /// Its bus id.
+        id: u8,
+    },
+    /// The trunk tilted beyond the limit.
+    Fall {
+        /// Tilt from vertical, mrad.
+        tilt_mrad: u16,
+    },
+    /// Too many consecutive tick overruns.
+    OverrunBurst {
+        /// Consecutive overruns counted.
+        count: u16,
+    },
+    /// A joint target was NaN or infinite.
+    NonFiniteTarget {
+        /// Joint index 0..12 (left leg then right leg).
+        joint: u8,
+    },
+    /// The walking plan finished.
+    PlanDone,
+    /// Stop requested from outside (operator, host).
+    Requested,
+}
+
+impl StopReason {
+    /// The reason's code.
+    pub const fn kind(&self) -> StopCode {
+        match self {
+            StopReason::DeviceMissing { .. } => StopCode::DeviceMissing,
+            StopReason::DeviceLost { .. } => StopCode::DeviceLost,
+            StopReason::Fall { .. } => StopCode::Fall,
+            StopReason::OverrunBurst { .. } => StopCode::OverrunBurst,
+            StopReason::NonFiniteTarget { .. } => StopCode::NonFiniteTarget,
+            StopReason::PlanDone => StopCode::PlanDone,
+            StopReason::Requested => StopCode::Requested,
+        }
+    }
+
+    /// Wire form (code, id, value) used by the log's stop record ([`StopCode`] for the codes).
+    pub fn code(&self) -> (u8, u8, i32) {
+        let c = self.kind().code();
+        match *self {
+            StopReason::DeviceMissing { id } | StopReason::DeviceLost { id } => (c, id, 0),
+            StopReason::Fall { tilt_mrad } => (c, 0, i32::from(tilt_mrad)),
+            StopReason::OverrunBurst { count } => (c, 0, i32::from(count)),
+            StopReason::NonFiniteTarget { joint } => (c, joint, 0),
+            StopReason::PlanDone | StopReason::Requested => (c, 0, 0),
+        }
+    }
+
+    /// Inverse of [`StopReason::code`]; None for an unknown code or impossible value.
+    pub fn from_code(code: u8, id: u8, value: i32) -> Option<Self> {
+        Some(match StopCode::try_from(code).ok()? {
+            StopCode::DeviceMissing => StopReason::DeviceMissing { id },
+            StopCode::DeviceLost => StopReason::DeviceLost { id },
+            StopCode::Fall => StopReason::Fall {
+                tilt_mrad: u16::try_from(value).ok()?,
+            },
+            StopCode::OverrunBurst => StopReason::OverrunBurst {
+                count: u16::try_from(value).ok()?,
+            },
+            StopCode::NonFiniteTarget => StopReason::NonFiniteTarget { joint: id },
+            StopCode::PlanDone => StopReason::PlanDone,
+            StopCode::Requested => StopReason::Requested,
+        })
+    }
+}
+
+/// Kind of a fault event record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum FaultKind {
+    /// 1: a device missed its reply; the firmware holds its last good value (`value` = ticks).
+    DeviceHolding,
+    /// 2: a held device answered again (`value` = ticks it was held).
+    DeviceRecovered,
+    /// 3: a target was clamped to its joint limit (`id` = joint index, `value` = mask).
+    TargetClamped,
+    /// 4: a non-finite IMU sample was replaced by the last good one (`value` = count).
+    ImuNonFinite,
+    /// 5: a run-time parameter was rejected before start-up (`id` = key index in
+    /// [`crate::params::PARAMS`], 0xFF unknown key, 0xFE plan rejected by gait-core; `value` =
+    /// token position, or the `GaitError` code for 0xFE).
+    ConfigRejected,
+    /// 6: a start-up step failed after the probe (`id` = device, `value` = step code).
+    StartupFailed,
+    /// 7: the step timing was stretched for the servo speed limit (`id` = worst joint index,
+    /// `value` = total factor on t1, t2, T in 1/1000).
+    TimingStretched,
+    /// 8: the swing was lowered for the servo speed limit (`id` = worst joint index, `value` =
+    /// new swing height, µm).
+    SwingLowered,
+    /// 9: a joint still needs more than the servo speed limit (`id` = worst joint index,
+    /// `value` = its peak speed, mrad/s); the walk goes on, the servo will lag.
+    SpeedLimit,
+    /// Other kind (code kept for forward compatibility).
+    Other(u8),
+}
+
+impl FaultKind {
+    /// Wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::DeviceHolding => 1,
+            Self::DeviceRecovered => 2,
+            Self::TargetClamped => 3,
+            Self::ImuNonFinite => 4,
+            Self::ConfigRejected => 5,
+            Self::StartupFailed => 6,
+            Self::TimingStretched => 7,
+            Self::SwingLowered => 8,
+            Self::SpeedLimit => 9,
+            Self::Other(c) => c,
+        }
+    }
+    /// From a wire code (every code decodes: unknown ones as [`FaultKind::Other`]).
+    pub const fn from_code(c: u8) -> Self {
+        match c {
+            1 => Self::DeviceHolding,
+            2 => Self::DeviceRecovered,
+            3 => Self::TargetClamped,
+            4 => Self::ImuNonFinite,
+            5 => Self::ConfigRejected,
+            6 => Self::StartupFailed,
+            7 => Self::TimingStretched,
+            8 => Self::SwingLowered,
+            9 => Self::SpeedLimit,
+            c => Self::Other(c),
+        }
+    }
+}
+
+impl From<u8> for FaultKind {
+    fn from(c: u8) -> Self {
+        Self::from_code(c)
+    }
+}
+
+/// Which start-up step failed (its code is the `StartupFailed` fault record's `value`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum StartupStep {
+    /// 1: reading Return Delay Time.
+    ReturnDelayRead,
+    /// 2: writing Return Delay Time = 0.
+    ReturnDelayWrite,
+    /// 3: the read-back value was not 0.
+    ReturnDelayVerify,
+    /// 4: SYNC READ of the present positions.
+    ReadPositions,
+    /// 5: WRITE Torque Enable = 1.
+    TorqueEnable,
+}
+
+impl StartupStep {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            StartupStep::ReturnDelayRead => 1,
+            StartupStep::ReturnDelayWrite => 2,
+            StartupStep::ReturnDelayVerify => 3,
+            StartupStep::ReadPositions => 4,
+            StartupStep::TorqueEnable => 5,
+        }
+    }
+}
+
+impl TryFrom<u8> for StartupStep {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => StartupStep::ReturnDelayRead,
+            2 => StartupStep::ReturnDelayWrite,
+            3 => StartupStep::ReturnDelayVerify,
+            4 => StartupStep::ReadPositions,
+            5 => StartupStep::TorqueEnable,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
+/// The firmware's exit code (see the module docs' table).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum ExitCode {
+    /// 0: plan done.
+    PlanDone,
+    /// 2: configuration rejected.
+    ConfigRejected,
+    /// 3: virtual watchdog (QEMU board).
+    Watchdog,
+    /// 11: device missing at start-up.
+    DeviceMissing,
+    /// 12: device lost while running.
+    DeviceLost,
+    /// 13: fall.
+    Fall,
+    /// 14: overrun burst.
+    OverrunBurst,
+    /// 15: non-finite joint target.
+    NonFiniteTarget,
+    /// 17: stop requested.
+    Requested,
+    /// 20: a start-up step failed after the probe.
+    StartupFailed,
+    /// 101: panic.
+    Panic,
+}
+
+impl ExitCode {
+    /// Every exit code.
+    pub const ALL: [ExitCode; 11] = [
+        ExitCode::PlanDone,
+        ExitCode::ConfigRejected,
+        ExitCode::Watchdog,
+        ExitCode::DeviceMissing,
+        ExitCode::DeviceLost,
+        ExitCode::Fall,
+        ExitCode::OverrunBurst,
+        ExitCode::NonFiniteTarget,
+        ExitCode::Requested,
+        ExitCode::StartupFailed,
+        ExitCode::Panic,
+    ];
+
+    /// The numeric exit code.
+    pub const fn code(self) -> u8 {
+        match self {
+            ExitCode::PlanDone => 0,
+            ExitCode::ConfigRejected => 2,
+            ExitCode::Watchdog => 3,
+            ExitCode::DeviceMissing => 11,
+            ExitCode::DeviceLost => 12,
+            ExitCode::Fall => 13,
+            ExitCode::OverrunBurst => 14,
+            ExitCode::NonFiniteTarget => 15,
+            ExitCode::Requested => 17,
+            ExitCode::StartupFailed => 20,
+            ExitCode::Panic => 101,
+        }
+    }
+
+    /// The numeric exit code as the process status (`i32`, semihosting `exit`).
+    pub const fn status(self) -> i32 {
+        self.code() as i32
+    }
+
+    /// What the code means, in a few words.
+    pub const fn meaning(self) -> &'static str {
+        match self {
+            ExitCode::PlanDone => "plan done",
+            ExitCode::ConfigRejected => "configuration rejected",
+            ExitCode::Watchdog => "watchdog",
+            ExitCode::DeviceMissing => "device missing at start-up",
+            ExitCode::DeviceLost => "device lost",
+            ExitCode::Fall => "fall",
+            ExitCode::OverrunBurst => "overrun burst",
+            ExitCode::NonFiniteTarget => "non-finite target",
+            ExitCode::Requested => "stop requested",
+            ExitCode::StartupFailed => "start-up step failed",
+            ExitCode::Panic => "panic",
+        }
+    }
+}
+
+impl TryFrom<u8> for ExitCode {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            0 => ExitCode::PlanDone,
+            2 => ExitCode::ConfigRejected,
+            3 => ExitCode::Watchdog,
+            11 => ExitCode::DeviceMissing,
+            12 => ExitCode::DeviceLost,
+            13 => ExitCode::Fall,
+            14 => ExitCode::OverrunBurst,
+            15 => ExitCode::NonFiniteTarget,
+            17 => ExitCode::Requested,
+            20 => ExitCode::StartupFailed,
+            101 => ExitCode::Panic,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_code_round_trips_and_is_unique() {
+        for c in 0..=255u8 {
+            if let Ok(s) = StopCode::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(e) = ExitCode::try_from(c) {
+                assert_eq!(e.code(), c);
+            }
+            assert_eq!(FaultKind::from_code(c).code(), c);
+            if let Ok(s) = StartupStep::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+        }
+        assert_eq!(
+            (0..=255u8)
+                .filter(|&c| StopCode::try_from(c).is_ok())
+                .count(),
+            StopCode::ALL.len()
+        );
+        assert_eq!(
+            (0..=255u8)
+                .filter(|&c| ExitCode::try_from(c).is_ok())
+                .count(),
+            ExitCode::ALL.len()
+        );
+        assert_eq!(StopCode::try_from(0), Err(UnknownCode(0)));
+    }
+
+    #[test]
+    fn supervisor_stops_exit_with_ten_plus_their_code() {
+        for s in StopCode::ALL {
+            let e = s.exit();
+            if s == StopCode::PlanDone {
+                assert_eq!(e, ExitCode::PlanDone);
+            } else {
+                assert_eq!(e.code(), 10 + s.code(), "{s:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn stop_reasons_round_trip() {
+        for r in [
+            StopReason::DeviceMissing { id: 111 },
+            StopReason::DeviceLost { id: 7 },
+            StopReason::Fall { tilt_mrad: 650 },
+            StopReason::OverrunBurst { count: 5 },
+            StopReason::NonFiniteTarget { joint: 3 },
+            StopReason::PlanDone,
+            StopReason::Requested,
+        ] {
+            let (c, id, v) = r.code();
+            assert_eq!(StopReason::from_code(c, id, v), Some(r));
+        }
+        assert_eq!(StopReason::from_code(3, 0, -1), None);
+        assert_eq!(StopReason::from_code(99, 0, 0), None);
+    }
+}

@@ -1,0 +1,169 @@
+//! The firmware's run-time configuration ([`Config`]) and the small enums it selects from.
+//! Every field that a `key=value` token can set is declared once in [`crate::params::PARAMS`];
+//! the host builds the same `Config` from a plan file through that table.
+
+/// Most footsteps a firmware plan may have.
+pub const MAX_STEPS: usize = 64;
+/// Default low-pass cutoff of the φ̈ filter, Hz (see the firmware's `imu` module).
+pub const DEFAULT_IMU_CUTOFF_HZ: f32 = 15.0;
+/// Default longest single wait for one reply byte, µs (see the firmware's `bus` module).
+pub const DEFAULT_READ_POLL_US: u32 = 20;
+
+pub use gait_core::gait::{Compensation, Feasibility};
+
+/// Supervisor limits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupervisorConfig {
+    /// Consecutive missed replies bridged with the last good value (then `DeviceLost`).
+    pub hold_ticks: u16,
+    /// Tilt from vertical that counts as a fall, rad.
+    pub tilt_limit_rad: f32,
+    /// Ticks the pose is held in `Stopping` before torque off.
+    pub stopping_ticks: u16,
+    /// Consecutive overruns that stop the robot.
+    pub overrun_burst: u16,
+}
+
+impl SupervisorConfig {
+    /// The defaults: 10 ticks of hold, 0.6 rad tilt, 200 ticks of stopping, 5 overruns.
+    pub const fn default_limits() -> Self {
+        SupervisorConfig {
+            hold_ticks: 10,
+            tilt_limit_rad: 0.6,
+            stopping_ticks: 200,
+            overrun_burst: 5,
+        }
+    }
+}
+
+impl Default for SupervisorConfig {
+    fn default() -> Self {
+        Self::default_limits()
+    }
+}
+
+/// Run-time configuration shared by the boards and the control loop. On QEMU every field
+/// named in [`crate::params::PARAMS`] can be overridden from the semihosting command line; on the real
+/// board the configuration is compiled in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    /// Control tick period = gait sample time dt, µs (1000 ..= 20000).
+    pub tick_period_us: u32,
+    /// Servo bus baud rate, bit/s.
+    pub bus_baud: u32,
+    /// Servo Return Delay Time, µs (modelled by the QEMU board's clock).
+    pub return_delay_us: u32,
+    /// Watchdog timeout once the control loop runs, ms.
+    pub watchdog_ms: u32,
+    /// Supervisor limits.
+    pub supervisor: SupervisorConfig,
+    /// Low-pass cutoff of the φ̈ filter, Hz.
+    pub imu_cutoff_hz: f32,
+    /// Pendulum model of the gait.
+    pub model: gait_core::ModelKind,
+    /// The forward walk (seed 000 Table 2 by default).
+    pub walk: gait_core::ForwardWalk,
+    /// Use seed 001's continuous ZMP instead of the natural ZMP (d1, d2, a).
+    pub zmp_continuous: bool,
+    /// Half travel b of the continuous ZMP, m (`None`: the walk's `a`).
+    pub zmp_b: Option<f64>,
+    /// Use seed 001's sinusoid swing (height h_z) instead of the cycloid (h_z, w_y).
+    pub swing_sinusoid: bool,
+    /// Reply timeout of the Dynamixel master, µs (per expected status packet).
+    pub reply_timeout_us: u32,
+    /// Longest single wait for one reply byte, µs (the firmware's bus driver).
+    pub read_poll_us: u32,
+    /// Attempts per start-up transaction (ping, Return Delay Time, positions, torque).
+    pub startup_attempts: u8,
+    /// Duration of the smooth move from the present pose to the initial pose, µs.
+    pub ramp_us: u32,
+    /// Time the final pose is held after the plan before torque off, µs.
+    pub final_hold_us: u32,
+    /// Smallest load of a foot that counts for the measured ZMP, N.
+    pub min_load_n: f32,
+    /// A foot board missing at start-up stops the robot (`true`) or is tolerated (`false`:
+    /// the walk runs with the other foot's forces only; see the firmware's `control`).
+    pub feet_required: bool,
+    /// Modelled compute time per tick on the QEMU board, µs (ignored by real boards).
+    pub compute_us: u32,
+    /// How the pelvis is placed: the paper's pipeline or whole-body compensation.
+    pub compensation: Compensation,
+    /// The ZMP/DCM feedback stabilizer is on.
+    pub stabilizer_on: bool,
+    /// The stabilizer's gains and limits.
+    pub stabilizer: gait_core::stabilizer::StabilizerConfig,
+    /// Gyro damping through the ankles and hips of the legs on the ground
+    /// ([`gait_core::balance`]).
+    pub gyro_feedback: gait_core::balance::GyroFeedback,
+    /// What start-up does when the plan needs joints faster than the servos.
+    pub feasibility: Feasibility,
+    /// Fault injection: replace joint 0's target by NaN at this walk tick.
+    pub fault_nan_tick: Option<u32>,
+    /// Fault injection: request a stop at this walk tick.
+    pub stop_at_tick: Option<u32>,
+}
+
+impl Config {
+    /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
+    /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
+    /// compensation, stabilizer off, gyro balance feedback on (k_a 0.1 s, k_h 0.05 s), 8 start-up
+    /// attempts, servo-speed feasibility by stretching the timing.
+    pub const fn default_config() -> Self {
+        Config {
+            tick_period_us: 5_000,
+            bus_baud: 1_000_000,
+            return_delay_us: 0,
+            watchdog_ms: 50,
+            supervisor: SupervisorConfig::default_limits(),
+            imu_cutoff_hz: DEFAULT_IMU_CUTOFF_HZ,
+            model: gait_core::ModelKind::Tlipfm,
+            walk: gait_core::ForwardWalk::table2(),
+            zmp_continuous: false,
+            zmp_b: None,
+            swing_sinusoid: false,
+            reply_timeout_us: 1_000,
+            read_poll_us: DEFAULT_READ_POLL_US,
+            startup_attempts: 8,
+            ramp_us: 1_500_000,
+            final_hold_us: 1_000_000,
+            min_load_n: 2.0,
+            feet_required: true,
+            compute_us: 150,
+            compensation: Compensation::None,
+            stabilizer_on: false,
+            stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
+            gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
+            feasibility: Feasibility::Stretch,
+            fault_nan_tick: None,
+            stop_at_tick: None,
+        }
+    }
+
+    /// The tick period in seconds (the gait's dt).
+    pub fn dt_s(&self) -> f64 {
+        f64::from(self.tick_period_us) * 1e-6
+    }
+
+    /// The gait part of the configuration (gait-core's [`gait_core::gait::WalkConfig`]).
+    pub fn walk_config(&self) -> gait_core::gait::WalkConfig {
+        gait_core::gait::WalkConfig {
+            model: self.model,
+            walk: self.walk,
+            zmp_continuous: self.zmp_continuous,
+            zmp_b: self.zmp_b,
+            swing_sinusoid: self.swing_sinusoid,
+            dt_s: self.dt_s(),
+        }
+    }
+
+    /// Number of whole ticks covering `us` microseconds (at least 1).
+    pub fn ticks_for_us(&self, us: u32) -> u32 {
+        us.div_ceil(self.tick_period_us.max(1)).max(1)
+    }
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self::default_config()
+    }
+}

@@ -1,0 +1,32 @@
+//! walker-contract: what the firmware and the host tools must agree on, each fact once.
+//!
+//! * [`bus_map`]: device IDs, joint order and names, the ONE joint-angle ↔ servo-tick map;
+//! * [`codes`]: stop reasons, fault kinds and exit codes with explicit numeric values;
+//! * [`config`]: the firmware's run-time configuration;
+//! * [`params`]: the run-time parameter table (one declaration per key), its parser and the
+//!   docs' table;
+//! * [`record`]: the ZMP-response log's wire format, its writer and its decoder.
+//!
+//! `no_std`, allocation-free and panic-free (no unwrap, expect or unchecked indexing outside
+//! tests); `std` only for its own tests.
+#![cfg_attr(not(test), no_std)]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::indexing_slicing,
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic
+    )
+)]
+
+pub mod bus_map;
+pub mod codes;
+pub mod config;
+pub mod params;
+pub mod record;
+
+pub use codes::{ExitCode, FaultKind, StopCode, StopReason};
+pub use config::Config;

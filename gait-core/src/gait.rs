@@ -1,0 +1,345 @@
+//! Gait decisions shared by the firmware and the host tools: which sampler a walk configuration
+//! builds, which joint-target pipeline turns a sample into 12 joint angles (and with which CoM
+//! shift), the support polygon of a sample and its cache, and the servo-speed feasibility check
+//! with its timing stretch.
+//!
+//! # Joint targets ([`Targets`])
+//! * [`Compensation::None`], the paper's pipeline: the pelvis point on the model's CoM c + δ
+//!   (δ = the stabilizer's shift, 0 without feedback), two-leg IK ([`crate::pipeline`]);
+//! * [`Compensation::WholeBody`]: the pelvis placed so that the multi-body CoM (swing leg
+//!   included) is on c + δ ([`crate::wholebody`], [`WHOLEBODY_ITERATIONS`] fixed-point steps).
+//!
+//! # Support polygon ([`support_of`], [`SupportCache`])
+//! The support sole in single support, the hull of both soles otherwise. The cache rebuilds it
+//! only when the phase or a supporting foot changes (a few times per step).
+//!
+//! # Servo-speed check ([`servo_timing`])
+//! The whole plan runs through the sampler and [`Targets`] at dt (a dry run, O(1) memory) with
+//! [`JointSpeedMonitor`]. When the peak joint speed v exceeds the servo limit v_max
+//! (`robot.servo.max_speed`), with [`Feasibility::Stretch`] t1, t2 and T are multiplied by
+//! f = ⌈1000·(v/v_max)·1.05⌉/1000 (joint speeds scale as 1/f for the same path,
+//! [`stretched`]), with [`Feasibility::Lower`] the swing height becomes ⌊h_z·v_max/(1.05·v)⌋
+//! (µm), and the plan is checked again, at most [`MAX_TIMING_ROUNDS`] adjustments.
+
+use crate::kinematics::{JointSpeedMonitor, JointSpeedReport, LegKinematics, LegsIkReport};
+use crate::pipeline::joint_targets;
+use crate::plan::SwingShape;
+use crate::robot::LEG_JOINTS;
+use crate::support::SupportPolygon;
+use crate::wholebody::WholeBody;
+use crate::zmp::ZmpShape;
+use crate::{ForwardWalk, GaitError, GaitSample, Model, ModelKind, Place, Robot, Sampler};
+
+/// Fixed-point steps of the whole-body compensation per sample (cost: that + 1 two-leg IK and
+/// FK evaluations).
+pub const WHOLEBODY_ITERATIONS: u8 = 2;
+/// Most adjustments of the servo-speed check.
+pub const MAX_TIMING_ROUNDS: u8 = 4;
+/// Safety factor on the needed slow-down.
+pub const TIMING_MARGIN: f64 = 1.05;
+/// Most samples of one dry run (a 64-step plan of 4 s steps at 1 kHz is below).
+pub const MAX_DRY_RUN_SAMPLES: u32 = 400_000;
+
+/// How the pelvis is placed (firmware token `comp=`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Compensation {
+    /// The paper's pipeline: the pelvis point on the model's CoM.
+    None,
+    /// Whole-body compensation: the multi-body CoM (swing leg included) on the model's CoM.
+    WholeBody,
+}
+
+/// What the servo-speed check does when the plan needs a joint faster than the servo
+/// (firmware token `feasibility=`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feasibility {
+    /// Stretch t1, t2 and T by the needed factor × 1.05 (re-checked).
+    Stretch,
+    /// Lower the swing height by the needed factor × 1.05 (re-checked).
+    Lower,
+    /// Only report it.
+    Off,
+}
+
+/// What a walk is made of: the model, the forward walk, the ZMP and swing shapes and dt.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WalkConfig {
+    /// Pendulum model.
+    pub model: ModelKind,
+    /// The forward walk (Table 2 names).
+    pub walk: ForwardWalk,
+    /// Seed 001's continuous ZMP instead of the natural ZMP.
+    pub zmp_continuous: bool,
+    /// Half travel b of the continuous ZMP, m (`None`: the walk's `a`).
+    pub zmp_b: Option<f64>,
+    /// Seed 001's sinusoid swing instead of the cycloid.
+    pub swing_sinusoid: bool,
+    /// Sample time, s.
+    pub dt_s: f64,
+}
+
+/// The f32 sampler of `w` (model, walk, ZMP and swing shape, dt) with room for `N` steps.
+pub fn build_sampler<const N: usize>(
+    w: &WalkConfig,
+    robot: &Robot,
+) -> Result<Sampler<f32, N>, GaitError> {
+    let fw = &w.walk;
+    let model = Model::<f32>::new(w.model, robot, fw.z_c)?;
+    let mut params = fw.params(model);
+    if w.zmp_continuous {
+        let b = w.zmp_b.unwrap_or(fw.a);
+        params.zmp = ZmpShape::Continuous { b: b as f32 };
+    }
+    if w.swing_sinusoid {
+        params.swing = SwingShape::Sinusoid {
+            height: fw.h_z as f32,
+        };
+    }
+    let plan = fw.plan::<f32, N>(robot, params)?;
+    Sampler::new(plan, w.dt_s)
+}
+
+/// Sample → 12 joint targets, built once: the paper's pipeline or whole-body compensation.
+#[derive(Clone, Debug)]
+pub enum Targets {
+    /// Pelvis point on the (shifted) model CoM, two-leg IK.
+    Plain(LegKinematics<f32>),
+    /// Multi-body CoM on the (shifted) model CoM.
+    WholeBody(WholeBody<f32>),
+}
+
+impl Targets {
+    /// The pipeline of `comp` for `robot`.
+    pub fn new(robot: &Robot, comp: Compensation) -> Self {
+        match comp {
+            Compensation::None => Targets::Plain(LegKinematics::new(robot)),
+            Compensation::WholeBody => {
+                Targets::WholeBody(WholeBody::new(robot, WHOLEBODY_ITERATIONS))
+            }
+        }
+    }
+
+    /// The joint targets of `s` with its CoM shifted by `shift` (m), and what the IK clamped.
+    pub fn joints(
+        &self,
+        s: &GaitSample<f32>,
+        shift: [f32; 2],
+    ) -> ([f32; LEG_JOINTS], LegsIkReport<f32>) {
+        match self {
+            Targets::Plain(kin) => {
+                let mut shifted = *s;
+                shifted.com[0] += shift[0];
+                shifted.com[1] += shift[1];
+                joint_targets(kin, &shifted)
+            }
+            Targets::WholeBody(wb) => {
+                let c = wb.pelvis_for_com(s, [s.com[0] + shift[0], s.com[1] + shift[1]]);
+                (c.joints, c.report)
+            }
+        }
+    }
+}
+
+/// The support polygon of a sample: the support sole in single support, both soles otherwise.
+pub fn support_of(robot: &Robot, s: &GaitSample<f32>) -> Option<SupportPolygon<f32>> {
+    let place = |i: usize| {
+        s.feet.get(i).map(|f| Place {
+            x: f.x,
+            y: f.y,
+            yaw: f.yaw,
+        })
+    };
+    match s.phase {
+        crate::SupportPhase::Single(side) => {
+            SupportPolygon::single(&place(side.index())?, robot).ok()
+        }
+        _ => SupportPolygon::double(&place(0)?, &place(1)?, robot).ok(),
+    }
+}
+
+/// The support polygon of the gait samples, rebuilt only when the support phase or a
+/// supporting foot changes (a few times per step) instead of every tick: building the hull costs
+/// thousands of instructions and the supporting feet stand still while they support.
+#[derive(Clone, Debug, Default)]
+pub struct SupportCache {
+    key: Option<(crate::SupportPhase, [[f32; 3]; 2])>,
+    poly: Option<SupportPolygon<f32>>,
+}
+
+impl SupportCache {
+    /// The support polygon of `s` (as [`support_of`]).
+    pub fn get(&mut self, robot: &Robot, s: &GaitSample<f32>) -> Option<&SupportPolygon<f32>> {
+        let foot = |i: usize| s.feet.get(i).map_or([0.0; 3], |f| [f.x, f.y, f.yaw]);
+        // Only the feet that support enter the key: a swinging foot does not change the polygon.
+        let feet = match s.phase {
+            crate::SupportPhase::Single(side) => {
+                let mut k = [[0.0; 3]; 2];
+                if let Some(slot) = k.get_mut(side.index()) {
+                    *slot = foot(side.index());
+                }
+                k
+            }
+            _ => [foot(0), foot(1)],
+        };
+        let key = (s.phase, feet);
+        if self.key != Some(key) {
+            self.poly = support_of(robot, s);
+            self.key = Some(key);
+        }
+        self.poly.as_ref()
+    }
+}
+
+/// One adjustment or warning of the servo-speed check (the firmware logs each as a fault
+/// record).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimingNote {
+    /// t1, t2 and T were stretched by `milli`/1000 for joint `joint`.
+    Stretched {
+        /// The worst joint that triggered it.
+        joint: u8,
+        /// Total factor, 1/1000.
+        milli: u32,
+    },
+    /// The swing height was lowered to `um` µm for joint `joint`.
+    Lowered {
+        /// The worst joint that triggered it.
+        joint: u8,
+        /// New swing height, µm.
+        um: u32,
+    },
+    /// Joint `joint` still needs `mrad_s` mrad/s, above the servo limit.
+    TooFast {
+        /// The worst joint.
+        joint: u8,
+        /// Its peak speed, mrad/s.
+        mrad_s: i32,
+    },
+}
+
+/// The outcome of [`servo_timing`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimingCheck {
+    /// The walk to use (the configured one, possibly adjusted).
+    pub walk: ForwardWalk,
+    /// Total factor applied to t1, t2 and T, in 1/1000 (1000 = unchanged).
+    pub factor_milli: u32,
+    /// Swing height after lowering, µm (`None` = unchanged).
+    pub lowered_um: Option<u32>,
+    /// The worst joint that triggered the (last) adjustment.
+    pub trigger_joint: u8,
+    /// Peak speeds of the walk that will run.
+    pub report: JointSpeedReport,
+    /// Number of adjustments made.
+    pub rounds: u8,
+}
+
+impl TimingCheck {
+    /// True when the walk that will run stays within the servo limit.
+    pub fn feasible(&self) -> bool {
+        self.report.worst_speed <= self.report.limit
+    }
+
+    /// What to report: stretched / lowered, then the warning.
+    pub fn notes(&self) -> heapless::Vec<TimingNote, 2> {
+        let mut v = heapless::Vec::new();
+        if self.factor_milli != 1000 {
+            let _ = v.push(TimingNote::Stretched {
+                joint: self.trigger_joint,
+                milli: self.factor_milli,
+            });
+        }
+        if let Some(um) = self.lowered_um {
+            let _ = v.push(TimingNote::Lowered {
+                joint: self.trigger_joint,
+                um,
+            });
+        }
+        if !self.feasible() {
+            let mrad = self.report.worst_speed * 1000.0;
+            let mrad_s = if mrad.is_finite() {
+                mrad.clamp(0.0, i32::MAX as f64) as i32
+            } else {
+                i32::MAX
+            };
+            let joint = u8::try_from(self.report.worst_joint).unwrap_or(u8::MAX);
+            let _ = v.push(TimingNote::TooFast { joint, mrad_s });
+        }
+        v
+    }
+}
+
+/// `walk` with t1, t2 and T multiplied by `milli`/1000 (the host reproduces it from the log).
+pub fn stretched(walk: &ForwardWalk, milli: u32) -> ForwardWalk {
+    let f = f64::from(milli) / 1000.0;
+    ForwardWalk {
+        t1: walk.t1 * f,
+        t2: walk.t2 * f,
+        period: walk.period * f,
+        ..*walk
+    }
+}
+
+/// Peak joint speeds of `w`'s walk through `targets` at dt (dry run, no τ, no feedback);
+/// `N` is the plan capacity.
+pub fn dry_run<const N: usize>(
+    w: &WalkConfig,
+    robot: &Robot,
+    targets: &Targets,
+) -> Result<JointSpeedReport, GaitError> {
+    let mut s = build_sampler::<N>(w, robot)?;
+    let mut mon = JointSpeedMonitor::new(robot, w.dt_s)?;
+    let mut n = 0u32;
+    while !s.is_done() && n < MAX_DRY_RUN_SAMPLES {
+        let g = s.next(0.0);
+        let (q, _) = targets.joints(&g, [0.0; 2]);
+        mon.push(g.time_ns as f64 * 1e-9, &q);
+        n += 1;
+    }
+    Ok(mon.report())
+}
+
+/// The servo-speed check of `w`'s walk (see the module docs): the walk to run and what was
+/// done. Errors are gait-core's rejections of the (adjusted) plan.
+pub fn servo_timing<const N: usize>(
+    w: &WalkConfig,
+    feasibility: Feasibility,
+    robot: &Robot,
+    targets: &Targets,
+) -> Result<TimingCheck, GaitError> {
+    let base = w.walk;
+    let mut run = *w;
+    let mut out = TimingCheck {
+        walk: base,
+        factor_milli: 1000,
+        lowered_um: None,
+        trigger_joint: 0,
+        report: dry_run::<N>(&run, robot, targets)?,
+        rounds: 0,
+    };
+    while !out.feasible() && out.rounds < MAX_TIMING_ROUNDS && feasibility != Feasibility::Off {
+        let r = &out.report;
+        let need = r.worst_speed / r.limit * TIMING_MARGIN;
+        if !(need.is_finite() && need > 1.0) {
+            break;
+        }
+        out.trigger_joint = u8::try_from(r.worst_joint).unwrap_or(u8::MAX);
+        match feasibility {
+            Feasibility::Stretch => {
+                let f = libm::ceil(f64::from(out.factor_milli) * need);
+                out.factor_milli = if f < 100_000.0 { f as u32 } else { 100_000 };
+                out.walk = stretched(&base, out.factor_milli);
+            }
+            Feasibility::Lower | Feasibility::Off => {
+                let h = libm::floor(out.walk.h_z / need * 1e6);
+                let um = if h > 0.0 { h as u32 } else { 0 };
+                out.lowered_um = Some(um);
+                out.walk.h_z = f64::from(um) * 1e-6;
+            }
+        }
+        out.rounds += 1;
+        run.walk = out.walk;
+        out.report = dry_run::<N>(&run, robot, targets)?;
+    }
+    Ok(out)
+}
