@@ -14,7 +14,8 @@ step "clippy (host)"
 cargo clippy --target host-tuple --workspace --all-targets -- -D warnings
 
 step "clippy (thumbv7em-none-eabihf, no_std crates)"
-cargo clippy -p gait-core -p dxl -- -D warnings
+cargo clippy -p gait-core -p dxl -p walker-contract -- -D warnings
+cargo clippy -p gait-core --features fixed-engine -- -D warnings
 
 step "gait-core builds for the target"
 cargo build -p gait-core --target thumbv7em-none-eabihf
@@ -28,6 +29,11 @@ DXL_FUZZ_CASES=10000000 cargo test --release --target host-tuple -p dxl --test p
 step "firmware: clippy and release builds for both boards"
 cargo clippy --release --no-deps --no-default-features --features board-qemu --bins -- -D warnings
 cargo clippy --release --no-deps --no-default-features --features board-opencr --bins -- -D warnings
+# The fixed-point gait (`math=fixed`) is a build feature (≈ 17 KB of flash): its ELF is kept as
+# qemu-fixed for the firmware-in-the-loop test, then the default ELF is built.
+cargo clippy --release --no-deps --no-default-features --features board-qemu,fixed-gait --bins -- -D warnings
+cargo build --release --no-default-features --features board-qemu,fixed-gait --bin qemu
+cp target/thumbv7em-none-eabihf/release/qemu target/thumbv7em-none-eabihf/release/qemu-fixed
 cargo build --release --no-default-features --features board-qemu --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
 
@@ -53,6 +59,7 @@ render_py=$(bash scripts/render-setup.sh | tail -n 1)
 
 step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism, faults, falls, a 14-step walk with its video)"
 WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu \
+WALKER_QEMU_FIXED_ELF=target/thumbv7em-none-eabihf/release/qemu-fixed \
     cargo test --release --target host-tuple -p walker-host --test fil -- --ignored --test-threads 1
 
 printf '\nall checks passed\n'

@@ -276,7 +276,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         Err(_) => *cfg,
     };
     let cfg = &walk_cfg;
-    let mut sampler = match timing.and_then(|_| build_sampler(cfg, &robot)) {
+    let engine = timing.and_then(|_| {
+        gait_core::gait::Engine::<MAX_STEPS>::new(&cfg.walk_config(), cfg.arithmetic, &robot)
+    });
+    let mut sampler = match engine {
         Ok(s) => s,
         Err(e) => {
             crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
@@ -358,8 +361,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 
     // 5. The initial pose and the ramp to it.
     let map = JointMap::from_robot(&robot);
-    let first = sampler.next(0.0);
-    let (q0, _) = targets.joints(&first, [0.0; 2]);
+    let first_sample = sampler.next(0.0);
+    let q0 = sampler.joints(&targets, &first_sample, [0.0; 2]);
+    let first = first_sample.f32;
     let mut from = [0.0f32; LEG_JOINTS];
     for (j, (f, &t)) in from.iter_mut().zip(present.iter()).enumerate() {
         *f = map.rad_of_tick(j, t);
@@ -382,7 +386,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
     let mut ramp_k: Option<u32> = Some(0);
-    let mut pending = Some(first);
+    let mut pending = Some(first_sample);
     let mut prev = first;
     let mut support_cache = SupportCache::default();
     let mut walk_tick: u32 = 0;
@@ -475,7 +479,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     None => {
                         let k = walk_tick;
                         walk_tick = walk_tick.saturating_add(1);
-                        let s = pending.take().unwrap_or_else(|| sampler.next(tau));
+                        let sample = pending.take().unwrap_or_else(|| sampler.next(tau));
+                        let s = sample.f32;
                         let shift = if cfg.stabilizer_on {
                             // The measurement answers the previous command: compare with it.
                             stab.update(&StabilizerInput {
@@ -487,7 +492,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         } else {
                             [0.0; 2]
                         };
-                        let (mut q, _) = targets.joints(&s, shift);
+                        let mut q = sampler.joints(&targets, &sample, shift);
                         cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                         if sampler.is_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);

@@ -9,7 +9,7 @@ pub const DEFAULT_IMU_CUTOFF_HZ: f32 = 15.0;
 /// Default longest single wait for one reply byte, µs (see the firmware's `bus` module).
 pub const DEFAULT_READ_POLL_US: u32 = 20;
 
-pub use gait_core::gait::{Compensation, Feasibility};
+pub use gait_core::gait::{Arithmetic, Compensation, Feasibility};
 
 /// Supervisor limits.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,6 +97,8 @@ pub struct Config {
     pub gyro_feedback: gait_core::balance::GyroFeedback,
     /// What start-up does when the plan needs joints faster than the servos.
     pub feasibility: Feasibility,
+    /// The number type of the per-sample gait work (f32, or the fixed-point sampler and IK).
+    pub arithmetic: Arithmetic,
     /// Fault injection: replace joint 0's target by NaN at this walk tick.
     pub fault_nan_tick: Option<u32>,
     /// Fault injection: request a stop at this walk tick.
@@ -134,6 +136,7 @@ impl Config {
             stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
             gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
             feasibility: Feasibility::Stretch,
+            arithmetic: Arithmetic::F32,
             fault_nan_tick: None,
             stop_at_tick: None,
         }

@@ -20,7 +20,7 @@
 
 use core::fmt;
 
-use crate::config::{Compensation, Config, Feasibility, MAX_STEPS};
+use crate::config::{Arithmetic, Compensation, Config, Feasibility, MAX_STEPS};
 use gait_core::ModelKind;
 
 /// The values a parameter takes.
@@ -792,6 +792,21 @@ params! {
         doc: "test: request a stop at this walk tick",
         set: |c, v| { c.stop_at_tick = Some(v as u32) },
         get: |c| { c.stop_at_tick.map(Value::Int) },
+    },
+    {
+        key: "math",
+        plan_key: None,
+        unit: "",
+        domain: Domain::Word(&["f32", "fixed"]),
+        doc: "per-sample gait work: f32, or the fixed-point sampler and integer-only IK (firmware built with `--features fixed-gait`; otherwise refused at start-up, exit 2)",
+        set: |c, v| {
+            c.arithmetic = if v as usize == 1 {
+                Arithmetic::Fixed
+            } else {
+                Arithmetic::F32
+            }
+        },
+        get: |c| { Some(Value::Word(usize::from(c.arithmetic == Arithmetic::Fixed))) },
     },
 }
 

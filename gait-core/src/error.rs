@@ -38,11 +38,13 @@ pub enum GaitError {
     BadStartFoot,
     /// The walk has reached its lead-out: no more steps can be appended.
     WalkEnded,
+    /// The requested method is not built in (a cargo feature is off).
+    NotBuiltIn,
 }
 
 impl GaitError {
     /// Every error, in the order of its code.
-    pub const ALL: [GaitError; 17] = [
+    pub const ALL: [GaitError; 18] = [
         GaitError::NonFinite,
         GaitError::NonPositiveMass,
         GaitError::NonPositiveLength,
@@ -60,6 +62,7 @@ impl GaitError {
         GaitError::PeriodTooLong,
         GaitError::BadStartFoot,
         GaitError::WalkEnded,
+        GaitError::NotBuiltIn,
     ];
 
     /// The wire code (the firmware's `ConfigRejected` fault record carries it), one explicit
@@ -83,6 +86,7 @@ impl GaitError {
             GaitError::PeriodTooLong => 14,
             GaitError::BadStartFoot => 15,
             GaitError::WalkEnded => 16,
+            GaitError::NotBuiltIn => 17,
         }
     }
 }
@@ -109,6 +113,7 @@ impl TryFrom<u8> for GaitError {
             14 => GaitError::PeriodTooLong,
             15 => GaitError::BadStartFoot,
             16 => GaitError::WalkEnded,
+            17 => GaitError::NotBuiltIn,
             other => return Err(other),
         })
     }
@@ -134,6 +139,7 @@ impl core::fmt::Display for GaitError {
             GaitError::PeriodTooLong => "a period or standing time is longer than 4 s",
             GaitError::BadStartFoot => "S_first must be -1 or +1",
             GaitError::WalkEnded => "the walk has ended; no more steps can be appended",
+            GaitError::NotBuiltIn => "the requested method is not built in (cargo feature off)",
         };
         f.write_str(s)
     }

@@ -152,6 +152,43 @@ pub struct FixedSample {
     pub steps_done: u32,
 }
 
+impl FixedFoot {
+    /// The foot in f32.
+    pub fn to_f32(&self) -> crate::swing::FootSample<f32> {
+        crate::swing::FootSample {
+            x: self.x.to_num(),
+            y: self.y.to_num(),
+            z: self.z.to_num(),
+            yaw: self.yaw.to_num(),
+        }
+    }
+}
+
+impl FixedSample {
+    /// The sample in f32 (for the log, the stabilizer and the support polygon).
+    pub fn to_f32(&self) -> crate::GaitSample<f32> {
+        crate::GaitSample {
+            time_ns: self.time_ns,
+            zmp: self.zmp.map(|v| v.to_num()),
+            com: self.com.map(|v| v.to_num()),
+            com_vel: self.com_vel.map(|v| v.to_num()),
+            feet: [self.feet[0].to_f32(), self.feet[1].to_f32()],
+            phase: self.phase,
+            support_foot: self.support_foot,
+            steps_done: self.steps_done,
+        }
+    }
+
+    /// The sample with its CoM shifted by `shift` (m, saturating to the fixed-point range).
+    pub fn shifted(&self, shift: [f32; 2]) -> FixedSample {
+        let mut s = *self;
+        for (c, d) in s.com.iter_mut().zip(shift) {
+            *c = c.saturating_add(Fx::saturating_from_num(d));
+        }
+        s
+    }
+}
+
 #[derive(Clone, Copy, Debug, Default)]
 struct FixedSegment {
     p0: [Fx; 2],

@@ -13,6 +13,13 @@
 //! The support sole in single support, the hull of both soles otherwise. The cache rebuilds it
 //! only when the phase or a supporting foot changes (a few times per step).
 //!
+//! # Arithmetic ([`Engine`])
+//! The per-sample work runs in f32 ([`Arithmetic::F32`]) or in fixed point
+//! ([`Arithmetic::Fixed`]: the I16F16 sampler of `fixed_point.rs` and the integer-only IK of
+//! `fixed_ik.rs`, same plan and timeline; BENCHMARKS.md gives its accuracy against f64, CoM
+//! ≤ 5.4e-5 m over the Table 2 walk). The log, the stabilizer and the support polygon take
+//! the sample in f32 either way.
+//!
 //! # Servo-speed check ([`servo_timing`])
 //! The whole plan runs through the sampler and [`Targets`] at dt (a dry run, O(1) memory) with
 //! [`JointSpeedMonitor`]. When the peak joint speed v exceeds the servo limit v_max
@@ -21,6 +28,11 @@
 //! [`stretched`]), with [`Feasibility::Lower`] the swing height becomes ⌊h_z·v_max/(1.05·v)⌋
 //! (µm), and the plan is checked again, at most [`MAX_TIMING_ROUNDS`] adjustments.
 
+#[cfg(feature = "fixed-engine")]
+use crate::fixed_ik::FixedLegKinematics;
+use crate::fixed_point::FixedSample;
+#[cfg(feature = "fixed-engine")]
+use crate::fixed_point::FixedSampler;
 use crate::kinematics::{JointSpeedMonitor, JointSpeedReport, LegKinematics, LegsIkReport};
 use crate::pipeline::joint_targets;
 use crate::plan::SwingShape;
@@ -83,6 +95,14 @@ pub fn build_sampler<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
 ) -> Result<Sampler<f32, N>, GaitError> {
+    Sampler::new(build_plan::<N>(w, robot)?, w.dt_s)
+}
+
+/// The f32 footstep plan of `w` with room for `N` steps.
+pub fn build_plan<const N: usize>(
+    w: &WalkConfig,
+    robot: &Robot,
+) -> Result<crate::Plan<f32, N>, GaitError> {
     let fw = &w.walk;
     let model = Model::<f32>::new(w.model, robot, fw.z_c)?;
     let mut params = fw.params(model);
@@ -95,8 +115,107 @@ pub fn build_sampler<const N: usize>(
             height: fw.h_z as f32,
         };
     }
-    let plan = fw.plan::<f32, N>(robot, params)?;
-    Sampler::new(plan, w.dt_s)
+    fw.plan::<f32, N>(robot, params)
+}
+
+/// The number type of the per-sample gait work (firmware token `math=`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Arithmetic {
+    /// The f32 sampler and the f32 IK (or whole-body compensation).
+    F32,
+    /// The fixed-point sampler ([`crate::fixed_point`]) and, with [`Compensation::None`], the
+    /// integer-only two-leg IK ([`crate::fixed_ik`]); whole-body compensation stays f32 on the
+    /// fixed-point sample.
+    Fixed,
+}
+
+/// One gait sample: in f32 always (log, stabilizer, support polygon) and in fixed point too
+/// when the fixed-point sampler made it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// The sample in f32.
+    pub f32: GaitSample<f32>,
+    /// The fixed-point sample it came from.
+    pub fixed: Option<FixedSample>,
+}
+
+/// The gait's per-sample engine: the f32 sampler, or the fixed-point sampler with the
+/// integer-only IK ([`Arithmetic`]; built with the feature `fixed-engine` only, so that a
+/// firmware without it keeps its flash: ≈ 17 KB for the fixed-point sampler and IK).
+// One engine lives for the whole walk and no_std has no Box: the size of the larger variant is
+// the cost of choosing at run time.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+pub enum Engine<const N: usize> {
+    /// f32 sampler.
+    F32(Sampler<f32, N>),
+    /// Fixed-point sampler and IK (feature `fixed-engine`).
+    #[cfg(feature = "fixed-engine")]
+    Fixed(FixedSampler<N>, FixedLegKinematics),
+}
+
+impl<const N: usize> Engine<N> {
+    /// The engine of `w` in `arithmetic`.
+    pub fn new(w: &WalkConfig, arithmetic: Arithmetic, robot: &Robot) -> Result<Self, GaitError> {
+        let plan = build_plan::<N>(w, robot)?;
+        Ok(match arithmetic {
+            Arithmetic::F32 => Engine::F32(Sampler::new(plan, w.dt_s)?),
+            #[cfg(feature = "fixed-engine")]
+            Arithmetic::Fixed => Engine::Fixed(
+                FixedSampler::new(plan, w.dt_s)?,
+                FixedLegKinematics::new(robot),
+            ),
+            #[cfg(not(feature = "fixed-engine"))]
+            Arithmetic::Fixed => {
+                let _ = robot;
+                return Err(GaitError::NotBuiltIn);
+            }
+        })
+    }
+
+    /// True once the lead-out is over.
+    pub fn is_done(&self) -> bool {
+        match self {
+            Engine::F32(s) => s.is_done(),
+            #[cfg(feature = "fixed-engine")]
+            Engine::Fixed(s, _) => s.is_done(),
+        }
+    }
+
+    /// The next sample with the measured torque `tau` (N·m; the fixed-point sampler takes it
+    /// in whole mN·m, as read from the bus).
+    pub fn next(&mut self, tau: f32) -> Sample {
+        match self {
+            Engine::F32(s) => Sample {
+                f32: s.next(tau),
+                fixed: None,
+            },
+            #[cfg(feature = "fixed-engine")]
+            Engine::Fixed(s, _) => {
+                let mnm = if tau.is_finite() {
+                    libm::roundf(tau * 1000.0).clamp(-1.0e9, 1.0e9) as i32
+                } else {
+                    0
+                };
+                let f = s.next(mnm);
+                Sample {
+                    f32: f.to_f32(),
+                    fixed: Some(f),
+                }
+            }
+        }
+    }
+
+    /// The joint targets (rad) of `s` with its CoM shifted by `shift` (m): the integer IK for
+    /// a fixed-point sample with [`Targets::Plain`], `targets` otherwise.
+    pub fn joints(&self, targets: &Targets, s: &Sample, shift: [f32; 2]) -> [f32; LEG_JOINTS] {
+        #[cfg(feature = "fixed-engine")]
+        if let (Engine::Fixed(_, ik), Some(f), Targets::Plain(_)) = (self, &s.fixed, targets) {
+            let (q, _) = crate::fixed_ik::joint_targets(ik, &f.shifted(shift));
+            return q.map(|a| a.to_num());
+        }
+        targets.joints(&s.f32, shift).0
+    }
 }
 
 /// Sample → 12 joint targets, built once: the paper's pipeline or whole-body compensation.

@@ -6,7 +6,7 @@ use dxl::table::x_series;
 use walker_contract::bus_map::TickMap;
 use walker_host::sim::{Push, SimConfig, Simulator, XServoParams};
 
-fn rad_to_ticks(q: f64) -> i32 {
+fn ticks_of(q: f64) -> i32 {
     TickMap::reference().tick_f64(0, q)
 }
 
@@ -25,7 +25,7 @@ fn hold_pose(sim: &mut Simulator, q: &[f64; 12]) {
     let ids: Vec<u8> = (1..=12).collect();
     let goals: Vec<Vec<u8>> = q
         .iter()
-        .map(|&a| rad_to_ticks(a).to_le_bytes().to_vec())
+        .map(|&a| ticks_of(a).to_le_bytes().to_vec())
         .collect();
     write_all(sim, x_series::GOAL_POSITION, &ids, &goals);
     write_all(sim, x_series::TORQUE_ENABLE, &ids, &vec![vec![1u8]; 12]);
@@ -197,7 +197,7 @@ fn servo_step_follows_the_torque_speed_line() {
         &mut sim,
         x_series::GOAL_POSITION,
         &[1],
-        &[rad_to_ticks(step).to_le_bytes().to_vec()],
+        &[ticks_of(step).to_le_bytes().to_vec()],
     );
     let mut t90 = None;
     while sim.time_us() < t0 + 1_000_000 {
