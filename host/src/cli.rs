@@ -893,7 +893,17 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
         spec: crate::beyond::adjusted_spec(&spec, &events),
         plan_name,
     };
-    let rep = report::run(&ropts, &Robot::reference())?;
+    let rep = match report::run(&ropts, &Robot::reference()) {
+        Ok(rep) => rep,
+        // A firmware that stopped before walking: its exit code is the news, not the report.
+        Err(e) if r.exit_code != Some(0) => {
+            return Err(CliError {
+                message: format!("the firmware exited with code {:?} ({e})", r.exit_code),
+                code: 3,
+            })
+        }
+        Err(e) => return Err(e.into()),
+    };
     println!(
         "{}: {} good records ({} ticks, {} events), {} bad",
         r.log.display(),

@@ -5,7 +5,9 @@
 //! Record counts: *good* = frames the decoder accepted (tick and event records), *bad* = frames
 //! it rejected (COBS, CRC, type, length or field errors, overlong garbage; a capture that
 //! starts mid-frame rejects its first partial frame) plus one for bytes left after the last
-//! delimiter (a frame truncated by the end of the capture). Nothing is fatal.
+//! delimiter (a frame truncated by the end of the capture). Bad frames are counted, not fatal;
+//! but a log with nothing decodable, or without a tick record in a walking phase, is refused
+//! ([`check_walking`]): `walker report` exits 1 with the reason and writes nothing.
 //!
 //! Time: `t` is the firmware's tick clock in seconds (32-bit µs, unwrapped). The plan's time
 //! is aligned on the walk start: the first tick whose phase leaves `standing` is the end of the
@@ -379,14 +381,8 @@ pub struct Alignment {
 
 /// Aligns the log on the plan's walk start (first tick leaving `standing`).
 pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
-    let walking = |p: SupportPhase| {
-        matches!(
-            p,
-            SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
-        )
-    };
     for w in rows.windows(2) {
-        if w[0].rec.phase == SupportPhase::Standing && walking(w[1].rec.phase) {
+        if w[0].rec.phase == SupportPhase::Standing && is_walking(w[1].rec.phase) {
             return Alignment {
                 offset: walk_start - w[1].t,
                 how: format!("walk start (first walking tick at t = {:.3} s = plan's end of lead-in {walk_start:.3} s)", w[1].t),
@@ -691,9 +687,55 @@ pub fn zmp_figure(
     }
 }
 
-/// Writes the whole report; returns what it found.
+/// True for the phases of a walk (double or single support).
+pub fn is_walking(p: SupportPhase) -> bool {
+    matches!(
+        p,
+        SupportPhase::Double | SupportPhase::SingleLeft | SupportPhase::SingleRight
+    )
+}
+
+/// Refuses a log that cannot be reported on: nothing decodable (not a firmware log, or an
+/// empty file), or no tick record in a walking phase (the firmware never walked).
+pub fn check_walking(log: &DecodedLog, path: &Path) -> Result<(), String> {
+    let name = path.display();
+    if log.bytes == 0 {
+        return Err(format!(
+            "the log {name} is empty (0 bytes): nothing to report"
+        ));
+    }
+    if log.good() == 0 {
+        return Err(format!(
+            "the log {name} holds no firmware log record ({} bytes, {} bad frames): not a walker log (COBS frames with CRC-16, see src/log.rs)?",
+            log.bytes,
+            log.bad()
+        ));
+    }
+    if !log.ticks.iter().any(|t| is_walking(t.phase)) {
+        let events: Vec<String> = log
+            .events
+            .iter()
+            .map(|e| {
+                let (_, _, kind, detail) = event_text(e);
+                format!("{kind} {detail}")
+            })
+            .collect();
+        return Err(format!(
+            "the log {name} has no walking record ({} tick records, none in double or single support; {} events{}{}): the firmware did not walk",
+            log.ticks.len(),
+            log.events.len(),
+            if events.is_empty() { "" } else { ": " },
+            events.join("; ")
+        ));
+    }
+    Ok(())
+}
+
+/// Writes the whole report; returns what it found. A log that [`check_walking`] refuses is an
+/// error (nothing is written).
 pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String> {
     let log = decode_file(&opts.log)?;
+    check_walking(&log, &opts.log)?;
     std::fs::create_dir_all(&opts.out_dir)
         .map_err(|e| format!("cannot create {}: {e}", opts.out_dir.display()))?;
     let rows = tick_rows(&log.ticks);

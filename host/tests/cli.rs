@@ -544,3 +544,40 @@ fn report_with_truth_file() {
     let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
     assert!(!json.contains("\"truth_error\": null"));
 }
+
+#[test]
+fn report_refuses_logs_without_a_walk() {
+    let dir = tmp("refuse");
+    // 5 KB of random bytes (xorshift, fixed seed): nothing decodes.
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let random: Vec<u8> = (0..5 * 1024)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect();
+    // Only standing ticks: decodable, but the firmware never walked.
+    let mut standing = vec![0u8];
+    for seq in 0..50u16 {
+        standing.extend(frame(&tick(seq, [0.0, 0.0], None, SupportPhase::Standing)));
+    }
+    for (name, bytes, want) in [
+        ("random.log", random, "no firmware log record"),
+        ("empty.log", Vec::new(), "is empty"),
+        ("standing.log", standing, "no walking record"),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let out = dir.join(format!("{name}.report"));
+        let o = walker(&["report", "--log", s(&path), "--out", s(&out)]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(want) && err.contains(name), "{name}: {err}");
+        assert!(
+            !out.join("zmp_response.png").exists(),
+            "{name}: plots written"
+        );
+    }
+}
