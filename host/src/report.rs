@@ -19,8 +19,10 @@
 use crate::planfile::{WalkSpec, PLAN_CAPACITY};
 use crate::plot::{Dash, Figure, Panel, Series};
 use gait_core::measured::{AxisErrorStats, ZmpErrorStats};
+use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
 use gait_core::support::SupportPolygon;
 use gait_core::{Robot, SupportPhase as PlanPhase};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -395,42 +397,66 @@ pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
     }
 }
 
-/// A ground-truth ZMP trace (e.g. from the simulator), on the log's clock.
+/// A ground-truth trace (the simulator's truth CSV, or any CSV with a time and a ZMP column),
+/// on the log's clock.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Truth {
     /// Time, s.
     pub t: Vec<f64>,
     /// ZMP (x, y), m.
     pub zmp: Vec<[f64; 2]>,
+    /// Every column by its header name, one value per row of `t` (an empty or non-numeric
+    /// field is NaN; `support`/`stance` letters are NaN here).
+    pub columns: BTreeMap<String, Vec<f64>>,
 }
 
 impl Truth {
     /// The ZMP at time `t` (nearest sample at or before `t`, none outside the trace).
     pub fn at(&self, t: f64) -> Option<[f64; 2]> {
+        self.index_at(t).and_then(|i| self.zmp.get(i).copied())
+    }
+
+    /// The row at or before `t` (none outside the trace).
+    pub fn index_at(&self, t: f64) -> Option<usize> {
         let first = *self.t.first()?;
         let last = *self.t.last()?;
         if t < first - 1e-9 || t > last + 1e-9 {
             return None;
         }
-        let i = self.t.partition_point(|&v| v <= t + 1e-9).saturating_sub(1);
-        self.zmp.get(i).copied()
+        Some(self.t.partition_point(|&v| v <= t + 1e-9).saturating_sub(1))
+    }
+
+    /// One column by name.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns.get(name).map(Vec::as_slice)
+    }
+
+    /// Whether every named column is present.
+    pub fn has(&self, names: &[&str]) -> bool {
+        names.iter().all(|n| self.columns.contains_key(*n))
     }
 }
 
-/// Reads a truth CSV: a header with `t` (or `time`) and `zmp_x`/`zmp_y` (or `zmp_true_x`,
-/// `true_zmp_x`), s and m, on the log's clock.
+/// Reads a truth CSV (the one reader of truth files): a header with `t` (or `time`, `t_s`) and
+/// `zmp_x`/`zmp_y` (or `zmp_true_x`, `true_zmp_x`, `zmp_truth_x`), s and m, on the log's
+/// clock; `#` lines are comments; every other column is kept by name. A row whose time is
+/// empty is skipped; a malformed time or ZMP is an error naming the line and column.
 pub fn read_truth(path: &Path) -> Result<Truth, String> {
-    let text = std::fs::read_to_string(path)
+    let mut rd = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_path(path)
         .map_err(|e| format!("cannot read the truth file {}: {e}", path.display()))?;
-    let mut lines = text
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
-    let header: Vec<String> = lines
-        .next()
-        .ok_or_else(|| format!("{}: empty truth file", path.display()))?
-        .split(',')
-        .map(|s| s.trim().to_string())
+    let header: Vec<String> = rd
+        .headers()
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .iter()
+        .map(str::to_string)
         .collect();
+    if header.iter().all(String::is_empty) {
+        return Err(format!("{}: empty truth file", path.display()));
+    }
     let col = |names: &[&str]| header.iter().position(|h| names.contains(&h.as_str()));
     let ct = col(&["t", "time", "t_s"])
         .ok_or_else(|| format!("{}: no `t` column in {header:?}", path.display()))?;
@@ -439,10 +465,11 @@ pub fn read_truth(path: &Path) -> Result<Truth, String> {
     let cy = col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
         .ok_or_else(|| format!("{}: no `zmp_y` column in {header:?}", path.display()))?;
     let mut out = Truth::default();
-    for (n, line) in lines.enumerate() {
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
-        let get = |i: usize| -> Result<f64, String> {
-            let s = f.get(i).copied().unwrap_or("");
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+    for (n, rec) in rd.records().enumerate() {
+        let rec = rec.map_err(|e| format!("{}: {e}", path.display()))?;
+        let strict = |i: usize| -> Result<f64, String> {
+            let s = rec.get(i).unwrap_or("");
             if s.is_empty() {
                 return Ok(f64::NAN);
             }
@@ -455,13 +482,21 @@ pub fn read_truth(path: &Path) -> Result<Truth, String> {
                 )
             })
         };
-        let t = get(ct)?;
+        let t = strict(ct)?;
         if !t.is_finite() {
             continue;
         }
         out.t.push(t);
-        out.zmp.push([get(cx)?, get(cy)?]);
+        out.zmp.push([strict(cx)?, strict(cy)?]);
+        for (i, c) in cols.iter_mut().enumerate() {
+            c.push(
+                rec.get(i)
+                    .and_then(|s| s.parse::<f64>().ok())
+                    .unwrap_or(f64::NAN),
+            );
+        }
     }
+    out.columns = header.into_iter().zip(cols).collect();
     Ok(out)
 }
 
@@ -683,8 +718,152 @@ pub fn zmp_figure(
         title: title.into(),
         width: 1100,
         panel_height: 360,
+        columns: 1,
         panels,
     }
+}
+
+/// The plan's joint speeds, rad/s, on the log's clock (`t = plan_t − offset`): the joint
+/// targets of the plan's IK ([`crate::export::export_rows`]) differentiated centrally. `None`
+/// when the plan cannot be exported.
+pub fn planned_joint_speeds(
+    spec: &WalkSpec,
+    robot: &Robot,
+    dt: f64,
+    offset: f64,
+) -> Option<(Vec<f64>, Vec<[f64; LEG_JOINTS]>)> {
+    let (rows, _) = crate::export::export_rows(spec, robot, dt).ok()?;
+    if rows.len() < 3 {
+        return None;
+    }
+    let mut t = Vec::with_capacity(rows.len());
+    let mut v = Vec::with_capacity(rows.len());
+    for i in 0..rows.len() {
+        let (a, b) = (
+            &rows[i.saturating_sub(1)],
+            &rows[(i + 1).min(rows.len() - 1)],
+        );
+        let h = b.t - a.t;
+        t.push(rows[i].t - offset);
+        v.push(std::array::from_fn(|j| (b.q[j] - a.q[j]) / h));
+    }
+    Some((t, v))
+}
+
+/// Per-joint panels (left leg left, right leg right, hip to ankle downwards) of the truth
+/// columns `{prefix}1` … `{prefix}12` (by servo ID), with an optional planned line per joint.
+/// `None` when the truth lacks the columns or they hold no finite value.
+pub fn joint_figure(
+    title: &str,
+    truth: &Truth,
+    prefix: &str,
+    unit: &str,
+    planned: Option<&(Vec<f64>, Vec<[f64; LEG_JOINTS]>)>,
+) -> Option<Figure> {
+    let cols: Vec<&[f64]> = (1..=LEG_JOINTS)
+        .map(|id| truth.column(&format!("{prefix}{id}")))
+        .collect::<Option<_>>()?;
+    if !cols.iter().any(|c| c.iter().any(|v| v.is_finite())) {
+        return None;
+    }
+    let mut panels = Vec::new();
+    for k in 0..LEG_JOINTS / 2 {
+        for j in [k, k + LEG_JOINTS / 2] {
+            let mut series = Vec::new();
+            if let Some((pt, pv)) = planned {
+                series.push(Series {
+                    label: "plan (IK)".into(),
+                    color: [30, 80, 200],
+                    dash: Dash::DashDot,
+                    width: 1.5,
+                    points: pt.iter().zip(pv).map(|(&t, v)| (t, v[j])).collect(),
+                });
+            }
+            series.push(Series {
+                label: "simulated".into(),
+                color: [200, 30, 30],
+                dash: Dash::Solid,
+                width: 1.2,
+                points: truth
+                    .t
+                    .iter()
+                    .copied()
+                    .zip(cols[j].iter().copied())
+                    .collect(),
+            });
+            panels.push(Panel {
+                title: format!("{} (ID {})", JOINT_NAMES[j].replace('_', " "), j + 1),
+                x_label: "t (s)".into(),
+                y_label: unit.into(),
+                series,
+            });
+        }
+    }
+    Some(Figure {
+        title: title.into(),
+        width: 1100,
+        panel_height: 230,
+        columns: 2,
+        panels,
+    })
+}
+
+/// The foot-force figure: each sole's four load cells (`l_f0..l_f3`, `r_f0..r_f3`: front-left,
+/// front-right, rear-left, rear-right) and its contact force `l_fz` / `r_fz` when present.
+/// `None` when the truth has no load-cell columns.
+pub fn foot_force_figure(title: &str, truth: &Truth) -> Option<Figure> {
+    let colors = [[30, 80, 200], [20, 150, 60], [220, 120, 0], [150, 40, 160]];
+    let names = ["front-left", "front-right", "rear-left", "rear-right"];
+    let mut panels = Vec::new();
+    for (side, name) in [("l", "left sole"), ("r", "right sole")] {
+        let mut series = Vec::new();
+        for (k, (c, n)) in colors.iter().zip(names).enumerate() {
+            let v = truth.column(&format!("{side}_f{k}"))?;
+            series.push(Series {
+                label: format!("load cell {k} ({n})"),
+                color: *c,
+                dash: Dash::Solid,
+                width: 1.0,
+                points: truth.t.iter().copied().zip(v.iter().copied()).collect(),
+            });
+        }
+        if let Some(v) = truth.column(&format!("{side}_fz")) {
+            series.push(Series {
+                label: "contact force, vertical".into(),
+                color: [0, 0, 0],
+                dash: Dash::Dashed,
+                width: 1.5,
+                points: truth.t.iter().copied().zip(v.iter().copied()).collect(),
+            });
+        }
+        panels.push(Panel {
+            title: format!("{name}: vertical forces"),
+            x_label: "t (s)".into(),
+            y_label: "force (N)".into(),
+            series,
+        });
+    }
+    Some(Figure {
+        title: title.into(),
+        width: 1100,
+        panel_height: 330,
+        columns: 1,
+        panels,
+    })
+}
+
+fn write_figure(
+    fig: &Figure,
+    dir: &Path,
+    stem: &str,
+    files: &mut Vec<PathBuf>,
+) -> Result<(), String> {
+    write_file(
+        &dir.join(format!("{stem}.svg")),
+        fig.to_svg()?.as_bytes(),
+        files,
+    )?;
+    write_file(&dir.join(format!("{stem}.png")), &fig.to_png()?, files)
 }
 
 /// True for the phases of a walk (double or single support).
@@ -782,16 +961,36 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         alignment.offset,
         truth.as_ref(),
     );
-    write_file(
-        &opts.out_dir.join("zmp_response.svg"),
-        fig.to_svg().as_bytes(),
-        &mut files,
-    )?;
-    write_file(
-        &opts.out_dir.join("zmp_response.png"),
-        &fig.to_png(),
-        &mut files,
-    )?;
+    write_figure(&fig, &opts.out_dir, "zmp_response", &mut files)?;
+    let mut figures = vec!["zmp_response"];
+    if let Some(tr) = &truth {
+        let planned = planned_joint_speeds(&opts.spec, robot, dt, alignment.offset);
+        let speeds = joint_figure(
+            &format!("Joint speeds: plan vs simulated robot ({model})"),
+            tr,
+            "qd_",
+            "speed (rad/s)",
+            planned.as_ref(),
+        );
+        let torques = joint_figure(
+            &format!("Motor torques of the simulated robot ({model})"),
+            tr,
+            "tq_",
+            "torque (N·m)",
+            None,
+        );
+        let forces = foot_force_figure(&format!("Foot forces, simulated robot ({model})"), tr);
+        for (fig, stem) in [
+            (speeds, "joint_speeds"),
+            (torques, "joint_torques"),
+            (forces, "foot_forces"),
+        ] {
+            if let Some(fig) = fig {
+                write_figure(&fig, &opts.out_dir, stem, &mut files)?;
+                figures.push(stem);
+            }
+        }
+    }
 
     // report.md
     let mut md = String::new();
@@ -849,6 +1048,9 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         "\n## Plot\n\n![ZMP reference vs response](zmp_response.svg)\n"
     );
     let _ = writeln!(md, "Reference dash-dot, response solid, support-polygon min/max dashed (PNG: zmp_response.png).");
+    for stem in &figures[1..] {
+        let _ = writeln!(md, "\n![{stem}]({stem}.svg)\n");
+    }
     if !log.events.is_empty() {
         let _ = writeln!(
             md,

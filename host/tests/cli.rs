@@ -262,7 +262,8 @@ fn report_on_damaged_log_counts_exactly() {
     let png = std::fs::read(out.join("zmp_response.png")).unwrap();
     assert_eq!(&png[..8], &[0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A]);
     let svg = std::fs::read_to_string(out.join("zmp_response.svg")).unwrap();
-    assert!(svg.contains("ZMP reference") && svg.contains("stroke-dasharray"));
+    assert!(svg.contains("ZMP reference") && svg.contains("support polygon min/max"));
+    assert!(svg.contains("t (s)") && svg.contains("ZMP x (m)"), "{svg}");
     // Every measured x is 1 mm ahead of the reference.
     assert!(
         stdout.contains("| x (sagittal) | 97 | 0.097000 | 0.001000 | 0.001000 | 0.001000 |"),
@@ -515,10 +516,11 @@ fn report_with_truth_file() {
     std::fs::write(&log, hand_log(1.0)).unwrap();
     // The sim's truth CSV: t_s plus more columns; the true ZMP equals the reference here.
     let truth = dir.join("truth.csv");
-    let mut t = String::from("t_s,zmp_x,zmp_y,fz_n\n");
+    let mut t =
+        String::from("t_s,zmp_x,zmp_y,fz_n,support,l_f0,l_f1,l_f2,l_f3,r_f0,r_f1,r_f2,r_f3\n");
     for k in 0..4 {
         t.push_str(&format!(
-            "{:.6},0.010000,-0.020000,48.5\n",
+            "{:.6},0.010000,-0.020000,48.5,D,1,2,3,4,5,6,7,{k}\n",
             1.0 + k as f64 * 1e-3
         ));
     }
@@ -543,6 +545,14 @@ fn report_with_truth_file() {
     assert!(md.contains("Measured − true ZMP") && md.contains("LIPM"));
     let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
     assert!(!json.contains("\"truth_error\": null"));
+    // Load cells in the truth: the foot-force figure; no joint columns: no joint figures.
+    assert!(out.join("foot_forces.png").is_file() && out.join("foot_forces.svg").is_file());
+    assert!(!out.join("joint_speeds.png").exists());
+    let tr = report::read_truth(&truth).unwrap();
+    assert_eq!(tr.column("r_f3"), Some(&[0.0, 1.0, 2.0, 3.0][..]));
+    assert!(tr.column("support").unwrap().iter().all(|v| v.is_nan()));
+    assert!(report::foot_force_figure("f", &tr).is_some());
+    assert!(report::joint_figure("j", &tr, "qd_", "rad/s", None).is_none());
 }
 
 #[test]
