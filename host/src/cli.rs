@@ -228,8 +228,10 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
         summary: "record the firmware log from a serial port (or decode a saved capture)",
         usage: "walker capture --port /dev/ttyUSB0 [--baud 921600] --out out/walk.log [--seconds N]\n\
                 walker capture --from-file saved.log [--out out/walk.log]\n\
+                walker capture --list    (the serial ports found)\n\
                 \n  writes the raw stream to --out, the decoded ticks to <out>.csv and events to <out>.events.csv\
-                \n  without --seconds, capture runs until Ctrl-C",
+                \n  any baud rate the port accepts; without --seconds, capture runs until Ctrl-C or the\
+                \n  port hangs up; the CSVs are written however it ends",
         run: run_capture,
     },
     Subcommand {
@@ -511,18 +513,33 @@ fn run_compare(a: &mut Args) -> Result<(), CliError> {
 }
 
 fn run_capture(a: &mut Args) -> Result<(), CliError> {
+    let list = a.flag("--list");
     let from = a.value("--from-file")?.map(PathBuf::from);
-    let port = a.value("--port")?.map(PathBuf::from);
+    let port = a.value("--port")?;
     let baud: Option<u32> = a.parsed("--baud")?;
     let out = a.value("--out")?.map(PathBuf::from);
     let seconds: Option<f64> = a.parsed("--seconds")?;
     a.finish()?;
     if let Some(s) = seconds {
-        if !(s.is_finite() && s > 0.0) {
+        if !(s.is_finite() && s > 0.0 && s <= capture::MAX_SECONDS) {
             return Err(CliError::usage(format!(
-                "walker capture: --seconds must be positive (got {s})"
+                "walker capture: --seconds must be positive and at most {} (got {s})",
+                capture::MAX_SECONDS
             )));
         }
+    }
+    if baud == Some(0) {
+        return Err(CliError::usage("walker capture: --baud must be positive"));
+    }
+    if list {
+        let ports = capture::list_ports()?;
+        if ports.is_empty() {
+            println!("no serial port found");
+        }
+        for p in ports {
+            println!("{p}");
+        }
+        return Ok(());
     }
     let log = match (from, port) {
         (Some(_), Some(_)) => {
@@ -561,7 +578,7 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
                 out: out.clone(),
                 seconds,
             };
-            let log = capture::capture(&opts)?;
+            let (log, _end) = capture::capture(&opts)?;
             println!(
                 "wrote {}, {}, {}",
                 out.display(),

@@ -430,6 +430,7 @@ fn capture_from_file_and_missing_port() {
         err.contains("serial port /dev/ttyDOESNOTEXIST not found"),
         "{err}"
     );
+    // Not a serial port.
     let o = walker(&[
         "capture",
         "--port",
@@ -440,73 +441,148 @@ fn capture_from_file_and_missing_port() {
         s(&dir.join("x.log")),
     ]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("unsupported baud rate"));
-}
-
-#[test]
-fn capture_from_a_pseudo_terminal() {
-    let (mut master, slave) = {
-        let (mut m, mut sl) = (0, 0);
-        let mut name = [0 as libc::c_char; 128];
-        // SAFETY: openpty writes two descriptors and a NUL-terminated name into our buffers.
-        let rc = unsafe {
-            libc::openpty(
-                &mut m,
-                &mut sl,
-                name.as_mut_ptr(),
-                std::ptr::null(),
-                std::ptr::null(),
-            )
-        };
-        assert_eq!(rc, 0, "openpty failed");
-        // SAFETY: `name` is NUL-terminated by openpty; `m` is a fresh descriptor we own.
-        let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-            .to_string_lossy()
-            .into_owned();
-        let master = unsafe { <std::fs::File as std::os::unix::io::FromRawFd>::from_raw_fd(m) };
-        (master, (sl, path))
-    };
-    let dir = tmp("pty");
-    let out = dir.join("walk.log");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_walker"))
-        .args([
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("cannot open serial port /dev/null"), "{err}");
+    // Bad --seconds / --baud: usage errors before any port is opened.
+    for (flag, bad) in [
+        ("--seconds", "NaN"),
+        ("--seconds", "-1"),
+        ("--seconds", "0"),
+        ("--seconds", "1e300"),
+        ("--seconds", "inf"),
+        ("--baud", "0"),
+        ("--baud", "-5"),
+    ] {
+        let o = walker(&[
             "capture",
             "--port",
-            &slave.1,
-            "--baud",
-            "921600",
+            "/dev/ttyDOESNOTEXIST",
             "--out",
-            s(&out),
-            "--seconds",
-            "2",
-        ])
+            s(&dir.join("x.log")),
+            flag,
+            bad,
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {bad}: {err}");
+        assert!(err.contains(flag), "{flag} {bad}: {err}");
+    }
+    // The port listing runs (whatever the machine has).
+    let o = walker(&["capture", "--list"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// How a pseudo-terminal capture is ended.
+#[cfg(unix)]
+#[derive(Clone, Copy, Debug)]
+enum PtyEnd {
+    /// `--seconds 2`.
+    Seconds,
+    /// The other end closes (a hang-up).
+    HangUp,
+    /// SIGINT (Ctrl-C).
+    CtrlC,
+}
+
+/// Captures the damaged log through a pseudo-terminal (from `serialport`) at `baud`, ended as
+/// `how`: the raw bytes and the CSVs must be there whichever way it ends.
+#[cfg(unix)]
+fn pty_capture(name: &str, baud: &str, how: PtyEnd) {
+    use serialport::SerialPort as _;
+    use std::io::{BufRead, Read, Write};
+    let (master, slave) = serialport::TTYPort::pair().expect("a pseudo-terminal");
+    let path = slave.name().expect("the pty's name");
+    // The pair's descriptors are inheritable: keep close-on-exec copies only, so that no child
+    // (the capture or another test's) holds the master open and hides the hang-up.
+    let cloexec = |fd: std::os::fd::RawFd| {
+        // SAFETY: `fd` was just released by its TTYPort (`into_raw_fd`): we own it.
+        let owned = unsafe { <std::os::fd::OwnedFd as std::os::fd::FromRawFd>::from_raw_fd(fd) };
+        std::fs::File::from(owned.try_clone().expect("F_DUPFD_CLOEXEC"))
+    };
+    use std::os::fd::IntoRawFd as _;
+    let mut master = cloexec(master.into_raw_fd());
+    let slave = cloexec(slave.into_raw_fd());
+    let dir = tmp(name);
+    let out = dir.join("walk.log");
+    let mut args = vec!["capture", "--port", &path, "--baud", baud, "--out", s(&out)];
+    if let PtyEnd::Seconds = how {
+        args.extend(["--seconds", "2"]);
+    }
+    let mut child = Command::new(env!("CARGO_BIN_EXE_walker"))
+        .args(&args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // The capture prints "capturing …" once the port is raw and flushed: send after that.
+    // The capture prints "capturing …" once the port is open: send after that.
     let mut err = std::io::BufReader::new(child.stderr.take().unwrap());
     let mut line = String::new();
-    std::io::BufRead::read_line(&mut err, &mut line).unwrap();
+    err.read_line(&mut line).unwrap();
     assert!(line.starts_with("capturing"), "{line}");
     let (bytes, kept) = damaged_log();
     for chunk in bytes.chunks(333) {
-        std::io::Write::write_all(&mut master, chunk).unwrap();
+        master.write_all(chunk).unwrap();
+    }
+    // Wait until the capture has everything on disk, then end it.
+    let t0 = std::time::Instant::now();
+    while std::fs::metadata(&out).map_or(0, |m| m.len()) < bytes.len() as u64 {
+        assert!(
+            t0.elapsed().as_secs() < 20,
+            "the capture did not read the bytes"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    match how {
+        PtyEnd::Seconds => {}
+        PtyEnd::HangUp => {
+            drop(master);
+            drop(slave);
+        }
+        PtyEnd::CtrlC => {
+            let st = Command::new("kill")
+                .args(["-INT", &child.id().to_string()])
+                .status()
+                .unwrap();
+            assert!(st.success());
+        }
+    }
+    let t0 = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed().as_secs() > 30 {
+            let _ = child.kill();
+            panic!("{how:?}: the capture did not end");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
     }
     let o = child.wait_with_output().unwrap();
-    // SAFETY: closing the slave descriptor openpty gave us, after the child is done.
-    unsafe { libc::close(slave.0) };
     let mut rest = String::new();
-    std::io::Read::read_to_string(&mut err, &mut rest).unwrap();
-    assert!(o.status.success(), "{rest}");
+    err.read_to_string(&mut rest).unwrap();
+    assert!(o.status.success(), "{how:?}: {rest}");
+    let want = match how {
+        PtyEnd::Seconds => "time is up",
+        PtyEnd::HangUp => "hung up",
+        PtyEnd::CtrlC => "Ctrl-C",
+    };
+    assert!(rest.contains(want), "{how:?}: {rest}");
     assert_eq!(std::fs::read(&out).unwrap(), bytes);
     let (_, rows) = read_csv(&dir.join("walk.csv"));
     assert_eq!(rows.len(), kept.len());
+    let (_, events) = read_csv(&dir.join("walk.events.csv"));
+    assert_eq!(events.len(), 2);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(
         stdout.contains("99 good records (97 ticks, 2 events), 5 bad"),
         "{stdout}"
     );
+}
+
+/// One test, run in turn: each capture's pseudo-terminal must not leak into another's child.
+#[cfg(unix)]
+#[test]
+fn capture_from_a_pseudo_terminal() {
+    pty_capture("pty", "921600", PtyEnd::Seconds);
+    // 250 000 and 1 234 567 baud are no standard termios rates.
+    pty_capture("pty-hangup", "250000", PtyEnd::HangUp);
+    pty_capture("pty-ctrlc", "1234567", PtyEnd::CtrlC);
 }
 
 #[test]
