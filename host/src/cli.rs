@@ -209,9 +209,11 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
     Subcommand {
         name: "report",
         summary: "decode a firmware log: ZMP CSV, plots (SVG/PNG), Table 3 statistics",
-        usage: "walker report --log out/walk.log [--out out/report] [--truth out/truth.csv] [--plan plans/table2.toml] [--model tlipfm]\n\
+        usage: "walker report --log out/walk.log [--out out/report] [--truth out/truth.csv] [--plan plans/table2.toml] [--model tlipfm] [--mcap run.mcap]\n\
                 \n  --log    captured firmware log (binary COBS frames)\
                 \n  --out    folder for zmp_response.csv, events.csv, zmp_response.svg/.png, report.md, stats.json\
+                \n           (with a truth file also joint_speeds, joint_torques, foot_forces .svg/.png)\
+                \n  --mcap   also write the run as MCAP for Foxglove (README: \"Opening a run in Foxglove\")\
                 \n  --truth  CSV with t, zmp_x, zmp_y (e.g. the simulator's true ZMP), same clock as the log\
                 \n  --plan   the plan the firmware walked (support-polygon bounds; default Table 2)\
                 \n  --model  lipm | dlipm | tlipfm: the model the firmware ran (report title; default: the plan's)",
@@ -406,6 +408,7 @@ fn run_report(a: &mut Args) -> Result<(), CliError> {
     let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/report".into()));
     let truth = a.value("--truth")?.map(PathBuf::from);
     let model = a.value("--model")?;
+    let mcap = a.value("--mcap")?.map(PathBuf::from);
     let (mut spec, plan_name) = plan_arg(a)?;
     a.finish()?;
     if let Some(m) = model {
@@ -425,6 +428,15 @@ fn run_report(a: &mut Args) -> Result<(), CliError> {
         plan_name,
     };
     let r = report::run(&opts, &Robot::reference())?;
+    if let Some(m) = &mcap {
+        let counts = crate::mcap_export::export_run(&opts, &r, &Robot::reference(), m)?;
+        println!(
+            "{}: {} channels, {} messages (Foxglove: open the file)",
+            m.display(),
+            counts.len(),
+            counts.values().sum::<u64>()
+        );
+    }
     println!(
         "{}: {} good records ({} ticks, {} events), {} bad, {} sequence gaps",
         opts.log.display(),

@@ -723,30 +723,37 @@ pub fn zmp_figure(
     }
 }
 
-/// The plan's joint speeds, rad/s, on the log's clock (`t = plan_t − offset`): the joint
-/// targets of the plan's IK ([`crate::export::export_rows`]) differentiated centrally. `None`
-/// when the plan cannot be exported.
-pub fn planned_joint_speeds(
+/// The plan's joint targets, rad, on the log's clock (`t = plan_t − offset`): the joint angles
+/// of the plan's IK ([`crate::export::export_rows`]), by servo ID − 1. `None` when the plan
+/// cannot be exported.
+pub fn planned_joint_angles(
     spec: &WalkSpec,
     robot: &Robot,
     dt: f64,
     offset: f64,
 ) -> Option<(Vec<f64>, Vec<[f64; LEG_JOINTS]>)> {
     let (rows, _) = crate::export::export_rows(spec, robot, dt).ok()?;
-    if rows.len() < 3 {
+    Some(rows.iter().map(|r| (r.t - offset, r.q)).unzip())
+}
+
+/// The plan's joint speeds, rad/s, on the log's clock: [`planned_joint_angles`] differentiated
+/// centrally. `None` when the plan cannot be exported.
+pub fn planned_joint_speeds(
+    spec: &WalkSpec,
+    robot: &Robot,
+    dt: f64,
+    offset: f64,
+) -> Option<(Vec<f64>, Vec<[f64; LEG_JOINTS]>)> {
+    let (t, q) = planned_joint_angles(spec, robot, dt, offset)?;
+    if t.len() < 3 {
         return None;
     }
-    let mut t = Vec::with_capacity(rows.len());
-    let mut v = Vec::with_capacity(rows.len());
-    for i in 0..rows.len() {
-        let (a, b) = (
-            &rows[i.saturating_sub(1)],
-            &rows[(i + 1).min(rows.len() - 1)],
-        );
-        let h = b.t - a.t;
-        t.push(rows[i].t - offset);
-        v.push(std::array::from_fn(|j| (b.q[j] - a.q[j]) / h));
-    }
+    let v = (0..t.len())
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(t.len() - 1));
+            std::array::from_fn(|j| (q[b][j] - q[a][j]) / (t[b] - t[a]))
+        })
+        .collect();
     Some((t, v))
 }
 

@@ -667,3 +667,135 @@ fn report_refuses_logs_without_a_walk() {
         );
     }
 }
+
+/// A synthetic 14-step walk (Table 2 through the plan's own trajectory): the firmware log
+/// (standing lead-in, then walking ticks; measured ZMP 1 mm ahead) and a truth CSV with every
+/// column of the simulator's header.
+fn synthetic_walk(dir: &Path) -> (PathBuf, PathBuf, usize) {
+    let spec = planfile::load(&workspace().join("plans/table2.toml")).unwrap();
+    let (rows, _) = export::export_rows(&spec, &Robot::reference(), 0.005).unwrap();
+    let mut log = vec![0u8];
+    log.extend(frame(&Record::Startup(StartupRecord {
+        seq: 0,
+        time_us: 0,
+        board: BoardId::QemuMps2,
+        fw: [0, 1, 0],
+        tick_period_us: 5000,
+        bus_baud: 1_000_000,
+        device_count: 15,
+        probed: true,
+        missing: Default::default(),
+    })));
+    let header: Vec<&str> = walker_host::sim::truth::HEADER.split(',').collect();
+    let mut truth = format!("{}\n", header.join(","));
+    for (i, r) in rows.iter().enumerate() {
+        let phase = if r.t < 1.6 {
+            SupportPhase::Standing
+        } else {
+            SupportPhase::Double
+        };
+        let mut t = TickRecord {
+            seq: (i + 1) as u16,
+            time_us: (r.t * 1e6).round() as u32 + 5000,
+            phase,
+            zmp_valid: true,
+            ..TickRecord::default()
+        };
+        t.set_zmp_ref_m(r.zmp[0] as f32, r.zmp[1] as f32);
+        t.set_zmp_meas_m(r.zmp[0] as f32 + 0.001, r.zmp[1] as f32);
+        t.set_com_m(r.com[0] as f32, r.com[1] as f32);
+        log.extend(frame(&Record::Tick(t)));
+        let vals: Vec<String> = header
+            .iter()
+            .map(|h| match *h {
+                "t_s" => format!("{:.6}", r.t + 0.005),
+                "zmp_x" => format!("{:.6}", r.zmp[0]),
+                "zmp_y" => format!("{:.6}", r.zmp[1]),
+                "support" => "D".into(),
+                "stance" => "L".into(),
+                "pelvis_z" => "0.217".into(),
+                h if h.starts_with("l_f") || h.starts_with("r_f") => "12.5".into(),
+                _ => format!("{:.4}", (i as f64 * 0.01).sin()),
+            })
+            .collect();
+        truth.push_str(&vals.join(","));
+        truth.push('\n');
+    }
+    log.extend(frame(&Record::Stop(StopRecord {
+        seq: rows.len() as u16 + 1,
+        time_us: 13_000_000,
+        reason: StopReason::PlanDone,
+    })));
+    let (lp, tp) = (dir.join("walk.log"), dir.join("truth.csv"));
+    std::fs::write(&lp, log).unwrap();
+    std::fs::write(&tp, truth).unwrap();
+    (lp, tp, rows.len())
+}
+
+#[test]
+fn mcap_of_a_14_step_walk_holds_every_channel() {
+    let dir = tmp("mcap");
+    let (log, truth, ticks) = synthetic_walk(&dir);
+    let mcap_path = dir.join("run.mcap");
+    let o = walker(&[
+        "report",
+        "--log",
+        s(&log),
+        "--truth",
+        s(&truth),
+        "--out",
+        s(&dir.join("report")),
+        "--mcap",
+        s(&mcap_path),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("run.mcap: 11 channels"), "{stdout}");
+    // The report's joint and foot figures come from the same truth.
+    for f in ["joint_speeds.png", "joint_torques.svg", "foot_forces.png"] {
+        assert!(dir.join("report").join(f).is_file(), "{f}");
+    }
+    let bytes = std::fs::read(&mcap_path).unwrap();
+    let mut count: std::collections::BTreeMap<String, usize> = Default::default();
+    let mut last_time = 0u64;
+    let mut pose = None;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        assert_eq!(m.channel.message_encoding, "json");
+        let schema = m.channel.schema.as_ref().expect("a schema");
+        assert_eq!(schema.encoding, "jsonschema");
+        assert!(m.log_time >= last_time, "messages in time order");
+        last_time = m.log_time;
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if m.channel.topic == "/torso_pose" && pose.is_none() {
+            pose = Some(v);
+        }
+        *count.entry(m.channel.topic.clone()).or_default() += 1;
+    }
+    for topic in [
+        "/zmp/reference",
+        "/zmp/measured",
+        "/zmp/true",
+        "/com",
+        "/com/true",
+        "/foot_forces",
+        "/imu",
+        "/torso_pose",
+        "/joints",
+        "/joints/target",
+        "/events",
+    ] {
+        assert!(
+            count.get(topic).copied().unwrap_or(0) > 0,
+            "{topic}: {count:?}"
+        );
+    }
+    assert_eq!(count["/zmp/reference"], ticks);
+    assert_eq!(count["/zmp/measured"], ticks);
+    assert_eq!(count["/events"], 2);
+    let pose = pose.unwrap();
+    assert_eq!(pose["frame_id"], "world");
+    assert_eq!(pose["pose"]["position"]["z"], 0.217);
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+    assert_eq!(summary.channels.len(), 11);
+}
