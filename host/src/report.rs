@@ -283,14 +283,15 @@ pub fn event_text(r: &Record) -> (u16, u32, &'static str, String) {
     }
 }
 
-/// Writes the event records as CSV.
-pub fn write_events_csv(events: &[Record], mut w: impl Write) -> std::io::Result<()> {
-    writeln!(w, "seq,time_us,kind,detail")?;
+/// Writes the event records as CSV (the `csv` crate: the detail is quoted as CSV quotes).
+pub fn write_events_csv(events: &[Record], w: impl Write) -> std::io::Result<()> {
+    let mut out = csv::Writer::from_writer(w);
+    out.write_record(["seq", "time_us", "kind", "detail"])?;
     for e in events {
         let (seq, t, kind, detail) = event_text(e);
-        writeln!(w, "{seq},{t},{kind},\"{}\"", detail.replace('"', "'"))?;
+        out.write_record([seq.to_string(), t.to_string(), kind.to_string(), detail])?;
     }
-    Ok(())
+    out.flush()
 }
 
 /// Table 3 statistics of one run.
@@ -550,49 +551,30 @@ pub fn stats_table(s: &ErrorSummary) -> String {
     t
 }
 
-fn axis_json(a: &AxisErrorStats) -> String {
-    format!(
-        "{{\"count\": {}, \"sum_abs\": {}, \"mean_abs\": {}, \"rms\": {}, \"max_abs\": {}}}",
-        a.count,
-        json_num(a.sum_abs),
-        json_num(a.mean_abs),
-        json_num(a.rms),
-        json_num(a.max_abs)
-    )
+/// A finite number as JSON, else `null` (JSON has no NaN).
+fn json_num(v: f64) -> serde_json::Value {
+    serde_json::Number::from_f64(v).map_or(serde_json::Value::Null, serde_json::Value::Number)
 }
 
-fn json_num(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:e}")
-    } else {
-        "null".into()
-    }
+fn axis_json(a: &AxisErrorStats) -> serde_json::Value {
+    serde_json::json!({
+        "count": a.count,
+        "sum_abs": json_num(a.sum_abs),
+        "mean_abs": json_num(a.mean_abs),
+        "rms": json_num(a.rms),
+        "max_abs": json_num(a.max_abs),
+    })
 }
 
-fn json_str(s: &str) -> String {
-    let mut o = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
-}
-
-/// The statistics as a JSON object.
-pub fn stats_json(s: &ErrorSummary) -> String {
-    format!(
-        "{{\"ticks\": {}, \"skipped\": {}, \"invalid\": {}, \"x\": {}, \"y\": {}}}",
-        s.ticks,
-        s.skipped,
-        s.invalid,
-        axis_json(&s.x),
-        axis_json(&s.y)
-    )
+/// The statistics as a JSON object (metres; a statistic without samples is `null`).
+pub fn stats_json(s: &ErrorSummary) -> serde_json::Value {
+    serde_json::json!({
+        "ticks": s.ticks,
+        "skipped": s.skipped,
+        "invalid": s.invalid,
+        "x": axis_json(&s.x),
+        "y": axis_json(&s.y),
+    })
 }
 
 fn write_file(path: &Path, data: &[u8], files: &mut Vec<PathBuf>) -> Result<(), String> {
@@ -1070,20 +1052,23 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
     }
     write_file(&opts.out_dir.join("report.md"), md.as_bytes(), &mut files)?;
 
-    let json = format!(
-        "{{\n  \"log\": {},\n  \"plan\": {},\n  \"model\": {},\n  \"records\": {{\"good\": {}, \"bad\": {}, \"ticks\": {}, \"events\": {}, \"seq_gaps\": {}, \"bytes\": {}}},\n  \"zmp_error\": {},\n  \"truth_error\": {}\n}}\n",
-        json_str(&opts.log.display().to_string()),
-        json_str(&opts.plan_name),
-        json_str(opts.spec.model_kind().name()),
-        log.good(),
-        log.bad(),
-        log.ticks.len(),
-        log.events.len(),
-        log.decoder.seq_gaps,
-        log.bytes,
-        stats_json(&stats),
-        truth_stats.as_ref().map_or("null".into(), stats_json)
-    );
+    let json = serde_json::json!({
+        "log": opts.log.display().to_string(),
+        "plan": opts.plan_name,
+        "model": opts.spec.model_kind().name(),
+        "records": {
+            "good": log.good(),
+            "bad": log.bad(),
+            "ticks": log.ticks.len(),
+            "events": log.events.len(),
+            "seq_gaps": log.decoder.seq_gaps,
+            "bytes": log.bytes,
+        },
+        "zmp_error": stats_json(&stats),
+        "truth_error": truth_stats.as_ref().map(stats_json),
+        "figures": figures,
+    });
+    let json = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())? + "\n";
     write_file(
         &opts.out_dir.join("stats.json"),
         json.as_bytes(),

@@ -254,11 +254,17 @@ fn report_on_damaged_log_counts_exactly() {
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
-    let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
-    assert!(
-        json.contains("\"good\": 99, \"bad\": 5, \"ticks\": 97, \"events\": 2"),
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    let rec = &json["records"];
+    assert_eq!(
+        [&rec["good"], &rec["bad"], &rec["ticks"], &rec["events"]],
+        [99, 5, 97, 2],
         "{json}"
     );
+    assert_eq!(json["zmp_error"]["x"]["count"], 97);
+    assert!((json["zmp_error"]["x"]["mean_abs"].as_f64().unwrap() - 0.001).abs() < 1e-9);
+    assert_eq!(json["truth_error"], serde_json::Value::Null);
     let png = std::fs::read(out.join("zmp_response.png")).unwrap();
     assert_eq!(&png[..8], &[0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A]);
     let svg = std::fs::read_to_string(out.join("zmp_response.svg")).unwrap();
@@ -619,8 +625,10 @@ fn report_with_truth_file() {
     assert_eq!(stdout.matches(x_row).count(), 2, "{stdout}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("Measured − true ZMP") && md.contains("LIPM"));
-    let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
-    assert!(!json.contains("\"truth_error\": null"));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    assert_eq!(json["truth_error"]["x"]["count"], 3);
+    assert_eq!(json["model"], "lipm");
     // Load cells in the truth: the foot-force figure; no joint columns: no joint figures.
     assert!(out.join("foot_forces.png").is_file() && out.join("foot_forces.svg").is_file());
     assert!(!out.join("joint_speeds.png").exists());
