@@ -769,7 +769,8 @@ pub fn joint_figure(
                 });
             }
             series.push(Series {
-                label: "simulated".into(),
+                // One line alone needs no legend.
+                label: if planned.is_some() { "simulated" } else { "" }.into(),
                 color: [200, 30, 30],
                 dash: Dash::Solid,
                 width: 1.2,
