@@ -6,9 +6,11 @@
 //! `defmt-print` output from probe-rs/RTT carries only the firmware's debug text, not the log:
 //! capture the UART (this command) or decode the QEMU serial file with `--from-file`.
 //!
-//! The serial port is opened with `open(2)` and configured raw with `termios` (libc): 8N1, no
-//! flow control, `VMIN = 0`, `VTIME = 1` (reads return after 100 ms of silence). Standard
-//! Linux rates up to 4 Mbaud are accepted (921 600 is `B921600`).
+//! The serial port is opened with the `serialport` crate (Linux, macOS, Windows): 8N1, no flow
+//! control, any baud rate the driver accepts (921 600 by default), reads returning after 100 ms
+//! of silence; `walker capture --list` lists the ports it finds. Ctrl-C (`ctrlc`), `--seconds`,
+//! a hang-up (the USB adapter unplugged, the pseudo-terminal's other end closed) or a read
+//! error all end the capture the same way: what was read is kept and its CSVs are written.
 //!
 //! The raw stream is written unchanged to `--out` (so it can be decoded again later) and the
 //! decoded ticks to the same path with the extension `.csv`.
@@ -16,102 +18,104 @@
 use crate::report::{tick_rows, write_events_csv, write_response_csv, DecodedLog, LogCollector};
 use std::fs::File;
 use std::io::{Read, Write};
-use std::os::unix::fs::OpenOptionsExt;
-use std::os::unix::io::AsRawFd;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-/// The termios speed constant for a baud rate.
-pub fn baud_constant(baud: u32) -> Option<libc::speed_t> {
-    Some(match baud {
-        9600 => libc::B9600,
-        19200 => libc::B19200,
-        38400 => libc::B38400,
-        57600 => libc::B57600,
-        115200 => libc::B115200,
-        230400 => libc::B230400,
-        460800 => libc::B460800,
-        500000 => libc::B500000,
-        576000 => libc::B576000,
-        921600 => libc::B921600,
-        1000000 => libc::B1000000,
-        1152000 => libc::B1152000,
-        1500000 => libc::B1500000,
-        2000000 => libc::B2000000,
-        2500000 => libc::B2500000,
-        3000000 => libc::B3000000,
-        3500000 => libc::B3500000,
-        4000000 => libc::B4000000,
-        _ => return None,
-    })
+/// The longest `--seconds` accepted (a year): beyond it a deadline is meaningless.
+pub const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
+
+/// Opens `port` (a device path, or `COM3` on Windows) at `baud`, 8N1, no flow control.
+pub fn open_serial(port: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, String> {
+    if baud == 0 {
+        return Err("baud rate 0: give the log UART's rate, e.g. 921600".into());
+    }
+    if cfg!(unix) && !Path::new(port).exists() {
+        return Err(format!(
+            "serial port {port} not found (is the board plugged in? `walker capture --list` lists the ports)"
+        ));
+    }
+    serialport::new(port, baud)
+        .data_bits(serialport::DataBits::Eight)
+        .parity(serialport::Parity::None)
+        .stop_bits(serialport::StopBits::One)
+        .flow_control(serialport::FlowControl::None)
+        .timeout(Duration::from_millis(100))
+        .open()
+        .map_err(|e| match e.kind() {
+            serialport::ErrorKind::NoDevice => format!(
+                "serial port {port} not found or busy: {e} (`walker capture --list` lists the ports)"
+            ),
+            _ => format!("cannot open serial port {port} at {baud} baud: {e}"),
+        })
 }
 
-/// Opens `port` raw at `baud`.
-pub fn open_serial(port: &Path, baud: u32) -> Result<File, String> {
-    let speed = baud_constant(baud).ok_or_else(|| {
-        format!("unsupported baud rate {baud} (use a standard rate such as 115200, 460800, 921600, 1000000, 2000000)")
-    })?;
-    if !port.exists() {
-        return Err(format!("serial port {} not found (is the board plugged in? see `ls /dev/ttyUSB* /dev/ttyACM*`)", port.display()));
-    }
-    let file = std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .custom_flags(libc::O_NOCTTY)
-        .open(port)
-        .map_err(|e| format!("cannot open serial port {}: {e}", port.display()))?;
-    let fd = file.as_raw_fd();
-    // SAFETY: `fd` is a valid open descriptor owned by `file` for the whole block; `tio` is a
-    // plain C struct fully initialised by tcgetattr before use.
-    unsafe {
-        let mut tio: libc::termios = std::mem::zeroed();
-        if libc::tcgetattr(fd, &mut tio) != 0 {
-            return Err(format!(
-                "{} is not a serial port: {}",
-                port.display(),
-                std::io::Error::last_os_error()
-            ));
-        }
-        libc::cfmakeraw(&mut tio);
-        tio.c_cflag |= libc::CLOCAL | libc::CREAD;
-        tio.c_cflag &= !(libc::CSTOPB | libc::PARENB | libc::CRTSCTS);
-        tio.c_iflag &= !(libc::IXON | libc::IXOFF | libc::IXANY);
-        tio.c_cc[libc::VMIN] = 0;
-        tio.c_cc[libc::VTIME] = 1;
-        if libc::cfsetispeed(&mut tio, speed) != 0 || libc::cfsetospeed(&mut tio, speed) != 0 {
-            return Err(format!("cannot set {baud} baud on {}", port.display()));
-        }
-        if libc::tcsetattr(fd, libc::TCSANOW, &tio) != 0 {
-            return Err(format!(
-                "cannot configure {}: {}",
-                port.display(),
-                std::io::Error::last_os_error()
-            ));
-        }
-        libc::tcflush(fd, libc::TCIFLUSH);
-    }
-    Ok(file)
+/// The serial ports the system reports, one line each (`name  kind`).
+pub fn list_ports() -> Result<Vec<String>, String> {
+    let ports =
+        serialport::available_ports().map_err(|e| format!("cannot list serial ports: {e}"))?;
+    Ok(ports
+        .into_iter()
+        .map(|p| {
+            let kind = match p.port_type {
+                serialport::SerialPortType::UsbPort(u) => format!(
+                    "USB {:04x}:{:04x}{}{}",
+                    u.vid,
+                    u.pid,
+                    u.manufacturer.map(|m| format!(" {m}")).unwrap_or_default(),
+                    u.product.map(|m| format!(" {m}")).unwrap_or_default()
+                ),
+                serialport::SerialPortType::PciPort => "PCI".into(),
+                serialport::SerialPortType::BluetoothPort => "Bluetooth".into(),
+                serialport::SerialPortType::Unknown => "unknown".into(),
+            };
+            format!("{}  {kind}", p.port_name)
+        })
+        .collect())
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
 
-extern "C" fn on_sigint(_: libc::c_int) {
-    STOP.store(true, Ordering::SeqCst);
+/// Makes Ctrl-C end a capture cleanly (once per process; later calls are no-ops).
+fn install_ctrlc() -> Result<(), String> {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    let mut res = Ok(());
+    ONCE.call_once(|| {
+        res = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst))
+            .map_err(|e| format!("cannot install the Ctrl-C handler: {e}"));
+    });
+    res
 }
 
-fn install_sigint() {
-    // SAFETY: the handler only stores to an atomic (async-signal-safe).
-    unsafe {
-        libc::signal(libc::SIGINT, on_sigint as *const () as libc::sighandler_t);
+/// How a capture ended.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CaptureEnd {
+    /// `--seconds` elapsed.
+    Deadline,
+    /// Ctrl-C.
+    Interrupted,
+    /// End of input (a file), or the port hung up.
+    HangUp,
+    /// A read error (the message).
+    Error(String),
+}
+
+impl std::fmt::Display for CaptureEnd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CaptureEnd::Deadline => f.write_str("time is up"),
+            CaptureEnd::Interrupted => f.write_str("stopped by Ctrl-C"),
+            CaptureEnd::HangUp => f.write_str("the port hung up (end of input)"),
+            CaptureEnd::Error(e) => write!(f, "read error: {e}"),
+        }
     }
 }
 
 /// Options of a capture.
 #[derive(Clone, Debug)]
 pub struct CaptureOptions {
-    /// Serial device.
-    pub port: PathBuf,
+    /// Serial device (a path, or `COM3` on Windows).
+    pub port: String,
     /// Baud rate.
     pub baud: u32,
     /// Raw output file.
@@ -150,65 +154,78 @@ pub fn write_decoded(log: &DecodedLog, raw: &Path) -> Result<Vec<PathBuf>, Strin
     Ok(vec![csv, ev])
 }
 
-/// Reads any byte source into `out` while decoding, until `deadline`, Ctrl-C or end of input
-/// (a serial port returns 0 bytes on a read timeout: with `tty` such reads do not end it).
+/// Reads any byte source into `out` while decoding, until `deadline`, Ctrl-C, end of input or
+/// an error; returns the log and how it ended. A read that times out (`TimedOut`,
+/// `WouldBlock`) only means silence on the line; with `tty`, a read of 0 bytes does too.
 pub fn capture_stream(
     mut src: impl Read,
     tty: bool,
     out: &mut impl Write,
     deadline: Option<Instant>,
     mut progress: impl FnMut(&LogCollector),
-) -> Result<DecodedLog, String> {
+) -> Result<(DecodedLog, CaptureEnd), String> {
+    use std::io::ErrorKind;
     let mut col = LogCollector::new();
     let mut buf = [0u8; 4096];
     let mut last_report = Instant::now();
-    loop {
-        if STOP.load(Ordering::SeqCst) || deadline.is_some_and(|d| Instant::now() >= d) {
-            break;
+    let end = loop {
+        if STOP.load(Ordering::SeqCst) {
+            break CaptureEnd::Interrupted;
+        }
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            break CaptureEnd::Deadline;
         }
         match src.read(&mut buf) {
-            Ok(0) => {
-                if !tty {
-                    break;
-                }
-            }
+            Ok(0) if !tty => break CaptureEnd::HangUp,
+            Ok(0) => {}
             Ok(n) => {
                 out.write_all(&buf[..n])
                     .map_err(|e| format!("cannot write the capture: {e}"))?;
                 col.feed(&buf[..n]);
             }
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e) => return Err(format!("read error: {e}")),
+            Err(e) if matches!(e.kind(), ErrorKind::Interrupted) => continue,
+            Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock) => {}
+            Err(e) if matches!(e.kind(), ErrorKind::BrokenPipe | ErrorKind::UnexpectedEof) => {
+                break CaptureEnd::HangUp
+            }
+            // EIO: a pseudo-terminal whose other end closed, a USB adapter unplugged.
+            Err(e) if e.raw_os_error() == Some(5) => break CaptureEnd::HangUp,
+            Err(e) => break CaptureEnd::Error(e.to_string()),
         }
         if last_report.elapsed() >= Duration::from_secs(1) {
             progress(&col);
             last_report = Instant::now();
         }
-    }
+    };
     out.flush()
         .map_err(|e| format!("cannot write the capture: {e}"))?;
-    Ok(col.finish())
+    Ok((col.finish(), end))
 }
 
-/// Captures from the serial port (see the module docs).
-pub fn capture(opts: &CaptureOptions) -> Result<DecodedLog, String> {
+/// Captures from the serial port (see the module docs); the CSVs are written however the
+/// capture ends.
+pub fn capture(opts: &CaptureOptions) -> Result<(DecodedLog, CaptureEnd), String> {
     let port = open_serial(&opts.port, opts.baud)?;
     create_parent(&opts.out)?;
     let mut out = File::create(&opts.out)
         .map_err(|e| format!("cannot create {}: {e}", opts.out.display()))?;
-    install_sigint();
-    let deadline = opts
-        .seconds
-        .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+    install_ctrlc()?;
+    let deadline = match opts.seconds {
+        Some(s) if s.is_finite() && s > 0.0 && s <= MAX_SECONDS => {
+            Some(Instant::now() + Duration::from_secs_f64(s))
+        }
+        Some(s) => return Err(format!("--seconds {s}: not in (0, {MAX_SECONDS}]")),
+        None => None,
+    };
     eprintln!(
         "capturing {} at {} baud into {}{}",
-        opts.port.display(),
+        opts.port,
         opts.baud,
         opts.out.display(),
         opts.seconds
             .map_or(" (Ctrl-C to stop)".to_string(), |s| format!(" for {s} s"))
     );
-    let log = capture_stream(port, true, &mut out, deadline, |c| {
+    let (log, end) = capture_stream(port, true, &mut out, deadline, |c| {
         let l = c.log();
         eprint!(
             "\r{} bytes, {} ticks, {} events   ",
@@ -218,8 +235,9 @@ pub fn capture(opts: &CaptureOptions) -> Result<DecodedLog, String> {
         );
     })?;
     eprintln!();
+    eprintln!("capture ended: {end}");
     write_decoded(&log, &opts.out)?;
-    Ok(log)
+    Ok((log, end))
 }
 
 /// Decodes a saved capture and writes its CSVs beside `out` (or beside the capture).

@@ -209,9 +209,11 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
     Subcommand {
         name: "report",
         summary: "decode a firmware log: ZMP CSV, plots (SVG/PNG), Table 3 statistics",
-        usage: "walker report --log out/walk.log [--out out/report] [--truth out/truth.csv] [--plan plans/table2.toml] [--model tlipfm]\n\
+        usage: "walker report --log out/walk.log [--out out/report] [--truth out/truth.csv] [--plan plans/table2.toml] [--model tlipfm] [--mcap run.mcap]\n\
                 \n  --log    captured firmware log (binary COBS frames)\
                 \n  --out    folder for zmp_response.csv, events.csv, zmp_response.svg/.png, report.md, stats.json\
+                \n           (with a truth file also joint_speeds, joint_torques, foot_forces .svg/.png)\
+                \n  --mcap   also write the run as MCAP for Foxglove (README: \"Opening a run in Foxglove\")\
                 \n  --truth  CSV with t, zmp_x, zmp_y (e.g. the simulator's true ZMP), same clock as the log\
                 \n  --plan   the plan the firmware walked (support-polygon bounds; default Table 2)\
                 \n  --model  lipm | dlipm | tlipfm: the model the firmware ran (report title; default: the plan's)",
@@ -228,8 +230,10 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
         summary: "record the firmware log from a serial port (or decode a saved capture)",
         usage: "walker capture --port /dev/ttyUSB0 [--baud 921600] --out out/walk.log [--seconds N]\n\
                 walker capture --from-file saved.log [--out out/walk.log]\n\
+                walker capture --list    (the serial ports found)\n\
                 \n  writes the raw stream to --out, the decoded ticks to <out>.csv and events to <out>.events.csv\
-                \n  without --seconds, capture runs until Ctrl-C",
+                \n  any baud rate the port accepts; without --seconds, capture runs until Ctrl-C or the\
+                \n  port hangs up; the CSVs are written however it ends",
         run: run_capture,
     },
     Subcommand {
@@ -404,6 +408,7 @@ fn run_report(a: &mut Args) -> Result<(), CliError> {
     let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/report".into()));
     let truth = a.value("--truth")?.map(PathBuf::from);
     let model = a.value("--model")?;
+    let mcap = a.value("--mcap")?.map(PathBuf::from);
     let (mut spec, plan_name) = plan_arg(a)?;
     a.finish()?;
     if let Some(m) = model {
@@ -423,6 +428,15 @@ fn run_report(a: &mut Args) -> Result<(), CliError> {
         plan_name,
     };
     let r = report::run(&opts, &Robot::reference())?;
+    if let Some(m) = &mcap {
+        let counts = crate::mcap_export::export_run(&opts, &r, &Robot::reference(), m)?;
+        println!(
+            "{}: {} channels, {} messages (Foxglove: open the file)",
+            m.display(),
+            counts.len(),
+            counts.values().sum::<u64>()
+        );
+    }
     println!(
         "{}: {} good records ({} ticks, {} events), {} bad, {} sequence gaps",
         opts.log.display(),
@@ -511,12 +525,26 @@ fn run_compare(a: &mut Args) -> Result<(), CliError> {
 }
 
 fn run_capture(a: &mut Args) -> Result<(), CliError> {
+    let list = a.flag("--list");
     let from = a.value("--from-file")?.map(PathBuf::from);
-    let port = a.value("--port")?.map(PathBuf::from);
+    let port = a.value("--port")?;
     let baud: Option<u32> = a.parsed("--baud")?;
     let out = a.value("--out")?.map(PathBuf::from);
     let seconds = seconds_arg(a, "--seconds")?.map(|d| d.as_secs_f64());
     a.finish()?;
+    if baud == Some(0) {
+        return Err(CliError::usage("walker capture: --baud must be positive"));
+    }
+    if list {
+        let ports = capture::list_ports()?;
+        if ports.is_empty() {
+            println!("no serial port found");
+        }
+        for p in ports {
+            println!("{p}");
+        }
+        return Ok(());
+    }
     let log = match (from, port) {
         (Some(_), Some(_)) => {
             return Err(CliError::usage(
@@ -554,7 +582,7 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
                 out: out.clone(),
                 seconds,
             };
-            let log = capture::capture(&opts)?;
+            let (log, _end) = capture::capture(&opts)?;
             println!(
                 "wrote {}, {}, {}",
                 out.display(),
@@ -928,7 +956,17 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
         spec: crate::beyond::adjusted_spec(&spec, &events),
         plan_name,
     };
-    let rep = report::run(&ropts, &Robot::reference())?;
+    let rep = match report::run(&ropts, &Robot::reference()) {
+        Ok(rep) => rep,
+        // A firmware that stopped before walking: its exit code is the news, not the report.
+        Err(e) if r.exit_code != Some(0) => {
+            return Err(CliError {
+                message: format!("the firmware exited with code {:?} ({e})", r.exit_code),
+                code: 3,
+            })
+        }
+        Err(e) => return Err(e.into()),
+    };
     println!(
         "{}: {} good records ({} ticks, {} events), {} bad",
         r.log.display(),

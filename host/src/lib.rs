@@ -5,6 +5,7 @@ pub mod capture;
 pub mod cli;
 pub mod export;
 pub mod fil;
+pub mod mcap_export;
 pub mod planfile;
 pub mod plot;
 pub mod report;

@@ -1,12 +1,19 @@
-//! Minimal line plots: hand-written SVG and PNG (a small rasteriser with a built-in 5×7 font:
-//! digits, capital letters — lower case is drawn in capitals — and common punctuation; the
-//! y-axis label sits above the axis instead of being rotated).
+//! Line plots drawn with `plotters` (`SVGBackend`); the PNG is the same SVG rasterised by
+//! `resvg`. Text uses DejaVu Sans embedded in the binary (the `dejavu` crate: `ab_glyph` lays it
+//! out for plotters, resvg's font database holds it for the raster): no system fonts or
+//! fontconfig are needed, and every character the report writes (lower case, µ, τ, Σ, −, ·) is
+//! drawn as written.
 //!
-//! A [`Figure`] is a column of [`Panel`]s sharing nothing but the width; each panel has its own
-//! axis ranges (from the data, padded by 5 %) and any number of [`Series`]. A NaN point breaks a
-//! line (e.g. a measured ZMP that is not available).
+//! A [`Figure`] is a grid of [`Panel`]s (`columns` wide, filled row by row); each panel has its
+//! own axis ranges (from the data; y padded by 5 %) and any number of [`Series`], with a legend
+//! in its top right corner. A NaN point breaks a line (e.g. a measured ZMP that is not
+//! available). Dash patterns are laid out in pixels along the whole polyline.
 
-use std::fmt::Write as _;
+use plotters::coord::Shift;
+use plotters::element::{Drawable, PointCollection};
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use plotters_backend::{BackendCoord, DrawingErrorKind};
 
 /// Line style.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -61,31 +68,43 @@ pub struct Panel {
     pub series: Vec<Series>,
 }
 
-/// A figure: panels stacked vertically.
+/// A figure: panels in a grid.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Figure {
     /// Figure title.
     pub title: String,
     /// Width, px.
     pub width: u32,
-    /// Height of one panel including its margins, px.
+    /// Height of one row of panels including its margins, px.
     pub panel_height: u32,
-    /// The panels, top to bottom.
+    /// Panels per row (0 or 1: one column).
+    pub columns: usize,
+    /// The panels, row by row.
     pub panels: Vec<Panel>,
 }
 
-const LEFT: f64 = 90.0;
-const RIGHT: f64 = 20.0;
-const TOP: f64 = 40.0;
-const PANEL_TOP: f64 = 28.0;
-const PANEL_BOTTOM: f64 = 48.0;
+/// Height of the figure title band, px.
+const TOP: u32 = 40;
+/// The font family name the embedded font is registered under.
+const FONT: &str = "sans-serif";
 
-/// Axis range and ticks.
+/// Registers the embedded DejaVu Sans once (plotters' `ab_glyph` font table).
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_err()
+        {
+            // The font ships inside the binary: this cannot fail short of a corrupted build.
+            panic!("the embedded DejaVu Sans font does not parse");
+        }
+    });
+}
+
+/// Axis range and tick label precision.
 #[derive(Clone, Debug, PartialEq)]
 struct Axis {
     lo: f64,
     hi: f64,
-    ticks: Vec<f64>,
     decimals: usize,
 }
 
@@ -128,40 +147,16 @@ impl Axis {
         } else {
             (-step.log10().floor()) as usize
         };
-        let mut ticks = Vec::new();
-        let mut v = (lo / step).ceil() * step;
-        while v <= hi + step * 1e-9 && ticks.len() < 50 {
-            ticks.push(if v.abs() < step * 1e-9 { 0.0 } else { v });
-            v += step;
-        }
-        Axis {
-            lo,
-            hi,
-            ticks,
-            decimals,
-        }
+        Axis { lo, hi, decimals }
     }
     fn label(&self, v: f64) -> String {
-        format!("{:.*}", self.decimals, v)
-    }
-}
-
-/// Pixel geometry of one panel.
-struct Frame {
-    x0: f64,
-    y0: f64,
-    w: f64,
-    h: f64,
-    xa: Axis,
-    ya: Axis,
-}
-
-impl Frame {
-    fn px(&self, x: f64) -> f64 {
-        self.x0 + (x - self.xa.lo) / (self.xa.hi - self.xa.lo) * self.w
-    }
-    fn py(&self, y: f64) -> f64 {
-        self.y0 + self.h - (y - self.ya.lo) / (self.ya.hi - self.ya.lo) * self.h
+        // No "-0.000".
+        let s = format!("{:.*}", self.decimals, v);
+        if s.starts_with('-') && s[1..].chars().all(|c| c == '0' || c == '.') {
+            s[1..].to_string()
+        } else {
+            s.replace('-', "−")
+        }
     }
 }
 
@@ -185,260 +180,115 @@ fn data_range(panel: &Panel) -> ((f64, f64), (f64, f64)) {
     ((xl, xh), (yl, yh))
 }
 
-impl Figure {
-    /// Total height, px.
-    pub fn height(&self) -> u32 {
-        TOP as u32 + self.panel_height * self.panels.len().max(1) as u32
-    }
+/// A polyline in data coordinates, drawn with a dash pattern laid out in pixels.
+struct DashedPath {
+    points: Vec<(f64, f64)>,
+    style: ShapeStyle,
+    dash: Dash,
+}
 
-    fn frames(&self) -> Vec<Frame> {
-        self.panels
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let ((xl, xh), (yl, yh)) = data_range(p);
-                let top = TOP + i as f64 * f64::from(self.panel_height) + PANEL_TOP;
-                Frame {
-                    x0: LEFT,
-                    y0: top,
-                    w: f64::from(self.width) - LEFT - RIGHT,
-                    h: f64::from(self.panel_height) - PANEL_TOP - PANEL_BOTTOM,
-                    xa: Axis::new(xl, xh, false),
-                    ya: Axis::new(yl, yh, true),
-                }
-            })
-            .collect()
+impl<'a> PointCollection<'a, (f64, f64)> for &'a DashedPath {
+    type Point = &'a (f64, f64);
+    type IntoIter = &'a [(f64, f64)];
+    fn point_iter(self) -> &'a [(f64, f64)] {
+        &self.points
     }
+}
 
-    /// The figure as an SVG document.
-    pub fn to_svg(&self) -> String {
-        let (w, h) = (self.width, self.height());
-        let mut s = String::new();
-        let _ = writeln!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="12">"#
-        );
-        let _ = writeln!(
-            s,
-            r#"<rect x="0" y="0" width="{w}" height="{h}" fill="white"/>"#
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="24" text-anchor="middle" font-size="16">{}</text>"#,
-            w / 2,
-            esc(&self.title)
-        );
-        for (i, (p, f)) in self.panels.iter().zip(self.frames()).enumerate() {
-            let _ = writeln!(
-                s,
-                r#"<clipPath id="clip{i}"><rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}"/></clipPath>"#,
-                f.x0, f.y0, f.w, f.h
-            );
-            // Grid and tick labels.
-            for &t in &f.xa.ticks {
-                let x = f.px(t);
-                let _ = writeln!(
-                    s,
-                    r##"<line x1="{x:.1}" y1="{:.1}" x2="{x:.1}" y2="{:.1}" stroke="#e0e0e0"/><text x="{x:.1}" y="{:.1}" text-anchor="middle">{}</text>"##,
-                    f.y0,
-                    f.y0 + f.h,
-                    f.y0 + f.h + 16.0,
-                    f.xa.label(t)
-                );
-            }
-            for &t in &f.ya.ticks {
-                let y = f.py(t);
-                let _ = writeln!(
-                    s,
-                    r##"<line x1="{:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#e0e0e0"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
-                    f.x0,
-                    f.x0 + f.w,
-                    f.x0 - 6.0,
-                    y + 4.0,
-                    f.ya.label(t)
-                );
-            }
-            let _ = writeln!(
-                s,
-                r#"<rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}" fill="none" stroke="black"/>"#,
-                f.x0, f.y0, f.w, f.h
-            );
-            let _ = writeln!(
-                s,
-                r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="14">{}</text>"#,
-                f.x0 + f.w / 2.0,
-                f.y0 - 8.0,
-                esc(&p.title)
-            );
-            let _ = writeln!(
-                s,
-                r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
-                f.x0 + f.w / 2.0,
-                f.y0 + f.h + 36.0,
-                esc(&p.x_label)
-            );
-            let (lx, ly) = (18.0, f.y0 + f.h / 2.0);
-            let _ = writeln!(
-                s,
-                r#"<text x="{lx}" y="{ly:.1}" text-anchor="middle" transform="rotate(-90 {lx} {ly:.1})">{}</text>"#,
-                esc(&p.y_label)
-            );
-            // Lines.
-            for ser in &p.series {
-                let dash_attr = dash_attr(ser);
-                let color = hex(ser.color);
-                for run in runs(&ser.points) {
-                    let run = decimate(run, |x| f.px(x));
-                    let mut d = String::new();
-                    let mut last = (f64::NAN, f64::NAN);
-                    for (k, &(x, y)) in run.iter().enumerate() {
-                        let (px, py) = (
-                            (f.px(x) * 10.0).round() / 10.0,
-                            (f.py(y) * 10.0).round() / 10.0,
-                        );
-                        if (px, py) == last && k + 1 != run.len() {
-                            continue;
-                        }
-                        last = (px, py);
-                        let _ = write!(
-                            d,
-                            "{}{px:.1},{py:.1}",
-                            if d.is_empty() { "M" } else { " L" }
-                        );
-                    }
-                    let _ = writeln!(
-                        s,
-                        r#"<path d="{d}" fill="none" stroke="{color}" stroke-width="{}"{dash_attr} clip-path="url(#clip{i})"/>"#,
-                        ser.width
-                    );
-                }
-            }
-            // Legend (top right inside the frame).
-            let lw = 200.0;
-            let legend: Vec<&Series> = p.series.iter().filter(|s| !s.label.is_empty()).collect();
-            let lh = 16.0 * legend.len() as f64 + 6.0;
-            let (lx0, ly0) = (f.x0 + f.w - lw - 6.0, f.y0 + 6.0);
-            if !legend.is_empty() {
-                let _ = writeln!(
-                    s,
-                    r##"<rect x="{lx0:.1}" y="{ly0:.1}" width="{lw}" height="{lh}" fill="white" fill-opacity="0.85" stroke="#999"/>"##
-                );
-            }
-            for (k, ser) in legend.iter().enumerate() {
-                let y = ly0 + 14.0 + 16.0 * k as f64;
-                let dash_attr = dash_attr(ser);
-                let _ = writeln!(
-                    s,
-                    r#"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{}" stroke-width="{}"{dash_attr}/><text x="{:.1}" y="{:.1}">{}</text>"#,
-                    lx0 + 6.0,
-                    y - 4.0,
-                    lx0 + 40.0,
-                    y - 4.0,
-                    hex(ser.color),
-                    ser.width,
-                    lx0 + 46.0,
-                    y,
-                    esc(&ser.label)
-                );
+impl<DB: DrawingBackend> Drawable<DB> for DashedPath {
+    fn draw<I: Iterator<Item = BackendCoord>>(
+        &self,
+        pos: I,
+        backend: &mut DB,
+        _: (u32, u32),
+    ) -> Result<(), DrawingErrorKind<DB::ErrorType>> {
+        let px: Vec<BackendCoord> = pos.collect();
+        for piece in dash_pieces(&px, self.dash.pattern()) {
+            backend.draw_path(piece, &self.style)?;
+        }
+        Ok(())
+    }
+}
+
+/// A short legend sample of a line style (the legend's own element, at a pixel position).
+struct LegendLine {
+    at: BackendCoord,
+    style: ShapeStyle,
+    dash: Dash,
+}
+
+impl<'a> PointCollection<'a, BackendCoord> for &'a LegendLine {
+    type Point = &'a BackendCoord;
+    type IntoIter = std::iter::Once<&'a BackendCoord>;
+    fn point_iter(self) -> Self::IntoIter {
+        std::iter::once(&self.at)
+    }
+}
+
+impl<DB: DrawingBackend> Drawable<DB> for LegendLine {
+    fn draw<I: Iterator<Item = BackendCoord>>(
+        &self,
+        mut pos: I,
+        backend: &mut DB,
+        _: (u32, u32),
+    ) -> Result<(), DrawingErrorKind<DB::ErrorType>> {
+        if let Some((x, y)) = pos.next() {
+            let line = [(x, y), (x + 30, y)];
+            for piece in dash_pieces(&line, self.dash.pattern()) {
+                backend.draw_path(piece, &self.style)?;
             }
         }
-        s.push_str("</svg>\n");
-        s
+        Ok(())
     }
+}
 
-    /// The figure rasterised as a PNG file.
-    pub fn to_png(&self) -> Vec<u8> {
-        let mut c = Canvas::new(self.width, self.height());
-        for (p, f) in self.panels.iter().zip(self.frames()) {
-            let clip = (f.x0, f.y0, f.x0 + f.w, f.y0 + f.h);
-            let full = (0.0, 0.0, f64::from(c.w), f64::from(c.h));
-            let grid = [224, 224, 224];
-            for &t in &f.xa.ticks {
-                let x = f.px(t);
-                c.polyline(&[(x, f.y0), (x, f.y0 + f.h)], grid, 1.0, Dash::Solid, full);
-                let label = f.xa.label(t);
-                let tw = text_width(&label, 2);
-                c.text(&label, (x - tw / 2.0) as i64, (f.y0 + f.h + 6.0) as i64, 2);
-            }
-            for &t in &f.ya.ticks {
-                let y = f.py(t);
-                c.polyline(&[(f.x0, y), (f.x0 + f.w, y)], grid, 1.0, Dash::Solid, full);
-                let label = f.ya.label(t);
-                let tw = text_width(&label, 2);
-                c.text(&label, (f.x0 - 6.0 - tw) as i64, (y - 7.0) as i64, 2);
-            }
-            let frame = [
-                (f.x0, f.y0),
-                (f.x0 + f.w, f.y0),
-                (f.x0 + f.w, f.y0 + f.h),
-                (f.x0, f.y0 + f.h),
-                (f.x0, f.y0),
-            ];
-            c.polyline(&frame, [0, 0, 0], 1.0, Dash::Solid, full);
-            for ser in &p.series {
-                for run in runs(&ser.points) {
-                    let pts: Vec<(f64, f64)> = decimate(run, |x| f.px(x))
-                        .iter()
-                        .map(|&(x, y)| (f.px(x), f.py(y)))
-                        .collect();
-                    c.polyline(&pts, ser.color, ser.width, ser.dash, clip);
-                }
-            }
-            // Panel title above the frame, axis labels, legend box (top right, as in the SVG).
-            let tw = text_width(&p.title, 2);
-            c.text(
-                &p.title,
-                (f.x0 + (f.w - tw) / 2.0) as i64,
-                (f.y0 - 22.0) as i64,
-                2,
-            );
-            let tw = text_width(&p.x_label, 2);
-            c.text(
-                &p.x_label,
-                (f.x0 + (f.w - tw) / 2.0) as i64,
-                (f.y0 + f.h + 28.0) as i64,
-                2,
-            );
-            c.text(&p.y_label, 4, (f.y0 - 12.0) as i64, 1);
-            let legend: Vec<&Series> = p.series.iter().filter(|s| !s.label.is_empty()).collect();
-            if !legend.is_empty() {
-                let longest = legend
-                    .iter()
-                    .map(|s| text_width(&s.label, 1))
-                    .fold(0.0, f64::max);
-                let (lw, lh) = (longest + 54.0, 12.0 * legend.len() as f64 + 6.0);
-                let (lx0, ly0) = (f.x0 + f.w - lw - 6.0, f.y0 + 6.0);
-                c.fill_rect(lx0, ly0, lw, lh, [255, 255, 255]);
-                let border = [
-                    (lx0, ly0),
-                    (lx0 + lw, ly0),
-                    (lx0 + lw, ly0 + lh),
-                    (lx0, ly0 + lh),
-                    (lx0, ly0),
-                ];
-                c.polyline(&border, [153, 153, 153], 1.0, Dash::Solid, full);
-                for (k, ser) in legend.iter().enumerate() {
-                    let y = ly0 + 9.0 + 12.0 * k as f64;
-                    c.polyline(
-                        &[(lx0 + 6.0, y), (lx0 + 40.0, y)],
-                        ser.color,
-                        ser.width,
-                        ser.dash,
-                        full,
-                    );
-                    c.text(&ser.label, (lx0 + 46.0) as i64, (y - 3.0) as i64, 1);
-                }
-            }
-        }
-        let tw = text_width(&self.title, 2);
-        c.text(
-            &self.title,
-            ((f64::from(self.width) - tw) / 2.0) as i64,
-            12,
-            2,
-        );
-        c.encode_png()
+/// Splits a pixel polyline into its "on" pieces under a dash pattern (on, off, on, off, …
+/// lengths in pixels; empty = solid), the pattern continuing across vertices.
+fn dash_pieces(px: &[BackendCoord], pattern: &[f64]) -> Vec<Vec<BackendCoord>> {
+    if pattern.is_empty() || px.len() < 2 {
+        return if px.is_empty() {
+            vec![]
+        } else {
+            vec![px.to_vec()]
+        };
     }
+    let mut out = Vec::new();
+    let mut cur: Vec<BackendCoord> = Vec::new();
+    let (mut idx, mut left, mut on) = (0usize, pattern[0], true);
+    let round = |x: f64, y: f64| (x.round() as i32, y.round() as i32);
+    for w in px.windows(2) {
+        let (a, b) = (
+            (f64::from(w[0].0), f64::from(w[0].1)),
+            (f64::from(w[1].0), f64::from(w[1].1)),
+        );
+        let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+        let mut done = 0.0;
+        if on && cur.is_empty() {
+            cur.push(w[0]);
+        }
+        while len - done > left {
+            done += left;
+            let f = done / len;
+            let p = round(a.0 + (b.0 - a.0) * f, a.1 + (b.1 - a.1) * f);
+            if on {
+                cur.push(p);
+                out.push(std::mem::take(&mut cur));
+            } else {
+                cur = vec![p];
+            }
+            on = !on;
+            idx = (idx + 1) % pattern.len();
+            left = pattern[idx];
+        }
+        left -= len - done;
+        if on {
+            cur.push(w[1]);
+        }
+    }
+    if on && cur.len() >= 2 {
+        out.push(cur);
+    }
+    out
 }
 
 /// Splits points into runs of finite points (NaN breaks a line).
@@ -464,14 +314,14 @@ fn runs(points: &[(f64, f64)]) -> Vec<&[(f64, f64)]> {
 
 /// Keeps at most first, min, max and last of the points in each pixel column (`px` maps x to
 /// pixels): the drawn shape is unchanged, the SVG stays small.
-fn decimate(run: &[(f64, f64)], px: impl Fn(f64) -> f64) -> Vec<(f64, f64)> {
+fn decimate(run: &[(f64, f64)], px: impl Fn(f64) -> i32) -> Vec<(f64, f64)> {
     let mut out: Vec<(f64, f64)> = Vec::with_capacity(run.len().min(4096));
     let mut i = 0;
     while i < run.len() {
-        let col = px(run[i].0).floor();
+        let col = px(run[i].0);
         let mut j = i;
         let (mut lo, mut hi) = (i, i);
-        while j < run.len() && px(run[j].0).floor() == col {
+        while j < run.len() && px(run[j].0) == col {
             if run[j].1 < run[lo].1 {
                 lo = j;
             }
@@ -494,273 +344,148 @@ fn decimate(run: &[(f64, f64)], px: impl Fn(f64) -> f64) -> Vec<(f64, f64)> {
     out
 }
 
-fn hex(c: [u8; 3]) -> String {
-    format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
+fn err(e: impl std::fmt::Display) -> String {
+    format!("plot: {e}")
 }
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
-
-/// An RGB raster.
-pub struct Canvas {
-    w: u32,
-    h: u32,
-    px: Vec<u8>,
-}
-
-impl Canvas {
-    /// A white canvas.
-    pub fn new(w: u32, h: u32) -> Canvas {
-        Canvas {
-            w,
-            h,
-            px: vec![255; w as usize * h as usize * 3],
-        }
+impl Figure {
+    /// Rows of panels.
+    fn rows(&self) -> usize {
+        self.panels.len().max(1).div_ceil(self.columns.max(1))
     }
 
-    /// The colour at (x, y) (white outside).
-    pub fn get(&self, x: u32, y: u32) -> [u8; 3] {
-        if x >= self.w || y >= self.h {
-            return [255; 3];
-        }
-        let i = (y as usize * self.w as usize + x as usize) * 3;
-        [self.px[i], self.px[i + 1], self.px[i + 2]]
+    /// Total height, px.
+    pub fn height(&self) -> u32 {
+        TOP + self.panel_height * self.rows() as u32
     }
 
-    fn set(&mut self, x: i64, y: i64, c: [u8; 3]) {
-        if x < 0 || y < 0 || x >= i64::from(self.w) || y >= i64::from(self.h) {
-            return;
+    /// Draws the figure on any plotters drawing area of `width × height()` pixels.
+    pub fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        register_font();
+        root.fill(&WHITE).map_err(err)?;
+        let (head, body) = root.split_vertically(TOP);
+        head.draw(&Text::new(
+            self.title.clone(),
+            (self.width as i32 / 2, TOP as i32 / 2),
+            TextStyle::from((FONT, 20).into_font())
+                .pos(Pos::new(HPos::Center, VPos::Center))
+                .color(&BLACK),
+        ))
+        .map_err(err)?;
+        let cells = body.split_evenly((self.rows(), self.columns.max(1)));
+        for (p, area) in self.panels.iter().zip(cells) {
+            draw_panel(p, &area)?;
         }
-        let i = (y as usize * self.w as usize + x as usize) * 3;
-        self.px[i..i + 3].copy_from_slice(&c);
+        root.present().map_err(err)
     }
 
-    fn stamp(&mut self, x: f64, y: f64, r: f64, c: [u8; 3], clip: (f64, f64, f64, f64)) {
-        if x < clip.0 - 0.5 || x > clip.2 + 0.5 || y < clip.1 - 0.5 || y > clip.3 + 0.5 {
-            return;
+    /// The figure as an SVG document.
+    pub fn to_svg(&self) -> Result<String, String> {
+        let mut s = String::new();
+        {
+            let root =
+                SVGBackend::with_string(&mut s, (self.width, self.height())).into_drawing_area();
+            self.draw(&root)?;
         }
-        let r = r.max(0.5);
-        let (x0, x1) = ((x - r + 0.5).floor() as i64, (x + r - 0.5).ceil() as i64);
-        let (y0, y1) = ((y - r + 0.5).floor() as i64, (y + r - 0.5).ceil() as i64);
-        for yy in y0..=y1.max(y0) {
-            for xx in x0..=x1.max(x0) {
-                self.set(xx, yy, c);
-            }
-        }
+        Ok(s)
     }
 
-    /// Draws a polyline with a dash pattern continuing across vertices.
-    pub fn polyline(
-        &mut self,
-        pts: &[(f64, f64)],
-        c: [u8; 3],
-        width: f64,
-        dash: Dash,
-        clip: (f64, f64, f64, f64),
-    ) {
-        let pat = dash.pattern();
-        let period: f64 = pat.iter().sum();
-        let mut dist = 0.0f64;
-        let r = width / 2.0;
-        if pts.len() == 1 {
-            self.stamp(pts[0].0, pts[0].1, r, c, clip);
-        }
-        for w in pts.windows(2) {
-            let (a, b) = (w[0], w[1]);
-            let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
-            if !len.is_finite() || len > 1e5 {
-                continue;
-            }
-            let n = (len / 0.5).ceil().max(1.0) as usize;
-            for k in 0..=n {
-                let f = k as f64 / n as f64;
-                let on = if period > 0.0 {
-                    let mut m = (dist + f * len) % period;
-                    let mut on = true;
-                    let mut idx = 0;
-                    while m >= pat[idx] {
-                        m -= pat[idx];
-                        idx = (idx + 1) % pat.len();
-                        on = !on;
-                    }
-                    on
-                } else {
-                    true
-                };
-                if on {
-                    self.stamp(a.0 + (b.0 - a.0) * f, a.1 + (b.1 - a.1) * f, r, c, clip);
-                }
-            }
-            dist += len;
-        }
+    /// The figure rasterised: its SVG rendered by resvg with the embedded font.
+    pub fn to_pixmap(&self) -> Result<resvg::tiny_skia::Pixmap, String> {
+        let svg = self.to_svg()?;
+        let mut opt = resvg::usvg::Options {
+            font_family: "DejaVu Sans".into(),
+            ..Default::default()
+        };
+        let db = opt.fontdb_mut();
+        db.load_font_data(dejavu::sans::regular().to_vec());
+        db.set_sans_serif_family("DejaVu Sans");
+        let tree = resvg::usvg::Tree::from_str(&svg, &opt).map_err(err)?;
+        let mut pixmap = resvg::tiny_skia::Pixmap::new(self.width, self.height())
+            .ok_or_else(|| format!("plot: bad size {}×{}", self.width, self.height()))?;
+        pixmap.fill(resvg::tiny_skia::Color::WHITE);
+        resvg::render(
+            &tree,
+            resvg::tiny_skia::Transform::default(),
+            &mut pixmap.as_mut(),
+        );
+        Ok(pixmap)
     }
 
-    /// Fills a rectangle (clipped to the canvas).
-    pub fn fill_rect(&mut self, x: f64, y: f64, w: f64, h: f64, c: [u8; 3]) {
-        let (x0, y0) = (x.round() as i64, y.round() as i64);
-        let (x1, y1) = ((x + w).round() as i64, (y + h).round() as i64);
-        for yy in y0..y1 {
-            for xx in x0..x1 {
-                self.set(xx, yy, c);
-            }
-        }
-    }
-
-    /// Draws text in the built-in 5×7 font (digits, capitals, punctuation; others are blanks).
-    pub fn text(&mut self, s: &str, x: i64, y: i64, scale: i64) {
-        let mut cx = x;
-        for ch in s.chars() {
-            if let Some(g) = glyph(ch) {
-                for (row, bits) in g.iter().enumerate() {
-                    for col in 0..5 {
-                        if bits & (0x10 >> col) != 0 {
-                            for dy in 0..scale {
-                                for dx in 0..scale {
-                                    self.set(
-                                        cx + col * scale + dx,
-                                        y + row as i64 * scale + dy,
-                                        [0, 0, 0],
-                                    );
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-            cx += 6 * scale;
-        }
-    }
-
-    /// Encodes the canvas as an RGB PNG (zlib via miniz_oxide).
-    pub fn encode_png(&self) -> Vec<u8> {
-        let stride = self.w as usize * 3;
-        let mut raw = Vec::with_capacity((stride + 1) * self.h as usize);
-        for row in self.px.chunks(stride.max(1)) {
-            raw.push(0); // filter: none
-            raw.extend_from_slice(row);
-        }
-        let z = miniz_oxide::deflate::compress_to_vec_zlib(&raw, 6);
-        let mut out = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
-        let mut ihdr = Vec::with_capacity(13);
-        ihdr.extend_from_slice(&self.w.to_be_bytes());
-        ihdr.extend_from_slice(&self.h.to_be_bytes());
-        ihdr.extend_from_slice(&[8, 2, 0, 0, 0]); // 8-bit RGB, deflate, no filter set, no interlace
-        chunk(&mut out, b"IHDR", &ihdr);
-        chunk(&mut out, b"IDAT", &z);
-        chunk(&mut out, b"IEND", &[]);
-        out
+    /// The figure rasterised as a PNG file.
+    pub fn to_png(&self) -> Result<Vec<u8>, String> {
+        self.to_pixmap()?.encode_png().map_err(err)
     }
 }
 
-fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
-    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-    let start = out.len();
-    out.extend_from_slice(kind);
-    out.extend_from_slice(data);
-    let crc = crc32(&out[start..]);
-    out.extend_from_slice(&crc.to_be_bytes());
-}
-
-/// CRC-32 (ISO-HDLC, as PNG uses).
-pub fn crc32(data: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in data {
-        c ^= u32::from(b);
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                (c >> 1) ^ 0xEDB8_8320
-            } else {
-                c >> 1
-            };
+fn draw_panel<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    let ((xl, xh), (yl, yh)) = data_range(p);
+    let (xa, ya) = (Axis::new(xl, xh, false), Axis::new(yl, yh, true));
+    let mut chart = ChartBuilder::on(area)
+        .caption(&p.title, (FONT, 16))
+        .margin_left(10)
+        .margin_right(20)
+        .margin_top(4)
+        .margin_bottom(6)
+        .x_label_area_size(44)
+        .y_label_area_size(78)
+        .build_cartesian_2d(xa.lo..xa.hi, ya.lo..ya.hi)
+        .map_err(err)?;
+    let (fx, fy) = (|v: &f64| xa.label(*v), |v: &f64| ya.label(*v));
+    chart
+        .configure_mesh()
+        .x_labels(12)
+        .y_labels(8)
+        .max_light_lines(1)
+        .light_line_style(RGBColor(240, 240, 240))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .x_label_formatter(&fx)
+        .y_label_formatter(&fy)
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .x_desc(p.x_label.as_str())
+        .y_desc(p.y_label.as_str())
+        .draw()
+        .map_err(err)?;
+    let mut labelled = false;
+    for ser in &p.series {
+        let style = ShapeStyle {
+            color: RGBColor(ser.color[0], ser.color[1], ser.color[2]).to_rgba(),
+            filled: false,
+            stroke_width: ser.width.round().max(1.0) as u32,
+        };
+        let paths: Vec<DashedPath> = runs(&ser.points)
+            .into_iter()
+            .map(|run| DashedPath {
+                points: decimate(run, |x| chart.backend_coord(&(x, 0.0)).0),
+                style,
+                dash: ser.dash,
+            })
+            .collect();
+        let anno = chart.draw_series(paths).map_err(err)?;
+        if !ser.label.is_empty() {
+            let dash = ser.dash;
+            anno.label(ser.label.as_str())
+                .legend(move |(x, y)| LegendLine {
+                    at: (x - 2, y),
+                    style,
+                    dash,
+                });
+            labelled = true;
         }
     }
-    !c
-}
-
-fn text_width(s: &str, scale: i64) -> f64 {
-    (s.chars().count() as i64 * 6 * scale - scale) as f64
-}
-
-/// 5×7 glyphs (rows top to bottom, bit 4 = leftmost column): digits, capitals (lower case maps
-/// to them), space and common punctuation; `None` for anything else.
-fn glyph(c: char) -> Option<[u8; 7]> {
-    let c = match c {
-        '−' => '-',
-        '×' => 'X',
-        'µ' | 'μ' => 'U',
-        c => c.to_ascii_uppercase(),
-    };
-    Some(match c {
-        '0' => [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E],
-        '1' => [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        '2' => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F],
-        '3' => [0x1F, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0E],
-        '4' => [0x02, 0x06, 0x0A, 0x12, 0x1F, 0x02, 0x02],
-        '5' => [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E],
-        '6' => [0x06, 0x08, 0x10, 0x1E, 0x11, 0x11, 0x0E],
-        '7' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
-        '8' => [0x0E, 0x11, 0x11, 0x0E, 0x11, 0x11, 0x0E],
-        '9' => [0x0E, 0x11, 0x11, 0x0F, 0x01, 0x02, 0x0C],
-        'A' => [0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
-        'B' => [0x1E, 0x11, 0x11, 0x1E, 0x11, 0x11, 0x1E],
-        'C' => [0x0E, 0x11, 0x10, 0x10, 0x10, 0x11, 0x0E],
-        'D' => [0x1C, 0x12, 0x11, 0x11, 0x11, 0x12, 0x1C],
-        'E' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x1F],
-        'F' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x10],
-        'G' => [0x0E, 0x11, 0x10, 0x17, 0x11, 0x11, 0x0F],
-        'H' => [0x11, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
-        'I' => [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        'J' => [0x07, 0x02, 0x02, 0x02, 0x02, 0x12, 0x0C],
-        'K' => [0x11, 0x12, 0x14, 0x18, 0x14, 0x12, 0x11],
-        'L' => [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F],
-        'M' => [0x11, 0x1B, 0x15, 0x15, 0x11, 0x11, 0x11],
-        'N' => [0x11, 0x11, 0x19, 0x15, 0x13, 0x11, 0x11],
-        'O' => [0x0E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
-        'P' => [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10],
-        'Q' => [0x0E, 0x11, 0x11, 0x11, 0x15, 0x12, 0x0D],
-        'R' => [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11],
-        'S' => [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E],
-        'T' => [0x1F, 0x04, 0x04, 0x04, 0x04, 0x04, 0x04],
-        'U' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
-        'V' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x0A, 0x04],
-        'W' => [0x11, 0x11, 0x11, 0x15, 0x15, 0x15, 0x0A],
-        'X' => [0x11, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0x11],
-        'Y' => [0x11, 0x11, 0x11, 0x0A, 0x04, 0x04, 0x04],
-        'Z' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x10, 0x1F],
-        ' ' => [0x00; 7],
-        '-' => [0x00, 0x00, 0x00, 0x1F, 0x00, 0x00, 0x00],
-        '.' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x0C, 0x0C],
-        ',' => [0x00, 0x00, 0x00, 0x00, 0x0C, 0x04, 0x08],
-        ':' => [0x00, 0x0C, 0x0C, 0x00, 0x0C, 0x0C, 0x00],
-        '(' => [0x02, 0x04, 0x08, 0x08, 0x08, 0x04, 0x02],
-        ')' => [0x08, 0x04, 0x02, 0x02, 0x02, 0x04, 0x08],
-        '[' => [0x0E, 0x08, 0x08, 0x08, 0x08, 0x08, 0x0E],
-        ']' => [0x0E, 0x02, 0x02, 0x02, 0x02, 0x02, 0x0E],
-        '/' => [0x00, 0x01, 0x02, 0x04, 0x08, 0x10, 0x00],
-        '%' => [0x18, 0x19, 0x02, 0x04, 0x08, 0x13, 0x03],
-        '+' => [0x00, 0x04, 0x04, 0x1F, 0x04, 0x04, 0x00],
-        '=' => [0x00, 0x00, 0x1F, 0x00, 0x1F, 0x00, 0x00],
-        '_' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x1F],
-        '<' => [0x02, 0x04, 0x08, 0x10, 0x08, 0x04, 0x02],
-        '>' => [0x08, 0x04, 0x02, 0x01, 0x02, 0x04, 0x08],
-        '|' => [0x04; 7],
-        '\'' => [0x04, 0x04, 0x08, 0x00, 0x00, 0x00, 0x00],
-        _ => return None,
-    })
-}
-
-/// The SVG `stroke-dasharray` attribute of a series ("" for a solid line).
-fn dash_attr(ser: &Series) -> String {
-    let dash = ser.dash.pattern();
-    if dash.is_empty() {
-        return String::new();
+    if labelled {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .legend_area_size(36)
+            .label_font((FONT, 13))
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(150, 150, 150))
+            .draw()
+            .map_err(err)?;
     }
-    let parts: Vec<String> = dash.iter().map(|d| format!("{d}")).collect();
-    format!(r#" stroke-dasharray="{}""#, parts.join(" "))
+    Ok(())
 }
 
 #[cfg(test)]
@@ -768,65 +493,46 @@ mod tests {
     use super::*;
 
     #[test]
-    fn crc32_check_value() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-    }
-
-    #[test]
     fn nice_axis() {
         let a = Axis::new(0.0, 1.0, false);
-        assert_eq!(a.ticks.first(), Some(&0.0));
-        assert!(a.ticks.len() >= 4 && a.ticks.len() <= 12);
+        assert_eq!((a.lo, a.hi, a.decimals), (0.0, 1.0, 1));
         let a = Axis::new(0.1, 0.1, true);
         assert!(a.hi > a.lo);
+        assert_eq!(Axis::new(-0.05, 0.05, false).label(-0.0001), "0.00");
+        assert_eq!(Axis::new(-0.05, 0.05, false).label(-0.02), "−0.02");
     }
 
     #[test]
-    fn font_covers_letters_digits_and_labels_distinctly() {
-        let chars: Vec<char> = ('0'..='9').chain('A'..='Z').collect();
-        let glyphs: Vec<[u8; 7]> = chars.iter().map(|&c| glyph(c).unwrap()).collect();
-        for i in 0..glyphs.len() {
-            assert!(glyphs[i].iter().all(|r| *r < 0x20), "{}", chars[i]);
-            for j in i + 1..glyphs.len() {
-                // Every glyph is its own (O and 0 too).
-                assert_ne!(glyphs[i], glyphs[j], "{} and {}", chars[i], chars[j]);
-            }
-        }
-        assert_eq!(glyph('a'), glyph('A'));
-        assert_eq!(glyph('−'), glyph('-'));
-        for c in "ZMP reference vs response (tlipfm), t (s) / 5 % [m]: x_y".chars() {
-            assert!(glyph(c).is_some(), "no glyph for {c:?}");
-        }
+    fn dashes_follow_the_pattern_across_vertices() {
+        // 30 px right then 30 px down, dashes of 8 on / 5 off.
+        let pieces = dash_pieces(&[(0, 0), (30, 0), (30, 30)], &[8.0, 5.0]);
+        let len = |p: &Vec<BackendCoord>| -> f64 {
+            p.windows(2)
+                .map(|w| f64::from((w[1].0 - w[0].0).abs() + (w[1].1 - w[0].1).abs()))
+                .sum()
+        };
+        let lens: Vec<f64> = pieces.iter().map(len).collect();
+        // 60 px = 4 × 13 + 8: five dashes, the third bending round the corner.
+        assert_eq!(lens, vec![8.0, 8.0, 8.0, 8.0, 8.0], "{pieces:?}");
+        assert_eq!(pieces[2], vec![(26, 0), (30, 0), (30, 4)]);
+        assert_eq!(dash_pieces(&[(0, 0), (5, 5)], &[]).len(), 1);
     }
 
-    #[test]
-    fn text_draws_the_glyph_bits() {
-        let mut c = Canvas::new(20, 10);
-        c.text("T", 1, 2, 1);
-        let g = glyph('T').unwrap();
-        for (row, bits) in g.iter().enumerate() {
-            for col in 0..5u32 {
-                let ink = c.get(1 + col, 2 + row as u32) == [0, 0, 0];
-                assert_eq!(ink, bits & (0x10 >> col) != 0, "row {row} col {col}");
-            }
-        }
-    }
-
-    #[test]
-    fn png_and_svg() {
-        let fig = Figure {
-            title: "t".into(),
-            width: 200,
-            panel_height: 120,
+    fn figure() -> Figure {
+        Figure {
+            title: "ZMP x — reference (m) vs µ, τ·s".into(),
+            width: 400,
+            panel_height: 240,
+            columns: 1,
             panels: vec![Panel {
                 title: "p".into(),
-                x_label: "x".into(),
-                y_label: "y".into(),
+                x_label: "t (s)".into(),
+                y_label: "y (mm)".into(),
                 series: vec![Series {
                     label: "a<b".into(),
                     color: [255, 0, 0],
-                    dash: Dash::DashDot,
-                    width: 1.5,
+                    dash: Dash::Solid,
+                    width: 2.0,
                     points: vec![
                         (0.0, 0.0),
                         (1.0, 1.0),
@@ -836,13 +542,29 @@ mod tests {
                     ],
                 }],
             }],
-        };
-        let svg = fig.to_svg();
-        assert!(
-            svg.starts_with("<svg") && svg.contains("a&lt;b") && svg.matches("<path").count() == 2
-        );
-        let png = fig.to_png();
+        }
+    }
+
+    #[test]
+    fn png_and_svg() {
+        let fig = figure();
+        let svg = fig.to_svg().unwrap();
+        assert!(svg.starts_with("<svg"), "{svg}");
+        assert!(svg.contains("a&lt;b") && svg.contains("µ") && svg.contains("t (s)"));
+        // Two runs (the NaN breaks the line) plus the legend sample.
+        assert!(svg.matches("stroke=\"#FF0000\"").count() >= 3, "{svg}");
+        let png = fig.to_png().unwrap();
         assert_eq!(&png[1..4], b"PNG");
-        assert_eq!(&png[12..16], b"IHDR");
+        let img = fig.to_pixmap().unwrap();
+        assert_eq!((img.width(), img.height()), (400, 280));
+        // Red line pixels and dark text pixels are drawn.
+        let px = |p: &resvg::tiny_skia::PremultipliedColorU8| [p.red(), p.green(), p.blue()];
+        let red = img.pixels().iter().filter(|p| px(p) == [255, 0, 0]).count();
+        let dark = img
+            .pixels()
+            .iter()
+            .filter(|p| px(p).iter().all(|&c| c < 80))
+            .count();
+        assert!(red > 100 && dark > 500, "red {red}, dark {dark}");
     }
 }

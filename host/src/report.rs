@@ -5,7 +5,9 @@
 //! Record counts: *good* = frames the decoder accepted (tick and event records), *bad* = frames
 //! it rejected (COBS, CRC, type, length or field errors, overlong garbage; a capture that
 //! starts mid-frame rejects its first partial frame) plus one for bytes left after the last
-//! delimiter (a frame truncated by the end of the capture). Nothing is fatal.
+//! delimiter (a frame truncated by the end of the capture). Bad frames are counted, not fatal;
+//! but a log with nothing decodable, or without a tick record in a walking phase, is refused
+//! ([`check_walking`]): `walker report` exits 1 with the reason and writes nothing.
 //!
 //! Time: `t` is the firmware's tick clock in seconds (32-bit µs, unwrapped). The plan's time
 //! is aligned on the walk start: the first tick whose phase leaves `standing` is the end of the
@@ -17,8 +19,10 @@
 use crate::planfile::{WalkSpec, PLAN_CAPACITY};
 use crate::plot::{Dash, Figure, Panel, Series};
 use gait_core::measured::{AxisErrorStats, ZmpErrorStats};
+use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
 use gait_core::support::SupportPolygon;
 use gait_core::{Robot, SupportPhase as PlanPhase};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -279,14 +283,15 @@ pub fn event_text(r: &Record) -> (u16, u32, &'static str, String) {
     }
 }
 
-/// Writes the event records as CSV.
-pub fn write_events_csv(events: &[Record], mut w: impl Write) -> std::io::Result<()> {
-    writeln!(w, "seq,time_us,kind,detail")?;
+/// Writes the event records as CSV (the `csv` crate: the detail is quoted as CSV quotes).
+pub fn write_events_csv(events: &[Record], w: impl Write) -> std::io::Result<()> {
+    let mut out = csv::Writer::from_writer(w);
+    out.write_record(["seq", "time_us", "kind", "detail"])?;
     for e in events {
         let (seq, t, kind, detail) = event_text(e);
-        writeln!(w, "{seq},{t},{kind},\"{}\"", detail.replace('"', "'"))?;
+        out.write_record([seq.to_string(), t.to_string(), kind.to_string(), detail])?;
     }
-    Ok(())
+    out.flush()
 }
 
 /// Table 3 statistics of one run.
@@ -379,14 +384,8 @@ pub struct Alignment {
 
 /// Aligns the log on the plan's walk start (first tick leaving `standing`).
 pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
-    let walking = |p: LoggedPhase| {
-        matches!(
-            p,
-            LoggedPhase::Double | LoggedPhase::SingleLeft | LoggedPhase::SingleRight
-        )
-    };
     for w in rows.windows(2) {
-        if w[0].rec.phase == LoggedPhase::Standing && walking(w[1].rec.phase) {
+        if w[0].rec.phase == LoggedPhase::Standing && is_walking(w[1].rec.phase) {
             return Alignment {
                 offset: walk_start - w[1].t,
                 how: format!("walk start (first walking tick at t = {:.3} s = plan's end of lead-in {walk_start:.3} s)", w[1].t),
@@ -399,25 +398,43 @@ pub fn align(rows: &[TickRow], walk_start: f64) -> Alignment {
     }
 }
 
-/// A ground-truth ZMP trace (e.g. from the simulator), on the log's clock.
+/// A ground-truth trace (the simulator's truth CSV, or any CSV with a time and a ZMP column),
+/// on the log's clock.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TruthTable {
     /// Time, s.
     pub t: Vec<f64>,
     /// ZMP (x, y), m.
     pub zmp: Vec<[f64; 2]>,
+    /// Every column by its header name, one value per row of `t` (an empty or non-numeric
+    /// field is NaN; `support`/`stance` letters are NaN here).
+    pub columns: BTreeMap<String, Vec<f64>>,
 }
 
 impl TruthTable {
     /// The ZMP at time `t` (nearest sample at or before `t`, none outside the trace).
     pub fn at(&self, t: f64) -> Option<[f64; 2]> {
+        self.index_at(t).and_then(|i| self.zmp.get(i).copied())
+    }
+
+    /// The row at or before `t` (none outside the trace).
+    pub fn index_at(&self, t: f64) -> Option<usize> {
         let first = *self.t.first()?;
         let last = *self.t.last()?;
         if t < first - 1e-9 || t > last + 1e-9 {
             return None;
         }
-        let i = self.t.partition_point(|&v| v <= t + 1e-9).saturating_sub(1);
-        self.zmp.get(i).copied()
+        Some(self.t.partition_point(|&v| v <= t + 1e-9).saturating_sub(1))
+    }
+
+    /// One column by name.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns.get(name).map(Vec::as_slice)
+    }
+
+    /// Whether every named column is present.
+    pub fn has(&self, names: &[&str]) -> bool {
+        names.iter().all(|n| self.columns.contains_key(*n))
     }
 }
 
@@ -458,24 +475,39 @@ impl CsvText {
     }
 }
 
-/// Reads a truth CSV: a header with `t` (or `time`) and `zmp_x`/`zmp_y` (or `zmp_true_x`,
-/// `true_zmp_x`), s and m, on the log's clock.
+/// Reads a truth CSV (the one reader of truth files): a header with `t` (or `time`, `t_s`) and
+/// `zmp_x`/`zmp_y` (or `zmp_true_x`, `true_zmp_x`, `zmp_truth_x`), s and m, on the log's
+/// clock; `#` lines are comments; every other column is kept by name. A row whose time is
+/// empty is skipped; a malformed time or ZMP is an error naming the line and column.
 pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
-    let csv = CsvText::read(path, "truth file")?;
-    let header = &csv.header;
-    let ct = csv
-        .col(&["t", "time", "t_s"])
+    let mut rd = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| format!("cannot read the truth file {}: {e}", path.display()))?;
+    let header: Vec<String> = rd
+        .headers()
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header.iter().all(String::is_empty) {
+        return Err(format!("{}: empty truth file", path.display()));
+    }
+    let col = |names: &[&str]| header.iter().position(|h| names.contains(&h.as_str()));
+    let ct = col(&["t", "time", "t_s"])
         .ok_or_else(|| format!("{}: no `t` column in {header:?}", path.display()))?;
-    let cx = csv
-        .col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
+    let cx = col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
         .ok_or_else(|| format!("{}: no `zmp_x` column in {header:?}", path.display()))?;
-    let cy = csv
-        .col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
+    let cy = col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
         .ok_or_else(|| format!("{}: no `zmp_y` column in {header:?}", path.display()))?;
     let mut out = TruthTable::default();
-    for (n, f) in csv.rows.iter().enumerate() {
-        let get = |i: usize| -> Result<f64, String> {
-            let s = f.get(i).map_or("", String::as_str);
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+    for (n, rec) in rd.records().enumerate() {
+        let rec = rec.map_err(|e| format!("{}: {e}", path.display()))?;
+        let strict = |i: usize| -> Result<f64, String> {
+            let s = rec.get(i).unwrap_or("");
             if s.is_empty() {
                 return Ok(f64::NAN);
             }
@@ -488,13 +520,21 @@ pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
                 )
             })
         };
-        let t = get(ct)?;
+        let t = strict(ct)?;
         if !t.is_finite() {
             continue;
         }
         out.t.push(t);
-        out.zmp.push([get(cx)?, get(cy)?]);
+        out.zmp.push([strict(cx)?, strict(cy)?]);
+        for (i, c) in cols.iter_mut().enumerate() {
+            c.push(
+                rec.get(i)
+                    .and_then(|s| s.parse::<f64>().ok())
+                    .unwrap_or(f64::NAN),
+            );
+        }
     }
+    out.columns = header.into_iter().zip(cols).collect();
     Ok(out)
 }
 
@@ -548,49 +588,30 @@ pub fn stats_table(s: &ErrorSummary) -> String {
     t
 }
 
-fn axis_json(a: &AxisErrorStats) -> String {
-    format!(
-        "{{\"count\": {}, \"sum_abs\": {}, \"mean_abs\": {}, \"rms\": {}, \"max_abs\": {}}}",
-        a.count,
-        json_num(a.sum_abs),
-        json_num(a.mean_abs),
-        json_num(a.rms),
-        json_num(a.max_abs)
-    )
+/// A finite number as JSON, else `null` (JSON has no NaN).
+fn json_num(v: f64) -> serde_json::Value {
+    serde_json::Number::from_f64(v).map_or(serde_json::Value::Null, serde_json::Value::Number)
 }
 
-fn json_num(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:e}")
-    } else {
-        "null".into()
-    }
+fn axis_json(a: &AxisErrorStats) -> serde_json::Value {
+    serde_json::json!({
+        "count": a.count,
+        "sum_abs": json_num(a.sum_abs),
+        "mean_abs": json_num(a.mean_abs),
+        "rms": json_num(a.rms),
+        "max_abs": json_num(a.max_abs),
+    })
 }
 
-fn json_str(s: &str) -> String {
-    let mut o = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
-}
-
-/// The statistics as a JSON object.
-pub fn stats_json(s: &ErrorSummary) -> String {
-    format!(
-        "{{\"ticks\": {}, \"skipped\": {}, \"invalid\": {}, \"x\": {}, \"y\": {}}}",
-        s.ticks,
-        s.skipped,
-        s.invalid,
-        axis_json(&s.x),
-        axis_json(&s.y)
-    )
+/// The statistics as a JSON object (metres; a statistic without samples is `null`).
+pub fn stats_json(s: &ErrorSummary) -> serde_json::Value {
+    serde_json::json!({
+        "ticks": s.ticks,
+        "skipped": s.skipped,
+        "invalid": s.invalid,
+        "x": axis_json(&s.x),
+        "y": axis_json(&s.y),
+    })
 }
 
 fn write_file(path: &Path, data: &[u8], files: &mut Vec<PathBuf>) -> Result<(), String> {
@@ -716,13 +737,211 @@ pub fn zmp_figure(
         title: title.into(),
         width: 1100,
         panel_height: 360,
+        columns: 1,
         panels,
     }
 }
 
-/// Writes the whole report; returns what it found.
+/// The plan's joint targets, rad, on the log's clock (`t = plan_t − offset`): the joint angles
+/// of the plan's IK ([`crate::export::export_rows`]), by servo ID − 1. `None` when the plan
+/// cannot be exported.
+pub fn planned_joint_angles(
+    spec: &WalkSpec,
+    robot: &Robot,
+    dt: f64,
+    offset: f64,
+) -> Option<(Vec<f64>, Vec<[f64; LEG_JOINTS]>)> {
+    let (rows, _) = crate::export::export_rows(spec, robot, dt).ok()?;
+    Some(rows.iter().map(|r| (r.t - offset, r.q)).unzip())
+}
+
+/// The plan's joint speeds, rad/s, on the log's clock: [`planned_joint_angles`] differentiated
+/// centrally. `None` when the plan cannot be exported.
+pub fn planned_joint_speeds(
+    spec: &WalkSpec,
+    robot: &Robot,
+    dt: f64,
+    offset: f64,
+) -> Option<(Vec<f64>, Vec<[f64; LEG_JOINTS]>)> {
+    let (t, q) = planned_joint_angles(spec, robot, dt, offset)?;
+    if t.len() < 3 {
+        return None;
+    }
+    let v = (0..t.len())
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(t.len() - 1));
+            std::array::from_fn(|j| (q[b][j] - q[a][j]) / (t[b] - t[a]))
+        })
+        .collect();
+    Some((t, v))
+}
+
+/// Per-joint panels (left leg left, right leg right, hip to ankle downwards) of the truth
+/// columns `{prefix}1` … `{prefix}12` (by servo ID), with an optional planned line per joint.
+/// `None` when the truth lacks the columns or they hold no finite value.
+pub fn joint_figure(
+    title: &str,
+    truth: &TruthTable,
+    prefix: &str,
+    unit: &str,
+    planned: Option<&(Vec<f64>, Vec<[f64; LEG_JOINTS]>)>,
+) -> Option<Figure> {
+    let cols: Vec<&[f64]> = (1..=LEG_JOINTS)
+        .map(|id| truth.column(&format!("{prefix}{id}")))
+        .collect::<Option<_>>()?;
+    if !cols.iter().any(|c| c.iter().any(|v| v.is_finite())) {
+        return None;
+    }
+    let mut panels = Vec::new();
+    for k in 0..LEG_JOINTS / 2 {
+        for j in [k, k + LEG_JOINTS / 2] {
+            let mut series = Vec::new();
+            if let Some((pt, pv)) = planned {
+                series.push(Series {
+                    label: "plan (IK)".into(),
+                    color: [30, 80, 200],
+                    dash: Dash::DashDot,
+                    width: 1.5,
+                    points: pt.iter().zip(pv).map(|(&t, v)| (t, v[j])).collect(),
+                });
+            }
+            series.push(Series {
+                // One line alone needs no legend.
+                label: if planned.is_some() { "simulated" } else { "" }.into(),
+                color: [200, 30, 30],
+                dash: Dash::Solid,
+                width: 1.2,
+                points: truth
+                    .t
+                    .iter()
+                    .copied()
+                    .zip(cols[j].iter().copied())
+                    .collect(),
+            });
+            panels.push(Panel {
+                title: format!("{} (ID {})", JOINT_NAMES[j].replace('_', " "), j + 1),
+                x_label: "t (s)".into(),
+                y_label: unit.into(),
+                series,
+            });
+        }
+    }
+    Some(Figure {
+        title: title.into(),
+        width: 1100,
+        panel_height: 230,
+        columns: 2,
+        panels,
+    })
+}
+
+/// The foot-force figure: each sole's four load cells (`l_f0..l_f3`, `r_f0..r_f3`: front-left,
+/// front-right, rear-left, rear-right) and its contact force `l_fz` / `r_fz` when present.
+/// `None` when the truth has no load-cell columns.
+pub fn foot_force_figure(title: &str, truth: &TruthTable) -> Option<Figure> {
+    let colors = [[30, 80, 200], [20, 150, 60], [220, 120, 0], [150, 40, 160]];
+    let names = ["front-left", "front-right", "rear-left", "rear-right"];
+    let mut panels = Vec::new();
+    for (side, name) in [("l", "left sole"), ("r", "right sole")] {
+        let mut series = Vec::new();
+        for (k, (c, n)) in colors.iter().zip(names).enumerate() {
+            let v = truth.column(&format!("{side}_f{k}"))?;
+            series.push(Series {
+                label: format!("load cell {k} ({n})"),
+                color: *c,
+                dash: Dash::Solid,
+                width: 1.0,
+                points: truth.t.iter().copied().zip(v.iter().copied()).collect(),
+            });
+        }
+        if let Some(v) = truth.column(&format!("{side}_fz")) {
+            series.push(Series {
+                label: "contact force, vertical".into(),
+                color: [0, 0, 0],
+                dash: Dash::Dashed,
+                width: 1.5,
+                points: truth.t.iter().copied().zip(v.iter().copied()).collect(),
+            });
+        }
+        panels.push(Panel {
+            title: format!("{name}: vertical forces"),
+            x_label: "t (s)".into(),
+            y_label: "force (N)".into(),
+            series,
+        });
+    }
+    Some(Figure {
+        title: title.into(),
+        width: 1100,
+        panel_height: 330,
+        columns: 1,
+        panels,
+    })
+}
+
+fn write_figure(
+    fig: &Figure,
+    dir: &Path,
+    stem: &str,
+    files: &mut Vec<PathBuf>,
+) -> Result<(), String> {
+    write_file(
+        &dir.join(format!("{stem}.svg")),
+        fig.to_svg()?.as_bytes(),
+        files,
+    )?;
+    write_file(&dir.join(format!("{stem}.png")), &fig.to_png()?, files)
+}
+
+/// True for the phases of a walk (double or single support).
+pub fn is_walking(p: LoggedPhase) -> bool {
+    matches!(
+        p,
+        LoggedPhase::Double | LoggedPhase::SingleLeft | LoggedPhase::SingleRight
+    )
+}
+
+/// Refuses a log that cannot be reported on: nothing decodable (not a firmware log, or an
+/// empty file), or no tick record in a walking phase (the firmware never walked).
+pub fn check_walking(log: &DecodedLog, path: &Path) -> Result<(), String> {
+    let name = path.display();
+    if log.bytes == 0 {
+        return Err(format!(
+            "the log {name} is empty (0 bytes): nothing to report"
+        ));
+    }
+    if log.good() == 0 {
+        return Err(format!(
+            "the log {name} holds no firmware log record ({} bytes, {} bad frames): not a walker log (COBS frames with CRC-16, see src/log.rs)?",
+            log.bytes,
+            log.bad()
+        ));
+    }
+    if !log.ticks.iter().any(|t| is_walking(t.phase)) {
+        let events: Vec<String> = log
+            .events
+            .iter()
+            .map(|e| {
+                let (_, _, kind, detail) = event_text(e);
+                format!("{kind} {detail}")
+            })
+            .collect();
+        return Err(format!(
+            "the log {name} has no walking record ({} tick records, none in double or single support; {} events{}{}): the firmware did not walk",
+            log.ticks.len(),
+            log.events.len(),
+            if events.is_empty() { "" } else { ": " },
+            events.join("; ")
+        ));
+    }
+    Ok(())
+}
+
+/// Writes the whole report; returns what it found. A log that [`check_walking`] refuses is an
+/// error (nothing is written).
 pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String> {
     let log = decode_file(&opts.log)?;
+    check_walking(&log, &opts.log)?;
     std::fs::create_dir_all(&opts.out_dir)
         .map_err(|e| format!("cannot create {}: {e}", opts.out_dir.display()))?;
     let rows = tick_rows(&log.ticks);
@@ -769,16 +988,36 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         alignment.offset,
         truth.as_ref(),
     );
-    write_file(
-        &opts.out_dir.join("zmp_response.svg"),
-        fig.to_svg().as_bytes(),
-        &mut files,
-    )?;
-    write_file(
-        &opts.out_dir.join("zmp_response.png"),
-        &fig.to_png(),
-        &mut files,
-    )?;
+    write_figure(&fig, &opts.out_dir, "zmp_response", &mut files)?;
+    let mut figures = vec!["zmp_response"];
+    if let Some(tr) = &truth {
+        let planned = planned_joint_speeds(&opts.spec, robot, dt, alignment.offset);
+        let speeds = joint_figure(
+            &format!("Joint speeds: plan vs simulated robot ({model})"),
+            tr,
+            "qd_",
+            "speed (rad/s)",
+            planned.as_ref(),
+        );
+        let torques = joint_figure(
+            &format!("Motor torques of the simulated robot ({model})"),
+            tr,
+            "tq_",
+            "torque (N·m)",
+            None,
+        );
+        let forces = foot_force_figure(&format!("Foot forces, simulated robot ({model})"), tr);
+        for (fig, stem) in [
+            (speeds, "joint_speeds"),
+            (torques, "joint_torques"),
+            (forces, "foot_forces"),
+        ] {
+            if let Some(fig) = fig {
+                write_figure(&fig, &opts.out_dir, stem, &mut files)?;
+                figures.push(stem);
+            }
+        }
+    }
 
     // report.md
     let mut md = String::new();
@@ -836,6 +1075,9 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         "\n## Plot\n\n![ZMP reference vs response](zmp_response.svg)\n"
     );
     let _ = writeln!(md, "Reference dash-dot, response solid, support-polygon min/max dashed (PNG: zmp_response.png).");
+    for stem in &figures[1..] {
+        let _ = writeln!(md, "\n![{stem}]({stem}.svg)\n");
+    }
     if !log.events.is_empty() {
         let _ = writeln!(
             md,
@@ -848,20 +1090,23 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
     }
     write_file(&opts.out_dir.join("report.md"), md.as_bytes(), &mut files)?;
 
-    let json = format!(
-        "{{\n  \"log\": {},\n  \"plan\": {},\n  \"model\": {},\n  \"records\": {{\"good\": {}, \"bad\": {}, \"ticks\": {}, \"events\": {}, \"seq_gaps\": {}, \"bytes\": {}}},\n  \"zmp_error\": {},\n  \"truth_error\": {}\n}}\n",
-        json_str(&opts.log.display().to_string()),
-        json_str(&opts.plan_name),
-        json_str(opts.spec.model_kind().name()),
-        log.good(),
-        log.bad(),
-        log.ticks.len(),
-        log.events.len(),
-        log.decoder.seq_gaps,
-        log.bytes,
-        stats_json(&stats),
-        truth_stats.as_ref().map_or("null".into(), stats_json)
-    );
+    let json = serde_json::json!({
+        "log": opts.log.display().to_string(),
+        "plan": opts.plan_name,
+        "model": opts.spec.model_kind().name(),
+        "records": {
+            "good": log.good(),
+            "bad": log.bad(),
+            "ticks": log.ticks.len(),
+            "events": log.events.len(),
+            "seq_gaps": log.decoder.seq_gaps,
+            "bytes": log.bytes,
+        },
+        "zmp_error": stats_json(&stats),
+        "truth_error": truth_stats.as_ref().map(stats_json),
+        "figures": figures,
+    });
+    let json = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())? + "\n";
     write_file(
         &opts.out_dir.join("stats.json"),
         json.as_bytes(),

@@ -254,15 +254,22 @@ fn report_on_damaged_log_counts_exactly() {
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
-    let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
-    assert!(
-        json.contains("\"good\": 99, \"bad\": 5, \"ticks\": 97, \"events\": 2"),
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    let rec = &json["records"];
+    assert_eq!(
+        [&rec["good"], &rec["bad"], &rec["ticks"], &rec["events"]],
+        [99, 5, 97, 2],
         "{json}"
     );
+    assert_eq!(json["zmp_error"]["x"]["count"], 97);
+    assert!((json["zmp_error"]["x"]["mean_abs"].as_f64().unwrap() - 0.001).abs() < 1e-9);
+    assert_eq!(json["truth_error"], serde_json::Value::Null);
     let png = std::fs::read(out.join("zmp_response.png")).unwrap();
     assert_eq!(&png[..8], &[0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A]);
     let svg = std::fs::read_to_string(out.join("zmp_response.svg")).unwrap();
-    assert!(svg.contains("ZMP reference") && svg.contains("stroke-dasharray"));
+    assert!(svg.contains("ZMP reference") && svg.contains("support polygon min/max"));
+    assert!(svg.contains("t (s)") && svg.contains("ZMP x (m)"), "{svg}");
     // Every measured x is 1 mm ahead of the reference.
     assert!(
         stdout.contains("| x (sagittal) | 97 | 0.097000 | 0.001000 | 0.001000 | 0.001000 |"),
@@ -455,6 +462,7 @@ fn capture_from_file_and_missing_port() {
         err.contains("serial port /dev/ttyDOESNOTEXIST not found"),
         "{err}"
     );
+    // Not a serial port.
     let o = walker(&[
         "capture",
         "--port",
@@ -465,73 +473,148 @@ fn capture_from_file_and_missing_port() {
         s(&dir.join("x.log")),
     ]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("unsupported baud rate"));
-}
-
-#[test]
-fn capture_from_a_pseudo_terminal() {
-    let (mut master, slave) = {
-        let (mut m, mut sl) = (0, 0);
-        let mut name = [0 as libc::c_char; 128];
-        // SAFETY: openpty writes two descriptors and a NUL-terminated name into our buffers.
-        let rc = unsafe {
-            libc::openpty(
-                &mut m,
-                &mut sl,
-                name.as_mut_ptr(),
-                std::ptr::null(),
-                std::ptr::null(),
-            )
-        };
-        assert_eq!(rc, 0, "openpty failed");
-        // SAFETY: `name` is NUL-terminated by openpty; `m` is a fresh descriptor we own.
-        let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-            .to_string_lossy()
-            .into_owned();
-        let master = unsafe { <std::fs::File as std::os::unix::io::FromRawFd>::from_raw_fd(m) };
-        (master, (sl, path))
-    };
-    let dir = tmp("pty");
-    let out = dir.join("walk.log");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_walker"))
-        .args([
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("cannot open serial port /dev/null"), "{err}");
+    // Bad --seconds / --baud: usage errors before any port is opened.
+    for (flag, bad) in [
+        ("--seconds", "NaN"),
+        ("--seconds", "-1"),
+        ("--seconds", "0"),
+        ("--seconds", "1e300"),
+        ("--seconds", "inf"),
+        ("--baud", "0"),
+        ("--baud", "-5"),
+    ] {
+        let o = walker(&[
             "capture",
             "--port",
-            &slave.1,
-            "--baud",
-            "921600",
+            "/dev/ttyDOESNOTEXIST",
             "--out",
-            s(&out),
-            "--seconds",
-            "2",
-        ])
+            s(&dir.join("x.log")),
+            flag,
+            bad,
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {bad}: {err}");
+        assert!(err.contains(flag), "{flag} {bad}: {err}");
+    }
+    // The port listing runs (whatever the machine has).
+    let o = walker(&["capture", "--list"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// How a pseudo-terminal capture is ended.
+#[cfg(unix)]
+#[derive(Clone, Copy, Debug)]
+enum PtyEnd {
+    /// `--seconds 2`.
+    Seconds,
+    /// The other end closes (a hang-up).
+    HangUp,
+    /// SIGINT (Ctrl-C).
+    CtrlC,
+}
+
+/// Captures the damaged log through a pseudo-terminal (from `serialport`) at `baud`, ended as
+/// `how`: the raw bytes and the CSVs must be there whichever way it ends.
+#[cfg(unix)]
+fn pty_capture(name: &str, baud: &str, how: PtyEnd) {
+    use serialport::SerialPort as _;
+    use std::io::{BufRead, Read, Write};
+    let (master, slave) = serialport::TTYPort::pair().expect("a pseudo-terminal");
+    let path = slave.name().expect("the pty's name");
+    // The pair's descriptors are inheritable: keep close-on-exec copies only, so that no child
+    // (the capture or another test's) holds the master open and hides the hang-up.
+    let cloexec = |fd: std::os::fd::RawFd| {
+        // SAFETY: `fd` was just released by its TTYPort (`into_raw_fd`): we own it.
+        let owned = unsafe { <std::os::fd::OwnedFd as std::os::fd::FromRawFd>::from_raw_fd(fd) };
+        std::fs::File::from(owned.try_clone().expect("F_DUPFD_CLOEXEC"))
+    };
+    use std::os::fd::IntoRawFd as _;
+    let mut master = cloexec(master.into_raw_fd());
+    let slave = cloexec(slave.into_raw_fd());
+    let dir = tmp(name);
+    let out = dir.join("walk.log");
+    let mut args = vec!["capture", "--port", &path, "--baud", baud, "--out", s(&out)];
+    if let PtyEnd::Seconds = how {
+        args.extend(["--seconds", "2"]);
+    }
+    let mut child = Command::new(env!("CARGO_BIN_EXE_walker"))
+        .args(&args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // The capture prints "capturing …" once the port is raw and flushed: send after that.
+    // The capture prints "capturing …" once the port is open: send after that.
     let mut err = std::io::BufReader::new(child.stderr.take().unwrap());
     let mut line = String::new();
-    std::io::BufRead::read_line(&mut err, &mut line).unwrap();
+    err.read_line(&mut line).unwrap();
     assert!(line.starts_with("capturing"), "{line}");
     let (bytes, kept) = damaged_log();
     for chunk in bytes.chunks(333) {
-        std::io::Write::write_all(&mut master, chunk).unwrap();
+        master.write_all(chunk).unwrap();
+    }
+    // Wait until the capture has everything on disk, then end it.
+    let t0 = std::time::Instant::now();
+    while std::fs::metadata(&out).map_or(0, |m| m.len()) < bytes.len() as u64 {
+        assert!(
+            t0.elapsed().as_secs() < 20,
+            "the capture did not read the bytes"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    match how {
+        PtyEnd::Seconds => {}
+        PtyEnd::HangUp => {
+            drop(master);
+            drop(slave);
+        }
+        PtyEnd::CtrlC => {
+            let st = Command::new("kill")
+                .args(["-INT", &child.id().to_string()])
+                .status()
+                .unwrap();
+            assert!(st.success());
+        }
+    }
+    let t0 = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed().as_secs() > 30 {
+            let _ = child.kill();
+            panic!("{how:?}: the capture did not end");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
     }
     let o = child.wait_with_output().unwrap();
-    // SAFETY: closing the slave descriptor openpty gave us, after the child is done.
-    unsafe { libc::close(slave.0) };
     let mut rest = String::new();
-    std::io::Read::read_to_string(&mut err, &mut rest).unwrap();
-    assert!(o.status.success(), "{rest}");
+    err.read_to_string(&mut rest).unwrap();
+    assert!(o.status.success(), "{how:?}: {rest}");
+    let want = match how {
+        PtyEnd::Seconds => "time is up",
+        PtyEnd::HangUp => "hung up",
+        PtyEnd::CtrlC => "Ctrl-C",
+    };
+    assert!(rest.contains(want), "{how:?}: {rest}");
     assert_eq!(std::fs::read(&out).unwrap(), bytes);
     let (_, rows) = read_csv(&dir.join("walk.csv"));
     assert_eq!(rows.len(), kept.len());
+    let (_, events) = read_csv(&dir.join("walk.events.csv"));
+    assert_eq!(events.len(), 2);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(
         stdout.contains("99 good records (97 ticks, 2 events), 5 bad"),
         "{stdout}"
     );
+}
+
+/// One test, run in turn: each capture's pseudo-terminal must not leak into another's child.
+#[cfg(unix)]
+#[test]
+fn capture_from_a_pseudo_terminal() {
+    pty_capture("pty", "921600", PtyEnd::Seconds);
+    // 250 000 and 1 234 567 baud are no standard termios rates.
+    pty_capture("pty-hangup", "250000", PtyEnd::HangUp);
+    pty_capture("pty-ctrlc", "1234567", PtyEnd::CtrlC);
 }
 
 #[test]
@@ -541,10 +624,11 @@ fn report_with_truth_file() {
     std::fs::write(&log, hand_log(1.0)).unwrap();
     // The sim's truth CSV: t_s plus more columns; the true ZMP equals the reference here.
     let truth = dir.join("truth.csv");
-    let mut t = String::from("t_s,zmp_x,zmp_y,fz_n\n");
+    let mut t =
+        String::from("t_s,zmp_x,zmp_y,fz_n,support,l_f0,l_f1,l_f2,l_f3,r_f0,r_f1,r_f2,r_f3\n");
     for k in 0..4 {
         t.push_str(&format!(
-            "{:.6},0.010000,-0.020000,48.5\n",
+            "{:.6},0.010000,-0.020000,48.5,D,1,2,3,4,5,6,7,{k}\n",
             1.0 + k as f64 * 1e-3
         ));
     }
@@ -567,6 +651,185 @@ fn report_with_truth_file() {
     assert_eq!(stdout.matches(x_row).count(), 2, "{stdout}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("Measured − true ZMP") && md.contains("LIPM"));
-    let json = std::fs::read_to_string(out.join("stats.json")).unwrap();
-    assert!(!json.contains("\"truth_error\": null"));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    assert_eq!(json["truth_error"]["x"]["count"], 3);
+    assert_eq!(json["model"], "lipm");
+    // Load cells in the truth: the foot-force figure; no joint columns: no joint figures.
+    assert!(out.join("foot_forces.png").is_file() && out.join("foot_forces.svg").is_file());
+    assert!(!out.join("joint_speeds.png").exists());
+    let tr = report::read_truth(&truth).unwrap();
+    assert_eq!(tr.column("r_f3"), Some(&[0.0, 1.0, 2.0, 3.0][..]));
+    assert!(tr.column("support").unwrap().iter().all(|v| v.is_nan()));
+    assert!(report::foot_force_figure("f", &tr).is_some());
+    assert!(report::joint_figure("j", &tr, "qd_", "rad/s", None).is_none());
+}
+
+#[test]
+fn report_refuses_logs_without_a_walk() {
+    let dir = tmp("refuse");
+    // 5 KB of random bytes (xorshift, fixed seed): nothing decodes.
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let random: Vec<u8> = (0..5 * 1024)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect();
+    // Only standing ticks: decodable, but the firmware never walked.
+    let mut standing = vec![0u8];
+    for seq in 0..50u16 {
+        standing.extend(frame(&tick(seq, [0.0, 0.0], None, LoggedPhase::Standing)));
+    }
+    for (name, bytes, want) in [
+        ("random.log", random, "no firmware log record"),
+        ("empty.log", Vec::new(), "is empty"),
+        ("standing.log", standing, "no walking record"),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let out = dir.join(format!("{name}.report"));
+        let o = walker(&["report", "--log", s(&path), "--out", s(&out)]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(want) && err.contains(name), "{name}: {err}");
+        assert!(
+            !out.join("zmp_response.png").exists(),
+            "{name}: plots written"
+        );
+    }
+}
+
+/// A synthetic 14-step walk (Table 2 through the plan's own trajectory): the firmware log
+/// (standing lead-in, then walking ticks; measured ZMP 1 mm ahead) and a truth CSV with every
+/// column of the simulator's header.
+fn synthetic_walk(dir: &Path) -> (PathBuf, PathBuf, usize) {
+    let spec = planfile::load(&workspace().join("plans/table2.toml")).unwrap();
+    let (rows, _) = export::export_rows(&spec, &Robot::reference(), 0.005).unwrap();
+    let mut log = vec![0u8];
+    log.extend(frame(&Record::Startup(StartupRecord {
+        seq: 0,
+        time_us: 0,
+        board: BoardId::QemuMps2,
+        fw: [0, 1, 0],
+        tick_period_us: 5000,
+        bus_baud: 1_000_000,
+        device_count: 15,
+        probed: true,
+        missing: Default::default(),
+    })));
+    let header: Vec<&str> = walker_host::sim::truth::HEADER.split(',').collect();
+    let mut truth = format!("{}\n", header.join(","));
+    for (i, r) in rows.iter().enumerate() {
+        let phase = if r.t < 1.6 {
+            LoggedPhase::Standing
+        } else {
+            LoggedPhase::Double
+        };
+        let mut t = TickRecord {
+            seq: (i + 1) as u16,
+            time_us: (r.t * 1e6).round() as u32 + 5000,
+            phase,
+            zmp_valid: true,
+            ..TickRecord::default()
+        };
+        t.set_zmp_ref_m(r.zmp[0] as f32, r.zmp[1] as f32);
+        t.set_zmp_meas_m(r.zmp[0] as f32 + 0.001, r.zmp[1] as f32);
+        t.set_com_m(r.com[0] as f32, r.com[1] as f32);
+        log.extend(frame(&Record::Tick(t)));
+        let vals: Vec<String> = header
+            .iter()
+            .map(|h| match *h {
+                "t_s" => format!("{:.6}", r.t + 0.005),
+                "zmp_x" => format!("{:.6}", r.zmp[0]),
+                "zmp_y" => format!("{:.6}", r.zmp[1]),
+                "support" => "D".into(),
+                "stance" => "L".into(),
+                "pelvis_z" => "0.217".into(),
+                h if h.starts_with("l_f") || h.starts_with("r_f") => "12.5".into(),
+                _ => format!("{:.4}", (i as f64 * 0.01).sin()),
+            })
+            .collect();
+        truth.push_str(&vals.join(","));
+        truth.push('\n');
+    }
+    log.extend(frame(&Record::Stop(StopRecord {
+        seq: rows.len() as u16 + 1,
+        time_us: 13_000_000,
+        reason: StopReason::PlanDone,
+    })));
+    let (lp, tp) = (dir.join("walk.log"), dir.join("truth.csv"));
+    std::fs::write(&lp, log).unwrap();
+    std::fs::write(&tp, truth).unwrap();
+    (lp, tp, rows.len())
+}
+
+#[test]
+fn mcap_of_a_14_step_walk_holds_every_channel() {
+    let dir = tmp("mcap");
+    let (log, truth, ticks) = synthetic_walk(&dir);
+    let mcap_path = dir.join("run.mcap");
+    let o = walker(&[
+        "report",
+        "--log",
+        s(&log),
+        "--truth",
+        s(&truth),
+        "--out",
+        s(&dir.join("report")),
+        "--mcap",
+        s(&mcap_path),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("run.mcap: 11 channels"), "{stdout}");
+    // The report's joint and foot figures come from the same truth.
+    for f in ["joint_speeds.png", "joint_torques.svg", "foot_forces.png"] {
+        assert!(dir.join("report").join(f).is_file(), "{f}");
+    }
+    let bytes = std::fs::read(&mcap_path).unwrap();
+    let mut count: std::collections::BTreeMap<String, usize> = Default::default();
+    let mut last_time = 0u64;
+    let mut pose = None;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        assert_eq!(m.channel.message_encoding, "json");
+        let schema = m.channel.schema.as_ref().expect("a schema");
+        assert_eq!(schema.encoding, "jsonschema");
+        assert!(m.log_time >= last_time, "messages in time order");
+        last_time = m.log_time;
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if m.channel.topic == "/torso_pose" && pose.is_none() {
+            pose = Some(v);
+        }
+        *count.entry(m.channel.topic.clone()).or_default() += 1;
+    }
+    for topic in [
+        "/zmp/reference",
+        "/zmp/measured",
+        "/zmp/true",
+        "/com",
+        "/com/true",
+        "/foot_forces",
+        "/imu",
+        "/torso_pose",
+        "/joints",
+        "/joints/target",
+        "/events",
+    ] {
+        assert!(
+            count.get(topic).copied().unwrap_or(0) > 0,
+            "{topic}: {count:?}"
+        );
+    }
+    assert_eq!(count["/zmp/reference"], ticks);
+    assert_eq!(count["/zmp/measured"], ticks);
+    assert_eq!(count["/events"], 2);
+    let pose = pose.unwrap();
+    assert_eq!(pose["frame_id"], "world");
+    assert_eq!(pose["pose"]["position"]["z"], 0.217);
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+    assert_eq!(summary.channels.len(), 11);
 }

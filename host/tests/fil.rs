@@ -400,7 +400,6 @@ fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
     assert!(std::fs::metadata(&video).unwrap().len() > 50_000);
 }
 
-<<<<<<< HEAD
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn table2_completes_with_twenty_percent_reply_loss() {
@@ -462,7 +461,8 @@ fn closed_loop_walk_survives_a_sagittal_push() {
     );
     assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
     assert!(r.sim.fall_started_us.is_some());
-=======
+}
+
 /// The firmware ELF built with `--features fixed-gait` (scripts/test.sh builds it and sets
 /// `WALKER_QEMU_FIXED_ELF`).
 fn fixed_elf() -> PathBuf {
@@ -545,5 +545,4 @@ fn fixed_point_path_walks_and_agrees_with_f32() {
     assert!(log.events.iter().any(|e| matches!(e, Record::Fault(f)
         if f.kind == walker_contract::FaultKind::ConfigRejected
             && f.value == i32::from(gait_core::GaitError::NotBuiltIn.code()))));
->>>>>>> contract
 }
