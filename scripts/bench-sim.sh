@@ -36,7 +36,7 @@ section=$(cat <<MD
 <!-- sim:begin -->
 ## The simulated robot: MuJoCo wall time (\`bash scripts/bench-sim.sh\`)
 
-Host wall clock on the shared 2-core machine (other jobs running: ±30 %).
+Host wall clock on the shared 2-core machine (quiet when run: other jobs slow it down up to ≈ 4×).
 
 | what | figure |
 | --- | --- |
