@@ -214,45 +214,32 @@ impl WalkFigures {
 
 /// Reads the walk's figures off the simulator's truth CSV and the plan.
 pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String> {
-    let text = std::fs::read_to_string(truth).map_err(|e| format!("{}: {e}", truth.display()))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let table = crate::report::read_truth(truth)?;
     let col = |n: &str| {
-        header
-            .iter()
-            .position(|h| *h == n)
+        table
+            .column(n)
             .ok_or_else(|| format!("{}: no `{n}` column", truth.display()))
     };
-    let (ct, cx, cyaw, cf, ca) = (
-        col("t_s")?,
+    let (x, yaw, falling, tilt) = (
         col("pelvis_x")?,
         col("pelvis_yaw")?,
         col("falling")?,
         col("fall_angle")?,
     );
-    let mut first: Option<(f64, f64)> = None;
-    let mut last = (0.0, 0.0);
-    let mut fell_at = None;
-    let mut max_tilt: f64 = 0.0;
-    for line in lines {
-        let v: Vec<&str> = line.split(',').collect();
-        let num = |i: usize| {
-            v.get(i)
-                .and_then(|s| s.parse::<f64>().ok())
-                .unwrap_or(f64::NAN)
-        };
-        let (x, yaw) = (num(cx), num(cyaw));
-        first.get_or_insert((x, yaw));
-        last = (x, yaw);
-        if fell_at.is_none() && v.get(cf) == Some(&"1") {
-            fell_at = Some(num(ct));
-        }
-        let a = num(ca);
-        if a.is_finite() {
-            max_tilt = max_tilt.max(a);
-        }
-    }
-    let first = first.ok_or_else(|| format!("{}: no rows", truth.display()))?;
+    let ends = |v: &[f64]| Some((*v.first()?, *v.last()?));
+    let ((x0, x1), (yaw0, yaw1)) = ends(x)
+        .zip(ends(yaw))
+        .ok_or_else(|| format!("{}: no rows", truth.display()))?;
+    let fell_at = falling
+        .iter()
+        .position(|f| *f == 1.0)
+        .and_then(|i| table.t.get(i).copied());
+    let max_tilt = tilt
+        .iter()
+        .copied()
+        .filter(|a| a.is_finite())
+        .fold(0.0, f64::max);
+    let (first, last) = ((x0, yaw0), (x1, yaw1));
     let robot = gait_core::Robot::reference();
     let mut s = spec.sampler(&robot, spec.dt).map_err(|e| e.to_string())?;
     let start = s.next(0.0).com[0];

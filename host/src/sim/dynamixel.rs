@@ -87,16 +87,6 @@ impl XServoParams {
         self.stall_torque / self.no_load_speed
     }
 
-    /// This model with its torque and speed scaled by `torque` and its gains left alone (for
-    /// robustness sweeps: a weaker or stronger servo of the same family).
-    pub fn scaled(&self, torque: f64) -> XServoParams {
-        XServoParams {
-            stall_torque: self.stall_torque * torque,
-            stall_current: self.stall_current * torque,
-            ..*self
-        }
-    }
-
     /// Every number finite, torques, speeds and voltages > 0, the rest ≥ 0.
     pub fn is_valid(&self) -> bool {
         let pos = [

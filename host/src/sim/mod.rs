@@ -88,9 +88,10 @@ pub struct DisturbanceConfig {
     pub start_s: f64,
     /// End of the disturbance, s (`None`: never ends).
     pub end_s: Option<f64>,
-    /// Natural frequency of the waist compliance joining the upper body to the pelvis, Hz.
+    /// Natural frequency of the waist compliance joining the upper body to the pelvis, Hz
+    /// (kinematic model only; the MuJoCo torso is one rigid body).
     pub waist_frequency_hz: f64,
-    /// Damping ratio of the waist compliance.
+    /// Damping ratio of the waist compliance (kinematic model only).
     pub waist_damping: f64,
 }
 
@@ -140,9 +141,10 @@ impl DisturbanceConfig {
 /// Fall detection and forced falls.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FallConfig {
-    /// Detect falls from the ZMP and the pelvis tilt.
+    /// Detect falls from the ZMP and the pelvis tilt (kinematic model; the MuJoCo robot falls by
+    /// itself and its truth marks the fall from the torso, see [`mujoco`]).
     pub enabled: bool,
-    /// ZMP outside the support polygon by more than this, m …
+    /// ZMP outside the support polygon by more than this, m … (kinematic model)
     pub zmp_margin: f64,
     /// … for at least this long, s, starts a fall.
     pub zmp_time_s: f64,
@@ -220,24 +222,24 @@ pub struct SimConfig {
     pub connect_timeout: Duration,
     /// Seed of every random stream.
     pub seed: u64,
-    /// Servo speed limit, rad/s.
+    /// Servo speed limit, rad/s (kinematic model; the MuJoCo servos follow [`Self::xservo`]).
     pub servo_speed_limit: f64,
-    /// Servo torque model (`None`: unlimited torque; see [`servo`]).
+    /// Servo torque model of the kinematic model (`None`: unlimited torque; see [`servo`]).
     pub servo_torque: Option<ServoTorque>,
-    /// Natural frequency of a servo's closed position loop with its load, Hz (see [`body`]: a
+    /// Natural frequency of a servo's closed position loop with its load, Hz (kinematic model; see [`body`]: a
     /// second-order response, so the joint velocity never jumps when a goal changes).
     pub servo_frequency_hz: f64,
-    /// Damping ratio of a servo's closed position loop (1 = critically damped).
+    /// Damping ratio of a servo's closed position loop (1 = critically damped; kinematic model).
     pub servo_damping: f64,
     /// Physics step, µs.
     pub physics_dt_us: u64,
-    /// A sole at most this high above the stance sole is in contact, m.
+    /// A sole at most this high above the stance sole is in contact, m (kinematic model).
     pub contact_threshold: f64,
-    /// A sole this much lower than the stance sole becomes the stance foot, m.
+    /// A sole this much lower than the stance sole becomes the stance foot, m (kinematic model).
     pub switch_threshold: f64,
     /// Joint angles at start, rad (left leg then right leg).
     pub initial_q: [f64; 12],
-    /// Include the upper body's J·φ̈ pitch term in the ZMP.
+    /// Include the upper body's J·φ̈ pitch term in the ZMP (kinematic model).
     pub upper_body_inertia_term: bool,
     /// Sensor noise.
     pub noise: NoiseConfig,
@@ -643,7 +645,7 @@ impl Simulator {
         let volts = self.cfg.xservo.supply_voltage;
         for j in 0..12 {
             let (q, qd) = (self.physics.q()[j], self.physics.qd()[j]);
-            let out = match &mut self.physics {
+            let out = match &self.physics {
                 Body::MuJoCo(b) => b.outputs()[j],
                 Body::Kinematic(_) => XServoOutput::default(),
             };
