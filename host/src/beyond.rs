@@ -178,8 +178,7 @@ impl RunMetrics {
 pub fn firmware_config(tokens: &[String]) -> Result<Config, String> {
     let mut cfg = Config::default();
     let line = tokens.join(" ");
-    params::apply(&mut cfg, line.as_bytes())
-        .map_err(|e| format!("firmware token {:?}: {:?}", e.key(), e.kind))?;
+    params::apply(&mut cfg, line.as_bytes()).map_err(|e| fil::token_error(&e, tokens))?;
     Ok(cfg)
 }
 
@@ -446,22 +445,28 @@ pub struct BeyondOptions {
 
 /// Walks the five variants and scores them; `progress(name)` before each run.
 pub fn run(opts: &BeyondOptions, progress: impl Fn(&str)) -> Result<Vec<RunMetrics>, String> {
+    // Every variant's firmware command line is checked before the first run starts.
+    let runs = variants()
+        .into_iter()
+        .map(|v| {
+            let spec = WalkSpec {
+                model: v.model,
+                compensation: v.compensation,
+                stabilizer: v.stabilizer,
+                ..opts.spec.clone()
+            };
+            let mut extra = opts.extra_tokens.clone();
+            if v.stabilizer {
+                extra.extend(opts.feedback_tokens.iter().cloned());
+            }
+            let (_, cfg) =
+                fil::check_tokens(&spec, &extra).map_err(|e| format!("run {}: {e}", v.name))?;
+            Ok((v, spec, extra, cfg))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
     let mut out = Vec::new();
-    for v in variants() {
+    for (v, spec, extra, cfg) in runs {
         progress(v.name);
-        let spec = WalkSpec {
-            model: v.model,
-            compensation: v.compensation,
-            stabilizer: v.stabilizer,
-            ..opts.spec.clone()
-        };
-        let mut extra = opts.extra_tokens.clone();
-        if v.stabilizer {
-            extra.extend(opts.feedback_tokens.iter().cloned());
-        }
-        let mut tokens = fil::firmware_tokens(&spec)?;
-        tokens.extend(extra.iter().cloned());
-        let cfg = firmware_config(&tokens)?;
         let sim = SimConfig {
             seed: opts.seed,
             servo_speed_limit: XM430_SPEED_RAD_S,

@@ -1,24 +1,30 @@
-//! The `walker` command line: a small hand parser (no clap: compile time) and a table of
-//! subcommands. Adding a subcommand = one [`Subcommand`] entry in [`SUBCOMMANDS`] with a
-//! handler `fn(&mut Args) -> Result<(), CliError>` that takes its options from [`Args`] and
-//! calls [`Args::finish`] before doing any work (so unknown options are refused early).
+//! The `walker` command line, declared with `clap` (derive): one documented struct per
+//! command ([`Command`]), the simulated robot's options shared by `simulate`, `fil` and `beyond`
+//! ([`SimArgs`]). Every option has a one-line help (a test checks it); a misspelt option gets a
+//! suggestion; paths are `PathBuf` parsed from `OsString` (a non-UTF-8 path never panics);
+//! an option given twice, or two options that exclude each other, are refused; every number is
+//! checked by its value parser (finite, in range, with a message naming the option) before any
+//! work starts.
 //!
-//! Exit codes: 0 success, 1 failure (bad plan file, unreadable log, serial port not found, …),
-//! 2 usage error (unknown subcommand or option, missing or malformed value).
+//! Exit codes: 0 success (also `--help`, `--version`), 1 failure (bad plan file, unreadable log,
+//! serial port not found, …), 2 usage error (unknown command or option, missing or malformed
+//! value), 3 the firmware failed (`fil`, `beyond`).
 
-use crate::planfile::{self, WalkSpec};
+use crate::planfile::{self, ModelName, WalkSpec};
 use crate::{capture, export, report};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use gait_core::Robot;
+use std::ffi::OsString;
 use std::fmt;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
+use std::time::Duration;
 
 /// A command-line error with its exit code.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CliError {
     /// What went wrong.
     pub message: String,
-    /// Exit code (1 failure, 2 usage).
+    /// Exit code (1 failure, 2 usage, 3 firmware failed).
     pub code: i32,
 }
 
@@ -59,240 +65,391 @@ impl From<planfile::PlanError> for CliError {
     }
 }
 
-/// The options of one subcommand, consumed by name.
-#[derive(Debug)]
-pub struct Args {
-    cmd: &'static str,
-    items: Vec<String>,
-    used: Vec<bool>,
+/// The default firmware ELF of `fil` and `beyond` (the board-qemu release build).
+pub const DEFAULT_ELF: &str = "target/thumbv7em-none-eabihf/release/qemu";
+
+/// `walker`: host tools of the walking controller.
+#[derive(Debug, Parser)]
+#[command(
+    name = "walker",
+    version,
+    about = "Host tools of the walking controller: simulated robot, firmware in the loop, log capture, reports",
+    propagate_version = true,
+    arg_required_else_help = true
+)]
+pub struct Cli {
+    /// The command to run.
+    #[command(subcommand)]
+    pub command: Command,
 }
 
-impl Args {
-    /// The arguments after the subcommand name.
-    pub fn new(cmd: &'static str, items: &[String]) -> Self {
-        Args {
-            cmd,
-            items: items.to_vec(),
-            used: vec![false; items.len()],
+/// The commands, in the order of the help text.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Sample a plan and write ZMP, CoM, feet and the 12 joint angles as CSV.
+    Export(ExportArgs),
+    /// Decode a firmware log: ZMP CSV, plots (SVG/PNG), Table 3 statistics, MCAP.
+    Report(ReportArgs),
+    /// Table 3 statistics of several runs side by side.
+    Compare(CompareArgs),
+    /// Record the firmware log from a serial port (or decode a saved capture).
+    Capture(CaptureArgs),
+    /// Serve the simulated robot on the servo bus (TCP) for the firmware.
+    Simulate(SimulateArgs),
+    /// Firmware in the loop: the firmware in QEMU against the simulated robot.
+    ///
+    /// Runs the firmware ELF in QEMU in lock-step with the simulated robot, captures its log to
+    /// OUT/walk.log, decodes its defmt output to OUT/firmware.log and writes the report to
+    /// OUT/report. Exit code 3: the firmware failed.
+    Fil(FilArgs),
+    /// LIPM, DLIPM, TLIPFM, + whole-body compensation, + feedback: side by side in the FIL walk.
+    ///
+    /// Walks the plan five times in the firmware-in-the-loop setup and prints per run the true
+    /// and measured ZMP errors, the time the true ZMP is inside the support polygon (5 mm
+    /// margin), distance walked vs planned, peak joint speeds and motor torques; writes
+    /// OUT/beyond.md, OUT/beyond.csv and OUT/<run>/.
+    Beyond(BeyondArgs),
+}
+
+/// `walker export`.
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// Plan file (TOML, e.g. plans/table2.toml); default: the built-in Table 2 walk.
+    #[arg(long, value_name = "FILE")]
+    pub plan: Option<PathBuf>,
+    /// CSV to write.
+    #[arg(long, value_name = "FILE", default_value = "out/plan.csv")]
+    pub out: PathBuf,
+    /// Sample time, s (default: the plan's dt).
+    #[arg(long, value_name = "S", value_parser = positive, allow_negative_numbers = true)]
+    pub dt: Option<f64>,
+}
+
+/// `walker report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// Captured firmware log (binary COBS frames).
+    #[arg(long, value_name = "FILE")]
+    pub log: PathBuf,
+    /// Folder for zmp_response.csv, events.csv, the plots (.svg/.png), report.md, stats.json.
+    #[arg(long, value_name = "DIR", default_value = "out/report")]
+    pub out: PathBuf,
+    /// Truth CSV of the simulator (t_s, zmp_x_m, zmp_y_m, …), same clock as the log.
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<PathBuf>,
+    /// The plan the firmware walked (support-polygon bounds); default: Table 2.
+    #[arg(long, value_name = "FILE")]
+    pub plan: Option<PathBuf>,
+    /// The model the firmware ran (report title); default: the plan's.
+    #[arg(long, value_enum)]
+    pub model: Option<ModelName>,
+    /// Also write the run as MCAP for Foxglove / PlotJuggler (README: "Opening a run in Foxglove").
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
+}
+
+/// `walker compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// The runs, NAME=LOG[,NAME=LOG…], e.g. lipm=out/lipm.log,tlipfm=out/tlipfm.log.
+    #[arg(long, value_name = "LIST", value_parser = parse_runs)]
+    pub runs: RunList,
+    /// Markdown table to write.
+    #[arg(long, value_name = "FILE", default_value = "out/compare.md")]
+    pub out: PathBuf,
+}
+
+/// The `--runs` of `walker compare`: (name, log file) pairs.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RunList(pub Vec<(String, PathBuf)>);
+
+/// `walker capture`.
+#[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("source").required(true).args(["list", "port", "from_file"]))]
+pub struct CaptureArgs {
+    /// List the serial ports found and exit.
+    #[arg(long)]
+    pub list: bool,
+    /// Serial port of the log UART (/dev/ttyUSB0, /dev/cu.usbserial-…, COM3).
+    #[arg(long, value_name = "PORT", requires = "out")]
+    pub port: Option<String>,
+    /// Decode a saved capture instead of reading a port.
+    #[arg(long, value_name = "FILE", conflicts_with = "port")]
+    pub from_file: Option<PathBuf>,
+    /// Baud rate of the log UART (any rate the port accepts).
+    #[arg(long, value_name = "BAUD", default_value_t = 921_600,
+          value_parser = clap::value_parser!(u32).range(1..), allow_negative_numbers = true)]
+    pub baud: u32,
+    /// Raw stream to write; the ticks go to <out>.csv, the events to <out>.events.csv.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Stop after this many seconds (default: at Ctrl-C or when the port hangs up).
+    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
+    pub seconds: Option<Duration>,
+}
+
+/// The simulated robot's options (`simulate`, `fil`, `beyond`); each overrides the run
+/// configuration file's value when given.
+#[derive(Debug, Args, Clone, Default)]
+pub struct SimArgs {
+    /// Physics of the simulated robot (default mujoco: full dynamics; kinematic: idealised, stance sole bolted down).
+    #[arg(long, value_enum)]
+    pub physics: Option<PhysicsArg>,
+    /// Seed of the noise and fault streams.
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// Servo stall torque, N·m (MuJoCo: XM430-W350 4.1 by default; kinematic: 3.5, 0 = unlimited).
+    #[arg(long, value_name = "NM", value_parser = non_negative, allow_negative_numbers = true)]
+    pub stall_torque: Option<f64>,
+    /// Push on the torso, T:IMPULSE_NS:DIRECTION_DEG (0° forward, 90° left), e.g. 3.2:1.5:0; comma-separated or repeated.
+    #[arg(long, value_name = "PUSH", value_delimiter = ',', value_parser = parse_push, allow_negative_numbers = true)]
+    pub push: Vec<crate::sim::Push>,
+    /// Sole–floor friction coefficient (default 1.0).
+    #[arg(long, value_name = "MU", value_parser = finite, allow_negative_numbers = true)]
+    pub floor_friction: Option<f64>,
+    /// Floor of square 5 cm tiles with random heights within ±MM, mm (seeded; level under the start).
+    #[arg(long, value_name = "MM", value_parser = finite, allow_negative_numbers = true)]
+    pub floor_steps: Option<f64>,
+    /// Floor slope, degrees (uphill forward).
+    #[arg(long, value_name = "DEG", value_parser = finite, allow_negative_numbers = true)]
+    pub slope: Option<f64>,
+    /// Extra mass on the torso, 15 cm above the pelvis, kg.
+    #[arg(long, value_name = "KG", value_parser = finite, allow_negative_numbers = true)]
+    pub payload: Option<f64>,
+    /// Latency of the foot boards' and the IMU's samples, ms (0..=1000).
+    #[arg(long, value_name = "MS", value_parser = latency_ms, allow_negative_numbers = true)]
+    pub sensor_latency_ms: Option<f64>,
+    /// Servo supply voltage, V (default 12; XM430-W350 datasheet at 12 V).
+    #[arg(long, value_name = "V", value_parser = positive, allow_negative_numbers = true)]
+    pub servo_voltage: Option<f64>,
+}
+
+/// `--physics`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PhysicsArg {
+    /// MuJoCo full dynamics (the robot can tip, slip and fall).
+    Mujoco,
+    /// The idealised kinematic model (stance sole bolted down).
+    Kinematic,
+}
+
+impl From<PhysicsArg> for crate::sim::PhysicsModel {
+    fn from(p: PhysicsArg) -> Self {
+        match p {
+            PhysicsArg::Mujoco => crate::sim::PhysicsModel::MuJoCo,
+            PhysicsArg::Kinematic => crate::sim::PhysicsModel::Kinematic,
         }
     }
+}
 
-    /// True when `--help` / `-h` was given.
-    pub fn wants_help(&self) -> bool {
-        self.items.iter().any(|a| a == "--help" || a == "-h")
+/// `walker simulate`.
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// Bus TCP port on 127.0.0.1 (QEMU -serial tcp:127.0.0.1:PORT).
+    #[arg(long, value_name = "PORT", default_value_t = 5760)]
+    pub port: u16,
+    /// Lock-step time channel's TCP port (default: free-running).
+    #[arg(long, value_name = "PORT")]
+    pub lockstep_port: Option<u16>,
+    /// Connect to a listening QEMU instead of listening.
+    #[arg(long)]
+    pub connect: bool,
+    /// Write the ground truth (true ZMP, …) to this CSV (for `walker report --truth`).
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<PathBuf>,
+    /// Seconds to wait for the firmware (default 30).
+    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
+    pub timeout: Option<Duration>,
+    /// The simulated robot.
+    #[command(flatten)]
+    pub sim: SimArgs,
+}
+
+/// The QEMU boards that run the board-qemu firmware.
+const MACHINES: [&str; 2] = ["mps2-an500", "mps2-an386"];
+
+/// `walker fil`.
+#[derive(Debug, Args)]
+pub struct FilArgs {
+    /// Plan file (TOML, e.g. plans/table2.toml); default: the built-in Table 2 walk.
+    #[arg(long, value_name = "FILE")]
+    pub plan: Option<PathBuf>,
+    /// Pendulum model (overrides the plan's).
+    #[arg(long, value_enum)]
+    pub model: Option<ModelName>,
+    /// Output folder (walk.log, firmware.log, truth.csv, report/).
+    #[arg(long, value_name = "DIR", default_value = "out/fil")]
+    pub out: PathBuf,
+    /// Firmware ELF (board-qemu build).
+    #[arg(long, value_name = "ELF")]
+    pub elf: Option<PathBuf>,
+    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
+    #[arg(long, value_parser = MACHINES)]
+    pub machine: Option<String>,
+    /// Probability that the bus drops an instruction packet (0..=1).
+    #[arg(long, value_name = "P", value_parser = probability, allow_negative_numbers = true)]
+    pub p_drop: Option<f64>,
+    /// Probability that the bus corrupts a status packet (0..=1).
+    #[arg(long, value_name = "P", value_parser = probability, allow_negative_numbers = true)]
+    pub p_corrupt: Option<f64>,
+    /// Devices that never answer, by bus id (e.g. 111,112); comma-separated or repeated.
+    #[arg(long, value_name = "ID", value_delimiter = ',')]
+    pub dead: Vec<u8>,
+    /// Force a fall at this simulated time, s.
+    #[arg(long, value_name = "S", value_parser = non_negative, allow_negative_numbers = true)]
+    pub fall_at: Option<f64>,
+    /// Constant pitch torque on the upper body, N·m (positive pitches it forward).
+    #[arg(long, value_name = "NM", value_parser = finite, allow_negative_numbers = true)]
+    pub tau_constant: Option<f64>,
+    /// Standard deviation of a random pitch torque on the upper body, N·m.
+    #[arg(long, value_name = "NM", value_parser = non_negative, allow_negative_numbers = true)]
+    pub tau_random: Option<f64>,
+    /// Extra firmware parameters, 'key=value …' (docs/parameters.md), checked before QEMU starts.
+    #[arg(long, value_name = "'K=V …'")]
+    pub firmware_args: Option<String>,
+    /// Wall-clock limit, s (default 1800).
+    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
+    pub timeout: Option<Duration>,
+    /// Render the walk to this video (MuJoCo, headless; needs `bash scripts/render-setup.sh`).
+    #[arg(long, value_name = "FILE")]
+    pub video: Option<PathBuf>,
+    /// The simulated robot.
+    #[command(flatten)]
+    pub sim: SimArgs,
+}
+
+/// `walker beyond`.
+#[derive(Debug, Args)]
+pub struct BeyondArgs {
+    /// Plan file (TOML); default: the built-in Table 2 walk.
+    #[arg(long, value_name = "FILE")]
+    pub plan: Option<PathBuf>,
+    /// Output folder (beyond.md, beyond.csv, one folder per run).
+    #[arg(long, value_name = "DIR", default_value = "out/beyond")]
+    pub out: PathBuf,
+    /// Firmware ELF (board-qemu build).
+    #[arg(long, value_name = "ELF")]
+    pub elf: Option<PathBuf>,
+    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
+    #[arg(long, value_parser = MACHINES)]
+    pub machine: Option<String>,
+    /// Firmware parameters for every run, 'key=value …' (e.g. feasibility=off).
+    #[arg(long, value_name = "'K=V …'")]
+    pub firmware_args: Option<String>,
+    /// Firmware parameters for the feedback run only, e.g. 'stab_ki=2'.
+    #[arg(long, value_name = "'K=V …'")]
+    pub feedback_args: Option<String>,
+    /// Wall-clock limit per run, s (default 1800).
+    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
+    pub timeout: Option<Duration>,
+    /// The simulated robot.
+    #[command(flatten)]
+    pub sim: SimArgs,
+}
+
+/// The longest duration any option takes, s (11.6 days; `Duration::from_secs_f64` panics on
+/// non-finite or huge values, so every duration is checked against this first).
+pub const MAX_SECONDS: f64 = 1e6;
+
+/// A duration in seconds: finite, > 0 and at most [`MAX_SECONDS`].
+fn seconds(s: &str) -> Result<Duration, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 && x <= MAX_SECONDS => Ok(Duration::from_secs_f64(x)),
+        Ok(_) => Err(format!(
+            "must be a number of seconds in (0, {MAX_SECONDS}] (got {})",
+            s.trim()
+        )),
+        Err(e) => Err(format!("not a number of seconds: {e}")),
     }
+}
 
-    /// The value of `--name VALUE` or `--name=VALUE` (the last one wins).
-    pub fn value(&mut self, name: &str) -> Result<Option<String>, CliError> {
-        let mut found = None;
-        let prefix = format!("{name}=");
-        let mut i = 0;
-        while i < self.items.len() {
-            if self.items[i] == name {
-                self.used[i] = true;
-                match self.items.get(i + 1) {
-                    Some(v) if !v.starts_with("--") => {
-                        self.used[i + 1] = true;
-                        found = Some(v.clone());
-                        i += 1;
-                    }
-                    _ => {
-                        return Err(CliError::usage(format!(
-                            "walker {}: {name} needs a value",
-                            self.cmd
-                        )))
-                    }
-                }
-            } else if let Some(v) = self.items[i].strip_prefix(&prefix) {
-                self.used[i] = true;
-                found = Some(v.to_string());
+/// A finite number.
+fn finite(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() => Ok(x),
+        Ok(_) => Err(format!("must be a finite number (got {})", s.trim())),
+        Err(e) => Err(format!("not a number: {e}")),
+    }
+}
+
+/// A finite number ≥ 0.
+fn non_negative(s: &str) -> Result<f64, String> {
+    let x = finite(s)?;
+    if x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(format!("must be >= 0 (got {x})"))
+    }
+}
+
+/// A finite number > 0.
+fn positive(s: &str) -> Result<f64, String> {
+    let x = finite(s)?;
+    if x > 0.0 {
+        Ok(x)
+    } else {
+        Err(format!("must be > 0 (got {x})"))
+    }
+}
+
+/// A probability, 0..=1.
+fn probability(s: &str) -> Result<f64, String> {
+    let x = finite(s)?;
+    if (0.0..=1.0).contains(&x) {
+        Ok(x)
+    } else {
+        Err(format!("must be within 0..=1 (got {x})"))
+    }
+}
+
+/// A sensor latency, ms (0..=1000).
+fn latency_ms(s: &str) -> Result<f64, String> {
+    let x = finite(s)?;
+    if (0.0..=1000.0).contains(&x) {
+        Ok(x)
+    } else {
+        Err(format!("must be in 0..=1000 (got {x})"))
+    }
+}
+
+/// One push, `T:IMPULSE_NS:DIRECTION_DEG`.
+fn parse_push(s: &str) -> Result<crate::sim::Push, String> {
+    crate::sim::Push::parse(s.trim())
+}
+
+/// Parses `name=path,name=path` (`walker compare --runs`).
+pub fn parse_runs(s: &str) -> Result<RunList, String> {
+    let mut out = Vec::new();
+    for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+        match item.split_once('=') {
+            Some((name, path)) if !name.is_empty() && !path.is_empty() => {
+                out.push((name.to_string(), PathBuf::from(path)))
             }
-            i += 1;
-        }
-        Ok(found)
-    }
-
-    /// A required value.
-    pub fn required(&mut self, name: &str) -> Result<String, CliError> {
-        self.value(name)?
-            .ok_or_else(|| CliError::usage(format!("walker {}: {name} is required", self.cmd)))
-    }
-
-    /// A value parsed as `T`.
-    pub fn parsed<T: FromStr>(&mut self, name: &str) -> Result<Option<T>, CliError>
-    where
-        T::Err: fmt::Display,
-    {
-        match self.value(name)? {
-            None => Ok(None),
-            Some(v) => v
-                .parse::<T>()
-                .map(Some)
-                .map_err(|e| CliError::usage(format!("walker {}: {name} {v:?}: {e}", self.cmd))),
+            _ => return Err(format!("item {item:?} is not name=path")),
         }
     }
-
-    /// A flag without a value.
-    pub fn flag(&mut self, name: &str) -> bool {
-        let mut hit = false;
-        for (a, u) in self.items.iter().zip(self.used.iter_mut()) {
-            if a == name {
-                *u = true;
-                hit = true;
-            }
-        }
-        hit
+    if out.is_empty() {
+        return Err("lists no run".into());
     }
-
-    /// Refuses anything not consumed.
-    pub fn finish(&self) -> Result<(), CliError> {
-        match self.items.iter().zip(&self.used).find(|(_, u)| !**u) {
-            Some((a, _)) => Err(CliError::usage(format!(
-                "walker {}: unexpected argument {a:?} (see `walker {} --help`)",
-                self.cmd, self.cmd
-            ))),
-            None => Ok(()),
-        }
-    }
-
-    /// The arguments not consumed yet (for pass-through subcommands).
-    pub fn rest(&mut self) -> Vec<String> {
-        let out = self
-            .items
-            .iter()
-            .zip(&self.used)
-            .filter(|(_, u)| !**u)
-            .map(|(a, _)| a.clone())
-            .collect();
-        self.used.iter_mut().for_each(|u| *u = true);
-        out
-    }
-}
-
-/// One subcommand.
-pub struct Subcommand {
-    /// Its name.
-    pub name: &'static str,
-    /// One line for the overview.
-    pub summary: &'static str,
-    /// Its usage text.
-    pub usage: &'static str,
-    /// The handler.
-    pub run: fn(&mut Args) -> Result<(), CliError>,
-}
-
-/// The simulated robot's physics options shared by `simulate`, `fil` and `beyond` (usage text).
-macro_rules! physics_options {
-    () => {
-        "\n  --physics        mujoco (default: full dynamics) | kinematic (idealised: stance sole bolted down)\
-\n  --push LIST      pushes on the torso, T:IMPULSE_NS:DIRECTION_DEG[,…] (0° forward, 90° left), e.g. 3.2:1.5:0\
-\n  --floor-friction sole–floor friction coefficient (default 1.0)\
-\n  --floor-steps MM floor of square 5 cm tiles with random heights within ±MM (seeded; level under the start)\
-\n  --slope DEG      floor slope, uphill forward\
-\n  --payload KG     extra mass on the torso, 15 cm above the pelvis\
-\n  --sensor-latency-ms MS  latency of the foot boards' and the IMU's samples\
-\n  --servo-voltage V       servo supply voltage (default 12; XM430-W350 datasheet at 12 V)"
-    };
-}
-
-/// Every subcommand, in the order of the help text.
-pub const SUBCOMMANDS: &[Subcommand] = &[
-    Subcommand {
-        name: "export",
-        summary: "sample a plan and write ZMP, CoM, feet and the 12 joint angles as CSV",
-        usage: "walker export [--plan plans/table2.toml] [--out out/plan.csv] [--dt 0.005]\n\
-                \n  --plan  plan/parameter file (TOML; default: the built-in Table 2 walk)\
-                \n  --out   CSV to write (default out/plan.csv)\
-                \n  --dt    sample time, s (default: the plan's dt)",
-        run: run_export,
-    },
-    Subcommand {
-        name: "report",
-        summary: "decode a firmware log: ZMP CSV, plots (SVG/PNG), Table 3 statistics",
-        usage: "walker report --log out/walk.log [--out out/report] [--truth out/truth.csv] [--plan plans/table2.toml] [--model tlipfm] [--mcap run.mcap]\n\
-                \n  --log    captured firmware log (binary COBS frames)\
-                \n  --out    folder for zmp_response.csv, events.csv, zmp_response.svg/.png, report.md, stats.json\
-                \n           (with a truth file also joint_speeds, joint_torques, foot_forces .svg/.png)\
-                \n  --mcap   also write the run as MCAP for Foxglove (README: \"Opening a run in Foxglove\")\
-                \n  --truth  CSV with t, zmp_x, zmp_y (e.g. the simulator's true ZMP), same clock as the log\
-                \n  --plan   the plan the firmware walked (support-polygon bounds; default Table 2)\
-                \n  --model  lipm | dlipm | tlipfm: the model the firmware ran (report title; default: the plan's)",
-        run: run_report,
-    },
-    Subcommand {
-        name: "compare",
-        summary: "Table 3 statistics of several runs side by side",
-        usage: "walker compare --runs lipm=out/lipm.log,dlipm=out/dlipm.log,tlipfm=out/tlipfm.log [--out out/compare.md]",
-        run: run_compare,
-    },
-    Subcommand {
-        name: "capture",
-        summary: "record the firmware log from a serial port (or decode a saved capture)",
-        usage: "walker capture --port /dev/ttyUSB0 [--baud 921600] --out out/walk.log [--seconds N]\n\
-                walker capture --from-file saved.log [--out out/walk.log]\n\
-                walker capture --list    (the serial ports found)\n\
-                \n  writes the raw stream to --out, the decoded ticks to <out>.csv and events to <out>.events.csv\
-                \n  any baud rate the port accepts; without --seconds, capture runs until Ctrl-C or the\
-                \n  port hangs up; the CSVs are written however it ends",
-        run: run_capture,
-    },
-    Subcommand {
-        name: "simulate",
-        summary: "serve the simulated robot on the servo bus (TCP) for the firmware",
-        usage: concat!("walker simulate [--port 5760] [--lockstep-port 5761] [--connect] [--seed N] [--stall-torque NM] [--truth out/truth.csv] [--timeout S]\n\
-                \n  --port           bus TCP port on 127.0.0.1 (QEMU -serial tcp:127.0.0.1:PORT)\
-                \n  --lockstep-port  lock-step time channel (default: free-running)\
-                \n  --connect        connect to a listening QEMU instead of listening\
-                \n  --seed           seed of the noise and fault streams\
-                \n  --stall-torque   servo stall torque, N·m (MuJoCo: XM430-W350 4.1 by default; kinematic: 3.5, 0 = unlimited)\
-                \n  --truth          write the ground truth (true ZMP, …) to this CSV (for `walker report --truth`)\
-                \n  --timeout        seconds to wait for the firmware (default 30)\
-                \n  physics options:", physics_options!()),
-        run: run_simulate,
-    },
-    Subcommand {
-        name: "fil",
-        summary: "firmware-in-the-loop: the firmware in QEMU against the simulated robot",
-        usage: concat!("walker fil [--plan plans/table2.toml] [--model lipm|dlipm|tlipfm] [--out out/fil]\n\
-                [--elf target/thumbv7em-none-eabihf/release/qemu] [--machine mps2-an500|mps2-an386]\n\
-                [--seed N] [--stall-torque NM] [--p-drop P] [--p-corrupt P] [--dead ID,ID] [--fall-at S]\n\
-                [--tau-constant NM] [--tau-random NM] [--firmware-args 'k=v ...'] [--timeout S]\n\
-                [--video OUT/walk.mp4] [physics options]\n\
-         Runs the firmware ELF in QEMU in lock-step with the simulated robot, captures its log\n\
-         to OUT/walk.log and writes the report to OUT/report. Exit code 3: the firmware failed.\n\
-         --video renders the walk (MuJoCo, headless; needs `bash scripts/render-setup.sh`).\n\
-         physics options:", physics_options!()),
-        run: run_fil,
-    },
-    Subcommand {
-        name: "beyond",
-        summary: "LIPM, DLIPM, TLIPFM, + whole-body compensation, + feedback: side by side in the FIL walk",
-        usage: concat!("walker beyond [--plan plans/table2.toml] [--out out/beyond] [--elf target/thumbv7em-none-eabihf/release/qemu]\n\
-                [--machine mps2-an500] [--seed N] [--stall-torque NM] [--firmware-args 'k=v ...'] [--feedback-args 'stab_ki=2 ...'] [--timeout S]\n\
-         Walks the plan five times in the firmware-in-the-loop setup (the MuJoCo robot with\n\
-         XM430-W350 servo models; --stall-torque changes their stall torque) and prints per\n\
-         run the true and measured ZMP errors, the time the true ZMP is inside the support polygon\n\
-         (5 mm margin), distance walked vs planned, peak joint speeds and motor torques; writes\n\
-         OUT/beyond.md, OUT/beyond.csv and OUT/<run>/.\n\
-         --firmware-args go to every run (e.g. feasibility=off), --feedback-args to the feedback run.\n\
-         physics options:", physics_options!()),
-        run: run_beyond,
-    },
-];
-
-/// The overview help text.
-pub fn usage() -> String {
-    let mut s = String::from("walker: host tools of the walking controller\n\nusage: walker <command> [options]\n\ncommands:\n");
-    for c in SUBCOMMANDS {
-        s.push_str(&format!("  {:<9} {}\n", c.name, c.summary));
-    }
-    s.push_str("\n`walker <command> --help` shows a command's options.\n");
-    s
+    Ok(RunList(out))
 }
 
 /// Runs the command line `args` (without the program name); returns the exit code.
-pub fn main_with(args: &[String]) -> i32 {
-    match dispatch(args) {
+pub fn main_with<I, T>(args: I) -> i32
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let argv = std::iter::once(OsString::from("walker")).chain(args.into_iter().map(Into::into));
+    let cli = match Cli::try_parse_from(argv) {
+        Ok(cli) => cli,
+        Err(e) => {
+            // Help and version go to stdout with exit code 0, usage errors to stderr with 2.
+            let _ = e.print();
+            return e.exit_code();
+        }
+    };
+    match run(cli.command) {
         Ok(()) => 0,
         Err(e) => {
             eprintln!("error: {e}");
@@ -301,53 +458,24 @@ pub fn main_with(args: &[String]) -> i32 {
     }
 }
 
-/// Finds and runs the subcommand.
-pub fn dispatch(args: &[String]) -> Result<(), CliError> {
-    let Some(name) = args.first() else {
-        print!("{}", usage());
-        return Err(CliError::usage("no command given"));
-    };
-    if name == "help" || name == "--help" || name == "-h" {
-        match args
-            .get(1)
-            .and_then(|n| SUBCOMMANDS.iter().find(|c| c.name == n))
-        {
-            Some(c) => println!("{}", c.usage),
-            None => print!("{}", usage()),
-        }
-        return Ok(());
+/// Runs one parsed command.
+pub fn run(command: Command) -> Result<(), CliError> {
+    match command {
+        Command::Export(a) => run_export(a),
+        Command::Report(a) => run_report(a),
+        Command::Compare(a) => run_compare(a),
+        Command::Capture(a) => run_capture(a),
+        Command::Simulate(a) => run_simulate(a),
+        Command::Fil(a) => run_fil(a),
+        Command::Beyond(a) => run_beyond(a),
     }
-    let Some(cmd) = SUBCOMMANDS.iter().find(|c| c.name == name) else {
-        return Err(CliError::usage(format!(
-            "unknown command {name:?}\n\n{}",
-            usage()
-        )));
-    };
-    let mut a = Args::new(cmd.name, &args[1..]);
-    if a.wants_help() {
-        println!("{}", cmd.usage);
-        return Ok(());
-    }
-    (cmd.run)(&mut a)
 }
 
-/// Loads `--plan` (or the built-in Table 2 walk).
-fn plan_arg(a: &mut Args) -> Result<(WalkSpec, String), CliError> {
-    match a.value("--plan")? {
-        Some(p) => Ok((planfile::load(Path::new(&p))?, p)),
+/// Loads `--plan` (or the built-in Table 2 walk); the plan's name for the reports.
+fn load_plan(plan: Option<&Path>) -> Result<(WalkSpec, String), CliError> {
+    match plan {
+        Some(p) => Ok((planfile::load(p)?, p.display().to_string())),
         None => Ok((WalkSpec::default(), "built-in Table 2 walk".to_string())),
-    }
-}
-
-/// The `--model` value of subcommand `cmd`.
-fn model_name(cmd: &str, m: &str) -> Result<planfile::ModelName, CliError> {
-    match m {
-        "lipm" => Ok(planfile::ModelName::Lipm),
-        "dlipm" => Ok(planfile::ModelName::Dlipm),
-        "tlipfm" => Ok(planfile::ModelName::Tlipfm),
-        other => Err(CliError::usage(format!(
-            "walker {cmd}: --model {other:?}: expected lipm, dlipm or tlipfm"
-        ))),
     }
 }
 
@@ -359,15 +487,82 @@ fn create_parent(p: &Path) -> Result<(), CliError> {
     Ok(())
 }
 
-fn run_export(a: &mut Args) -> Result<(), CliError> {
-    let plan = a.value("--plan")?;
-    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/plan.csv".into()));
-    let dt: Option<f64> = a.parsed("--dt")?;
-    a.finish()?;
-    let (spec, name) = match plan {
-        Some(p) => (planfile::load(Path::new(&p))?, p),
-        None => (WalkSpec::default(), "built-in Table 2 walk".to_string()),
-    };
+/// Splits `'k=v k=v'` into tokens.
+fn tokens(s: Option<&str>) -> Vec<String> {
+    s.map(|t| t.split_whitespace().map(String::from).collect())
+        .unwrap_or_default()
+}
+
+impl SimArgs {
+    /// Applies the options given to `cfg` (the shared physics options, the seed and the stall
+    /// torque); a value the simulator refuses is a usage error naming the option.
+    pub fn apply(&self, cmd: &str, cfg: &mut crate::sim::SimConfig) -> Result<(), CliError> {
+        let bad = |m: String| CliError::usage(format!("walker {cmd}: {m}"));
+        if let Some(p) = self.physics {
+            cfg.physics = p.into();
+        }
+        if let Some(s) = self.seed {
+            cfg.seed = s;
+        }
+        cfg.pushes.extend(self.push.iter().copied());
+        if let Some(v) = self.floor_friction {
+            cfg.env.floor_friction = v;
+        }
+        if let Some(v) = self.floor_steps {
+            cfg.env.step_height_m = v * 1e-3;
+        }
+        if let Some(v) = self.slope {
+            cfg.env.slope_deg = v;
+        }
+        if let Some(v) = self.payload {
+            cfg.env.payload_kg = v;
+        }
+        if let Some(v) = self.sensor_latency_ms {
+            cfg.noise.latency_us = (v * 1e3).round() as u64;
+        }
+        if let Some(v) = self.servo_voltage {
+            cfg.xservo.supply_voltage = v;
+        }
+        if let Some(t) = self.stall_torque {
+            apply_stall_torque(cfg, t).map_err(|e| bad(format!("--stall-torque: {e}")))?;
+        }
+        cfg.env
+            .validate()
+            .map_err(|e| bad(format!("floor/payload options: {e}")))?;
+        if !cfg.xservo.is_valid() {
+            return Err(bad("--servo-voltage must be > 0".into()));
+        }
+        Ok(())
+    }
+}
+
+/// A stall torque `t` (N·m) for both servo models: the kinematic model's torque–speed line
+/// (0 = unlimited) and the MuJoCo XM430-W350 model's stall torque (which must be > 0).
+pub fn apply_stall_torque(cfg: &mut crate::sim::SimConfig, t: f64) -> Result<(), String> {
+    if !(t.is_finite() && t >= 0.0) {
+        return Err(format!("must be >= 0 N·m (got {t})"));
+    }
+    if t == 0.0 {
+        if cfg.physics == crate::sim::PhysicsModel::MuJoCo {
+            return Err(
+                "0 (unlimited) is for --physics kinematic; a MuJoCo servo needs a stall torque > 0"
+                    .into(),
+            );
+        }
+        cfg.servo_torque = None;
+    } else {
+        cfg.servo_torque = Some(crate::sim::ServoTorque {
+            stall_torque: t,
+            ..cfg.servo_torque.unwrap_or(crate::sim::ServoTorque::XM430)
+        });
+        cfg.xservo.stall_torque = t;
+    }
+    Ok(())
+}
+
+fn run_export(a: ExportArgs) -> Result<(), CliError> {
+    let ExportArgs { plan, out, dt } = a;
+    let (spec, name) = load_plan(plan.as_deref())?;
     let robot = Robot::reference();
     let dt = dt.unwrap_or(spec.dt);
     let (rows, summary) = export::export_rows(&spec, &robot, dt).map_err(|e| {
@@ -403,16 +598,18 @@ fn run_export(a: &mut Args) -> Result<(), CliError> {
     Ok(())
 }
 
-fn run_report(a: &mut Args) -> Result<(), CliError> {
-    let log = PathBuf::from(a.required("--log")?);
-    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/report".into()));
-    let truth = a.value("--truth")?.map(PathBuf::from);
-    let model = a.value("--model")?;
-    let mcap = a.value("--mcap")?.map(PathBuf::from);
-    let (mut spec, plan_name) = plan_arg(a)?;
-    a.finish()?;
+fn run_report(a: ReportArgs) -> Result<(), CliError> {
+    let ReportArgs {
+        log,
+        out,
+        truth,
+        plan,
+        model,
+        mcap,
+    } = a;
+    let (mut spec, plan_name) = load_plan(plan.as_deref())?;
     if let Some(m) = model {
-        spec.model = model_name("report", &m)?;
+        spec.model = m;
     }
     if !log.exists() {
         return Err(CliError::failed(format!(
@@ -463,32 +660,11 @@ fn run_report(a: &mut Args) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Parses `name=path,name=path`.
-pub fn parse_runs(s: &str) -> Result<Vec<(String, PathBuf)>, CliError> {
-    let mut out = Vec::new();
-    for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
-        let (name, path) = item.split_once('=').ok_or_else(|| {
-            CliError::usage(format!(
-                "walker compare: --runs item {item:?} is not name=path"
-            ))
-        })?;
-        if name.is_empty() || path.is_empty() {
-            return Err(CliError::usage(format!(
-                "walker compare: --runs item {item:?} is not name=path"
-            )));
-        }
-        out.push((name.to_string(), PathBuf::from(path)));
-    }
-    if out.is_empty() {
-        return Err(CliError::usage("walker compare: --runs lists no run"));
-    }
-    Ok(out)
-}
-
-fn run_compare(a: &mut Args) -> Result<(), CliError> {
-    let runs = parse_runs(&a.required("--runs")?)?;
-    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/compare.md".into()));
-    a.finish()?;
+fn run_compare(a: CompareArgs) -> Result<(), CliError> {
+    let CompareArgs {
+        runs: RunList(runs),
+        out,
+    } = a;
     let mut results = Vec::new();
     for (name, path) in &runs {
         if !path.exists() {
@@ -524,17 +700,16 @@ fn run_compare(a: &mut Args) -> Result<(), CliError> {
     Ok(())
 }
 
-fn run_capture(a: &mut Args) -> Result<(), CliError> {
-    let list = a.flag("--list");
-    let from = a.value("--from-file")?.map(PathBuf::from);
-    let port = a.value("--port")?;
-    let baud: Option<u32> = a.parsed("--baud")?;
-    let out = a.value("--out")?.map(PathBuf::from);
-    let seconds = seconds_arg(a, "--seconds")?.map(|d| d.as_secs_f64());
-    a.finish()?;
-    if baud == Some(0) {
-        return Err(CliError::usage("walker capture: --baud must be positive"));
-    }
+fn run_capture(a: CaptureArgs) -> Result<(), CliError> {
+    let CaptureArgs {
+        list,
+        port,
+        from_file: from,
+        baud,
+        out,
+        seconds,
+    } = a;
+    let seconds = seconds.map(|d| d.as_secs_f64());
     if list {
         let ports = capture::list_ports()?;
         if ports.is_empty() {
@@ -546,14 +721,10 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
         return Ok(());
     }
     let log = match (from, port) {
-        (Some(_), Some(_)) => {
+        // clap's group and conflict: exactly one of --list, --port, --from-file.
+        (Some(_), Some(_)) | (None, None) => {
             return Err(CliError::usage(
-                "walker capture: give either --port or --from-file, not both",
-            ))
-        }
-        (None, None) => {
-            return Err(CliError::usage(
-                "walker capture: --port (or --from-file) is required",
+                "walker capture: give one of --list, --port, --from-file",
             ))
         }
         (Some(input), None) => {
@@ -578,7 +749,7 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
             let out = out.ok_or_else(|| CliError::usage("walker capture: --out is required"))?;
             let opts = capture::CaptureOptions {
                 port,
-                baud: baud.unwrap_or(921_600),
+                baud,
                 out: out.clone(),
                 seconds,
             };
@@ -604,157 +775,19 @@ fn run_capture(a: &mut Args) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Applies the shared physics options to `cfg`.
-fn physics_args(a: &mut Args, cfg: &mut crate::sim::SimConfig) -> Result<(), CliError> {
-    let cmd = a.cmd;
-    let bad = |m: String| CliError::usage(format!("walker {cmd}: {m}"));
-    if let Some(p) = a.value("--physics")? {
-        cfg.physics = match p.as_str() {
-            "mujoco" => crate::sim::PhysicsModel::MuJoCo,
-            "kinematic" => crate::sim::PhysicsModel::Kinematic,
-            other => {
-                return Err(bad(format!(
-                    "--physics: mujoco or kinematic (got {other:?})"
-                )))
-            }
-        };
-    }
-    if let Some(list) = a.value("--push")? {
-        for item in list.split(',').filter(|s| !s.trim().is_empty()) {
-            cfg.pushes.push(
-                crate::sim::Push::parse(item.trim()).map_err(|e| bad(format!("--push: {e}")))?,
-            );
-        }
-    }
-    let finite = |name: &str, v: Option<f64>| -> Result<Option<f64>, CliError> {
-        match v {
-            Some(x) if !x.is_finite() => Err(bad(format!("{name} must be a finite number"))),
-            other => Ok(other),
-        }
-    };
-    if let Some(v) = finite("--floor-friction", a.parsed("--floor-friction")?)? {
-        cfg.env.floor_friction = v;
-    }
-    if let Some(v) = finite("--floor-steps", a.parsed("--floor-steps")?)? {
-        cfg.env.step_height_m = v * 1e-3;
-    }
-    if let Some(v) = finite("--slope", a.parsed("--slope")?)? {
-        cfg.env.slope_deg = v;
-    }
-    if let Some(v) = finite("--payload", a.parsed("--payload")?)? {
-        cfg.env.payload_kg = v;
-    }
-    if let Some(v) = finite("--sensor-latency-ms", a.parsed("--sensor-latency-ms")?)? {
-        if !(0.0..=1000.0).contains(&v) {
-            return Err(bad(format!(
-                "--sensor-latency-ms must be in 0..=1000 (got {v})"
-            )));
-        }
-        cfg.noise.latency_us = (v * 1e3).round() as u64;
-    }
-    if let Some(v) = finite("--servo-voltage", a.parsed("--servo-voltage")?)? {
-        cfg.xservo.supply_voltage = v;
-    }
-    if let Err(e) = cfg.env.validate() {
-        return Err(bad(e));
-    }
-    if !cfg.xservo.is_valid() {
-        return Err(bad("--servo-voltage must be > 0".into()));
-    }
-    Ok(())
-}
-
-/// The longest duration any option takes, s (11.6 days; `Duration::from_secs_f64` panics on
-/// non-finite or huge values, so every duration is checked against this first).
-const MAX_SECONDS: f64 = 1e6;
-
-/// A duration option `name` in seconds: finite, > 0 and at most [`MAX_SECONDS`], else a usage
-/// error (exit 2) naming the option.
-fn seconds_arg(a: &mut Args, name: &str) -> Result<Option<std::time::Duration>, CliError> {
-    match a.parsed::<f64>(name)? {
-        None => Ok(None),
-        Some(s) if s.is_finite() && s > 0.0 && s <= MAX_SECONDS => {
-            Ok(Some(std::time::Duration::from_secs_f64(s)))
-        }
-        Some(s) => Err(CliError::usage(format!(
-            "walker {}: {name} must be a number of seconds in (0, {MAX_SECONDS}] (got {s})",
-            a.cmd
-        ))),
-    }
-}
-
-/// `--stall-torque NM`: the kinematic model's servo torque model (default XM430-class, 0 =
-/// none) and the value given (for the MuJoCo servo model, see [`apply_stall_torque`]).
-fn stall_torque_arg(
-    a: &mut Args,
-) -> Result<(Option<crate::sim::ServoTorque>, Option<f64>), CliError> {
-    let xm430 = crate::sim::ServoTorque::XM430;
-    match a.parsed::<f64>("--stall-torque")? {
-        None => Ok((Some(xm430), None)),
-        Some(0.0) => Ok((None, Some(0.0))),
-        Some(t) if t.is_finite() && t > 0.0 => Ok((
-            Some(crate::sim::ServoTorque {
-                stall_torque: t,
-                ..xm430
-            }),
-            Some(t),
-        )),
-        Some(t) => Err(CliError::usage(format!(
-            "walker {}: --stall-torque must be >= 0 N·m (got {t})",
-            a.cmd
-        ))),
-    }
-}
-
-/// `--stall-torque` for the MuJoCo servo model: its stall torque (0, "unlimited", is the
-/// kinematic model's option only).
-fn apply_stall_torque(
-    cmd: &str,
-    cfg: &mut crate::sim::SimConfig,
-    raw: Option<f64>,
-) -> Result<(), CliError> {
-    match raw {
-        Some(t) if t > 0.0 => cfg.xservo.stall_torque = t,
-        Some(_) if cfg.physics == crate::sim::PhysicsModel::MuJoCo => {
-            return Err(CliError::usage(format!(
-                "walker {cmd}: --stall-torque 0 (unlimited) is for --physics kinematic; a MuJoCo servo needs a stall torque > 0"
-            )))
-        }
-        _ => {}
-    }
-    Ok(())
-}
-
-fn run_simulate(a: &mut Args) -> Result<(), CliError> {
-    let port: Option<u16> = a.parsed("--port")?;
-    let lockstep: Option<u16> = a.parsed("--lockstep-port")?;
-    let connect = a.flag("--connect");
-    let seed: Option<u64> = a.parsed("--seed")?;
-    let (servo_torque, stall_raw) = stall_torque_arg(a)?;
-    let truth = a.value("--truth")?.map(PathBuf::from);
-    let timeout = seconds_arg(a, "--timeout")?;
-    let mut cfg = crate::sim::SimConfig {
-        servo_torque,
-        ..Default::default()
-    };
-    physics_args(a, &mut cfg)?;
-    apply_stall_torque(a.cmd, &mut cfg, stall_raw)?;
-    a.finish()?;
-    if let Some(p) = port {
-        cfg.port = p;
-    }
-    cfg.lockstep_port = lockstep;
-    cfg.connect = connect;
-    if let Some(s) = seed {
-        cfg.seed = s;
-    }
-    if let Some(t) = timeout {
+fn run_simulate(a: SimulateArgs) -> Result<(), CliError> {
+    let mut cfg = crate::sim::SimConfig::default();
+    a.sim.apply("simulate", &mut cfg)?;
+    cfg.port = a.port;
+    cfg.lockstep_port = a.lockstep_port;
+    cfg.connect = a.connect;
+    if let Some(t) = a.timeout {
         cfg.connect_timeout = t;
     }
-    if let Some(t) = &truth {
+    if let Some(t) = &a.truth {
         create_parent(t)?;
     }
-    cfg.log_truth = truth;
+    cfg.log_truth = a.truth;
     eprintln!(
         "simulated robot on 127.0.0.1:{} (lock-step {}); waiting for the firmware…",
         cfg.port,
@@ -767,45 +800,33 @@ fn run_simulate(a: &mut Args) -> Result<(), CliError> {
     Ok(())
 }
 
-fn run_beyond(a: &mut Args) -> Result<(), CliError> {
-    let elf = PathBuf::from(
-        a.value("--elf")?
-            .unwrap_or_else(|| "target/thumbv7em-none-eabihf/release/qemu".into()),
-    );
-    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/beyond".into()));
-    let seed: Option<u64> = a.parsed("--seed")?;
-    let (servo_torque, stall_raw) = stall_torque_arg(a)?;
-    let machine = a.value("--machine")?.unwrap_or_else(|| "mps2-an500".into());
-    let timeout = seconds_arg(a, "--timeout")?;
-    let split = |t: Option<String>| -> Vec<String> {
-        t.map(|t| t.split_whitespace().map(String::from).collect())
-            .unwrap_or_default()
-    };
-    let extra = split(a.value("--firmware-args")?);
-    let feedback = split(a.value("--feedback-args")?);
-    let (spec, plan_name) = plan_arg(a)?;
-    let mut sim = crate::sim::SimConfig {
-        servo_torque,
-        ..Default::default()
-    };
-    physics_args(a, &mut sim)?;
-    apply_stall_torque(a.cmd, &mut sim, stall_raw)?;
-    a.finish()?;
+fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
+    let (spec, plan_name) = load_plan(a.plan.as_deref())?;
+    let mut sim = crate::sim::SimConfig::default();
+    a.sim.apply("beyond", &mut sim)?;
+    let extra = tokens(a.firmware_args.as_deref());
+    let feedback = tokens(a.feedback_args.as_deref());
+    for (opt, t) in [("--firmware-args", &extra), ("--feedback-args", &feedback)] {
+        crate::fil::check_tokens(&spec, t)
+            .map_err(|e| CliError::usage(format!("walker beyond: {opt}: {e}")))?;
+    }
+    let out = a.out;
     let opts = crate::beyond::BeyondOptions {
-        sim,
-        elf,
+        elf: a.elf.unwrap_or_else(|| DEFAULT_ELF.into()),
         spec,
         out_dir: out.clone(),
-        machine,
-        seed: seed.unwrap_or(0),
+        machine: a.machine.unwrap_or_else(|| MACHINES[0].into()),
+        seed: sim.seed,
         extra_tokens: extra,
         feedback_tokens: feedback,
-        timeout: timeout.unwrap_or(std::time::Duration::from_secs(1800)),
-        servo_torque,
+        timeout: a.timeout.unwrap_or(Duration::from_secs(1800)),
+        servo_torque: sim.servo_torque,
+        sim,
     };
     eprintln!("walker beyond: {plan_name}, five firmware-in-the-loop walks");
     let runs = crate::beyond::run(&opts, |name| eprintln!("  walking {name} …"))?;
     let table = crate::beyond::table(&runs);
+    let servo_torque = opts.servo_torque;
     let servos = match opts.sim.physics {
         crate::sim::PhysicsModel::MuJoCo => {
             let x = &opts.sim.xservo;
@@ -852,36 +873,15 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
     }
 }
 
-fn run_fil(a: &mut Args) -> Result<(), CliError> {
-    let elf = PathBuf::from(
-        a.value("--elf")?
-            .unwrap_or_else(|| "target/thumbv7em-none-eabihf/release/qemu".into()),
-    );
-    let model = a.value("--model")?;
-    let out = PathBuf::from(a.value("--out")?.unwrap_or_else(|| "out/fil".into()));
-    let seed: Option<u64> = a.parsed("--seed")?;
-    let (servo_torque, stall_raw) = stall_torque_arg(a)?;
-    let p_drop: Option<f64> = a.parsed("--p-drop")?;
-    let p_corrupt: Option<f64> = a.parsed("--p-corrupt")?;
-    let dead = a.value("--dead")?;
-    let fall_at: Option<f64> = a.parsed("--fall-at")?;
-    let tau_const: Option<f64> = a.parsed("--tau-constant")?;
-    let tau_random: Option<f64> = a.parsed("--tau-random")?;
-    let machine = a.value("--machine")?.unwrap_or_else(|| "mps2-an500".into());
-    let timeout = seconds_arg(a, "--timeout")?;
-    let tokens = a.value("--firmware-args")?;
-    let video = a.value("--video")?.map(PathBuf::from);
-    let (mut spec, plan_name) = plan_arg(a)?;
-    let mut sim = crate::sim::SimConfig {
-        servo_torque,
-        ..Default::default()
-    };
-    physics_args(a, &mut sim)?;
-    apply_stall_torque(a.cmd, &mut sim, stall_raw)?;
-    a.finish()?;
-    if let Some(m) = model {
-        spec.model = model_name("fil", &m)?;
+fn run_fil(a: FilArgs) -> Result<(), CliError> {
+    let (mut spec, plan_name) = load_plan(a.plan.as_deref())?;
+    let mut sim = crate::sim::SimConfig::default();
+    a.sim.apply("fil", &mut sim)?;
+    if let Some(m) = a.model {
+        spec.model = m;
     }
+    let out = a.out;
+    let video = a.video;
     if video.is_some() && sim.physics != crate::sim::PhysicsModel::MuJoCo {
         return Err(CliError::usage(
             "walker fil: --video needs the MuJoCo robot (--physics mujoco)",
@@ -891,45 +891,34 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
         sim.model_out = Some(out.join("model.xml"));
         sim.qpos_out = Some(out.join("qpos.csv"));
     }
-    if let Some(s) = seed {
-        sim.seed = s;
+    if let Some(p) = a.p_drop {
+        sim.faults.p_drop = p;
     }
-    for (name, p) in [("--p-drop", p_drop), ("--p-corrupt", p_corrupt)] {
-        if let Some(v) = p {
-            if !(0.0..=1.0).contains(&v) {
-                return Err(CliError::usage(format!(
-                    "walker fil: {name} must be within 0..=1 (got {v})"
-                )));
-            }
-        }
+    if let Some(p) = a.p_corrupt {
+        sim.faults.p_corrupt = p;
     }
-    sim.faults.p_drop = p_drop.unwrap_or(0.0);
-    sim.faults.p_corrupt = p_corrupt.unwrap_or(0.0);
-    if let Some(d) = dead {
-        for id in d.split(',').filter(|s| !s.is_empty()) {
-            let id: u8 = id.trim().parse().map_err(|_| {
-                CliError::usage(format!("walker fil: --dead: bad device id {id:?}"))
-            })?;
-            sim.faults.dead_ids.push(id);
-        }
+    sim.faults.dead_ids.extend(a.dead.iter().copied());
+    if a.fall_at.is_some() {
+        sim.fall.forced_at_s = a.fall_at;
     }
-    sim.fall.forced_at_s = fall_at;
-    if let Some(t) = tau_const {
+    if let Some(t) = a.tau_constant {
         sim.disturbance.constant_nm = t;
     }
-    if let Some(t) = tau_random {
+    if let Some(t) = a.tau_random {
         sim.disturbance.random_std_nm = t;
     }
+    let extra_tokens = tokens(a.firmware_args.as_deref());
+    // The firmware's own parser, on the host, before QEMU starts.
+    crate::fil::check_tokens(&spec, &extra_tokens)
+        .map_err(|e| CliError::usage(format!("walker fil: --firmware-args: {e}")))?;
     let opts = crate::fil::FilOptions {
-        elf,
+        elf: a.elf.unwrap_or_else(|| DEFAULT_ELF.into()),
         spec: spec.clone(),
         out_dir: out.clone(),
-        machine,
-        timeout: timeout.unwrap_or(std::time::Duration::from_secs(1800)),
+        machine: a.machine.unwrap_or_else(|| MACHINES[0].into()),
+        timeout: a.timeout.unwrap_or(Duration::from_secs(1800)),
         sim,
-        extra_tokens: tokens
-            .map(|t| t.split_whitespace().map(String::from).collect())
-            .unwrap_or_default(),
+        extra_tokens,
     };
     eprintln!(
         "walker fil: {} ({:?}) in QEMU {} against the simulated robot",
@@ -1001,5 +990,60 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
             message: format!("the firmware exited with code {code:?}"),
             code: 3,
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    /// Every command and every option of every command has a help line.
+    #[test]
+    fn every_option_is_documented() {
+        let cli = Cli::command();
+        let mut options = 0;
+        for cmd in cli.get_subcommands() {
+            assert!(cmd.get_about().is_some(), "{}: no summary", cmd.get_name());
+            for arg in cmd.get_arguments() {
+                let id = arg.get_id().as_str();
+                if id == "help" || id == "version" {
+                    continue;
+                }
+                let help = arg.get_help().map(|h| h.to_string()).unwrap_or_default();
+                assert!(
+                    help.len() > 10,
+                    "walker {} --{id}: no help line",
+                    cmd.get_name()
+                );
+                options += 1;
+            }
+        }
+        // export 3, report 6, compare 2, capture 5, simulate 5 + 10, fil 14 + 10, beyond 7 + 10.
+        assert!(options >= 72, "{options} options");
+    }
+
+    #[test]
+    fn numbers_are_checked_by_their_parsers() {
+        for bad in ["nan", "-5", "1e300", "0", "inf", "x"] {
+            assert!(seconds(bad).is_err(), "{bad}");
+        }
+        assert_eq!(seconds("2.5"), Ok(Duration::from_millis(2500)));
+        assert!(probability("1.01").is_err() && probability("-0").is_ok());
+        assert!(latency_ms("1000.5").is_err() && latency_ms("20").is_ok());
+        assert!(finite("inf").is_err() && finite("-3").is_ok());
+        assert!(non_negative("-1e-9").is_err() && positive("0").is_err());
+        assert_eq!(
+            parse_runs("a=x.log, b=y.log").unwrap().0,
+            vec![("a".into(), "x.log".into()), ("b".into(), "y.log".into())]
+        );
+        for bad in ["", ",", "lipm", "=x", "a="] {
+            assert!(parse_runs(bad).is_err(), "{bad:?}");
+        }
     }
 }

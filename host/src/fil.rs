@@ -63,6 +63,51 @@ pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
     spec.firmware_tokens().map_err(|e| e.to_string())
 }
 
+/// The firmware's command line of a run (`lockstep`, the plan's tokens, then `extra`), checked
+/// with the firmware's own parser (`walker_contract::params::apply`) on the host, so that a
+/// misspelt key or a value out of range is refused before QEMU starts; the configuration the
+/// firmware will start with.
+pub fn check_tokens(
+    spec: &WalkSpec,
+    extra: &[String],
+) -> Result<(Vec<String>, walker_contract::Config), String> {
+    let mut t = vec!["lockstep".to_string()];
+    t.extend(firmware_tokens(spec)?);
+    t.extend(extra.iter().cloned());
+    let mut cfg = walker_contract::Config::default();
+    walker_contract::params::apply(&mut cfg, t.join(" ").as_bytes())
+        .map_err(|e| token_error(&e, &t))?;
+    Ok((t, cfg))
+}
+
+/// A firmware parser error as a sentence: the token, the reason, the key's domain or the
+/// list of valid keys.
+pub fn token_error(e: &walker_contract::params::ArgError, tokens: &[String]) -> String {
+    use walker_contract::params::{self as fw, ArgErrorKind};
+    let token = tokens
+        .get(usize::from(e.position))
+        .map_or(e.key(), String::as_str);
+    match e.kind {
+        ArgErrorKind::UnknownKey => format!(
+            "`{token}`: unknown firmware parameter `{}`; valid keys: {}",
+            e.key(),
+            fw::KEYS.join(", ")
+        ),
+        ArgErrorKind::BadValue | ArgErrorKind::OutOfRange => {
+            let mut domain = String::new();
+            if let Some(p) = fw::find(e.key()) {
+                let _ = p.write_domain(&mut domain);
+                if !p.unit.is_empty() {
+                    domain.push(' ');
+                    domain.push_str(p.unit);
+                }
+            }
+            format!("`{token}`: {} (expected {domain})", e.kind.reason())
+        }
+        ArgErrorKind::StrayWord => format!("`{token}`: not a key=value pair"),
+    }
+}
+
 /// Runs the firmware in QEMU against the simulator; blocks until the firmware exits.
 pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, String> {
     let qemu = which("qemu-system-arm").ok_or_else(|| {
@@ -82,6 +127,9 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
     let defmt = opts.out_dir.join("firmware.defmt");
     let _ = std::fs::remove_file(&log);
 
+    // Checked before anything starts (the firmware would refuse it at boot).
+    let (tokens, _) = check_tokens(&opts.spec, &opts.extra_tokens)?;
+    let tokens = tokens.join(" ");
     let mut cfg = opts.sim.clone();
     cfg.port = 0;
     cfg.lockstep_port = Some(0);
@@ -92,12 +140,6 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
     let lockstep = handle
         .lockstep_addr()
         .ok_or("simulator: no lock-step socket")?;
-    let tokens = {
-        let mut t = vec!["lockstep".to_string()];
-        t.extend(firmware_tokens(&opts.spec)?);
-        t.extend(opts.extra_tokens.iter().cloned());
-        t.join(" ")
-    };
     let defmt_file =
         std::fs::File::create(&defmt).map_err(|e| format!("{}: {e}", defmt.display()))?;
     let started = Instant::now();

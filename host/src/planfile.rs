@@ -148,8 +148,8 @@ pub enum CompensationName {
     Wholebody,
 }
 
-/// The model name of a plan file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+/// The model name of a plan file (and of the command line's `--model`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum ModelName {
     /// LIPM.

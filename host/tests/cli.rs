@@ -364,6 +364,122 @@ fn usage_errors_exit_2() {
     assert!(walker(&["report", "--help"]).status.success());
 }
 
+/// clap's conveniences: version, help with a line per option, suggestions, repeats and
+/// conflicts refused, non-UTF-8 paths.
+#[test]
+fn command_line_is_standard() {
+    let o = walker(&["--version"]);
+    assert!(o.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&o.stdout).trim(),
+        format!("walker {}", env!("CARGO_PKG_VERSION"))
+    );
+    for cmd in [
+        "export", "report", "compare", "capture", "simulate", "fil", "beyond",
+    ] {
+        let o = walker(&[cmd, "--help"]);
+        assert!(o.status.success(), "{cmd}");
+        let help = String::from_utf8_lossy(&o.stdout);
+        assert!(help.contains(&format!("Usage: walker {cmd}")), "{help}");
+    }
+    let help = String::from_utf8_lossy(&walker(&["fil", "--help"]).stdout).into_owned();
+    assert!(help.contains("--firmware-args") && help.contains("Sole–floor friction coefficient"));
+    // A misspelt flag: exit 2 and the right spelling suggested.
+    let o = walker(&["fil", "--timout", "5"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("'--timout'") && err.contains("'--timeout'"),
+        "{err}"
+    );
+    // Repeats and conflicts.
+    for args in [
+        &[
+            "fil",
+            "--plan",
+            "plans/table2.toml",
+            "--plan",
+            "plans/turn.toml",
+        ][..],
+        &["report", "--log", "a", "--log", "b"],
+        &[
+            "capture",
+            "--port",
+            "/dev/null",
+            "--from-file",
+            "x",
+            "--out",
+            "y",
+        ],
+        &["capture", "--list", "--port", "/dev/null"],
+        &["capture", "--port", "/dev/null"],
+        &["capture"],
+        &["fil", "--machine", "mps2-an385"],
+        &["fil", "--p-drop", "1.5"],
+        &["fil", "--dead", "111,x"],
+        &["simulate", "--port", "70000"],
+    ] {
+        let o = walker(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.starts_with("error: "), "{args:?}: {err}");
+    }
+    // A path that is not UTF-8 is carried as it is: a clean "not found", no panic.
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt as _;
+        let bad = std::ffi::OsStr::from_bytes(b"/tmp/walker-\xff\xfe.log");
+        let o = Command::new(env!("CARGO_BIN_EXE_walker"))
+            .arg("report")
+            .arg("--log")
+            .arg(bad)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("not found") && !err.contains("panicked"),
+            "{err}"
+        );
+    }
+}
+
+/// `--firmware-args` goes through the firmware's own parser on the host, before QEMU (or even
+/// the ELF) is looked for: a misspelt key lists the valid keys, a value out of range gives the
+/// range.
+#[test]
+fn firmware_args_are_checked_before_qemu_starts() {
+    let cases = [
+        ("stab_kk=1", "unknown firmware parameter `stab_kk`"),
+        (
+            "stab_kp=1e9",
+            "`stab_kp=1e9`: out of range (expected 0 ..= 10",
+        ),
+        ("feasibility=maybe", "`feasibility=maybe`: bad value"),
+        ("lockstep oops", "`oops`: not a key=value pair"),
+    ];
+    for (args, want) in cases {
+        for cmd in [
+            &["fil", "--elf", "/nonexistent", "--firmware-args", args][..],
+            &["beyond", "--elf", "/nonexistent", "--feedback-args", args],
+        ] {
+            let o = walker(cmd);
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{cmd:?}: {err}");
+            assert!(err.contains(want), "{cmd:?}: want {want:?} in {err}");
+            assert!(
+                !err.contains("ELF"),
+                "{cmd:?}: checked after the ELF: {err}"
+            );
+        }
+    }
+    let o = walker(&["fil", "--firmware-args", "stab_kk=1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    for key in walker_contract::params::KEYS {
+        assert!(err.contains(key), "valid key {key} not listed: {err}");
+    }
+}
+
 /// Three ticks with hand-picked errors (and one without a measured ZMP).
 fn hand_log(scale: f32) -> Vec<u8> {
     let errs = [[0.001, 0.0], [-0.002, 0.004], [0.003, -0.004]];
