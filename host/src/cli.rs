@@ -14,6 +14,7 @@ use crate::planfile::{self, ModelName, WalkSpec};
 use crate::{capture, export, report};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use gait_core::Robot;
+use serde::Deserialize;
 use std::ffi::OsString;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -188,9 +189,11 @@ pub struct CaptureArgs {
     pub seconds: Option<Duration>,
 }
 
-/// The simulated robot's options (`simulate`, `fil`, `beyond`); each overrides the run
-/// configuration file's value when given.
-#[derive(Debug, Args, Clone, Default)]
+/// The simulated robot's options (`simulate`, `fil`, `beyond`) and the `[sim]` table of a run
+/// configuration file (same names, `_` for `-`); an option given on the command line overrides
+/// the file's value (`push` and `dead` lists are added to).
+#[derive(Debug, Args, Clone, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct SimArgs {
     /// Physics of the simulated robot (default mujoco: full dynamics; kinematic: idealised, stance sole bolted down).
     #[arg(long, value_enum)]
@@ -201,8 +204,12 @@ pub struct SimArgs {
     /// Servo stall torque, N·m (MuJoCo: XM430-W350 4.1 by default; kinematic: 3.5, 0 = unlimited).
     #[arg(long, value_name = "NM", value_parser = non_negative, allow_negative_numbers = true)]
     pub stall_torque: Option<f64>,
+    /// Servo supply voltage, V (default 12; XM430-W350 datasheet at 12 V).
+    #[arg(long, value_name = "V", value_parser = positive, allow_negative_numbers = true)]
+    pub servo_voltage: Option<f64>,
     /// Push on the torso, T:IMPULSE_NS:DIRECTION_DEG (0° forward, 90° left), e.g. 3.2:1.5:0; comma-separated or repeated.
     #[arg(long, value_name = "PUSH", value_delimiter = ',', value_parser = parse_push, allow_negative_numbers = true)]
+    #[serde(deserialize_with = "pushes")]
     pub push: Vec<crate::sim::Push>,
     /// Sole–floor friction coefficient (default 1.0).
     #[arg(long, value_name = "MU", value_parser = finite, allow_negative_numbers = true)]
@@ -219,13 +226,47 @@ pub struct SimArgs {
     /// Latency of the foot boards' and the IMU's samples, ms (0..=1000).
     #[arg(long, value_name = "MS", value_parser = latency_ms, allow_negative_numbers = true)]
     pub sensor_latency_ms: Option<f64>,
-    /// Servo supply voltage, V (default 12; XM430-W350 datasheet at 12 V).
-    #[arg(long, value_name = "V", value_parser = positive, allow_negative_numbers = true)]
-    pub servo_voltage: Option<f64>,
+    /// Standard deviation of each load cell's noise, N.
+    #[arg(long, value_name = "N", value_parser = non_negative, allow_negative_numbers = true)]
+    pub force_noise: Option<f64>,
+    /// Standard deviation of each gyro axis' noise, rad/s.
+    #[arg(long, value_name = "RAD_S", value_parser = non_negative, allow_negative_numbers = true)]
+    pub gyro_noise: Option<f64>,
+    /// Standard deviation of each accelerometer axis' noise, m/s².
+    #[arg(long, value_name = "M_S2", value_parser = non_negative, allow_negative_numbers = true)]
+    pub accel_noise: Option<f64>,
+    /// Probability that the bus drops an instruction packet (0..=1).
+    #[arg(long, value_name = "P", value_parser = probability, allow_negative_numbers = true)]
+    pub p_drop: Option<f64>,
+    /// Probability that the bus corrupts a status packet (0..=1).
+    #[arg(long, value_name = "P", value_parser = probability, allow_negative_numbers = true)]
+    pub p_corrupt: Option<f64>,
+    /// Devices that never answer, by bus id (e.g. 111,112); comma-separated or repeated.
+    #[arg(long, value_name = "ID", value_delimiter = ',')]
+    pub dead: Vec<u8>,
+    /// Force a fall at this simulated time, s.
+    #[arg(long, value_name = "S", value_parser = non_negative, allow_negative_numbers = true)]
+    pub fall_at: Option<f64>,
+    /// Constant pitch torque on the upper body, N·m (positive pitches it forward).
+    #[arg(long, value_name = "NM", value_parser = finite, allow_negative_numbers = true)]
+    pub tau_constant: Option<f64>,
+    /// Standard deviation of a random pitch torque on the upper body, N·m.
+    #[arg(long, value_name = "NM", value_parser = non_negative, allow_negative_numbers = true)]
+    pub tau_random: Option<f64>,
+}
+
+/// The `push` list of a configuration file: strings `T:IMPULSE_NS:DIRECTION_DEG`.
+fn pushes<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<crate::sim::Push>, D::Error> {
+    let items = <Vec<String> as Deserialize>::deserialize(d)?;
+    items
+        .iter()
+        .map(|s| parse_push(s).map_err(serde::de::Error::custom))
+        .collect()
 }
 
 /// `--physics`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum PhysicsArg {
     /// MuJoCo full dynamics (the robot can tip, slip and fall).
     Mujoco,
@@ -266,11 +307,14 @@ pub struct SimulateArgs {
 }
 
 /// The QEMU boards that run the board-qemu firmware.
-const MACHINES: [&str; 2] = ["mps2-an500", "mps2-an386"];
+pub(crate) const MACHINES: [&str; 2] = ["mps2-an500", "mps2-an386"];
 
 /// `walker fil`.
 #[derive(Debug, Args)]
 pub struct FilArgs {
+    /// Run configuration (TOML: plan, firmware parameters, simulator, QEMU; plans/run-example.toml); options given here override it.
+    #[arg(long, value_name = "FILE", conflicts_with = "plan")]
+    pub config: Option<PathBuf>,
     /// Plan file (TOML, e.g. plans/table2.toml); default: the built-in Table 2 walk.
     #[arg(long, value_name = "FILE")]
     pub plan: Option<PathBuf>,
@@ -286,24 +330,6 @@ pub struct FilArgs {
     /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
     #[arg(long, value_parser = MACHINES)]
     pub machine: Option<String>,
-    /// Probability that the bus drops an instruction packet (0..=1).
-    #[arg(long, value_name = "P", value_parser = probability, allow_negative_numbers = true)]
-    pub p_drop: Option<f64>,
-    /// Probability that the bus corrupts a status packet (0..=1).
-    #[arg(long, value_name = "P", value_parser = probability, allow_negative_numbers = true)]
-    pub p_corrupt: Option<f64>,
-    /// Devices that never answer, by bus id (e.g. 111,112); comma-separated or repeated.
-    #[arg(long, value_name = "ID", value_delimiter = ',')]
-    pub dead: Vec<u8>,
-    /// Force a fall at this simulated time, s.
-    #[arg(long, value_name = "S", value_parser = non_negative, allow_negative_numbers = true)]
-    pub fall_at: Option<f64>,
-    /// Constant pitch torque on the upper body, N·m (positive pitches it forward).
-    #[arg(long, value_name = "NM", value_parser = finite, allow_negative_numbers = true)]
-    pub tau_constant: Option<f64>,
-    /// Standard deviation of a random pitch torque on the upper body, N·m.
-    #[arg(long, value_name = "NM", value_parser = non_negative, allow_negative_numbers = true)]
-    pub tau_random: Option<f64>,
     /// Extra firmware parameters, 'key=value …' (docs/parameters.md), checked before QEMU starts.
     #[arg(long, value_name = "'K=V …'")]
     pub firmware_args: Option<String>,
@@ -321,6 +347,9 @@ pub struct FilArgs {
 /// `walker beyond`.
 #[derive(Debug, Args)]
 pub struct BeyondArgs {
+    /// Run configuration (TOML: plan, firmware parameters, simulator, QEMU; plans/run-example.toml); options given here override it.
+    #[arg(long, value_name = "FILE", conflicts_with = "plan")]
+    pub config: Option<PathBuf>,
     /// Plan file (TOML); default: the built-in Table 2 walk.
     #[arg(long, value_name = "FILE")]
     pub plan: Option<PathBuf>,
@@ -352,7 +381,7 @@ pub struct BeyondArgs {
 pub const MAX_SECONDS: f64 = 1e6;
 
 /// A duration in seconds: finite, > 0 and at most [`MAX_SECONDS`].
-fn seconds(s: &str) -> Result<Duration, String> {
+pub(crate) fn seconds(s: &str) -> Result<Duration, String> {
     match s.trim().parse::<f64>() {
         Ok(x) if x.is_finite() && x > 0.0 && x <= MAX_SECONDS => Ok(Duration::from_secs_f64(x)),
         Ok(_) => Err(format!(
@@ -471,6 +500,51 @@ pub fn run(command: Command) -> Result<(), CliError> {
     }
 }
 
+/// What `fil` and `beyond` start from: the walk, the simulated robot and the QEMU run, from
+/// `--config` (or `--plan`) and the command line's simulator options over it.
+struct RunSetup {
+    spec: WalkSpec,
+    plan_name: String,
+    sim: crate::sim::SimConfig,
+    elf: PathBuf,
+    machine: String,
+    timeout: Duration,
+}
+
+impl RunSetup {
+    fn new(
+        cmd: &str,
+        config: Option<&Path>,
+        plan: Option<&Path>,
+        sim_args: SimArgs,
+        elf: Option<PathBuf>,
+        machine: Option<String>,
+        timeout: Option<Duration>,
+    ) -> Result<RunSetup, CliError> {
+        let (spec, plan_name, file_sim, file) = match config {
+            Some(c) => {
+                let rc = crate::runconfig::load(c).map_err(CliError::failed)?;
+                let file = (rc.elf, rc.machine, rc.timeout);
+                (rc.spec, c.display().to_string(), rc.sim, file)
+            }
+            None => {
+                let (spec, name) = load_plan(plan)?;
+                (spec, name, SimArgs::default(), (None, None, None))
+            }
+        };
+        let mut sim = crate::sim::SimConfig::default();
+        sim_args.over(file_sim).apply(cmd, &mut sim)?;
+        Ok(RunSetup {
+            spec,
+            plan_name,
+            sim,
+            elf: elf.or(file.0).unwrap_or_else(|| DEFAULT_ELF.into()),
+            machine: machine.or(file.1).unwrap_or_else(|| MACHINES[0].into()),
+            timeout: timeout.or(file.2).unwrap_or(Duration::from_secs(1800)),
+        })
+    }
+}
+
 /// Loads `--plan` (or the built-in Table 2 walk); the plan's name for the reports.
 fn load_plan(plan: Option<&Path>) -> Result<(WalkSpec, String), CliError> {
     match plan {
@@ -523,6 +597,31 @@ impl SimArgs {
         if let Some(v) = self.servo_voltage {
             cfg.xservo.supply_voltage = v;
         }
+        if let Some(v) = self.force_noise {
+            cfg.noise.force_std_n = v;
+        }
+        if let Some(v) = self.gyro_noise {
+            cfg.noise.gyro_std_rad_s = v;
+        }
+        if let Some(v) = self.accel_noise {
+            cfg.noise.accel_std_m_s2 = v;
+        }
+        if let Some(p) = self.p_drop {
+            cfg.faults.p_drop = p;
+        }
+        if let Some(p) = self.p_corrupt {
+            cfg.faults.p_corrupt = p;
+        }
+        cfg.faults.dead_ids.extend(self.dead.iter().copied());
+        if self.fall_at.is_some() {
+            cfg.fall.forced_at_s = self.fall_at;
+        }
+        if let Some(t) = self.tau_constant {
+            cfg.disturbance.constant_nm = t;
+        }
+        if let Some(t) = self.tau_random {
+            cfg.disturbance.random_std_nm = t;
+        }
         if let Some(t) = self.stall_torque {
             apply_stall_torque(cfg, t).map_err(|e| bad(format!("--stall-torque: {e}")))?;
         }
@@ -531,6 +630,67 @@ impl SimArgs {
             .map_err(|e| bad(format!("floor/payload options: {e}")))?;
         if !cfg.xservo.is_valid() {
             return Err(bad("--servo-voltage must be > 0".into()));
+        }
+        Ok(())
+    }
+}
+
+impl SimArgs {
+    /// These options over `base` (a configuration file's): a value given here wins, lists are
+    /// `base`'s followed by these.
+    pub fn over(self, base: SimArgs) -> SimArgs {
+        let mut push = base.push;
+        push.extend(self.push);
+        let mut dead = base.dead;
+        dead.extend(self.dead);
+        SimArgs {
+            physics: self.physics.or(base.physics),
+            seed: self.seed.or(base.seed),
+            stall_torque: self.stall_torque.or(base.stall_torque),
+            servo_voltage: self.servo_voltage.or(base.servo_voltage),
+            push,
+            floor_friction: self.floor_friction.or(base.floor_friction),
+            floor_steps: self.floor_steps.or(base.floor_steps),
+            slope: self.slope.or(base.slope),
+            payload: self.payload.or(base.payload),
+            sensor_latency_ms: self.sensor_latency_ms.or(base.sensor_latency_ms),
+            force_noise: self.force_noise.or(base.force_noise),
+            gyro_noise: self.gyro_noise.or(base.gyro_noise),
+            accel_noise: self.accel_noise.or(base.accel_noise),
+            p_drop: self.p_drop.or(base.p_drop),
+            p_corrupt: self.p_corrupt.or(base.p_corrupt),
+            dead,
+            fall_at: self.fall_at.or(base.fall_at),
+            tau_constant: self.tau_constant.or(base.tau_constant),
+            tau_random: self.tau_random.or(base.tau_random),
+        }
+    }
+
+    /// Checks the numbers of a configuration file's `[sim]` table with the very value parsers
+    /// of the command line; an error names the field.
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        type Check = fn(&str) -> Result<f64, String>;
+        let checks: [(&'static str, Option<f64>, Check); 15] = [
+            ("stall_torque", self.stall_torque, non_negative),
+            ("servo_voltage", self.servo_voltage, positive),
+            ("floor_friction", self.floor_friction, finite),
+            ("floor_steps", self.floor_steps, finite),
+            ("slope", self.slope, finite),
+            ("payload", self.payload, finite),
+            ("sensor_latency_ms", self.sensor_latency_ms, latency_ms),
+            ("force_noise", self.force_noise, non_negative),
+            ("gyro_noise", self.gyro_noise, non_negative),
+            ("accel_noise", self.accel_noise, non_negative),
+            ("p_drop", self.p_drop, probability),
+            ("p_corrupt", self.p_corrupt, probability),
+            ("fall_at", self.fall_at, non_negative),
+            ("tau_constant", self.tau_constant, finite),
+            ("tau_random", self.tau_random, non_negative),
+        ];
+        for (name, value, check) in checks {
+            if let Some(x) = value {
+                check(&x.to_string()).map_err(|e| (name, e))?;
+            }
         }
         Ok(())
     }
@@ -801,9 +961,22 @@ fn run_simulate(a: SimulateArgs) -> Result<(), CliError> {
 }
 
 fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
-    let (spec, plan_name) = load_plan(a.plan.as_deref())?;
-    let mut sim = crate::sim::SimConfig::default();
-    a.sim.apply("beyond", &mut sim)?;
+    let RunSetup {
+        spec,
+        plan_name,
+        sim,
+        elf,
+        machine,
+        timeout,
+    } = RunSetup::new(
+        "beyond",
+        a.config.as_deref(),
+        a.plan.as_deref(),
+        a.sim,
+        a.elf,
+        a.machine,
+        a.timeout,
+    )?;
     let extra = tokens(a.firmware_args.as_deref());
     let feedback = tokens(a.feedback_args.as_deref());
     for (opt, t) in [("--firmware-args", &extra), ("--feedback-args", &feedback)] {
@@ -812,14 +985,14 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
     }
     let out = a.out;
     let opts = crate::beyond::BeyondOptions {
-        elf: a.elf.unwrap_or_else(|| DEFAULT_ELF.into()),
+        elf,
         spec,
         out_dir: out.clone(),
-        machine: a.machine.unwrap_or_else(|| MACHINES[0].into()),
+        machine,
         seed: sim.seed,
         extra_tokens: extra,
         feedback_tokens: feedback,
-        timeout: a.timeout.unwrap_or(Duration::from_secs(1800)),
+        timeout,
         servo_torque: sim.servo_torque,
         sim,
     };
@@ -874,9 +1047,22 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
 }
 
 fn run_fil(a: FilArgs) -> Result<(), CliError> {
-    let (mut spec, plan_name) = load_plan(a.plan.as_deref())?;
-    let mut sim = crate::sim::SimConfig::default();
-    a.sim.apply("fil", &mut sim)?;
+    let RunSetup {
+        mut spec,
+        plan_name,
+        mut sim,
+        elf,
+        machine,
+        timeout,
+    } = RunSetup::new(
+        "fil",
+        a.config.as_deref(),
+        a.plan.as_deref(),
+        a.sim,
+        a.elf,
+        a.machine,
+        a.timeout,
+    )?;
     if let Some(m) = a.model {
         spec.model = m;
     }
@@ -891,32 +1077,16 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         sim.model_out = Some(out.join("model.xml"));
         sim.qpos_out = Some(out.join("qpos.csv"));
     }
-    if let Some(p) = a.p_drop {
-        sim.faults.p_drop = p;
-    }
-    if let Some(p) = a.p_corrupt {
-        sim.faults.p_corrupt = p;
-    }
-    sim.faults.dead_ids.extend(a.dead.iter().copied());
-    if a.fall_at.is_some() {
-        sim.fall.forced_at_s = a.fall_at;
-    }
-    if let Some(t) = a.tau_constant {
-        sim.disturbance.constant_nm = t;
-    }
-    if let Some(t) = a.tau_random {
-        sim.disturbance.random_std_nm = t;
-    }
     let extra_tokens = tokens(a.firmware_args.as_deref());
     // The firmware's own parser, on the host, before QEMU starts.
     crate::fil::check_tokens(&spec, &extra_tokens)
         .map_err(|e| CliError::usage(format!("walker fil: --firmware-args: {e}")))?;
     let opts = crate::fil::FilOptions {
-        elf: a.elf.unwrap_or_else(|| DEFAULT_ELF.into()),
+        elf,
         spec: spec.clone(),
         out_dir: out.clone(),
-        machine: a.machine.unwrap_or_else(|| MACHINES[0].into()),
-        timeout: a.timeout.unwrap_or(Duration::from_secs(1800)),
+        machine,
+        timeout,
         sim,
         extra_tokens,
     };

@@ -9,5 +9,6 @@ pub mod mcap_export;
 pub mod planfile;
 pub mod plot;
 pub mod report;
+pub mod runconfig;
 pub mod sim;
 pub mod video;

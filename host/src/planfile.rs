@@ -516,10 +516,18 @@ impl WalkSpec {
         for (k, _) in self.firmware.iter() {
             match fw_params::find(k) {
                 None => {
+                    let valid: Vec<&str> = PARAMS
+                        .iter()
+                        .filter(|p| p.plan_key.is_none())
+                        .map(|p| p.key)
+                        .collect();
                     return Err(PlanError::new(
                         format!("firmware.{k}"),
-                        "not a firmware parameter (see docs/parameters.md)",
-                    ))
+                        format!(
+                            "not a firmware parameter (docs/parameters.md); valid keys: {}",
+                            valid.join(", ")
+                        ),
+                    ));
                 }
                 Some(p) => {
                     if let Some(pk) = p.plan_key {

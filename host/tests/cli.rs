@@ -949,3 +949,37 @@ fn mcap_of_a_14_step_walk_holds_every_channel() {
     let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
     assert_eq!(summary.channels.len(), 11);
 }
+
+/// `--config`: one file per run; a typo is refused with the field's path before anything starts.
+#[test]
+fn run_configuration_file_errors_name_the_field() {
+    let dir = tmp("runconfig");
+    let bad = dir.join("run.toml");
+    std::fs::write(&bad, "[sim]\nfloor_frction = 0.5\n").unwrap();
+    for cmd in ["fil", "beyond"] {
+        let o = walker(&[cmd, "--config", s(&bad), "--elf", "/nonexistent"]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{cmd}: {err}");
+        assert!(
+            err.contains("run.toml: field `sim.floor_frction`: unknown field")
+                && err.contains("`floor_friction`"),
+            "{cmd}: {err}"
+        );
+        // --config and --plan exclude each other.
+        let o = walker(&[cmd, "--config", s(&bad), "--plan", "plans/table2.toml"]);
+        assert_eq!(o.status.code(), Some(2));
+    }
+    // The example is valid; a bad --firmware-args on top of it is still caught before QEMU.
+    let o = walker(&[
+        "fil",
+        "--config",
+        "plans/run-example.toml",
+        "--elf",
+        "/nonexistent",
+        "--firmware-args",
+        "stab_kp=20",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("`stab_kp=20`: out of range"), "{err}");
+}
