@@ -1140,6 +1140,58 @@ pub fn write_markdown(out: &mut impl fmt::Write) -> fmt::Result {
     Ok(())
 }
 
+/// Writes one parameter's facts on one line (the per-key lines of `docs/tuning.md`): unit,
+/// default, values, where a plan file sets it, and what it sets.
+pub fn write_facts(p: &Param, out: &mut impl fmt::Write) -> fmt::Result {
+    write!(out, "`{}`", p.key)?;
+    if !p.unit.is_empty() {
+        write!(out, " · unit {}", p.unit)?;
+    }
+    out.write_str(" · default ")?;
+    match p.value(&Config::default()) {
+        Some(v) => p.write_value(v, out)?,
+        None => out.write_str("unset")?,
+    }
+    out.write_str(" · values ")?;
+    p.write_domain(out)?;
+    match p.plan_key {
+        Some(k) => write!(out, " · plan key `{k}`")?,
+        None => write!(out, " · plan `[firmware] {}`", p.key)?,
+    }
+    write!(out, " · {}", p.doc)
+}
+
+/// `text` with the line after every `<!-- facts KEY -->` marker replaced by [`write_facts`] of
+/// KEY, and the keys of [`PARAMS`] that have no marker (`docs/tuning.md` is checked with it).
+#[cfg(test)]
+fn with_current_facts(text: &str) -> (std::string::String, std::vec::Vec<&'static str>) {
+    use std::string::String;
+    let mut out = String::new();
+    let mut seen = std::vec::Vec::new();
+    let mut lines = text.lines();
+    while let Some(line) = lines.next() {
+        out.push_str(line);
+        out.push('\n');
+        let Some(key) = line
+            .strip_prefix("<!-- facts ")
+            .and_then(|r| r.strip_suffix(" -->"))
+        else {
+            continue;
+        };
+        let p = find(key).unwrap_or_else(|| panic!("docs/tuning.md: unknown key {key}"));
+        seen.push(p.key);
+        lines.next();
+        write_facts(p, &mut out).unwrap();
+        out.push('\n');
+    }
+    let missing = PARAMS
+        .iter()
+        .map(|p| p.key)
+        .filter(|k| !seen.contains(k))
+        .collect();
+    (out, missing)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1447,6 +1499,34 @@ mod tests {
         assert!(
             on_disk == text,
             "docs/parameters.md is stale: WALKER_BLESS=1 cargo test --target host-tuple -p walker-contract"
+        );
+    }
+
+    /// Every key of the table has its facts line in the tuning guide, generated from the table
+    /// (the advice around it is prose).
+    #[test]
+    fn the_tuning_guide_covers_every_key() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/tuning.md");
+        let on_disk = std::fs::read_to_string(path).unwrap_or_default();
+        let (text, missing) = with_current_facts(&on_disk);
+        assert!(
+            missing.is_empty(),
+            "docs/tuning.md has no section for {missing:?}"
+        );
+        for p in PARAMS.iter() {
+            assert_eq!(
+                on_disk.matches(&format!("<!-- facts {} -->", p.key)).count(),
+                1,
+                "{}",
+                p.key
+            );
+        }
+        if std::env::var_os("WALKER_BLESS").is_some() {
+            std::fs::write(path, &text).unwrap();
+        }
+        assert!(
+            on_disk == text,
+            "docs/tuning.md facts are stale: WALKER_BLESS=1 cargo test --target host-tuple -p walker-contract"
         );
     }
 
