@@ -1515,7 +1515,9 @@ mod tests {
         );
         for p in PARAMS.iter() {
             assert_eq!(
-                on_disk.matches(&format!("<!-- facts {} -->", p.key)).count(),
+                on_disk
+                    .matches(&format!("<!-- facts {} -->", p.key))
+                    .count(),
                 1,
                 "{}",
                 p.key

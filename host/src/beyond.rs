@@ -244,41 +244,41 @@ impl TruthRows {
     }
 }
 
+/// The truth columns scored here, read through the one truth reader ([`report::read_truth`]).
 fn read_truth(path: &Path) -> Result<TruthRows, String> {
-    let csv = report::CsvText::read(path, "truth file")?;
-    let col = |n: &str| {
-        csv.col(&[n])
-            .ok_or_else(|| format!("{}: no column {n}", path.display()))
+    let table = report::read_truth(path)?;
+    let pelvis_x = table
+        .column("pelvis_x_m")
+        .ok_or_else(|| format!("{}: no column pelvis_x_m", path.display()))?
+        .to_vec();
+    let n = table.t.len();
+    // Optional (older truth files lack them): NaN.
+    let per_joint = |name: fn(usize) -> String| -> Vec<[f64; 12]> {
+        let cols: [Option<&[f64]>; 12] = std::array::from_fn(|j| table.column(&name(j + 1)));
+        (0..n)
+            .map(|i| {
+                std::array::from_fn(|j| cols[j].and_then(|c| c.get(i)).copied().unwrap_or(f64::NAN))
+            })
+            .collect()
     };
-    let (ct, cx, cy, cp) = (col("t_s")?, col("zmp_x")?, col("zmp_y")?, col("pelvis_x")?);
-    // Optional (older truth files lack them).
-    let opt = |n: String| csv.col(&[n.as_str()]);
-    let cqd: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("qd_{}", j + 1)));
-    let ctq: [Option<usize>; 12] = std::array::from_fn(|j| opt(format!("tq_{}", j + 1)));
-    let clim = opt("tq_limited".into());
-    let mut out = TruthRows::default();
-    for f in &csv.rows {
-        let g = |i: usize| {
-            f.get(i)
-                .and_then(|s| s.parse::<f64>().ok())
-                .unwrap_or(f64::NAN)
-        };
-        if !g(ct).is_finite() {
-            continue;
-        }
-        out.t.push(g(ct));
-        out.zmp.push([g(cx), g(cy)]);
-        out.pelvis_x.push(g(cp));
-        let opt_g = |c: Option<usize>| c.map_or(f64::NAN, g);
-        out.joint_speed.push(cqd.map(opt_g));
-        out.joint_torque.push(ctq.map(opt_g));
-        out.torque_limited.push(
-            clim.and_then(|c| f.get(c))
-                .and_then(|s| s.parse().ok())
-                .unwrap_or(0),
-        );
-    }
-    Ok(out)
+    let joint_speed = per_joint(crate::sim::truth::joint_speed_column);
+    let joint_torque = per_joint(crate::sim::truth::joint_torque_column);
+    let lim = table.column("tq_limited");
+    let torque_limited = (0..n)
+        .map(|i| {
+            lim.and_then(|c| c.get(i))
+                .filter(|v| v.is_finite() && **v >= 0.0 && **v <= f64::from(u16::MAX))
+                .map_or(0, |v| *v as u16)
+        })
+        .collect();
+    Ok(TruthRows {
+        t: table.t,
+        zmp: table.zmp,
+        pelvis_x,
+        joint_speed,
+        joint_torque,
+        torque_limited,
+    })
 }
 
 /// Scores one finished run (log + truth) of `cfg`'s walk (the tokens the firmware got).
@@ -497,6 +497,10 @@ fn mm(v: f64) -> String {
     }
 }
 
+/// Header of `beyond.csv`: units as name suffixes (`_frac`: a fraction of the walking ticks);
+/// an absent value (no fall, no truth column, no torque model) is an empty field.
+pub const CSV_HEADER: &str = "run,exit_code,fell_at_s,timing_factor,true_mean_x_m,true_mean_y_m,true_max_x_m,true_max_y_m,meas_mean_x_m,meas_mean_y_m,meas_max_x_m,meas_max_y_m,inside_frac,walking_ticks,walked_m,planned_m,peak_speed_max_rad_s,true_peak_speed_max_rad_s,peak_torque_max_nm,torque_limited_frac,ref_mismatch";
+
 /// The side-by-side table (Markdown).
 pub fn table(runs: &[RunMetrics]) -> String {
     let mut s = String::new();
@@ -555,31 +559,33 @@ pub fn table(runs: &[RunMetrics]) -> String {
 
 /// One CSV row per run.
 pub fn csv(runs: &[RunMetrics]) -> String {
-    let mut s = String::from("run,exit,fell_at,timing_factor,true_mean_x,true_mean_y,true_max_x,true_max_y,meas_mean_x,meas_mean_y,meas_max_x,meas_max_y,inside,walking_ticks,walked,planned,peak_speed_max,true_peak_speed_max,peak_torque_max,torque_limited,ref_mismatch\n");
+    let mut s = String::from(CSV_HEADER);
+    s.push('\n');
     for r in runs {
+        let n = report::csv_number;
         let _ = writeln!(
             s,
-            "{},{},{},{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.4},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.variant.name,
             r.exit_code.map_or(String::new(), |c| c.to_string()),
-            r.fell_at.map_or(String::new(), |t| format!("{t:.3}")),
-            r.timing_factor,
-            r.true_err[0].mean,
-            r.true_err[1].mean,
-            r.true_err[0].max,
-            r.true_err[1].max,
-            r.meas_err[0].mean,
-            r.meas_err[1].mean,
-            r.meas_err[0].max,
-            r.meas_err[1].max,
-            r.inside,
+            r.fell_at.map_or(String::new(), |t| n(t, 3)),
+            n(r.timing_factor, 4),
+            n(r.true_err[0].mean, 6),
+            n(r.true_err[1].mean, 6),
+            n(r.true_err[0].max, 6),
+            n(r.true_err[1].max, 6),
+            n(r.meas_err[0].mean, 6),
+            n(r.meas_err[1].mean, 6),
+            n(r.meas_err[0].max, 6),
+            n(r.meas_err[1].max, 6),
+            n(r.inside, 4),
             r.walking_ticks,
-            r.walked,
-            r.planned,
-            r.worst_joint().1,
-            r.worst_true_joint().1,
-            r.worst_torque_joint().1,
-            r.torque_limited,
+            n(r.walked, 4),
+            n(r.planned, 4),
+            n(r.worst_joint().1, 3),
+            n(r.worst_true_joint().1, 3),
+            n(r.worst_torque_joint().1, 3),
+            n(r.torque_limited, 4),
             r.ref_mismatch
         );
     }

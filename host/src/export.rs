@@ -1,8 +1,9 @@
 //! Plan export: the sampled plan with the 12 joint angles of the leg IK, as CSV.
 //!
-//! Columns: `t, zmp_x, zmp_y, com_x, com_y, com_z, l_foot_x, l_foot_y, l_foot_z, r_foot_x,
-//! r_foot_y, r_foot_z` then the joint names of [`gait_core::robot::JOINT_NAMES`]. SI units
-//! (s, m, rad), world frame, `t` from the start of the lead-in. The pelvis is the CoM point
+//! Columns (units as name suffixes): `t_s, zmp_x_m, zmp_y_m, com_x_m, com_y_m, com_z_m,
+//! l_foot_x_m, l_foot_y_m, l_foot_z_m, r_foot_x_m, r_foot_y_m, r_foot_z_m` then the joint names
+//! of [`gait_core::robot::JOINT_NAMES`] with `_rad` (`l_hip_yaw_rad` …). World frame, `t_s` from
+//! the start of the lead-in. The pelvis is the CoM point
 //! (x, y, z_c), upright, heading = the mean of the two feet's headings; the feet are level.
 
 use crate::planfile::{PlanError, WalkSpec};
@@ -13,9 +14,24 @@ use std::io::Write;
 
 /// The 12 leading columns of the export (the joint names follow).
 pub const LEAD_COLUMNS: [&str; 12] = [
-    "t", "zmp_x", "zmp_y", "com_x", "com_y", "com_z", "l_foot_x", "l_foot_y", "l_foot_z",
-    "r_foot_x", "r_foot_y", "r_foot_z",
+    "t_s",
+    "zmp_x_m",
+    "zmp_y_m",
+    "com_x_m",
+    "com_y_m",
+    "com_z_m",
+    "l_foot_x_m",
+    "l_foot_y_m",
+    "l_foot_z_m",
+    "r_foot_x_m",
+    "r_foot_y_m",
+    "r_foot_z_m",
 ];
+
+/// The column of joint `name` (an angle, rad).
+pub fn joint_column(name: &str) -> String {
+    format!("{name}_rad")
+}
 
 /// One row of the export.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -106,8 +122,8 @@ pub fn export_rows(
 pub fn header() -> String {
     LEAD_COLUMNS
         .iter()
-        .chain(JOINT_NAMES.iter())
-        .copied()
+        .map(|c| c.to_string())
+        .chain(JOINT_NAMES.iter().map(|n| joint_column(n)))
         .collect::<Vec<_>>()
         .join(",")
 }

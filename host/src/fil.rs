@@ -263,10 +263,10 @@ pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String
             .ok_or_else(|| format!("{}: no `{n}` column", truth.display()))
     };
     let (x, yaw, falling, tilt) = (
-        col("pelvis_x")?,
-        col("pelvis_yaw")?,
+        col("pelvis_x_m")?,
+        col("pelvis_yaw_rad")?,
         col("falling")?,
-        col("fall_angle")?,
+        col("fall_angle_rad")?,
     );
     let ends = |v: &[f64]| Some((*v.first()?, *v.last()?));
     let ((x0, x1), (yaw0, yaw1)) = ends(x)

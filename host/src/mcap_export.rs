@@ -145,19 +145,23 @@ pub fn write_mcap<W: Write + Seek>(
     if let Some(tr) = truth {
         let col = |name: &str| tr.column(name);
         let cols3 = |a: &str, b: &str, c: &str| Some([col(a)?, col(b)?, col(c)?]);
-        let com = cols3("com_x", "com_y", "com_z");
-        let gyro = cols3("gyro_x", "gyro_y", "gyro_z");
-        let acc = cols3("acc_x", "acc_y", "acc_z");
-        let pelvis = cols3("pelvis_x", "pelvis_y", "pelvis_z");
-        let rpy = cols3("pelvis_roll", "pelvis_pitch", "pelvis_yaw");
+        let com = cols3("com_x_m", "com_y_m", "com_z_m");
+        let gyro = cols3("gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s");
+        let acc = cols3("acc_x_m_s2", "acc_y_m_s2", "acc_z_m_s2");
+        let pelvis = cols3("pelvis_x_m", "pelvis_y_m", "pelvis_z_m");
+        let rpy = cols3("pelvis_roll_rad", "pelvis_pitch_rad", "pelvis_yaw_rad");
         let cells: Option<Vec<&[f64]>> = ["l", "r"]
             .iter()
-            .flat_map(|s| (0..4).map(move |k| format!("{s}_f{k}")))
+            .flat_map(|s| (0..4).map(move |k| format!("{s}_f{k}_n")))
             .map(|c| col(&c))
             .collect();
-        let (lfz, rfz) = (col("l_fz"), col("r_fz"));
-        let qd: Option<Vec<&[f64]>> = (1..=LEG_JOINTS).map(|i| col(&format!("qd_{i}"))).collect();
-        let tq: Option<Vec<&[f64]>> = (1..=LEG_JOINTS).map(|i| col(&format!("tq_{i}"))).collect();
+        let (lfz, rfz) = (col("l_fz_n"), col("r_fz_n"));
+        let qd: Option<Vec<&[f64]>> = (1..=LEG_JOINTS)
+            .map(|i| col(&crate::sim::truth::joint_speed_column(i)))
+            .collect();
+        let tq: Option<Vec<&[f64]>> = (1..=LEG_JOINTS)
+            .map(|i| col(&crate::sim::truth::joint_torque_column(i)))
+            .collect();
         for (i, &t_s) in tr.t.iter().enumerate() {
             let Some(t) = ns(t_s) else { continue };
             let z = tr.zmp[i];

@@ -226,10 +226,13 @@ pub fn tick_rows(ticks: &[TickRecord]) -> Vec<TickRow> {
     out
 }
 
-/// Header of `zmp_response.csv`.
-pub const RESPONSE_HEADER: &str = "t,seq,zmp_ref_x,zmp_ref_y,zmp_meas_x,zmp_meas_y,zmp_valid,com_x,com_y,tau,phase,fault,overrun,bus_timeouts,bus_crc_errors,bus_status_errors,tick_overruns";
+/// Header of `zmp_response.csv` (and of `walker capture`'s `<out>.csv`): units as name
+/// suffixes; `zmp_valid`, `overrun` (0/1), `phase`, `fault` (names) and the counters have none.
+pub const RESPONSE_HEADER: &str = "t_s,seq,zmp_ref_x_m,zmp_ref_y_m,zmp_meas_x_m,zmp_meas_y_m,zmp_valid,com_x_m,com_y_m,tau_nm,phase,fault,overrun,bus_timeouts,bus_crc_errors,bus_status_errors,tick_overruns";
 
-fn num(v: f64, decimals: usize) -> String {
+/// A number as a CSV field with `decimals` decimals; a value that is not available
+/// (non-finite) is an empty field, never `NaN`.
+pub fn csv_number(v: f64, decimals: usize) -> String {
     if v.is_finite() {
         format!("{v:.decimals$}")
     } else {
@@ -247,14 +250,14 @@ pub fn write_response_csv(rows: &[TickRow], mut w: impl Write) -> std::io::Resul
             "{:.6},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.t,
             r.rec.seq,
-            num(r.zmp_ref[0], 5),
-            num(r.zmp_ref[1], 5),
-            num(r.zmp_meas[0], 5),
-            num(r.zmp_meas[1], 5),
+            csv_number(r.zmp_ref[0], 5),
+            csv_number(r.zmp_ref[1], 5),
+            csv_number(r.zmp_meas[0], 5),
+            csv_number(r.zmp_meas[1], 5),
             u8::from(r.rec.zmp_valid),
-            num(r.com[0], 5),
-            num(r.com[1], 5),
-            num(r.tau, 3),
+            csv_number(r.com[0], 5),
+            csv_number(r.com[1], 5),
+            csv_number(r.tau, 3),
             phase_name(r.rec.phase),
             fault_name(r.rec.fault),
             u8::from(r.rec.overrun),
@@ -438,46 +441,9 @@ impl TruthTable {
     }
 }
 
-/// A CSV file as text: its header and its data lines split into trimmed fields (blank lines
-/// and `#` comments skipped). The one reader of the simulator's truth CSV ([`read_truth`] and
-/// `beyond`'s per-joint columns).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct CsvText {
-    /// Column names.
-    pub header: Vec<String>,
-    /// Data lines, fields trimmed.
-    pub rows: Vec<Vec<String>>,
-}
-
-impl CsvText {
-    /// Reads `path` (`what` names it in errors: "truth file").
-    pub fn read(path: &Path, what: &str) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read the {what} {}: {e}", path.display()))?;
-        let mut lines = text
-            .lines()
-            .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
-        let header = lines
-            .next()
-            .ok_or_else(|| format!("{}: empty {what}", path.display()))?
-            .split(',')
-            .map(|s| s.trim().to_string())
-            .collect();
-        let rows = lines
-            .map(|l| l.split(',').map(|f| f.trim().to_string()).collect())
-            .collect();
-        Ok(CsvText { header, rows })
-    }
-
-    /// The index of the first column named one of `names`.
-    pub fn col(&self, names: &[&str]) -> Option<usize> {
-        self.header.iter().position(|h| names.contains(&h.as_str()))
-    }
-}
-
-/// Reads a truth CSV (the one reader of truth files): a header with `t` (or `time`, `t_s`) and
-/// `zmp_x`/`zmp_y` (or `zmp_true_x`, `true_zmp_x`, `zmp_truth_x`), s and m, on the log's
-/// clock; `#` lines are comments; every other column is kept by name. A row whose time is
+/// Reads a truth CSV (the one reader of truth files): a header with `t_s` (or `t`, `time`) and
+/// `zmp_x_m`/`zmp_y_m` (or `zmp_x`, `zmp_true_x`, `true_zmp_x`, `zmp_truth_x`), s and m, on
+/// the log's clock (the simulator's columns: [`crate::sim::truth`]); `#` lines are comments; every other column is kept by name. A row whose time is
 /// empty is skipped; a malformed time or ZMP is an error naming the line and column.
 pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
     let mut rd = csv::ReaderBuilder::new()
@@ -496,12 +462,24 @@ pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
         return Err(format!("{}: empty truth file", path.display()));
     }
     let col = |names: &[&str]| header.iter().position(|h| names.contains(&h.as_str()));
-    let ct = col(&["t", "time", "t_s"])
-        .ok_or_else(|| format!("{}: no `t` column in {header:?}", path.display()))?;
-    let cx = col(&["zmp_x", "zmp_true_x", "true_zmp_x", "zmp_truth_x"])
-        .ok_or_else(|| format!("{}: no `zmp_x` column in {header:?}", path.display()))?;
-    let cy = col(&["zmp_y", "zmp_true_y", "true_zmp_y", "zmp_truth_y"])
-        .ok_or_else(|| format!("{}: no `zmp_y` column in {header:?}", path.display()))?;
+    let ct = col(&["t_s", "t", "time"])
+        .ok_or_else(|| format!("{}: no `t_s` column in {header:?}", path.display()))?;
+    let cx = col(&[
+        "zmp_x_m",
+        "zmp_x",
+        "zmp_true_x",
+        "true_zmp_x",
+        "zmp_truth_x",
+    ])
+    .ok_or_else(|| format!("{}: no `zmp_x_m` column in {header:?}", path.display()))?;
+    let cy = col(&[
+        "zmp_y_m",
+        "zmp_y",
+        "zmp_true_y",
+        "true_zmp_y",
+        "zmp_truth_y",
+    ])
+    .ok_or_else(|| format!("{}: no `zmp_y_m` column in {header:?}", path.display()))?;
     let mut out = TruthTable::default();
     let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
     for (n, rec) in rd.records().enumerate() {
@@ -777,17 +755,18 @@ pub fn planned_joint_speeds(
 }
 
 /// Per-joint panels (left leg left, right leg right, hip to ankle downwards) of the truth
-/// columns `{prefix}1` … `{prefix}12` (by servo ID), with an optional planned line per joint.
+/// columns `column(1)` … `column(12)` (by servo ID, e.g.
+/// [`crate::sim::truth::joint_speed_column`]), with an optional planned line per joint.
 /// `None` when the truth lacks the columns or they hold no finite value.
 pub fn joint_figure(
     title: &str,
     truth: &TruthTable,
-    prefix: &str,
+    column: fn(usize) -> String,
     unit: &str,
     planned: Option<&(Vec<f64>, Vec<[f64; LEG_JOINTS]>)>,
 ) -> Option<Figure> {
     let cols: Vec<&[f64]> = (1..=LEG_JOINTS)
-        .map(|id| truth.column(&format!("{prefix}{id}")))
+        .map(|id| truth.column(&column(id)))
         .collect::<Option<_>>()?;
     if !cols.iter().any(|c| c.iter().any(|v| v.is_finite())) {
         return None;
@@ -835,8 +814,9 @@ pub fn joint_figure(
     })
 }
 
-/// The foot-force figure: each sole's four load cells (`l_f0..l_f3`, `r_f0..r_f3`: front-left,
-/// front-right, rear-left, rear-right) and its contact force `l_fz` / `r_fz` when present.
+/// The foot-force figure: each sole's four load cells (`l_f0_n..l_f3_n`, `r_f0_n..r_f3_n`:
+/// front-left, front-right, rear-left, rear-right) and its contact force `l_fz_n` / `r_fz_n`
+/// when present.
 /// `None` when the truth has no load-cell columns.
 pub fn foot_force_figure(title: &str, truth: &TruthTable) -> Option<Figure> {
     let colors = [[30, 80, 200], [20, 150, 60], [220, 120, 0], [150, 40, 160]];
@@ -845,7 +825,7 @@ pub fn foot_force_figure(title: &str, truth: &TruthTable) -> Option<Figure> {
     for (side, name) in [("l", "left sole"), ("r", "right sole")] {
         let mut series = Vec::new();
         for (k, (c, n)) in colors.iter().zip(names).enumerate() {
-            let v = truth.column(&format!("{side}_f{k}"))?;
+            let v = truth.column(&format!("{side}_f{k}_n"))?;
             series.push(Series {
                 label: format!("load cell {k} ({n})"),
                 color: *c,
@@ -854,7 +834,7 @@ pub fn foot_force_figure(title: &str, truth: &TruthTable) -> Option<Figure> {
                 points: truth.t.iter().copied().zip(v.iter().copied()).collect(),
             });
         }
-        if let Some(v) = truth.column(&format!("{side}_fz")) {
+        if let Some(v) = truth.column(&format!("{side}_fz_n")) {
             series.push(Series {
                 label: "contact force, vertical".into(),
                 color: [0, 0, 0],
@@ -995,14 +975,14 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         let speeds = joint_figure(
             &format!("Joint speeds: plan vs simulated robot ({model})"),
             tr,
-            "qd_",
+            crate::sim::truth::joint_speed_column,
             "speed (rad/s)",
             planned.as_ref(),
         );
         let torques = joint_figure(
             &format!("Motor torques of the simulated robot ({model})"),
             tr,
-            "tq_",
+            crate::sim::truth::joint_torque_column,
             "torque (N·m)",
             None,
         );

@@ -49,6 +49,70 @@ fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
     (header, rows)
 }
 
+/// Every column of a CSV the host writes names its unit as a suffix, or is a count, flag, code
+/// or name (listed here).
+fn assert_units(header: &str) {
+    const UNITS: [&str; 11] = [
+        "_s", "_us", "_m", "_rad", "_rad_s", "_m_s2", "_n", "_nm", "_frac", "_deg", "_v",
+    ];
+    const UNITLESS: [&str; 22] = [
+        "seq",
+        "kind",
+        "detail",
+        "zmp_valid",
+        "phase",
+        "fault",
+        "overrun",
+        "bus_timeouts",
+        "bus_crc_errors",
+        "bus_status_errors",
+        "tick_overruns",
+        "support",
+        "stance",
+        "falling",
+        "tq_limited",
+        "l_contact",
+        "r_contact",
+        "other_contact",
+        "run",
+        "exit_code",
+        "timing_factor",
+        "walking_ticks",
+    ];
+    for c in header.split(',') {
+        assert!(
+            UNITS.iter().any(|u| c.ends_with(u)) || UNITLESS.contains(&c) || c == "ref_mismatch",
+            "column {c:?} has no unit in {header}"
+        );
+    }
+}
+
+/// No `NaN` (or `inf`) text in a CSV: an absent value is an empty field.
+fn assert_no_nan_text(path: &Path) {
+    let text = std::fs::read_to_string(path).unwrap();
+    for word in ["NaN", "nan", "inf"] {
+        assert!(
+            !text
+                .split([',', '\n'])
+                .any(|f| f.trim().trim_start_matches('-') == word),
+            "{}: {word} field",
+            path.display()
+        );
+    }
+}
+
+#[test]
+fn every_csv_header_carries_units() {
+    assert_units(report::RESPONSE_HEADER);
+    assert_units(walker_host::sim::truth::HEADER);
+    assert_units(walker_host::beyond::CSV_HEADER);
+    assert_units(&walker_host::export::header());
+    // The events CSV: seq, time_us, kind, detail.
+    let mut buf = Vec::new();
+    report::write_events_csv(&[], &mut buf).unwrap();
+    assert_units(String::from_utf8(buf).unwrap().trim());
+}
+
 fn frame(rec: &Record) -> Vec<u8> {
     let mut b = [0u8; MAX_FRAME];
     let n = encode(rec, &mut b);
@@ -89,9 +153,10 @@ fn export_round_trips_through_forward_kinematics() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (header, rows) = read_csv(&out);
-    let mut expect: Vec<&str> = export::LEAD_COLUMNS.to_vec();
-    expect.extend(gait_core::robot::JOINT_NAMES);
+    let mut expect: Vec<String> = export::LEAD_COLUMNS.map(String::from).to_vec();
+    expect.extend(gait_core::robot::JOINT_NAMES.map(|n| format!("{n}_rad")));
     assert_eq!(header, expect);
+    assert_units(&header.join(","));
     // 1.6 + 14·0.64 + 1.6 s at 5 ms.
     assert_eq!(rows.len(), 12160 / 5 + 1);
     let robot = Robot::reference();
@@ -234,6 +299,7 @@ fn report_on_damaged_log_counts_exactly() {
     let (header, rows) = read_csv(&out.join("zmp_response.csv"));
     assert_eq!(header.join(","), report::RESPONSE_HEADER);
     assert_eq!(rows.len(), 97);
+    assert_no_nan_text(&out.join("zmp_response.csv"));
     let seqs: Vec<u16> = rows.iter().map(|r| r[1].parse().unwrap()).collect();
     assert_eq!(seqs, kept);
     // Row of seq 30: t, reference, measured, phase, bus timeouts.
@@ -740,8 +806,9 @@ fn report_with_truth_file() {
     std::fs::write(&log, hand_log(1.0)).unwrap();
     // The sim's truth CSV: t_s plus more columns; the true ZMP equals the reference here.
     let truth = dir.join("truth.csv");
-    let mut t =
-        String::from("t_s,zmp_x,zmp_y,fz_n,support,l_f0,l_f1,l_f2,l_f3,r_f0,r_f1,r_f2,r_f3\n");
+    let mut t = String::from(
+        "t_s,zmp_x_m,zmp_y_m,fz_n,support,l_f0_n,l_f1_n,l_f2_n,l_f3_n,r_f0_n,r_f1_n,r_f2_n,r_f3_n\n",
+    );
     for k in 0..4 {
         t.push_str(&format!(
             "{:.6},0.010000,-0.020000,48.5,D,1,2,3,4,5,6,7,{k}\n",
@@ -775,10 +842,11 @@ fn report_with_truth_file() {
     assert!(out.join("foot_forces.png").is_file() && out.join("foot_forces.svg").is_file());
     assert!(!out.join("joint_speeds.png").exists());
     let tr = report::read_truth(&truth).unwrap();
-    assert_eq!(tr.column("r_f3"), Some(&[0.0, 1.0, 2.0, 3.0][..]));
+    assert_eq!(tr.column("r_f3_n"), Some(&[0.0, 1.0, 2.0, 3.0][..]));
     assert!(tr.column("support").unwrap().iter().all(|v| v.is_nan()));
     assert!(report::foot_force_figure("f", &tr).is_some());
-    assert!(report::joint_figure("j", &tr, "qd_", "rad/s", None).is_none());
+    let speed = walker_host::sim::truth::joint_speed_column;
+    assert!(report::joint_figure("j", &tr, speed, "rad/s", None).is_none());
 }
 
 #[test]
@@ -859,11 +927,11 @@ fn synthetic_walk(dir: &Path) -> (PathBuf, PathBuf, usize) {
             .iter()
             .map(|h| match *h {
                 "t_s" => format!("{:.6}", r.t + 0.005),
-                "zmp_x" => format!("{:.6}", r.zmp[0]),
-                "zmp_y" => format!("{:.6}", r.zmp[1]),
+                "zmp_x_m" => format!("{:.6}", r.zmp[0]),
+                "zmp_y_m" => format!("{:.6}", r.zmp[1]),
                 "support" => "D".into(),
                 "stance" => "L".into(),
-                "pelvis_z" => "0.217".into(),
+                "pelvis_z_m" => "0.217".into(),
                 h if h.starts_with("l_f") || h.starts_with("r_f") => "12.5".into(),
                 _ => format!("{:.4}", (i as f64 * 0.01).sin()),
             })

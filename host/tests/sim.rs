@@ -219,6 +219,8 @@ fn truth_csv_is_written() {
     let cfg = SimConfig {
         log_truth: Some(path.clone()),
         log_every_us: 10_000,
+        // No torque model: the motor torques are not available (empty fields).
+        servo_torque: None,
         ..kin()
     };
     let mut sim = Simulator::new(&cfg).unwrap();
@@ -227,11 +229,34 @@ fn truth_csv_is_written() {
     let text = std::fs::read_to_string(&path).unwrap();
     let _ = std::fs::remove_file(&path);
     let lines: Vec<&str> = text.lines().collect();
-    assert!(lines[0].starts_with("t_s,zmp_x,zmp_y"));
+    assert!(lines[0].starts_with("t_s,zmp_x_m,zmp_y_m,fz_n,"));
     assert_eq!(lines.len() as u64, s.truth_rows + 1);
     assert!((95..=101).contains(&s.truth_rows), "{}", s.truth_rows);
     let cols = lines[0].split(',').count();
     assert!(lines[1..].iter().all(|l| l.split(',').count() == cols));
+    // An absent value is an empty field, never NaN text.
+    assert!(!text.contains("NaN") && !text.to_lowercase().contains(",nan"));
+    // The one reader reads it back: the ZMP under the feet while standing, and every torque
+    // column either all numbers or all empty (no torque model in the kinematic robot: empty).
+    let tr = walker_host::report::read_truth(&path_copy(&text)).unwrap();
+    assert_eq!(tr.t.len() as u64, s.truth_rows);
+    assert!(
+        tr.zmp.iter().all(|z| z[1].abs() < 0.05),
+        "{:?}",
+        tr.zmp.first()
+    );
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let tq = header.iter().position(|c| *c == "tq_1_nm").unwrap();
+    let first: Vec<&str> = lines[1].split(',').collect();
+    let torque_model = cfg.servo_torque.is_some();
+    assert_eq!(first[tq].is_empty(), !torque_model, "{}", lines[1]);
+}
+
+/// `text` in a fresh temporary file.
+fn path_copy(text: &str) -> std::path::PathBuf {
+    let p = std::env::temp_dir().join(format!("walker-sim-truth-copy-{}.csv", std::process::id()));
+    std::fs::write(&p, text).unwrap();
+    p
 }
 
 /// BULK READ request of foot board `id`'s sensor block.

@@ -1,19 +1,22 @@
 //! Ground-truth CSV log.
 //!
 //! One row per `log_every_us` of physics time (the instant the values describe; accelerations
-//! are those of the motion state at that instant). Columns:
+//! are those of the motion state at that instant). Every column name ends in its unit (`_m`,
+//! `_rad`, `_rad_s`, `_m_s2`, `_n`, `_nm`, `_s`); a name without one is a code, flag or bitmask.
+//! A value that is not available (a torque without the torque model or while falling, a margin
+//! outside every support polygon) is an empty field. Columns:
 //!
-//! `t_s, zmp_x, zmp_y, fz_n, com_x, com_y, com_z, pelvis_x, pelvis_y, pelvis_z, pelvis_roll,
-//! pelvis_pitch, pelvis_yaw, support (L/R/D), stance (L/R), margin_m, l_f0..l_f3, r_f0..r_f3
-//! (N, noiseless, sensor order front-left, front-right, rear-left, rear-right), gyro_x..z
-//! (rad/s), acc_x..z (m/s²), tau_nm, falling (0/1), fall_angle, qd_1..qd_12` (joint speeds,
-//! rad/s, by servo ID), `tq_1..tq_12` (motor torques, N·m; NaN without the torque model or while
-//! falling), `tq_limited` (bit `ID − 1` set: that motor is at its torque bound), `l_contact,
-//! r_contact` (each sole touches the ground, 0/1), `l_fx … l_mz, r_fx … r_mz` (each sole's
-//! contact wrench in the world frame about its sole point, N and N·m; 0 in the kinematic
-//! model), `other_contact` (a robot part other than a sole touches the ground, 0/1). With the
-//! MuJoCo robot `zmp_x, zmp_y` is the true centre of pressure of the contact forces and
-//! `fz_n` their vertical sum.
+//! `t_s, zmp_x_m, zmp_y_m, fz_n, com_{x,y,z}_m, pelvis_{x,y,z}_m, pelvis_{roll,pitch,yaw}_rad,
+//! support (L/R/D), stance (L/R), margin_m, l_f0_n..l_f3_n, r_f0_n..r_f3_n` (load cells,
+//! noiseless, sensor order front-left, front-right, rear-left, rear-right), `gyro_{x,y,z}_rad_s,
+//! acc_{x,y,z}_m_s2, tau_nm, falling (0/1), fall_angle_rad, qd_1_rad_s..qd_12_rad_s` (joint
+//! speeds by servo ID), `tq_1_nm..tq_12_nm` (motor torques), `tq_limited` (bit `ID − 1` set:
+//! that motor is at its torque bound), `l_contact, r_contact` (each sole touches the ground,
+//! 0/1), `l_f{x,y,z}_n, l_m{x,y,z}_nm, r_f{x,y,z}_n, r_m{x,y,z}_nm` (each sole's contact wrench
+//! in the world frame about its sole point; 0 in the kinematic model), `other_contact` (a robot
+//! part other than a sole touches the ground, 0/1). With the MuJoCo robot `zmp_x_m, zmp_y_m` is
+//! the true centre of pressure of the contact forces and `fz_n` their vertical sum.
+//! [`crate::report::read_truth`] is the one reader.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -22,12 +25,23 @@ use std::path::Path;
 use super::body::Truth;
 
 /// Header line of the truth CSV (without newline).
-pub const HEADER: &str = "t_s,zmp_x,zmp_y,fz_n,com_x,com_y,com_z,pelvis_x,pelvis_y,pelvis_z,\
-pelvis_roll,pelvis_pitch,pelvis_yaw,support,stance,margin_m,l_f0,l_f1,l_f2,l_f3,r_f0,r_f1,r_f2,r_f3,\
-gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z,tau_nm,falling,fall_angle,\
-qd_1,qd_2,qd_3,qd_4,qd_5,qd_6,qd_7,qd_8,qd_9,qd_10,qd_11,qd_12,\
-tq_1,tq_2,tq_3,tq_4,tq_5,tq_6,tq_7,tq_8,tq_9,tq_10,tq_11,tq_12,tq_limited,\
-l_contact,r_contact,l_fx,l_fy,l_fz,l_mx,l_my,l_mz,r_fx,r_fy,r_fz,r_mx,r_my,r_mz,other_contact";
+pub const HEADER: &str = "t_s,zmp_x_m,zmp_y_m,fz_n,com_x_m,com_y_m,com_z_m,pelvis_x_m,pelvis_y_m,pelvis_z_m,\
+pelvis_roll_rad,pelvis_pitch_rad,pelvis_yaw_rad,support,stance,margin_m,\
+l_f0_n,l_f1_n,l_f2_n,l_f3_n,r_f0_n,r_f1_n,r_f2_n,r_f3_n,\
+gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,acc_x_m_s2,acc_y_m_s2,acc_z_m_s2,tau_nm,falling,fall_angle_rad,\
+qd_1_rad_s,qd_2_rad_s,qd_3_rad_s,qd_4_rad_s,qd_5_rad_s,qd_6_rad_s,qd_7_rad_s,qd_8_rad_s,qd_9_rad_s,qd_10_rad_s,qd_11_rad_s,qd_12_rad_s,\
+tq_1_nm,tq_2_nm,tq_3_nm,tq_4_nm,tq_5_nm,tq_6_nm,tq_7_nm,tq_8_nm,tq_9_nm,tq_10_nm,tq_11_nm,tq_12_nm,tq_limited,\
+l_contact,r_contact,l_fx_n,l_fy_n,l_fz_n,l_mx_nm,l_my_nm,l_mz_nm,r_fx_n,r_fy_n,r_fz_n,r_mx_nm,r_my_nm,r_mz_nm,other_contact";
+
+/// The truth column of joint `id`'s speed (rad/s).
+pub fn joint_speed_column(id: usize) -> String {
+    format!("qd_{id}_rad_s")
+}
+
+/// The truth column of joint `id`'s motor torque (N·m).
+pub fn joint_torque_column(id: usize) -> String {
+    format!("tq_{id}_nm")
+}
 
 /// Writer of the truth CSV.
 #[derive(Debug)]
@@ -47,37 +61,30 @@ impl TruthLog {
     /// Appends one row.
     pub fn row(&mut self, t: &Truth) -> std::io::Result<()> {
         let mut s = format!("{:.6}", t.t_us as f64 * 1e-6);
-        let mut put = |v: f64| {
+        let put = |s: &mut String, v: f64, decimals: usize| {
             s.push(',');
-            s.push_str(&format!("{v:.6}"));
+            s.push_str(&crate::report::csv_number(v, decimals));
         };
         for v in [t.zmp[0], t.zmp[1], t.fz] {
-            put(v);
+            put(&mut s, v, 6);
         }
         for v in t.com.iter().chain(&t.pelvis).chain(&t.pelvis_rpy) {
-            put(*v);
+            put(&mut s, *v, 6);
         }
-        let margin = if t.margin.is_finite() {
-            t.margin
-        } else {
-            f64::NAN
-        };
         s.push_str(&format!(
-            ",{},{},{margin:.6}",
+            ",{},{}",
             t.support.code(),
             if t.stance_left { 'L' } else { 'R' }
         ));
-        let mut put = |v: f64| {
-            s.push(',');
-            s.push_str(&format!("{v:.6}"));
-        };
+        put(&mut s, t.margin, 6);
         for v in t.forces.iter().flatten().chain(&t.gyro).chain(&t.accel) {
-            put(*v);
+            put(&mut s, *v, 6);
         }
-        put(t.tau);
-        s.push_str(&format!(",{},{:.6}", u8::from(t.falling), t.fall_angle));
+        put(&mut s, t.tau, 6);
+        s.push_str(&format!(",{}", u8::from(t.falling)));
+        put(&mut s, t.fall_angle, 6);
         for v in t.joint_speed.iter().chain(&t.joint_torque) {
-            s.push_str(&format!(",{v:.5}"));
+            put(&mut s, *v, 5);
         }
         s.push_str(&format!(",{}", t.torque_limited));
         s.push_str(&format!(
@@ -86,7 +93,7 @@ impl TruthLog {
             u8::from(t.sole_contact[1])
         ));
         for v in t.sole_wrench.iter().flatten() {
-            s.push_str(&format!(",{v:.4}"));
+            put(&mut s, *v, 4);
         }
         s.push_str(&format!(",{}", u8::from(t.other_contact)));
         writeln!(self.out, "{s}")?;
