@@ -22,7 +22,9 @@
 # (101 panic, 3 virtual watchdog, 124 wall-clock timeout, 127 qemu missing).
 # defmt frames arrive on qemu's stdout (semihosting) and are decoded with `defmt-print -e ELF`
 # when it is installed (`cargo install defmt-print --version 1.2.0 --locked`); otherwise the
-# raw frames are saved next to the ELF (ELF.defmt) and a one-line hint is printed.
+# raw frames are saved next to the ELF (ELF.defmt) and decoded after the run by the `walker`
+# binary when one is built (`walker capture --defmt ELF.defmt --elf ELF` → ELF.defmt.log),
+# else a one-line hint is printed.
 # Run-to-run determinism: -icount shift=0 (1 instruction = 1 virtual ns) and the firmware's
 # virtual clock (see src/boards/qemu_mps2.rs and docs/lockstep.md).
 set -u
@@ -88,9 +90,15 @@ if command -v defmt-print >/dev/null 2>&1; then
     status=${PIPESTATUS[0]}
 else
     raw="$elf.defmt"
-    echo "qemu-run.sh: defmt-print not installed (cargo install defmt-print --version 1.2.0 --locked); raw defmt frames saved to $raw" >&2
     "${limit[@]}" "${cmd[@]}" > "$raw"
     status=$?
+    # Without defmt-print, the host tool's decoder (defmt-decoder inside `walker`) when built.
+    walker=$(ls -t target/*/release/walker target/*/debug/walker 2>/dev/null | head -n 1 || true)
+    if [ -n "$walker" ] && "$walker" capture --defmt "$raw" --elf "$elf" >/dev/null; then
+        cat "$raw.log"
+    else
+        echo "qemu-run.sh: raw defmt frames saved to $raw; decode them with \`cargo walker capture --defmt $raw --elf $elf\` (or install defmt-print: cargo install defmt-print --version 1.2.0 --locked)" >&2
+    fi
 fi
 
 if [ "$status" -eq 124 ]; then

@@ -166,10 +166,11 @@ pub struct RunList(pub Vec<(String, PathBuf)>);
 
 /// `walker capture`.
 #[derive(Debug, Args)]
-#[command(group = clap::ArgGroup::new("source").required(true).args(["list", "port", "from_file"]))]
+#[command(group = clap::ArgGroup::new("source").required(true).multiple(true)
+    .args(["list", "port", "from_file", "defmt"]))]
 pub struct CaptureArgs {
     /// List the serial ports found and exit.
-    #[arg(long)]
+    #[arg(long, conflicts_with_all = ["port", "from_file", "defmt", "elf"])]
     pub list: bool,
     /// Serial port of the log UART (/dev/ttyUSB0, /dev/cu.usbserial-…, COM3).
     #[arg(long, value_name = "PORT", requires = "out")]
@@ -187,6 +188,12 @@ pub struct CaptureArgs {
     /// Stop after this many seconds (default: at Ctrl-C or when the port hangs up).
     #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
     pub seconds: Option<Duration>,
+    /// Raw defmt stream saved from the firmware (e.g. scripts/qemu-run.sh's ELF.defmt, RTT), decoded to <FILE>.log.
+    #[arg(long, value_name = "FILE", requires = "elf")]
+    pub defmt: Option<PathBuf>,
+    /// The firmware ELF whose defmt table decodes --defmt.
+    #[arg(long, value_name = "ELF", requires = "defmt")]
+    pub elf: Option<PathBuf>,
 }
 
 /// The simulated robot's options (`simulate`, `fil`, `beyond`) and the `[sim]` table of a run
@@ -868,8 +875,24 @@ fn run_capture(a: CaptureArgs) -> Result<(), CliError> {
         baud,
         out,
         seconds,
+        defmt,
+        elf,
     } = a;
     let seconds = seconds.map(|d| d.as_secs_f64());
+    // Decoded first: a missing ELF or stream is reported before a capture starts.
+    if let (Some(raw), Some(elf)) = (&defmt, &elf) {
+        let mut name = raw.file_name().unwrap_or_default().to_os_string();
+        name.push(".log");
+        let text = raw.with_file_name(name);
+        let l = crate::defmt_log::decode_file(elf, raw, &text)?;
+        println!("{}: {}", text.display(), l.summary());
+        for w in l.warnings().take(20) {
+            println!("  {}", w.text);
+        }
+        if from.is_none() && port.is_none() {
+            return Ok(());
+        }
+    }
     if list {
         let ports = capture::list_ports()?;
         if ports.is_empty() {
@@ -881,10 +904,10 @@ fn run_capture(a: CaptureArgs) -> Result<(), CliError> {
         return Ok(());
     }
     let log = match (from, port) {
-        // clap's group and conflict: exactly one of --list, --port, --from-file.
+        // clap's group and conflict: one of --list, --port, --from-file (and --defmt).
         (Some(_), Some(_)) | (None, None) => {
             return Err(CliError::usage(
-                "walker capture: give one of --list, --port, --from-file",
+                "walker capture: give one of --list, --port, --from-file, --defmt",
             ))
         }
         (Some(input), None) => {
@@ -1103,6 +1126,19 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
     })?;
     eprintln!();
     eprintln!("  {}", crate::fil::summary_line(&r.sim));
+    match &r.firmware_log {
+        Ok(l) => {
+            eprintln!(
+                "  firmware log: {} ({})",
+                out.join("firmware.log").display(),
+                l.summary()
+            );
+            for w in l.warnings().take(20) {
+                eprintln!("    {}", w.text);
+            }
+        }
+        Err(e) => eprintln!("  firmware log: not decoded: {e}"),
+    }
     eprintln!("  wall clock {:.1} s", r.wall.as_secs_f64());
     // The report's support bounds follow the timing the firmware adjusted at start-up.
     let events = report::decode_file(&r.log)

@@ -4,7 +4,8 @@
 //!
 //! Wiring (see `docs/lockstep.md`): QEMU's UART0 (the servo bus) and UART2 (the lock-step
 //! channel) connect as TCP clients to the simulator's two listening sockets; UART1 (the log)
-//! goes to `OUT/walk.log`; the semihosting output (defmt frames) to `OUT/firmware.defmt`. The
+//! goes to `OUT/walk.log`; the semihosting output (defmt frames) to `OUT/firmware.defmt`, decoded
+//! after the run with the ELF's table into `OUT/firmware.log` ([`crate::defmt_log`]). The
 //! walk's parameters reach the firmware as `key=value` tokens on its semihosting command line
 //! (`-append`), so any forward-walk plan file can be walked. Time in the loop is the firmware's
 //! virtual clock, so the result does not depend on how fast the host is.
@@ -49,6 +50,17 @@ pub struct FilResult {
     pub truth: PathBuf,
     /// Wall-clock duration of the run.
     pub wall: Duration,
+    /// The firmware's defmt output decoded to `OUT/firmware.log` (or why it could not be).
+    pub firmware_log: Result<crate::defmt_log::DefmtLog, String>,
+}
+
+/// Decodes `OUT/firmware.defmt` into `OUT/firmware.log` with the ELF's defmt table.
+fn decode_defmt(elf: &Path, out_dir: &Path) -> Result<crate::defmt_log::DefmtLog, String> {
+    crate::defmt_log::decode_file(
+        elf,
+        &out_dir.join("firmware.defmt"),
+        &out_dir.join("firmware.log"),
+    )
 }
 
 /// The firmware command-line tokens of a forward-walk plan (the contract's parameter table,
@@ -173,8 +185,17 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
             let _ = child.kill();
             let _ = child.wait();
             handle.stop();
+            let defmt = match decode_defmt(&opts.elf, &opts.out_dir) {
+                Ok(l) => {
+                    format!(
+                        "its defmt output: {}",
+                        opts.out_dir.join("firmware.log").display()
+                    ) + &format!(" ({})", l.summary())
+                }
+                Err(e) => format!("its defmt output was not decoded: {e}"),
+            };
             return Err(format!(
-                "firmware did not finish within {:?} (wall clock)",
+                "firmware did not finish within {:?} (wall clock); {defmt}",
                 opts.timeout
             ));
         }
@@ -191,6 +212,7 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
         log,
         truth,
         wall: started.elapsed(),
+        firmware_log: decode_defmt(&opts.elf, &opts.out_dir),
     })
 }
 

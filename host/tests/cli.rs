@@ -680,6 +680,17 @@ fn capture_from_file_and_missing_port() {
         assert_eq!(o.status.code(), Some(2), "{flag} {bad}: {err}");
         assert!(err.contains(flag), "{flag} {bad}: {err}");
     }
+    // --defmt needs --elf (and the other way round); a missing ELF is a failure, not a panic.
+    for args in [
+        &["capture", "--defmt", "x.defmt"][..],
+        &["capture", "--elf", "x.elf", "--list"],
+        &["capture", "--list", "--defmt", "x", "--elf", "y"],
+    ] {
+        assert_eq!(walker(args).status.code(), Some(2), "{args:?}");
+    }
+    let o = walker(&["capture", "--defmt", s(&saved), "--elf", "/nonexistent.elf"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cannot read the ELF /nonexistent.elf"));
     // The port listing runs (whatever the machine has).
     let o = walker(&["capture", "--list"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

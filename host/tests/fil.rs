@@ -155,6 +155,25 @@ fn a_dead_foot_board_is_reported_missing_at_start_up() {
         _ => None,
     });
     assert_eq!(startup.expect("start-up record").missing.as_slice(), &[111]);
+    // The firmware's defmt output, decoded with the ELF's table into OUT/firmware.log.
+    let fw = r.firmware_log.as_ref().expect("defmt output decoded");
+    assert_eq!((fw.malformed, fw.truncated), (0, false), "{}", fw.text());
+    assert!(
+        fw.lines
+            .iter()
+            .any(|l| l.level == Some("info") && l.text.contains("walker-firmware")),
+        "{}",
+        fw.text()
+    );
+    assert!(
+        fw.lines
+            .iter()
+            .any(|l| l.level == Some("error") && l.text.contains("missing, first Some(111)")),
+        "{}",
+        fw.text()
+    );
+    let text = std::fs::read_to_string(r.log.with_file_name("firmware.log")).unwrap();
+    assert_eq!(text, fw.text());
 }
 
 #[test]
