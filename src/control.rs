@@ -63,7 +63,7 @@ use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::measured::{measured_zmp, ForceReading};
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
-use gait_core::{GaitError, GaitSample, Robot, Sampler, Side};
+use gait_core::{GaitError, GaitSample, Robot, Side};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 use walker_contract::ExitCode;
 
@@ -80,7 +80,7 @@ use crate::{startup_record, Config};
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_STEPS};
 /// The sampler type of the firmware.
-pub type GaitSampler = Sampler<f32, MAX_STEPS>;
+pub type GaitSampler = gait_core::fourier_walk::WalkSampler<f32, MAX_STEPS>;
 pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;

@@ -69,6 +69,10 @@ pub struct Config {
     pub zmp_b: Option<f64>,
     /// Use seed 001's sinusoid swing (height h_z) instead of the cycloid (h_z, w_y).
     pub swing_sinusoid: bool,
+    /// The CoM from seed 001's Fourier series (`true`) or seed 000's exact solution.
+    pub com_fourier: bool,
+    /// Terms per axis of the Fourier CoM.
+    pub fourier_terms: u8,
     /// Reply timeout of the Dynamixel master, µs (per expected status packet).
     pub reply_timeout_us: u32,
     /// Longest single wait for one reply byte, µs (the firmware's bus driver).
@@ -123,6 +127,8 @@ impl Config {
             zmp_continuous: false,
             zmp_b: None,
             swing_sinusoid: false,
+            com_fourier: false,
+            fourier_terms: gait_core::fourier_walk::DEFAULT_FOURIER_TERMS,
             reply_timeout_us: 1_000,
             read_poll_us: DEFAULT_READ_POLL_US,
             startup_attempts: 8,
@@ -155,6 +161,13 @@ impl Config {
             zmp_continuous: self.zmp_continuous,
             zmp_b: self.zmp_b,
             swing_sinusoid: self.swing_sinusoid,
+            com: if self.com_fourier {
+                gait_core::gait::ComMethod::Fourier {
+                    terms: self.fourier_terms,
+                }
+            } else {
+                gait_core::gait::ComMethod::Exact
+            },
             dt_s: self.dt_s(),
         }
     }

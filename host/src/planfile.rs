@@ -25,6 +25,8 @@
 //! zmp = "natural"         # natural (d1, d2, a) | continuous (b)
 //! b = 0.004               # continuous ZMP: half travel under the sole, m (default: a)
 //! swing = "cycloid"       # cycloid (h_z, w_y) | sinusoid (h_z)
+//! com = "exact"           # exact (seed 000's bounded solution) | fourier (seed 001's series through the steady steps; forward walks of ≥ 5 steps)
+//! fourier_terms = 12      # terms per axis of the Fourier CoM (1 ..= 24)
 //! compensation = "none"   # none (the paper's pipeline) | wholebody (multi-body CoM on the model CoM; firmware `comp=`)
 //! stabilizer = false      # the firmware's ZMP/DCM feedback stabilizer (`stab=on`, default gains)
 //!
@@ -50,11 +52,11 @@
 //! from it, and [`WalkSpec::check`] runs the firmware's own parser on them first, so a value
 //! out of its physical range (`d2 = 1e38`, `h_z = 10`) is refused here as on the robot.
 
+use gait_core::fourier_walk::{ComMethod, WalkSampler, DEFAULT_FOURIER_TERMS};
 use gait_core::plan::{SwingShape, Timing};
 use gait_core::zmp::ZmpShape;
 use gait_core::{
-    Footstep, ForwardWalk, GaitError, GaitParams, Model, ModelKind, Place, Plan, Robot, Sampler,
-    Side,
+    Footstep, ForwardWalk, GaitError, GaitParams, Model, ModelKind, Place, Plan, Robot, Side,
 };
 use serde::Deserialize;
 use std::fmt;
@@ -66,7 +68,7 @@ pub const PLAN_CAPACITY: usize = 64;
 /// The plan type used by the host tools.
 pub type HostPlan = Plan<f64, PLAN_CAPACITY>;
 /// The sampler type used by the host tools.
-pub type HostSampler = Sampler<f64, PLAN_CAPACITY>;
+pub type HostSampler = WalkSampler<f64, PLAN_CAPACITY>;
 /// Default sample time, s (the firmware's 200 Hz tick; 1 kHz needs a 3 Mbps bus).
 pub const DEFAULT_DT: f64 = 0.005;
 
@@ -146,6 +148,17 @@ pub enum CompensationName {
     None,
     /// Whole-body compensation: the multi-body CoM on the model's CoM.
     Wholebody,
+}
+
+/// The CoM solver of a plan file (the firmware's `com=` token).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ComName {
+    /// Seed 000's exact bounded solution.
+    #[default]
+    Exact,
+    /// Seed 001's Fourier series through the steady steps.
+    Fourier,
 }
 
 /// The model name of a plan file.
@@ -251,6 +264,10 @@ pub struct WalkSpec {
     pub swing: SwingKind,
     /// Explicit footsteps (replace the forward walk when present).
     pub footsteps: Option<Vec<FootstepSpec>>,
+    /// The CoM solver.
+    pub com: ComName,
+    /// Terms per axis of the Fourier CoM (default 12).
+    pub fourier_terms: Option<u8>,
     /// Pelvis placement (firmware only; host exports plot the model's plan).
     pub compensation: CompensationName,
     /// The firmware's feedback stabilizer on (firmware only).
@@ -284,6 +301,8 @@ impl Default for WalkSpec {
             b: None,
             swing: SwingKind::Cycloid,
             footsteps: None,
+            com: ComName::Exact,
+            fourier_terms: None,
             compensation: CompensationName::None,
             stabilizer: false,
             firmware: toml::Table::new(),
@@ -500,6 +519,11 @@ impl WalkSpec {
             "period" => Some(self.period.to_string()),
             "lead_in" => Some(self.lead_in.to_string()),
             "lead_out" => Some(self.lead_out.to_string()),
+            "com" => word(match self.com {
+                ComName::Exact => "exact",
+                ComName::Fourier => "fourier",
+            }),
+            "fourier_terms" => self.fourier_terms.map(|n| n.to_string()),
             "compensation" => word(match self.compensation {
                 CompensationName::None => "none",
                 CompensationName::Wholebody => "wholebody",
@@ -769,11 +793,26 @@ impl WalkSpec {
         }
     }
 
+    /// The CoM method of the plan.
+    pub fn com_method(&self) -> ComMethod {
+        match self.com {
+            ComName::Exact => ComMethod::Exact,
+            ComName::Fourier => ComMethod::Fourier {
+                terms: self.fourier_terms.unwrap_or(DEFAULT_FOURIER_TERMS),
+            },
+        }
+    }
+
     /// A sampler over the plan at sample time `dt` (the `dt` field, or an override).
     pub fn sampler(&self, robot: &Robot, dt: f64) -> Result<HostSampler, PlanError> {
         check_dt(dt)?;
         let plan = self.plan(robot)?;
-        Sampler::new(plan, dt).map_err(|e| match e {
+        if self.com == ComName::Fourier && self.footsteps.is_some() {
+            return Err(PlanError::gait("com", GaitError::NotPeriodicWalk));
+        }
+        WalkSampler::new(plan, &self.forward_walk(), self.com_method(), dt).map_err(|e| match e {
+            GaitError::NotPeriodicWalk => PlanError::gait("com", e),
+            GaitError::BadTermCount => PlanError::gait("fourier_terms", e),
             GaitError::BadSampleTime => PlanError::new(
                 "dt",
                 format!("dt = {dt} s is longer than the shortest phase (t1, t2 − t1, T − t2, lead_in, lead_out)"),
