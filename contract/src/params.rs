@@ -826,6 +826,15 @@ params! {
         set: |c, v| { c.fourier_terms = v as u8 },
         get: |c| { Some(Value::Int(u32::from(c.fourier_terms))) },
     },
+    {
+        key: "servo_lead",
+        plan_key: None,
+        unit: "s",
+        domain: range(0.0, crate::config::MAX_SERVO_LEAD_S),
+        doc: "servo-lag feed-forward: joint targets are the gait's this far ahead of the reference (rounded to ticks)",
+        set: |c, v| { c.servo_lead_s = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_lead_s)) },
+    },
 }
 
 /// Key index meaning "not a known key".
