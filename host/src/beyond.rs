@@ -649,7 +649,7 @@ pub fn goal_section(runs: &[RunMetrics]) -> String {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -660,7 +660,8 @@ mod tests {
         assert!(AxisError::of(std::iter::empty()).mean.is_nan());
     }
 
-    fn metrics(name: &'static str, mean: [f64; 2]) -> RunMetrics {
+    /// Metrics of a run named `name` with true ZMP mean errors `mean` (test data).
+    pub(crate) fn metrics(name: &'static str, mean: [f64; 2]) -> RunMetrics {
         let mut v = variants()[0].clone();
         v.name = name;
         RunMetrics {

@@ -924,4 +924,49 @@ mod tests {
         assert_eq!(cfg.feasibility, walker_contract::config::Feasibility::Off);
         assert_eq!(cfg.walk, ForwardWalk::table2());
     }
+
+    /// The plans shipped in `plans/` load, and the paper's open loop and the Fourier plan set
+    /// what their comments say (against the firmware's defaults: the closed loop).
+    #[test]
+    fn shipped_plans_load_and_mean_what_they_say() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../plans");
+        let mut n = 0;
+        for e in std::fs::read_dir(dir).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().and_then(|x| x.to_str()) == Some("toml")
+                && !path.ends_with("run-example.toml")
+            {
+                load(&path).unwrap_or_else(|err| panic!("{err}"));
+                n += 1;
+            }
+        }
+        assert!(n >= 4, "{n} plans");
+        let d = walker_contract::Config::default();
+        assert!(
+            d.gyro_feedback.ankle > 0.0
+                && d.feasibility != walker_contract::config::Feasibility::Off
+        );
+        let paper = load(&std::path::Path::new(dir).join("table2-paper.toml"))
+            .unwrap()
+            .firmware_config()
+            .unwrap();
+        assert_eq!(paper.model, ModelKind::Tlipfm);
+        assert_eq!(paper.walk, ForwardWalk::table2());
+        assert_eq!(paper.feasibility, walker_contract::config::Feasibility::Off);
+        assert_eq!(
+            (paper.gyro_feedback.ankle, paper.gyro_feedback.hip),
+            (0.0, 0.0)
+        );
+        assert!(!paper.stabilizer_on && !paper.com_fourier);
+        assert_eq!(
+            paper.compensation,
+            walker_contract::config::Compensation::None
+        );
+        let fourier = load(&std::path::Path::new(dir).join("table2-fourier.toml"))
+            .unwrap()
+            .firmware_config()
+            .unwrap();
+        assert!(fourier.com_fourier);
+        assert_eq!(fourier.fourier_terms, 12);
+    }
 }
