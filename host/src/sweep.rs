@@ -128,18 +128,18 @@ impl SweepRow {
             out.push(format!("fell at {t:.1} s"));
         }
         let share = f.walked / f.planned;
-        if !(share >= goal::DISTANCE) {
+        if share.is_nan() || share < goal::DISTANCE {
             out.push(format!("distance {:.0} % < 95 %", 100.0 * share));
         }
         let h = f.heading_drift.to_degrees();
-        if !(h.abs() < goal::HEADING_DEG) {
+        if h.is_nan() || h.abs() >= goal::HEADING_DEG {
             out.push(format!("heading {h:+.1}°"));
         }
         let [ex, ey] = self.metrics.true_err.map(|e| e.mean);
-        if !(ex < goal::ZMP_X) {
+        if ex.is_nan() || ex >= goal::ZMP_X {
             out.push(format!("ZMP x {:.1} mm", ex * 1e3));
         }
-        if !(ey < goal::ZMP_Y) {
+        if ey.is_nan() || ey >= goal::ZMP_Y {
             out.push(format!("ZMP y {:.1} mm", ey * 1e3));
         }
         out
