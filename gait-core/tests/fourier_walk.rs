@@ -21,11 +21,9 @@ fn config(kind: ModelKind, com: ComMethod) -> WalkConfig {
 }
 
 fn walk64(w: &WalkConfig) -> Vec<GaitSample<f64>> {
-    let robot = Robot::reference();
-    let model = gait_core::Model::<f64>::new(w.model, &robot, w.walk.z_c).unwrap();
     let plan = w
         .walk
-        .plan::<f64, 64>(&robot, w.walk.params(model))
+        .model_plan::<f64, 64>(&Robot::reference(), w.model)
         .unwrap();
     let mut s = WalkSampler::new(plan, &w.walk, w.com, w.dt_s).unwrap();
     let mut out = Vec::new();
@@ -62,10 +60,7 @@ fn figures(kind: ModelKind, terms: u8) -> Figures {
     let robot = Robot::reference();
     let model = gait_core::Model::<f64>::new(kind, &robot, fw.walk.z_c).unwrap();
     let omega = model.omega;
-    let plan = fw
-        .walk
-        .plan::<f64, 64>(&robot, fw.walk.params(model))
-        .unwrap();
+    let plan = fw.walk.model_plan::<f64, 64>(&robot, kind).unwrap();
     let s = WalkSampler::new(plan, &fw.walk, fw.com, DT).unwrap();
     let blend = s.fourier().unwrap();
     let start = s.walk_start_ns();
