@@ -202,9 +202,9 @@ mod compensation_tests {
         for (p, w) in rp.iter().zip(&rw) {
             let g = sampler32.next(0.0);
             let (q32, _) = firmware.joints(&g, [0.0; 2]);
-            for j in 0..LEG_JOINTS {
-                differ = differ.max((p.q[j] - w.q[j]).abs());
-                worst = worst.max((f64::from(q32[j]) - w.q[j]).abs());
+            for ((a, b), c) in p.q.iter().zip(&w.q).zip(&q32) {
+                differ = differ.max((a - b).abs());
+                worst = worst.max((f64::from(*c) - b).abs());
             }
         }
         assert!(
