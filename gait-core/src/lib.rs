@@ -14,6 +14,7 @@ pub use error::GaitError;
 pub use real::Real;
 pub use robot::{Robot, Side};
 pub mod com;
+pub mod command;
 pub mod fourier;
 pub mod fourier_walk;
 pub mod measured;
