@@ -112,6 +112,8 @@ pub struct FakeBoard {
     /// Script: the tick that made the `n`-th SYNC WRITE takes this much longer, µs.
     pub slow: Vec<(usize, u64)>,
     imu_counter: u16,
+    /// Amplitude of the IMU's 1.5 Hz pitch-rate sinusoid, rad/s.
+    imu_rate_amp: f32,
 }
 
 /// Joint angles (rad) → ticks of the fake's initial pose: knees bent, hips and ankles pitched.
@@ -165,6 +167,7 @@ impl FakeBoard {
             fall_at: None,
             slow: Vec::new(),
             imu_counter: 0,
+            imu_rate_amp: 0.3,
         }
     }
 
@@ -178,6 +181,13 @@ impl FakeBoard {
     /// Uses the tick period of `cfg`.
     pub fn with_period(mut self, period_us: u32) -> Self {
         self.sched = TickSchedule::new(period_us);
+        self
+    }
+
+    /// The same with the IMU's pitch-rate sinusoid of amplitude `amp` rad/s (0: a still
+    /// trunk, so τ = J·φ̈ = 0).
+    pub fn with_imu_rate(mut self, amp: f32) -> Self {
+        self.imu_rate_amp = amp;
         self
     }
 
@@ -263,7 +273,7 @@ impl FakeBoard {
     fn imu_sample(&mut self) -> [u8; 26] {
         self.imu_counter = self.imu_counter.wrapping_add(1);
         let t = self.now_ns as f32 * 1e-9;
-        let rate = 0.3 * (core::f32::consts::TAU * 1.5 * t).sin();
+        let rate = self.imu_rate_amp * (core::f32::consts::TAU * 1.5 * t).sin();
         let g = 9.80665f32;
         let fallen = self.fall_at.is_some_and(|n| self.sync_writes() >= n);
         let accel = if fallen {

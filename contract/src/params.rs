@@ -808,6 +808,33 @@ params! {
         },
         get: |c| { Some(Value::Word(usize::from(c.arithmetic == Arithmetic::Fixed))) },
     },
+    {
+        key: "com",
+        plan_key: Some("com"),
+        unit: "",
+        domain: Domain::Word(&["exact", "fourier"]),
+        doc: "CoM solver: seed 000's exact solution, or seed 001's Fourier series through the steady steps (blended with the exact one at start and stop; f32, forward walks of ≥ 5 steps)",
+        set: |c, v| { c.com_fourier = v as usize == 1 },
+        get: |c| { Some(Value::Word(usize::from(c.com_fourier))) },
+    },
+    {
+        key: "fourier_terms",
+        plan_key: Some("fourier_terms"),
+        unit: "",
+        domain: int(1, gait_core::fourier_walk::MAX_FOURIER_TERMS as u32),
+        doc: "terms per axis of the Fourier CoM (`com=fourier`)",
+        set: |c, v| { c.fourier_terms = v as u8 },
+        get: |c| { Some(Value::Int(u32::from(c.fourier_terms))) },
+    },
+    {
+        key: "servo_lead",
+        plan_key: None,
+        unit: "s",
+        domain: range(0.0, crate::config::MAX_SERVO_LEAD_S),
+        doc: "servo-lag feed-forward: joint targets are the gait's this far ahead of the reference (rounded to ticks)",
+        set: |c, v| { c.servo_lead_s = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_lead_s)) },
+    },
 }
 
 /// Key index meaning "not a known key".

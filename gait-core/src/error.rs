@@ -40,11 +40,13 @@ pub enum GaitError {
     WalkEnded,
     /// The requested method is not built in (a cargo feature is off).
     NotBuiltIn,
+    /// The Fourier CoM needs a straight forward walk of at least 5 steps, in f32 or f64.
+    NotPeriodicWalk,
 }
 
 impl GaitError {
     /// Every error, in the order of its code.
-    pub const ALL: [GaitError; 18] = [
+    pub const ALL: [GaitError; 19] = [
         GaitError::NonFinite,
         GaitError::NonPositiveMass,
         GaitError::NonPositiveLength,
@@ -63,6 +65,7 @@ impl GaitError {
         GaitError::BadStartFoot,
         GaitError::WalkEnded,
         GaitError::NotBuiltIn,
+        GaitError::NotPeriodicWalk,
     ];
 
     /// The wire code (the firmware's `ConfigRejected` fault record carries it), one explicit
@@ -87,6 +90,7 @@ impl GaitError {
             GaitError::BadStartFoot => 15,
             GaitError::WalkEnded => 16,
             GaitError::NotBuiltIn => 17,
+            GaitError::NotPeriodicWalk => 18,
         }
     }
 }
@@ -114,6 +118,7 @@ impl TryFrom<u8> for GaitError {
             15 => GaitError::BadStartFoot,
             16 => GaitError::WalkEnded,
             17 => GaitError::NotBuiltIn,
+            18 => GaitError::NotPeriodicWalk,
             other => return Err(other),
         })
     }
@@ -140,6 +145,9 @@ impl core::fmt::Display for GaitError {
             GaitError::BadStartFoot => "S_first must be -1 or +1",
             GaitError::WalkEnded => "the walk has ended; no more steps can be appended",
             GaitError::NotBuiltIn => "the requested method is not built in (cargo feature off)",
+            GaitError::NotPeriodicWalk => {
+                "the Fourier CoM needs a straight forward walk of at least 5 steps (f32, not fixed point)"
+            }
         };
         f.write_str(s)
     }

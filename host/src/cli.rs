@@ -103,13 +103,20 @@ pub enum Command {
     /// OUT/walk.log, decodes its defmt output to OUT/firmware.log and writes the report to
     /// OUT/report. Exit code 3: the firmware failed.
     Fil(FilArgs),
-    /// LIPM, DLIPM, TLIPFM, + whole-body compensation, + feedback: side by side in the FIL walk.
+    /// LIPM, DLIPM, TLIPFM, TLIPFM with the Fourier CoM, + whole-body compensation, + feedback: side by side in the FIL walk.
     ///
-    /// Walks the plan five times in the firmware-in-the-loop setup and prints per run the true
+    /// Walks the plan six times in the firmware-in-the-loop setup and prints per run the true
     /// and measured ZMP errors, the time the true ZMP is inside the support polygon (5 mm
     /// margin), distance walked vs planned, peak joint speeds and motor torques; writes
     /// OUT/beyond.md, OUT/beyond.csv and OUT/<run>/.
     Beyond(BeyondArgs),
+    /// Robustness sweep: the plan walked in the FIL setup nominal and with each perturbation of the robot.
+    ///
+    /// The firmware (its defaults: the closed loop) walks the plan on the MuJoCo robot once
+    /// nominal and once per case (servo torque and gains ±20 %, link masses ±10 %, floor
+    /// friction 0.5 / 0.75, +5 ms sensor latency, 5 % dropped status packets; host/src/sweep.rs)
+    /// and writes OUT/sweep.md with the goals each case misses, and OUT/<case>/.
+    Sweep(SweepArgs),
 }
 
 /// `walker export`.
@@ -383,6 +390,35 @@ pub struct BeyondArgs {
     pub sim: SimArgs,
 }
 
+/// `walker sweep`.
+#[derive(Debug, Args)]
+pub struct SweepArgs {
+    /// Run configuration (TOML: plan, firmware parameters, nominal simulator, QEMU; plans/run-example.toml); options given here override it.
+    #[arg(long, value_name = "FILE", conflicts_with = "plan")]
+    pub config: Option<PathBuf>,
+    /// Plan file (TOML); default: the built-in Table 2 walk.
+    #[arg(long, value_name = "FILE")]
+    pub plan: Option<PathBuf>,
+    /// Output folder (sweep.md, one folder per case).
+    #[arg(long, value_name = "DIR", default_value = "out/sweep")]
+    pub out: PathBuf,
+    /// Firmware ELF (board-qemu build).
+    #[arg(long, value_name = "ELF")]
+    pub elf: Option<PathBuf>,
+    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
+    #[arg(long, value_parser = MACHINES)]
+    pub machine: Option<String>,
+    /// Firmware parameters for every run, 'key=value …', checked before QEMU starts.
+    #[arg(long, value_name = "'K=V …'")]
+    pub firmware_args: Option<String>,
+    /// Wall-clock limit per run, s (default 1800).
+    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
+    pub timeout: Option<Duration>,
+    /// The nominal simulated robot (each case changes one knob of it).
+    #[command(flatten)]
+    pub sim: SimArgs,
+}
+
 /// The longest duration any option takes, s (11.6 days; `Duration::from_secs_f64` panics on
 /// non-finite or huge values, so every duration is checked against this first).
 pub const MAX_SECONDS: f64 = 1e6;
@@ -504,6 +540,7 @@ pub fn run(command: Command) -> Result<(), CliError> {
         Command::Simulate(a) => run_simulate(a),
         Command::Fil(a) => run_fil(a),
         Command::Beyond(a) => run_beyond(a),
+        Command::Sweep(a) => run_sweep(a),
     }
 }
 
@@ -1019,7 +1056,7 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
         servo_torque: sim.servo_torque,
         sim,
     };
-    eprintln!("walker beyond: {plan_name}, five firmware-in-the-loop walks");
+    eprintln!("walker beyond: {plan_name}, six firmware-in-the-loop walks");
     let runs = crate::beyond::run(&opts, |name| eprintln!("  walking {name} …"))?;
     let table = crate::beyond::table(&runs);
     let servo_torque = opts.servo_torque;
@@ -1194,6 +1231,63 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         Some(0) => Ok(()),
         code => Err(CliError {
             message: format!("the firmware exited with code {code:?}"),
+            code: 3,
+        }),
+    }
+}
+
+fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
+    let RunSetup {
+        spec,
+        plan_name,
+        sim,
+        elf,
+        machine,
+        timeout,
+    } = RunSetup::new(
+        "sweep",
+        a.config.as_deref(),
+        a.plan.as_deref(),
+        a.sim,
+        a.elf,
+        a.machine,
+        a.timeout,
+    )?;
+    let extra_tokens = tokens(a.firmware_args.as_deref());
+    crate::fil::check_tokens(&spec, &extra_tokens)
+        .map_err(|e| CliError::usage(format!("walker sweep: --firmware-args: {e}")))?;
+    let out = a.out;
+    let opts = crate::sweep::SweepOptions {
+        elf,
+        spec,
+        out_dir: out.clone(),
+        machine,
+        sim,
+        extra_tokens,
+        timeout,
+    };
+    let n = crate::sweep::cases().len();
+    eprintln!("walker sweep: {plan_name}, {n} firmware-in-the-loop walks");
+    let rows = crate::sweep::run(&opts, |name| eprintln!("  walking {name} …"))?;
+    use crate::sweep::goal;
+    let mut md = format!(
+        "# Robustness sweep: {plan_name}\n\nThe firmware's defaults (closed loop) on the MuJoCo robot, nominal and one perturbation per case; true CoP − reference over the walking ticks. Goals: no fall, ≥ {:.0} % of the planned distance, heading drift < {}°, ZMP mean |e| < {} mm sagittal and < {} mm lateral.\n\n",
+        goal::DISTANCE * 100.0,
+        goal::HEADING_DEG,
+        goal::ZMP_X * 1e3,
+        goal::ZMP_Y * 1e3
+    );
+    md.push_str(&crate::sweep::table(&rows));
+    std::fs::create_dir_all(&out)
+        .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
+    let path = out.join("sweep.md");
+    std::fs::write(&path, &md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
+    print!("{md}");
+    println!("\nwritten: {}", path.display());
+    match rows.iter().find(|r| r.exit_code != Some(0)) {
+        None => Ok(()),
+        Some(r) => Err(CliError {
+            message: format!("case {} exited with {:?}", r.name, r.exit_code),
             code: 3,
         }),
     }

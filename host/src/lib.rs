@@ -12,4 +12,5 @@ pub mod plot;
 pub mod report;
 pub mod runconfig;
 pub mod sim;
+pub mod sweep;
 pub mod video;

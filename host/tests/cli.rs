@@ -528,6 +528,7 @@ fn firmware_args_are_checked_before_qemu_starts() {
         for cmd in [
             &["fil", "--elf", "/nonexistent", "--firmware-args", args][..],
             &["beyond", "--elf", "/nonexistent", "--feedback-args", args],
+            &["sweep", "--elf", "/nonexistent", "--firmware-args", args],
         ] {
             let o = walker(cmd);
             let err = String::from_utf8_lossy(&o.stderr);
@@ -1035,7 +1036,7 @@ fn run_configuration_file_errors_name_the_field() {
     let dir = tmp("runconfig");
     let bad = dir.join("run.toml");
     std::fs::write(&bad, "[sim]\nfloor_frction = 0.5\n").unwrap();
-    for cmd in ["fil", "beyond"] {
+    for cmd in ["fil", "beyond", "sweep"] {
         let o = walker(&[cmd, "--config", s(&bad), "--elf", "/nonexistent"]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{cmd}: {err}");

@@ -1,0 +1,336 @@
+//! Walking on command: velocity commands (vx, vy, yaw rate) turned into omnidirectional
+//! footsteps, one step at a time, within the leg's reach and without the feet colliding.
+//!
+//! **Velocity filter.** A command c = (vx, vy, ω) (m/s, m/s, rad/s, robot frame) is first
+//! clamped to [`CommandLimits`] (|vx| ≤ `vx_forward` forward / `vx_backward` backward, |vy| ≤
+//! `vy`, |ω| ≤ `yaw_rate`, each non-finite component counted as 0), then the walking velocity v
+//! moves towards it by at most `acc·T` per step and axis (T = the step period):
+//!
+//! ```text
+//!   v_{n+1} = v_n + clamp(c − v_n, −a·T, a·T)                                     (S1)
+//! ```
+//!
+//! **Footprint.** Step n swings foot s (+1 left, −1 right) while the other foot supports at
+//! S = (x_S, y_S, θ_S). With d = v_{n+1}·T (the torso's travel over one step period, robot frame),
+//! the swing foot lands at
+//!
+//! ```text
+//!   θ = θ_S + d_ω,   (x, y) = (x_S, y_S) + R(θ_S + d_ω/2)·(d_x, s·2w + d_y)             (S2)
+//! ```
+//!
+//! (w = the nominal half width `step_width`): consecutive footprints advance by v·T, so the
+//! robot moves at v; the offset turns by half the step's heading change so that a turn is
+//! symmetric. Zero velocity gives a step in place beside the support foot, parallel to it.
+//!
+//! **Limits.** Each footprint must pass the plan's reach check ([`StepLimits::check`]: forward
+//! distance, lateral distance ≥ sole width + 1 cm, heading change) and the sole-corner check: all
+//! four corners of the swing sole lie at least [`SOLE_GAP`] beyond the support sole's inner edge
+//! (lateral coordinate in the support frame, times s, ≥ sole_width/2 + gap) — turning feet do not
+//! overlap at the toes or heels. A footprint that fails is moved back towards the in-place step:
+//! d ← λ·d with λ ∈ [0, 1) found by [`SCALE_STEPS`] bisections (the largest passing λ to
+//! 2⁻²⁴), and the walking velocity is set to the d actually stepped (v = λ·v), so the velocity
+//! state is always what the feet did: at the reach limit the robot walks at the largest speed
+//! the leg allows (Table 2's z_c and T = 0.64 s: 0.067 m per step, 0.105 m/s). λ = 0 (the
+//! in-place step) always passes for a valid width (checked by [`StepGenerator::new`]).
+//!
+//! Everything is deterministic arithmetic in `R`: the host and the firmware integrate the same
+//! commands to the same footprints.
+
+use crate::error::GaitError;
+use crate::plan::{Footstep, Place, StepLimits};
+use crate::real::Real;
+use crate::robot::{Robot, Side};
+
+/// Clearance between the soles' facing edges, m.
+pub const SOLE_GAP: f64 = 0.005;
+/// Bisections of the footprint back-off λ.
+pub const SCALE_STEPS: u32 = 24;
+
+/// A walking velocity (robot frame).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WalkCommand<R> {
+    /// Forward velocity, m/s.
+    pub vx: R,
+    /// Leftward velocity, m/s.
+    pub vy: R,
+    /// Yaw rate (counter-clockwise seen from above), rad/s.
+    pub yaw_rate: R,
+}
+
+impl<R: Real> WalkCommand<R> {
+    /// Standing still.
+    pub fn zero() -> Self {
+        WalkCommand {
+            vx: R::zero(),
+            vy: R::zero(),
+            yaw_rate: R::zero(),
+        }
+    }
+
+    /// True when every component is 0.
+    pub fn is_zero(&self) -> bool {
+        self.vx == R::zero() && self.vy == R::zero() && self.yaw_rate == R::zero()
+    }
+}
+
+/// Velocity and acceleration limits of the command filter (S1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CommandLimits {
+    /// Largest forward velocity, m/s.
+    pub vx_forward: f64,
+    /// Largest backward velocity (positive), m/s.
+    pub vx_backward: f64,
+    /// Largest sideways velocity, m/s.
+    pub vy: f64,
+    /// Largest yaw rate, rad/s.
+    pub yaw_rate: f64,
+    /// Largest change of vx and vy per second, m/s².
+    pub acc: f64,
+    /// Largest change of the yaw rate per second, rad/s².
+    pub yaw_acc: f64,
+}
+
+impl CommandLimits {
+    /// Kid-size defaults: 0.2 m/s forward, 0.1 m/s back, 0.1 m/s sideways, 0.6 rad/s
+    /// (34°/s); 0.1 m/s² and 0.5 rad/s² (a stop from full speed in two to three steps).
+    pub const DEFAULT: CommandLimits = CommandLimits {
+        vx_forward: 0.2,
+        vx_backward: 0.1,
+        vy: 0.1,
+        yaw_rate: 0.6,
+        acc: 0.1,
+        yaw_acc: 0.5,
+    };
+
+    /// Every limit finite and positive.
+    pub fn is_valid(&self) -> bool {
+        [
+            self.vx_forward,
+            self.vx_backward,
+            self.vy,
+            self.yaw_rate,
+            self.acc,
+            self.yaw_acc,
+        ]
+        .iter()
+        .all(|v| v.is_finite() && *v > 0.0)
+    }
+}
+
+/// Footsteps from velocity commands, one per call of [`StepGenerator::next_step`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepGenerator<R> {
+    reach: StepLimits,
+    limits: CommandLimits,
+    /// Nominal half width w, m.
+    half_width: R,
+    /// Step period T, s.
+    period: R,
+    /// Sole length and width, m.
+    sole: [R; 2],
+    /// The walking velocity v (vx, vy, ω) after the last step.
+    velocity: [R; 3],
+    /// Where each foot is (left, right).
+    feet: [Place<R>; 2],
+    /// The foot that swings next.
+    next_swing: Side,
+}
+
+fn clamp_r<R: Real>(v: R, lo: R, hi: R) -> R {
+    if !v.is_finite() {
+        R::zero()
+    } else {
+        v.clamp_to(lo, hi)
+    }
+}
+
+impl<R: Real> StepGenerator<R> {
+    /// A generator for `robot` standing with its feet at `feet` (left, right), walking with
+    /// half width `half_width` (m) and step period `period` (s), `first` the foot that swings
+    /// first; the reach limits are the plan's at CoM height `z_c`.
+    pub fn new(
+        robot: &Robot,
+        z_c: f64,
+        limits: CommandLimits,
+        half_width: R,
+        period: R,
+        feet: [Place<R>; 2],
+        first: Side,
+    ) -> Result<Self, GaitError> {
+        if !limits.is_valid() {
+            return Err(GaitError::NonPositiveParameter);
+        }
+        if !(half_width.is_finite() && period.is_finite() && feet.iter().all(|f| f.is_finite())) {
+            return Err(GaitError::NonFinite);
+        }
+        if period <= R::zero() {
+            return Err(GaitError::NonPositivePeriod);
+        }
+        let reach = StepLimits::for_robot(robot, z_c);
+        let g = &robot.geometry;
+        let gen = StepGenerator {
+            reach,
+            limits,
+            half_width,
+            period,
+            sole: [R::of(g.sole_length), R::of(g.sole_width)],
+            velocity: [R::zero(); 3],
+            feet,
+            next_swing: first,
+        };
+        // The in-place step must be possible: it is the fallback of every footprint.
+        let support = gen.support();
+        let in_place = gen.footprint(&support, first, [R::zero(); 3]);
+        if !gen.fits(first, &support, &in_place) {
+            return Err(GaitError::StepOutOfReach);
+        }
+        Ok(gen)
+    }
+
+    /// The walking velocity (vx, vy, ω) of the last step.
+    pub fn velocity(&self) -> [R; 3] {
+        self.velocity
+    }
+
+    /// Where the feet are after the last step (left, right).
+    pub fn feet(&self) -> [Place<R>; 2] {
+        self.feet
+    }
+
+    /// The foot that swings next.
+    pub fn next_swing(&self) -> Side {
+        self.next_swing
+    }
+
+    /// True when the velocity is 0 and the feet stand parallel at the nominal width (the
+    /// last step was an in-place step).
+    pub fn is_standing(&self) -> bool {
+        if self.velocity.iter().any(|v| *v != R::zero()) {
+            return false;
+        }
+        let [l, r] = self.feet;
+        let d = l.yaw - r.yaw;
+        let (s, c) = (r.yaw.sin(), r.yaw.cos());
+        let (dx, dy) = (l.x - r.x, l.y - r.y);
+        let fwd = c * dx + s * dy;
+        let lat = c * dy - s * dx;
+        let eps = R::of(1e-6);
+        d.abs() < eps && fwd.abs() < eps && (lat - (self.half_width + self.half_width)).abs() < eps
+    }
+
+    fn support(&self) -> Place<R> {
+        let [l, r] = self.feet;
+        match self.next_swing {
+            Side::Left => r,
+            Side::Right => l,
+        }
+    }
+
+    /// (S2): the swing foot's place for the per-step travel `d` = (d_x, d_y, d_ω).
+    fn footprint(&self, support: &Place<R>, side: Side, d: [R; 3]) -> Place<R> {
+        let [dx, dy, dw] = d;
+        let half = R::of(0.5);
+        let a = support.yaw + dw * half;
+        let (s, c) = (a.sin(), a.cos());
+        let lat = R::of(side.sign()) * (self.half_width + self.half_width) + dy;
+        Place {
+            x: support.x + c * dx - s * lat,
+            y: support.y + s * dx + c * lat,
+            yaw: support.yaw + dw,
+        }
+    }
+
+    /// The reach check and the sole-corner check of `to` (a `side` foot) against `support`.
+    fn fits(&self, side: Side, support: &Place<R>, to: &Place<R>) -> bool {
+        if self.reach.check(side, support, to).is_err() {
+            return false;
+        }
+        let (ss, cs) = (support.yaw.sin(), support.yaw.cos());
+        let (st, ct) = (to.yaw.sin(), to.yaw.cos());
+        let half = R::of(0.5);
+        let [len, wid] = self.sole;
+        let edge = wid * half + R::of(SOLE_GAP);
+        let sign = R::of(side.sign());
+        for (u, v) in [(half, half), (half, -half), (-half, half), (-half, -half)] {
+            // The corner in the world, then in the support sole's frame.
+            let (cx, cy) = (u * len, v * wid);
+            let wx = to.x + ct * cx - st * cy - support.x;
+            let wy = to.y + st * cx + ct * cy - support.y;
+            let lat = cs * wy - ss * wx;
+            if lat * sign < edge {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The next footstep for the command `cmd` (S1, S2 and the limits; see the module doc).
+    pub fn next_step(&mut self, cmd: &WalkCommand<R>) -> Footstep<R> {
+        let l = &self.limits;
+        let target = [
+            clamp_r(cmd.vx, R::of(-l.vx_backward), R::of(l.vx_forward)),
+            clamp_r(cmd.vy, R::of(-l.vy), R::of(l.vy)),
+            clamp_r(cmd.yaw_rate, R::of(-l.yaw_rate), R::of(l.yaw_rate)),
+        ];
+        let t = self.period;
+        let dv = [R::of(l.acc) * t, R::of(l.acc) * t, R::of(l.yaw_acc) * t];
+        let mut v = self.velocity;
+        for ((vi, ti), di) in v.iter_mut().zip(target).zip(dv) {
+            *vi = *vi + clamp_r(ti - *vi, -di, di);
+        }
+        let side = self.next_swing;
+        let support = self.support();
+        let full = v.map(|vi| vi * t);
+        let full_place = self.footprint(&support, side, full);
+        let (place, scale) = if self.fits(side, &support, &full_place) {
+            (full_place, R::one())
+        } else {
+            // Bisection on λ: `lo` always passes (λ = 0 is the in-place step), `hi` fails.
+            let (mut lo, mut hi) = (R::zero(), R::one());
+            let half = R::of(0.5);
+            for _ in 0..SCALE_STEPS {
+                let mid = (lo + hi) * half;
+                let p = self.footprint(&support, side, full.map(|d| d * mid));
+                if self.fits(side, &support, &p) {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            (self.footprint(&support, side, full.map(|d| d * lo)), lo)
+        };
+        self.velocity = v.map(|vi| vi * scale);
+        if let Some(f) = self.feet.get_mut(side.index()) {
+            *f = place;
+        }
+        self.next_swing = side.other();
+        Footstep { side, place }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gen(limits: CommandLimits) -> StepGenerator<f64> {
+        StepGenerator::new(
+            &Robot::reference(),
+            0.217,
+            limits,
+            0.045,
+            0.64,
+            [Place::new(0.0, 0.045, 0.0), Place::new(0.0, -0.045, 0.0)],
+            Side::Left,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn zero_command_steps_in_place_and_stands() {
+        let mut g = gen(CommandLimits::DEFAULT);
+        let s = g.next_step(&WalkCommand::zero());
+        assert_eq!(s.side, Side::Left);
+        assert_eq!(s.place, Place::new(0.0, 0.045, 0.0));
+        assert!(g.is_standing());
+    }
+}
