@@ -323,100 +323,72 @@ pub struct SimulateArgs {
 /// The QEMU boards that run the board-qemu firmware.
 pub(crate) const MACHINES: [&str; 2] = ["mps2-an500", "mps2-an386"];
 
-/// `walker fil`.
+/// The options of a firmware-in-the-loop run shared by `fil`, `beyond` and `sweep`.
 #[derive(Debug, Args)]
-pub struct FilArgs {
+pub struct RunArgs {
     /// Run configuration (TOML: plan, firmware parameters, simulator, QEMU; plans/run-example.toml); options given here override it.
     #[arg(long, value_name = "FILE", conflicts_with = "plan")]
     pub config: Option<PathBuf>,
     /// Plan file (TOML, e.g. plans/table2.toml); default: the built-in Table 2 walk.
     #[arg(long, value_name = "FILE")]
     pub plan: Option<PathBuf>,
+    /// Firmware ELF (board-qemu build; default target/thumbv7em-none-eabihf/release/qemu).
+    #[arg(long, value_name = "ELF")]
+    pub elf: Option<PathBuf>,
+    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
+    #[arg(long, value_parser = MACHINES)]
+    pub machine: Option<String>,
+    /// Firmware parameters for every run, 'key=value …' (docs/parameters.md), checked before QEMU starts.
+    #[arg(long, value_name = "'K=V …'")]
+    pub firmware_args: Option<String>,
+    /// Wall-clock limit per run, s (default 1800).
+    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
+    pub timeout: Option<Duration>,
+    /// The simulated robot (sweep: the nominal one).
+    #[command(flatten)]
+    pub sim: SimArgs,
+}
+
+/// `walker fil`.
+#[derive(Debug, Args)]
+pub struct FilArgs {
     /// Pendulum model (overrides the plan's).
     #[arg(long, value_enum)]
     pub model: Option<ModelName>,
     /// Output folder (walk.log, firmware.log, truth.csv, report/).
     #[arg(long, value_name = "DIR", default_value = "out/fil")]
     pub out: PathBuf,
-    /// Firmware ELF (board-qemu build).
-    #[arg(long, value_name = "ELF")]
-    pub elf: Option<PathBuf>,
-    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
-    #[arg(long, value_parser = MACHINES)]
-    pub machine: Option<String>,
-    /// Extra firmware parameters, 'key=value …' (docs/parameters.md), checked before QEMU starts.
-    #[arg(long, value_name = "'K=V …'")]
-    pub firmware_args: Option<String>,
-    /// Wall-clock limit, s (default 1800).
-    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
-    pub timeout: Option<Duration>,
     /// Render the walk to this video (MuJoCo, headless; needs `bash scripts/render-setup.sh`).
     #[arg(long, value_name = "FILE")]
     pub video: Option<PathBuf>,
-    /// The simulated robot.
+    /// The run.
     #[command(flatten)]
-    pub sim: SimArgs,
+    pub run: RunArgs,
 }
 
 /// `walker beyond`.
 #[derive(Debug, Args)]
 pub struct BeyondArgs {
-    /// Run configuration (TOML: plan, firmware parameters, simulator, QEMU; plans/run-example.toml); options given here override it.
-    #[arg(long, value_name = "FILE", conflicts_with = "plan")]
-    pub config: Option<PathBuf>,
-    /// Plan file (TOML); default: the built-in Table 2 walk.
-    #[arg(long, value_name = "FILE")]
-    pub plan: Option<PathBuf>,
     /// Output folder (beyond.md, beyond.csv, one folder per run).
     #[arg(long, value_name = "DIR", default_value = "out/beyond")]
     pub out: PathBuf,
-    /// Firmware ELF (board-qemu build).
-    #[arg(long, value_name = "ELF")]
-    pub elf: Option<PathBuf>,
-    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
-    #[arg(long, value_parser = MACHINES)]
-    pub machine: Option<String>,
-    /// Firmware parameters for every run, 'key=value …' (e.g. feasibility=off).
-    #[arg(long, value_name = "'K=V …'")]
-    pub firmware_args: Option<String>,
     /// Firmware parameters for the feedback run only, e.g. 'stab_ki=2'.
     #[arg(long, value_name = "'K=V …'")]
     pub feedback_args: Option<String>,
-    /// Wall-clock limit per run, s (default 1800).
-    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
-    pub timeout: Option<Duration>,
-    /// The simulated robot.
+    /// The runs.
     #[command(flatten)]
-    pub sim: SimArgs,
+    pub run: RunArgs,
 }
 
 /// `walker sweep`.
 #[derive(Debug, Args)]
 pub struct SweepArgs {
-    /// Run configuration (TOML: plan, firmware parameters, nominal simulator, QEMU; plans/run-example.toml); options given here override it.
-    #[arg(long, value_name = "FILE", conflicts_with = "plan")]
-    pub config: Option<PathBuf>,
-    /// Plan file (TOML); default: the built-in Table 2 walk.
-    #[arg(long, value_name = "FILE")]
-    pub plan: Option<PathBuf>,
     /// Output folder (sweep.md, one folder per case).
     #[arg(long, value_name = "DIR", default_value = "out/sweep")]
     pub out: PathBuf,
-    /// Firmware ELF (board-qemu build).
-    #[arg(long, value_name = "ELF")]
-    pub elf: Option<PathBuf>,
-    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
-    #[arg(long, value_parser = MACHINES)]
-    pub machine: Option<String>,
-    /// Firmware parameters for every run, 'key=value …', checked before QEMU starts.
-    #[arg(long, value_name = "'K=V …'")]
-    pub firmware_args: Option<String>,
-    /// Wall-clock limit per run, s (default 1800).
-    #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
-    pub timeout: Option<Duration>,
-    /// The nominal simulated robot (each case changes one knob of it).
+    /// The runs (each case changes one knob of the nominal simulated robot).
     #[command(flatten)]
-    pub sim: SimArgs,
+    pub run: RunArgs,
 }
 
 /// The longest duration any option takes, s (11.6 days; `Duration::from_secs_f64` panics on
@@ -544,8 +516,9 @@ pub fn run(command: Command) -> Result<(), CliError> {
     }
 }
 
-/// What `fil` and `beyond` start from: the walk, the simulated robot and the QEMU run, from
-/// `--config` (or `--plan`) and the command line's simulator options over it.
+/// What `fil`, `beyond` and `sweep` start from: the walk, the simulated robot, the QEMU run
+/// and the extra firmware tokens, from `--config` (or `--plan`) and the command line's options
+/// over it; the firmware tokens are checked with the firmware's own parser.
 struct RunSetup {
     spec: WalkSpec,
     plan_name: String,
@@ -553,38 +526,36 @@ struct RunSetup {
     elf: PathBuf,
     machine: String,
     timeout: Duration,
+    extra_tokens: Vec<String>,
 }
 
 impl RunSetup {
-    fn new(
-        cmd: &str,
-        config: Option<&Path>,
-        plan: Option<&Path>,
-        sim_args: SimArgs,
-        elf: Option<PathBuf>,
-        machine: Option<String>,
-        timeout: Option<Duration>,
-    ) -> Result<RunSetup, CliError> {
-        let (spec, plan_name, file_sim, file) = match config {
+    fn new(cmd: &str, a: RunArgs) -> Result<RunSetup, CliError> {
+        let (spec, plan_name, file_sim, file) = match &a.config {
             Some(c) => {
                 let rc = crate::runconfig::load(c).map_err(CliError::failed)?;
                 let file = (rc.elf, rc.machine, rc.timeout);
                 (rc.spec, c.display().to_string(), rc.sim, file)
             }
             None => {
-                let (spec, name) = load_plan(plan)?;
+                let (spec, name) = load_plan(a.plan.as_deref())?;
                 (spec, name, SimArgs::default(), (None, None, None))
             }
         };
         let mut sim = crate::sim::SimConfig::default();
-        sim_args.over(file_sim).apply(cmd, &mut sim)?;
+        a.sim.over(file_sim).apply(cmd, &mut sim)?;
+        let extra_tokens = tokens(a.firmware_args.as_deref());
+        // The firmware's own parser, on the host, before QEMU starts.
+        crate::fil::check_tokens(&spec, &extra_tokens)
+            .map_err(|e| CliError::usage(format!("walker {cmd}: --firmware-args: {e}")))?;
         Ok(RunSetup {
             spec,
             plan_name,
             sim,
-            elf: elf.or(file.0).unwrap_or_else(|| DEFAULT_ELF.into()),
-            machine: machine.or(file.1).unwrap_or_else(|| MACHINES[0].into()),
-            timeout: timeout.or(file.2).unwrap_or(Duration::from_secs(1800)),
+            elf: a.elf.or(file.0).unwrap_or_else(|| DEFAULT_ELF.into()),
+            machine: a.machine.or(file.1).unwrap_or_else(|| MACHINES[0].into()),
+            timeout: a.timeout.or(file.2).unwrap_or(Duration::from_secs(1800)),
+            extra_tokens,
         })
     }
 }
@@ -1028,21 +999,11 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
         elf,
         machine,
         timeout,
-    } = RunSetup::new(
-        "beyond",
-        a.config.as_deref(),
-        a.plan.as_deref(),
-        a.sim,
-        a.elf,
-        a.machine,
-        a.timeout,
-    )?;
-    let extra = tokens(a.firmware_args.as_deref());
+        extra_tokens: extra,
+    } = RunSetup::new("beyond", a.run)?;
     let feedback = tokens(a.feedback_args.as_deref());
-    for (opt, t) in [("--firmware-args", &extra), ("--feedback-args", &feedback)] {
-        crate::fil::check_tokens(&spec, t)
-            .map_err(|e| CliError::usage(format!("walker beyond: {opt}: {e}")))?;
-    }
+    crate::fil::check_tokens(&spec, &feedback)
+        .map_err(|e| CliError::usage(format!("walker beyond: --feedback-args: {e}")))?;
     let out = a.out;
     let opts = crate::beyond::BeyondOptions {
         elf,
@@ -1114,15 +1075,8 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         elf,
         machine,
         timeout,
-    } = RunSetup::new(
-        "fil",
-        a.config.as_deref(),
-        a.plan.as_deref(),
-        a.sim,
-        a.elf,
-        a.machine,
-        a.timeout,
-    )?;
+        extra_tokens,
+    } = RunSetup::new("fil", a.run)?;
     if let Some(m) = a.model {
         spec.model = m;
     }
@@ -1137,10 +1091,6 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         sim.model_out = Some(out.join("model.xml"));
         sim.qpos_out = Some(out.join("qpos.csv"));
     }
-    let extra_tokens = tokens(a.firmware_args.as_deref());
-    // The firmware's own parser, on the host, before QEMU starts.
-    crate::fil::check_tokens(&spec, &extra_tokens)
-        .map_err(|e| CliError::usage(format!("walker fil: --firmware-args: {e}")))?;
     let opts = crate::fil::FilOptions {
         elf,
         spec: spec.clone(),
@@ -1244,18 +1194,8 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
         elf,
         machine,
         timeout,
-    } = RunSetup::new(
-        "sweep",
-        a.config.as_deref(),
-        a.plan.as_deref(),
-        a.sim,
-        a.elf,
-        a.machine,
-        a.timeout,
-    )?;
-    let extra_tokens = tokens(a.firmware_args.as_deref());
-    crate::fil::check_tokens(&spec, &extra_tokens)
-        .map_err(|e| CliError::usage(format!("walker sweep: --firmware-args: {e}")))?;
+        extra_tokens,
+    } = RunSetup::new("sweep", a.run)?;
     let out = a.out;
     let opts = crate::sweep::SweepOptions {
         elf,

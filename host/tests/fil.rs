@@ -158,20 +158,13 @@ fn a_dead_foot_board_is_reported_missing_at_start_up() {
     // The firmware's defmt output, decoded with the ELF's table into OUT/firmware.log.
     let fw = r.firmware_log.as_ref().expect("defmt output decoded");
     assert_eq!((fw.malformed, fw.truncated), (0, false), "{}", fw.text());
-    assert!(
+    let has = |level: &str, text: &str| {
         fw.lines
             .iter()
-            .any(|l| l.level == Some("info") && l.text.contains("walker-firmware")),
-        "{}",
-        fw.text()
-    );
-    assert!(
-        fw.lines
-            .iter()
-            .any(|l| l.level == Some("error") && l.text.contains("missing, first Some(111)")),
-        "{}",
-        fw.text()
-    );
+            .any(|l| l.level == Some(level) && l.text.contains(text))
+    };
+    assert!(has("info", "walker-firmware"), "{}", fw.text());
+    assert!(has("error", "missing, first Some(111)"), "{}", fw.text());
     let text = std::fs::read_to_string(r.log.with_file_name("firmware.log")).unwrap();
     assert_eq!(text, fw.text());
 }
