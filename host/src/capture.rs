@@ -4,7 +4,9 @@
 //! `walker_contract::record`): on the OpenCR board a UART at 921 600 baud (or USB CDC), in QEMU a
 //! CMSDK UART that QEMU writes to a file or pipe. The records never go through defmt, so
 //! `defmt-print` output from probe-rs/RTT carries only the firmware's debug text, not the log:
-//! capture the UART (this command) or decode the QEMU serial file with `--from-file`.
+//! capture the UART (this command) or decode the QEMU serial file with `--from-file`. A raw
+//! defmt stream saved from the firmware is decoded by `walker capture --defmt FILE --elf ELF`
+//! ([`crate::defmt_log`]).
 //!
 //! The serial port is opened with the `serialport` crate (Linux, macOS, Windows): 8N1, no flow
 //! control, any baud rate the driver accepts (921 600 by default), reads returning after 100 ms
