@@ -346,6 +346,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         }
     }
     let present = match startup::set_return_delay(&mut bus, &present_ids, cfg)
+        .and_then(|_| startup::set_position_gains(&mut bus, cfg))
         .and_then(|_| startup::read_positions(&mut bus, cfg))
         .and_then(|p| {
             write_goals(&mut bus, &p);

@@ -138,6 +138,47 @@ pub fn set_return_delay<B: ServoBus + Clock>(
     Ok(written)
 }
 
+/// The Position I Gain of leg joint `j` from `cfg`: [`Config::servo_i_roll`] for the hip-roll
+/// and ankle-roll joints (1 and 5 of each leg), [`Config::servo_i_pitch`] for hip pitch, knee
+/// and ankle pitch (2, 3, 4), none for the hip yaw (0).
+pub fn position_i_gain(cfg: &Config, j: usize) -> Option<u16> {
+    match j % 6 {
+        1 | 5 => Some(cfg.servo_i_roll),
+        2..=4 => Some(cfg.servo_i_pitch),
+        _ => None,
+    }
+}
+
+/// Writes the configured Position I Gains (register 82) to the leg servos whose gain is not 0,
+/// each write read back (retried `startup_attempts` times); returns how many were written.
+/// Position-mode servos follow their goal only to a load-dependent error (P gain 800: ≈ 19
+/// N·m/rad on an XM430-W350); the integral removes that sag of the stance leg.
+pub fn set_position_gains<B: ServoBus + Clock>(
+    bus: &mut BoardMaster<'_, B>,
+    cfg: &Config,
+) -> Result<u8, StartupError> {
+    let addr = x_series::POSITION_I_GAIN.addr;
+    let n = cfg.startup_attempts;
+    let fail = |step, id, error| StartupError { step, id, error };
+    let mut written = 0u8;
+    for (j, &id) in ids::LEGS.iter().enumerate() {
+        let Some(gain) = position_i_gain(cfg, j).filter(|g| *g > 0) else {
+            continue;
+        };
+        let bytes = gain.to_le_bytes();
+        retry(n, || bus.master().write(id, addr, &bytes))
+            .map_err(|e| fail(StartupStep::GainWrite, id, Some(e)))?;
+        let mut back = [0u8; 2];
+        retry(n, || bus.master().read(id, addr, &mut back))
+            .map_err(|e| fail(StartupStep::GainWrite, id, Some(e)))?;
+        if back != bytes {
+            return Err(fail(StartupStep::GainVerify, id, None));
+        }
+        written = written.saturating_add(1);
+    }
+    Ok(written)
+}
+
 /// Present positions (ticks) of the 12 leg servos by SYNC READ, retried per device: each
 /// attempt asks only the servos that have not answered yet, so a lost reply costs that servo
 /// one more attempt, not the whole transaction (with `attempts` = 8 and 20 % reply loss, a

@@ -68,6 +68,8 @@ pub struct FakeDevice {
     pub present: i32,
     /// Dead: answers nothing.
     pub dead: bool,
+    /// Position I Gain register.
+    pub i_gain: u16,
 }
 
 /// Per `wait_tick`: the tick and the number of packets sent before it.
@@ -134,6 +136,7 @@ impl FakeBoard {
                 goal: t,
                 present: t,
                 dead: false,
+                i_gain: 0,
             });
         }
         for (id, kind) in [(111, Kind::Foot(0)), (112, Kind::Foot(1)), (200, Kind::Imu)] {
@@ -146,6 +149,7 @@ impl FakeBoard {
                 goal: 0,
                 present: 0,
                 dead: false,
+                i_gain: 0,
             });
         }
         FakeBoard {
@@ -291,6 +295,7 @@ impl FakeBoard {
             (Kind::Servo(_), 132, 4) => Some(d.present.to_le_bytes().to_vec()),
             (Kind::Servo(_), 116, 4) => Some(d.goal.to_le_bytes().to_vec()),
             (Kind::Servo(_), 64, 1) => Some(vec![u8::from(d.torque)]),
+            (Kind::Servo(_), 82, 2) => Some(d.i_gain.to_le_bytes().to_vec()),
             (Kind::Foot(s), 128, 18) => {
                 let f = FootForces {
                     forces_mn: self.foot_forces()[s],
@@ -319,6 +324,10 @@ impl FakeBoard {
                 if d.torque {
                     d.goal = d.present;
                 }
+                true
+            }
+            (Kind::Servo(_), 82, [a, b]) => {
+                d.i_gain = u16::from_le_bytes([*a, *b]);
                 true
             }
             (Kind::Servo(_), 116, [a, b, c, e]) => {

@@ -264,6 +264,10 @@ pub enum StartupStep {
     ReadPositions,
     /// 5: WRITE Torque Enable = 1.
     TorqueEnable,
+    /// 6: writing a servo's Position I Gain.
+    GainWrite,
+    /// 7: the read-back Position I Gain differed.
+    GainVerify,
 }
 
 impl StartupStep {
@@ -275,6 +279,8 @@ impl StartupStep {
             StartupStep::ReturnDelayVerify => 3,
             StartupStep::ReadPositions => 4,
             StartupStep::TorqueEnable => 5,
+            StartupStep::GainWrite => 6,
+            StartupStep::GainVerify => 7,
         }
     }
 }
@@ -288,6 +294,8 @@ impl TryFrom<u8> for StartupStep {
             3 => StartupStep::ReturnDelayVerify,
             4 => StartupStep::ReadPositions,
             5 => StartupStep::TorqueEnable,
+            6 => StartupStep::GainWrite,
+            7 => StartupStep::GainVerify,
             other => return Err(UnknownCode(other)),
         })
     }

@@ -80,6 +80,11 @@ pub struct Config {
     pub fourier_terms: u8,
     /// Servo-lag feed-forward: the joint targets are the gait's this far ahead, s.
     pub servo_lead_s: f32,
+    /// Position I Gain written at start-up to the hip-roll and ankle-roll servos (register
+    /// units; the servo's integral action removes their load sag).
+    pub servo_i_roll: u16,
+    /// Position I Gain written at start-up to the hip-pitch, knee and ankle-pitch servos.
+    pub servo_i_pitch: u16,
     /// Reply timeout of the Dynamixel master, µs (per expected status packet).
     pub reply_timeout_us: u32,
     /// Longest single wait for one reply byte, µs (the firmware's bus driver).
@@ -137,6 +142,8 @@ impl Config {
             com_fourier: false,
             fourier_terms: gait_core::fourier_walk::DEFAULT_FOURIER_TERMS,
             servo_lead_s: 0.0,
+            servo_i_roll: 0,
+            servo_i_pitch: 0,
             reply_timeout_us: 1_000,
             read_poll_us: DEFAULT_READ_POLL_US,
             startup_attempts: 8,

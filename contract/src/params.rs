@@ -835,6 +835,24 @@ params! {
         set: |c, v| { c.servo_lead_s = v as f32 },
         get: |c| { Some(Value::Num32(c.servo_lead_s)) },
     },
+    {
+        key: "servo_i_roll",
+        plan_key: None,
+        unit: "",
+        domain: int(0, 16383),
+        doc: "Position I Gain (register 82) written at start-up to the hip-roll and ankle-roll servos: integral action against the stance leg's load sag (0: factory default)",
+        set: |c, v| { c.servo_i_roll = v as u16 },
+        get: |c| { Some(Value::Int(u32::from(c.servo_i_roll))) },
+    },
+    {
+        key: "servo_i_pitch",
+        plan_key: None,
+        unit: "",
+        domain: int(0, 16383),
+        doc: "Position I Gain written at start-up to the hip-pitch, knee and ankle-pitch servos (0: factory default)",
+        set: |c, v| { c.servo_i_pitch = v as u16 },
+        get: |c| { Some(Value::Int(u32::from(c.servo_i_pitch))) },
+    },
 }
 
 /// Key index meaning "not a known key".

@@ -5,7 +5,7 @@
 use super::*;
 use crate::board::{Clock, ServoBus};
 use crate::record::{FaultState, StartupRecord};
-use crate::testkit::{FakeBoard, Pkt};
+use crate::testkit::{FakeBoard, Kind, Pkt};
 use dxl::opcode;
 use gait_core::support::SupportPolygon;
 use std::vec::Vec;
@@ -739,4 +739,35 @@ fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_referen
         "lead ticks fewer goal writes"
     );
     assert_goals_in_limits(&b);
+}
+
+/// `servo_i_roll` / `servo_i_pitch`: the Position I Gains are written (and read back) to the
+/// roll and the pitch servos before torque goes on; 0 leaves a servo's gain alone.
+#[test]
+fn position_i_gains_are_written_before_torque_on() {
+    let cfg = cfg_with("servo_i_roll=4000 servo_i_pitch=0");
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    for d in b.servos() {
+        let Kind::Servo(j) = d.kind else {
+            unreachable!()
+        };
+        let want = if matches!(j % 6, 1 | 5) { 4000 } else { 0 };
+        assert_eq!(d.i_gain, want, "joint {j}");
+    }
+    let gain_writes: Vec<usize> = (0..b.packets.len())
+        .filter(|&i| b.packets[i].op == opcode::WRITE && b.packets[i].addr == 82)
+        .collect();
+    let torque_on = b
+        .packets
+        .iter()
+        .position(|p| p.op == opcode::WRITE && p.addr == 64 && p.data == [1])
+        .unwrap();
+    assert_eq!(gain_writes.len(), 4);
+    assert!(gain_writes.iter().all(|&i| i < torque_on));
+    // Both gains: ten servos (the hip yaws keep theirs).
+    let cfg = cfg_with("servo_i_roll=10 servo_i_pitch=20");
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(b.servos().filter(|d| d.i_gain > 0).count(), 10);
 }
