@@ -392,6 +392,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut walk_tick: u32 = 0;
     let mut clamped_seen = 0u16;
 
+    if !first.is_finite() {
+        // The initial pose would come from a non-finite sample: hold the present pose, stop.
+        sup.stop(StopReason::NonFiniteSample { tick: 0 });
+    }
     crate::fw_log!(info, "walking: ramp {} ticks", ramp.ticks());
     bus.board().start(cfg.watchdog_ms);
     loop {
@@ -474,13 +478,23 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         } else {
                             Some(k + 1)
                         };
-                        ramp.at(k)
+                        Some(ramp.at(k))
                     }
-                    None => {
+                    None => 'sample: {
                         let k = walk_tick;
                         walk_tick = walk_tick.saturating_add(1);
-                        let sample = pending.take().unwrap_or_else(|| sampler.next(tau));
+                        let mut sample = pending.take().unwrap_or_else(|| sampler.next(tau));
+                        if cfg.fault_nan_com_tick == Some(k) {
+                            sample.f32.com[0] = f32::NAN;
+                        }
                         let s = sample.f32;
+                        // The finite check before the IK (which would clamp a NaN pelvis to
+                        // finite, meaningless angles): hold the last targets and stop.
+                        if !s.is_finite() {
+                            crate::fw_log!(error, "non-finite gait sample at walk tick {}", k);
+                            sup.stop(StopReason::NonFiniteSample { tick: k });
+                            break 'sample None;
+                        }
                         let shift = if cfg.stabilizer_on {
                             // The measurement answers the previous command: compare with it.
                             stab.update(&StabilizerInput {
@@ -492,6 +506,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         } else {
                             [0.0; 2]
                         };
+                        if !shift.iter().all(|v| v.is_finite()) {
+                            sup.stop(StopReason::NonFiniteSample { tick: k });
+                            break 'sample None;
+                        }
                         let mut q = sampler.joints(&targets, &sample, shift);
                         cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                         if sampler.is_done() {
@@ -510,11 +528,20 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         rec.set_com_m(cx + shift[0], cy + shift[1]);
                         rec.phase = phase_of(&s);
                         prev = s;
-                        q
+                        Some(q)
                     }
                 };
-                let ticks = match safe_targets(&q, &map, &last_ticks) {
-                    Ok(t) => {
+                let ticks = match q.map(|q| safe_targets(&q, &map, &last_ticks)) {
+                    // A non-finite sample: the last targets again (the stop has begun); the
+                    // log shows the last finite sample.
+                    None => {
+                        let ([zx, zy], [cx, cy, _]) = (prev.zmp, prev.com);
+                        rec.set_zmp_ref_m(zx, zy);
+                        rec.set_com_m(cx, cy);
+                        rec.phase = LoggedPhase::Stopped;
+                        last_ticks
+                    }
+                    Some(Ok(t)) => {
                         if t.clamped & !clamped_seen != 0 {
                             let first = t.clamped.trailing_zeros() as u8;
                             let now = bus.board().now_us();
@@ -525,7 +552,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         clamped_seen |= t.clamped;
                         t.ticks
                     }
-                    Err(e) => {
+                    Some(Err(e)) => {
                         sup.stop(StopReason::NonFiniteTarget {
                             joint: e.first_joint(),
                         });

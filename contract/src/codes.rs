@@ -16,6 +16,7 @@
 //! | 14 | overrun burst |
 //! | 15 | non-finite joint target |
 //! | 17 | stop requested |
+//! | 18 | non-finite gait sample (CoM, ZMP, feet or the stabilizer's shift) before the IK |
 //! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
 //! | 101 | panic |
 //!
@@ -44,11 +45,14 @@ pub enum StopCode {
     PlanDone,
     /// 7: stop requested from outside.
     Requested,
+    /// 8: a gait sample (or the stabilizer's shift) was not finite before the IK (value =
+    /// walk tick).
+    NonFiniteSample,
 }
 
 impl StopCode {
     /// Every stop code.
-    pub const ALL: [StopCode; 7] = [
+    pub const ALL: [StopCode; 8] = [
         StopCode::DeviceMissing,
         StopCode::DeviceLost,
         StopCode::Fall,
@@ -56,6 +60,7 @@ impl StopCode {
         StopCode::NonFiniteTarget,
         StopCode::PlanDone,
         StopCode::Requested,
+        StopCode::NonFiniteSample,
     ];
 
     /// The wire code.
@@ -68,6 +73,7 @@ impl StopCode {
             StopCode::NonFiniteTarget => 5,
             StopCode::PlanDone => 6,
             StopCode::Requested => 7,
+            StopCode::NonFiniteSample => 8,
         }
     }
 
@@ -81,6 +87,7 @@ impl StopCode {
             StopCode::NonFiniteTarget => ExitCode::NonFiniteTarget,
             StopCode::PlanDone => ExitCode::PlanDone,
             StopCode::Requested => ExitCode::Requested,
+            StopCode::NonFiniteSample => ExitCode::NonFiniteSample,
         }
     }
 }
@@ -96,6 +103,7 @@ impl TryFrom<u8> for StopCode {
             5 => StopCode::NonFiniteTarget,
             6 => StopCode::PlanDone,
             7 => StopCode::Requested,
+            8 => StopCode::NonFiniteSample,
             other => return Err(UnknownCode(other)),
         })
     }
@@ -134,6 +142,12 @@ pub enum StopReason {
     PlanDone,
     /// Stop requested from outside (operator, host).
     Requested,
+    /// A gait sample (CoM, ZMP, feet) or the stabilizer's CoM shift was NaN or infinite: it
+    /// never reaches the IK (whose clamping would turn it into finite, meaningless angles).
+    NonFiniteSample {
+        /// Walk tick of the sample (0 = the first sample, before the ramp).
+        tick: u32,
+    },
 }
 
 impl StopReason {
@@ -147,6 +161,7 @@ impl StopReason {
             StopReason::NonFiniteTarget { .. } => StopCode::NonFiniteTarget,
             StopReason::PlanDone => StopCode::PlanDone,
             StopReason::Requested => StopCode::Requested,
+            StopReason::NonFiniteSample { .. } => StopCode::NonFiniteSample,
         }
     }
 
@@ -159,6 +174,7 @@ impl StopReason {
             StopReason::OverrunBurst { count } => (c, 0, i32::from(count)),
             StopReason::NonFiniteTarget { joint } => (c, joint, 0),
             StopReason::PlanDone | StopReason::Requested => (c, 0, 0),
+            StopReason::NonFiniteSample { tick } => (c, 0, i32::try_from(tick).unwrap_or(i32::MAX)),
         }
     }
 
@@ -176,6 +192,9 @@ impl StopReason {
             StopCode::NonFiniteTarget => StopReason::NonFiniteTarget { joint: id },
             StopCode::PlanDone => StopReason::PlanDone,
             StopCode::Requested => StopReason::Requested,
+            StopCode::NonFiniteSample => StopReason::NonFiniteSample {
+                tick: u32::try_from(value).ok()?,
+            },
         })
     }
 }
@@ -315,6 +334,8 @@ pub enum ExitCode {
     NonFiniteTarget,
     /// 17: stop requested.
     Requested,
+    /// 18: non-finite gait sample.
+    NonFiniteSample,
     /// 20: a start-up step failed after the probe.
     StartupFailed,
     /// 101: panic.
@@ -323,7 +344,7 @@ pub enum ExitCode {
 
 impl ExitCode {
     /// Every exit code.
-    pub const ALL: [ExitCode; 11] = [
+    pub const ALL: [ExitCode; 12] = [
         ExitCode::PlanDone,
         ExitCode::ConfigRejected,
         ExitCode::Watchdog,
@@ -333,6 +354,7 @@ impl ExitCode {
         ExitCode::OverrunBurst,
         ExitCode::NonFiniteTarget,
         ExitCode::Requested,
+        ExitCode::NonFiniteSample,
         ExitCode::StartupFailed,
         ExitCode::Panic,
     ];
@@ -349,6 +371,7 @@ impl ExitCode {
             ExitCode::OverrunBurst => 14,
             ExitCode::NonFiniteTarget => 15,
             ExitCode::Requested => 17,
+            ExitCode::NonFiniteSample => 18,
             ExitCode::StartupFailed => 20,
             ExitCode::Panic => 101,
         }
@@ -371,6 +394,7 @@ impl ExitCode {
             ExitCode::OverrunBurst => "overrun burst",
             ExitCode::NonFiniteTarget => "non-finite target",
             ExitCode::Requested => "stop requested",
+            ExitCode::NonFiniteSample => "non-finite gait sample",
             ExitCode::StartupFailed => "start-up step failed",
             ExitCode::Panic => "panic",
         }
@@ -390,6 +414,7 @@ impl TryFrom<u8> for ExitCode {
             14 => ExitCode::OverrunBurst,
             15 => ExitCode::NonFiniteTarget,
             17 => ExitCode::Requested,
+            18 => ExitCode::NonFiniteSample,
             20 => ExitCode::StartupFailed,
             101 => ExitCode::Panic,
             other => return Err(UnknownCode(other)),
@@ -452,6 +477,7 @@ mod tests {
             StopReason::NonFiniteTarget { joint: 3 },
             StopReason::PlanDone,
             StopReason::Requested,
+            StopReason::NonFiniteSample { tick: 1234 },
         ] {
             let (c, id, v) = r.code();
             assert_eq!(StopReason::from_code(c, id, v), Some(r));

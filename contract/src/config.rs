@@ -103,6 +103,9 @@ pub struct Config {
     pub fault_nan_tick: Option<u32>,
     /// Fault injection: request a stop at this walk tick.
     pub stop_at_tick: Option<u32>,
+    /// Fault injection: make the gait sample's CoM NaN at this walk tick (the finite check
+    /// before the IK must stop).
+    pub fault_nan_com_tick: Option<u32>,
 }
 
 impl Config {
@@ -139,6 +142,7 @@ impl Config {
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,
             stop_at_tick: None,
+            fault_nan_com_tick: None,
         }
     }
 

@@ -808,6 +808,15 @@ params! {
         },
         get: |c| { Some(Value::Word(usize::from(c.arithmetic == Arithmetic::Fixed))) },
     },
+    {
+        key: "fault_nan_com",
+        plan_key: None,
+        unit: "tick",
+        domain: int(0, u32::MAX),
+        doc: "test: make the gait sample's CoM NaN at this walk tick (the finite check before the IK stops, exit 18)",
+        set: |c, v| { c.fault_nan_com_tick = Some(v as u32) },
+        get: |c| { c.fault_nan_com_tick.map(Value::Int) },
+    },
 }
 
 /// Key index meaning "not a known key".

@@ -695,3 +695,41 @@ fn support_cache_equals_the_fresh_polygon_every_tick_and_rebuilds_rarely() {
     assert!(rebuilds <= 3 * 14 + 4, "{rebuilds} distinct polygons");
     assert!(ticks > 2000, "{ticks}");
 }
+
+#[test]
+fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
+    // `fault_nan_com=40`: walk tick 40's CoM is NaN. The IK would clamp a NaN pelvis to finite
+    // angles (the targets' check never fires): the sample check must stop with its own code.
+    let mut cfg = cfg_with("elf fault_nan_com=40");
+    cfg.walk.steps = 3;
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let mut b = board(&cfg);
+    let end = run(&mut b, &cfg);
+    assert_eq!(
+        end,
+        RunEnd::Stopped(StopReason::NonFiniteSample { tick: 40 })
+    );
+    assert_eq!(end.exit_code(), 18);
+    assert_goals_in_limits(&b);
+    // Walk tick 40 is SYNC WRITE 1 + ramp + 41: every joint kept its previous target.
+    let k = 1 + ramp + 40;
+    assert_eq!(b.goals[k], b.goals[k - 1]);
+    // Then the pose is held until torque off: no goal changes any more.
+    assert!(b.goals[k..].windows(2).all(|w| w[0] == w[1]));
+    assert!(torque_off_sent(&b));
+    let recs = b.records();
+    assert_eq!(
+        stop_of(&recs),
+        Some(StopReason::NonFiniteSample { tick: 40 })
+    );
+    // The logged CoM stays finite (the NaN sample is not logged as the reference).
+    let tr = ticks_of(&recs);
+    assert!(tr[ramp + 40..]
+        .iter()
+        .all(|t| t.com[0] != crate::record::POS_NA && t.phase == LoggedPhase::Stopped));
+    assert!(tr[ramp + 41..].iter().all(|t| t.fault != FaultState::Ok));
+    // The same plan without the fault walks to the end.
+    cfg.fault_nan_com_tick = None;
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+}
