@@ -6,12 +6,18 @@
 //! 1. `wait_tick()`; overruns go to the supervisor (a burst of them stops).
 //! 2. ONE BULK READ: foot boards 111/112 (18 bytes at 128: 4 forces + counter) and the IMU 200
 //!    (26 bytes at 128: gyro, accelerometer, counter).
-//! 3. Per device the supervisor decides fresh / held (last good value, at most
-//!    [`crate::supervisor::SupervisorConfig::hold_ticks`] ticks in a row) / lost (stop).
+//! 3. Every reply is checked for plausibility ([`crate::plausible`]: the board's sample counter
+//!    advanced, values in the sensor's range, foot forces consistent with the robot's weight);
+//!    a rejected reply counts as missing (fault record `SensorRejected` at the first of a run).
+//!    Per device the supervisor decides fresh / held (last good value, at most
+//!    [`crate::supervisor::SupervisorConfig::hold_ticks`] ticks in a row) / lost (stop); a
+//!    board without an accepted sample for longer than [`Config::sensor_stale_ms`] stops
+//!    (`SensorStale`, exit 19) whatever `hold_ticks`.
 //! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp`, feet placed where the previous
 //!    gait sample put them, feet under [`Config::min_load_n`] ignored); φ̈ from the gyro pitch
 //!    rate through [`PitchAccel`], τ = J·φ̈; tilt from the accelerometer (fall → stop).
-//! 5. One gait sample with τ; with `stab=on` the feedback stabilizer (gait-core
+//! 5. One gait sample with τ, checked finite (CoM, ZMP, feet; then the stabilizer's shift) before
+//!    the IK: a non-finite one holds the last targets and stops (`NonFiniteSample`, exit 18); with `stab=on` the feedback stabilizer (gait-core
 //!    [`gait_core::stabilizer`]) turns the measured ZMP error and the gyro into a bounded shift
 //!    δ of the commanded CoM (‖δ‖ ≤ `stab_max` ≤ 2 cm, rate-limited, ZMP command inside the
 //!    support polygon with margin; a missing or non-finite measurement never reaches it);
@@ -71,12 +77,14 @@ use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
 use crate::imu::{AttitudeFilter, PitchAccel, PitchAccelConfig};
 use crate::params::ArgError;
+use crate::plausible::Plausibility;
 use crate::record::{
     FaultKind, FaultRecord, FaultState, LogWriter, LoggedPhase, Record, StopRecord, TickRecord,
 };
 use crate::startup::{self, Ramp, StartupError};
 use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
 use crate::{startup_record, Config};
+use walker_contract::codes::SensorRejection;
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_STEPS};
 /// The sampler type of the firmware.
@@ -251,12 +259,87 @@ impl Sensors {
         let &(_, off) = self.slots.get(req)?;
         self.buf.get(off..off + len)
     }
+
+    /// Parses and checks every reply of the last [`Sensors::read`] ([`crate::plausible`]);
+    /// accepted samples are recorded in `checks` at `now_us`.
+    fn check(&self, checks: &mut Plausibility<3>, now_us: u64) -> Checked {
+        let mut out = Checked {
+            feet: [None; 2],
+            imu: None,
+            rejected: [None; 3],
+        };
+        for (i, &(k, _)) in self.slots.iter().enumerate() {
+            if !self.results.get(i).is_some_and(|r| r.is_ok()) {
+                continue;
+            }
+            let verdict = if SENSOR_IDS.get(k) == Some(&ids::IMU) {
+                let s = self
+                    .data(i, usize::from(imu_table::SAMPLE.len))
+                    .and_then(ImuSample::from_bytes);
+                match s {
+                    Some(s) => checks.imu(k, &s).map(|()| out.imu = Some(s)),
+                    None => Err(SensorRejection::Malformed),
+                }
+            } else {
+                let f = self
+                    .data(i, usize::from(foot::SAMPLE.len))
+                    .and_then(FootForces::from_bytes);
+                match (f, out.feet.get_mut(k)) {
+                    (Some(f), Some(slot)) => checks.foot(k, &f).map(|()| *slot = Some(f)),
+                    _ => Err(SensorRejection::Malformed),
+                }
+            };
+            if let (Err(r), Some(slot)) = (verdict, out.rejected.get_mut(k)) {
+                *slot = Some(r);
+            }
+        }
+        if let [Some(a), Some(b)] = &out.feet {
+            if let Err(r) = checks.feet_together(a, b) {
+                out.feet = [None; 2];
+                for slot in out.rejected.iter_mut().take(2) {
+                    *slot = Some(r);
+                }
+            }
+        }
+        for (k, f) in out.feet.iter().enumerate() {
+            if let Some(f) = f {
+                checks.accept(k, f.counter, now_us);
+            }
+        }
+        if let (Some(s), Some(k)) = (out.imu, SENSOR_IDS.iter().position(|&d| d == ids::IMU)) {
+            checks.accept(k, s.counter, now_us);
+        }
+        out
+    }
+}
+
+/// The replies of one tick that passed the plausibility checks, and why the others failed.
+struct Checked {
+    /// Accepted foot samples (index = side).
+    feet: [Option<FootForces>; 2],
+    /// Accepted IMU sample.
+    imu: Option<ImuSample>,
+    /// Per [`SENSOR_IDS`] index: why its reply was rejected (a reply that never came is `None`).
+    rejected: [Option<SensorRejection>; 3],
+}
+
+impl Checked {
+    /// True when sensor `k`'s (index into [`SENSOR_IDS`]) reply was accepted.
+    fn accepted(&self, k: usize) -> bool {
+        match SENSOR_IDS.get(k) {
+            Some(&ids::IMU) => self.imu.is_some(),
+            Some(_) => self.feet.get(k).is_some_and(|f| f.is_some()),
+            None => false,
+        }
+    }
 }
 
 /// Last good sensor values.
 struct SensorState {
     feet: [Option<FootForces>; 2],
     held: [u16; 3],
+    /// Per sensor: its last reply was rejected (the fault record is written once per run).
+    rejecting: [bool; 3],
 }
 
 /// Runs start-up and the walk on `board` with `cfg` until torque is off (see the module docs).
@@ -375,6 +458,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut state = SensorState {
         feet: [None; 2],
         held: [0; 3],
+        rejecting: [false; 3],
     };
     let mut pitch = PitchAccel::new(PitchAccelConfig {
         dt_s: cfg.dt_s() as f32,
@@ -397,6 +481,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         sup.stop(StopReason::NonFiniteSample { tick: 0 });
     }
     crate::fw_log!(info, "walking: ramp {} ticks", ramp.ticks());
+    let weight_n = (robot.masses.total() * robot.gravity) as f32;
+    let mut plausible = Plausibility::<3>::new(cfg, weight_n, bus.board().now_us());
     bus.board().start(cfg.watchdog_ms);
     loop {
         let tick = bus.board().wait_tick();
@@ -404,15 +490,35 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 
         // Sensors.
         sensors.read(&mut bus);
+        let now = bus.board().now_us();
+        let checked = sensors.check(&mut plausible, now);
         let mut imu_fresh = None;
-        for (i, &(k, _)) in sensors.slots.clone().iter().enumerate() {
+        for &(k, _) in sensors.slots.clone().iter() {
             let Some(&id) = SENSOR_IDS.get(k) else {
                 continue;
             };
-            let ok = sensors.results.get(i).is_some_and(|r| r.is_ok());
-            let fresh = sup.report(id, ok);
-            let held = state.held.get_mut(k);
             let t = bus.board().now_us();
+            let rejected = checked.rejected.get(k).copied().flatten();
+            if let (Some(r), Some(seen)) = (rejected, state.rejecting.get_mut(k)) {
+                if !*seen {
+                    crate::fw_log!(warn, "sensor {} reply rejected: {}", id, r.code());
+                    let rec = fault(t, FaultKind::SensorRejected, id, i32::from(r.code()));
+                    log.write(bus.board(), rec);
+                }
+                *seen = true;
+            }
+            let ok = checked.accepted(k);
+            if ok {
+                if let Some(seen) = state.rejecting.get_mut(k) {
+                    *seen = false;
+                }
+            }
+            let fresh = sup.report(id, ok);
+            if let Some(age_ms) = plausible.stale(k, now) {
+                crate::fw_log!(error, "sensor {} stale for {} ms", id, age_ms);
+                sup.stop(StopReason::SensorStale { id, age_ms });
+            }
+            let held = state.held.get_mut(k);
             match (fresh, held) {
                 (Freshness::Fresh, Some(h)) => {
                     if *h > 0 {
@@ -421,9 +527,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     }
                     *h = 0;
                     if id == ids::IMU {
-                        imu_fresh = sensors.data(i, 26).and_then(ImuSample::from_bytes);
-                    } else if let Some(slot) = state.feet.get_mut(k) {
-                        *slot = sensors.data(i, 18).and_then(FootForces::from_bytes);
+                        imu_fresh = checked.imu;
+                    } else if let (Some(slot), Some(f)) =
+                        (state.feet.get_mut(k), checked.feet.get(k))
+                    {
+                        *slot = *f;
                     }
                 }
                 (Freshness::Held(n), Some(h)) => {

@@ -111,7 +111,13 @@ pub struct FakeBoard {
     pub fall_at: Option<usize>,
     /// Script: the tick that made the `n`-th SYNC WRITE takes this much longer, µs.
     pub slow: Vec<(usize, u64)>,
+    /// Script: board `id`'s sample counter stops advancing once `n` SYNC WRITEs were seen.
+    pub freeze_at: Option<(u8, usize)>,
+    /// Script: board `id` reports an out-of-range value (a byte-shifted sample) at the
+    /// `n`-th SYNC WRITE only.
+    pub spike_at: Option<(u8, usize)>,
     imu_counter: u16,
+    foot_counters: [u16; 2],
 }
 
 /// Joint angles (rad) → ticks of the fake's initial pose: knees bent, hips and ankles pitched.
@@ -164,7 +170,10 @@ impl FakeBoard {
             revive_at: None,
             fall_at: None,
             slow: Vec::new(),
+            freeze_at: None,
+            spike_at: None,
             imu_counter: 0,
+            foot_counters: [0; 2],
         }
     }
 
@@ -260,8 +269,24 @@ impl FakeBoard {
         })
     }
 
+    /// True when script `s` (device, SYNC WRITE count) applies to `id` now: from then on
+    /// (`once` false) or at that count only.
+    fn scripted(&self, s: Option<(u8, usize)>, id: u8, once: bool) -> bool {
+        s.is_some_and(|(d, n)| {
+            d == id
+                && if once {
+                    self.sync_writes() == n
+                } else {
+                    self.sync_writes() >= n
+                }
+        })
+    }
+
     fn imu_sample(&mut self) -> [u8; 26] {
-        self.imu_counter = self.imu_counter.wrapping_add(1);
+        if !self.scripted(self.freeze_at, walker_contract::bus_map::IMU, false) {
+            self.imu_counter = self.imu_counter.wrapping_add(1);
+        }
+        let spike = self.scripted(self.spike_at, walker_contract::bus_map::IMU, true);
         let t = self.now_ns as f32 * 1e-9;
         let rate = 0.3 * (core::f32::consts::TAU * 1.5 * t).sin();
         let g = 9.80665f32;
@@ -271,7 +296,11 @@ impl FakeBoard {
         } else {
             [0.0, 0.0, g]
         };
-        ImuSample::from_si([0.0, rate, 0.0], accel, self.imu_counter).to_bytes()
+        let mut s = ImuSample::from_si([0.0, rate, 0.0], accel, self.imu_counter);
+        if spike {
+            s.gyro_urad_s[1] = i32::MAX / 2;
+        }
+        s.to_bytes()
     }
 
     fn read_mem(&mut self, i: usize, addr: u16, len: u16) -> Option<Vec<u8>> {
@@ -282,10 +311,19 @@ impl FakeBoard {
             (Kind::Servo(_), 116, 4) => Some(d.goal.to_le_bytes().to_vec()),
             (Kind::Servo(_), 64, 1) => Some(vec![u8::from(d.torque)]),
             (Kind::Foot(s), 128, 18) => {
-                let f = FootForces {
-                    forces_mn: self.foot_forces()[s],
-                    counter: 0,
-                };
+                let counter = self.foot_counters.get_mut(s)?;
+                let frozen = self
+                    .freeze_at
+                    .is_some_and(|(id, n)| id == d.id && self.goals.len() >= n);
+                if !frozen {
+                    *counter = counter.wrapping_add(1);
+                }
+                let counter = *counter;
+                let mut forces_mn = self.foot_forces()[s];
+                if self.scripted(self.spike_at, d.id, true) {
+                    forces_mn[0] = forces_mn[0].wrapping_mul(256).wrapping_add(1_000_000);
+                }
+                let f = FootForces { forces_mn, counter };
                 Some(f.to_bytes().to_vec())
             }
             (Kind::Imu, 128, 26) => Some(self.imu_sample().to_vec()),

@@ -17,6 +17,7 @@
 //! | 15 | non-finite joint target |
 //! | 17 | stop requested |
 //! | 18 | non-finite gait sample (CoM, ZMP, feet or the stabilizer's shift) before the IK |
+//! | 19 | sensor data stale (no plausible reply from a sensor board for longer than `stale_ms`) |
 //! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
 //! | 101 | panic |
 //!
@@ -48,11 +49,14 @@ pub enum StopCode {
     /// 8: a gait sample (or the stabilizer's shift) was not finite before the IK (value =
     /// walk tick).
     NonFiniteSample,
+    /// 9: a sensor board gave no plausible reply for longer than `stale_ms` (id = device,
+    /// value = age of its last accepted sample, ms).
+    SensorStale,
 }
 
 impl StopCode {
     /// Every stop code.
-    pub const ALL: [StopCode; 8] = [
+    pub const ALL: [StopCode; 9] = [
         StopCode::DeviceMissing,
         StopCode::DeviceLost,
         StopCode::Fall,
@@ -61,6 +65,7 @@ impl StopCode {
         StopCode::PlanDone,
         StopCode::Requested,
         StopCode::NonFiniteSample,
+        StopCode::SensorStale,
     ];
 
     /// The wire code.
@@ -74,6 +79,7 @@ impl StopCode {
             StopCode::PlanDone => 6,
             StopCode::Requested => 7,
             StopCode::NonFiniteSample => 8,
+            StopCode::SensorStale => 9,
         }
     }
 
@@ -88,6 +94,7 @@ impl StopCode {
             StopCode::PlanDone => ExitCode::PlanDone,
             StopCode::Requested => ExitCode::Requested,
             StopCode::NonFiniteSample => ExitCode::NonFiniteSample,
+            StopCode::SensorStale => ExitCode::SensorStale,
         }
     }
 }
@@ -104,6 +111,7 @@ impl TryFrom<u8> for StopCode {
             6 => StopCode::PlanDone,
             7 => StopCode::Requested,
             8 => StopCode::NonFiniteSample,
+            9 => StopCode::SensorStale,
             other => return Err(UnknownCode(other)),
         })
     }
@@ -148,6 +156,13 @@ pub enum StopReason {
         /// Walk tick of the sample (0 = the first sample, before the ramp).
         tick: u32,
     },
+    /// No plausible reply from a sensor board for longer than the staleness bound.
+    SensorStale {
+        /// Its bus id.
+        id: u8,
+        /// Age of its last accepted sample, ms (saturating).
+        age_ms: u16,
+    },
 }
 
 impl StopReason {
@@ -162,6 +177,7 @@ impl StopReason {
             StopReason::PlanDone => StopCode::PlanDone,
             StopReason::Requested => StopCode::Requested,
             StopReason::NonFiniteSample { .. } => StopCode::NonFiniteSample,
+            StopReason::SensorStale { .. } => StopCode::SensorStale,
         }
     }
 
@@ -175,6 +191,7 @@ impl StopReason {
             StopReason::NonFiniteTarget { joint } => (c, joint, 0),
             StopReason::PlanDone | StopReason::Requested => (c, 0, 0),
             StopReason::NonFiniteSample { tick } => (c, 0, i32::try_from(tick).unwrap_or(i32::MAX)),
+            StopReason::SensorStale { id, age_ms } => (c, id, i32::from(age_ms)),
         }
     }
 
@@ -194,6 +211,10 @@ impl StopReason {
             StopCode::Requested => StopReason::Requested,
             StopCode::NonFiniteSample => StopReason::NonFiniteSample {
                 tick: u32::try_from(value).ok()?,
+            },
+            StopCode::SensorStale => StopReason::SensorStale {
+                id,
+                age_ms: u16::try_from(value).ok()?,
             },
         })
     }
@@ -226,6 +247,9 @@ pub enum FaultKind {
     /// 9: a joint still needs more than the servo speed limit (`id` = worst joint index,
     /// `value` = its peak speed, mrad/s); the walk goes on, the servo will lag.
     SpeedLimit,
+    /// 10: a sensor reply arrived but failed the plausibility check and counts as missing
+    /// (`id` = device, `value` = [`SensorRejection`] code); logged at the first of a run.
+    SensorRejected,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -243,6 +267,7 @@ impl FaultKind {
             Self::TimingStretched => 7,
             Self::SwingLowered => 8,
             Self::SpeedLimit => 9,
+            Self::SensorRejected => 10,
             Self::Other(c) => c,
         }
     }
@@ -258,6 +283,7 @@ impl FaultKind {
             7 => Self::TimingStretched,
             8 => Self::SwingLowered,
             9 => Self::SpeedLimit,
+            10 => Self::SensorRejected,
             c => Self::Other(c),
         }
     }
@@ -266,6 +292,46 @@ impl FaultKind {
 impl From<u8> for FaultKind {
     fn from(c: u8) -> Self {
         Self::from_code(c)
+    }
+}
+
+/// Why a sensor reply was rejected (the `SensorRejected` fault record's `value`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum SensorRejection {
+    /// 1: the board's sample counter did not advance since its last accepted sample.
+    FrozenCounter,
+    /// 2: a value is outside the sensor's range.
+    OutOfRange,
+    /// 3: the foot forces are not consistent with the robot's weight (total above
+    /// m·g·`force_factor`, or below −0.1·m·g).
+    Weight,
+    /// 4: the reply data could not be read as a sample.
+    Malformed,
+}
+
+impl SensorRejection {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            SensorRejection::FrozenCounter => 1,
+            SensorRejection::OutOfRange => 2,
+            SensorRejection::Weight => 3,
+            SensorRejection::Malformed => 4,
+        }
+    }
+}
+
+impl TryFrom<u8> for SensorRejection {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => SensorRejection::FrozenCounter,
+            2 => SensorRejection::OutOfRange,
+            3 => SensorRejection::Weight,
+            4 => SensorRejection::Malformed,
+            other => return Err(UnknownCode(other)),
+        })
     }
 }
 
@@ -336,6 +402,8 @@ pub enum ExitCode {
     Requested,
     /// 18: non-finite gait sample.
     NonFiniteSample,
+    /// 19: sensor data stale.
+    SensorStale,
     /// 20: a start-up step failed after the probe.
     StartupFailed,
     /// 101: panic.
@@ -344,7 +412,7 @@ pub enum ExitCode {
 
 impl ExitCode {
     /// Every exit code.
-    pub const ALL: [ExitCode; 12] = [
+    pub const ALL: [ExitCode; 13] = [
         ExitCode::PlanDone,
         ExitCode::ConfigRejected,
         ExitCode::Watchdog,
@@ -355,6 +423,7 @@ impl ExitCode {
         ExitCode::NonFiniteTarget,
         ExitCode::Requested,
         ExitCode::NonFiniteSample,
+        ExitCode::SensorStale,
         ExitCode::StartupFailed,
         ExitCode::Panic,
     ];
@@ -372,6 +441,7 @@ impl ExitCode {
             ExitCode::NonFiniteTarget => 15,
             ExitCode::Requested => 17,
             ExitCode::NonFiniteSample => 18,
+            ExitCode::SensorStale => 19,
             ExitCode::StartupFailed => 20,
             ExitCode::Panic => 101,
         }
@@ -395,6 +465,7 @@ impl ExitCode {
             ExitCode::NonFiniteTarget => "non-finite target",
             ExitCode::Requested => "stop requested",
             ExitCode::NonFiniteSample => "non-finite gait sample",
+            ExitCode::SensorStale => "sensor data stale",
             ExitCode::StartupFailed => "start-up step failed",
             ExitCode::Panic => "panic",
         }
@@ -415,6 +486,7 @@ impl TryFrom<u8> for ExitCode {
             15 => ExitCode::NonFiniteTarget,
             17 => ExitCode::Requested,
             18 => ExitCode::NonFiniteSample,
+            19 => ExitCode::SensorStale,
             20 => ExitCode::StartupFailed,
             101 => ExitCode::Panic,
             other => return Err(UnknownCode(other)),
@@ -437,6 +509,9 @@ mod tests {
             }
             assert_eq!(FaultKind::from_code(c).code(), c);
             if let Ok(s) = StartupStep::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = SensorRejection::try_from(c) {
                 assert_eq!(s.code(), c);
             }
         }
@@ -478,6 +553,10 @@ mod tests {
             StopReason::PlanDone,
             StopReason::Requested,
             StopReason::NonFiniteSample { tick: 1234 },
+            StopReason::SensorStale {
+                id: 200,
+                age_ms: 105,
+            },
         ] {
             let (c, id, v) = r.code();
             assert_eq!(StopReason::from_code(c, id, v), Some(r));

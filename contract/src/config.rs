@@ -103,6 +103,11 @@ pub struct Config {
     pub fault_nan_tick: Option<u32>,
     /// Fault injection: request a stop at this walk tick.
     pub stop_at_tick: Option<u32>,
+    /// Longest time a sensor board may go without a plausible reply before the robot stops
+    /// (`SensorStale`), ms.
+    pub sensor_stale_ms: u32,
+    /// Foot forces above m·g·`force_factor` (one foot or both together) are implausible.
+    pub force_factor: f32,
     /// Fault injection: make the gait sample's CoM NaN at this walk tick (the finite check
     /// before the IK must stop).
     pub fault_nan_com_tick: Option<u32>,
@@ -143,6 +148,8 @@ impl Config {
             fault_nan_tick: None,
             stop_at_tick: None,
             fault_nan_com_tick: None,
+            sensor_stale_ms: 100,
+            force_factor: 4.0,
         }
     }
 

@@ -817,6 +817,24 @@ params! {
         set: |c, v| { c.fault_nan_com_tick = Some(v as u32) },
         get: |c| { c.fault_nan_com_tick.map(Value::Int) },
     },
+    {
+        key: "stale_ms",
+        plan_key: None,
+        unit: "ms",
+        domain: int(1, 10_000),
+        doc: "longest time without a plausible sensor reply before the robot stops (exit 19)",
+        set: |c, v| { c.sensor_stale_ms = v as u32 },
+        get: |c| { Some(Value::Int(c.sensor_stale_ms)) },
+    },
+    {
+        key: "force_factor",
+        plan_key: None,
+        unit: "",
+        domain: range(1.0, 20.0),
+        doc: "foot forces above m·g·force_factor (one foot or both) are implausible",
+        set: |c, v| { c.force_factor = v as f32 },
+        get: |c| { Some(Value::Num32(c.force_factor)) },
+    },
 }
 
 /// Key index meaning "not a known key".

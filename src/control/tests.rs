@@ -733,3 +733,99 @@ fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
     let mut b = board(&cfg);
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
 }
+
+#[test]
+fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
+    use walker_contract::codes::SensorRejection;
+    let cfg = Config::default();
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    // The IMU keeps answering (CRC fine) but repeats its sample from walk tick 50 on: every
+    // reply is rejected as frozen, held for hold_ticks, then the device is lost.
+    let mut b = board(&cfg);
+    b.freeze_at = Some((200, 1 + ramp + 50));
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Stopped(StopReason::DeviceLost { id: 200 }));
+    let recs = b.records();
+    let rej = faults_of(&recs, FaultKind::SensorRejected);
+    assert_eq!(rej.len(), 1, "one record per run of rejections: {rej:?}");
+    assert_eq!(
+        (rej[0].id, rej[0].value),
+        (200, i32::from(SensorRejection::FrozenCounter.code()))
+    );
+    let tr = ticks_of(&recs);
+    assert_eq!(
+        tr.iter().filter(|t| t.fault == FaultState::Holding).count(),
+        usize::from(cfg.supervisor.hold_ticks)
+    );
+    // No bus error at all: the replies were intact, only implausible.
+    assert!(tr.iter().all(|t| t.bus.timeouts == 0 && t.bus.crc == 0));
+
+    // With a (too) long hold, the staleness bound stops: 100 ms after the last accepted
+    // sample, i.e. on the 21st frozen tick at 5 ms (age 21 × 5 = 105 ms > 100 ms; the 20th
+    // is exactly 100 ms old), which starts the stop sequence in the same tick.
+    let mut cfg = Config::default();
+    cfg.supervisor.hold_ticks = 65_535;
+    let mut b = board(&cfg);
+    b.freeze_at = Some((111, 1 + ramp + 50));
+    let end = run(&mut b, &cfg);
+    assert_eq!(
+        end,
+        RunEnd::Stopped(StopReason::SensorStale {
+            id: 111,
+            age_ms: 105
+        })
+    );
+    assert_eq!(end.exit_code(), 19);
+    let recs = b.records();
+    assert_eq!(
+        stop_of(&recs),
+        Some(StopReason::SensorStale {
+            id: 111,
+            age_ms: 105
+        })
+    );
+    let tr = ticks_of(&recs);
+    let first_hold = tr
+        .iter()
+        .position(|t| t.fault == FaultState::Holding)
+        .unwrap();
+    assert_eq!(first_hold, ramp + 50);
+    let stopping = tr
+        .iter()
+        .position(|t| t.fault == FaultState::Stopping)
+        .unwrap();
+    assert_eq!(stopping - first_hold, 20);
+    assert!(torque_off_sent(&b));
+}
+
+#[test]
+fn an_out_of_range_reply_is_rejected_and_held() {
+    use walker_contract::codes::SensorRejection;
+    let mut cfg = Config::default();
+    cfg.walk.steps = 2;
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    for id in [111u8, 200] {
+        let mut b = board(&cfg);
+        // One byte-shifted reply (load cell ×256 + 1000 N; gyro 1073 rad/s).
+        b.spike_at = Some((id, 1 + ramp + 30));
+        assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+        let recs = b.records();
+        let rej = faults_of(&recs, FaultKind::SensorRejected);
+        assert_eq!(rej.len(), 1, "{id}: {rej:?}");
+        assert_eq!(
+            (rej[0].id, rej[0].value),
+            (id, i32::from(SensorRejection::OutOfRange.code()))
+        );
+        // Held for exactly that one tick, then recovered.
+        let tr = ticks_of(&recs);
+        let holding: Vec<usize> = tr
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.fault == FaultState::Holding)
+            .map(|(i, _)| i)
+            .collect();
+        assert_eq!(holding, vec![ramp + 30], "{id}");
+        assert!(recs.iter().any(|r| matches!(r,
+            Record::Fault(f) if f.kind == FaultKind::DeviceRecovered && f.id == id && f.value == 1)));
+    }
+}
