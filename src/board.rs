@@ -3,7 +3,7 @@
 //! bus time model, the broadcast torque-off packet).
 //!
 //! A board is one value implementing [`Board`] (= [`ServoBus`] + [`Clock`] + [`TickTimer`] +
-//! [`LogSink`] + [`Watchdog`]). Because the bus transport and the clock live on the *same*
+//! [`LogSink`] + [`Watchdog`], plus the servo power switch). Because the bus transport and the clock live on the *same*
 //! value, a driver borrowing `&mut board` as its [`ServoBus`] can still read the clock through
 //! it (`impl ServoBus for &mut T` below), and a board whose clock is virtual (QEMU) can advance
 //! it from inside its bus transport.
@@ -119,6 +119,10 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
     /// Best-effort torque off of every servo: sends [`TORQUE_OFF_PACKET`] (broadcast WRITE of
     /// Torque Enable = 0) on the bus, waiting for no reply. Safe to call from the panic handler.
     fn torque_off_best_effort(&mut self);
+    /// Switches the servos' power supply on or off (the OpenCR's Dynamixel power FET, PF15; a
+    /// board without a switch logs the request and does nothing). The stop sequence cuts it
+    /// after the confirmed torque off ([`crate::control`]).
+    fn servo_power(&mut self, on: bool);
     /// Ends the firmware: under QEMU exits with `code` through semihosting; on the real board
     /// sends torque off and parks/resets (see the board module).
     fn exit(&mut self, code: i32) -> !;

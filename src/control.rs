@@ -46,6 +46,11 @@
 //!   Torque Enable = 0) and the stop record `PlanDone`.
 //! * Any supervisor stop: the pose is held for `stopping_ticks`, torque off, stop record with
 //!   the reason.
+//! * Torque off (every stop, start-up failures included) is confirmed: up to
+//!   [`Config::torque_off_attempts`] rounds of broadcast Torque Enable = 0 and a READ of Torque
+//!   Enable (64) from each servo not yet confirmed at 0; then the servo power is cut
+//!   ([`Board::servo_power`], PF15 on the OpenCR). Unconfirmed servos: fault record
+//!   `TorqueOffUnconfirmed` before the stop record.
 //!
 //! # Foot boards missing at start-up
 //! With [`Config::feet_required`] (the default) a missing foot board stops like any other
@@ -165,16 +170,46 @@ fn phase_of(s: &GaitSample<f32>) -> LoggedPhase {
     }
 }
 
-/// Broadcast Torque Enable = 0 through the master (lock-step aware); the board's
-/// best-effort raw packet if that fails.
-fn torque_off<B: Board>(bus: &mut BoardMaster<'_, B>) {
-    if bus
-        .master()
-        .write(BROADCAST_ID, TORQUE_ENABLE_ADDR, &[0])
-        .is_err()
-    {
-        bus.board().torque_off_best_effort();
+/// The stop that stops: up to [`Config::torque_off_attempts`] rounds of broadcast Torque
+/// Enable = 0 (the board's best-effort raw packet if the master cannot send it) followed by a
+/// READ of Torque Enable from every leg servo not yet confirmed at 0; then the servo power is
+/// cut ([`Board::servo_power`]) whatever the outcome. Servos never confirmed are logged
+/// (`TorqueOffUnconfirmed`). The watchdog is fed after each round (a dead bus costs
+/// `attempts` × 12 reply timeouts, 36 ms by default).
+fn torque_off<B: Board>(bus: &mut BoardMaster<'_, B>, log: &mut LogWriter, cfg: &Config) {
+    let mut off = [false; LEG_JOINTS];
+    for _ in 0..cfg.torque_off_attempts.max(1) {
+        if bus
+            .master()
+            .write(BROADCAST_ID, TORQUE_ENABLE_ADDR, &[0])
+            .is_err()
+        {
+            bus.board().torque_off_best_effort();
+        }
+        for (done, &id) in off.iter_mut().zip(ids::LEGS.iter()) {
+            if !*done {
+                let mut v = [0xFFu8; 1];
+                *done = bus.master().read(id, TORQUE_ENABLE_ADDR, &mut v).is_ok() && v == [0];
+            }
+        }
+        bus.board().feed();
+        if off.iter().all(|&d| d) {
+            break;
+        }
     }
+    let unconfirmed = off.iter().filter(|&&d| !d).count();
+    if let Some(&id) = off.iter().position(|&d| !d).and_then(|j| ids::LEGS.get(j)) {
+        crate::fw_log!(
+            error,
+            "torque off not confirmed by {} servo(s), first {}",
+            unconfirmed,
+            id
+        );
+        let now = bus.board().now_us();
+        let rec = fault(now, FaultKind::TorqueOffUnconfirmed, id, unconfirmed as i32);
+        log.write(bus.board(), rec);
+    }
+    bus.board().servo_power(false);
 }
 
 fn write_stop<B: Board>(bus: &mut BoardMaster<'_, B>, log: &mut LogWriter, reason: StopReason) {
@@ -409,7 +444,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             missing.len(),
             critical.first()
         );
-        torque_off(&mut bus);
+        torque_off(&mut bus, &mut log, cfg);
         write_stop(&mut bus, &mut log, reason);
         return RunEnd::Stopped(reason);
     }
@@ -436,7 +471,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 b,
                 fault(t, FaultKind::StartupFailed, e.id, i32::from(e.step.code())),
             );
-            torque_off(&mut bus);
+            torque_off(&mut bus, &mut log, cfg);
             write_stop(&mut bus, &mut log, StopReason::DeviceLost { id: e.id });
             return RunEnd::Startup(e);
         }
@@ -671,7 +706,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 last_ticks = ticks;
             }
             Action::HoldPose => write_goals(&mut bus, &last_ticks),
-            Action::SendTorqueOff => torque_off(&mut bus),
+            Action::SendTorqueOff => torque_off(&mut bus, &mut log, cfg),
             Action::Idle => {}
         }
         if action != Action::Run {

@@ -68,6 +68,8 @@ pub struct FakeDevice {
     pub present: i32,
     /// Dead: answers nothing.
     pub dead: bool,
+    /// Torque Enable ignores writes of 0 (a servo that does not let go).
+    pub torque_stuck: bool,
 }
 
 /// Per `wait_tick`: the tick and the number of packets sent before it.
@@ -101,6 +103,8 @@ pub struct FakeBoard {
     pub feeds: u32,
     /// Calls of `torque_off_best_effort`.
     pub best_effort: u32,
+    /// Every `servo_power` call: (on, `packets.len()` at the call).
+    pub power: Vec<(bool, usize)>,
     /// Goal positions of every SYNC WRITE.
     pub goals: Vec<[i32; 12]>,
     /// Script: device `id` dies once `n` SYNC WRITEs were seen.
@@ -138,6 +142,7 @@ impl FakeBoard {
                 goal: t,
                 present: t,
                 dead: false,
+                torque_stuck: false,
             });
         }
         for (id, kind) in [(111, Kind::Foot(0)), (112, Kind::Foot(1)), (200, Kind::Imu)] {
@@ -150,6 +155,7 @@ impl FakeBoard {
                 goal: 0,
                 present: 0,
                 dead: false,
+                torque_stuck: false,
             });
         }
         FakeBoard {
@@ -165,6 +171,7 @@ impl FakeBoard {
             watchdog: None,
             feeds: 0,
             best_effort: 0,
+            power: Vec::new(),
             goals: Vec::new(),
             kill_at: None,
             revive_at: None,
@@ -343,7 +350,7 @@ impl FakeBoard {
                 true
             }
             (Kind::Servo(_), 64, [v]) => {
-                d.torque = *v != 0;
+                d.torque = *v != 0 || (d.torque && d.torque_stuck);
                 if d.torque {
                     d.goal = d.present;
                 }
@@ -562,6 +569,10 @@ impl Board for FakeBoard {
         for d in &mut self.devices {
             d.torque = false;
         }
+    }
+
+    fn servo_power(&mut self, on: bool) {
+        self.power.push((on, self.packets.len()));
     }
 
     fn exit(&mut self, code: i32) -> ! {

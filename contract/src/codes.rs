@@ -250,6 +250,10 @@ pub enum FaultKind {
     /// 10: a sensor reply arrived but failed the plausibility check and counts as missing
     /// (`id` = device, `value` = [`SensorRejection`] code); logged at the first of a run.
     SensorRejected,
+    /// 11: torque off was not confirmed by every servo after `off_attempts` rounds of
+    /// broadcast Torque Enable = 0 and read-back (`id` = first unconfirmed servo, `value` =
+    /// number unconfirmed); the servo power is cut anyway.
+    TorqueOffUnconfirmed,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -268,6 +272,7 @@ impl FaultKind {
             Self::SwingLowered => 8,
             Self::SpeedLimit => 9,
             Self::SensorRejected => 10,
+            Self::TorqueOffUnconfirmed => 11,
             Self::Other(c) => c,
         }
     }
@@ -284,6 +289,7 @@ impl FaultKind {
             8 => Self::SwingLowered,
             9 => Self::SpeedLimit,
             10 => Self::SensorRejected,
+            11 => Self::TorqueOffUnconfirmed,
             c => Self::Other(c),
         }
     }

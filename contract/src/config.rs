@@ -108,6 +108,9 @@ pub struct Config {
     pub sensor_stale_ms: u32,
     /// Foot forces above m·g·`force_factor` (one foot or both together) are implausible.
     pub force_factor: f32,
+    /// Rounds of broadcast torque off + read-back of every servo's Torque Enable before the
+    /// servo power is cut.
+    pub torque_off_attempts: u8,
     /// Fault injection: make the gait sample's CoM NaN at this walk tick (the finite check
     /// before the IK must stop).
     pub fault_nan_com_tick: Option<u32>,
@@ -150,6 +153,7 @@ impl Config {
             fault_nan_com_tick: None,
             sensor_stale_ms: 100,
             force_factor: 4.0,
+            torque_off_attempts: 3,
         }
     }
 

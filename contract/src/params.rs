@@ -835,6 +835,15 @@ params! {
         set: |c, v| { c.force_factor = v as f32 },
         get: |c| { Some(Value::Num32(c.force_factor)) },
     },
+    {
+        key: "off_attempts",
+        plan_key: None,
+        unit: "",
+        domain: int(1, 10),
+        doc: "rounds of torque off + Torque Enable read-back before the servo power is cut",
+        set: |c, v| { c.torque_off_attempts = v as u8 },
+        get: |c| { Some(Value::Int(u32::from(c.torque_off_attempts))) },
+    },
 }
 
 /// Key index meaning "not a known key".

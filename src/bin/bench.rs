@@ -1196,6 +1196,8 @@ mod firmware {
             }
         }
 
+        fn servo_power(&mut self, _on: bool) {}
+
         fn exit(&mut self, code: i32) -> ! {
             semihosting_exit(code)
         }

@@ -167,7 +167,7 @@ pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
 /// The OpenCR board. `D` is the bus direction pin ([`DxlDir`] on the real board).
 pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     dir: D,
-    _dxl_power: PF15<Output<PushPull>>,
+    dxl_power: PF15<Output<PushPull>>,
     baud: u32,
     tim: pac::TIM2,
     clock_high: Cell<u64>,
@@ -255,7 +255,7 @@ impl OpenCrBoard<DxlDir> {
 
         OpenCrBoard {
             dir: DxlDir(dir),
-            _dxl_power: power,
+            dxl_power: power,
             baud: cfg.bus_baud,
             tim,
             clock_high: Cell::new(0),
@@ -434,6 +434,18 @@ impl<D: OutputPin> Board for OpenCrBoard<D> {
 
     fn torque_off_best_effort(&mut self) {
         let _ = self.send(&TORQUE_OFF_PACKET);
+    }
+
+    fn servo_power(&mut self, on: bool) {
+        // The Dynamixel power enable is PF15 (`BDPIN_DXL_PWR_EN`, high = on) per the OpenCR 1.0
+        // documentation: ROBOTIS e-Manual "OpenCR 1.0" (schematic, OpenCR_REV1.0) and the
+        // OpenCR Arduino core's variant.h. Low switches the FET off: the servos lose power.
+        if on {
+            self.dxl_power.set_high();
+        } else {
+            self.dxl_power.set_low();
+        }
+        defmt::warn!("servo power {=bool} (PF15)", on);
     }
 
     fn exit(&mut self, code: i32) -> ! {

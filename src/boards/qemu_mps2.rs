@@ -506,6 +506,14 @@ impl Board for QemuBoard {
         self.cpu.resume();
     }
 
+    fn servo_power(&mut self, on: bool) {
+        // No power switch on the emulated board: the request is only logged.
+        defmt::info!(
+            "servo power {=bool} (no switch on this board: nothing done)",
+            on
+        );
+    }
+
     fn exit(&mut self, code: i32) -> ! {
         semihosting_exit(code)
     }

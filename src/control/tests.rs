@@ -108,7 +108,8 @@ fn table2_walk_runs_to_plan_done() {
         let bulk: Vec<_> = pk.iter().filter(|p| p.op == opcode::BULK_READ).collect();
         let sync: Vec<_> = pk.iter().filter(|p| p.op == opcode::SYNC_WRITE).collect();
         assert_eq!(bulk.len(), 1, "tick {k}");
-        assert_eq!(pk.len(), 2, "tick {k}: {pk:?}");
+        // The last tick: bulk read, torque off, and its read-back from the 12 servos.
+        assert_eq!(pk.len(), if k < last { 2 } else { 14 }, "tick {k}: {pk:?}");
         if k < last {
             assert_eq!(sync.len(), 1, "tick {k}");
             assert_eq!(sync[0].addr, 116);
@@ -125,7 +126,9 @@ fn table2_walk_runs_to_plan_done() {
     assert_goals_in_limits(&b);
     assert!(b.servos().all(|d| !d.torque), "torque off at the end");
     assert_eq!(b.watchdog, Some(cfg.watchdog_ms));
-    assert_eq!(b.feeds as usize, ticks.len());
+    // Once per tick and once per torque-off round (one round: all 12 servos confirmed).
+    assert_eq!(b.feeds as usize, ticks.len() + 1);
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
     assert_eq!(b.best_effort, 0);
 
     // The ramp starts at the present pose and moves smoothly (≤ 3 ticks per servo per tick).
@@ -262,8 +265,12 @@ fn unconnected_bus_reports_everything_missing_quickly() {
     assert_eq!(end, RunEnd::Stopped(StopReason::DeviceMissing { id: 1 }));
     assert_eq!(end.exit_code(), 11);
     assert_eq!(&startup_of(&b.records()).missing[..], &DEVICE_IDS[..]);
-    // 15 devices × 8 attempts × (PING 100 µs + 1 ms timeout) = 132 ms, plus the torque off.
-    assert!(b.now_us() < 150_000, "{} µs", b.now_us());
+    // 15 devices × 8 attempts × (PING 100 µs + 1 ms timeout) = 132 ms, plus the torque off:
+    // 3 rounds × (broadcast 130 µs + 12 × (READ 140 µs + 1 ms timeout)) = 41.4 ms.
+    assert!(b.now_us() < 132_000 + 41_400 + 1_000, "{} µs", b.now_us());
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
+    assert!(b.records().iter().any(|r| matches!(r,
+        Record::Fault(f) if f.kind == FaultKind::TorqueOffUnconfirmed && f.id == 1 && f.value == 12)));
 }
 
 #[test]
@@ -828,4 +835,53 @@ fn an_out_of_range_reply_is_rejected_and_held() {
         assert!(recs.iter().any(|r| matches!(r,
             Record::Fault(f) if f.kind == FaultKind::DeviceRecovered && f.id == id && f.value == 1)));
     }
+}
+
+#[test]
+fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
+    // Servo 5 does not let go: every round re-broadcasts the torque off and asks servo 5 again;
+    // after `off_attempts` rounds it is logged and the power is cut anyway.
+    let cfg = cfg_with("elf stop_at=20");
+    let mut b = board(&cfg);
+    b.device_mut(5).unwrap().torque_stuck = true;
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::Requested));
+    let first_off = b
+        .packets
+        .iter()
+        .position(|p| p.id == 0xFE && p.op == opcode::WRITE && p.addr == 64)
+        .unwrap();
+    let after = &b.packets[first_off..];
+    // In order: [broadcast off, READ 64 of the unconfirmed servos] × rounds, then the power.
+    let mut expected: Vec<(u8, u8)> = vec![(0xFE, opcode::WRITE)];
+    expected.extend((1..=12).map(|id| (id, opcode::READ)));
+    for _ in 1..cfg.torque_off_attempts {
+        expected.push((0xFE, opcode::WRITE));
+        expected.push((5, opcode::READ));
+    }
+    let seen: Vec<(u8, u8)> = after.iter().map(|p| (p.id, p.op)).collect();
+    assert_eq!(seen, expected);
+    assert!(after
+        .iter()
+        .filter(|p| p.op == opcode::READ)
+        .all(|p| p.addr == 64));
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
+    let recs = b.records();
+    let f = faults_of(&recs, FaultKind::TorqueOffUnconfirmed);
+    assert_eq!(f.len(), 1);
+    assert_eq!((f[0].id, f[0].value), (5, 1));
+    // Every other servo is off; the stop record comes after the torque-off fault.
+    assert!(b.servos().filter(|d| d.id != 5).all(|d| !d.torque));
+    assert!(matches!(recs.last(), Some(Record::Stop(_))));
+
+    // All servos let go at once: one round, no fault record.
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::Requested));
+    let readbacks = b
+        .packets
+        .iter()
+        .filter(|p| p.op == opcode::READ && p.addr == 64)
+        .count();
+    assert_eq!(readbacks, 12, "one read-back per servo");
+    assert!(faults_of(&b.records(), FaultKind::TorqueOffUnconfirmed).is_empty());
+    assert_eq!(b.power.len(), 1);
 }
