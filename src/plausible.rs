@@ -9,11 +9,14 @@
 //! * **counter** (both boards): the board's u16 sample counter differs from the one of its last
 //!   accepted sample (a frozen board repeats it);
 //! * **range**: IMU |ω| per axis ≤ [`imu::GYRO_FULL_SCALE_URAD_S`] (±2000 °/s) and |a| per axis
-//!   ≤ [`imu::ACCEL_FULL_SCALE_UM_S2`] (±16 g); each load cell in [−0.1·W, f·W];
+//!   ≤ [`imu::ACCEL_FULL_SCALE_UM_S2`] (±16 g); each load cell within ±f·W (a cell reads
+//!   negative when the centre of pressure is beyond the opposite edge: −1.2·W in the MuJoCo
+//!   robot's Table 2 walk);
 //! * **weight**: one foot's total in [−0.1·W, f·W], and both feet's total ≤ f·W when both
 //!   replied this tick, where W = m·g is the robot's weight (reference robot: m·g from
-//!   `Robot::masses.total()` and `gravity`) and f = [`Config::force_factor`] (default 4: the
-//!   feet carry W standing and somewhat more at touch-down; a shifted byte is off by 2⁸ or more).
+//!   `Robot::masses.total()` and `gravity`, 48.5 N) and f = [`Config::force_factor`] (default
+//!   6: the feet carry W standing and up to 3.4·W at touch-down in the MuJoCo robot's Table 2
+//!   walk; a shifted byte is off by a factor 2⁸ or more).
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::{self, ImuSample};
@@ -21,7 +24,7 @@ use walker_contract::codes::SensorRejection;
 
 use crate::Config;
 
-/// Fraction of the weight a load cell or a foot may read below zero (noise, zero offset).
+/// Fraction of the weight a foot's total may read below zero (noise, zero offset).
 pub const NEGATIVE_LOAD_FRACTION: f32 = 0.1;
 
 /// The per-board state of the checks for `N` sensor boards.
@@ -54,18 +57,24 @@ impl<const N: usize> Plausibility<N> {
         }
     }
 
-    fn load_ok(&self, mn: f32) -> bool {
+    /// A foot's total load is plausible.
+    fn total_ok(&self, mn: f32) -> bool {
         mn >= -NEGATIVE_LOAD_FRACTION * self.weight_mn && mn <= self.factor * self.weight_mn
     }
 
     /// Checks a foot board's sample (board index `k`).
     pub fn foot(&self, k: usize, f: &FootForces) -> Result<(), SensorRejection> {
         self.counter_advanced(k, f.counter)?;
-        if !f.forces_mn.iter().all(|&v| self.load_ok(v as f32)) {
+        let cell_max = self.factor * self.weight_mn;
+        if !f
+            .forces_mn
+            .iter()
+            .all(|&v| libm::fabsf(v as f32) <= cell_max)
+        {
             return Err(SensorRejection::OutOfRange);
         }
         let total: f32 = f.forces_mn.iter().map(|&v| v as f32).sum();
-        if !self.load_ok(total) {
+        if !self.total_ok(total) {
             return Err(SensorRejection::Weight);
         }
         Ok(())
@@ -147,27 +156,32 @@ mod tests {
         assert_eq!(c.foot(0, &ok), Err(SensorRejection::FrozenCounter));
         // Another board's counter is its own.
         assert_eq!(c.foot(1, &ok), Ok(()));
-        // One cell above 4·W = 160 N (a byte shift multiplies by 256): out of range.
+        // One cell beyond ±6·W = ±240 N (a byte shift multiplies by 256): out of range.
         assert_eq!(
             c.foot(0, &foot([10_000 * 256, 0, 0, 0], 2)),
             Err(SensorRejection::OutOfRange)
         );
         assert_eq!(
-            c.foot(0, &foot([-4_001, 0, 0, 0], 2)),
+            c.foot(0, &foot([-240_001, 240_000, 8_000, 0], 2)),
             Err(SensorRejection::OutOfRange)
         );
-        assert_eq!(c.foot(0, &foot([-4_000, 0, 0, 0], 2)), Ok(()));
-        // Each cell in range but the foot's total above 4·W = 160 N.
+        assert_eq!(c.foot(0, &foot([-240_000, 240_000, 8_000, 0], 2)), Ok(()));
+        // Cells in range but the foot's total below −0.1·W = −4 N or above 6·W = 240 N.
         assert_eq!(
-            c.foot(0, &foot([41_000; 4], 2)),
+            c.foot(0, &foot([-4_001, 0, 0, 0], 2)),
             Err(SensorRejection::Weight)
         );
-        assert_eq!(c.foot(0, &foot([40_000; 4], 2)), Ok(()));
-        // Both feet together above 160 N.
-        let a = foot([25_000; 4], 3);
-        let b = foot([15_001; 4], 3);
+        assert_eq!(c.foot(0, &foot([-4_000, 0, 0, 0], 2)), Ok(()));
+        assert_eq!(
+            c.foot(0, &foot([60_001, 60_000, 60_000, 60_000], 2)),
+            Err(SensorRejection::Weight)
+        );
+        assert_eq!(c.foot(0, &foot([60_000; 4], 2)), Ok(()));
+        // Both feet together above 240 N.
+        let a = foot([35_000; 4], 3);
+        let b = foot([25_001; 4], 3);
         assert_eq!(c.feet_together(&a, &b), Err(SensorRejection::Weight));
-        assert_eq!(c.feet_together(&a, &foot([15_000; 4], 3)), Ok(()));
+        assert_eq!(c.feet_together(&a, &foot([25_000; 4], 3)), Ok(()));
     }
 
     #[test]

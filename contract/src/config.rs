@@ -152,7 +152,7 @@ impl Config {
             stop_at_tick: None,
             fault_nan_com_tick: None,
             sensor_stale_ms: 100,
-            force_factor: 4.0,
+            force_factor: 6.0,
             torque_off_attempts: 3,
         }
     }
