@@ -70,6 +70,14 @@ pub struct FakeDevice {
     pub dead: bool,
     /// Torque Enable ignores writes of 0 (a servo that does not let go).
     pub torque_stuck: bool,
+    /// Hardware Error Status.
+    pub hw_error: u8,
+    /// Present Temperature, °C.
+    pub temperature: u8,
+    /// Present Input Voltage, 0.1 V.
+    pub voltage_dv: u16,
+    /// Present Current, units of 2.69 mA.
+    pub current_raw: i16,
 }
 
 /// Per `wait_tick`: the tick and the number of packets sent before it.
@@ -143,6 +151,10 @@ impl FakeBoard {
                 present: t,
                 dead: false,
                 torque_stuck: false,
+                hw_error: 0,
+                temperature: 40,
+                voltage_dv: 120,
+                current_raw: 300,
             });
         }
         for (id, kind) in [(111, Kind::Foot(0)), (112, Kind::Foot(1)), (200, Kind::Imu)] {
@@ -156,6 +168,10 @@ impl FakeBoard {
                 present: 0,
                 dead: false,
                 torque_stuck: false,
+                hw_error: 0,
+                temperature: 40,
+                voltage_dv: 120,
+                current_raw: 300,
             });
         }
         FakeBoard {
@@ -317,6 +333,15 @@ impl FakeBoard {
             (Kind::Servo(_), 132, 4) => Some(d.present.to_le_bytes().to_vec()),
             (Kind::Servo(_), 116, 4) => Some(d.goal.to_le_bytes().to_vec()),
             (Kind::Servo(_), 64, 1) => Some(vec![u8::from(d.torque)]),
+            (Kind::Servo(_), 70, 1) => Some(vec![d.hw_error]),
+            (Kind::Servo(_), 126, 21) => {
+                let mut b = vec![0u8; 21];
+                b[0..2].copy_from_slice(&d.current_raw.to_le_bytes());
+                b[6..10].copy_from_slice(&d.present.to_le_bytes());
+                b[18..20].copy_from_slice(&d.voltage_dv.to_le_bytes());
+                b[20] = d.temperature;
+                Some(b)
+            }
             (Kind::Foot(s), 128, 18) => {
                 let counter = self.foot_counters.get_mut(s)?;
                 let frozen = self

@@ -18,10 +18,12 @@
 //! | 17 | stop requested |
 //! | 18 | non-finite gait sample (CoM, ZMP, feet or the stabilizer's shift) before the IK |
 //! | 19 | sensor data stale (no plausible reply from a sensor board for longer than `stale_ms`) |
+//! | 21 | servo fault (Hardware Error Status, temperature, input voltage or current beyond its limit) |
 //! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
 //! | 101 | panic |
 //!
-//! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0).
+//! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0). Stop
+//! code 10 is never used: its exit code would be start-up's 20.
 
 /// An unknown code (the value that could not be decoded).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -52,11 +54,14 @@ pub enum StopCode {
     /// 9: a sensor board gave no plausible reply for longer than `stale_ms` (id = device,
     /// value = age of its last accepted sample, ms).
     SensorStale,
+    /// 11: the servo monitor saw a servo beyond a limit (id = servo, value = [`ServoCheck`]
+    /// code · 65536 + the reading in the check's unit). (10 is not used: see the module docs.)
+    ServoFault,
 }
 
 impl StopCode {
     /// Every stop code.
-    pub const ALL: [StopCode; 9] = [
+    pub const ALL: [StopCode; 10] = [
         StopCode::DeviceMissing,
         StopCode::DeviceLost,
         StopCode::Fall,
@@ -66,6 +71,7 @@ impl StopCode {
         StopCode::Requested,
         StopCode::NonFiniteSample,
         StopCode::SensorStale,
+        StopCode::ServoFault,
     ];
 
     /// The wire code.
@@ -80,6 +86,7 @@ impl StopCode {
             StopCode::Requested => 7,
             StopCode::NonFiniteSample => 8,
             StopCode::SensorStale => 9,
+            StopCode::ServoFault => 11,
         }
     }
 
@@ -95,6 +102,7 @@ impl StopCode {
             StopCode::Requested => ExitCode::Requested,
             StopCode::NonFiniteSample => ExitCode::NonFiniteSample,
             StopCode::SensorStale => ExitCode::SensorStale,
+            StopCode::ServoFault => ExitCode::ServoFault,
         }
     }
 }
@@ -112,6 +120,7 @@ impl TryFrom<u8> for StopCode {
             7 => StopCode::Requested,
             8 => StopCode::NonFiniteSample,
             9 => StopCode::SensorStale,
+            11 => StopCode::ServoFault,
             other => return Err(UnknownCode(other)),
         })
     }
@@ -163,6 +172,15 @@ pub enum StopReason {
         /// Age of its last accepted sample, ms (saturating).
         age_ms: u16,
     },
+    /// A servo read while walking was beyond a limit.
+    ServoFault {
+        /// Its bus id.
+        id: u8,
+        /// Which check.
+        check: ServoCheck,
+        /// The reading, in the check's unit (see [`ServoCheck`]).
+        reading: u16,
+    },
 }
 
 impl StopReason {
@@ -178,6 +196,7 @@ impl StopReason {
             StopReason::Requested => StopCode::Requested,
             StopReason::NonFiniteSample { .. } => StopCode::NonFiniteSample,
             StopReason::SensorStale { .. } => StopCode::SensorStale,
+            StopReason::ServoFault { .. } => StopCode::ServoFault,
         }
     }
 
@@ -192,6 +211,9 @@ impl StopReason {
             StopReason::PlanDone | StopReason::Requested => (c, 0, 0),
             StopReason::NonFiniteSample { tick } => (c, 0, i32::try_from(tick).unwrap_or(i32::MAX)),
             StopReason::SensorStale { id, age_ms } => (c, id, i32::from(age_ms)),
+            StopReason::ServoFault { id, check, reading } => {
+                (c, id, (i32::from(check.code()) << 16) | i32::from(reading))
+            }
         }
     }
 
@@ -215,6 +237,11 @@ impl StopReason {
             StopCode::SensorStale => StopReason::SensorStale {
                 id,
                 age_ms: u16::try_from(value).ok()?,
+            },
+            StopCode::ServoFault => StopReason::ServoFault {
+                id,
+                check: ServoCheck::try_from(u8::try_from(value >> 16).ok()?).ok()?,
+                reading: u16::try_from(value & 0xFFFF).ok()?,
             },
         })
     }
@@ -341,6 +368,50 @@ impl TryFrom<u8> for SensorRejection {
     }
 }
 
+/// Which servo check failed (the `ServoFault` stop's reason; the reading's unit in brackets).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum ServoCheck {
+    /// 1: Hardware Error Status (70) is not 0 [its bits: 0 input voltage, 2 overheating, 3
+    /// motor encoder, 4 electrical shock, 5 overload].
+    HardwareError,
+    /// 2: Present Temperature (146) above the limit [°C].
+    Temperature,
+    /// 3: Present Input Voltage (144) below the limit [0.1 V].
+    VoltageLow,
+    /// 4: Present Input Voltage above the limit [0.1 V].
+    VoltageHigh,
+    /// 5: |Present Current| (126) above the limit [mA].
+    Current,
+}
+
+impl ServoCheck {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            ServoCheck::HardwareError => 1,
+            ServoCheck::Temperature => 2,
+            ServoCheck::VoltageLow => 3,
+            ServoCheck::VoltageHigh => 4,
+            ServoCheck::Current => 5,
+        }
+    }
+}
+
+impl TryFrom<u8> for ServoCheck {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => ServoCheck::HardwareError,
+            2 => ServoCheck::Temperature,
+            3 => ServoCheck::VoltageLow,
+            4 => ServoCheck::VoltageHigh,
+            5 => ServoCheck::Current,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
 /// Which start-up step failed (its code is the `StartupFailed` fault record's `value`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
@@ -410,6 +481,8 @@ pub enum ExitCode {
     NonFiniteSample,
     /// 19: sensor data stale.
     SensorStale,
+    /// 21: servo fault seen by the monitor.
+    ServoFault,
     /// 20: a start-up step failed after the probe.
     StartupFailed,
     /// 101: panic.
@@ -418,7 +491,7 @@ pub enum ExitCode {
 
 impl ExitCode {
     /// Every exit code.
-    pub const ALL: [ExitCode; 13] = [
+    pub const ALL: [ExitCode; 14] = [
         ExitCode::PlanDone,
         ExitCode::ConfigRejected,
         ExitCode::Watchdog,
@@ -431,6 +504,7 @@ impl ExitCode {
         ExitCode::NonFiniteSample,
         ExitCode::SensorStale,
         ExitCode::StartupFailed,
+        ExitCode::ServoFault,
         ExitCode::Panic,
     ];
 
@@ -448,6 +522,7 @@ impl ExitCode {
             ExitCode::Requested => 17,
             ExitCode::NonFiniteSample => 18,
             ExitCode::SensorStale => 19,
+            ExitCode::ServoFault => 21,
             ExitCode::StartupFailed => 20,
             ExitCode::Panic => 101,
         }
@@ -472,6 +547,7 @@ impl ExitCode {
             ExitCode::Requested => "stop requested",
             ExitCode::NonFiniteSample => "non-finite gait sample",
             ExitCode::SensorStale => "sensor data stale",
+            ExitCode::ServoFault => "servo fault",
             ExitCode::StartupFailed => "start-up step failed",
             ExitCode::Panic => "panic",
         }
@@ -493,6 +569,7 @@ impl TryFrom<u8> for ExitCode {
             17 => ExitCode::Requested,
             18 => ExitCode::NonFiniteSample,
             19 => ExitCode::SensorStale,
+            21 => ExitCode::ServoFault,
             20 => ExitCode::StartupFailed,
             101 => ExitCode::Panic,
             other => return Err(UnknownCode(other)),
@@ -518,6 +595,9 @@ mod tests {
                 assert_eq!(s.code(), c);
             }
             if let Ok(s) = SensorRejection::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = ServoCheck::try_from(c) {
                 assert_eq!(s.code(), c);
             }
         }
@@ -562,6 +642,16 @@ mod tests {
             StopReason::SensorStale {
                 id: 200,
                 age_ms: 105,
+            },
+            StopReason::ServoFault {
+                id: 7,
+                check: ServoCheck::Temperature,
+                reading: 81,
+            },
+            StopReason::ServoFault {
+                id: 12,
+                check: ServoCheck::Current,
+                reading: 65_535,
             },
         ] {
             let (c, id, v) = r.code();

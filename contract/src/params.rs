@@ -844,6 +844,42 @@ params! {
         set: |c, v| { c.torque_off_attempts = v as u8 },
         get: |c| { Some(Value::Int(u32::from(c.torque_off_attempts))) },
     },
+    {
+        key: "servo_temp_max",
+        plan_key: None,
+        unit: "°C",
+        domain: int(1, 100),
+        doc: "servo monitor: highest Present Temperature",
+        set: |c, v| { c.servo_limits.temperature_max_c = v as u8 },
+        get: |c| { Some(Value::Int(u32::from(c.servo_limits.temperature_max_c))) },
+    },
+    {
+        key: "servo_volt_min",
+        plan_key: None,
+        unit: "V",
+        domain: range(0.0, 30.0),
+        doc: "servo monitor: lowest Present Input Voltage",
+        set: |c, v| { c.servo_limits.voltage_min_v = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_limits.voltage_min_v)) },
+    },
+    {
+        key: "servo_volt_max",
+        plan_key: None,
+        unit: "V",
+        domain: range(0.0, 30.0),
+        doc: "servo monitor: highest Present Input Voltage",
+        set: |c, v| { c.servo_limits.voltage_max_v = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_limits.voltage_max_v)) },
+    },
+    {
+        key: "servo_current_max",
+        plan_key: None,
+        unit: "A",
+        domain: range(0.0, 20.0),
+        doc: "servo monitor: highest |Present Current|",
+        set: |c, v| { c.servo_limits.current_max_a = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_limits.current_max_a)) },
+    },
 }
 
 /// Key index meaning "not a known key".

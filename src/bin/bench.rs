@@ -960,6 +960,15 @@ mod firmware {
                 (Kind::Servo, 132, 4) => put(out, &d.present.to_le_bytes()),
                 (Kind::Servo, 116, 4) => put(out, &d.goal.to_le_bytes()),
                 (Kind::Servo, 64, 1) => put(out, &[u8::from(d.torque)]),
+                // The servo monitor's reads: no hardware error; 0.8 A, 12.0 V, 40 °C.
+                (Kind::Servo, 70, 1) => put(out, &[0]),
+                (Kind::Servo, 126, 21) => {
+                    let mut b = [0u8; 21];
+                    b[0..2].copy_from_slice(&300i16.to_le_bytes());
+                    b[18..20].copy_from_slice(&120u16.to_le_bytes());
+                    b[20] = 40;
+                    put(out, &b)
+                }
                 (Kind::Foot(s), 128, 18) => {
                     let f = FootForces {
                         forces_mn: if s == 0 {

@@ -108,8 +108,25 @@ fn table2_walk_runs_to_plan_done() {
         let bulk: Vec<_> = pk.iter().filter(|p| p.op == opcode::BULK_READ).collect();
         let sync: Vec<_> = pk.iter().filter(|p| p.op == opcode::SYNC_WRITE).collect();
         assert_eq!(bulk.len(), 1, "tick {k}");
-        // The last tick: bulk read, torque off, and its read-back from the 12 servos.
-        assert_eq!(pk.len(), if k < last { 2 } else { 14 }, "tick {k}: {pk:?}");
+        // Walking ticks: bulk read, sync write, the servo monitor's two READs of servo
+        // 1 + k mod 12 (ramp and walk; not the held final pose). The last tick: bulk read,
+        // torque off, and its read-back from the 12 servos.
+        let monitored = k < ramp + walk;
+        let expected = if k == last {
+            14
+        } else if monitored {
+            4
+        } else {
+            2
+        };
+        assert_eq!(pk.len(), expected, "tick {k}: {pk:?}");
+        if monitored {
+            let id = 1 + (k % 12) as u8;
+            assert_eq!(
+                (pk[2].id, pk[2].addr, pk[3].id, pk[3].addr),
+                (id, 70, id, 126)
+            );
+        }
         if k < last {
             assert_eq!(sync.len(), 1, "tick {k}");
             assert_eq!(sync[0].addr, 116);
@@ -884,4 +901,47 @@ fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
     assert_eq!(readbacks, 12, "one read-back per servo");
     assert!(faults_of(&b.records(), FaultKind::TorqueOffUnconfirmed).is_empty());
     assert_eq!(b.power.len(), 1);
+}
+
+#[test]
+fn the_servo_monitor_stops_on_each_limit() {
+    use walker_contract::codes::ServoCheck;
+    let cfg = Config::default();
+    // Each fault set on servo 8 from the start: the monitor reads servo 8 on tick 7 (round-robin
+    // from servo 1 at tick 0), so the stop begins on tick 7 of the ramp.
+    type SetFault = fn(&mut crate::testkit::FakeDevice);
+    let cases: [(SetFault, ServoCheck, u16); 5] = [
+        (|d| d.hw_error = 0x04, ServoCheck::HardwareError, 4),
+        (|d| d.temperature = 75, ServoCheck::Temperature, 75),
+        (|d| d.voltage_dv = 95, ServoCheck::VoltageLow, 95),
+        (|d| d.voltage_dv = 160, ServoCheck::VoltageHigh, 160),
+        // −1000 units × 2.69 mA = 2.69 A > 2.5 A.
+        (|d| d.current_raw = -1000, ServoCheck::Current, 2690),
+    ];
+    for (set, check, reading) in cases {
+        let mut b = board(&cfg);
+        set(b.device_mut(8).unwrap());
+        let end = run(&mut b, &cfg);
+        let want = StopReason::ServoFault {
+            id: 8,
+            check,
+            reading,
+        };
+        assert_eq!(end, RunEnd::Stopped(want), "{check:?}");
+        assert_eq!(end.exit_code(), 21);
+        let recs = b.records();
+        assert_eq!(stop_of(&recs), Some(want));
+        let tr = ticks_of(&recs);
+        assert_eq!(
+            tr.iter().position(|t| t.fault == FaultState::Stopping),
+            Some(8),
+            "{check:?}"
+        );
+        assert!(torque_off_sent(&b));
+    }
+    // The limits are parameters: 75 °C passes with servo_temp_max=80.
+    let cfg = cfg_with("elf servo_temp_max=80 steps=1");
+    let mut b = board(&cfg);
+    b.device_mut(8).unwrap().temperature = 75;
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
 }
