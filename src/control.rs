@@ -63,6 +63,15 @@
 //! measurement instruments for the ZMP-response log. A foot board that stops answering
 //! *during* the walk is a device loss (stop), whatever this setting.
 //!
+//! # Reset cause and crash records
+//! At every boot [`run`] logs the reset cause ([`Board::reset_cause`]: RCC_CSR on the OpenCR,
+//! power-on under QEMU) as a `ResetCause` fault record after the start-up record, and a panic
+//! or watchdog record left by the previous run in no-init RAM ([`Board::crash_cell`]; the loop
+//! notes its tick there every tick) as a `CrashRecord`. After any reset but a power-on the
+//! firmware does not walk by itself: torque off (confirmed, then servo power cut: the servos
+//! kept their power through the controller's reset) and stop `NotPowerOn` (exit 22). Walking
+//! again needs a power cycle until the command port of the online-walking issue exists.
+//!
 //! # Exit codes
 //! [`RunEnd::exit_code`] maps an end to the contract's [`walker_contract::ExitCode`] table (the
 //! one table of the codes and their meanings; QEMU passes them to the host through
@@ -81,7 +90,7 @@ use gait_core::{GaitError, GaitSample, Robot, Sampler, Side};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 use walker_contract::ExitCode;
 
-use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
+use crate::board::{Board, CrashCode, CrashNote, ResetCause, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
 use crate::imu::{AttitudeFilter, PitchAccel, PitchAccelConfig};
 use crate::monitor::ServoMonitor;
@@ -128,6 +137,58 @@ impl RunEnd {
     /// The process exit status of this end (QEMU semihosting).
     pub fn exit_code(&self) -> i32 {
         self.exit().status()
+    }
+}
+
+/// What the boot found: the reset cause (with the board's raw flags) and the crash record of
+/// the previous run, if any.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Boot {
+    /// What reset the controller.
+    pub cause: ResetCause,
+    /// The board's raw reset flags.
+    pub flags: u32,
+    /// A panic or watchdog of the previous run and the last tick it noted.
+    pub crash: Option<(CrashCode, u32)>,
+}
+
+impl Boot {
+    /// Reads the reset cause and takes the crash record from `board` (after a power-on the
+    /// no-init RAM is random: cleared, not read; a watchdog reset without a record still
+    /// reports the watchdog, with the last tick the loop noted if any).
+    pub fn read<B: Board>(board: &mut B) -> Self {
+        let (cause, flags) = board.reset_cause();
+        let note = board.crash_cell().take();
+        let crash = match (cause, note) {
+            (ResetCause::PowerOn, _) => None,
+            (
+                _,
+                Some(CrashNote {
+                    code: Some(c),
+                    tick,
+                }),
+            ) => Some((c, tick)),
+            (ResetCause::Watchdog, n) => Some((CrashCode::Watchdog, n.map_or(0, |n| n.tick))),
+            _ => None,
+        };
+        Boot {
+            cause,
+            flags,
+            crash,
+        }
+    }
+
+    /// Writes the boot's records: `ResetCause` (id = cause, value = raw flags), then
+    /// `CrashRecord` (id = crash code, value = tick) if there was one.
+    pub fn write<B: Board>(&self, board: &mut B, log: &mut LogWriter) {
+        let now = board.now_us();
+        let flags = i32::try_from(self.flags).unwrap_or(i32::MAX);
+        let rec = fault(now, FaultKind::ResetCause, self.cause.code(), flags);
+        log.write(board, rec);
+        if let Some((code, tick)) = self.crash {
+            let tick = i32::try_from(tick).unwrap_or(i32::MAX);
+            log.write(board, fault(now, FaultKind::CrashRecord, code.code(), tick));
+        }
     }
 }
 
@@ -386,6 +447,21 @@ struct SensorState {
 pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let robot = Robot::reference();
     let mut log = LogWriter::new();
+    // Why did we boot? Only a power-on walks by itself.
+    let boot = Boot::read(board);
+    if boot.cause != ResetCause::PowerOn {
+        crate::fw_log!(error, "reset cause {}: not walking", boot.cause.code());
+        let rec = startup_record(board, cfg, None);
+        log.write(board, rec);
+        boot.write(board, &mut log);
+        let time = Cell::new(0);
+        let mut bus = BoardMaster::new(board, &time, cfg);
+        // The servos kept their power through the controller's reset: let go, cut it.
+        torque_off(&mut bus, &mut log, cfg);
+        let reason = StopReason::NotPowerOn { cause: boot.cause };
+        write_stop(&mut bus, &mut log, reason);
+        return RunEnd::Stopped(reason);
+    }
     let targets = Targets::new(&robot, cfg.compensation);
     // The servo-speed check (a dry run) adjusts the walk before anything moves.
     let timing =
@@ -407,6 +483,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
             let rec = startup_record(board, cfg, None);
             log.write(board, rec);
+            boot.write(board, &mut log);
             let rec = fault(
                 board.now_us(),
                 FaultKind::ConfigRejected,
@@ -427,6 +504,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         let b = bus.board();
         let rec = startup_record(&*b, cfg, Some(&missing));
         log.write(b, rec);
+        boot.write(b, &mut log);
     }
     if let Ok(t) = &timing {
         for (kind, id, value) in t.notes().into_iter().map(startup::note_record) {
@@ -526,6 +604,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     bus.board().start(cfg.watchdog_ms);
     loop {
         let tick = bus.board().wait_tick();
+        bus.board().crash_cell().note_tick(tick.index);
         sup.tick_timing(tick.overrun);
 
         // Sensors.

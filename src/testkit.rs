@@ -113,6 +113,10 @@ pub struct FakeBoard {
     pub best_effort: u32,
     /// Every `servo_power` call: (on, `packets.len()` at the call).
     pub power: Vec<(bool, usize)>,
+    /// What `reset_cause` reports (power-on by default).
+    pub reset: (crate::board::ResetCause, u32),
+    /// The no-init crash record.
+    pub crash: crate::board::CrashCell,
     /// Goal positions of every SYNC WRITE.
     pub goals: Vec<[i32; 12]>,
     /// Script: device `id` dies once `n` SYNC WRITEs were seen.
@@ -188,6 +192,8 @@ impl FakeBoard {
             feeds: 0,
             best_effort: 0,
             power: Vec::new(),
+            reset: (crate::board::ResetCause::PowerOn, 0),
+            crash: crate::board::CrashCell::new(),
             goals: Vec::new(),
             kill_at: None,
             revive_at: None,
@@ -598,6 +604,14 @@ impl Board for FakeBoard {
 
     fn servo_power(&mut self, on: bool) {
         self.power.push((on, self.packets.len()));
+    }
+
+    fn reset_cause(&self) -> (crate::board::ResetCause, u32) {
+        self.reset
+    }
+
+    fn crash_cell(&mut self) -> &mut crate::board::CrashCell {
+        &mut self.crash
     }
 
     fn exit(&mut self, code: i32) -> ! {

@@ -19,6 +19,7 @@
 //! | 18 | non-finite gait sample (CoM, ZMP, feet or the stabilizer's shift) before the IK |
 //! | 19 | sensor data stale (no plausible reply from a sensor board for longer than `stale_ms`) |
 //! | 21 | servo fault (Hardware Error Status, temperature, input voltage or current beyond its limit) |
+//! | 22 | not walking after a reset other than power-on (brown-out, watchdog, software/panic, pin) |
 //! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
 //! | 101 | panic |
 //!
@@ -57,11 +58,14 @@ pub enum StopCode {
     /// 11: the servo monitor saw a servo beyond a limit (id = servo, value = [`ServoCheck`]
     /// code · 65536 + the reading in the check's unit). (10 is not used: see the module docs.)
     ServoFault,
+    /// 12: the last reset was not a power-on: the firmware does not walk by itself (value =
+    /// [`ResetCause`] code).
+    NotPowerOn,
 }
 
 impl StopCode {
     /// Every stop code.
-    pub const ALL: [StopCode; 10] = [
+    pub const ALL: [StopCode; 11] = [
         StopCode::DeviceMissing,
         StopCode::DeviceLost,
         StopCode::Fall,
@@ -72,6 +76,7 @@ impl StopCode {
         StopCode::NonFiniteSample,
         StopCode::SensorStale,
         StopCode::ServoFault,
+        StopCode::NotPowerOn,
     ];
 
     /// The wire code.
@@ -87,6 +92,7 @@ impl StopCode {
             StopCode::NonFiniteSample => 8,
             StopCode::SensorStale => 9,
             StopCode::ServoFault => 11,
+            StopCode::NotPowerOn => 12,
         }
     }
 
@@ -103,6 +109,7 @@ impl StopCode {
             StopCode::NonFiniteSample => ExitCode::NonFiniteSample,
             StopCode::SensorStale => ExitCode::SensorStale,
             StopCode::ServoFault => ExitCode::ServoFault,
+            StopCode::NotPowerOn => ExitCode::NotPowerOn,
         }
     }
 }
@@ -121,6 +128,7 @@ impl TryFrom<u8> for StopCode {
             8 => StopCode::NonFiniteSample,
             9 => StopCode::SensorStale,
             11 => StopCode::ServoFault,
+            12 => StopCode::NotPowerOn,
             other => return Err(UnknownCode(other)),
         })
     }
@@ -181,6 +189,11 @@ pub enum StopReason {
         /// The reading, in the check's unit (see [`ServoCheck`]).
         reading: u16,
     },
+    /// The last reset was not a power-on: no walk without a command.
+    NotPowerOn {
+        /// What reset the controller.
+        cause: ResetCause,
+    },
 }
 
 impl StopReason {
@@ -197,6 +210,7 @@ impl StopReason {
             StopReason::NonFiniteSample { .. } => StopCode::NonFiniteSample,
             StopReason::SensorStale { .. } => StopCode::SensorStale,
             StopReason::ServoFault { .. } => StopCode::ServoFault,
+            StopReason::NotPowerOn { .. } => StopCode::NotPowerOn,
         }
     }
 
@@ -214,6 +228,7 @@ impl StopReason {
             StopReason::ServoFault { id, check, reading } => {
                 (c, id, (i32::from(check.code()) << 16) | i32::from(reading))
             }
+            StopReason::NotPowerOn { cause } => (c, 0, i32::from(cause.code())),
         }
     }
 
@@ -242,6 +257,9 @@ impl StopReason {
                 id,
                 check: ServoCheck::try_from(u8::try_from(value >> 16).ok()?).ok()?,
                 reading: u16::try_from(value & 0xFFFF).ok()?,
+            },
+            StopCode::NotPowerOn => StopReason::NotPowerOn {
+                cause: ResetCause::try_from(u8::try_from(value).ok()?).ok()?,
             },
         })
     }
@@ -281,6 +299,12 @@ pub enum FaultKind {
     /// broadcast Torque Enable = 0 and read-back (`id` = first unconfirmed servo, `value` =
     /// number unconfirmed); the servo power is cut anyway.
     TorqueOffUnconfirmed,
+    /// 12: what reset the controller, logged at every boot (`id` = [`ResetCause`] code, `value`
+    /// = the raw reset flags where the board has them: RCC_CSR bits 24..=31 on the OpenCR).
+    ResetCause,
+    /// 13: a panic or watchdog record found in no-init RAM at boot, from the previous run
+    /// (`id` = [`CrashCode`], `value` = the last control tick index it noted).
+    CrashRecord,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -300,6 +324,8 @@ impl FaultKind {
             Self::SpeedLimit => 9,
             Self::SensorRejected => 10,
             Self::TorqueOffUnconfirmed => 11,
+            Self::ResetCause => 12,
+            Self::CrashRecord => 13,
             Self::Other(c) => c,
         }
     }
@@ -317,6 +343,8 @@ impl FaultKind {
             9 => Self::SpeedLimit,
             10 => Self::SensorRejected,
             11 => Self::TorqueOffUnconfirmed,
+            12 => Self::ResetCause,
+            13 => Self::CrashRecord,
             c => Self::Other(c),
         }
     }
@@ -412,6 +440,88 @@ impl TryFrom<u8> for ServoCheck {
     }
 }
 
+/// What reset the controller (the `ResetCause` fault record's `id`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum ResetCause {
+    /// 1: power-on (the only reset after which the firmware walks by itself).
+    PowerOn,
+    /// 2: brown-out (the supply sagged below the threshold).
+    BrownOut,
+    /// 3: a watchdog (independent or window).
+    Watchdog,
+    /// 4: a software reset (the panic path, `SCB::sys_reset`).
+    Software,
+    /// 5: the reset pin (button, debugger).
+    Pin,
+    /// 6: low-power management.
+    LowPower,
+    /// 7: no flag set (unknown).
+    Unknown,
+}
+
+impl ResetCause {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            ResetCause::PowerOn => 1,
+            ResetCause::BrownOut => 2,
+            ResetCause::Watchdog => 3,
+            ResetCause::Software => 4,
+            ResetCause::Pin => 5,
+            ResetCause::LowPower => 6,
+            ResetCause::Unknown => 7,
+        }
+    }
+}
+
+impl TryFrom<u8> for ResetCause {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => ResetCause::PowerOn,
+            2 => ResetCause::BrownOut,
+            3 => ResetCause::Watchdog,
+            4 => ResetCause::Software,
+            5 => ResetCause::Pin,
+            6 => ResetCause::LowPower,
+            7 => ResetCause::Unknown,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
+/// What a crash record in no-init RAM says (the `CrashRecord` fault record's `id`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum CrashCode {
+    /// 1: the firmware panicked.
+    Panic,
+    /// 2: the watchdog reset the controller (the record holds the last tick noted).
+    Watchdog,
+}
+
+impl CrashCode {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            CrashCode::Panic => 1,
+            CrashCode::Watchdog => 2,
+        }
+    }
+}
+
+impl TryFrom<u8> for CrashCode {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => CrashCode::Panic,
+            2 => CrashCode::Watchdog,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
 /// Which start-up step failed (its code is the `StartupFailed` fault record's `value`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
@@ -483,6 +593,8 @@ pub enum ExitCode {
     SensorStale,
     /// 21: servo fault seen by the monitor.
     ServoFault,
+    /// 22: not walking after a reset other than power-on.
+    NotPowerOn,
     /// 20: a start-up step failed after the probe.
     StartupFailed,
     /// 101: panic.
@@ -491,7 +603,7 @@ pub enum ExitCode {
 
 impl ExitCode {
     /// Every exit code.
-    pub const ALL: [ExitCode; 14] = [
+    pub const ALL: [ExitCode; 15] = [
         ExitCode::PlanDone,
         ExitCode::ConfigRejected,
         ExitCode::Watchdog,
@@ -505,6 +617,7 @@ impl ExitCode {
         ExitCode::SensorStale,
         ExitCode::StartupFailed,
         ExitCode::ServoFault,
+        ExitCode::NotPowerOn,
         ExitCode::Panic,
     ];
 
@@ -523,6 +636,7 @@ impl ExitCode {
             ExitCode::NonFiniteSample => 18,
             ExitCode::SensorStale => 19,
             ExitCode::ServoFault => 21,
+            ExitCode::NotPowerOn => 22,
             ExitCode::StartupFailed => 20,
             ExitCode::Panic => 101,
         }
@@ -548,6 +662,7 @@ impl ExitCode {
             ExitCode::NonFiniteSample => "non-finite gait sample",
             ExitCode::SensorStale => "sensor data stale",
             ExitCode::ServoFault => "servo fault",
+            ExitCode::NotPowerOn => "reset other than power-on: not walking",
             ExitCode::StartupFailed => "start-up step failed",
             ExitCode::Panic => "panic",
         }
@@ -570,6 +685,7 @@ impl TryFrom<u8> for ExitCode {
             18 => ExitCode::NonFiniteSample,
             19 => ExitCode::SensorStale,
             21 => ExitCode::ServoFault,
+            22 => ExitCode::NotPowerOn,
             20 => ExitCode::StartupFailed,
             101 => ExitCode::Panic,
             other => return Err(UnknownCode(other)),
@@ -598,6 +714,12 @@ mod tests {
                 assert_eq!(s.code(), c);
             }
             if let Ok(s) = ServoCheck::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = ResetCause::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = CrashCode::try_from(c) {
                 assert_eq!(s.code(), c);
             }
         }
@@ -652,6 +774,9 @@ mod tests {
                 id: 12,
                 check: ServoCheck::Current,
                 reading: 65_535,
+            },
+            StopReason::NotPowerOn {
+                cause: ResetCause::BrownOut,
             },
         ] {
             let (c, id, v) = r.code();

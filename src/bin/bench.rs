@@ -63,8 +63,8 @@ mod firmware {
         ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
     };
     use walker_firmware::board::{
-        Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer,
-        Watchdog,
+        Board, BusError, Clock, CrashCell, LineTime, LogSink, ResetCause, ServoBus, Tick,
+        TickSchedule, TickTimer, Watchdog,
     };
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
     use walker_firmware::bus_map::{self, TickMap};
@@ -868,6 +868,7 @@ mod firmware {
         compute_ns: u64,
         devs: [Dev; 15],
         imu_counter: u16,
+        crash: CrashCell,
         mark: Option<u32>,
         paused_at: u32,
         excluded: u32,
@@ -909,6 +910,7 @@ mod firmware {
                 compute_ns: 150_000,
                 devs,
                 imu_counter: 0,
+                crash: CrashCell::new(),
                 mark: None,
                 paused_at: 0,
                 excluded: 0,
@@ -1206,6 +1208,14 @@ mod firmware {
         }
 
         fn servo_power(&mut self, _on: bool) {}
+
+        fn reset_cause(&self) -> (ResetCause, u32) {
+            (ResetCause::PowerOn, 0)
+        }
+
+        fn crash_cell(&mut self) -> &mut CrashCell {
+            &mut self.crash
+        }
 
         fn exit(&mut self, code: i32) -> ! {
             semihosting_exit(code)

@@ -42,8 +42,8 @@ use stm32f7xx_hal::serial::{self, Serial};
 use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
 use crate::board::{
-    Board, BusError, Clock, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
-    TORQUE_OFF_PACKET,
+    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogSink, ResetCause,
+    ServoBus, Tick, TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
 use crate::Config;
@@ -126,41 +126,26 @@ pub fn panic_torque_off() {
     gpiof.bsrr.write(|w| w.br15().set_bit());
 }
 
-/// Marker left in RAM that is not zeroed at start-up (`.uninit`) by a panic, so that the next
-/// boot knows the reset was a panic and not a debugger's or the user's.
-#[link_section = ".uninit.WALKER_PANIC_MARK"]
-static mut PANIC_MARK: core::mem::MaybeUninit<u32> = core::mem::MaybeUninit::uninit();
-/// Value of [`PANIC_MARK`] after a panic.
-const PANIC_MAGIC: u32 = 0x5741_4C4B; // "WALK"
+/// The crash record in RAM that is not zeroed at start-up (`.uninit`, NOLOAD in cortex-m-rt's
+/// `link.x`): the loop notes its tick there, a panic records itself, and the next boot logs it
+/// ([`crate::control`]). After a power-on its content is random and ignored.
+#[link_section = ".uninit.WALKER_CRASH"]
+static mut CRASH: core::mem::MaybeUninit<CrashCell> = core::mem::MaybeUninit::uninit();
 
-/// Records that the firmware is about to reset because of a panic.
-pub fn mark_panic() {
-    // SAFETY: single-core, called from the panic handler only; a plain volatile u32 store.
-    unsafe {
-        core::ptr::write_volatile(
-            core::ptr::addr_of_mut!(PANIC_MARK).cast::<u32>(),
-            PANIC_MAGIC,
-        )
-    }
+/// The crash record (see [`CRASH`]).
+fn crash_cell() -> &'static mut CrashCell {
+    // SAFETY: single core; the board (one value, `Peripherals::take` makes it unique) and the
+    // panic path (after which nothing else runs) are its only users. Every field is a u32, any
+    // bit pattern is a value; `CrashCell` accesses them volatile.
+    unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashCell>() }
 }
 
-/// True when the last reset came from a panic; clears the mark. Meaningless after a power-on
-/// (the RAM content is random), which the caller excludes with the reset flags.
-pub fn take_panic_mark() -> bool {
-    let p = core::ptr::addr_of_mut!(PANIC_MARK).cast::<u32>();
-    // SAFETY: single-core, called once at boot before anything else touches the marker.
-    unsafe {
-        let v = core::ptr::read_volatile(p);
-        core::ptr::write_volatile(p, 0);
-        v == PANIC_MAGIC
-    }
-}
-
-/// Panic path of the OpenCR binary: log, torque off, reset.
+/// Panic path of the OpenCR binary: log, record the panic in no-init RAM, torque off and
+/// servo power off, reset (the next boot logs the record and does not walk).
 pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
     defmt::error!("panic: {}", defmt::Display2Format(info));
+    crash_cell().record(CrashCode::Panic);
     panic_torque_off();
-    mark_panic();
     SCB::sys_reset()
 }
 
@@ -180,12 +165,16 @@ pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     len: usize,
     log_dropped: u32,
     uart_errors: u32,
+    reset_csr: u32,
 }
 
 impl OpenCrBoard<DxlDir> {
     /// Brings the board up: 216 MHz clocks, Dynamixel power on, USART3 bus at
     /// `cfg.bus_baud`, USART6 log at [`LOG_BAUD`], TIM2 at 1 MHz. The watchdog is not started.
     pub fn new(dp: pac::Peripherals, cfg: &Config) -> Self {
+        // The reset flags first, then clear them (RMVF) so that the next boot sees its own.
+        let reset_csr = dp.RCC.csr.read().bits();
+        dp.RCC.csr.modify(|_, w| w.rmvf().set_bit());
         let rcc = dp.RCC.constrain();
         let clocks = rcc
             .cfgr
@@ -268,6 +257,7 @@ impl OpenCrBoard<DxlDir> {
             len: 0,
             log_dropped: 0,
             uart_errors: 0,
+            reset_csr,
         }
     }
 }
@@ -434,6 +424,14 @@ impl<D: OutputPin> Board for OpenCrBoard<D> {
 
     fn torque_off_best_effort(&mut self) {
         let _ = self.send(&TORQUE_OFF_PACKET);
+    }
+
+    fn reset_cause(&self) -> (ResetCause, u32) {
+        (stm32f7_reset_cause(self.reset_csr), self.reset_csr >> 24)
+    }
+
+    fn crash_cell(&mut self) -> &mut CrashCell {
+        crash_cell()
     }
 
     fn servo_power(&mut self, on: bool) {

@@ -65,8 +65,8 @@ use cortex_m_rt as _;
 use defmt_semihosting as _;
 
 use crate::board::{
-    Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
-    TORQUE_OFF_PACKET,
+    Board, BusError, Clock, CrashCell, CrashCode, LineTime, LogSink, ResetCause, ServoBus, Tick,
+    TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
 use crate::Config;
@@ -253,6 +253,7 @@ pub struct QemuBoard {
     cpu: CpuMeter,
     cpu_last_us: u32,
     cpu_max_us: u32,
+    crash: CrashCell,
     _syst: SYST,
 }
 
@@ -296,6 +297,7 @@ impl QemuBoard {
             cpu: CpuMeter { mark: 0, counts: 0 },
             cpu_last_us: 0,
             cpu_max_us: 0,
+            crash: CrashCell::new(),
             _syst: syst,
         };
         b.cpu.resume();
@@ -374,6 +376,7 @@ impl QemuBoard {
         if let Some(ms) = self.watchdog_ms {
             if self.virt_ns.saturating_sub(self.last_feed_ns) > u64::from(ms) * 1_000_000 {
                 defmt::error!("virtual watchdog expired at {} us", self.now_us_inner());
+                self.crash.record(CrashCode::Watchdog);
                 self.torque_off_best_effort();
                 semihosting_exit(EXIT_WATCHDOG);
             }
@@ -504,6 +507,15 @@ impl Board for QemuBoard {
         self.cpu.pause();
         panic_torque_off();
         self.cpu.resume();
+    }
+
+    fn reset_cause(&self) -> (ResetCause, u32) {
+        // Every QEMU run starts from power-on.
+        (ResetCause::PowerOn, 0)
+    }
+
+    fn crash_cell(&mut self) -> &mut CrashCell {
+        &mut self.crash
     }
 
     fn servo_power(&mut self, on: bool) {

@@ -945,3 +945,141 @@ fn the_servo_monitor_stops_on_each_limit() {
     b.device_mut(8).unwrap().temperature = 75;
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
 }
+
+/// The boot records of `recs`: (reset cause code, raw flags), crash record (code, tick).
+fn boot_records(recs: &[Record]) -> (Option<(u8, i32)>, Option<(u8, i32)>) {
+    let reset = faults_of(recs, FaultKind::ResetCause)
+        .first()
+        .map(|f| (f.id, f.value));
+    let crash = faults_of(recs, FaultKind::CrashRecord)
+        .first()
+        .map(|f| (f.id, f.value));
+    (reset, crash)
+}
+
+/// Asserts a run that must not walk: no torque enable, no goal, torque off confirmed and the
+/// servo power cut, stop `NotPowerOn`.
+fn assert_not_walking(b: &FakeBoard, cause: crate::board::ResetCause) {
+    assert!(!b
+        .packets
+        .iter()
+        .any(|p| p.op == opcode::WRITE && p.addr == 64 && p.data == [1]));
+    assert_eq!(b.count(opcode::SYNC_WRITE), 0);
+    assert!(torque_off_sent(b));
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
+    assert!(b.servos().all(|d| !d.torque));
+    assert_eq!(
+        stop_of(&b.records()),
+        Some(StopReason::NotPowerOn { cause })
+    );
+}
+
+#[test]
+fn a_power_on_logs_its_cause_and_walks() {
+    use crate::board::ResetCause;
+    let cfg = cfg_with("elf steps=1");
+    let mut b = board(&cfg);
+    // Random RAM after a power-on that happens to look like a panic record: ignored.
+    b.crash.note_tick(7);
+    b.crash.record(crate::board::CrashCode::Panic);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (Some((ResetCause::PowerOn.code(), 0)), None)
+    );
+    // Right after the start-up record.
+    assert!(matches!(recs[1], Record::Fault(f) if f.kind == FaultKind::ResetCause));
+    // The loop noted its last tick in the no-init record.
+    let last = b.ticks.last().unwrap().tick.index;
+    let note = b.crash.take().unwrap();
+    assert_eq!((note.code, u64::from(note.tick)), (None, last));
+}
+
+#[test]
+fn a_brown_out_reset_logs_its_cause_and_does_not_walk() {
+    use crate::board::{stm32f7_reset_cause, ResetCause};
+    let cfg = Config::default();
+    let mut b = board(&cfg);
+    // RCC_CSR after a brown-out: BORRSTF and PINRSTF, no PORRSTF.
+    let csr = (1u32 << 25) | (1 << 26);
+    b.reset = (stm32f7_reset_cause(csr), csr >> 24);
+    // Torque was on before the reset (the servos have their own supply).
+    for d in b.devices.iter_mut() {
+        d.torque = matches!(d.kind, crate::testkit::Kind::Servo(_));
+    }
+    let end = run(&mut b, &cfg);
+    assert_eq!(
+        end,
+        RunEnd::Stopped(StopReason::NotPowerOn {
+            cause: ResetCause::BrownOut
+        })
+    );
+    assert_eq!(end.exit_code(), 22);
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (Some((ResetCause::BrownOut.code(), 0b110)), None)
+    );
+    assert!(!startup_of(&recs).probed);
+    assert_not_walking(&b, ResetCause::BrownOut);
+}
+
+#[test]
+fn a_watchdog_reset_writes_its_record_at_the_next_boot() {
+    use crate::board::ResetCause;
+    let cfg = Config::default();
+    // A first run stops mid-walk; then the loop hangs (it does not return here: the last noted
+    // tick is what the watchdog reset leaves in no-init RAM).
+    let mut b = board(&cfg);
+    let mut c1 = cfg;
+    c1.stop_at_tick = Some(100);
+    let _ = run(&mut b, &c1);
+    let last = b.ticks.last().unwrap().tick.index;
+    // Next boot on the same board (RAM kept) after an IWDG reset: IWDGRSTF + PINRSTF.
+    b.reset = (ResetCause::Watchdog, 0b0010_0100);
+    b.packets.clear();
+    b.log.clear();
+    b.power.clear();
+    let end = run(&mut b, &cfg);
+    assert_eq!(
+        end,
+        RunEnd::Stopped(StopReason::NotPowerOn {
+            cause: ResetCause::Watchdog
+        })
+    );
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (
+            Some((ResetCause::Watchdog.code(), 0b0010_0100)),
+            Some((crate::board::CrashCode::Watchdog.code(), last as i32))
+        )
+    );
+    assert_not_walking(&b, ResetCause::Watchdog);
+}
+
+#[test]
+fn a_panic_writes_its_record_at_the_next_boot() {
+    use crate::board::{CrashCode, ResetCause};
+    let cfg = Config::default();
+    let mut b = board(&cfg);
+    // What the panic path does on the OpenCR: the loop had noted tick 1234, the handler
+    // records the panic, then a software reset (SFTRSTF + PINRSTF).
+    b.crash.note_tick(1234);
+    b.crash.record(CrashCode::Panic);
+    b.reset = (ResetCause::Software, 0b0001_0100);
+    let end = run(&mut b, &cfg);
+    assert_eq!(end.exit_code(), 22);
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (
+            Some((ResetCause::Software.code(), 0b0001_0100)),
+            Some((CrashCode::Panic.code(), 1234))
+        )
+    );
+    assert_not_walking(&b, ResetCause::Software);
+    // The record is consumed: the boot after that finds none.
+    assert_eq!(b.crash.take(), None);
+}
