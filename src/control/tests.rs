@@ -947,7 +947,9 @@ fn the_servo_monitor_stops_on_each_limit() {
 }
 
 /// The boot records of `recs`: (reset cause code, raw flags), crash record (code, tick).
-fn boot_records(recs: &[Record]) -> (Option<(u8, i32)>, Option<(u8, i32)>) {
+type IdValue = Option<(u8, i32)>;
+
+fn boot_records(recs: &[Record]) -> (IdValue, IdValue) {
     let reset = faults_of(recs, FaultKind::ResetCause)
         .first()
         .map(|f| (f.id, f.value));
