@@ -23,6 +23,8 @@ pub enum BusError {
     UnsupportedBaud,
     /// The packet is longer than the transport can send.
     TooLong,
+    /// The UART did not become ready within the board's bounded wait (a hung peripheral).
+    Timeout,
 }
 
 /// The half-duplex Dynamixel bus, one instruction packet at a time.
@@ -30,7 +32,8 @@ pub enum BusError {
 /// Contract (both boards implement it exactly, the driver relies on it):
 /// * [`ServoBus::send`] transmits one complete instruction packet and returns when its last
 ///   byte is on the wire and the line is turned around to receive. Any reply bytes of an
-///   earlier packet that were never read are discarded first.
+///   earlier packet that were never read are discarded first. Every wait for the UART is
+///   bounded ([`BusError::Timeout`]).
 /// * [`ServoBus::recv`] reads up to `buf.len()` reply bytes and returns how many it read; it
 ///   returns early (fewer bytes) only when `timeout_us` microseconds of [`Clock`] time have
 ///   passed since the call — that is the timeout, there is no separate error. `Ok(0)` with a
@@ -101,8 +104,9 @@ pub trait TickTimer {
     fn overruns(&self) -> u32;
 }
 
-/// The hardware watchdog. Not running until [`Watchdog::start`] (walking begins); once
-/// running it cannot be stopped, so the loop must [`Watchdog::feed`] it every tick.
+/// The hardware watchdog. Started at boot by [`crate::control::run`]; once running it cannot
+/// be stopped: the boards feed it in their wait loops (bus send/receive, tick wait), the
+/// start-up dry run every 256 samples and the loop every tick.
 pub trait Watchdog {
     /// Starts the watchdog with the given timeout (rounded to what the hardware can do).
     fn start(&mut self, timeout_ms: u32);

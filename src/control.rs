@@ -447,6 +447,9 @@ struct SensorState {
 pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let robot = Robot::reference();
     let mut log = LogWriter::new();
+    // The watchdog runs from boot: the boards feed it in their wait loops, the dry run every
+    // 256 samples, the loop every tick.
+    board.start(cfg.watchdog_ms);
     // Why did we boot? Only a power-on walks by itself.
     let boot = Boot::read(board);
     if boot.cause != ResetCause::PowerOn {
@@ -464,8 +467,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     }
     let targets = Targets::new(&robot, cfg.compensation);
     // The servo-speed check (a dry run) adjusts the walk before anything moves.
-    let timing =
-        build_sampler(cfg, &robot).and_then(|_| startup::servo_timing(cfg, &robot, &targets));
+    let timing = build_sampler(cfg, &robot)
+        .and_then(|_| startup::servo_timing_fed(cfg, &robot, &targets, &mut || board.feed()));
     let walk_cfg = match &timing {
         Ok(t) => Config {
             walk: t.walk,
@@ -601,7 +604,6 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let weight_n = (robot.masses.total() * robot.gravity) as f32;
     let mut plausible = Plausibility::<3>::new(cfg, weight_n, bus.board().now_us());
     let mut monitor = ServoMonitor::new();
-    bus.board().start(cfg.watchdog_ms);
     loop {
         let tick = bus.board().wait_tick();
         bus.board().crash_cell().note_tick(tick.index);

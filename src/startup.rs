@@ -42,7 +42,7 @@ use gait_core::robot::LEG_JOINTS;
 use gait_core::{GaitError, Robot};
 
 pub use gait_core::gait::{
-    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_SAMPLES, MAX_TIMING_ROUNDS, TIMING_MARGIN,
+    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_WORK, MAX_TIMING_ROUNDS, TIMING_MARGIN,
 };
 
 pub use walker_contract::record::timing_fault as note_record;
@@ -62,7 +62,23 @@ pub fn servo_timing(
     robot: &Robot,
     targets: &Targets,
 ) -> Result<TimingCheck, GaitError> {
-    gait_core::gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, robot, targets)
+    servo_timing_fed(cfg, robot, targets, &mut || {})
+}
+
+/// [`servo_timing`] calling `feed` (the watchdog) every few hundred samples.
+pub fn servo_timing_fed(
+    cfg: &Config,
+    robot: &Robot,
+    targets: &Targets,
+    feed: &mut dyn FnMut(),
+) -> Result<TimingCheck, GaitError> {
+    gait_core::gait::servo_timing_fed::<MAX_STEPS>(
+        &cfg.walk_config(),
+        cfg.feasibility,
+        robot,
+        targets,
+        feed,
+    )
 }
 
 pub use walker_contract::codes::StartupStep;

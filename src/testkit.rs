@@ -107,6 +107,8 @@ pub struct FakeBoard {
     pub ticks: Vec<TickMark>,
     /// Watchdog timeout once started.
     pub watchdog: Option<u32>,
+    /// `packets.len()` when the watchdog was started.
+    pub watchdog_at: Option<usize>,
     /// Watchdog feeds.
     pub feeds: u32,
     /// Calls of `torque_off_best_effort`.
@@ -189,6 +191,7 @@ impl FakeBoard {
             log: Vec::new(),
             ticks: Vec::new(),
             watchdog: None,
+            watchdog_at: None,
             feeds: 0,
             best_effort: 0,
             power: Vec::new(),
@@ -585,6 +588,7 @@ impl LogSink for FakeBoard {
 impl Watchdog for FakeBoard {
     fn start(&mut self, timeout_ms: u32) {
         self.watchdog = Some(timeout_ms);
+        self.watchdog_at = Some(self.packets.len());
     }
     fn feed(&mut self) {
         self.feeds += 1;

@@ -40,11 +40,14 @@ pub enum GaitError {
     WalkEnded,
     /// The requested method is not built in (a cargo feature is off).
     NotBuiltIn,
+    /// The servo-speed check's dry run would exceed its work budget (the plan is too long to
+    /// be checked at start-up: fewer steps, shorter phases or a longer dt).
+    DryRunTooLong,
 }
 
 impl GaitError {
     /// Every error, in the order of its code.
-    pub const ALL: [GaitError; 18] = [
+    pub const ALL: [GaitError; 19] = [
         GaitError::NonFinite,
         GaitError::NonPositiveMass,
         GaitError::NonPositiveLength,
@@ -63,6 +66,7 @@ impl GaitError {
         GaitError::BadStartFoot,
         GaitError::WalkEnded,
         GaitError::NotBuiltIn,
+        GaitError::DryRunTooLong,
     ];
 
     /// The wire code (the firmware's `ConfigRejected` fault record carries it), one explicit
@@ -87,6 +91,7 @@ impl GaitError {
             GaitError::BadStartFoot => 15,
             GaitError::WalkEnded => 16,
             GaitError::NotBuiltIn => 17,
+            GaitError::DryRunTooLong => 18,
         }
     }
 }
@@ -114,6 +119,7 @@ impl TryFrom<u8> for GaitError {
             15 => GaitError::BadStartFoot,
             16 => GaitError::WalkEnded,
             17 => GaitError::NotBuiltIn,
+            18 => GaitError::DryRunTooLong,
             other => return Err(other),
         })
     }
@@ -140,6 +146,9 @@ impl core::fmt::Display for GaitError {
             GaitError::BadStartFoot => "S_first must be -1 or +1",
             GaitError::WalkEnded => "the walk has ended; no more steps can be appended",
             GaitError::NotBuiltIn => "the requested method is not built in (cargo feature off)",
+            GaitError::DryRunTooLong => {
+                "the plan is too long for the start-up servo-speed check's work budget"
+            }
         };
         f.write_str(s)
     }

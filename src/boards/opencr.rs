@@ -9,7 +9,7 @@
 //! | Dynamixel power switch (FET) | **PF15**, high = on | `BDPIN_DXL_PWR_EN` |
 //! | log UART | **USART6**, PC6 TX / PC7 RX (AF8) at 921 600 baud | Arduino header pins 1 (TX) / 0 (RX), `Serial1`; spare on this robot |
 //! | tick and µs clock | TIM2, 32-bit, free-running at 1 MHz | extended to 64 bits in software |
-//! | watchdog | IWDG (LSI ≈ 32 kHz) | started when walking begins, fed each tick |
+//! | watchdog | IWDG (LSI ≈ 32 kHz) | started at boot (`control::run`), fed in the bus and tick waits, the dry run and each tick |
 //! | defmt | RTT (probe-rs) | |
 //!
 //! The pins are the `BUS_*`, `LOG_*` constants' documentation and the concrete pin types in
@@ -56,6 +56,22 @@ pub const HSE_HZ: u32 = 25_000_000;
 pub const LOG_BAUD: u32 = 921_600;
 /// Log ring buffer size, bytes (≈ 25 tick records).
 pub const LOG_RING: usize = 1024;
+/// Longest busy-wait on a bus UART flag (TXE, TC), loop iterations: one iteration is a few
+/// cycles (a register read and a compare), so 10⁶ iterations are ≥ 5 ms at 216 MHz, more than
+/// a byte at the slowest rate (9600 baud: 1.04 ms). Beyond it the bus is hung:
+/// [`BusError::Timeout`].
+pub const UART_SPIN_LIMIT: u32 = 1_000_000;
+
+/// Waits (bounded, [`UART_SPIN_LIMIT`]) until `ready` holds for the bus UART.
+fn wait_bus(ready: impl Fn(&pac::usart1::RegisterBlock) -> bool) -> Result<(), BusError> {
+    let u = usart3();
+    for _ in 0..UART_SPIN_LIMIT {
+        if ready(u) {
+            return Ok(());
+        }
+    }
+    Err(BusError::Timeout)
+}
 
 /// The Dynamixel direction pin as an `embedded-hal` 1.0 output (stm32f7xx-hal 0.8 pins only
 /// implement embedded-hal 0.2): PC9, high = transmit.
@@ -301,21 +317,28 @@ impl<D: OutputPin> OpenCrBoard<D> {
 
 impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
     fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
+        self.feed();
         self.discard_input();
         let u = usart3();
         let _ = self.dir.set_high();
+        let mut sent = Ok(());
         for &b in packet {
-            while u.isr.read().txe().bit_is_clear() {}
+            sent = wait_bus(|u| u.isr.read().txe().bit_is_set());
+            if sent.is_err() {
+                break;
+            }
             u.tdr.write(|w| w.tdr().bits(u16::from(b)));
         }
-        while u.isr.read().tc().bit_is_clear() {}
+        let done = sent.and_then(|()| wait_bus(|u| u.isr.read().tc().bit_is_set()));
         let _ = self.dir.set_low();
         // Whatever the transceiver echoed while we were driving the line is not a reply.
         self.discard_input();
-        Ok(())
+        done
     }
 
     fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
+        // Bounded by `timeout_us` (TIM2); the watchdog is fed once per wait.
+        self.feed();
         let u = usart3();
         let deadline = self.now_us() + u64::from(timeout_us);
         let mut n = 0;
@@ -345,7 +368,7 @@ impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
     fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
         let div = brr(baud).ok_or(BusError::UnsupportedBaud)?;
         let u = usart3();
-        while u.isr.read().tc().bit_is_clear() {}
+        wait_bus(|u| u.isr.read().tc().bit_is_set())?;
         u.cr1.modify(|_, w| w.ue().clear_bit());
         // SAFETY: any 16-bit value is a valid BRR; `div` is in 16..=0xFFFF.
         u.brr.write(|w| unsafe { w.bits(div) });
@@ -374,6 +397,8 @@ impl<D: OutputPin> TickTimer for OpenCrBoard<D> {
     fn wait_tick(&mut self) -> Tick {
         let plan = self.schedule.plan(self.now_us());
         if let Some(t) = plan.wait_until_us {
+            // Bounded by the tick period (TIM2); fed once per wait.
+            self.feed();
             while self.now_us() < t {
                 self.pump_log();
             }

@@ -53,8 +53,15 @@
 //! *is* measured (SysTick, spins excluded) for diagnostics only: [`QemuBoard::cpu_us`].
 //!
 //! # Watchdog
-//! A virtual watchdog: once started, a tick that begins more than the timeout (virtual time)
-//! after the last feed sends torque off and exits with [`EXIT_WATCHDOG`].
+//! A virtual watchdog, started at boot: once started, a tick that begins more than the timeout
+//! (virtual time) after the last feed (each tick, and each bus receive wait) sends torque off,
+//! records itself in the crash cell and exits with [`EXIT_WATCHDOG`].
+//!
+//! # Bounded waits
+//! Transmit spins on UART0 are bounded ([`UART_SPIN_LIMIT`]: `send` fails with
+//! `BusError::Timeout`). The lock-step reads (reply announcements and announced reply bytes)
+//! block on purpose: the simulator always answers, and a host that is gone ends the run through
+//! the host's QEMU timeout (`walker fil --timeout`).
 
 use core::ptr::{read_volatile, write_volatile};
 
@@ -89,6 +96,10 @@ pub const EXIT_PANIC: i32 = walker_contract::ExitCode::Panic.status();
 pub const LOCKSTEP_TIME: u8 = 0x5A;
 /// Lock-step reply announcement marker (simulator → firmware).
 pub const LOCKSTEP_REPLY: u8 = 0xA5;
+
+/// Longest spin on a full UART transmit buffer, iterations (the bus `send` fails with
+/// [`BusError::Timeout`] beyond it; a chardev drains a byte in far fewer).
+pub const UART_SPIN_LIMIT: u32 = 1_000_000;
 
 const DATA: usize = 0x00;
 const STATE: usize = 0x04;
@@ -131,12 +142,12 @@ impl Uart {
         while self.tx_full() {}
         self.write(DATA, u32::from(b));
     }
-    /// Bounded-spin write for the panic path: gives up if the UART never drains.
+    /// Bounded-spin write ([`UART_SPIN_LIMIT`] iterations): false if the UART never drains.
     fn put_bounded(self, b: u8) -> bool {
         let mut spins = 0u32;
         while self.tx_full() {
             spins += 1;
-            if spins > 1_000_000 {
+            if spins > UART_SPIN_LIMIT {
                 return false;
             }
         }
@@ -363,13 +374,16 @@ impl QemuBoard {
         usize::from(u16::from_le_bytes([lo, hi]))
     }
 
-    /// Writes raw bytes on UART0 (blocking; spin excluded from the CPU meter).
-    fn bus_write(&mut self, bytes: &[u8]) {
+    /// Writes raw bytes on UART0 (bounded spins, excluded from the CPU meter).
+    fn bus_write(&mut self, bytes: &[u8]) -> Result<(), BusError> {
         self.cpu.pause();
-        for &b in bytes {
-            self.bus.put(b);
-        }
+        let ok = bytes.iter().all(|&b| self.bus.put_bounded(b));
         self.cpu.resume();
+        if ok {
+            Ok(())
+        } else {
+            Err(BusError::Timeout)
+        }
     }
 
     fn check_watchdog(&mut self) {
@@ -399,7 +413,7 @@ impl ServoBus for QemuBoard {
             self.pending_reply = 0;
         }
         self.sync_time();
-        self.bus_write(packet);
+        self.bus_write(packet)?;
         self.virt_ns += self.line.bytes_ns(packet.len());
         self.reply_started = false;
         self.pending_reply = if self.lockstep {
@@ -429,6 +443,8 @@ impl ServoBus for QemuBoard {
         if n < buf.len() {
             self.virt_ns = self.virt_ns.max(start + u64::from(timeout_us) * 1000);
         }
+        // A bus wait: the watchdog is fed (it still bites a tick that starts late).
+        self.feed();
         Ok(n)
     }
 

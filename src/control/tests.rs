@@ -143,8 +143,20 @@ fn table2_walk_runs_to_plan_done() {
     assert_goals_in_limits(&b);
     assert!(b.servos().all(|d| !d.torque), "torque off at the end");
     assert_eq!(b.watchdog, Some(cfg.watchdog_ms));
-    // Once per tick and once per torque-off round (one round: all 12 servos confirmed).
-    assert_eq!(b.feeds as usize, ticks.len() + 1);
+    // Armed at boot, before the first packet; fed once per tick, once per torque-off round
+    // (one round: all 12 servos confirmed) and every 256 samples of the start-up dry runs.
+    assert_eq!(b.watchdog_at, Some(0));
+    let robot = Robot::reference();
+    let mut dry = 0usize;
+    startup::servo_timing_fed(
+        &cfg,
+        &robot,
+        &Targets::new(&robot, cfg.compensation),
+        &mut || dry += 1,
+    )
+    .unwrap();
+    assert!(dry >= 2, "{dry}");
+    assert_eq!(b.feeds as usize, ticks.len() + 1 + dry);
     assert_eq!(b.power, vec![(false, b.packets.len())]);
     assert_eq!(b.best_effort, 0);
 
@@ -1084,4 +1096,25 @@ fn a_panic_writes_its_record_at_the_next_boot() {
     assert_not_walking(&b, ResetCause::Software);
     // The record is consumed: the boot after that finds none.
     assert_eq!(b.crash.take(), None);
+}
+
+#[test]
+fn a_plan_too_long_to_check_is_refused_before_the_bus() {
+    // 64 steps of 4 s at dt = 1 ms with whole-body compensation: beyond the dry run's work
+    // budget (gait-core MAX_DRY_RUN_WORK): configuration rejected, nothing sent, watchdog fed.
+    let cfg = cfg_with(
+        "elf dt=0.001 steps=64 step_length=0.01 period=4 t1=0.4 t2=3.6 lead_in=4 lead_out=4 \
+         comp=wholebody",
+    );
+    let mut b = board(&cfg);
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Config(GaitError::DryRunTooLong));
+    assert_eq!(end.exit_code(), 2);
+    assert!(b.packets.is_empty());
+    let budget = startup::MAX_DRY_RUN_WORK / gait_core::gait::WHOLEBODY_SAMPLE_COST;
+    assert_eq!(b.feeds, budget / gait_core::gait::DRY_RUN_FEED_EVERY);
+    assert!(b.records().iter().any(|r| matches!(r,
+        Record::Fault(f) if f.kind == FaultKind::ConfigRejected
+            && f.id == PLAN_REJECTED_ID
+            && f.value == i32::from(GaitError::DryRunTooLong.code()))));
 }
