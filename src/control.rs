@@ -212,6 +212,22 @@ pub fn report_arg_error<B: Board>(board: &mut B, cfg: &Config, e: &ArgError) {
     log.write(board, rec);
 }
 
+/// Logs a command line the firmware could not read (longer than its buffer): the start-up
+/// record and a `ConfigRejected` fault record (id = `CMDLINE_TOO_LONG`, value = the buffer).
+pub fn report_cmdline_too_long<B: Board>(board: &mut B, cfg: &Config) {
+    let mut log = LogWriter::new();
+    let rec = startup_record(board, cfg, None);
+    log.write(board, rec);
+    let max = i32::try_from(crate::params::CMDLINE_MAX).unwrap_or(i32::MAX);
+    let rec = fault(
+        board.now_us(),
+        FaultKind::ConfigRejected,
+        crate::params::CMDLINE_TOO_LONG,
+        max,
+    );
+    log.write(board, rec);
+}
+
 fn fault(time_us: u64, kind: FaultKind, id: u8, value: i32) -> Record {
     Record::Fault(FaultRecord {
         seq: 0,

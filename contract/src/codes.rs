@@ -278,8 +278,9 @@ pub enum FaultKind {
     /// 4: a non-finite IMU sample was replaced by the last good one (`value` = count).
     ImuNonFinite,
     /// 5: a run-time parameter was rejected before start-up (`id` = key index in
-    /// [`crate::params::PARAMS`], 0xFF unknown key, 0xFE plan rejected by gait-core; `value` =
-    /// token position, or the `GaitError` code for 0xFE).
+    /// [`crate::params::PARAMS`], 0xFF unknown key, 0xFE plan rejected by gait-core, 0xFD
+    /// command line longer than the firmware's buffer; `value` = token position, or the
+    /// `GaitError` code for 0xFE, or the buffer size for 0xFD).
     ConfigRejected,
     /// 6: a start-up step failed after the probe (`id` = device, `value` = step code).
     StartupFailed,

@@ -884,6 +884,21 @@ params! {
 
 /// Key index meaning "not a known key".
 pub const UNKNOWN_KEY: u8 = 0xFF;
+/// Key index (the `ConfigRejected` fault record's id) meaning "the command line could not be
+/// read: longer than [`CMDLINE_MAX`]" (value = [`CMDLINE_MAX`]).
+pub const CMDLINE_TOO_LONG: u8 = 0xFD;
+
+/// The QEMU firmware's semihosting command-line buffer, bytes. QEMU's SYS_GET_CMDLINE hands
+/// over the kernel's file name, a space and the `-append` text with a NUL, and refuses (the
+/// firmware then reads nothing) when that does not fit: the host checks
+/// [`cmdline_fits`] before it starts QEMU.
+pub const CMDLINE_MAX: usize = 1024;
+
+/// True when `kernel` (the ELF path as given to QEMU's `-kernel`) and the `-append` text fit
+/// the firmware's [`CMDLINE_MAX`]: `len(kernel) + 1 + len(append) + 1 ≤ CMDLINE_MAX`.
+pub const fn cmdline_fits(kernel_len: usize, append_len: usize) -> bool {
+    kernel_len + append_len + 2 <= CMDLINE_MAX
+}
 
 /// The parameter of `key`.
 pub fn find(key: &str) -> Option<&'static Param> {

@@ -199,8 +199,8 @@ pub fn semihosting_exit(code: i32) -> ! {
 }
 
 /// Longest semihosting command line read, bytes (qemu refuses SYS_GET_CMDLINE when the line,
-/// kernel file name first, does not fit the buffer).
-pub const CMDLINE_MAX: usize = 1024;
+/// kernel file name first, does not fit the buffer; the host checks it before QEMU starts).
+pub use walker_contract::params::CMDLINE_MAX;
 
 /// Reads the semihosting command line (qemu `-append`, after the kernel's file name) into
 /// `buf`; returns its length (None when qemu refuses, e.g. `buf` is too small).
