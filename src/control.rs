@@ -27,6 +27,13 @@
 //!    reach and joint limits, [`safe_targets`] to the servo ticks (a non-finite target holds
 //!    the previous tick and stops); ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes
 //!    each).
+//!    With `servo_lead = Δ` (default 0) the targets come from the gait sample Δ ahead
+//!    (a delay line of [`MAX_LEAD_TICKS`] samples) while the reference, the log, the stabilizer
+//!    and the gyro feedback's support phase stay at the present sample: a feed-forward of the
+//!    position servos' lag. Measured on the MuJoCo robot (Table 2, paper timing, default gyro
+//!    feedback; true CoP − reference, mean |e| x / y): Δ = 0 13.0 / 34.5 mm, 50 ms
+//!    15.0 / 31.0, 100 ms 16.9 / 30.4, 150 ms 17.0 / 30.8, 200 ms 18.7 / 33.3 — laterally a
+//!    little better, sagittally worse, so it stays off by default.
 //! 6. The servo monitor ([`crate::monitor`]) reads one leg servo's Hardware Error Status,
 //!    current, voltage and temperature (round-robin); a limit exceeded stops (`ServoFault`).
 //! 7. The tick log record (nominal time, ZMP reference, measured ZMP, CoM, τ, support phase,
@@ -86,7 +93,7 @@ use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::measured::{measured_zmp, ForceReading};
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
-use gait_core::{GaitError, GaitSample, Robot, Sampler, Side};
+use gait_core::{GaitError, GaitSample, Robot, Side};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 use walker_contract::ExitCode;
 
@@ -104,9 +111,9 @@ use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, S
 use crate::{startup_record, Config};
 use walker_contract::codes::SensorRejection;
 
-pub use walker_contract::config::{Compensation, Feasibility, MAX_STEPS};
+pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
-pub type GaitSampler = Sampler<f32, MAX_STEPS>;
+pub type GaitSampler = gait_core::fourier_walk::WalkSampler<f32, MAX_STEPS>;
 pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;
@@ -580,9 +587,19 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 
     // 5. The initial pose and the ramp to it.
     let map = JointMap::from_robot(&robot);
+    // The delay line of the servo-lag feed-forward: gait samples from "now" (reference, log,
+    // stabilizer) to `lead` ticks ahead (joint targets).
+    let mut delay: heapless::Deque<GaitSample<f32>, { MAX_LEAD_TICKS + 1 }> =
+        heapless::Deque::new();
     let first_sample = sampler.next(0.0);
-    let q0 = sampler.joints(&targets, &first_sample, [0.0; 2]);
     let first = first_sample.f32;
+    let _ = delay.push_back(first);
+    let mut lead_sample = first_sample;
+    for _ in 0..cfg.lead_ticks() {
+        lead_sample = sampler.next(0.0);
+        let _ = delay.push_back(lead_sample.f32);
+    }
+    let q0 = sampler.joints(&targets, &lead_sample, [0.0; 2]);
     let mut from = [0.0f32; LEG_JOINTS];
     for (j, (f, &t)) in from.iter_mut().zip(present.iter()).enumerate() {
         *f = map.rad_of_tick(j, t);
@@ -606,7 +623,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
     let mut ramp_k: Option<u32> = Some(0);
-    let mut pending = Some(first_sample);
+    let mut pending = Some(lead_sample);
     let mut prev = first;
     let mut support_cache = SupportCache::default();
     let mut walk_tick: u32 = 0;
@@ -728,14 +745,22 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     None => 'sample: {
                         let k = walk_tick;
                         walk_tick = walk_tick.saturating_add(1);
-                        let mut sample = pending.take().unwrap_or_else(|| sampler.next(tau));
+                        let mut ahead = match pending.take() {
+                            Some(p) => p,
+                            None => {
+                                let a = sampler.next(tau);
+                                let _ = delay.push_back(a.f32);
+                                a
+                            }
+                        };
                         if cfg.fault_nan_com_tick == Some(k) {
-                            sample.f32.com[0] = f32::NAN;
+                            ahead.f32.com[0] = f32::NAN;
                         }
-                        let s = sample.f32;
+                        let s = delay.pop_front().unwrap_or(ahead.f32);
                         // The finite check before the IK (which would clamp a NaN pelvis to
-                        // finite, meaningless angles): hold the last targets and stop.
-                        if !s.is_finite() {
+                        // finite, meaningless angles): the sample the IK takes (`servo_lead`
+                        // ahead) and the present one; hold the last targets and stop.
+                        if !(s.is_finite() && ahead.f32.is_finite()) {
                             crate::fw_log!(error, "non-finite gait sample at walk tick {}", k);
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
@@ -755,7 +780,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
                         }
-                        let mut q = sampler.joints(&targets, &sample, shift);
+                        let mut q = sampler.joints(&targets, &ahead, shift);
                         cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                         if sampler.is_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);

@@ -136,6 +136,8 @@ pub struct FakeBoard {
     pub spike_at: Option<(u8, usize)>,
     imu_counter: u16,
     foot_counters: [u16; 2],
+    /// Amplitude of the IMU's 1.5 Hz pitch-rate sinusoid, rad/s.
+    imu_rate_amp: f32,
 }
 
 /// Joint angles (rad) → ticks of the fake's initial pose: knees bent, hips and ankles pitched.
@@ -206,6 +208,7 @@ impl FakeBoard {
             spike_at: None,
             imu_counter: 0,
             foot_counters: [0; 2],
+            imu_rate_amp: 0.3,
         }
     }
 
@@ -219,6 +222,13 @@ impl FakeBoard {
     /// Uses the tick period of `cfg`.
     pub fn with_period(mut self, period_us: u32) -> Self {
         self.sched = TickSchedule::new(period_us);
+        self
+    }
+
+    /// The same with the IMU's pitch-rate sinusoid of amplitude `amp` rad/s (0: a still
+    /// trunk, so τ = J·φ̈ = 0).
+    pub fn with_imu_rate(mut self, amp: f32) -> Self {
+        self.imu_rate_amp = amp;
         self
     }
 
@@ -320,7 +330,7 @@ impl FakeBoard {
         }
         let spike = self.scripted(self.spike_at, walker_contract::bus_map::IMU, true);
         let t = self.now_ns as f32 * 1e-9;
-        let rate = 0.3 * (core::f32::consts::TAU * 1.5 * t).sin();
+        let rate = self.imu_rate_amp * (core::f32::consts::TAU * 1.5 * t).sin();
         let g = 9.80665f32;
         let fallen = self.fall_at.is_some_and(|n| self.sync_writes() >= n);
         let accel = if fallen {

@@ -4,6 +4,11 @@
 
 /// Most footsteps a firmware plan may have.
 pub const MAX_STEPS: usize = 64;
+/// Longest servo-lag feed-forward, s.
+pub const MAX_SERVO_LEAD_S: f64 = 0.3;
+/// Most ticks of servo-lag feed-forward (the firmware's delay line of gait samples: 0.3 s at
+/// the 200 Hz default; at 1 kHz the lead is capped at 64 ms).
+pub const MAX_LEAD_TICKS: usize = 64;
 /// Default low-pass cutoff of the φ̈ filter, Hz (see the firmware's `imu` module).
 pub const DEFAULT_IMU_CUTOFF_HZ: f32 = 15.0;
 /// Default longest single wait for one reply byte, µs (see the firmware's `bus` module).
@@ -96,6 +101,12 @@ pub struct Config {
     pub zmp_b: Option<f64>,
     /// Use seed 001's sinusoid swing (height h_z) instead of the cycloid (h_z, w_y).
     pub swing_sinusoid: bool,
+    /// The CoM from seed 001's Fourier series (`true`) or seed 000's exact solution.
+    pub com_fourier: bool,
+    /// Terms per axis of the Fourier CoM.
+    pub fourier_terms: u8,
+    /// Servo-lag feed-forward: the joint targets are the gait's this far ahead, s.
+    pub servo_lead_s: f32,
     /// Reply timeout of the Dynamixel master, µs (per expected status packet).
     pub reply_timeout_us: u32,
     /// Longest single wait for one reply byte, µs (the firmware's bus driver).
@@ -163,6 +174,9 @@ impl Config {
             zmp_continuous: false,
             zmp_b: None,
             swing_sinusoid: false,
+            com_fourier: false,
+            fourier_terms: gait_core::fourier_walk::DEFAULT_FOURIER_TERMS,
+            servo_lead_s: 0.0,
             reply_timeout_us: 1_000,
             read_poll_us: DEFAULT_READ_POLL_US,
             startup_attempts: 8,
@@ -200,7 +214,24 @@ impl Config {
             zmp_continuous: self.zmp_continuous,
             zmp_b: self.zmp_b,
             swing_sinusoid: self.swing_sinusoid,
+            com: if self.com_fourier {
+                gait_core::gait::ComMethod::Fourier {
+                    terms: self.fourier_terms,
+                }
+            } else {
+                gait_core::gait::ComMethod::Exact
+            },
             dt_s: self.dt_s(),
+        }
+    }
+
+    /// The servo lead in whole ticks (rounded, at most [`MAX_LEAD_TICKS`]).
+    pub fn lead_ticks(&self) -> usize {
+        let t = libm::roundf(self.servo_lead_s * 1e6 / self.tick_period_us.max(1) as f32);
+        if t > 0.0 {
+            (t as usize).min(MAX_LEAD_TICKS)
+        } else {
+            0
         }
     }
 

@@ -11,11 +11,8 @@ use std::hint::black_box;
 const CAP: usize = 32;
 
 fn sampler<R: Real>(kind: ModelKind) -> Sampler<R, CAP> {
-    let robot = Robot::reference();
-    let walk = ForwardWalk::table2();
-    let model = Model::<R>::new(kind, &robot, walk.z_c).expect("model");
-    let plan = walk
-        .plan::<R, CAP>(&robot, walk.params(model))
+    let plan = ForwardWalk::table2()
+        .model_plan::<R, CAP>(&Robot::reference(), kind)
         .expect("plan");
     Sampler::new(plan, 0.005).expect("sampler")
 }

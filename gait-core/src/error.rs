@@ -40,6 +40,8 @@ pub enum GaitError {
     WalkEnded,
     /// The requested method is not built in (a cargo feature is off).
     NotBuiltIn,
+    /// The Fourier CoM needs a straight forward walk of at least 5 steps, in f32 or f64.
+    NotPeriodicWalk,
     /// The servo-speed check's dry run would exceed its work budget (the plan is too long to
     /// be checked at start-up: fewer steps, shorter phases or a longer dt).
     DryRunTooLong,
@@ -47,7 +49,7 @@ pub enum GaitError {
 
 impl GaitError {
     /// Every error, in the order of its code.
-    pub const ALL: [GaitError; 19] = [
+    pub const ALL: [GaitError; 20] = [
         GaitError::NonFinite,
         GaitError::NonPositiveMass,
         GaitError::NonPositiveLength,
@@ -66,6 +68,7 @@ impl GaitError {
         GaitError::BadStartFoot,
         GaitError::WalkEnded,
         GaitError::NotBuiltIn,
+        GaitError::NotPeriodicWalk,
         GaitError::DryRunTooLong,
     ];
 
@@ -91,7 +94,8 @@ impl GaitError {
             GaitError::BadStartFoot => 15,
             GaitError::WalkEnded => 16,
             GaitError::NotBuiltIn => 17,
-            GaitError::DryRunTooLong => 18,
+            GaitError::NotPeriodicWalk => 18,
+            GaitError::DryRunTooLong => 19,
         }
     }
 }
@@ -119,7 +123,8 @@ impl TryFrom<u8> for GaitError {
             15 => GaitError::BadStartFoot,
             16 => GaitError::WalkEnded,
             17 => GaitError::NotBuiltIn,
-            18 => GaitError::DryRunTooLong,
+            18 => GaitError::NotPeriodicWalk,
+            19 => GaitError::DryRunTooLong,
             other => return Err(other),
         })
     }
@@ -146,6 +151,9 @@ impl core::fmt::Display for GaitError {
             GaitError::BadStartFoot => "S_first must be -1 or +1",
             GaitError::WalkEnded => "the walk has ended; no more steps can be appended",
             GaitError::NotBuiltIn => "the requested method is not built in (cargo feature off)",
+            GaitError::NotPeriodicWalk => {
+                "the Fourier CoM needs a straight forward walk of at least 5 steps (f32, not fixed point)"
+            }
             GaitError::DryRunTooLong => {
                 "the plan is too long for the start-up servo-speed check's work budget"
             }

@@ -13,6 +13,11 @@
 //! The support sole in single support, the hull of both soles otherwise. The cache rebuilds it
 //! only when the phase or a supporting foot changes (a few times per step).
 //!
+//! # CoM method ([`ComMethod`])
+//! Seed 000's exact bounded solution ([`crate::com`]), or seed 001's Fourier series through the
+//! steady steps, blended C¹ with the exact one at the start and the stop
+//! ([`crate::fourier_walk`]: the series is periodic, a walk is not). f32 only.
+//!
 //! # Arithmetic ([`Engine`])
 //! The per-sample work runs in f32 ([`Arithmetic::F32`]) or in fixed point
 //! ([`Arithmetic::Fixed`]: the I16F16 sampler of `fixed_point.rs` and the integer-only IK of
@@ -34,6 +39,8 @@ use crate::fixed_ik::FixedLegKinematics;
 use crate::fixed_point::FixedSample;
 #[cfg(feature = "fixed-engine")]
 use crate::fixed_point::FixedSampler;
+pub use crate::fourier_walk::ComMethod;
+use crate::fourier_walk::WalkSampler;
 use crate::kinematics::{JointSpeedMonitor, JointSpeedReport, LegKinematics, LegsIkReport};
 use crate::pipeline::joint_targets;
 use crate::plan::SwingShape;
@@ -41,7 +48,7 @@ use crate::robot::LEG_JOINTS;
 use crate::support::SupportPolygon;
 use crate::wholebody::WholeBody;
 use crate::zmp::ZmpShape;
-use crate::{ForwardWalk, GaitError, GaitSample, Model, ModelKind, Place, Robot, Sampler};
+use crate::{ForwardWalk, GaitError, GaitSample, Model, ModelKind, Place, Robot};
 
 /// Fixed-point steps of the whole-body compensation per sample (cost: that + 1 two-leg IK and
 /// FK evaluations).
@@ -98,16 +105,19 @@ pub struct WalkConfig {
     pub zmp_b: Option<f64>,
     /// Seed 001's sinusoid swing instead of the cycloid.
     pub swing_sinusoid: bool,
+    /// The CoM solver: seed 000's exact solution or seed 001's Fourier series.
+    pub com: ComMethod,
     /// Sample time, s.
     pub dt_s: f64,
 }
 
-/// The f32 sampler of `w` (model, walk, ZMP and swing shape, dt) with room for `N` steps.
+/// The f32 sampler of `w` (model, walk, ZMP and swing shape, CoM method, dt) with room for
+/// `N` steps.
 pub fn build_sampler<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
-) -> Result<Sampler<f32, N>, GaitError> {
-    Sampler::new(build_plan::<N>(w, robot)?, w.dt_s)
+) -> Result<WalkSampler<f32, N>, GaitError> {
+    WalkSampler::new(build_plan::<N>(w, robot)?, &w.walk, w.com, w.dt_s)
 }
 
 /// The f32 footstep plan of `w` with room for `N` steps.
@@ -159,8 +169,8 @@ pub struct Sample {
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Engine<const N: usize> {
-    /// f32 sampler.
-    F32(Sampler<f32, N>),
+    /// f32 sampler (either CoM method).
+    F32(WalkSampler<f32, N>),
     /// Fixed-point sampler and IK (feature `fixed-engine`).
     #[cfg(feature = "fixed-engine")]
     Fixed(FixedSampler<N>, FixedLegKinematics),
@@ -171,12 +181,17 @@ impl<const N: usize> Engine<N> {
     pub fn new(w: &WalkConfig, arithmetic: Arithmetic, robot: &Robot) -> Result<Self, GaitError> {
         let plan = build_plan::<N>(w, robot)?;
         Ok(match arithmetic {
-            Arithmetic::F32 => Engine::F32(Sampler::new(plan, w.dt_s)?),
+            Arithmetic::F32 => Engine::F32(WalkSampler::new(plan, &w.walk, w.com, w.dt_s)?),
             #[cfg(feature = "fixed-engine")]
-            Arithmetic::Fixed => Engine::Fixed(
-                FixedSampler::new(plan, w.dt_s)?,
-                FixedLegKinematics::new(robot),
-            ),
+            Arithmetic::Fixed => {
+                if w.com != ComMethod::Exact {
+                    return Err(GaitError::NotPeriodicWalk);
+                }
+                Engine::Fixed(
+                    FixedSampler::new(plan, w.dt_s)?,
+                    FixedLegKinematics::new(robot),
+                )
+            }
             #[cfg(not(feature = "fixed-engine"))]
             Arithmetic::Fixed => {
                 let _ = robot;
@@ -528,6 +543,7 @@ mod tests {
             zmp_continuous: false,
             zmp_b: None,
             swing_sinusoid: false,
+            com: ComMethod::Exact,
             dt_s,
         }
     }

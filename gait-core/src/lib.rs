@@ -15,6 +15,7 @@ pub use real::Real;
 pub use robot::{Robot, Side};
 pub mod com;
 pub mod fourier;
+pub mod fourier_walk;
 pub mod measured;
 pub mod model;
 pub mod plan;

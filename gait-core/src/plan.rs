@@ -523,6 +523,17 @@ impl ForwardWalk {
         }
     }
 
+    /// The plan of this walk for the pendulum model `kind` at this walk's z_c (model, gait
+    /// parameters and footsteps in one call).
+    pub fn model_plan<R: Real, const N: usize>(
+        &self,
+        robot: &Robot,
+        kind: crate::ModelKind,
+    ) -> Result<Plan<R, N>, GaitError> {
+        let model = Model::<R>::new(kind, robot, self.z_c)?;
+        self.plan(robot, self.params(model))
+    }
+
     /// Support-foot location p^c_n of step n (eqs 6-7).
     pub fn support_location(&self, n: usize) -> (f64, f64) {
         let sign = if n.is_multiple_of(2) { 1.0 } else { -1.0 };

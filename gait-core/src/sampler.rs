@@ -397,6 +397,14 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         }
     }
 
+    /// The exact solver's CoM position and velocity (x, y) at the time of the next sample,
+    /// without the τ response (what [`Sampler::next`] adds it to).
+    pub fn com_now(&mut self) -> ([R; 2], [R; 2]) {
+        self.sync();
+        self.seg
+            .eval(self.plan.params().model.omega, self.local_time())
+    }
+
     /// The sample at the current time, with the measured torque `tau` (N·m, τ = J·φ̈) held
     /// until the next sample; then advances by dt. A non-finite τ counts as 0.
     pub fn next(&mut self, tau: R) -> GaitSample<R> {

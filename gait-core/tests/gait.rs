@@ -12,11 +12,8 @@ use proptest::prelude::*;
 const CAP: usize = 64;
 
 fn table2_sampler<R: Real>(kind: ModelKind, dt: f64) -> Sampler<R, CAP> {
-    let robot = Robot::reference();
-    let walk = ForwardWalk::table2();
-    let model = Model::<R>::new(kind, &robot, walk.z_c).expect("model");
-    let plan = walk
-        .plan::<R, CAP>(&robot, walk.params(model))
+    let plan = ForwardWalk::table2()
+        .model_plan::<R, CAP>(&Robot::reference(), kind)
         .expect("plan");
     Sampler::new(plan, dt).expect("sampler")
 }

@@ -1,8 +1,9 @@
 //! `walker beyond`: the paper's open-loop methods and the two additions of issue 7 walked side
 //! by side in the firmware-in-the-loop setup, scored against the simulator's ground truth.
 //!
-//! Five runs of the same plan: LIPM, DLIPM, TLIPFM (the paper's pipeline), TLIPFM + whole-body
-//! compensation (`comp=wholebody`), TLIPFM + compensation + the feedback stabilizer
+//! Six runs of the same plan: LIPM, DLIPM, TLIPFM (the paper's pipeline, seed 000's exact CoM),
+//! TLIPFM with seed 001's Fourier CoM (`com=fourier`, `gait_core::fourier_walk`), TLIPFM +
+//! whole-body compensation (`comp=wholebody`), TLIPFM + compensation + the feedback stabilizer
 //! (`comp=wholebody stab=on`). The simulator's servos are XM430-class: speed limit 4.8 rad/s
 //! (`SimConfig::servo_speed_limit`) and the torque–speed line of a 3.5 N·m stall torque with
 //! 4.8 rad/s no-load speed (`SimConfig::servo_torque`, [`crate::sim::servo`]; `--stall-torque`
@@ -38,7 +39,7 @@ use walker_contract::record::{FaultKind, LoggedPhase, Record, POS_NA};
 use walker_contract::{params, Config};
 
 use crate::fil::{self, FilOptions};
-use crate::planfile::{CompensationName, ModelName, WalkSpec};
+use crate::planfile::{ComName, CompensationName, ModelName, WalkSpec};
 use crate::report::{self, tick_rows};
 use crate::sim::{ServoTorque, SimConfig};
 
@@ -47,35 +48,53 @@ pub const XM430_SPEED_RAD_S: f64 = 4.8;
 /// Margin of the "inside the support polygon" statistic, m.
 pub const INSIDE_MARGIN_M: f64 = 0.005;
 
-/// One of the five runs.
+/// One of the six runs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Variant {
     /// Short name (also the output sub-folder).
     pub name: &'static str,
     /// Pendulum model.
     pub model: ModelName,
+    /// CoM solver.
+    pub com: ComName,
     /// Whole-body compensation.
     pub compensation: CompensationName,
     /// Feedback stabilizer.
     pub stabilizer: bool,
 }
 
-/// The five runs of the report, in table order.
-pub fn variants() -> [Variant; 5] {
-    let v = |name, model, compensation, stabilizer| Variant {
+/// The six runs of the report, in table order.
+pub fn variants() -> [Variant; 6] {
+    let v = |name, model, com, compensation, stabilizer| Variant {
         name,
         model,
+        com,
         compensation,
         stabilizer,
     };
+    use ComName::{Exact, Fourier};
     use CompensationName::{None as Plain, Wholebody};
     [
-        v("lipm", ModelName::Lipm, Plain, false),
-        v("dlipm", ModelName::Dlipm, Plain, false),
-        v("tlipfm", ModelName::Tlipfm, Plain, false),
-        v("tlipfm-wb", ModelName::Tlipfm, Wholebody, false),
-        v("tlipfm-wb-fb", ModelName::Tlipfm, Wholebody, true),
+        v("lipm", ModelName::Lipm, Exact, Plain, false),
+        v("dlipm", ModelName::Dlipm, Exact, Plain, false),
+        v("tlipfm", ModelName::Tlipfm, Exact, Plain, false),
+        v("tlipfm-fourier", ModelName::Tlipfm, Fourier, Plain, false),
+        v("tlipfm-wb", ModelName::Tlipfm, Exact, Wholebody, false),
+        v("tlipfm-wb-fb", ModelName::Tlipfm, Exact, Wholebody, true),
     ]
+}
+
+impl Variant {
+    /// `base` walked as this variant (model, CoM solver, compensation, stabilizer).
+    pub fn spec(&self, base: &WalkSpec) -> WalkSpec {
+        WalkSpec {
+            model: self.model,
+            com: self.com,
+            compensation: self.compensation,
+            stabilizer: self.stabilizer,
+            ..base.clone()
+        }
+    }
 }
 
 /// Mean and max |e| of one axis.
@@ -444,17 +463,12 @@ pub struct BeyondOptions {
     pub sim: SimConfig,
 }
 
-/// Walks the five variants and scores them; `progress(name)` before each run.
+/// Walks the six variants and scores them; `progress(name)` before each run.
 pub fn run(opts: &BeyondOptions, progress: impl Fn(&str)) -> Result<Vec<RunMetrics>, String> {
     let mut out = Vec::new();
     for v in variants() {
         progress(v.name);
-        let spec = WalkSpec {
-            model: v.model,
-            compensation: v.compensation,
-            stabilizer: v.stabilizer,
-            ..opts.spec.clone()
-        };
+        let spec = v.spec(&opts.spec);
         let mut extra = opts.extra_tokens.clone();
         if v.stabilizer {
             extra.extend(opts.feedback_tokens.iter().cloned());
@@ -635,7 +649,7 @@ pub fn goal_section(runs: &[RunMetrics]) -> String {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -646,7 +660,8 @@ mod tests {
         assert!(AxisError::of(std::iter::empty()).mean.is_nan());
     }
 
-    fn metrics(name: &'static str, mean: [f64; 2]) -> RunMetrics {
+    /// Metrics of a run named `name` with true ZMP mean errors `mean` (test data).
+    pub(crate) fn metrics(name: &'static str, mean: [f64; 2]) -> RunMetrics {
         let mut v = variants()[0].clone();
         v.name = name;
         RunMetrics {
@@ -747,12 +762,7 @@ mod tests {
     fn variants_map_to_firmware_tokens() {
         let spec = WalkSpec::default();
         for v in variants() {
-            let s = WalkSpec {
-                model: v.model,
-                compensation: v.compensation,
-                stabilizer: v.stabilizer,
-                ..spec.clone()
-            };
+            let s = v.spec(&spec);
             let cfg = firmware_config(&fil::firmware_tokens(&s).unwrap()).unwrap();
             assert_eq!(cfg.stabilizer_on, v.stabilizer, "{}", v.name);
             assert_eq!(
@@ -760,6 +770,7 @@ mod tests {
                 v.compensation == CompensationName::Wholebody
             );
             assert_eq!(cfg.model, gait_core::ModelKind::from(v.model));
+            assert_eq!(cfg.com_fourier, v.com == ComName::Fourier, "{}", v.name);
         }
     }
 

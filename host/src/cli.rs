@@ -266,10 +266,10 @@ pub const SUBCOMMANDS: &[Subcommand] = &[
     },
     Subcommand {
         name: "beyond",
-        summary: "LIPM, DLIPM, TLIPFM, + whole-body compensation, + feedback: side by side in the FIL walk",
+        summary: "LIPM, DLIPM, TLIPFM, TLIPFM with the Fourier CoM, + whole-body compensation, + feedback: side by side in the FIL walk",
         usage: concat!("walker beyond [--plan plans/table2.toml] [--out out/beyond] [--elf target/thumbv7em-none-eabihf/release/qemu]\n\
                 [--machine mps2-an500] [--seed N] [--stall-torque NM] [--firmware-args 'k=v ...'] [--feedback-args 'stab_ki=2 ...'] [--timeout S]\n\
-         Walks the plan five times in the firmware-in-the-loop setup (the MuJoCo robot with\n\
+         Walks the plan six times in the firmware-in-the-loop setup (the MuJoCo robot with\n\
          XM430-W350 servo models; --stall-torque changes their stall torque) and prints per\n\
          run the true and measured ZMP errors, the time the true ZMP is inside the support polygon\n\
          (5 mm margin), distance walked vs planned, peak joint speeds and motor torques; writes\n\
@@ -803,7 +803,7 @@ fn run_beyond(a: &mut Args) -> Result<(), CliError> {
         timeout: timeout.unwrap_or(std::time::Duration::from_secs(1800)),
         servo_torque,
     };
-    eprintln!("walker beyond: {plan_name}, five firmware-in-the-loop walks");
+    eprintln!("walker beyond: {plan_name}, six firmware-in-the-loop walks");
     let runs = crate::beyond::run(&opts, |name| eprintln!("  walking {name} …"))?;
     let table = crate::beyond::table(&runs);
     let servos = match opts.sim.physics {

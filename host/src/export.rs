@@ -4,10 +4,19 @@
 //! r_foot_y, r_foot_z` then the joint names of [`gait_core::robot::JOINT_NAMES`]. SI units
 //! (s, m, rad), world frame, `t` from the start of the lead-in. The pelvis is the CoM point
 //! (x, y, z_c), upright, heading = the mean of the two feet's headings; the feet are level.
+//!
+//! The plan's open-loop choices are applied as the firmware applies them: the CoM solver
+//! (`com`), and with `compensation = "wholebody"` the joints place the pelvis so that the
+//! multi-body CoM is on the model's CoM (gait-core `wholebody`, the firmware's
+//! [`gait_core::gait::WHOLEBODY_ITERATIONS`]; the `com_*` columns stay the model's CoM). A plan
+//! with `stabilizer = true` is refused: the stabilizer is feedback on measurements, which an
+//! export has not.
 
-use crate::planfile::{PlanError, WalkSpec};
+use crate::planfile::{CompensationName, PlanError, WalkSpec};
+use gait_core::gait::WHOLEBODY_ITERATIONS;
 use gait_core::kinematics::{legs_ik, Pose};
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
+use gait_core::wholebody::WholeBody;
 use gait_core::Robot;
 use std::io::Write;
 
@@ -68,6 +77,15 @@ pub fn export_rows(
     robot: &Robot,
     dt: f64,
 ) -> Result<(Vec<ExportRow>, ExportSummary), PlanError> {
+    if spec.stabilizer {
+        return Err(PlanError::new(
+            "stabilizer",
+            "the stabilizer is feedback on the robot's measurements: an export is open loop \
+             (set it false, or walk the plan with `walker fil`)",
+        ));
+    }
+    let wholebody = (spec.compensation == CompensationName::Wholebody)
+        .then(|| WholeBody::<f64>::new(robot, WHOLEBODY_ITERATIONS));
     let mut sampler = spec.sampler(robot, dt)?;
     let mut rows = Vec::new();
     let mut summary = ExportSummary::default();
@@ -84,10 +102,18 @@ pub fn export_rows(
             feet_yaw: [f[0].yaw, f[1].yaw],
             q: [0.0; LEG_JOINTS],
         };
-        let pelvis = row.pelvis();
-        let lf = Pose::level(f[0].x, f[0].y, f[0].z, f[0].yaw);
-        let rf = Pose::level(f[1].x, f[1].y, f[1].z, f[1].yaw);
-        let (q, rep) = legs_ik(robot, &pelvis, &lf, &rf);
+        let (q, rep) = match &wholebody {
+            Some(wb) => {
+                let c = wb.joint_targets(&s);
+                (c.joints, c.report)
+            }
+            None => {
+                let pelvis = row.pelvis();
+                let lf = Pose::level(f[0].x, f[0].y, f[0].z, f[0].yaw);
+                let rf = Pose::level(f[1].x, f[1].y, f[1].z, f[1].yaw);
+                legs_ik(robot, &pelvis, &lf, &rf)
+            }
+        };
         row.q = q;
         if rep.clamped() {
             summary.clamped_rows += 1;
@@ -145,4 +171,52 @@ pub fn write_csv(rows: &[ExportRow], mut w: impl Write) -> std::io::Result<()> {
         writeln!(w, "{line}")?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod compensation_tests {
+    use super::*;
+    use gait_core::gait::{Compensation, Targets};
+
+    /// `compensation = "wholebody"` exports the firmware's compensated joints (its f32
+    /// `Targets::WholeBody` on the same samples, to f32 rounding), which differ from the plain
+    /// IK's; `stabilizer = true` is refused naming the key.
+    #[test]
+    fn export_applies_wholebody_compensation_and_refuses_the_stabilizer() {
+        let robot = Robot::reference();
+        let plain = WalkSpec::default();
+        let wb = WalkSpec {
+            compensation: CompensationName::Wholebody,
+            ..plain.clone()
+        };
+        let (rp, _) = export_rows(&plain, &robot, 0.005).unwrap();
+        let (rw, _) = export_rows(&wb, &robot, 0.005).unwrap();
+        assert_eq!(rp.len(), rw.len());
+        let firmware = Targets::new(&robot, Compensation::WholeBody);
+        let mut sampler32 = gait_core::gait::build_sampler::<64>(
+            &wb.firmware_config().unwrap().walk_config(),
+            &robot,
+        )
+        .unwrap();
+        let (mut differ, mut worst) = (0.0f64, 0.0f64);
+        for (p, w) in rp.iter().zip(&rw) {
+            let g = sampler32.next(0.0);
+            let (q32, _) = firmware.joints(&g, [0.0; 2]);
+            for ((a, b), c) in p.q.iter().zip(&w.q).zip(&q32) {
+                differ = differ.max((a - b).abs());
+                worst = worst.max((f64::from(*c) - b).abs());
+            }
+        }
+        assert!(
+            differ > 0.01,
+            "compensation changes the joints by {differ} rad"
+        );
+        assert!(worst < 1e-3, "export vs firmware compensation: {worst} rad");
+        let fb = WalkSpec {
+            stabilizer: true,
+            ..plain
+        };
+        let e = export_rows(&fb, &robot, 0.005).unwrap_err();
+        assert_eq!(e.field, "stabilizer");
+    }
 }

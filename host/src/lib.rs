@@ -10,4 +10,5 @@ pub mod planfile;
 pub mod plot;
 pub mod report;
 pub mod sim;
+pub mod sweep;
 pub mod video;

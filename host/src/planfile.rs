@@ -25,6 +25,8 @@
 //! zmp = "natural"         # natural (d1, d2, a) | continuous (b)
 //! b = 0.004               # continuous ZMP: half travel under the sole, m (default: a)
 //! swing = "cycloid"       # cycloid (h_z, w_y) | sinusoid (h_z)
+//! com = "exact"           # exact (seed 000's bounded solution) | fourier (seed 001's series through the steady steps; forward walks of ≥ 5 steps)
+//! fourier_terms = 12      # terms per axis of the Fourier CoM (1 ..= 24)
 //! compensation = "none"   # none (the paper's pipeline) | wholebody (multi-body CoM on the model CoM; firmware `comp=`)
 //! stabilizer = false      # the firmware's ZMP/DCM feedback stabilizer (`stab=on`, default gains)
 //!
@@ -50,11 +52,11 @@
 //! from it, and [`WalkSpec::check`] runs the firmware's own parser on them first, so a value
 //! out of its physical range (`d2 = 1e38`, `h_z = 10`) is refused here as on the robot.
 
+use gait_core::fourier_walk::{ComMethod, WalkSampler, DEFAULT_FOURIER_TERMS};
 use gait_core::plan::{SwingShape, Timing};
 use gait_core::zmp::ZmpShape;
 use gait_core::{
-    Footstep, ForwardWalk, GaitError, GaitParams, Model, ModelKind, Place, Plan, Robot, Sampler,
-    Side,
+    Footstep, ForwardWalk, GaitError, GaitParams, Model, ModelKind, Place, Plan, Robot, Side,
 };
 use serde::Deserialize;
 use std::fmt;
@@ -66,7 +68,7 @@ pub const PLAN_CAPACITY: usize = 64;
 /// The plan type used by the host tools.
 pub type HostPlan = Plan<f64, PLAN_CAPACITY>;
 /// The sampler type used by the host tools.
-pub type HostSampler = Sampler<f64, PLAN_CAPACITY>;
+pub type HostSampler = WalkSampler<f64, PLAN_CAPACITY>;
 /// Default sample time, s (the firmware's 200 Hz tick; 1 kHz needs a 3 Mbps bus).
 pub const DEFAULT_DT: f64 = 0.005;
 
@@ -146,6 +148,17 @@ pub enum CompensationName {
     None,
     /// Whole-body compensation: the multi-body CoM on the model's CoM.
     Wholebody,
+}
+
+/// The CoM solver of a plan file (the firmware's `com=` token).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ComName {
+    /// Seed 000's exact bounded solution.
+    #[default]
+    Exact,
+    /// Seed 001's Fourier series through the steady steps.
+    Fourier,
 }
 
 /// The model name of a plan file.
@@ -251,6 +264,10 @@ pub struct WalkSpec {
     pub swing: SwingKind,
     /// Explicit footsteps (replace the forward walk when present).
     pub footsteps: Option<Vec<FootstepSpec>>,
+    /// The CoM solver.
+    pub com: ComName,
+    /// Terms per axis of the Fourier CoM (default 12).
+    pub fourier_terms: Option<u8>,
     /// Pelvis placement (firmware only; host exports plot the model's plan).
     pub compensation: CompensationName,
     /// The firmware's feedback stabilizer on (firmware only).
@@ -284,6 +301,8 @@ impl Default for WalkSpec {
             b: None,
             swing: SwingKind::Cycloid,
             footsteps: None,
+            com: ComName::Exact,
+            fourier_terms: None,
             compensation: CompensationName::None,
             stabilizer: false,
             firmware: toml::Table::new(),
@@ -500,6 +519,11 @@ impl WalkSpec {
             "period" => Some(self.period.to_string()),
             "lead_in" => Some(self.lead_in.to_string()),
             "lead_out" => Some(self.lead_out.to_string()),
+            "com" => word(match self.com {
+                ComName::Exact => "exact",
+                ComName::Fourier => "fourier",
+            }),
+            "fourier_terms" => self.fourier_terms.map(|n| n.to_string()),
             "compensation" => word(match self.compensation {
                 CompensationName::None => "none",
                 CompensationName::Wholebody => "wholebody",
@@ -769,11 +793,26 @@ impl WalkSpec {
         }
     }
 
+    /// The CoM method of the plan.
+    pub fn com_method(&self) -> ComMethod {
+        match self.com {
+            ComName::Exact => ComMethod::Exact,
+            ComName::Fourier => ComMethod::Fourier {
+                terms: self.fourier_terms.unwrap_or(DEFAULT_FOURIER_TERMS),
+            },
+        }
+    }
+
     /// A sampler over the plan at sample time `dt` (the `dt` field, or an override).
     pub fn sampler(&self, robot: &Robot, dt: f64) -> Result<HostSampler, PlanError> {
         check_dt(dt)?;
         let plan = self.plan(robot)?;
-        Sampler::new(plan, dt).map_err(|e| match e {
+        if self.com == ComName::Fourier && self.footsteps.is_some() {
+            return Err(PlanError::gait("com", GaitError::NotPeriodicWalk));
+        }
+        WalkSampler::new(plan, &self.forward_walk(), self.com_method(), dt).map_err(|e| match e {
+            GaitError::NotPeriodicWalk => PlanError::gait("com", e),
+            GaitError::BadTermCount => PlanError::gait("fourier_terms", e),
             GaitError::BadSampleTime => PlanError::new(
                 "dt",
                 format!("dt = {dt} s is longer than the shortest phase (t1, t2 − t1, T − t2, lead_in, lead_out)"),
@@ -884,5 +923,50 @@ mod tests {
         assert_eq!(cfg.bus_baud, 3_000_000);
         assert_eq!(cfg.feasibility, walker_contract::config::Feasibility::Off);
         assert_eq!(cfg.walk, ForwardWalk::table2());
+    }
+
+    /// The plans shipped in `plans/` load, and the paper's open loop and the Fourier plan set
+    /// what their comments say (against the firmware's defaults: the closed loop).
+    #[test]
+    fn shipped_plans_load_and_mean_what_they_say() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../plans");
+        let mut n = 0;
+        for e in std::fs::read_dir(dir).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().and_then(|x| x.to_str()) == Some("toml")
+                && !path.ends_with("run-example.toml")
+            {
+                load(&path).unwrap_or_else(|err| panic!("{err}"));
+                n += 1;
+            }
+        }
+        assert!(n >= 4, "{n} plans");
+        let d = walker_contract::Config::default();
+        assert!(
+            d.gyro_feedback.ankle > 0.0
+                && d.feasibility != walker_contract::config::Feasibility::Off
+        );
+        let paper = load(&std::path::Path::new(dir).join("table2-paper.toml"))
+            .unwrap()
+            .firmware_config()
+            .unwrap();
+        assert_eq!(paper.model, ModelKind::Tlipfm);
+        assert_eq!(paper.walk, ForwardWalk::table2());
+        assert_eq!(paper.feasibility, walker_contract::config::Feasibility::Off);
+        assert_eq!(
+            (paper.gyro_feedback.ankle, paper.gyro_feedback.hip),
+            (0.0, 0.0)
+        );
+        assert!(!paper.stabilizer_on && !paper.com_fourier);
+        assert_eq!(
+            paper.compensation,
+            walker_contract::config::Compensation::None
+        );
+        let fourier = load(&std::path::Path::new(dir).join("table2-fourier.toml"))
+            .unwrap()
+            .firmware_config()
+            .unwrap();
+        assert!(fourier.com_fourier);
+        assert_eq!(fourier.fourier_terms, 12);
     }
 }

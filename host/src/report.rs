@@ -315,12 +315,19 @@ pub fn error_stats(rows: &[TickRow]) -> ErrorSummary {
     for r in rows {
         s.push(r.zmp_ref, r.measured());
     }
-    ErrorSummary {
-        ticks: s.samples(),
-        skipped: s.skipped(),
-        invalid: s.invalid(),
-        x: s.x(),
-        y: s.y(),
+    ErrorSummary::of(&s)
+}
+
+impl ErrorSummary {
+    /// The summary of accumulated statistics.
+    pub fn of(s: &ZmpErrorStats<f64>) -> Self {
+        ErrorSummary {
+            ticks: s.samples(),
+            skipped: s.skipped(),
+            invalid: s.invalid(),
+            x: s.x(),
+            y: s.y(),
+        }
     }
 }
 
@@ -971,13 +978,7 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
                 s.push(z, r.measured());
             }
         }
-        ErrorSummary {
-            ticks: s.samples(),
-            skipped: s.skipped(),
-            invalid: s.invalid(),
-            x: s.x(),
-            y: s.y(),
-        }
+        ErrorSummary::of(&s)
     });
 
     let model = opts.spec.model_kind().name().to_uppercase();

@@ -710,15 +710,7 @@ fn stepping_switches_support_without_jumps() {
             // Sway right (positive hip roll shifts the pelvis right), then lift the left leg.
             let th = 0.2 * (std::f64::consts::PI * (t / 3.0)).sin().powi(2);
             let lift = 0.3 * (std::f64::consts::PI * ((t - 1.0) / 1.0).clamp(0.0, 1.0)).sin();
-            let mut q = [0.0; 12];
-            q[1] = th;
-            q[5] = -th;
-            q[7] = th;
-            q[11] = -th;
-            q[2] = -lift;
-            q[3] = 2.0 * lift;
-            q[4] = -lift;
-            set_goals(&mut sim, &q);
+            set_goals(&mut sim, &sway_and_lift_by(th, lift));
         }
         sim.advance_to((k + 1) * 1000).unwrap();
         let tr = *sim.physics.truth();
@@ -1002,8 +994,11 @@ fn drive(sim: &mut Simulator, from_s: f64, secs: f64, goal: impl Fn(f64) -> [f64
 /// Sway the pelvis over the right foot (parallel legs: hip roll θ, ankle roll −θ), then lift the
 /// left foot by bending its knee: the goals at time `t` (s).
 fn sway_and_lift(t: f64) -> [f64; 12] {
-    let th = 0.2 * min_jerk(t);
-    let lift = 0.3 * min_jerk(t - 1.0);
+    sway_and_lift_by(0.2 * min_jerk(t), 0.3 * min_jerk(t - 1.0))
+}
+
+/// The goals of a sway by hip/ankle roll `th` (rad) with the left knee lifted by `lift` (rad).
+fn sway_and_lift_by(th: f64, lift: f64) -> [f64; 12] {
     let mut q = [0.0; 12];
     q[1] = th;
     q[5] = -th;

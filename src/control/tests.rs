@@ -1118,3 +1118,48 @@ fn a_plan_too_long_to_check_is_refused_before_the_bus() {
             && f.id == PLAN_REJECTED_ID
             && f.value == i32::from(GaitError::DryRunTooLong.code()))));
 }
+
+/// The servo-lag feed-forward (`servo_lead`): the joint targets of walk tick k are those the
+/// walk without lead sends at tick k + lead, while the logged reference (ZMP, CoM) stays that
+/// of tick k; the ramp ends at the lead sample's pose. A still IMU (τ = 0), so that the two
+/// walks command the same plan.
+#[test]
+fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_reference() {
+    let base = cfg_with("gyro_ankle=0 gyro_hip=0");
+    let lead = cfg_with("gyro_ankle=0 gyro_hip=0 servo_lead=0.1");
+    assert_eq!(lead.lead_ticks(), 20);
+    let (mut a, mut b) = (
+        board(&base).with_imu_rate(0.0),
+        board(&lead).with_imu_rate(0.0),
+    );
+    assert_eq!(run(&mut a, &base), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(run(&mut b, &lead), RunEnd::Stopped(StopReason::PlanDone));
+    let ramp = base.ticks_for_us(base.ramp_us) as usize;
+    let walk = expected_walk_ticks(&base);
+    let (ta, tb) = (ticks_of(&a.records()), ticks_of(&b.records()));
+    let first_walk = |t: &[TickRecord]| {
+        t.iter()
+            .position(|r| r.com[0] != crate::record::POS_NA)
+            .unwrap()
+    };
+    let (fa, fb) = (first_walk(&ta), first_walk(&tb));
+    let mut compared = 0;
+    for k in 0..walk - 20 {
+        assert_eq!(
+            b.goals[1 + ramp + k],
+            a.goals[1 + ramp + k + 20],
+            "walk tick {k}"
+        );
+        let (ra, rb) = (&ta[fa + k], &tb[fb + k]);
+        assert_eq!((ra.zmp_ref, ra.com), (rb.zmp_ref, rb.com), "walk tick {k}");
+        compared += 1;
+    }
+    assert!(compared > 2000);
+    // The lead walk finishes its plan `lead` ticks earlier.
+    assert_eq!(
+        b.goals.len() + 20,
+        a.goals.len(),
+        "lead ticks fewer goal writes"
+    );
+    assert_goals_in_limits(&b);
+}

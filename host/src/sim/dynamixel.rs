@@ -67,6 +67,9 @@ pub struct XServoParams {
     pub gear_damping: f64,
     /// Coulomb friction of the gear train (MuJoCo joint frictionloss), N·m.
     pub friction_loss: f64,
+    /// Factor on the drive's P, I and D gains against the registers (1: the datasheet servo;
+    /// the robustness sweep varies it to stand for servos tuned or built differently).
+    pub gain_scale: f64,
 }
 
 impl XServoParams {
@@ -80,6 +83,7 @@ impl XServoParams {
         armature: 0.045,
         gear_damping: 0.233,
         friction_loss: 0.03,
+        gain_scale: 1.0,
     };
 
     /// Back-EMF damping `τ_s/ω_0`, N·m·s/rad.
@@ -95,6 +99,7 @@ impl XServoParams {
             self.stall_current,
             self.nominal_voltage,
             self.supply_voltage,
+            self.gain_scale,
         ];
         let non_neg = [self.armature, self.gear_damping, self.friction_loss];
         pos.iter().all(|v| v.is_finite() && *v > 0.0)
@@ -202,9 +207,10 @@ impl XServo {
         self.advance_profile(regs, dt);
         let e = self.desired - present;
         self.integral += e;
-        let kp = f64::from(regs.p_gain) / 128.0;
-        let ki = f64::from(regs.i_gain) / 65536.0;
-        let kd = f64::from(regs.d_gain) / 16.0;
+        let g = params.gain_scale;
+        let kp = g * f64::from(regs.p_gain) / 128.0;
+        let ki = g * f64::from(regs.i_gain) / 65536.0;
+        let kd = g * f64::from(regs.d_gain) / 16.0;
         let limit = f64::from(regs.pwm_limit.min(x_series::PWM_FULL_SCALE));
         let raw = kp * e + ki * self.integral + kd * (e - self.last_error);
         self.last_error = e;
