@@ -428,23 +428,28 @@ fn fall_stops_and_turns_torque_off() {
     );
 }
 
+/// Runs `cfg` whose fault injection fires at walk tick 40; checks the stop, its exit code,
+/// that every goal stayed in the limits and torque went off. Returns the board and the index
+/// of walk tick 40's SYNC WRITE (1 + ramp + 40: the start-up one, the ramp, 40 walk ticks).
+fn run_fault_at_tick_40(cfg: &Config, stop: StopReason, exit: i32) -> (FakeBoard, usize) {
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let mut b = board(cfg);
+    let end = run(&mut b, cfg);
+    assert_eq!(end, RunEnd::Stopped(stop));
+    assert_eq!(end.exit_code(), exit);
+    assert_goals_in_limits(&b);
+    assert!(torque_off_sent(&b));
+    (b, 1 + ramp + 40)
+}
+
 #[test]
 fn nan_target_never_reaches_the_servos() {
     let mut cfg = Config::default();
     cfg.fault_nan_tick = Some(40);
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
-    let mut b = board(&cfg);
-    let end = run(&mut b, &cfg);
-    assert_eq!(
-        end,
-        RunEnd::Stopped(StopReason::NonFiniteTarget { joint: 0 })
-    );
-    assert_eq!(end.exit_code(), 15);
-    assert_goals_in_limits(&b);
-    // Walk tick 40 is SYNC WRITE 1 + ramp + 41: joint 0 kept its previous target.
-    let k = 1 + ramp + 40;
+    let stop = StopReason::NonFiniteTarget { joint: 0 };
+    let (b, k) = run_fault_at_tick_40(&cfg, stop, 15);
+    // Joint 0 kept its previous target.
     assert_eq!(b.goals[k][0], b.goals[k - 1][0]);
-    assert!(torque_off_sent(&b));
 }
 
 #[test]
@@ -739,20 +744,11 @@ fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
     let mut cfg = cfg_with("elf fault_nan_com=40");
     cfg.walk.steps = 3;
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
-    let mut b = board(&cfg);
-    let end = run(&mut b, &cfg);
-    assert_eq!(
-        end,
-        RunEnd::Stopped(StopReason::NonFiniteSample { tick: 40 })
-    );
-    assert_eq!(end.exit_code(), 18);
-    assert_goals_in_limits(&b);
-    // Walk tick 40 is SYNC WRITE 1 + ramp + 41: every joint kept its previous target.
-    let k = 1 + ramp + 40;
+    let stop = StopReason::NonFiniteSample { tick: 40 };
+    let (b, k) = run_fault_at_tick_40(&cfg, stop, 18);
+    // Every joint kept its previous target, then the pose is held until torque off.
     assert_eq!(b.goals[k], b.goals[k - 1]);
-    // Then the pose is held until torque off: no goal changes any more.
     assert!(b.goals[k..].windows(2).all(|w| w[0] == w[1]));
-    assert!(torque_off_sent(&b));
     let recs = b.records();
     assert_eq!(
         stop_of(&recs),
