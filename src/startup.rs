@@ -23,7 +23,10 @@
 //! swing knee), with `feasibility=stretch` t1, t2 and T are multiplied by
 //! f = ⌈1000·(v/v_max)·1.05⌉/1000 (joint speeds scale as 1/f for the same path), with
 //! `feasibility=lower` the swing height becomes ⌊h_z·v_max/(1.05·v)⌋ (µm), and the plan is
-//! checked again, at most [`MAX_TIMING_ROUNDS`] adjustments. Fault records (log kinds 7, 8, 9)
+//! checked again, at most [`MAX_TIMING_ROUNDS`] adjustments. All rounds together spend at most
+//! [`MAX_DRY_RUN_WORK`] (≈ 10⁹ M7 instructions; a longer plan is refused with
+//! `GaitError::DryRunTooLong`, exit 2), feeding the watchdog every 256 samples
+//! ([`servo_timing_fed`]). Fault records (log kinds 7, 8, 9)
 //! carry the factor / new height and a remaining excess.
 //!
 //! Steps 2–4 report the first failing device as a [`StartupError`] (log fault record
@@ -42,7 +45,7 @@ use gait_core::robot::LEG_JOINTS;
 use gait_core::{GaitError, Robot};
 
 pub use gait_core::gait::{
-    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_SAMPLES, MAX_TIMING_ROUNDS, TIMING_MARGIN,
+    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_WORK, MAX_TIMING_ROUNDS, TIMING_MARGIN,
 };
 
 pub use walker_contract::record::timing_fault as note_record;
@@ -62,7 +65,23 @@ pub fn servo_timing(
     robot: &Robot,
     targets: &Targets,
 ) -> Result<TimingCheck, GaitError> {
-    gait_core::gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, robot, targets)
+    servo_timing_fed(cfg, robot, targets, &mut || {})
+}
+
+/// [`servo_timing`] calling `feed` (the watchdog) every few hundred samples.
+pub fn servo_timing_fed(
+    cfg: &Config,
+    robot: &Robot,
+    targets: &Targets,
+    feed: &mut dyn FnMut(),
+) -> Result<TimingCheck, GaitError> {
+    gait_core::gait::servo_timing_fed::<MAX_STEPS>(
+        &cfg.walk_config(),
+        cfg.feasibility,
+        robot,
+        targets,
+        feed,
+    )
 }
 
 pub use walker_contract::codes::StartupStep;

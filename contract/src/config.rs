@@ -47,6 +47,33 @@ impl Default for SupervisorConfig {
     }
 }
 
+/// Limits of the servo monitor (one servo read per walking tick, round-robin).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServoLimits {
+    /// Highest Present Temperature, °C.
+    pub temperature_max_c: u8,
+    /// Lowest Present Input Voltage, V.
+    pub voltage_min_v: f32,
+    /// Highest Present Input Voltage, V.
+    pub voltage_max_v: f32,
+    /// Highest |Present Current|, A.
+    pub current_max_a: f32,
+}
+
+impl ServoLimits {
+    /// XM430-W350 defaults: 70 °C (the servo shuts down at its 80 °C Temperature Limit),
+    /// 10.0 ..= 14.8 V (its operating range), 2.5 A (above its 2.3 A stall current at 12 V:
+    /// only a shorted or blocked motor draws it; the MuJoCo Table 2 walk peaks at 2.1 A).
+    pub const fn xm430() -> Self {
+        ServoLimits {
+            temperature_max_c: 70,
+            voltage_min_v: 10.0,
+            voltage_max_v: 14.8,
+            current_max_a: 2.5,
+        }
+    }
+}
+
 /// Run-time configuration shared by the boards and the control loop. On QEMU every field
 /// named in [`crate::params::PARAMS`] can be overridden from the semihosting command line; on the real
 /// board the configuration is compiled in.
@@ -119,6 +146,19 @@ pub struct Config {
     pub fault_nan_tick: Option<u32>,
     /// Fault injection: request a stop at this walk tick.
     pub stop_at_tick: Option<u32>,
+    /// Longest time a sensor board may go without a plausible reply before the robot stops
+    /// (`SensorStale`), ms.
+    pub sensor_stale_ms: u32,
+    /// Foot forces above m·g·`force_factor` (one foot or both together) are implausible.
+    pub force_factor: f32,
+    /// Rounds of broadcast torque off + read-back of every servo's Torque Enable before the
+    /// servo power is cut.
+    pub torque_off_attempts: u8,
+    /// Limits of the servo monitor.
+    pub servo_limits: ServoLimits,
+    /// Fault injection: make the gait sample's CoM NaN at this walk tick (the finite check
+    /// before the IK must stop).
+    pub fault_nan_com_tick: Option<u32>,
 }
 
 impl Config {
@@ -160,6 +200,11 @@ impl Config {
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,
             stop_at_tick: None,
+            fault_nan_com_tick: None,
+            sensor_stale_ms: 100,
+            force_factor: 6.0,
+            torque_off_attempts: 3,
+            servo_limits: ServoLimits::xm430(),
         }
     }
 

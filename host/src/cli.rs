@@ -931,6 +931,8 @@ fn run_fil(a: &mut Args) -> Result<(), CliError> {
             .map(|t| t.split_whitespace().map(String::from).collect())
             .unwrap_or_default(),
     };
+    // A command line QEMU would refuse: a clear error before anything starts.
+    crate::fil::qemu_append(&opts).map_err(|e| CliError::usage(format!("walker fil: {e}")))?;
     eprintln!(
         "walker fil: {} ({:?}) in QEMU {} against the simulated robot",
         plan_name, spec.model, opts.machine
