@@ -4,6 +4,9 @@
 
 /// Most footsteps a firmware plan may have.
 pub const MAX_STEPS: usize = 64;
+/// Default Position I Gain of the roll servos (register units): the value that walked best in
+/// the MuJoCo runs of docs/beyond.md (paper timing 13.0 / 34.5 → 8.1 / 15.7 mm true ZMP error).
+pub const DEFAULT_SERVO_I_ROLL: u16 = 3000;
 /// Longest servo-lag feed-forward, s.
 pub const MAX_SERVO_LEAD_S: f64 = 0.3;
 /// Most ticks of servo-lag feed-forward (the firmware's delay line of gait samples: 0.3 s at
@@ -165,7 +168,8 @@ impl Config {
     /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
     /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
     /// compensation, stabilizer off, gyro balance feedback on (k_a 0.1 s, k_h 0.05 s), 8 start-up
-    /// attempts, servo-speed feasibility by stretching the timing.
+    /// attempts, servo-speed feasibility by stretching the timing, Position I Gain 3000 on the
+    /// roll servos.
     pub const fn default_config() -> Self {
         Config {
             tick_period_us: 5_000,
@@ -182,7 +186,7 @@ impl Config {
             com_fourier: false,
             fourier_terms: gait_core::fourier_walk::DEFAULT_FOURIER_TERMS,
             servo_lead_s: 0.0,
-            servo_i_roll: 0,
+            servo_i_roll: DEFAULT_SERVO_I_ROLL,
             servo_i_pitch: 0,
             reply_timeout_us: 1_000,
             read_poll_us: DEFAULT_READ_POLL_US,

@@ -840,7 +840,7 @@ params! {
         plan_key: None,
         unit: "",
         domain: int(0, 16383),
-        doc: "Position I Gain (register 82) written at start-up to the hip-roll and ankle-roll servos: integral action against the stance leg's load sag (0: factory default)",
+        doc: "Position I Gain (register 82) written at start-up to the hip-roll and ankle-roll servos: integral action against the stance leg's load sag (0: the factory default, no write)",
         set: |c, v| { c.servo_i_roll = v as u16 },
         get: |c| { Some(Value::Int(u32::from(c.servo_i_roll))) },
     },
