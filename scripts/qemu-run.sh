@@ -80,6 +80,22 @@ cmd=(qemu-system-arm -M "$machine" -nographic -monitor none
     -icount shift=0
     -kernel "$elf" "${append[@]}" "${extra[@]}")
 
+# QEMU hands the firmware "ELF -append-text" + NUL through semihosting and refuses when that is
+# over the firmware's 1024-byte buffer (walker_contract::params::CMDLINE_MAX): the firmware
+# would then read no parameter. Refuse it here, before QEMU starts (the last -append wins).
+cmdline_max=1024
+text=
+prev=
+for a in "${cmd[@]}"; do
+    if [ "$prev" = "-append" ]; then text=$a; fi
+    prev=$a
+done
+need=$(( ${#elf} + 1 + ${#text} + 1 ))
+if [ -n "$text" ] && [ "$need" -gt "$cmdline_max" ]; then
+    echo "qemu-run.sh: the firmware command line is $need bytes (ELF path + space + -append text + NUL), over the firmware's $cmdline_max-byte semihosting buffer" >&2
+    exit 2
+fi
+
 limit=()
 if [ "$timeout_s" != "0" ] && command -v timeout >/dev/null 2>&1; then
     limit=(timeout --foreground "$timeout_s")

@@ -49,6 +49,23 @@ if [ "$code" != 11 ]; then
     exit 1
 fi
 
+step "firmware: a command line over its 1024-byte semihosting buffer is refused (script: before QEMU; firmware: exit 2, not defaults)"
+long=$(printf 'stop_at=1 %.0s' $(seq 110))
+code=0
+scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --timeout 60 -append "$long" || code=$?
+if [ "$code" != 2 ]; then
+    echo "qemu-run.sh: expected exit 2 for an over-long command line, got $code" >&2
+    exit 1
+fi
+code=0
+timeout 60 qemu-system-arm -M mps2-an500 -nographic -monitor none -serial null -serial null \
+    -serial null -semihosting-config enable=on,target=native -icount shift=0 \
+    -kernel target/thumbv7em-none-eabihf/release/qemu -append "$long" >/dev/null || code=$?
+if [ "$code" != 2 ]; then
+    echo "firmware: expected exit 2 (configuration rejected) for a refused command line, got $code" >&2
+    exit 1
+fi
+
 step "the official ROBOTIS dynamixel-sdk (PyPI) reads and writes every simulated device"
 cargo build --release --target host-tuple -p walker-host --bin walker
 bash scripts/sdk-test.sh "target/$(rustc -vV | sed -n 's/^host: //p')/release/walker"

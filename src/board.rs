@@ -3,7 +3,7 @@
 //! bus time model, the broadcast torque-off packet).
 //!
 //! A board is one value implementing [`Board`] (= [`ServoBus`] + [`Clock`] + [`TickTimer`] +
-//! [`LogSink`] + [`Watchdog`]). Because the bus transport and the clock live on the *same*
+//! [`LogSink`] + [`Watchdog`], plus the servo power switch). Because the bus transport and the clock live on the *same*
 //! value, a driver borrowing `&mut board` as its [`ServoBus`] can still read the clock through
 //! it (`impl ServoBus for &mut T` below), and a board whose clock is virtual (QEMU) can advance
 //! it from inside its bus transport.
@@ -23,6 +23,8 @@ pub enum BusError {
     UnsupportedBaud,
     /// The packet is longer than the transport can send.
     TooLong,
+    /// The UART did not become ready within the board's bounded wait (a hung peripheral).
+    Timeout,
 }
 
 /// The half-duplex Dynamixel bus, one instruction packet at a time.
@@ -30,7 +32,8 @@ pub enum BusError {
 /// Contract (both boards implement it exactly, the driver relies on it):
 /// * [`ServoBus::send`] transmits one complete instruction packet and returns when its last
 ///   byte is on the wire and the line is turned around to receive. Any reply bytes of an
-///   earlier packet that were never read are discarded first.
+///   earlier packet that were never read are discarded first. Every wait for the UART is
+///   bounded ([`BusError::Timeout`]).
 /// * [`ServoBus::recv`] reads up to `buf.len()` reply bytes and returns how many it read; it
 ///   returns early (fewer bytes) only when `timeout_us` microseconds of [`Clock`] time have
 ///   passed since the call — that is the timeout, there is no separate error. `Ok(0)` with a
@@ -101,8 +104,9 @@ pub trait TickTimer {
     fn overruns(&self) -> u32;
 }
 
-/// The hardware watchdog. Not running until [`Watchdog::start`] (walking begins); once
-/// running it cannot be stopped, so the loop must [`Watchdog::feed`] it every tick.
+/// The hardware watchdog. Started at boot by [`crate::control::run`]; once running it cannot
+/// be stopped: the boards feed it in their wait loops (bus send/receive, tick wait), the
+/// start-up dry run every 256 samples and the loop every tick.
 pub trait Watchdog {
     /// Starts the watchdog with the given timeout (rounded to what the hardware can do).
     fn start(&mut self, timeout_ms: u32);
@@ -119,9 +123,134 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
     /// Best-effort torque off of every servo: sends [`TORQUE_OFF_PACKET`] (broadcast WRITE of
     /// Torque Enable = 0) on the bus, waiting for no reply. Safe to call from the panic handler.
     fn torque_off_best_effort(&mut self);
+    /// Switches the servos' power supply on or off (the OpenCR's Dynamixel power FET, PF15; a
+    /// board without a switch logs the request and does nothing). The stop sequence cuts it
+    /// after the confirmed torque off ([`crate::control`]).
+    fn servo_power(&mut self, on: bool);
+    /// What reset the controller before this boot, and the raw reset flags (0 where the board
+    /// has none). Read once by the board at start-up (the flags are cleared there).
+    fn reset_cause(&self) -> (ResetCause, u32);
+    /// The crash record kept in no-init RAM (survives a reset, not a power-on): the control
+    /// loop notes each tick in it, the panic path and the watchdog record themselves there.
+    fn crash_cell(&mut self) -> &mut CrashCell;
     /// Ends the firmware: under QEMU exits with `code` through semihosting; on the real board
     /// sends torque off and parks/resets (see the board module).
     fn exit(&mut self, code: i32) -> !;
+}
+
+pub use walker_contract::codes::{CrashCode, ResetCause};
+
+/// The reset cause from the STM32F7's RCC_CSR (RM0385 §5.3.21: bit 25 BORRSTF, 26 PINRSTF,
+/// 27 PORRSTF, 28 SFTRSTF, 29 IWDGRSTF, 30 WWDGRSTF, 31 LPWRRSTF). A power-on sets PORRSTF
+/// (with BORRSTF and PINRSTF); a brown-out sets BORRSTF without PORRSTF; every reset also
+/// drives the NRST pin, so PINRSTF alone means the pin (button, debugger). Priority: power-on,
+/// watchdog, software, low-power, brown-out, pin.
+pub fn stm32f7_reset_cause(csr: u32) -> ResetCause {
+    let bit = |n: u32| csr & (1 << n) != 0;
+    if bit(27) {
+        ResetCause::PowerOn
+    } else if bit(29) || bit(30) {
+        ResetCause::Watchdog
+    } else if bit(28) {
+        ResetCause::Software
+    } else if bit(31) {
+        ResetCause::LowPower
+    } else if bit(25) {
+        ResetCause::BrownOut
+    } else if bit(26) {
+        ResetCause::Pin
+    } else {
+        ResetCause::Unknown
+    }
+}
+
+/// A record in RAM that is not initialised at start-up (the `.uninit` section of cortex-m-rt's
+/// `link.x`, NOLOAD): the running loop notes its tick, a panic or the watchdog marks it, and
+/// the next boot reads it ([`CrashCell::take`]) and writes it to the log. Valid only when the
+/// magic and the check word agree (after a power-on the RAM is random: the boot ignores it).
+/// Every access is volatile (the content must reach RAM before a reset).
+#[repr(C)]
+#[derive(Clone, Debug, Default)]
+pub struct CrashCell {
+    magic: u32,
+    code: u32,
+    tick: u32,
+    check: u32,
+}
+
+/// What [`CrashCell::take`] found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CrashNote {
+    /// Panic or watchdog; `None` when the previous run only noted ticks.
+    pub code: Option<CrashCode>,
+    /// The last control tick index noted (saturating to u32).
+    pub tick: u32,
+}
+
+impl CrashCell {
+    /// Magic of a valid cell ("WALK").
+    pub const MAGIC: u32 = 0x5741_4C4B;
+    /// Code of a cell that only notes the running tick.
+    const RUNNING: u32 = 0;
+
+    /// A cleared cell.
+    pub const fn new() -> Self {
+        CrashCell {
+            magic: 0,
+            code: 0,
+            tick: 0,
+            check: 0,
+        }
+    }
+
+    fn check_of(code: u32, tick: u32) -> u32 {
+        Self::MAGIC ^ code.rotate_left(16) ^ tick ^ 0xA5A5_5A5A
+    }
+
+    fn store(&mut self, code: u32, tick: u32) {
+        // SAFETY: plain volatile stores to fields of `self` (valid, aligned, exclusive).
+        unsafe {
+            core::ptr::write_volatile(&mut self.magic, Self::MAGIC);
+            core::ptr::write_volatile(&mut self.code, code);
+            core::ptr::write_volatile(&mut self.tick, tick);
+            core::ptr::write_volatile(&mut self.check, Self::check_of(code, tick));
+        }
+    }
+
+    fn load(&self) -> Option<(u32, u32)> {
+        // SAFETY: volatile loads of fields of `self`.
+        let (m, c, t, k) = unsafe {
+            (
+                core::ptr::read_volatile(&self.magic),
+                core::ptr::read_volatile(&self.code),
+                core::ptr::read_volatile(&self.tick),
+                core::ptr::read_volatile(&self.check),
+            )
+        };
+        (m == Self::MAGIC && k == Self::check_of(c, t)).then_some((c, t))
+    }
+
+    /// Notes the running control tick (each tick).
+    pub fn note_tick(&mut self, tick: u64) {
+        self.store(Self::RUNNING, u32::try_from(tick).unwrap_or(u32::MAX));
+    }
+
+    /// Records a panic or watchdog with the last tick noted (0 if none was).
+    pub fn record(&mut self, code: CrashCode) {
+        let tick = self.load().map_or(0, |(_, t)| t);
+        self.store(u32::from(code.code()), tick);
+    }
+
+    /// Reads and clears the cell: `None` when it is not valid.
+    pub fn take(&mut self) -> Option<CrashNote> {
+        let (c, tick) = self.load()?;
+        // SAFETY: volatile store to a field of `self`.
+        unsafe { core::ptr::write_volatile(&mut self.magic, 0) };
+        let code = u8::try_from(c)
+            .ok()
+            .and_then(|c| CrashCode::try_from(c).ok());
+        Some(CrashNote { code, tick })
+    }
 }
 
 /// Control-table address of Torque Enable on X-series servos (1 byte).
@@ -255,6 +384,53 @@ impl LineTime {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stm32f7_reset_flags() {
+        let f = |bits: &[u32]| bits.iter().fold(0u32, |a, b| a | 1 << b);
+        assert_eq!(stm32f7_reset_cause(f(&[25, 26, 27])), ResetCause::PowerOn);
+        assert_eq!(stm32f7_reset_cause(f(&[25, 26])), ResetCause::BrownOut);
+        assert_eq!(stm32f7_reset_cause(f(&[26, 29])), ResetCause::Watchdog);
+        assert_eq!(stm32f7_reset_cause(f(&[26, 30])), ResetCause::Watchdog);
+        assert_eq!(stm32f7_reset_cause(f(&[26, 28])), ResetCause::Software);
+        assert_eq!(stm32f7_reset_cause(f(&[26])), ResetCause::Pin);
+        assert_eq!(stm32f7_reset_cause(f(&[26, 31])), ResetCause::LowPower);
+        assert_eq!(stm32f7_reset_cause(0), ResetCause::Unknown);
+    }
+
+    #[test]
+    fn crash_cell_round_trip_and_garbage() {
+        let mut c = CrashCell::new();
+        assert_eq!(c.take(), None);
+        c.note_tick(41);
+        c.note_tick(42);
+        c.record(CrashCode::Panic);
+        assert_eq!(
+            c.take(),
+            Some(CrashNote {
+                code: Some(CrashCode::Panic),
+                tick: 42
+            })
+        );
+        // Taken: cleared.
+        assert_eq!(c.take(), None);
+        c.note_tick(7);
+        assert_eq!(
+            c.take(),
+            Some(CrashNote {
+                code: None,
+                tick: 7
+            })
+        );
+        // Random RAM (a power-on) is not a record: magic right, check wrong.
+        let mut g = CrashCell {
+            magic: CrashCell::MAGIC,
+            code: 1,
+            tick: 99,
+            check: 12345,
+        };
+        assert_eq!(g.take(), None);
+    }
 
     #[test]
     fn torque_off_packet_layout() {

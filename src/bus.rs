@@ -71,6 +71,7 @@ fn kind_of(e: BusError) -> ErrorKind {
         BusError::Hardware => ErrorKind::Other,
         BusError::UnsupportedBaud => ErrorKind::Unsupported,
         BusError::TooLong => ErrorKind::OutOfMemory,
+        BusError::Timeout => ErrorKind::TimedOut,
     }
 }
 

@@ -6,12 +6,18 @@
 //! 1. `wait_tick()`; overruns go to the supervisor (a burst of them stops).
 //! 2. ONE BULK READ: foot boards 111/112 (18 bytes at 128: 4 forces + counter) and the IMU 200
 //!    (26 bytes at 128: gyro, accelerometer, counter).
-//! 3. Per device the supervisor decides fresh / held (last good value, at most
-//!    [`crate::supervisor::SupervisorConfig::hold_ticks`] ticks in a row) / lost (stop).
+//! 3. Every reply is checked for plausibility ([`crate::plausible`]: the board's sample counter
+//!    advanced, values in the sensor's range, foot forces consistent with the robot's weight);
+//!    a rejected reply counts as missing (fault record `SensorRejected` at the first of a run).
+//!    Per device the supervisor decides fresh / held (last good value, at most
+//!    [`crate::supervisor::SupervisorConfig::hold_ticks`] ticks in a row) / lost (stop); a
+//!    board without an accepted sample for longer than [`Config::sensor_stale_ms`] stops
+//!    (`SensorStale`, exit 19) whatever `hold_ticks`.
 //! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp`, feet placed where the previous
 //!    gait sample put them, feet under [`Config::min_load_n`] ignored); φ̈ from the gyro pitch
 //!    rate through [`PitchAccel`], τ = J·φ̈; tilt from the accelerometer (fall → stop).
-//! 5. One gait sample with τ; with `stab=on` the feedback stabilizer (gait-core
+//! 5. One gait sample with τ, checked finite (CoM, ZMP, feet; then the stabilizer's shift) before
+//!    the IK: a non-finite one holds the last targets and stops (`NonFiniteSample`, exit 18); with `stab=on` the feedback stabilizer (gait-core
 //!    [`gait_core::stabilizer`]) turns the measured ZMP error and the gyro into a bounded shift
 //!    δ of the commanded CoM (‖δ‖ ≤ `stab_max` ≤ 2 cm, rate-limited, ZMP command inside the
 //!    support polygon with margin; a missing or non-finite measurement never reaches it);
@@ -28,12 +34,15 @@
 //!    feedback; true CoP − reference, mean |e| x / y): Δ = 0 13.0 / 34.5 mm, 50 ms
 //!    15.0 / 31.0, 100 ms 16.9 / 30.4, 150 ms 17.0 / 30.8, 200 ms 18.7 / 33.3 — laterally a
 //!    little better, sagittally worse, so it stays off by default.
-//! 6. The tick log record (nominal time, ZMP reference, measured ZMP, CoM, τ, support phase,
+//! 6. The servo monitor ([`crate::monitor`]) reads one leg servo's Hardware Error Status,
+//!    current, voltage and temperature (round-robin); a limit exceeded stops (`ServoFault`).
+//! 7. The tick log record (nominal time, ZMP reference, measured ZMP, CoM, τ, support phase,
 //!    fault state, bus error counters, overruns); the watchdog is fed.
 //!
 //! Bus traffic per tick at 1 Mbps (no byte stuffing needed for typical data): BULK READ
 //! instruction 25 bytes out; replies 29 + 29 + 37 = 95 bytes in; SYNC WRITE 74 bytes out — 99
-//! bytes out and 95 in, ≈ 1.94 ms of line time (+ the Return Delay Times, 0 after start-up).
+//! bytes out and 95 in, ≈ 1.94 ms of line time (+ the Return Delay Times, 0 after start-up);
+//! while walking the servo monitor adds two READs (14 + 14 bytes out, 12 + 32 in): 2.66 ms.
 //!
 //! # Phases
 //! * Servo-speed check (before the bus is touched for motion): the plan is run through the
@@ -47,6 +56,11 @@
 //!   Torque Enable = 0) and the stop record `PlanDone`.
 //! * Any supervisor stop: the pose is held for `stopping_ticks`, torque off, stop record with
 //!   the reason.
+//! * Torque off (every stop, start-up failures included) is confirmed: up to
+//!   [`Config::torque_off_attempts`] rounds of broadcast Torque Enable = 0 and a READ of Torque
+//!   Enable (64) from each servo not yet confirmed at 0; then the servo power is cut
+//!   ([`Board::servo_power`], PF15 on the OpenCR). Unconfirmed servos: fault record
+//!   `TorqueOffUnconfirmed` before the stop record.
 //!
 //! # Foot boards missing at start-up
 //! With [`Config::feet_required`] (the default) a missing foot board stops like any other
@@ -55,6 +69,15 @@
 //! only the missing foot carries load). The gait itself never depends on the feet: they are
 //! measurement instruments for the ZMP-response log. A foot board that stops answering
 //! *during* the walk is a device loss (stop), whatever this setting.
+//!
+//! # Reset cause and crash records
+//! At every boot [`run`] logs the reset cause ([`Board::reset_cause`]: RCC_CSR on the OpenCR,
+//! power-on under QEMU) as a `ResetCause` fault record after the start-up record, and a panic
+//! or watchdog record left by the previous run in no-init RAM ([`Board::crash_cell`]; the loop
+//! notes its tick there every tick) as a `CrashRecord`. After any reset but a power-on the
+//! firmware does not walk by itself: torque off (confirmed, then servo power cut: the servos
+//! kept their power through the controller's reset) and stop `NotPowerOn` (exit 22). Walking
+//! again needs a power cycle until the command port of the online-walking issue exists.
 //!
 //! # Exit codes
 //! [`RunEnd::exit_code`] maps an end to the contract's [`walker_contract::ExitCode`] table (the
@@ -74,16 +97,19 @@ use gait_core::{GaitError, GaitSample, Robot, Side};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 use walker_contract::ExitCode;
 
-use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
+use crate::board::{Board, CrashCode, CrashNote, ResetCause, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
 use crate::imu::{AttitudeFilter, PitchAccel, PitchAccelConfig};
+use crate::monitor::ServoMonitor;
 use crate::params::ArgError;
+use crate::plausible::Plausibility;
 use crate::record::{
     FaultKind, FaultRecord, FaultState, LogWriter, LoggedPhase, Record, StopRecord, TickRecord,
 };
 use crate::startup::{self, Ramp, StartupError};
 use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
 use crate::{startup_record, Config};
+use walker_contract::codes::SensorRejection;
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
@@ -121,6 +147,58 @@ impl RunEnd {
     }
 }
 
+/// What the boot found: the reset cause (with the board's raw flags) and the crash record of
+/// the previous run, if any.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Boot {
+    /// What reset the controller.
+    pub cause: ResetCause,
+    /// The board's raw reset flags.
+    pub flags: u32,
+    /// A panic or watchdog of the previous run and the last tick it noted.
+    pub crash: Option<(CrashCode, u32)>,
+}
+
+impl Boot {
+    /// Reads the reset cause and takes the crash record from `board` (after a power-on the
+    /// no-init RAM is random: cleared, not read; a watchdog reset without a record still
+    /// reports the watchdog, with the last tick the loop noted if any).
+    pub fn read<B: Board>(board: &mut B) -> Self {
+        let (cause, flags) = board.reset_cause();
+        let note = board.crash_cell().take();
+        let crash = match (cause, note) {
+            (ResetCause::PowerOn, _) => None,
+            (
+                _,
+                Some(CrashNote {
+                    code: Some(c),
+                    tick,
+                }),
+            ) => Some((c, tick)),
+            (ResetCause::Watchdog, n) => Some((CrashCode::Watchdog, n.map_or(0, |n| n.tick))),
+            _ => None,
+        };
+        Boot {
+            cause,
+            flags,
+            crash,
+        }
+    }
+
+    /// Writes the boot's records: `ResetCause` (id = cause, value = raw flags), then
+    /// `CrashRecord` (id = crash code, value = tick) if there was one.
+    pub fn write<B: Board>(&self, board: &mut B, log: &mut LogWriter) {
+        let now = board.now_us();
+        let flags = i32::try_from(self.flags).unwrap_or(i32::MAX);
+        let rec = fault(now, FaultKind::ResetCause, self.cause.code(), flags);
+        log.write(board, rec);
+        if let Some((code, tick)) = self.crash {
+            let tick = i32::try_from(tick).unwrap_or(i32::MAX);
+            log.write(board, fault(now, FaultKind::CrashRecord, code.code(), tick));
+        }
+    }
+}
+
 /// The gait sampler of `cfg` (model, walk, ZMP and swing shape, dt; gait-core decides).
 pub fn build_sampler(cfg: &Config, robot: &Robot) -> Result<GaitSampler, GaitError> {
     gait_core::gait::build_sampler::<MAX_STEPS>(&cfg.walk_config(), robot)
@@ -137,6 +215,22 @@ pub fn report_arg_error<B: Board>(board: &mut B, cfg: &Config, e: &ArgError) {
         FaultKind::ConfigRejected,
         e.key_index,
         i32::from(e.position),
+    );
+    log.write(board, rec);
+}
+
+/// Logs a command line the firmware could not read (longer than its buffer): the start-up
+/// record and a `ConfigRejected` fault record (id = `CMDLINE_TOO_LONG`, value = the buffer).
+pub fn report_cmdline_too_long<B: Board>(board: &mut B, cfg: &Config) {
+    let mut log = LogWriter::new();
+    let rec = startup_record(board, cfg, None);
+    log.write(board, rec);
+    let max = i32::try_from(crate::params::CMDLINE_MAX).unwrap_or(i32::MAX);
+    let rec = fault(
+        board.now_us(),
+        FaultKind::ConfigRejected,
+        crate::params::CMDLINE_TOO_LONG,
+        max,
     );
     log.write(board, rec);
 }
@@ -164,16 +258,46 @@ fn phase_of(s: &GaitSample<f32>) -> LoggedPhase {
     }
 }
 
-/// Broadcast Torque Enable = 0 through the master (lock-step aware); the board's
-/// best-effort raw packet if that fails.
-fn torque_off<B: Board>(bus: &mut BoardMaster<'_, B>) {
-    if bus
-        .master()
-        .write(BROADCAST_ID, TORQUE_ENABLE_ADDR, &[0])
-        .is_err()
-    {
-        bus.board().torque_off_best_effort();
+/// The stop that stops: up to [`Config::torque_off_attempts`] rounds of broadcast Torque
+/// Enable = 0 (the board's best-effort raw packet if the master cannot send it) followed by a
+/// READ of Torque Enable from every leg servo not yet confirmed at 0; then the servo power is
+/// cut ([`Board::servo_power`]) whatever the outcome. Servos never confirmed are logged
+/// (`TorqueOffUnconfirmed`). The watchdog is fed after each round (a dead bus costs
+/// `attempts` × 12 reply timeouts, 36 ms by default).
+fn torque_off<B: Board>(bus: &mut BoardMaster<'_, B>, log: &mut LogWriter, cfg: &Config) {
+    let mut off = [false; LEG_JOINTS];
+    for _ in 0..cfg.torque_off_attempts.max(1) {
+        if bus
+            .master()
+            .write(BROADCAST_ID, TORQUE_ENABLE_ADDR, &[0])
+            .is_err()
+        {
+            bus.board().torque_off_best_effort();
+        }
+        for (done, &id) in off.iter_mut().zip(ids::LEGS.iter()) {
+            if !*done {
+                let mut v = [0xFFu8; 1];
+                *done = bus.master().read(id, TORQUE_ENABLE_ADDR, &mut v).is_ok() && v == [0];
+            }
+        }
+        bus.board().feed();
+        if off.iter().all(|&d| d) {
+            break;
+        }
     }
+    let unconfirmed = off.iter().filter(|&&d| !d).count();
+    if let Some(&id) = off.iter().position(|&d| !d).and_then(|j| ids::LEGS.get(j)) {
+        crate::fw_log!(
+            error,
+            "torque off not confirmed by {} servo(s), first {}",
+            unconfirmed,
+            id
+        );
+        let now = bus.board().now_us();
+        let rec = fault(now, FaultKind::TorqueOffUnconfirmed, id, unconfirmed as i32);
+        log.write(bus.board(), rec);
+    }
+    bus.board().servo_power(false);
 }
 
 fn write_stop<B: Board>(bus: &mut BoardMaster<'_, B>, log: &mut LogWriter, reason: StopReason) {
@@ -258,12 +382,87 @@ impl Sensors {
         let &(_, off) = self.slots.get(req)?;
         self.buf.get(off..off + len)
     }
+
+    /// Parses and checks every reply of the last [`Sensors::read`] ([`crate::plausible`]);
+    /// accepted samples are recorded in `checks` at `now_us`.
+    fn check(&self, checks: &mut Plausibility<3>, now_us: u64) -> Checked {
+        let mut out = Checked {
+            feet: [None; 2],
+            imu: None,
+            rejected: [None; 3],
+        };
+        for (i, &(k, _)) in self.slots.iter().enumerate() {
+            if !self.results.get(i).is_some_and(|r| r.is_ok()) {
+                continue;
+            }
+            let verdict = if SENSOR_IDS.get(k) == Some(&ids::IMU) {
+                let s = self
+                    .data(i, usize::from(imu_table::SAMPLE.len))
+                    .and_then(ImuSample::from_bytes);
+                match s {
+                    Some(s) => checks.imu(k, &s).map(|()| out.imu = Some(s)),
+                    None => Err(SensorRejection::Malformed),
+                }
+            } else {
+                let f = self
+                    .data(i, usize::from(foot::SAMPLE.len))
+                    .and_then(FootForces::from_bytes);
+                match (f, out.feet.get_mut(k)) {
+                    (Some(f), Some(slot)) => checks.foot(k, &f).map(|()| *slot = Some(f)),
+                    _ => Err(SensorRejection::Malformed),
+                }
+            };
+            if let (Err(r), Some(slot)) = (verdict, out.rejected.get_mut(k)) {
+                *slot = Some(r);
+            }
+        }
+        if let [Some(a), Some(b)] = &out.feet {
+            if let Err(r) = checks.feet_together(a, b) {
+                out.feet = [None; 2];
+                for slot in out.rejected.iter_mut().take(2) {
+                    *slot = Some(r);
+                }
+            }
+        }
+        for (k, f) in out.feet.iter().enumerate() {
+            if let Some(f) = f {
+                checks.accept(k, f.counter, now_us);
+            }
+        }
+        if let (Some(s), Some(k)) = (out.imu, SENSOR_IDS.iter().position(|&d| d == ids::IMU)) {
+            checks.accept(k, s.counter, now_us);
+        }
+        out
+    }
+}
+
+/// The replies of one tick that passed the plausibility checks, and why the others failed.
+struct Checked {
+    /// Accepted foot samples (index = side).
+    feet: [Option<FootForces>; 2],
+    /// Accepted IMU sample.
+    imu: Option<ImuSample>,
+    /// Per [`SENSOR_IDS`] index: why its reply was rejected (a reply that never came is `None`).
+    rejected: [Option<SensorRejection>; 3],
+}
+
+impl Checked {
+    /// True when sensor `k`'s (index into [`SENSOR_IDS`]) reply was accepted.
+    fn accepted(&self, k: usize) -> bool {
+        match SENSOR_IDS.get(k) {
+            Some(&ids::IMU) => self.imu.is_some(),
+            Some(_) => self.feet.get(k).is_some_and(|f| f.is_some()),
+            None => false,
+        }
+    }
 }
 
 /// Last good sensor values.
 struct SensorState {
     feet: [Option<FootForces>; 2],
     held: [u16; 3],
+    /// Per sensor: its last reply was rejected (the fault record is written once per run).
+    rejecting: [bool; 3],
 }
 
 /// Runs start-up and the walk on `board` with `cfg` until torque is off (see the module docs).
@@ -271,10 +470,28 @@ struct SensorState {
 pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let robot = Robot::reference();
     let mut log = LogWriter::new();
+    // The watchdog runs from boot: the boards feed it in their wait loops, the dry run every
+    // 256 samples, the loop every tick.
+    board.start(cfg.watchdog_ms);
+    // Why did we boot? Only a power-on walks by itself.
+    let boot = Boot::read(board);
+    if boot.cause != ResetCause::PowerOn {
+        crate::fw_log!(error, "reset cause {}: not walking", boot.cause.code());
+        let rec = startup_record(board, cfg, None);
+        log.write(board, rec);
+        boot.write(board, &mut log);
+        let time = Cell::new(0);
+        let mut bus = BoardMaster::new(board, &time, cfg);
+        // The servos kept their power through the controller's reset: let go, cut it.
+        torque_off(&mut bus, &mut log, cfg);
+        let reason = StopReason::NotPowerOn { cause: boot.cause };
+        write_stop(&mut bus, &mut log, reason);
+        return RunEnd::Stopped(reason);
+    }
     let targets = Targets::new(&robot, cfg.compensation);
     // The servo-speed check (a dry run) adjusts the walk before anything moves.
-    let timing =
-        build_sampler(cfg, &robot).and_then(|_| startup::servo_timing(cfg, &robot, &targets));
+    let timing = build_sampler(cfg, &robot)
+        .and_then(|_| startup::servo_timing_fed(cfg, &robot, &targets, &mut || board.feed()));
     let walk_cfg = match &timing {
         Ok(t) => Config {
             walk: t.walk,
@@ -292,6 +509,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
             let rec = startup_record(board, cfg, None);
             log.write(board, rec);
+            boot.write(board, &mut log);
             let rec = fault(
                 board.now_us(),
                 FaultKind::ConfigRejected,
@@ -312,6 +530,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         let b = bus.board();
         let rec = startup_record(&*b, cfg, Some(&missing));
         log.write(b, rec);
+        boot.write(b, &mut log);
     }
     if let Ok(t) = &timing {
         for (kind, id, value) in t.notes().into_iter().map(startup::note_record) {
@@ -333,7 +552,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             missing.len(),
             critical.first()
         );
-        torque_off(&mut bus);
+        torque_off(&mut bus, &mut log, cfg);
         write_stop(&mut bus, &mut log, reason);
         return RunEnd::Stopped(reason);
     }
@@ -346,6 +565,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         }
     }
     let present = match startup::set_return_delay(&mut bus, &present_ids, cfg)
+        .and_then(|_| startup::set_position_gains(&mut bus, cfg))
         .and_then(|_| startup::read_positions(&mut bus, cfg))
         .and_then(|p| {
             write_goals(&mut bus, &p);
@@ -360,7 +580,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 b,
                 fault(t, FaultKind::StartupFailed, e.id, i32::from(e.step.code())),
             );
-            torque_off(&mut bus);
+            torque_off(&mut bus, &mut log, cfg);
             write_stop(&mut bus, &mut log, StopReason::DeviceLost { id: e.id });
             return RunEnd::Startup(e);
         }
@@ -392,6 +612,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut state = SensorState {
         feet: [None; 2],
         held: [0; 3],
+        rejecting: [false; 3],
     };
     let mut pitch = PitchAccel::new(PitchAccelConfig {
         dt_s: cfg.dt_s() as f32,
@@ -409,23 +630,50 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut walk_tick: u32 = 0;
     let mut clamped_seen = 0u16;
 
+    if !first.is_finite() {
+        // The initial pose would come from a non-finite sample: hold the present pose, stop.
+        sup.stop(StopReason::NonFiniteSample { tick: 0 });
+    }
     crate::fw_log!(info, "walking: ramp {} ticks", ramp.ticks());
-    bus.board().start(cfg.watchdog_ms);
+    let weight_n = (robot.masses.total() * robot.gravity) as f32;
+    let mut plausible = Plausibility::<3>::new(cfg, weight_n, bus.board().now_us());
+    let mut monitor = ServoMonitor::new();
     loop {
         let tick = bus.board().wait_tick();
+        bus.board().crash_cell().note_tick(tick.index);
         sup.tick_timing(tick.overrun);
 
         // Sensors.
         sensors.read(&mut bus);
+        let now = bus.board().now_us();
+        let checked = sensors.check(&mut plausible, now);
         let mut imu_fresh = None;
-        for (i, &(k, _)) in sensors.slots.clone().iter().enumerate() {
+        for &(k, _) in sensors.slots.clone().iter() {
             let Some(&id) = SENSOR_IDS.get(k) else {
                 continue;
             };
-            let ok = sensors.results.get(i).is_some_and(|r| r.is_ok());
-            let fresh = sup.report(id, ok);
-            let held = state.held.get_mut(k);
             let t = bus.board().now_us();
+            let rejected = checked.rejected.get(k).copied().flatten();
+            if let (Some(r), Some(seen)) = (rejected, state.rejecting.get_mut(k)) {
+                if !*seen {
+                    crate::fw_log!(warn, "sensor {} reply rejected: {}", id, r.code());
+                    let rec = fault(t, FaultKind::SensorRejected, id, i32::from(r.code()));
+                    log.write(bus.board(), rec);
+                }
+                *seen = true;
+            }
+            let ok = checked.accepted(k);
+            if ok {
+                if let Some(seen) = state.rejecting.get_mut(k) {
+                    *seen = false;
+                }
+            }
+            let fresh = sup.report(id, ok);
+            if let Some(age_ms) = plausible.stale(k, now) {
+                crate::fw_log!(error, "sensor {} stale for {} ms", id, age_ms);
+                sup.stop(StopReason::SensorStale { id, age_ms });
+            }
+            let held = state.held.get_mut(k);
             match (fresh, held) {
                 (Freshness::Fresh, Some(h)) => {
                     if *h > 0 {
@@ -434,9 +682,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     }
                     *h = 0;
                     if id == ids::IMU {
-                        imu_fresh = sensors.data(i, 26).and_then(ImuSample::from_bytes);
-                    } else if let Some(slot) = state.feet.get_mut(k) {
-                        *slot = sensors.data(i, 18).and_then(FootForces::from_bytes);
+                        imu_fresh = checked.imu;
+                    } else if let (Some(slot), Some(f)) =
+                        (state.feet.get_mut(k), checked.feet.get(k))
+                    {
+                        *slot = *f;
                     }
                 }
                 (Freshness::Held(n), Some(h)) => {
@@ -491,12 +741,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         } else {
                             Some(k + 1)
                         };
-                        ramp.at(k)
+                        Some(ramp.at(k))
                     }
-                    None => {
+                    None => 'sample: {
                         let k = walk_tick;
                         walk_tick = walk_tick.saturating_add(1);
-                        let ahead = match pending.take() {
+                        let mut ahead = match pending.take() {
                             Some(p) => p,
                             None => {
                                 let a = sampler.next(tau);
@@ -504,7 +754,18 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 a
                             }
                         };
+                        if cfg.fault_nan_com_tick == Some(k) {
+                            ahead.f32.com[0] = f32::NAN;
+                        }
                         let s = delay.pop_front().unwrap_or(ahead.f32);
+                        // The finite check before the IK (which would clamp a NaN pelvis to
+                        // finite, meaningless angles): the sample the IK takes (`servo_lead`
+                        // ahead) and the present one; hold the last targets and stop.
+                        if !(s.is_finite() && ahead.f32.is_finite()) {
+                            crate::fw_log!(error, "non-finite gait sample at walk tick {}", k);
+                            sup.stop(StopReason::NonFiniteSample { tick: k });
+                            break 'sample None;
+                        }
                         let shift = if cfg.stabilizer_on {
                             // The measurement answers the previous command: compare with it.
                             stab.update(&StabilizerInput {
@@ -516,6 +777,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         } else {
                             [0.0; 2]
                         };
+                        if !shift.iter().all(|v| v.is_finite()) {
+                            sup.stop(StopReason::NonFiniteSample { tick: k });
+                            break 'sample None;
+                        }
                         let mut q = sampler.joints(&targets, &ahead, shift);
                         cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                         if sampler.is_done() {
@@ -534,11 +799,20 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         rec.set_com_m(cx + shift[0], cy + shift[1]);
                         rec.phase = phase_of(&s);
                         prev = s;
-                        q
+                        Some(q)
                     }
                 };
-                let ticks = match safe_targets(&q, &map, &last_ticks) {
-                    Ok(t) => {
+                let ticks = match q.map(|q| safe_targets(&q, &map, &last_ticks)) {
+                    // A non-finite sample: the last targets again (the stop has begun); the
+                    // log shows the last finite sample.
+                    None => {
+                        let ([zx, zy], [cx, cy, _]) = (prev.zmp, prev.com);
+                        rec.set_zmp_ref_m(zx, zy);
+                        rec.set_com_m(cx, cy);
+                        rec.phase = LoggedPhase::Stopped;
+                        last_ticks
+                    }
+                    Some(Ok(t)) => {
                         if t.clamped & !clamped_seen != 0 {
                             let first = t.clamped.trailing_zeros() as u8;
                             let now = bus.board().now_us();
@@ -549,7 +823,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         clamped_seen |= t.clamped;
                         t.ticks
                     }
-                    Err(e) => {
+                    Some(Err(e)) => {
                         sup.stop(StopReason::NonFiniteTarget {
                             joint: e.first_joint(),
                         });
@@ -558,9 +832,13 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 };
                 write_goals(&mut bus, &ticks);
                 last_ticks = ticks;
+                if let Some(reason) = monitor.poll(&mut bus, &cfg.servo_limits) {
+                    crate::fw_log!(error, "servo fault: {}", reason);
+                    sup.stop(reason);
+                }
             }
             Action::HoldPose => write_goals(&mut bus, &last_ticks),
-            Action::SendTorqueOff => torque_off(&mut bus),
+            Action::SendTorqueOff => torque_off(&mut bus, &mut log, cfg),
             Action::Idle => {}
         }
         if action != Action::Run {

@@ -47,6 +47,8 @@ pub mod board;
 pub mod bus;
 pub mod control;
 pub mod imu;
+pub mod monitor;
+pub mod plausible;
 pub mod startup;
 pub mod supervisor;
 

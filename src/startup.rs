@@ -23,7 +23,10 @@
 //! swing knee), with `feasibility=stretch` t1, t2 and T are multiplied by
 //! f = ⌈1000·(v/v_max)·1.05⌉/1000 (joint speeds scale as 1/f for the same path), with
 //! `feasibility=lower` the swing height becomes ⌊h_z·v_max/(1.05·v)⌋ (µm), and the plan is
-//! checked again, at most [`MAX_TIMING_ROUNDS`] adjustments. Fault records (log kinds 7, 8, 9)
+//! checked again, at most [`MAX_TIMING_ROUNDS`] adjustments. All rounds together spend at most
+//! [`MAX_DRY_RUN_WORK`] (≈ 10⁹ M7 instructions; a longer plan is refused with
+//! `GaitError::DryRunTooLong`, exit 2), feeding the watchdog every 256 samples
+//! ([`servo_timing_fed`]). Fault records (log kinds 7, 8, 9)
 //! carry the factor / new height and a remaining excess.
 //!
 //! Steps 2–4 report the first failing device as a [`StartupError`] (log fault record
@@ -42,7 +45,7 @@ use gait_core::robot::LEG_JOINTS;
 use gait_core::{GaitError, Robot};
 
 pub use gait_core::gait::{
-    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_SAMPLES, MAX_TIMING_ROUNDS, TIMING_MARGIN,
+    stretched, TimingCheck, TimingNote, MAX_DRY_RUN_WORK, MAX_TIMING_ROUNDS, TIMING_MARGIN,
 };
 
 pub use walker_contract::record::timing_fault as note_record;
@@ -62,7 +65,23 @@ pub fn servo_timing(
     robot: &Robot,
     targets: &Targets,
 ) -> Result<TimingCheck, GaitError> {
-    gait_core::gait::servo_timing::<MAX_STEPS>(&cfg.walk_config(), cfg.feasibility, robot, targets)
+    servo_timing_fed(cfg, robot, targets, &mut || {})
+}
+
+/// [`servo_timing`] calling `feed` (the watchdog) every few hundred samples.
+pub fn servo_timing_fed(
+    cfg: &Config,
+    robot: &Robot,
+    targets: &Targets,
+    feed: &mut dyn FnMut(),
+) -> Result<TimingCheck, GaitError> {
+    gait_core::gait::servo_timing_fed::<MAX_STEPS>(
+        &cfg.walk_config(),
+        cfg.feasibility,
+        robot,
+        targets,
+        feed,
+    )
 }
 
 pub use walker_contract::codes::StartupStep;
@@ -134,6 +153,47 @@ pub fn set_return_delay<B: ServoBus + Clock>(
         if back[0] != 0 {
             return Err(fail(StartupStep::ReturnDelayVerify, id, None));
         }
+    }
+    Ok(written)
+}
+
+/// The Position I Gain of leg joint `j` from `cfg`: [`Config::servo_i_roll`] for the hip-roll
+/// and ankle-roll joints (1 and 5 of each leg), [`Config::servo_i_pitch`] for hip pitch, knee
+/// and ankle pitch (2, 3, 4), none for the hip yaw (0).
+pub fn position_i_gain(cfg: &Config, j: usize) -> Option<u16> {
+    match j % 6 {
+        1 | 5 => Some(cfg.servo_i_roll),
+        2..=4 => Some(cfg.servo_i_pitch),
+        _ => None,
+    }
+}
+
+/// Writes the configured Position I Gains (register 82) to the leg servos whose gain is not 0,
+/// each write read back (retried `startup_attempts` times); returns how many were written.
+/// Position-mode servos follow their goal only to a load-dependent error (P gain 800: ≈ 19
+/// N·m/rad on an XM430-W350); the integral removes that sag of the stance leg.
+pub fn set_position_gains<B: ServoBus + Clock>(
+    bus: &mut BoardMaster<'_, B>,
+    cfg: &Config,
+) -> Result<u8, StartupError> {
+    let addr = x_series::POSITION_I_GAIN.addr;
+    let n = cfg.startup_attempts;
+    let fail = |step, id, error| StartupError { step, id, error };
+    let mut written = 0u8;
+    for (j, &id) in ids::LEGS.iter().enumerate() {
+        let Some(gain) = position_i_gain(cfg, j).filter(|g| *g > 0) else {
+            continue;
+        };
+        let bytes = gain.to_le_bytes();
+        retry(n, || bus.master().write(id, addr, &bytes))
+            .map_err(|e| fail(StartupStep::GainWrite, id, Some(e)))?;
+        let mut back = [0u8; 2];
+        retry(n, || bus.master().read(id, addr, &mut back))
+            .map_err(|e| fail(StartupStep::GainWrite, id, Some(e)))?;
+        if back != bytes {
+            return Err(fail(StartupStep::GainVerify, id, None));
+        }
+        written = written.saturating_add(1);
     }
     Ok(written)
 }

@@ -68,6 +68,18 @@ pub struct FakeDevice {
     pub present: i32,
     /// Dead: answers nothing.
     pub dead: bool,
+    /// Position I Gain register.
+    pub i_gain: u16,
+    /// Torque Enable ignores writes of 0 (a servo that does not let go).
+    pub torque_stuck: bool,
+    /// Hardware Error Status.
+    pub hw_error: u8,
+    /// Present Temperature, °C.
+    pub temperature: u8,
+    /// Present Input Voltage, 0.1 V.
+    pub voltage_dv: u16,
+    /// Present Current, units of 2.69 mA.
+    pub current_raw: i16,
 }
 
 /// Per `wait_tick`: the tick and the number of packets sent before it.
@@ -97,10 +109,18 @@ pub struct FakeBoard {
     pub ticks: Vec<TickMark>,
     /// Watchdog timeout once started.
     pub watchdog: Option<u32>,
+    /// `packets.len()` when the watchdog was started.
+    pub watchdog_at: Option<usize>,
     /// Watchdog feeds.
     pub feeds: u32,
     /// Calls of `torque_off_best_effort`.
     pub best_effort: u32,
+    /// Every `servo_power` call: (on, `packets.len()` at the call).
+    pub power: Vec<(bool, usize)>,
+    /// What `reset_cause` reports (power-on by default).
+    pub reset: (crate::board::ResetCause, u32),
+    /// The no-init crash record.
+    pub crash: crate::board::CrashCell,
     /// Goal positions of every SYNC WRITE.
     pub goals: Vec<[i32; 12]>,
     /// Script: device `id` dies once `n` SYNC WRITEs were seen.
@@ -111,7 +131,13 @@ pub struct FakeBoard {
     pub fall_at: Option<usize>,
     /// Script: the tick that made the `n`-th SYNC WRITE takes this much longer, µs.
     pub slow: Vec<(usize, u64)>,
+    /// Script: board `id`'s sample counter stops advancing once `n` SYNC WRITEs were seen.
+    pub freeze_at: Option<(u8, usize)>,
+    /// Script: board `id` reports an out-of-range value (a byte-shifted sample) at the
+    /// `n`-th SYNC WRITE only.
+    pub spike_at: Option<(u8, usize)>,
     imu_counter: u16,
+    foot_counters: [u16; 2],
     /// Amplitude of the IMU's 1.5 Hz pitch-rate sinusoid, rad/s.
     imu_rate_amp: f32,
 }
@@ -134,6 +160,12 @@ impl FakeBoard {
                 goal: t,
                 present: t,
                 dead: false,
+                i_gain: 0,
+                torque_stuck: false,
+                hw_error: 0,
+                temperature: 40,
+                voltage_dv: 120,
+                current_raw: 300,
             });
         }
         for (id, kind) in [(111, Kind::Foot(0)), (112, Kind::Foot(1)), (200, Kind::Imu)] {
@@ -146,6 +178,12 @@ impl FakeBoard {
                 goal: 0,
                 present: 0,
                 dead: false,
+                i_gain: 0,
+                torque_stuck: false,
+                hw_error: 0,
+                temperature: 40,
+                voltage_dv: 120,
+                current_raw: 300,
             });
         }
         FakeBoard {
@@ -159,14 +197,21 @@ impl FakeBoard {
             log: Vec::new(),
             ticks: Vec::new(),
             watchdog: None,
+            watchdog_at: None,
             feeds: 0,
             best_effort: 0,
+            power: Vec::new(),
+            reset: (crate::board::ResetCause::PowerOn, 0),
+            crash: crate::board::CrashCell::new(),
             goals: Vec::new(),
             kill_at: None,
             revive_at: None,
             fall_at: None,
             slow: Vec::new(),
+            freeze_at: None,
+            spike_at: None,
             imu_counter: 0,
+            foot_counters: [0; 2],
             imu_rate_amp: 0.3,
         }
     }
@@ -270,8 +315,24 @@ impl FakeBoard {
         })
     }
 
+    /// True when script `s` (device, SYNC WRITE count) applies to `id` now: from then on
+    /// (`once` false) or at that count only.
+    fn scripted(&self, s: Option<(u8, usize)>, id: u8, once: bool) -> bool {
+        s.is_some_and(|(d, n)| {
+            d == id
+                && if once {
+                    self.sync_writes() == n
+                } else {
+                    self.sync_writes() >= n
+                }
+        })
+    }
+
     fn imu_sample(&mut self) -> [u8; 26] {
-        self.imu_counter = self.imu_counter.wrapping_add(1);
+        if !self.scripted(self.freeze_at, walker_contract::bus_map::IMU, false) {
+            self.imu_counter = self.imu_counter.wrapping_add(1);
+        }
+        let spike = self.scripted(self.spike_at, walker_contract::bus_map::IMU, true);
         let t = self.now_ns as f32 * 1e-9;
         let rate = self.imu_rate_amp * (core::f32::consts::TAU * 1.5 * t).sin();
         let g = 9.80665f32;
@@ -281,7 +342,11 @@ impl FakeBoard {
         } else {
             [0.0, 0.0, g]
         };
-        ImuSample::from_si([0.0, rate, 0.0], accel, self.imu_counter).to_bytes()
+        let mut s = ImuSample::from_si([0.0, rate, 0.0], accel, self.imu_counter);
+        if spike {
+            s.gyro_urad_s[1] = i32::MAX / 2;
+        }
+        s.to_bytes()
     }
 
     fn read_mem(&mut self, i: usize, addr: u16, len: u16) -> Option<Vec<u8>> {
@@ -291,11 +356,30 @@ impl FakeBoard {
             (Kind::Servo(_), 132, 4) => Some(d.present.to_le_bytes().to_vec()),
             (Kind::Servo(_), 116, 4) => Some(d.goal.to_le_bytes().to_vec()),
             (Kind::Servo(_), 64, 1) => Some(vec![u8::from(d.torque)]),
+            (Kind::Servo(_), 82, 2) => Some(d.i_gain.to_le_bytes().to_vec()),
+            (Kind::Servo(_), 70, 1) => Some(vec![d.hw_error]),
+            (Kind::Servo(_), 126, 21) => {
+                let mut b = vec![0u8; 21];
+                b[0..2].copy_from_slice(&d.current_raw.to_le_bytes());
+                b[6..10].copy_from_slice(&d.present.to_le_bytes());
+                b[18..20].copy_from_slice(&d.voltage_dv.to_le_bytes());
+                b[20] = d.temperature;
+                Some(b)
+            }
             (Kind::Foot(s), 128, 18) => {
-                let f = FootForces {
-                    forces_mn: self.foot_forces()[s],
-                    counter: 0,
-                };
+                let counter = self.foot_counters.get_mut(s)?;
+                let frozen = self
+                    .freeze_at
+                    .is_some_and(|(id, n)| id == d.id && self.goals.len() >= n);
+                if !frozen {
+                    *counter = counter.wrapping_add(1);
+                }
+                let counter = *counter;
+                let mut forces_mn = self.foot_forces()[s];
+                if self.scripted(self.spike_at, d.id, true) {
+                    forces_mn[0] = forces_mn[0].wrapping_mul(256).wrapping_add(1_000_000);
+                }
+                let f = FootForces { forces_mn, counter };
                 Some(f.to_bytes().to_vec())
             }
             (Kind::Imu, 128, 26) => Some(self.imu_sample().to_vec()),
@@ -315,10 +399,14 @@ impl FakeBoard {
                 true
             }
             (Kind::Servo(_), 64, [v]) => {
-                d.torque = *v != 0;
+                d.torque = *v != 0 || (d.torque && d.torque_stuck);
                 if d.torque {
                     d.goal = d.present;
                 }
+                true
+            }
+            (Kind::Servo(_), 82, [a, b]) => {
+                d.i_gain = u16::from_le_bytes([*a, *b]);
                 true
             }
             (Kind::Servo(_), 116, [a, b, c, e]) => {
@@ -519,6 +607,7 @@ impl LogSink for FakeBoard {
 impl Watchdog for FakeBoard {
     fn start(&mut self, timeout_ms: u32) {
         self.watchdog = Some(timeout_ms);
+        self.watchdog_at = Some(self.packets.len());
     }
     fn feed(&mut self) {
         self.feeds += 1;
@@ -534,6 +623,18 @@ impl Board for FakeBoard {
         for d in &mut self.devices {
             d.torque = false;
         }
+    }
+
+    fn servo_power(&mut self, on: bool) {
+        self.power.push((on, self.packets.len()));
+    }
+
+    fn reset_cause(&self) -> (crate::board::ResetCause, u32) {
+        self.reset
+    }
+
+    fn crash_cell(&mut self) -> &mut crate::board::CrashCell {
+        &mut self.crash
     }
 
     fn exit(&mut self, code: i32) -> ! {

@@ -30,7 +30,9 @@ fn ping(id: u8) -> [u8; 10] {
 mod tests {
     use core::hint::black_box;
     use defmt::assert;
-    use walker_firmware::board::{Clock, ServoBus, TickTimer, TORQUE_OFF_PACKET};
+    use walker_firmware::board::{
+        Board, Clock, CrashCode, CrashNote, ResetCause, ServoBus, TickTimer, TORQUE_OFF_PACKET,
+    };
     use walker_firmware::boards::qemu_mps2::QemuBoard;
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig, TiltEstimator};
     use walker_firmware::record::{self as log, Record, RecordDecoder, TickRecord};
@@ -175,6 +177,24 @@ mod tests {
         assert!(board.now_us() == tick.nominal_us);
         let next = board.wait_tick();
         assert!(next.index == tick.index + 1 && !next.overrun);
+    }
+
+    #[test]
+    fn power_on_servo_power_and_the_crash_cell(board: &mut QemuBoard) {
+        // Every QEMU run is a power-on; the servo power switch is a logged no-op; the crash
+        // cell keeps the last tick noted and a panic mark (volatile stores on the target).
+        assert!(board.reset_cause() == (ResetCause::PowerOn, 0));
+        board.servo_power(false);
+        board.crash_cell().note_tick(5);
+        board.crash_cell().record(CrashCode::Panic);
+        let note = board.crash_cell().take();
+        assert!(
+            note == Some(CrashNote {
+                code: Some(CrashCode::Panic),
+                tick: 5
+            })
+        );
+        assert!(board.crash_cell().take().is_none());
     }
 
     /// Only with a simulator attached (`--bus … --lockstep …`); a no-op otherwise. The

@@ -16,10 +16,15 @@
 //! | 14 | overrun burst |
 //! | 15 | non-finite joint target |
 //! | 17 | stop requested |
+//! | 18 | non-finite gait sample (CoM, ZMP, feet or the stabilizer's shift) before the IK |
+//! | 19 | sensor data stale (no plausible reply from a sensor board for longer than `stale_ms`) |
+//! | 21 | servo fault (Hardware Error Status, temperature, input voltage or current beyond its limit) |
+//! | 22 | not walking after a reset other than power-on (brown-out, watchdog, software/panic, pin) |
 //! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
 //! | 101 | panic |
 //!
-//! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0).
+//! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0). Stop
+//! code 10 is never used: its exit code would be start-up's 20.
 
 /// An unknown code (the value that could not be decoded).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,11 +49,23 @@ pub enum StopCode {
     PlanDone,
     /// 7: stop requested from outside.
     Requested,
+    /// 8: a gait sample (or the stabilizer's shift) was not finite before the IK (value =
+    /// walk tick).
+    NonFiniteSample,
+    /// 9: a sensor board gave no plausible reply for longer than `stale_ms` (id = device,
+    /// value = age of its last accepted sample, ms).
+    SensorStale,
+    /// 11: the servo monitor saw a servo beyond a limit (id = servo, value = [`ServoCheck`]
+    /// code · 65536 + the reading in the check's unit). (10 is not used: see the module docs.)
+    ServoFault,
+    /// 12: the last reset was not a power-on: the firmware does not walk by itself (value =
+    /// [`ResetCause`] code).
+    NotPowerOn,
 }
 
 impl StopCode {
     /// Every stop code.
-    pub const ALL: [StopCode; 7] = [
+    pub const ALL: [StopCode; 11] = [
         StopCode::DeviceMissing,
         StopCode::DeviceLost,
         StopCode::Fall,
@@ -56,6 +73,10 @@ impl StopCode {
         StopCode::NonFiniteTarget,
         StopCode::PlanDone,
         StopCode::Requested,
+        StopCode::NonFiniteSample,
+        StopCode::SensorStale,
+        StopCode::ServoFault,
+        StopCode::NotPowerOn,
     ];
 
     /// The wire code.
@@ -68,6 +89,10 @@ impl StopCode {
             StopCode::NonFiniteTarget => 5,
             StopCode::PlanDone => 6,
             StopCode::Requested => 7,
+            StopCode::NonFiniteSample => 8,
+            StopCode::SensorStale => 9,
+            StopCode::ServoFault => 11,
+            StopCode::NotPowerOn => 12,
         }
     }
 
@@ -81,6 +106,10 @@ impl StopCode {
             StopCode::NonFiniteTarget => ExitCode::NonFiniteTarget,
             StopCode::PlanDone => ExitCode::PlanDone,
             StopCode::Requested => ExitCode::Requested,
+            StopCode::NonFiniteSample => ExitCode::NonFiniteSample,
+            StopCode::SensorStale => ExitCode::SensorStale,
+            StopCode::ServoFault => ExitCode::ServoFault,
+            StopCode::NotPowerOn => ExitCode::NotPowerOn,
         }
     }
 }
@@ -96,6 +125,10 @@ impl TryFrom<u8> for StopCode {
             5 => StopCode::NonFiniteTarget,
             6 => StopCode::PlanDone,
             7 => StopCode::Requested,
+            8 => StopCode::NonFiniteSample,
+            9 => StopCode::SensorStale,
+            11 => StopCode::ServoFault,
+            12 => StopCode::NotPowerOn,
             other => return Err(UnknownCode(other)),
         })
     }
@@ -134,6 +167,33 @@ pub enum StopReason {
     PlanDone,
     /// Stop requested from outside (operator, host).
     Requested,
+    /// A gait sample (CoM, ZMP, feet) or the stabilizer's CoM shift was NaN or infinite: it
+    /// never reaches the IK (whose clamping would turn it into finite, meaningless angles).
+    NonFiniteSample {
+        /// Walk tick of the sample (0 = the first sample, before the ramp).
+        tick: u32,
+    },
+    /// No plausible reply from a sensor board for longer than the staleness bound.
+    SensorStale {
+        /// Its bus id.
+        id: u8,
+        /// Age of its last accepted sample, ms (saturating).
+        age_ms: u16,
+    },
+    /// A servo read while walking was beyond a limit.
+    ServoFault {
+        /// Its bus id.
+        id: u8,
+        /// Which check.
+        check: ServoCheck,
+        /// The reading, in the check's unit (see [`ServoCheck`]).
+        reading: u16,
+    },
+    /// The last reset was not a power-on: no walk without a command.
+    NotPowerOn {
+        /// What reset the controller.
+        cause: ResetCause,
+    },
 }
 
 impl StopReason {
@@ -147,6 +207,10 @@ impl StopReason {
             StopReason::NonFiniteTarget { .. } => StopCode::NonFiniteTarget,
             StopReason::PlanDone => StopCode::PlanDone,
             StopReason::Requested => StopCode::Requested,
+            StopReason::NonFiniteSample { .. } => StopCode::NonFiniteSample,
+            StopReason::SensorStale { .. } => StopCode::SensorStale,
+            StopReason::ServoFault { .. } => StopCode::ServoFault,
+            StopReason::NotPowerOn { .. } => StopCode::NotPowerOn,
         }
     }
 
@@ -159,6 +223,12 @@ impl StopReason {
             StopReason::OverrunBurst { count } => (c, 0, i32::from(count)),
             StopReason::NonFiniteTarget { joint } => (c, joint, 0),
             StopReason::PlanDone | StopReason::Requested => (c, 0, 0),
+            StopReason::NonFiniteSample { tick } => (c, 0, i32::try_from(tick).unwrap_or(i32::MAX)),
+            StopReason::SensorStale { id, age_ms } => (c, id, i32::from(age_ms)),
+            StopReason::ServoFault { id, check, reading } => {
+                (c, id, (i32::from(check.code()) << 16) | i32::from(reading))
+            }
+            StopReason::NotPowerOn { cause } => (c, 0, i32::from(cause.code())),
         }
     }
 
@@ -176,6 +246,21 @@ impl StopReason {
             StopCode::NonFiniteTarget => StopReason::NonFiniteTarget { joint: id },
             StopCode::PlanDone => StopReason::PlanDone,
             StopCode::Requested => StopReason::Requested,
+            StopCode::NonFiniteSample => StopReason::NonFiniteSample {
+                tick: u32::try_from(value).ok()?,
+            },
+            StopCode::SensorStale => StopReason::SensorStale {
+                id,
+                age_ms: u16::try_from(value).ok()?,
+            },
+            StopCode::ServoFault => StopReason::ServoFault {
+                id,
+                check: ServoCheck::try_from(u8::try_from(value >> 16).ok()?).ok()?,
+                reading: u16::try_from(value & 0xFFFF).ok()?,
+            },
+            StopCode::NotPowerOn => StopReason::NotPowerOn {
+                cause: ResetCause::try_from(u8::try_from(value).ok()?).ok()?,
+            },
         })
     }
 }
@@ -193,8 +278,9 @@ pub enum FaultKind {
     /// 4: a non-finite IMU sample was replaced by the last good one (`value` = count).
     ImuNonFinite,
     /// 5: a run-time parameter was rejected before start-up (`id` = key index in
-    /// [`crate::params::PARAMS`], 0xFF unknown key, 0xFE plan rejected by gait-core; `value` =
-    /// token position, or the `GaitError` code for 0xFE).
+    /// [`crate::params::PARAMS`], 0xFF unknown key, 0xFE plan rejected by gait-core, 0xFD
+    /// command line longer than the firmware's buffer; `value` = token position, or the
+    /// `GaitError` code for 0xFE, or the buffer size for 0xFD).
     ConfigRejected,
     /// 6: a start-up step failed after the probe (`id` = device, `value` = step code).
     StartupFailed,
@@ -207,6 +293,19 @@ pub enum FaultKind {
     /// 9: a joint still needs more than the servo speed limit (`id` = worst joint index,
     /// `value` = its peak speed, mrad/s); the walk goes on, the servo will lag.
     SpeedLimit,
+    /// 10: a sensor reply arrived but failed the plausibility check and counts as missing
+    /// (`id` = device, `value` = [`SensorRejection`] code); logged at the first of a run.
+    SensorRejected,
+    /// 11: torque off was not confirmed by every servo after `off_attempts` rounds of
+    /// broadcast Torque Enable = 0 and read-back (`id` = first unconfirmed servo, `value` =
+    /// number unconfirmed); the servo power is cut anyway.
+    TorqueOffUnconfirmed,
+    /// 12: what reset the controller, logged at every boot (`id` = [`ResetCause`] code, `value`
+    /// = the raw reset flags where the board has them: RCC_CSR bits 24..=31 on the OpenCR).
+    ResetCause,
+    /// 13: a panic or watchdog record found in no-init RAM at boot, from the previous run
+    /// (`id` = [`CrashCode`], `value` = the last control tick index it noted).
+    CrashRecord,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -224,6 +323,10 @@ impl FaultKind {
             Self::TimingStretched => 7,
             Self::SwingLowered => 8,
             Self::SpeedLimit => 9,
+            Self::SensorRejected => 10,
+            Self::TorqueOffUnconfirmed => 11,
+            Self::ResetCause => 12,
+            Self::CrashRecord => 13,
             Self::Other(c) => c,
         }
     }
@@ -239,6 +342,10 @@ impl FaultKind {
             7 => Self::TimingStretched,
             8 => Self::SwingLowered,
             9 => Self::SpeedLimit,
+            10 => Self::SensorRejected,
+            11 => Self::TorqueOffUnconfirmed,
+            12 => Self::ResetCause,
+            13 => Self::CrashRecord,
             c => Self::Other(c),
         }
     }
@@ -247,6 +354,172 @@ impl FaultKind {
 impl From<u8> for FaultKind {
     fn from(c: u8) -> Self {
         Self::from_code(c)
+    }
+}
+
+/// Why a sensor reply was rejected (the `SensorRejected` fault record's `value`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum SensorRejection {
+    /// 1: the board's sample counter did not advance since its last accepted sample.
+    FrozenCounter,
+    /// 2: a value is outside the sensor's range.
+    OutOfRange,
+    /// 3: the foot forces are not consistent with the robot's weight (total above
+    /// m·g·`force_factor`, or below −0.1·m·g).
+    Weight,
+    /// 4: the reply data could not be read as a sample.
+    Malformed,
+}
+
+impl SensorRejection {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            SensorRejection::FrozenCounter => 1,
+            SensorRejection::OutOfRange => 2,
+            SensorRejection::Weight => 3,
+            SensorRejection::Malformed => 4,
+        }
+    }
+}
+
+impl TryFrom<u8> for SensorRejection {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => SensorRejection::FrozenCounter,
+            2 => SensorRejection::OutOfRange,
+            3 => SensorRejection::Weight,
+            4 => SensorRejection::Malformed,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
+/// Which servo check failed (the `ServoFault` stop's reason; the reading's unit in brackets).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum ServoCheck {
+    /// 1: Hardware Error Status (70) is not 0 [its bits: 0 input voltage, 2 overheating, 3
+    /// motor encoder, 4 electrical shock, 5 overload].
+    HardwareError,
+    /// 2: Present Temperature (146) above the limit [°C].
+    Temperature,
+    /// 3: Present Input Voltage (144) below the limit [0.1 V].
+    VoltageLow,
+    /// 4: Present Input Voltage above the limit [0.1 V].
+    VoltageHigh,
+    /// 5: |Present Current| (126) above the limit [mA].
+    Current,
+}
+
+impl ServoCheck {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            ServoCheck::HardwareError => 1,
+            ServoCheck::Temperature => 2,
+            ServoCheck::VoltageLow => 3,
+            ServoCheck::VoltageHigh => 4,
+            ServoCheck::Current => 5,
+        }
+    }
+}
+
+impl TryFrom<u8> for ServoCheck {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => ServoCheck::HardwareError,
+            2 => ServoCheck::Temperature,
+            3 => ServoCheck::VoltageLow,
+            4 => ServoCheck::VoltageHigh,
+            5 => ServoCheck::Current,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
+/// What reset the controller (the `ResetCause` fault record's `id`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum ResetCause {
+    /// 1: power-on (the only reset after which the firmware walks by itself).
+    PowerOn,
+    /// 2: brown-out (the supply sagged below the threshold).
+    BrownOut,
+    /// 3: a watchdog (independent or window).
+    Watchdog,
+    /// 4: a software reset (the panic path, `SCB::sys_reset`).
+    Software,
+    /// 5: the reset pin (button, debugger).
+    Pin,
+    /// 6: low-power management.
+    LowPower,
+    /// 7: no flag set (unknown).
+    Unknown,
+}
+
+impl ResetCause {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            ResetCause::PowerOn => 1,
+            ResetCause::BrownOut => 2,
+            ResetCause::Watchdog => 3,
+            ResetCause::Software => 4,
+            ResetCause::Pin => 5,
+            ResetCause::LowPower => 6,
+            ResetCause::Unknown => 7,
+        }
+    }
+}
+
+impl TryFrom<u8> for ResetCause {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => ResetCause::PowerOn,
+            2 => ResetCause::BrownOut,
+            3 => ResetCause::Watchdog,
+            4 => ResetCause::Software,
+            5 => ResetCause::Pin,
+            6 => ResetCause::LowPower,
+            7 => ResetCause::Unknown,
+            other => return Err(UnknownCode(other)),
+        })
+    }
+}
+
+/// What a crash record in no-init RAM says (the `CrashRecord` fault record's `id`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum CrashCode {
+    /// 1: the firmware panicked.
+    Panic,
+    /// 2: the watchdog reset the controller (the record holds the last tick noted).
+    Watchdog,
+}
+
+impl CrashCode {
+    /// The wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            CrashCode::Panic => 1,
+            CrashCode::Watchdog => 2,
+        }
+    }
+}
+
+impl TryFrom<u8> for CrashCode {
+    type Error = UnknownCode;
+    fn try_from(c: u8) -> Result<Self, UnknownCode> {
+        Ok(match c {
+            1 => CrashCode::Panic,
+            2 => CrashCode::Watchdog,
+            other => return Err(UnknownCode(other)),
+        })
     }
 }
 
@@ -264,6 +537,10 @@ pub enum StartupStep {
     ReadPositions,
     /// 5: WRITE Torque Enable = 1.
     TorqueEnable,
+    /// 6: writing a servo's Position I Gain.
+    GainWrite,
+    /// 7: the read-back Position I Gain differed.
+    GainVerify,
 }
 
 impl StartupStep {
@@ -275,6 +552,8 @@ impl StartupStep {
             StartupStep::ReturnDelayVerify => 3,
             StartupStep::ReadPositions => 4,
             StartupStep::TorqueEnable => 5,
+            StartupStep::GainWrite => 6,
+            StartupStep::GainVerify => 7,
         }
     }
 }
@@ -288,6 +567,8 @@ impl TryFrom<u8> for StartupStep {
             3 => StartupStep::ReturnDelayVerify,
             4 => StartupStep::ReadPositions,
             5 => StartupStep::TorqueEnable,
+            6 => StartupStep::GainWrite,
+            7 => StartupStep::GainVerify,
             other => return Err(UnknownCode(other)),
         })
     }
@@ -315,6 +596,14 @@ pub enum ExitCode {
     NonFiniteTarget,
     /// 17: stop requested.
     Requested,
+    /// 18: non-finite gait sample.
+    NonFiniteSample,
+    /// 19: sensor data stale.
+    SensorStale,
+    /// 21: servo fault seen by the monitor.
+    ServoFault,
+    /// 22: not walking after a reset other than power-on.
+    NotPowerOn,
     /// 20: a start-up step failed after the probe.
     StartupFailed,
     /// 101: panic.
@@ -323,7 +612,7 @@ pub enum ExitCode {
 
 impl ExitCode {
     /// Every exit code.
-    pub const ALL: [ExitCode; 11] = [
+    pub const ALL: [ExitCode; 15] = [
         ExitCode::PlanDone,
         ExitCode::ConfigRejected,
         ExitCode::Watchdog,
@@ -333,7 +622,11 @@ impl ExitCode {
         ExitCode::OverrunBurst,
         ExitCode::NonFiniteTarget,
         ExitCode::Requested,
+        ExitCode::NonFiniteSample,
+        ExitCode::SensorStale,
         ExitCode::StartupFailed,
+        ExitCode::ServoFault,
+        ExitCode::NotPowerOn,
         ExitCode::Panic,
     ];
 
@@ -349,6 +642,10 @@ impl ExitCode {
             ExitCode::OverrunBurst => 14,
             ExitCode::NonFiniteTarget => 15,
             ExitCode::Requested => 17,
+            ExitCode::NonFiniteSample => 18,
+            ExitCode::SensorStale => 19,
+            ExitCode::ServoFault => 21,
+            ExitCode::NotPowerOn => 22,
             ExitCode::StartupFailed => 20,
             ExitCode::Panic => 101,
         }
@@ -371,6 +668,10 @@ impl ExitCode {
             ExitCode::OverrunBurst => "overrun burst",
             ExitCode::NonFiniteTarget => "non-finite target",
             ExitCode::Requested => "stop requested",
+            ExitCode::NonFiniteSample => "non-finite gait sample",
+            ExitCode::SensorStale => "sensor data stale",
+            ExitCode::ServoFault => "servo fault",
+            ExitCode::NotPowerOn => "reset other than power-on: not walking",
             ExitCode::StartupFailed => "start-up step failed",
             ExitCode::Panic => "panic",
         }
@@ -390,6 +691,10 @@ impl TryFrom<u8> for ExitCode {
             14 => ExitCode::OverrunBurst,
             15 => ExitCode::NonFiniteTarget,
             17 => ExitCode::Requested,
+            18 => ExitCode::NonFiniteSample,
+            19 => ExitCode::SensorStale,
+            21 => ExitCode::ServoFault,
+            22 => ExitCode::NotPowerOn,
             20 => ExitCode::StartupFailed,
             101 => ExitCode::Panic,
             other => return Err(UnknownCode(other)),
@@ -412,6 +717,18 @@ mod tests {
             }
             assert_eq!(FaultKind::from_code(c).code(), c);
             if let Ok(s) = StartupStep::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = SensorRejection::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = ServoCheck::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = ResetCause::try_from(c) {
+                assert_eq!(s.code(), c);
+            }
+            if let Ok(s) = CrashCode::try_from(c) {
                 assert_eq!(s.code(), c);
             }
         }
@@ -452,6 +769,24 @@ mod tests {
             StopReason::NonFiniteTarget { joint: 3 },
             StopReason::PlanDone,
             StopReason::Requested,
+            StopReason::NonFiniteSample { tick: 1234 },
+            StopReason::SensorStale {
+                id: 200,
+                age_ms: 105,
+            },
+            StopReason::ServoFault {
+                id: 7,
+                check: ServoCheck::Temperature,
+                reading: 81,
+            },
+            StopReason::ServoFault {
+                id: 12,
+                check: ServoCheck::Current,
+                reading: 65_535,
+            },
+            StopReason::NotPowerOn {
+                cause: ResetCause::BrownOut,
+            },
         ] {
             let (c, id, v) = r.code();
             assert_eq!(StopReason::from_code(c, id, v), Some(r));

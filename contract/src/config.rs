@@ -4,6 +4,9 @@
 
 /// Most footsteps a firmware plan may have.
 pub const MAX_STEPS: usize = 64;
+/// Default Position I Gain of the roll servos (register units): the value that walked best in
+/// the MuJoCo runs of docs/beyond.md (paper timing 13.0 / 34.5 → 8.1 / 15.7 mm true ZMP error).
+pub const DEFAULT_SERVO_I_ROLL: u16 = 3000;
 /// Longest servo-lag feed-forward, s.
 pub const MAX_SERVO_LEAD_S: f64 = 0.3;
 /// Most ticks of servo-lag feed-forward (the firmware's delay line of gait samples: 0.3 s at
@@ -47,6 +50,33 @@ impl Default for SupervisorConfig {
     }
 }
 
+/// Limits of the servo monitor (one servo read per walking tick, round-robin).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServoLimits {
+    /// Highest Present Temperature, °C.
+    pub temperature_max_c: u8,
+    /// Lowest Present Input Voltage, V.
+    pub voltage_min_v: f32,
+    /// Highest Present Input Voltage, V.
+    pub voltage_max_v: f32,
+    /// Highest |Present Current|, A.
+    pub current_max_a: f32,
+}
+
+impl ServoLimits {
+    /// XM430-W350 defaults: 70 °C (the servo shuts down at its 80 °C Temperature Limit),
+    /// 10.0 ..= 14.8 V (its operating range), 2.5 A (above its 2.3 A stall current at 12 V:
+    /// only a shorted or blocked motor draws it; the MuJoCo Table 2 walk peaks at 2.1 A).
+    pub const fn xm430() -> Self {
+        ServoLimits {
+            temperature_max_c: 70,
+            voltage_min_v: 10.0,
+            voltage_max_v: 14.8,
+            current_max_a: 2.5,
+        }
+    }
+}
+
 /// Run-time configuration shared by the boards and the control loop. On QEMU every field
 /// named in [`crate::params::PARAMS`] can be overridden from the semihosting command line; on the real
 /// board the configuration is compiled in.
@@ -80,6 +110,11 @@ pub struct Config {
     pub fourier_terms: u8,
     /// Servo-lag feed-forward: the joint targets are the gait's this far ahead, s.
     pub servo_lead_s: f32,
+    /// Position I Gain written at start-up to the hip-roll and ankle-roll servos (register
+    /// units; the servo's integral action removes their load sag).
+    pub servo_i_roll: u16,
+    /// Position I Gain written at start-up to the hip-pitch, knee and ankle-pitch servos.
+    pub servo_i_pitch: u16,
     /// Reply timeout of the Dynamixel master, µs (per expected status packet).
     pub reply_timeout_us: u32,
     /// Longest single wait for one reply byte, µs (the firmware's bus driver).
@@ -114,13 +149,27 @@ pub struct Config {
     pub fault_nan_tick: Option<u32>,
     /// Fault injection: request a stop at this walk tick.
     pub stop_at_tick: Option<u32>,
+    /// Longest time a sensor board may go without a plausible reply before the robot stops
+    /// (`SensorStale`), ms.
+    pub sensor_stale_ms: u32,
+    /// Foot forces above m·g·`force_factor` (one foot or both together) are implausible.
+    pub force_factor: f32,
+    /// Rounds of broadcast torque off + read-back of every servo's Torque Enable before the
+    /// servo power is cut.
+    pub torque_off_attempts: u8,
+    /// Limits of the servo monitor.
+    pub servo_limits: ServoLimits,
+    /// Fault injection: make the gait sample's CoM NaN at this walk tick (the finite check
+    /// before the IK must stop).
+    pub fault_nan_com_tick: Option<u32>,
 }
 
 impl Config {
     /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
     /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
     /// compensation, stabilizer off, gyro balance feedback on (k_a 0.1 s, k_h 0.05 s), 8 start-up
-    /// attempts, servo-speed feasibility by stretching the timing.
+    /// attempts, servo-speed feasibility by stretching the timing, Position I Gain 3000 on the
+    /// roll servos.
     pub const fn default_config() -> Self {
         Config {
             tick_period_us: 5_000,
@@ -137,6 +186,8 @@ impl Config {
             com_fourier: false,
             fourier_terms: gait_core::fourier_walk::DEFAULT_FOURIER_TERMS,
             servo_lead_s: 0.0,
+            servo_i_roll: DEFAULT_SERVO_I_ROLL,
+            servo_i_pitch: 0,
             reply_timeout_us: 1_000,
             read_poll_us: DEFAULT_READ_POLL_US,
             startup_attempts: 8,
@@ -153,6 +204,11 @@ impl Config {
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,
             stop_at_tick: None,
+            fault_nan_com_tick: None,
+            sensor_stale_ms: 100,
+            force_factor: 6.0,
+            torque_off_attempts: 3,
+            servo_limits: ServoLimits::xm430(),
         }
     }
 

@@ -835,10 +835,115 @@ params! {
         set: |c, v| { c.servo_lead_s = v as f32 },
         get: |c| { Some(Value::Num32(c.servo_lead_s)) },
     },
+    {
+        key: "servo_i_roll",
+        plan_key: None,
+        unit: "",
+        domain: int(0, 16383),
+        doc: "Position I Gain (register 82) written at start-up to the hip-roll and ankle-roll servos: integral action against the stance leg's load sag (0: the factory default, no write)",
+        set: |c, v| { c.servo_i_roll = v as u16 },
+        get: |c| { Some(Value::Int(u32::from(c.servo_i_roll))) },
+    },
+    {
+        key: "servo_i_pitch",
+        plan_key: None,
+        unit: "",
+        domain: int(0, 16383),
+        doc: "Position I Gain written at start-up to the hip-pitch, knee and ankle-pitch servos (0: factory default)",
+        set: |c, v| { c.servo_i_pitch = v as u16 },
+        get: |c| { Some(Value::Int(u32::from(c.servo_i_pitch))) },
+    },
+    {
+        key: "fault_nan_com",
+        plan_key: None,
+        unit: "tick",
+        domain: int(0, u32::MAX),
+        doc: "test: make the gait sample's CoM NaN at this walk tick (the finite check before the IK stops, exit 18)",
+        set: |c, v| { c.fault_nan_com_tick = Some(v as u32) },
+        get: |c| { c.fault_nan_com_tick.map(Value::Int) },
+    },
+    {
+        key: "stale_ms",
+        plan_key: None,
+        unit: "ms",
+        domain: int(1, 10_000),
+        doc: "longest time without a plausible sensor reply before the robot stops (exit 19)",
+        set: |c, v| { c.sensor_stale_ms = v as u32 },
+        get: |c| { Some(Value::Int(c.sensor_stale_ms)) },
+    },
+    {
+        key: "force_factor",
+        plan_key: None,
+        unit: "",
+        domain: range(1.0, 20.0),
+        doc: "foot forces above m·g·force_factor (one foot or both) are implausible",
+        set: |c, v| { c.force_factor = v as f32 },
+        get: |c| { Some(Value::Num32(c.force_factor)) },
+    },
+    {
+        key: "off_attempts",
+        plan_key: None,
+        unit: "",
+        domain: int(1, 10),
+        doc: "rounds of torque off + Torque Enable read-back before the servo power is cut",
+        set: |c, v| { c.torque_off_attempts = v as u8 },
+        get: |c| { Some(Value::Int(u32::from(c.torque_off_attempts))) },
+    },
+    {
+        key: "servo_temp_max",
+        plan_key: None,
+        unit: "°C",
+        domain: int(1, 100),
+        doc: "servo monitor: highest Present Temperature",
+        set: |c, v| { c.servo_limits.temperature_max_c = v as u8 },
+        get: |c| { Some(Value::Int(u32::from(c.servo_limits.temperature_max_c))) },
+    },
+    {
+        key: "servo_volt_min",
+        plan_key: None,
+        unit: "V",
+        domain: range(0.0, 30.0),
+        doc: "servo monitor: lowest Present Input Voltage",
+        set: |c, v| { c.servo_limits.voltage_min_v = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_limits.voltage_min_v)) },
+    },
+    {
+        key: "servo_volt_max",
+        plan_key: None,
+        unit: "V",
+        domain: range(0.0, 30.0),
+        doc: "servo monitor: highest Present Input Voltage",
+        set: |c, v| { c.servo_limits.voltage_max_v = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_limits.voltage_max_v)) },
+    },
+    {
+        key: "servo_current_max",
+        plan_key: None,
+        unit: "A",
+        domain: range(0.0, 20.0),
+        doc: "servo monitor: highest |Present Current|",
+        set: |c, v| { c.servo_limits.current_max_a = v as f32 },
+        get: |c| { Some(Value::Num32(c.servo_limits.current_max_a)) },
+    },
 }
 
 /// Key index meaning "not a known key".
 pub const UNKNOWN_KEY: u8 = 0xFF;
+/// Key index (the `ConfigRejected` fault record's id) meaning "the command line could not be
+/// read: longer than [`CMDLINE_MAX`]" (value = [`CMDLINE_MAX`]).
+pub const CMDLINE_TOO_LONG: u8 = 0xFD;
+
+/// The QEMU firmware's semihosting command-line buffer, bytes. QEMU's SYS_GET_CMDLINE hands
+/// over the kernel's file name, a space and the `-append` text with a NUL, and refuses (the
+/// firmware then reads nothing) when that does not fit: the host checks
+/// [`cmdline_fits`] before it starts QEMU.
+pub const CMDLINE_MAX: usize = 1024;
+
+/// True when `kernel` (the ELF path as given to QEMU's `-kernel`) and the `-append` text fit
+/// the firmware's [`CMDLINE_MAX`]: `len(kernel) + 1 + len(append) + 1 ≤ CMDLINE_MAX`.
+pub const fn cmdline_fits(kernel_len: usize, append_len: usize) -> bool {
+    kernel_len + append_len + 2 <= CMDLINE_MAX
+}
 
 /// The parameter of `key`.
 pub fn find(key: &str) -> Option<&'static Param> {

@@ -227,7 +227,7 @@ pub mod foot {
 ///
 /// Units: angular rate in µrad/s (1e-6 rad/s, range ±2147 rad/s, far beyond the ±20 rad/s
 /// a kid-size robot sees), acceleration in µm/s² (1e-6 m/s², range ±2147 m/s² ≈ ±219 g,
-/// covering the ±4 g sensor range with sub-µg resolution to spare).
+/// covering the sensor's ±16 g full scale with sub-µg resolution to spare).
 ///
 /// | addr | size | field |
 /// |---|---|---|
@@ -259,6 +259,12 @@ pub mod imu {
     pub const COUNTER: Field = f(152, 2);
     /// Model number reported by the IMU board.
     pub const MODEL_NUMBER_VALUE: u16 = 0x5A20;
+    /// Largest |angular rate| the board's gyro reports, µrad/s (its ±2000 °/s full scale):
+    /// a larger value cannot come from the sensor (byte-shifted or corrupt data).
+    pub const GYRO_FULL_SCALE_URAD_S: i32 = 34_906_586;
+    /// Largest |specific force| per axis the board's accelerometer reports, µm/s² (its ±16 g
+    /// full scale).
+    pub const ACCEL_FULL_SCALE_UM_S2: i32 = 156_906_500;
     /// Scale from raw units to SI (rad/s or m/s²).
     pub const SCALE: f32 = 1e-6;
 

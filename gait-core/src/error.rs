@@ -42,11 +42,14 @@ pub enum GaitError {
     NotBuiltIn,
     /// The Fourier CoM needs a straight forward walk of at least 5 steps, in f32 or f64.
     NotPeriodicWalk,
+    /// The servo-speed check's dry run would exceed its work budget (the plan is too long to
+    /// be checked at start-up: fewer steps, shorter phases or a longer dt).
+    DryRunTooLong,
 }
 
 impl GaitError {
     /// Every error, in the order of its code.
-    pub const ALL: [GaitError; 19] = [
+    pub const ALL: [GaitError; 20] = [
         GaitError::NonFinite,
         GaitError::NonPositiveMass,
         GaitError::NonPositiveLength,
@@ -66,6 +69,7 @@ impl GaitError {
         GaitError::WalkEnded,
         GaitError::NotBuiltIn,
         GaitError::NotPeriodicWalk,
+        GaitError::DryRunTooLong,
     ];
 
     /// The wire code (the firmware's `ConfigRejected` fault record carries it), one explicit
@@ -91,6 +95,7 @@ impl GaitError {
             GaitError::WalkEnded => 16,
             GaitError::NotBuiltIn => 17,
             GaitError::NotPeriodicWalk => 18,
+            GaitError::DryRunTooLong => 19,
         }
     }
 }
@@ -119,6 +124,7 @@ impl TryFrom<u8> for GaitError {
             16 => GaitError::WalkEnded,
             17 => GaitError::NotBuiltIn,
             18 => GaitError::NotPeriodicWalk,
+            19 => GaitError::DryRunTooLong,
             other => return Err(other),
         })
     }
@@ -147,6 +153,9 @@ impl core::fmt::Display for GaitError {
             GaitError::NotBuiltIn => "the requested method is not built in (cargo feature off)",
             GaitError::NotPeriodicWalk => {
                 "the Fourier CoM needs a straight forward walk of at least 5 steps (f32, not fixed point)"
+            }
+            GaitError::DryRunTooLong => {
+                "the plan is too long for the start-up servo-speed check's work budget"
             }
         };
         f.write_str(s)

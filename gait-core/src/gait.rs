@@ -31,7 +31,8 @@
 //! (`robot.servo.max_speed`), with [`Feasibility::Stretch`] t1, t2 and T are multiplied by
 //! f = ⌈1000·(v/v_max)·1.05⌉/1000 (joint speeds scale as 1/f for the same path,
 //! [`stretched`]), with [`Feasibility::Lower`] the swing height becomes ⌊h_z·v_max/(1.05·v)⌋
-//! (µm), and the plan is checked again, at most [`MAX_TIMING_ROUNDS`] adjustments.
+//! (µm), and the plan is checked again, at most [`MAX_TIMING_ROUNDS`] adjustments. All rounds
+//! together spend at most [`MAX_DRY_RUN_WORK`] (≈ 10⁹ M7 instructions); a longer plan is refused.
 
 #[cfg(feature = "fixed-engine")]
 use crate::fixed_ik::FixedLegKinematics;
@@ -56,8 +57,19 @@ pub const WHOLEBODY_ITERATIONS: u8 = 2;
 pub const MAX_TIMING_ROUNDS: u8 = 4;
 /// Safety factor on the needed slow-down.
 pub const TIMING_MARGIN: f64 = 1.05;
-/// Most samples of one dry run (a 64-step plan of 4 s steps at 1 kHz is below).
-pub const MAX_DRY_RUN_SAMPLES: u32 = 400_000;
+/// Work budget of the whole servo-speed check (every round together), in units of one plain
+/// dry-run sample (sampler + two-leg IK + speed monitor, ≈ 5.1·10³ M7 instructions by
+/// BENCHMARKS.md: 907 + 4,160 + the monitor); a whole-body sample costs
+/// [`WHOLEBODY_SAMPLE_COST`] units (24,353 + 907 ≈ 5 × as much). 200,000 units ≈ 1.0·10⁹
+/// instructions, ≈ 4.7 s on the 216 MHz M7: the bound on the start-up check whatever the
+/// parameters (without it a 64-step plan of 4 s steps at dt = 1 ms with whole-body compensation
+/// and 4 stretch rounds needed ≈ 3·10¹⁰). A plan beyond it is refused
+/// ([`GaitError::DryRunTooLong`]) rather than checked in part.
+pub const MAX_DRY_RUN_WORK: u32 = 200_000;
+/// Cost of one whole-body dry-run sample in [`MAX_DRY_RUN_WORK`] units.
+pub const WHOLEBODY_SAMPLE_COST: u32 = 5;
+/// The dry run calls its `feed` callback (the firmware's watchdog) every this many samples.
+pub const DRY_RUN_FEED_EVERY: u32 = 256;
 
 /// How the pelvis is placed (firmware token `comp=`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -366,6 +378,8 @@ pub struct TimingCheck {
     pub report: JointSpeedReport,
     /// Number of adjustments made.
     pub rounds: u8,
+    /// Work spent by the dry runs, [`MAX_DRY_RUN_WORK`] units.
+    pub work: u32,
 }
 
 impl TimingCheck {
@@ -415,20 +429,41 @@ pub fn stretched(walk: &ForwardWalk, milli: u32) -> ForwardWalk {
 }
 
 /// Peak joint speeds of `w`'s walk through `targets` at dt (dry run, no τ, no feedback);
-/// `N` is the plan capacity.
+/// `N` is the plan capacity. Refused when it would take more than [`MAX_DRY_RUN_WORK`].
 pub fn dry_run<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
     targets: &Targets,
 ) -> Result<JointSpeedReport, GaitError> {
+    let mut budget = MAX_DRY_RUN_WORK;
+    dry_run_within::<N>(w, robot, targets, &mut budget, &mut || {})
+}
+
+/// [`dry_run`] drawing on `budget` (units of [`MAX_DRY_RUN_WORK`]) and calling `feed` every
+/// [`DRY_RUN_FEED_EVERY`] samples.
+fn dry_run_within<const N: usize>(
+    w: &WalkConfig,
+    robot: &Robot,
+    targets: &Targets,
+    budget: &mut u32,
+    feed: &mut dyn FnMut(),
+) -> Result<JointSpeedReport, GaitError> {
+    let cost = match targets {
+        Targets::Plain(_) => 1,
+        Targets::WholeBody(_) => WHOLEBODY_SAMPLE_COST,
+    };
     let mut s = build_sampler::<N>(w, robot)?;
     let mut mon = JointSpeedMonitor::new(robot, w.dt_s)?;
     let mut n = 0u32;
-    while !s.is_done() && n < MAX_DRY_RUN_SAMPLES {
+    while !s.is_done() {
+        *budget = budget.checked_sub(cost).ok_or(GaitError::DryRunTooLong)?;
         let g = s.next(0.0);
         let (q, _) = targets.joints(&g, [0.0; 2]);
         mon.push(g.time_ns as f64 * 1e-9, &q);
-        n += 1;
+        n = n.wrapping_add(1);
+        if n.is_multiple_of(DRY_RUN_FEED_EVERY) {
+            feed();
+        }
     }
     Ok(mon.report())
 }
@@ -441,15 +476,31 @@ pub fn servo_timing<const N: usize>(
     robot: &Robot,
     targets: &Targets,
 ) -> Result<TimingCheck, GaitError> {
+    servo_timing_fed::<N>(w, feasibility, robot, targets, &mut || {})
+}
+
+/// [`servo_timing`] calling `feed` every [`DRY_RUN_FEED_EVERY`] samples (the firmware feeds
+/// its watchdog); all rounds together spend at most [`MAX_DRY_RUN_WORK`]
+/// ([`GaitError::DryRunTooLong`] beyond).
+pub fn servo_timing_fed<const N: usize>(
+    w: &WalkConfig,
+    feasibility: Feasibility,
+    robot: &Robot,
+    targets: &Targets,
+    feed: &mut dyn FnMut(),
+) -> Result<TimingCheck, GaitError> {
     let base = w.walk;
     let mut run = *w;
+    let mut budget = MAX_DRY_RUN_WORK;
+    let report = dry_run_within::<N>(&run, robot, targets, &mut budget, feed)?;
     let mut out = TimingCheck {
         walk: base,
         factor_milli: 1000,
         lowered_um: None,
         trigger_joint: 0,
-        report: dry_run::<N>(&run, robot, targets)?,
+        report,
         rounds: 0,
+        work: MAX_DRY_RUN_WORK - budget,
     };
     while !out.feasible() && out.rounds < MAX_TIMING_ROUNDS && feasibility != Feasibility::Off {
         let r = &out.report;
@@ -473,7 +524,98 @@ pub fn servo_timing<const N: usize>(
         }
         out.rounds += 1;
         run.walk = out.walk;
-        out.report = dry_run::<N>(&run, robot, targets)?;
+        out.report = dry_run_within::<N>(&run, robot, targets, &mut budget, feed)?;
+        out.work = MAX_DRY_RUN_WORK - budget;
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const N: usize = 64;
+
+    fn table2(dt_s: f64) -> WalkConfig {
+        WalkConfig {
+            model: ModelKind::Tlipfm,
+            walk: ForwardWalk::table2(),
+            zmp_continuous: false,
+            zmp_b: None,
+            swing_sinusoid: false,
+            com: ComMethod::Exact,
+            dt_s,
+        }
+    }
+
+    fn samples(w: &WalkConfig, robot: &Robot) -> u32 {
+        let mut s = build_sampler::<N>(w, robot).unwrap();
+        let mut n = 0;
+        while !s.is_done() {
+            s.next(0.0);
+            n += 1;
+        }
+        n
+    }
+
+    #[test]
+    fn the_servo_check_spends_one_unit_per_plain_sample() {
+        // Table 2 at 5 ms: the first dry run and the stretched one, one unit per sample.
+        let robot = Robot::reference();
+        let w = table2(0.005);
+        let targets = Targets::new(&robot, Compensation::None);
+        let mut feeds = 0u32;
+        let t = servo_timing_fed::<N>(&w, Feasibility::Stretch, &robot, &targets, &mut || {
+            feeds += 1
+        })
+        .unwrap();
+        assert_eq!(t.rounds, 1, "{t:?}");
+        let stretched_w = WalkConfig { walk: t.walk, ..w };
+        let expected = samples(&w, &robot) + samples(&stretched_w, &robot);
+        assert_eq!(t.work, expected);
+        assert!(t.work > 4_000 && t.work < MAX_DRY_RUN_WORK, "{}", t.work);
+        // Fed every 256 samples of each run.
+        let per_run = samples(&w, &robot) / DRY_RUN_FEED_EVERY
+            + samples(&stretched_w, &robot) / DRY_RUN_FEED_EVERY;
+        assert_eq!(feeds, per_run);
+    }
+
+    #[test]
+    fn the_longest_plan_is_refused_within_the_work_budget() {
+        // The parameter table's worst case: 64 steps of 4 s, 4 s lead-in and lead-out, dt = 1 ms,
+        // whole-body compensation: 264,000 samples per run (5 runs with stretching, ≈ 3·10¹⁰
+        // M7 instructions). Refused after at most MAX_DRY_RUN_WORK units (40,000 whole-body
+        // samples, ≈ 1.0·10⁹ instructions).
+        let robot = Robot::reference();
+        let mut w = table2(0.001);
+        w.walk.steps = 64;
+        w.walk.step_length = 0.01;
+        w.walk.period = 4.0;
+        w.walk.t1 = 0.4;
+        w.walk.t2 = 3.6;
+        w.walk.lead_in = 4.0;
+        w.walk.lead_out = 4.0;
+        assert!(samples(&w, &robot) > 260_000);
+        for comp in [Compensation::WholeBody, Compensation::None] {
+            let targets = Targets::new(&robot, comp);
+            let mut fed = 0u32;
+            let r =
+                servo_timing_fed::<N>(&w, Feasibility::Stretch, &robot, &targets, &mut || fed += 1);
+            assert_eq!(r.unwrap_err(), GaitError::DryRunTooLong, "{comp:?}");
+            let cost = match comp {
+                Compensation::WholeBody => WHOLEBODY_SAMPLE_COST,
+                Compensation::None => 1,
+            };
+            // Exactly the budget's worth of samples were run (fed every 256 of them).
+            assert_eq!(
+                fed,
+                MAX_DRY_RUN_WORK / cost / DRY_RUN_FEED_EVERY,
+                "{comp:?}"
+            );
+        }
+        // A plan that fits is checked whole: Table 2 at 1 ms with whole-body compensation.
+        let targets = Targets::new(&robot, Compensation::WholeBody);
+        let t = servo_timing::<N>(&table2(0.001), Feasibility::Stretch, &robot, &targets).unwrap();
+        assert!(t.work <= MAX_DRY_RUN_WORK, "{t:?}");
+    }
 }

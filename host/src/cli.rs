@@ -1100,6 +1100,8 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         sim,
         extra_tokens,
     };
+    // A command line QEMU would refuse: a clear error before anything starts.
+    crate::fil::qemu_append(&opts).map_err(|e| CliError::usage(format!("walker fil: {e}")))?;
     eprintln!(
         "walker fil: {} ({:?}) in QEMU {} against the simulated robot",
         plan_name, spec.model, opts.machine

@@ -75,6 +75,14 @@ pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
     spec.firmware_tokens().map_err(|e| e.to_string())
 }
 
+/// The firmware's command-line tokens of a run: `lockstep`, the plan's tokens, then `extra`.
+fn command_tokens(spec: &WalkSpec, extra: &[String]) -> Result<Vec<String>, String> {
+    let mut t = vec!["lockstep".to_string()];
+    t.extend(firmware_tokens(spec)?);
+    t.extend(extra.iter().cloned());
+    Ok(t)
+}
+
 /// The firmware's command line of a run (`lockstep`, the plan's tokens, then `extra`), checked
 /// with the firmware's own parser (`walker_contract::params::apply`) on the host, so that a
 /// misspelt key or a value out of range is refused before QEMU starts; the configuration the
@@ -83,9 +91,7 @@ pub fn check_tokens(
     spec: &WalkSpec,
     extra: &[String],
 ) -> Result<(Vec<String>, walker_contract::Config), String> {
-    let mut t = vec!["lockstep".to_string()];
-    t.extend(firmware_tokens(spec)?);
-    t.extend(extra.iter().cloned());
+    let t = command_tokens(spec, extra)?;
     let mut cfg = walker_contract::Config::default();
     walker_contract::params::apply(&mut cfg, t.join(" ").as_bytes())
         .map_err(|e| token_error(&e, &t))?;
@@ -120,8 +126,30 @@ pub fn token_error(e: &walker_contract::params::ArgError, tokens: &[String]) -> 
     }
 }
 
+/// The `-append` text of a run (`lockstep`, the plan's tokens, the extra tokens), checked
+/// against the firmware's semihosting buffer: QEMU hands the firmware the ELF path, a space and
+/// this text, and refuses when that is longer than `CMDLINE_MAX` − 1 bytes — the firmware would
+/// then read no parameter at all. Refused here, before anything starts.
+pub fn qemu_append(opts: &FilOptions) -> Result<String, String> {
+    let append = command_tokens(&opts.spec, &opts.extra_tokens)?.join(" ");
+    let kernel = opts.elf.as_os_str().len();
+    if walker_contract::params::cmdline_fits(kernel, append.len()) {
+        Ok(append)
+    } else {
+        Err(format!(
+            "the firmware command line is {} bytes (ELF path {kernel} + 1 + parameters {} + NUL),              over the firmware's {}-byte semihosting buffer: QEMU would pass no parameter at all.              Use fewer or shorter parameters (or a shorter ELF path)",
+            kernel + append.len() + 2,
+            append.len(),
+            walker_contract::params::CMDLINE_MAX
+        ))
+    }
+}
+
 /// Runs the firmware in QEMU against the simulator; blocks until the firmware exits.
 pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, String> {
+    // Checked before anything starts: the firmware's own parser, then the firmware's buffer.
+    check_tokens(&opts.spec, &opts.extra_tokens)?;
+    let tokens = qemu_append(opts)?;
     let qemu = which("qemu-system-arm").ok_or_else(|| {
         "qemu-system-arm not found: install it with `sudo apt-get install -y qemu-system-arm`"
             .to_string()
@@ -139,9 +167,6 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
     let defmt = opts.out_dir.join("firmware.defmt");
     let _ = std::fs::remove_file(&log);
 
-    // Checked before anything starts (the firmware would refuse it at boot).
-    let (tokens, _) = check_tokens(&opts.spec, &opts.extra_tokens)?;
-    let tokens = tokens.join(" ");
     let mut cfg = opts.sim.clone();
     cfg.port = 0;
     cfg.lockstep_port = Some(0);
@@ -318,4 +343,40 @@ pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String
         heading_drift: last.1 - first.1,
         max_tilt,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn opts(elf: &str, extra: Vec<String>) -> FilOptions {
+        FilOptions {
+            elf: PathBuf::from(elf),
+            spec: WalkSpec::default(),
+            out_dir: PathBuf::from("unused"),
+            machine: "mps2-an500".into(),
+            timeout: Duration::from_secs(1),
+            sim: SimConfig::default(),
+            extra_tokens: extra,
+        }
+    }
+
+    #[test]
+    fn the_command_line_must_fit_the_firmware_buffer() {
+        // Table 2's tokens fit with room to spare.
+        let base = qemu_append(&opts("fw.elf", vec![])).unwrap();
+        assert!(base.starts_with("lockstep "), "{base}");
+        let room = walker_contract::params::CMDLINE_MAX - 2 - "fw.elf".len() - base.len();
+        assert!(room > 300, "{room}");
+        // Exactly full: ELF path + space + text + NUL = 1024 bytes (`pad(n)` adds n bytes: a
+        // space and an (n − 1)-byte token).
+        let pad = |n: usize| vec![format!("x={}", "9".repeat(n - 3))];
+        let full = opts("fw.elf", pad(room));
+        let text = qemu_append(&full).unwrap();
+        assert_eq!("fw.elf".len() + 1 + text.len() + 1, 1024);
+        // One byte more is refused, naming the sizes; so is a longer ELF path.
+        let e = qemu_append(&opts("fw.elf", pad(room + 1))).unwrap_err();
+        assert!(e.contains("1025 bytes") && e.contains("1024-byte"), "{e}");
+        assert!(qemu_append(&opts("/x/fw.elf", pad(room))).is_err());
+    }
 }

@@ -426,6 +426,14 @@ fn usage_errors_exit_2() {
         let out = walker(&["fil", opt, bad]);
         assert_eq!(out.status.code(), Some(2), "fil {opt} {bad}");
     }
+    // A firmware command line over the firmware's 1024-byte semihosting buffer: refused
+    // before QEMU starts (QEMU would hand the firmware no parameter at all).
+    let long = vec!["stop_at=1"; 110].join(" ");
+    assert!(long.len() > 1024);
+    let out = walker(&["fil", "--firmware-args", &long]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("1024-byte semihosting buffer"), "{err}");
     assert!(walker(&["--help"]).status.success());
     assert!(walker(&["report", "--help"]).status.success());
 }

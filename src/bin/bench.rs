@@ -63,8 +63,8 @@ mod firmware {
         ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
     };
     use walker_firmware::board::{
-        Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer,
-        Watchdog,
+        Board, BusError, Clock, CrashCell, LineTime, LogSink, ResetCause, ServoBus, Tick,
+        TickSchedule, TickTimer, Watchdog,
     };
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
     use walker_firmware::bus_map::{self, TickMap};
@@ -868,6 +868,7 @@ mod firmware {
         compute_ns: u64,
         devs: [Dev; 15],
         imu_counter: u16,
+        crash: CrashCell,
         mark: Option<u32>,
         paused_at: u32,
         excluded: u32,
@@ -909,6 +910,7 @@ mod firmware {
                 compute_ns: 150_000,
                 devs,
                 imu_counter: 0,
+                crash: CrashCell::new(),
                 mark: None,
                 paused_at: 0,
                 excluded: 0,
@@ -960,6 +962,15 @@ mod firmware {
                 (Kind::Servo, 132, 4) => put(out, &d.present.to_le_bytes()),
                 (Kind::Servo, 116, 4) => put(out, &d.goal.to_le_bytes()),
                 (Kind::Servo, 64, 1) => put(out, &[u8::from(d.torque)]),
+                // The servo monitor's reads: no hardware error; 0.8 A, 12.0 V, 40 °C.
+                (Kind::Servo, 70, 1) => put(out, &[0]),
+                (Kind::Servo, 126, 21) => {
+                    let mut b = [0u8; 21];
+                    b[0..2].copy_from_slice(&300i16.to_le_bytes());
+                    b[18..20].copy_from_slice(&120u16.to_le_bytes());
+                    b[20] = 40;
+                    put(out, &b)
+                }
                 (Kind::Foot(s), 128, 18) => {
                     let f = FootForces {
                         forces_mn: if s == 0 {
@@ -1194,6 +1205,16 @@ mod firmware {
             for d in self.devs.iter_mut() {
                 d.torque = false;
             }
+        }
+
+        fn servo_power(&mut self, _on: bool) {}
+
+        fn reset_cause(&self) -> (ResetCause, u32) {
+            (ResetCause::PowerOn, 0)
+        }
+
+        fn crash_cell(&mut self) -> &mut CrashCell {
+            &mut self.crash
         }
 
         fn exit(&mut self, code: i32) -> ! {

@@ -3,9 +3,12 @@
 //! ([`walker_firmware::control::run`]: probe, Return Delay Time, torque on, 1.5 s move to the
 //! initial pose, the walk, final hold, torque off), then idles: torque stays off, the tick
 //! keeps running and the watchdog (started when the control loop began) is fed, so the board
-//! does not reset into a new walk. After a reset caused by a panic or by a watchdog, the
-//! firmware does NOT walk again: it sends torque off and idles until the board is power-cycled
-//! or reset with its button (or by the debugger).
+//! does not reset into a new walk. `control::run` logs the reset cause (RCC_CSR) and any panic
+//! or watchdog record left in no-init RAM; after any reset but a power-on (brown-out, watchdog,
+//! panic's software reset, the reset button or the debugger) it does NOT walk: torque off
+//! (confirmed), servo power off, stop `NotPowerOn` (exit 22), then this idle loop, until the
+//! board is power-cycled. (A command to walk again comes with the online-walking issue's
+//! command port.)
 //!
 //! Build: `cargo build --release --no-default-features --features board-opencr --bin opencr`
 //! Flash and run (needs probe-rs and a probe on the SWD header): `cargo run --release --bin opencr`
@@ -32,24 +35,8 @@ mod firmware {
         let Some(dp) = stm32f7xx_hal::pac::Peripherals::take() else {
             cortex_m::peripheral::SCB::sys_reset();
         };
-        // Why did we boot? A panic leaves a mark in `.uninit` RAM before its software reset
-        // and a hung loop ends in a watchdog reset: never start walking again on our own after
-        // either. (A debugger's or the reset button's reset walks; after a power-on or brown-out
-        // reset the RAM mark is random and ignored.)
-        let csr = dp.RCC.csr.read();
-        let power_on = csr.porrstf().bit_is_set() || csr.borrstf().bit_is_set();
-        let watchdog = csr.wdgrstf().bit_is_set() || csr.wwdgrstf().bit_is_set();
-        let panicked = opencr::take_panic_mark() && !power_on;
-        let fault_reset = watchdog || panicked;
-        dp.RCC.csr.modify(|_, w| w.rmvf().set_bit());
+        // The board reads (and clears) the reset flags; `control::run` decides from them.
         let mut board = OpenCrBoard::new(dp, &cfg);
-        if fault_reset {
-            defmt::error!("reset by a panic or the watchdog: torque off, not walking");
-            board.torque_off_best_effort();
-            loop {
-                let _ = board.wait_tick();
-            }
-        }
         defmt::info!(
             "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, model {=str}, {=usize} steps",
             env!("CARGO_PKG_VERSION"),

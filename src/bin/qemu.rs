@@ -36,7 +36,10 @@ mod firmware {
     fn main() -> ! {
         let mut cfg = Config::default();
         let mut cmd = [0u8; CMDLINE_MAX];
-        let n = qemu_mps2::semihosting_cmdline(&mut cmd).unwrap_or(0);
+        // QEMU refuses a command line longer than the buffer: then nothing was read, and the
+        // firmware must not run on defaults (it reports the refusal instead, below).
+        let read = qemu_mps2::semihosting_cmdline(&mut cmd);
+        let n = read.unwrap_or(0);
         let args = params::apply(&mut cfg, cmd.get(..n).unwrap_or(&[]));
         if args.is_err() {
             cfg = Config::default();
@@ -46,6 +49,14 @@ mod firmware {
         };
         let mut board = QemuBoard::new(cp.SYST, &cfg);
         board.set_compute_us(cfg.compute_us);
+        if read.is_none() {
+            defmt::error!(
+                "command line refused by QEMU (longer than {=usize} bytes)",
+                CMDLINE_MAX
+            );
+            control::report_cmdline_too_long(&mut board, &cfg);
+            board.exit(ExitCode::ConfigRejected.status())
+        }
         if let Err(e) = args {
             defmt::error!(
                 "bad parameter `{=str}` (token {=u8}): {}",

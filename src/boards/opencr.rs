@@ -9,7 +9,7 @@
 //! | Dynamixel power switch (FET) | **PF15**, high = on | `BDPIN_DXL_PWR_EN` |
 //! | log UART | **USART6**, PC6 TX / PC7 RX (AF8) at 921 600 baud | Arduino header pins 1 (TX) / 0 (RX), `Serial1`; spare on this robot |
 //! | tick and µs clock | TIM2, 32-bit, free-running at 1 MHz | extended to 64 bits in software |
-//! | watchdog | IWDG (LSI ≈ 32 kHz) | started when walking begins, fed each tick |
+//! | watchdog | IWDG (LSI ≈ 32 kHz) | started at boot (`control::run`), fed in the bus and tick waits, the dry run and each tick |
 //! | defmt | RTT (probe-rs) | |
 //!
 //! The pins are the `BUS_*`, `LOG_*` constants' documentation and the concrete pin types in
@@ -42,8 +42,8 @@ use stm32f7xx_hal::serial::{self, Serial};
 use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
 use crate::board::{
-    Board, BusError, Clock, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
-    TORQUE_OFF_PACKET,
+    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogSink, ResetCause,
+    ServoBus, Tick, TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
 use crate::Config;
@@ -56,6 +56,22 @@ pub const HSE_HZ: u32 = 25_000_000;
 pub const LOG_BAUD: u32 = 921_600;
 /// Log ring buffer size, bytes (≈ 25 tick records).
 pub const LOG_RING: usize = 1024;
+/// Longest busy-wait on a bus UART flag (TXE, TC), loop iterations: one iteration is a few
+/// cycles (a register read and a compare), so 10⁶ iterations are ≥ 5 ms at 216 MHz, more than
+/// a byte at the slowest rate (9600 baud: 1.04 ms). Beyond it the bus is hung:
+/// [`BusError::Timeout`].
+pub const UART_SPIN_LIMIT: u32 = 1_000_000;
+
+/// Waits (bounded, [`UART_SPIN_LIMIT`]) until `ready` holds for the bus UART.
+fn wait_bus(ready: impl Fn(&pac::usart1::RegisterBlock) -> bool) -> Result<(), BusError> {
+    let u = usart3();
+    for _ in 0..UART_SPIN_LIMIT {
+        if ready(u) {
+            return Ok(());
+        }
+    }
+    Err(BusError::Timeout)
+}
 
 /// The Dynamixel direction pin as an `embedded-hal` 1.0 output (stm32f7xx-hal 0.8 pins only
 /// implement embedded-hal 0.2): PC9, high = transmit.
@@ -126,48 +142,33 @@ pub fn panic_torque_off() {
     gpiof.bsrr.write(|w| w.br15().set_bit());
 }
 
-/// Marker left in RAM that is not zeroed at start-up (`.uninit`) by a panic, so that the next
-/// boot knows the reset was a panic and not a debugger's or the user's.
-#[link_section = ".uninit.WALKER_PANIC_MARK"]
-static mut PANIC_MARK: core::mem::MaybeUninit<u32> = core::mem::MaybeUninit::uninit();
-/// Value of [`PANIC_MARK`] after a panic.
-const PANIC_MAGIC: u32 = 0x5741_4C4B; // "WALK"
+/// The crash record in RAM that is not zeroed at start-up (`.uninit`, NOLOAD in cortex-m-rt's
+/// `link.x`): the loop notes its tick there, a panic records itself, and the next boot logs it
+/// ([`crate::control`]). After a power-on its content is random and ignored.
+#[link_section = ".uninit.WALKER_CRASH"]
+static mut CRASH: core::mem::MaybeUninit<CrashCell> = core::mem::MaybeUninit::uninit();
 
-/// Records that the firmware is about to reset because of a panic.
-pub fn mark_panic() {
-    // SAFETY: single-core, called from the panic handler only; a plain volatile u32 store.
-    unsafe {
-        core::ptr::write_volatile(
-            core::ptr::addr_of_mut!(PANIC_MARK).cast::<u32>(),
-            PANIC_MAGIC,
-        )
-    }
+/// The crash record (see [`CRASH`]).
+fn crash_cell() -> &'static mut CrashCell {
+    // SAFETY: single core; the board (one value, `Peripherals::take` makes it unique) and the
+    // panic path (after which nothing else runs) are its only users. Every field is a u32, any
+    // bit pattern is a value; `CrashCell` accesses them volatile.
+    unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashCell>() }
 }
 
-/// True when the last reset came from a panic; clears the mark. Meaningless after a power-on
-/// (the RAM content is random), which the caller excludes with the reset flags.
-pub fn take_panic_mark() -> bool {
-    let p = core::ptr::addr_of_mut!(PANIC_MARK).cast::<u32>();
-    // SAFETY: single-core, called once at boot before anything else touches the marker.
-    unsafe {
-        let v = core::ptr::read_volatile(p);
-        core::ptr::write_volatile(p, 0);
-        v == PANIC_MAGIC
-    }
-}
-
-/// Panic path of the OpenCR binary: log, torque off, reset.
+/// Panic path of the OpenCR binary: log, record the panic in no-init RAM, torque off and
+/// servo power off, reset (the next boot logs the record and does not walk).
 pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
     defmt::error!("panic: {}", defmt::Display2Format(info));
+    crash_cell().record(CrashCode::Panic);
     panic_torque_off();
-    mark_panic();
     SCB::sys_reset()
 }
 
 /// The OpenCR board. `D` is the bus direction pin ([`DxlDir`] on the real board).
 pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     dir: D,
-    _dxl_power: PF15<Output<PushPull>>,
+    dxl_power: PF15<Output<PushPull>>,
     baud: u32,
     tim: pac::TIM2,
     clock_high: Cell<u64>,
@@ -180,12 +181,16 @@ pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     len: usize,
     log_dropped: u32,
     uart_errors: u32,
+    reset_csr: u32,
 }
 
 impl OpenCrBoard<DxlDir> {
     /// Brings the board up: 216 MHz clocks, Dynamixel power on, USART3 bus at
     /// `cfg.bus_baud`, USART6 log at [`LOG_BAUD`], TIM2 at 1 MHz. The watchdog is not started.
     pub fn new(dp: pac::Peripherals, cfg: &Config) -> Self {
+        // The reset flags first, then clear them (RMVF) so that the next boot sees its own.
+        let reset_csr = dp.RCC.csr.read().bits();
+        dp.RCC.csr.modify(|_, w| w.rmvf().set_bit());
         let rcc = dp.RCC.constrain();
         let clocks = rcc
             .cfgr
@@ -255,7 +260,7 @@ impl OpenCrBoard<DxlDir> {
 
         OpenCrBoard {
             dir: DxlDir(dir),
-            _dxl_power: power,
+            dxl_power: power,
             baud: cfg.bus_baud,
             tim,
             clock_high: Cell::new(0),
@@ -268,6 +273,7 @@ impl OpenCrBoard<DxlDir> {
             len: 0,
             log_dropped: 0,
             uart_errors: 0,
+            reset_csr,
         }
     }
 }
@@ -311,21 +317,28 @@ impl<D: OutputPin> OpenCrBoard<D> {
 
 impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
     fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
+        self.feed();
         self.discard_input();
         let u = usart3();
         let _ = self.dir.set_high();
+        let mut sent = Ok(());
         for &b in packet {
-            while u.isr.read().txe().bit_is_clear() {}
+            sent = wait_bus(|u| u.isr.read().txe().bit_is_set());
+            if sent.is_err() {
+                break;
+            }
             u.tdr.write(|w| w.tdr().bits(u16::from(b)));
         }
-        while u.isr.read().tc().bit_is_clear() {}
+        let done = sent.and_then(|()| wait_bus(|u| u.isr.read().tc().bit_is_set()));
         let _ = self.dir.set_low();
         // Whatever the transceiver echoed while we were driving the line is not a reply.
         self.discard_input();
-        Ok(())
+        done
     }
 
     fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
+        // Bounded by `timeout_us` (TIM2); the watchdog is fed once per wait.
+        self.feed();
         let u = usart3();
         let deadline = self.now_us() + u64::from(timeout_us);
         let mut n = 0;
@@ -355,7 +368,7 @@ impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
     fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
         let div = brr(baud).ok_or(BusError::UnsupportedBaud)?;
         let u = usart3();
-        while u.isr.read().tc().bit_is_clear() {}
+        wait_bus(|u| u.isr.read().tc().bit_is_set())?;
         u.cr1.modify(|_, w| w.ue().clear_bit());
         // SAFETY: any 16-bit value is a valid BRR; `div` is in 16..=0xFFFF.
         u.brr.write(|w| unsafe { w.bits(div) });
@@ -384,6 +397,8 @@ impl<D: OutputPin> TickTimer for OpenCrBoard<D> {
     fn wait_tick(&mut self) -> Tick {
         let plan = self.schedule.plan(self.now_us());
         if let Some(t) = plan.wait_until_us {
+            // Bounded by the tick period (TIM2); fed once per wait.
+            self.feed();
             while self.now_us() < t {
                 self.pump_log();
             }
@@ -434,6 +449,26 @@ impl<D: OutputPin> Board for OpenCrBoard<D> {
 
     fn torque_off_best_effort(&mut self) {
         let _ = self.send(&TORQUE_OFF_PACKET);
+    }
+
+    fn reset_cause(&self) -> (ResetCause, u32) {
+        (stm32f7_reset_cause(self.reset_csr), self.reset_csr >> 24)
+    }
+
+    fn crash_cell(&mut self) -> &mut CrashCell {
+        crash_cell()
+    }
+
+    fn servo_power(&mut self, on: bool) {
+        // The Dynamixel power enable is PF15 (`BDPIN_DXL_PWR_EN`, high = on) per the OpenCR 1.0
+        // documentation: ROBOTIS e-Manual "OpenCR 1.0" (schematic, OpenCR_REV1.0) and the
+        // OpenCR Arduino core's variant.h. Low switches the FET off: the servos lose power.
+        if on {
+            self.dxl_power.set_high();
+        } else {
+            self.dxl_power.set_low();
+        }
+        defmt::warn!("servo power {=bool} (PF15)", on);
     }
 
     fn exit(&mut self, code: i32) -> ! {

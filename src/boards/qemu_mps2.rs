@@ -53,8 +53,15 @@
 //! *is* measured (SysTick, spins excluded) for diagnostics only: [`QemuBoard::cpu_us`].
 //!
 //! # Watchdog
-//! A virtual watchdog: once started, a tick that begins more than the timeout (virtual time)
-//! after the last feed sends torque off and exits with [`EXIT_WATCHDOG`].
+//! A virtual watchdog, started at boot: once started, a tick that begins more than the timeout
+//! (virtual time) after the last feed (each tick, and each bus receive wait) sends torque off,
+//! records itself in the crash cell and exits with [`EXIT_WATCHDOG`].
+//!
+//! # Bounded waits
+//! Transmit spins on UART0 are bounded ([`UART_SPIN_LIMIT`]: `send` fails with
+//! `BusError::Timeout`). The lock-step reads (reply announcements and announced reply bytes)
+//! block on purpose: the simulator always answers, and a host that is gone ends the run through
+//! the host's QEMU timeout (`walker fil --timeout`).
 
 use core::ptr::{read_volatile, write_volatile};
 
@@ -65,8 +72,8 @@ use cortex_m_rt as _;
 use defmt_semihosting as _;
 
 use crate::board::{
-    Board, BusError, Clock, LineTime, LogSink, ServoBus, Tick, TickSchedule, TickTimer, Watchdog,
-    TORQUE_OFF_PACKET,
+    Board, BusError, Clock, CrashCell, CrashCode, LineTime, LogSink, ResetCause, ServoBus, Tick,
+    TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
 use crate::Config;
@@ -89,6 +96,10 @@ pub const EXIT_PANIC: i32 = walker_contract::ExitCode::Panic.status();
 pub const LOCKSTEP_TIME: u8 = 0x5A;
 /// Lock-step reply announcement marker (simulator → firmware).
 pub const LOCKSTEP_REPLY: u8 = 0xA5;
+
+/// Longest spin on a full UART transmit buffer, iterations (the bus `send` fails with
+/// [`BusError::Timeout`] beyond it; a chardev drains a byte in far fewer).
+pub const UART_SPIN_LIMIT: u32 = 1_000_000;
 
 const DATA: usize = 0x00;
 const STATE: usize = 0x04;
@@ -131,12 +142,12 @@ impl Uart {
         while self.tx_full() {}
         self.write(DATA, u32::from(b));
     }
-    /// Bounded-spin write for the panic path: gives up if the UART never drains.
+    /// Bounded-spin write ([`UART_SPIN_LIMIT`] iterations): false if the UART never drains.
     fn put_bounded(self, b: u8) -> bool {
         let mut spins = 0u32;
         while self.tx_full() {
             spins += 1;
-            if spins > 1_000_000 {
+            if spins > UART_SPIN_LIMIT {
                 return false;
             }
         }
@@ -188,8 +199,8 @@ pub fn semihosting_exit(code: i32) -> ! {
 }
 
 /// Longest semihosting command line read, bytes (qemu refuses SYS_GET_CMDLINE when the line,
-/// kernel file name first, does not fit the buffer).
-pub const CMDLINE_MAX: usize = 1024;
+/// kernel file name first, does not fit the buffer; the host checks it before QEMU starts).
+pub use walker_contract::params::CMDLINE_MAX;
 
 /// Reads the semihosting command line (qemu `-append`, after the kernel's file name) into
 /// `buf`; returns its length (None when qemu refuses, e.g. `buf` is too small).
@@ -253,6 +264,7 @@ pub struct QemuBoard {
     cpu: CpuMeter,
     cpu_last_us: u32,
     cpu_max_us: u32,
+    crash: CrashCell,
     _syst: SYST,
 }
 
@@ -296,6 +308,7 @@ impl QemuBoard {
             cpu: CpuMeter { mark: 0, counts: 0 },
             cpu_last_us: 0,
             cpu_max_us: 0,
+            crash: CrashCell::new(),
             _syst: syst,
         };
         b.cpu.resume();
@@ -361,19 +374,23 @@ impl QemuBoard {
         usize::from(u16::from_le_bytes([lo, hi]))
     }
 
-    /// Writes raw bytes on UART0 (blocking; spin excluded from the CPU meter).
-    fn bus_write(&mut self, bytes: &[u8]) {
+    /// Writes raw bytes on UART0 (bounded spins, excluded from the CPU meter).
+    fn bus_write(&mut self, bytes: &[u8]) -> Result<(), BusError> {
         self.cpu.pause();
-        for &b in bytes {
-            self.bus.put(b);
-        }
+        let ok = bytes.iter().all(|&b| self.bus.put_bounded(b));
         self.cpu.resume();
+        if ok {
+            Ok(())
+        } else {
+            Err(BusError::Timeout)
+        }
     }
 
     fn check_watchdog(&mut self) {
         if let Some(ms) = self.watchdog_ms {
             if self.virt_ns.saturating_sub(self.last_feed_ns) > u64::from(ms) * 1_000_000 {
                 defmt::error!("virtual watchdog expired at {} us", self.now_us_inner());
+                self.crash.record(CrashCode::Watchdog);
                 self.torque_off_best_effort();
                 semihosting_exit(EXIT_WATCHDOG);
             }
@@ -396,7 +413,7 @@ impl ServoBus for QemuBoard {
             self.pending_reply = 0;
         }
         self.sync_time();
-        self.bus_write(packet);
+        self.bus_write(packet)?;
         self.virt_ns += self.line.bytes_ns(packet.len());
         self.reply_started = false;
         self.pending_reply = if self.lockstep {
@@ -426,6 +443,8 @@ impl ServoBus for QemuBoard {
         if n < buf.len() {
             self.virt_ns = self.virt_ns.max(start + u64::from(timeout_us) * 1000);
         }
+        // A bus wait: the watchdog is fed (it still bites a tick that starts late).
+        self.feed();
         Ok(n)
     }
 
@@ -504,6 +523,23 @@ impl Board for QemuBoard {
         self.cpu.pause();
         panic_torque_off();
         self.cpu.resume();
+    }
+
+    fn reset_cause(&self) -> (ResetCause, u32) {
+        // Every QEMU run starts from power-on.
+        (ResetCause::PowerOn, 0)
+    }
+
+    fn crash_cell(&mut self) -> &mut CrashCell {
+        &mut self.crash
+    }
+
+    fn servo_power(&mut self, on: bool) {
+        // No power switch on the emulated board: the request is only logged.
+        defmt::info!(
+            "servo power {=bool} (no switch on this board: nothing done)",
+            on
+        );
     }
 
     fn exit(&mut self, code: i32) -> ! {

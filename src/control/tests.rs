@@ -5,7 +5,7 @@
 use super::*;
 use crate::board::{Clock, ServoBus};
 use crate::record::{FaultState, StartupRecord};
-use crate::testkit::{FakeBoard, Pkt};
+use crate::testkit::{FakeBoard, Kind, Pkt};
 use dxl::opcode;
 use gait_core::support::SupportPolygon;
 use std::vec::Vec;
@@ -108,7 +108,25 @@ fn table2_walk_runs_to_plan_done() {
         let bulk: Vec<_> = pk.iter().filter(|p| p.op == opcode::BULK_READ).collect();
         let sync: Vec<_> = pk.iter().filter(|p| p.op == opcode::SYNC_WRITE).collect();
         assert_eq!(bulk.len(), 1, "tick {k}");
-        assert_eq!(pk.len(), 2, "tick {k}: {pk:?}");
+        // Walking ticks: bulk read, sync write, the servo monitor's two READs of servo
+        // 1 + k mod 12 (ramp and walk; not the held final pose). The last tick: bulk read,
+        // torque off, and its read-back from the 12 servos.
+        let monitored = k < ramp + walk;
+        let expected = if k == last {
+            14
+        } else if monitored {
+            4
+        } else {
+            2
+        };
+        assert_eq!(pk.len(), expected, "tick {k}: {pk:?}");
+        if monitored {
+            let id = 1 + (k % 12) as u8;
+            assert_eq!(
+                (pk[2].id, pk[2].addr, pk[3].id, pk[3].addr),
+                (id, 70, id, 126)
+            );
+        }
         if k < last {
             assert_eq!(sync.len(), 1, "tick {k}");
             assert_eq!(sync[0].addr, 116);
@@ -125,7 +143,21 @@ fn table2_walk_runs_to_plan_done() {
     assert_goals_in_limits(&b);
     assert!(b.servos().all(|d| !d.torque), "torque off at the end");
     assert_eq!(b.watchdog, Some(cfg.watchdog_ms));
-    assert_eq!(b.feeds as usize, ticks.len());
+    // Armed at boot, before the first packet; fed once per tick, once per torque-off round
+    // (one round: all 12 servos confirmed) and every 256 samples of the start-up dry runs.
+    assert_eq!(b.watchdog_at, Some(0));
+    let robot = Robot::reference();
+    let mut dry = 0usize;
+    startup::servo_timing_fed(
+        &cfg,
+        &robot,
+        &Targets::new(&robot, cfg.compensation),
+        &mut || dry += 1,
+    )
+    .unwrap();
+    assert!(dry >= 2, "{dry}");
+    assert_eq!(b.feeds as usize, ticks.len() + 1 + dry);
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
     assert_eq!(b.best_effort, 0);
 
     // The ramp starts at the present pose and moves smoothly (≤ 3 ticks per servo per tick).
@@ -262,8 +294,12 @@ fn unconnected_bus_reports_everything_missing_quickly() {
     assert_eq!(end, RunEnd::Stopped(StopReason::DeviceMissing { id: 1 }));
     assert_eq!(end.exit_code(), 11);
     assert_eq!(&startup_of(&b.records()).missing[..], &DEVICE_IDS[..]);
-    // 15 devices × 8 attempts × (PING 100 µs + 1 ms timeout) = 132 ms, plus the torque off.
-    assert!(b.now_us() < 150_000, "{} µs", b.now_us());
+    // 15 devices × 8 attempts × (PING 100 µs + 1 ms timeout) = 132 ms, plus the torque off:
+    // 3 rounds × (broadcast 130 µs + 12 × (READ 140 µs + 1 ms timeout)) = 41.4 ms.
+    assert!(b.now_us() < 132_000 + 41_400 + 1_000, "{} µs", b.now_us());
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
+    assert!(b.records().iter().any(|r| matches!(r,
+        Record::Fault(f) if f.kind == FaultKind::TorqueOffUnconfirmed && f.id == 1 && f.value == 12)));
 }
 
 #[test]
@@ -392,23 +428,28 @@ fn fall_stops_and_turns_torque_off() {
     );
 }
 
+/// Runs `cfg` whose fault injection fires at walk tick 40; checks the stop, its exit code,
+/// that every goal stayed in the limits and torque went off. Returns the board and the index
+/// of walk tick 40's SYNC WRITE (1 + ramp + 40: the start-up one, the ramp, 40 walk ticks).
+fn run_fault_at_tick_40(cfg: &Config, stop: StopReason, exit: i32) -> (FakeBoard, usize) {
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let mut b = board(cfg);
+    let end = run(&mut b, cfg);
+    assert_eq!(end, RunEnd::Stopped(stop));
+    assert_eq!(end.exit_code(), exit);
+    assert_goals_in_limits(&b);
+    assert!(torque_off_sent(&b));
+    (b, 1 + ramp + 40)
+}
+
 #[test]
 fn nan_target_never_reaches_the_servos() {
     let mut cfg = Config::default();
     cfg.fault_nan_tick = Some(40);
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
-    let mut b = board(&cfg);
-    let end = run(&mut b, &cfg);
-    assert_eq!(
-        end,
-        RunEnd::Stopped(StopReason::NonFiniteTarget { joint: 0 })
-    );
-    assert_eq!(end.exit_code(), 15);
-    assert_goals_in_limits(&b);
-    // Walk tick 40 is SYNC WRITE 1 + ramp + 41: joint 0 kept its previous target.
-    let k = 1 + ramp + 40;
+    let stop = StopReason::NonFiniteTarget { joint: 0 };
+    let (b, k) = run_fault_at_tick_40(&cfg, stop, 15);
+    // Joint 0 kept its previous target.
     assert_eq!(b.goals[k][0], b.goals[k - 1][0]);
-    assert!(torque_off_sent(&b));
 }
 
 #[test]
@@ -696,6 +737,384 @@ fn support_cache_equals_the_fresh_polygon_every_tick_and_rebuilds_rarely() {
     assert!(ticks > 2000, "{ticks}");
 }
 
+#[test]
+fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
+    // `fault_nan_com=40`: walk tick 40's CoM is NaN. The IK would clamp a NaN pelvis to finite
+    // angles (the targets' check never fires): the sample check must stop with its own code.
+    let mut cfg = cfg_with("elf fault_nan_com=40");
+    cfg.walk.steps = 3;
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let stop = StopReason::NonFiniteSample { tick: 40 };
+    let (b, k) = run_fault_at_tick_40(&cfg, stop, 18);
+    // Every joint kept its previous target, then the pose is held until torque off.
+    assert_eq!(b.goals[k], b.goals[k - 1]);
+    assert!(b.goals[k..].windows(2).all(|w| w[0] == w[1]));
+    let recs = b.records();
+    assert_eq!(
+        stop_of(&recs),
+        Some(StopReason::NonFiniteSample { tick: 40 })
+    );
+    // The logged CoM stays finite (the NaN sample is not logged as the reference).
+    let tr = ticks_of(&recs);
+    assert!(tr[ramp + 40..]
+        .iter()
+        .all(|t| t.com[0] != crate::record::POS_NA && t.phase == LoggedPhase::Stopped));
+    assert!(tr[ramp + 41..].iter().all(|t| t.fault != FaultState::Ok));
+    // The same plan without the fault walks to the end.
+    cfg.fault_nan_com_tick = None;
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+}
+
+#[test]
+fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
+    use walker_contract::codes::SensorRejection;
+    let cfg = Config::default();
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    // The IMU keeps answering (CRC fine) but repeats its sample from walk tick 50 on: every
+    // reply is rejected as frozen, held for hold_ticks, then the device is lost.
+    let mut b = board(&cfg);
+    b.freeze_at = Some((200, 1 + ramp + 50));
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Stopped(StopReason::DeviceLost { id: 200 }));
+    let recs = b.records();
+    let rej = faults_of(&recs, FaultKind::SensorRejected);
+    assert_eq!(rej.len(), 1, "one record per run of rejections: {rej:?}");
+    assert_eq!(
+        (rej[0].id, rej[0].value),
+        (200, i32::from(SensorRejection::FrozenCounter.code()))
+    );
+    let tr = ticks_of(&recs);
+    assert_eq!(
+        tr.iter().filter(|t| t.fault == FaultState::Holding).count(),
+        usize::from(cfg.supervisor.hold_ticks)
+    );
+    // No bus error at all: the replies were intact, only implausible.
+    assert!(tr.iter().all(|t| t.bus.timeouts == 0 && t.bus.crc == 0));
+
+    // With a (too) long hold, the staleness bound stops: 100 ms after the last accepted
+    // sample, i.e. on the 21st frozen tick at 5 ms (age 21 × 5 = 105 ms > 100 ms; the 20th
+    // is exactly 100 ms old), which starts the stop sequence in the same tick.
+    let mut cfg = Config::default();
+    cfg.supervisor.hold_ticks = 65_535;
+    let mut b = board(&cfg);
+    b.freeze_at = Some((111, 1 + ramp + 50));
+    let end = run(&mut b, &cfg);
+    assert_eq!(
+        end,
+        RunEnd::Stopped(StopReason::SensorStale {
+            id: 111,
+            age_ms: 105
+        })
+    );
+    assert_eq!(end.exit_code(), 19);
+    let recs = b.records();
+    assert_eq!(
+        stop_of(&recs),
+        Some(StopReason::SensorStale {
+            id: 111,
+            age_ms: 105
+        })
+    );
+    let tr = ticks_of(&recs);
+    let first_hold = tr
+        .iter()
+        .position(|t| t.fault == FaultState::Holding)
+        .unwrap();
+    assert_eq!(first_hold, ramp + 50);
+    let stopping = tr
+        .iter()
+        .position(|t| t.fault == FaultState::Stopping)
+        .unwrap();
+    assert_eq!(stopping - first_hold, 20);
+    assert!(torque_off_sent(&b));
+}
+
+#[test]
+fn an_out_of_range_reply_is_rejected_and_held() {
+    use walker_contract::codes::SensorRejection;
+    let mut cfg = Config::default();
+    cfg.walk.steps = 2;
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    for id in [111u8, 200] {
+        let mut b = board(&cfg);
+        // One byte-shifted reply (load cell ×256 + 1000 N; gyro 1073 rad/s).
+        b.spike_at = Some((id, 1 + ramp + 30));
+        assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+        let recs = b.records();
+        let rej = faults_of(&recs, FaultKind::SensorRejected);
+        assert_eq!(rej.len(), 1, "{id}: {rej:?}");
+        assert_eq!(
+            (rej[0].id, rej[0].value),
+            (id, i32::from(SensorRejection::OutOfRange.code()))
+        );
+        // Held for exactly that one tick, then recovered.
+        let tr = ticks_of(&recs);
+        let holding: Vec<usize> = tr
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.fault == FaultState::Holding)
+            .map(|(i, _)| i)
+            .collect();
+        assert_eq!(holding, vec![ramp + 30], "{id}");
+        assert!(recs.iter().any(|r| matches!(r,
+            Record::Fault(f) if f.kind == FaultKind::DeviceRecovered && f.id == id && f.value == 1)));
+    }
+}
+
+#[test]
+fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
+    // Servo 5 does not let go: every round re-broadcasts the torque off and asks servo 5 again;
+    // after `off_attempts` rounds it is logged and the power is cut anyway.
+    let cfg = cfg_with("elf stop_at=20");
+    let mut b = board(&cfg);
+    b.device_mut(5).unwrap().torque_stuck = true;
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::Requested));
+    let first_off = b
+        .packets
+        .iter()
+        .position(|p| p.id == 0xFE && p.op == opcode::WRITE && p.addr == 64)
+        .unwrap();
+    let after = &b.packets[first_off..];
+    // In order: [broadcast off, READ 64 of the unconfirmed servos] × rounds, then the power.
+    let mut expected: Vec<(u8, u8)> = vec![(0xFE, opcode::WRITE)];
+    expected.extend((1..=12).map(|id| (id, opcode::READ)));
+    for _ in 1..cfg.torque_off_attempts {
+        expected.push((0xFE, opcode::WRITE));
+        expected.push((5, opcode::READ));
+    }
+    let seen: Vec<(u8, u8)> = after.iter().map(|p| (p.id, p.op)).collect();
+    assert_eq!(seen, expected);
+    assert!(after
+        .iter()
+        .filter(|p| p.op == opcode::READ)
+        .all(|p| p.addr == 64));
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
+    let recs = b.records();
+    let f = faults_of(&recs, FaultKind::TorqueOffUnconfirmed);
+    assert_eq!(f.len(), 1);
+    assert_eq!((f[0].id, f[0].value), (5, 1));
+    // Every other servo is off; the stop record comes after the torque-off fault.
+    assert!(b.servos().filter(|d| d.id != 5).all(|d| !d.torque));
+    assert!(matches!(recs.last(), Some(Record::Stop(_))));
+
+    // All servos let go at once: one round, no fault record.
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::Requested));
+    let readbacks = b
+        .packets
+        .iter()
+        .filter(|p| p.op == opcode::READ && p.addr == 64)
+        .count();
+    assert_eq!(readbacks, 12, "one read-back per servo");
+    assert!(faults_of(&b.records(), FaultKind::TorqueOffUnconfirmed).is_empty());
+    assert_eq!(b.power.len(), 1);
+}
+
+#[test]
+fn the_servo_monitor_stops_on_each_limit() {
+    use walker_contract::codes::ServoCheck;
+    let cfg = Config::default();
+    // Each fault set on servo 8 from the start: the monitor reads servo 8 on tick 7 (round-robin
+    // from servo 1 at tick 0), so the stop begins on tick 7 of the ramp.
+    type SetFault = fn(&mut crate::testkit::FakeDevice);
+    let cases: [(SetFault, ServoCheck, u16); 5] = [
+        (|d| d.hw_error = 0x04, ServoCheck::HardwareError, 4),
+        (|d| d.temperature = 75, ServoCheck::Temperature, 75),
+        (|d| d.voltage_dv = 95, ServoCheck::VoltageLow, 95),
+        (|d| d.voltage_dv = 160, ServoCheck::VoltageHigh, 160),
+        // −1000 units × 2.69 mA = 2.69 A > 2.5 A.
+        (|d| d.current_raw = -1000, ServoCheck::Current, 2690),
+    ];
+    for (set, check, reading) in cases {
+        let mut b = board(&cfg);
+        set(b.device_mut(8).unwrap());
+        let end = run(&mut b, &cfg);
+        let want = StopReason::ServoFault {
+            id: 8,
+            check,
+            reading,
+        };
+        assert_eq!(end, RunEnd::Stopped(want), "{check:?}");
+        assert_eq!(end.exit_code(), 21);
+        let recs = b.records();
+        assert_eq!(stop_of(&recs), Some(want));
+        let tr = ticks_of(&recs);
+        assert_eq!(
+            tr.iter().position(|t| t.fault == FaultState::Stopping),
+            Some(8),
+            "{check:?}"
+        );
+        assert!(torque_off_sent(&b));
+    }
+    // The limits are parameters: 75 °C passes with servo_temp_max=80.
+    let cfg = cfg_with("elf servo_temp_max=80 steps=1");
+    let mut b = board(&cfg);
+    b.device_mut(8).unwrap().temperature = 75;
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+}
+
+/// The boot records of `recs`: (reset cause code, raw flags), crash record (code, tick).
+type IdValue = Option<(u8, i32)>;
+
+fn boot_records(recs: &[Record]) -> (IdValue, IdValue) {
+    let reset = faults_of(recs, FaultKind::ResetCause)
+        .first()
+        .map(|f| (f.id, f.value));
+    let crash = faults_of(recs, FaultKind::CrashRecord)
+        .first()
+        .map(|f| (f.id, f.value));
+    (reset, crash)
+}
+
+/// Asserts a run that must not walk: no torque enable, no goal, torque off confirmed and the
+/// servo power cut, stop `NotPowerOn`.
+fn assert_not_walking(b: &FakeBoard, cause: crate::board::ResetCause) {
+    assert!(!b
+        .packets
+        .iter()
+        .any(|p| p.op == opcode::WRITE && p.addr == 64 && p.data == [1]));
+    assert_eq!(b.count(opcode::SYNC_WRITE), 0);
+    assert!(torque_off_sent(b));
+    assert_eq!(b.power, vec![(false, b.packets.len())]);
+    assert!(b.servos().all(|d| !d.torque));
+    assert_eq!(
+        stop_of(&b.records()),
+        Some(StopReason::NotPowerOn { cause })
+    );
+}
+
+#[test]
+fn a_power_on_logs_its_cause_and_walks() {
+    use crate::board::ResetCause;
+    let cfg = cfg_with("elf steps=1");
+    let mut b = board(&cfg);
+    // Random RAM after a power-on that happens to look like a panic record: ignored.
+    b.crash.note_tick(7);
+    b.crash.record(crate::board::CrashCode::Panic);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (Some((ResetCause::PowerOn.code(), 0)), None)
+    );
+    // Right after the start-up record.
+    assert!(matches!(recs[1], Record::Fault(f) if f.kind == FaultKind::ResetCause));
+    // The loop noted its last tick in the no-init record.
+    let last = b.ticks.last().unwrap().tick.index;
+    let note = b.crash.take().unwrap();
+    assert_eq!((note.code, u64::from(note.tick)), (None, last));
+}
+
+#[test]
+fn a_brown_out_reset_logs_its_cause_and_does_not_walk() {
+    use crate::board::{stm32f7_reset_cause, ResetCause};
+    let cfg = Config::default();
+    let mut b = board(&cfg);
+    // RCC_CSR after a brown-out: BORRSTF and PINRSTF, no PORRSTF.
+    let csr = (1u32 << 25) | (1 << 26);
+    b.reset = (stm32f7_reset_cause(csr), csr >> 24);
+    // Torque was on before the reset (the servos have their own supply).
+    for d in b.devices.iter_mut() {
+        d.torque = matches!(d.kind, crate::testkit::Kind::Servo(_));
+    }
+    let end = run(&mut b, &cfg);
+    assert_eq!(
+        end,
+        RunEnd::Stopped(StopReason::NotPowerOn {
+            cause: ResetCause::BrownOut
+        })
+    );
+    assert_eq!(end.exit_code(), 22);
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (Some((ResetCause::BrownOut.code(), 0b110)), None)
+    );
+    assert!(!startup_of(&recs).probed);
+    assert_not_walking(&b, ResetCause::BrownOut);
+}
+
+#[test]
+fn a_watchdog_reset_writes_its_record_at_the_next_boot() {
+    use crate::board::ResetCause;
+    let cfg = Config::default();
+    // A first run stops mid-walk; then the loop hangs (it does not return here: the last noted
+    // tick is what the watchdog reset leaves in no-init RAM).
+    let mut b = board(&cfg);
+    let mut c1 = cfg;
+    c1.stop_at_tick = Some(100);
+    let _ = run(&mut b, &c1);
+    let last = b.ticks.last().unwrap().tick.index;
+    // Next boot on the same board (RAM kept) after an IWDG reset: IWDGRSTF + PINRSTF.
+    b.reset = (ResetCause::Watchdog, 0b0010_0100);
+    b.packets.clear();
+    b.log.clear();
+    b.power.clear();
+    let end = run(&mut b, &cfg);
+    assert_eq!(
+        end,
+        RunEnd::Stopped(StopReason::NotPowerOn {
+            cause: ResetCause::Watchdog
+        })
+    );
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (
+            Some((ResetCause::Watchdog.code(), 0b0010_0100)),
+            Some((crate::board::CrashCode::Watchdog.code(), last as i32))
+        )
+    );
+    assert_not_walking(&b, ResetCause::Watchdog);
+}
+
+#[test]
+fn a_panic_writes_its_record_at_the_next_boot() {
+    use crate::board::{CrashCode, ResetCause};
+    let cfg = Config::default();
+    let mut b = board(&cfg);
+    // What the panic path does on the OpenCR: the loop had noted tick 1234, the handler
+    // records the panic, then a software reset (SFTRSTF + PINRSTF).
+    b.crash.note_tick(1234);
+    b.crash.record(CrashCode::Panic);
+    b.reset = (ResetCause::Software, 0b0001_0100);
+    let end = run(&mut b, &cfg);
+    assert_eq!(end.exit_code(), 22);
+    let recs = b.records();
+    assert_eq!(
+        boot_records(&recs),
+        (
+            Some((ResetCause::Software.code(), 0b0001_0100)),
+            Some((CrashCode::Panic.code(), 1234))
+        )
+    );
+    assert_not_walking(&b, ResetCause::Software);
+    // The record is consumed: the boot after that finds none.
+    assert_eq!(b.crash.take(), None);
+}
+
+#[test]
+fn a_plan_too_long_to_check_is_refused_before_the_bus() {
+    // 64 steps of 4 s at dt = 1 ms with whole-body compensation: beyond the dry run's work
+    // budget (gait-core MAX_DRY_RUN_WORK): configuration rejected, nothing sent, watchdog fed.
+    let cfg = cfg_with(
+        "elf dt=0.001 steps=64 step_length=0.01 period=4 t1=0.4 t2=3.6 lead_in=4 lead_out=4 \
+         comp=wholebody",
+    );
+    let mut b = board(&cfg);
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Config(GaitError::DryRunTooLong));
+    assert_eq!(end.exit_code(), 2);
+    assert!(b.packets.is_empty());
+    let budget = startup::MAX_DRY_RUN_WORK / gait_core::gait::WHOLEBODY_SAMPLE_COST;
+    assert_eq!(b.feeds, budget / gait_core::gait::DRY_RUN_FEED_EVERY);
+    assert!(b.records().iter().any(|r| matches!(r,
+        Record::Fault(f) if f.kind == FaultKind::ConfigRejected
+            && f.id == PLAN_REJECTED_ID
+            && f.value == i32::from(GaitError::DryRunTooLong.code()))));
+}
+
 /// The servo-lag feed-forward (`servo_lead`): the joint targets of walk tick k are those the
 /// walk without lead sends at tick k + lead, while the logged reference (ZMP, CoM) stays that
 /// of tick k; the ramp ends at the lead sample's pose. A still IMU (τ = 0), so that the two
@@ -739,4 +1158,35 @@ fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_referen
         "lead ticks fewer goal writes"
     );
     assert_goals_in_limits(&b);
+}
+
+/// `servo_i_roll` / `servo_i_pitch`: the Position I Gains are written (and read back) to the
+/// roll and the pitch servos before torque goes on; 0 leaves a servo's gain alone.
+#[test]
+fn position_i_gains_are_written_before_torque_on() {
+    let cfg = cfg_with("servo_i_roll=4000 servo_i_pitch=0");
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    for d in b.servos() {
+        let Kind::Servo(j) = d.kind else {
+            unreachable!()
+        };
+        let want = if matches!(j % 6, 1 | 5) { 4000 } else { 0 };
+        assert_eq!(d.i_gain, want, "joint {j}");
+    }
+    let gain_writes: Vec<usize> = (0..b.packets.len())
+        .filter(|&i| b.packets[i].op == opcode::WRITE && b.packets[i].addr == 82)
+        .collect();
+    let torque_on = b
+        .packets
+        .iter()
+        .position(|p| p.op == opcode::WRITE && p.addr == 64 && p.data == [1])
+        .unwrap();
+    assert_eq!(gain_writes.len(), 4);
+    assert!(gain_writes.iter().all(|&i| i < torque_on));
+    // Both gains: ten servos (the hip yaws keep theirs).
+    let cfg = cfg_with("servo_i_roll=10 servo_i_pitch=20");
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(b.servos().filter(|d| d.i_gain > 0).count(), 10);
 }

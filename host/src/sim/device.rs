@@ -287,6 +287,18 @@ mod tests {
     }
 
     #[test]
+    fn servo_answers_the_monitor_registers() {
+        // The firmware's servo monitor reads Hardware Error Status (70) and 126 ..= 146
+        // (Present Current, Input Voltage, Temperature) from every servo while walking.
+        let d = Device::servo(3, 2, 2048);
+        assert_eq!(d.read(70, 1), Ok(&[0u8][..]));
+        let b = d.read(126, 21).unwrap();
+        assert_eq!(i16::from_le_bytes([b[0], b[1]]), 0);
+        assert_eq!(u16::from_le_bytes([b[18], b[19]]), 120, "12.0 V");
+        assert_eq!(b[20], 36, "36 °C");
+    }
+
+    #[test]
     fn board_access_rules() {
         let mut d = Device::foot(111, 0);
         assert_eq!(d.model(), foot::MODEL_NUMBER_VALUE);
