@@ -196,10 +196,15 @@ t3=${M3[tick.fixed.tlipfm.avg]}
 t3f=${M3[tick.f32.tlipfm.avg]}
 t7cs=${M7[tick.comp_stab.tlipfm.avg]}
 t3cs=${M3[tick.comp_stab.tlipfm.avg]}
-codec() { # array → Dynamixel codec instructions per tick (decode 3 replies + 2 encodes)
+codec() { # array → Dynamixel codec instructions per tick (decode + parse 3 replies + 2 encodes)
     local -n a=$1
-    calc "${a[dxl.decode3.avg]} + ${a[dxl.sync_write12.avg]} + ${a[dxl.bulk_read3.avg]}"
+    calc "${a[dxl.decode3_block.avg]} + ${a[dxl.sync_write12.avg]} + ${a[dxl.bulk_read3.avg]}"
 }
+# Per-byte codec figures (issue 14: decoder ≤ 20 per received byte, encoder ≤ 12 per sent byte).
+rx_bytes=$((${M7[bytes.status_foot_left]} + ${M7[bytes.status_foot_right]} + ${M7[bytes.status_imu]}))
+per_rx() { local -n a=$1; calc "${a[$2.avg]} / $rx_bytes" 1; }
+per_sw() { local -n a=$1; calc "${a[dxl.sync_write12.avg]} / ${M7[bytes.sync_write]}" 1; }
+per_br() { local -n a=$1; calc "${a[dxl.bulk_read3.avg]} / ${M7[bytes.bulk_read]}" 1; }
 codec7=$(codec M7)
 codec3=$(codec M3)
 pct() { calc "100 * ($1) / ($2)"; }
@@ -276,7 +281,7 @@ qemu-system-arm -M mps2-an385 -nographic -monitor none -serial null \\
 
 ### Full control tick, instructions (avg over the walk, max per tick in parentheses)
 
-A tick = decode the three status replies byte by byte (\`dxl::Decoder\`) → pitch-rate filter,
+A tick = decode the three status replies (\`dxl::Decoder::feed\`, block decoding as the bus master does) → pitch-rate filter,
 τ = J·φ̈ (\`imu::PitchAccel\`, f32) → one gait sample with that τ → measured ZMP from the 8
 forces (f32) → joint targets → 12 goal positions in ticks → encode the SYNC WRITE of 12 goal
 positions and the BULK READ of feet + IMU. The paths differ in the middle:
@@ -327,9 +332,9 @@ their sum):
 - **M7, f32 tick $(n "$t7")**: $(breakdown "$t7" "Dynamixel codec|$codec7" \
         "IK|${M7[ik.tlipfm.avg]}" "measured ZMP|${M7[mzmp.tlipfm.avg]}" \
         "gait sample|${M7[sample.f32.tlipfm.avg]}" "pitch filter|${M7[imu.pitch_accel.avg]}").
-  The codec: decoding the 95 reply bytes $(n "${M7[dxl.decode3.avg]}") ≈ $(calc "${M7[dxl.decode3.avg]} / 95") per byte, the
-  74-byte SYNC WRITE $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") — against $(n "${M7[dxl.crc16_72.avg]}") for a 72-byte
-  CRC, so the per-byte state machine and packet assembly cost far more than the CRC. The IK's
+  The codec: decoding and parsing the $rx_bytes reply bytes $(n "${M7[dxl.decode3_block.avg]}") ≈ $(per_rx M7 dxl.decode3_block) per byte, the
+  ${M7[bytes.sync_write]}-byte SYNC WRITE $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") (a 72-byte
+  CRC alone: $(n "${M7[dxl.crc16_72.avg]}"); per-byte figures in the codec table below). The IK's
   $ik_sc sin_cos + $ik_at \`atan2f\` + $ik_sq \`sqrtf\` are ≈ $(n "$ik7") by the primitive figures below
   (\`sqrtf\` is libm's software square root, $(n "${M7[prim.sqrtf.avg]}") a call). Without the codec the tick
   is $(n "$t7 - $codec7").
@@ -365,6 +370,26 @@ their sum):
 | flash ≤ 64 KiB (65,536 B) | \`qemu\` $(commas "$q_flash") B, \`opencr\` $(commas "$o_flash") B | qemu $(verdict "$q_flash" 65536) ($(commas "$((65536 - q_flash))") B left), opencr $(verdict "$o_flash" 65536) ($(commas "$((65536 - o_flash))") B left) |
 | static RAM ≤ 16 KiB (16,384 B) | \`qemu\` $(commas "$q_ram") B, \`opencr\` $(commas "$o_ram") B (stack not included) | qemu $(verdict "$q_ram" 16384), opencr $(verdict "$o_ram" 16384) |
 
+### Dynamixel codec per byte (issue 14 targets: decode ≤ 20 per received byte, encode ≤ 12 per sent byte)
+
+The three status replies ($rx_bytes bytes: $sfl + $sfr + $simu) and the two instruction packets of a
+tick, instructions per byte (stage avg ÷ bytes). **Block decoding** (\`Decoder::feed\`) is what the
+bus master uses: it reads the rest of a frame from the UART in one \`recv\` (\`Decoder::wanted\`)
+and feeds it at once (a whole clean frame is checked with one CRC pass over it); **byte by byte**
+(\`Decoder::push\`) is the same decoder one byte per call. Parsing (\`Status::from_packet\`, the
+foot and IMU records) comes on top in the "decode + parse" row (the tick's figure).
+
+| per byte | Cortex-M7 | Cortex-M4F | Cortex-M3 | target | M7 verdict |
+| --- | --- | --- | --- | --- | --- |
+| decode, block (\`dxl.feed3\`) | $(per_rx M7 dxl.feed3) | $(per_rx M4 dxl.feed3) | $(per_rx M3 dxl.feed3) | ≤ 20 | $(verdict "$(per_rx M7 dxl.feed3)" 20) |
+| decode + parse, block (\`dxl.decode3_block\`) | $(per_rx M7 dxl.decode3_block) | $(per_rx M4 dxl.decode3_block) | $(per_rx M3 dxl.decode3_block) | | |
+| decode, byte by byte (\`dxl.push3\`) | $(per_rx M7 dxl.push3) | $(per_rx M4 dxl.push3) | $(per_rx M3 dxl.push3) | | |
+| encode SYNC WRITE, 12 goals (${sw} B) | $(per_sw M7) | $(per_sw M4) | $(per_sw M3) | ≤ 12 | $(verdict "$(per_sw M7)" 12) |
+| encode BULK READ (${br} B) | $(per_br M7) | $(per_br M4) | $(per_br M3) | ≤ 12 | $(verdict "$(per_br M7)" 12) |
+| CRC-16, 72 B (\`crc::crc16\`, slicing by 4) | $(calc "${M7[dxl.crc16_72.avg]} / 72" 1) | $(calc "${M4[dxl.crc16_72.avg]} / 72" 1) | $(calc "${M3[dxl.crc16_72.avg]} / 72" 1) | | |
+
+The encode rows include the bench's own assembly of the 12 \`(id, bytes)\` entries.
+
 ### Stages, instructions per call: avg (max)
 
 | stage | model | Cortex-M7 (an500) | Cortex-M4F (an386) | Cortex-M3 (an385, soft float) |
@@ -392,7 +417,10 @@ EOF
         "imu.pitch_accel:pitch-rate filter and τ (\`imu::PitchAccel\`)" \
         "dxl.sync_write12:encode SYNC WRITE, 12 goal positions (${sw} bytes)" \
         "dxl.bulk_read3:encode BULK READ, feet + IMU (${br} bytes)" \
-        "dxl.decode3:decode 3 status replies byte by byte (${sfl} + ${sfr} + ${simu} bytes)" \
+        "dxl.decode3:decode + parse 3 status replies byte by byte (${sfl} + ${sfr} + ${simu} bytes)" \
+        "dxl.decode3_block:decode + parse 3 status replies, block feeds" \
+        "dxl.feed3:decode 3 status replies, block feeds (\`Decoder::feed\`), no parse" \
+        "dxl.push3:decode 3 status replies byte by byte (\`Decoder::push\`), no parse" \
         "dxl.crc16_72:CRC-16 over 72 bytes (\`dxl::crc::crc16\`)"; do
         key=${st%%:*}
         label=${st#*:}
