@@ -232,7 +232,7 @@ breakdown() {
 ik_sc=13 ik_at=14 ik_sq=10
 ik_tr() { # array → instructions in the IK's sin_cos/atan2/sqrt (primitive figures × calls)
     local -n a=$1
-    calc "$ik_sc * ${a[prim.sin_cos_fast.avg]} + $ik_at * ${a[prim.atan2f.avg]} + $ik_sq * ${a[prim.sqrtf.avg]}"
+    calc "$ik_sc * ${a[prim.sin_cos_fast.avg]} + $ik_at * ${a[prim.atan2_fast.avg]} + $ik_sq * ${a[prim.sqrt_fast.avg]}"
 }
 ik7=$(ik_tr M7)
 ik3=$(ik_tr M3)
@@ -263,8 +263,8 @@ single call, resolution 40 instructions (one count), call and timer reads includ
 instructions, not cycles: the M7 and M4F run the same ELF and give the same counts (a real M7
 dual-issues; cycles are not modelled). Inputs a stage takes from an earlier stage (the IK's gait
 samples) are computed beforehand, so each stage is timed alone. Release profile of Cargo.toml:
-**opt-level "$opt_level"** (chosen for flash, to fit the 64 KiB target; "s" or 3 would give
-fewer instructions per tick and a larger ELF), fat LTO, one codegen unit.
+**opt-level "$opt_level"** (dxl at 3; chosen by measurement, the figures are in Cargo.toml's
+comment), fat LTO, one codegen unit.
 
 Reproduce one machine by hand:
 
@@ -335,8 +335,9 @@ their sum):
   The codec: decoding and parsing the $rx_bytes reply bytes $(n "${M7[dxl.decode3_block.avg]}") ≈ $(per_rx M7 dxl.decode3_block) per byte, the
   ${M7[bytes.sync_write]}-byte SYNC WRITE $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") (a 72-byte
   CRC alone: $(n "${M7[dxl.crc16_72.avg]}"); per-byte figures in the codec table below). The IK's
-  $ik_sc sin_cos + $ik_at \`atan2f\` + $ik_sq \`sqrtf\` are ≈ $(n "$ik7") by the primitive figures below
-  (\`sqrtf\` is libm's software square root, $(n "${M7[prim.sqrtf.avg]}") a call). Without the codec the tick
+  $ik_sc sin_cos + $ik_at \`atan2\` + $ik_sq \`sqrt\` (\`gait_core::fastmath\`) are ≈ $(n "$ik7") by the primitive figures below
+  (\`sqrt\` is the FPU's \`VSQRT.F32\`, $(n "${M7[prim.sqrt_fast.avg]}") a call with the bench's loads and stores, against
+  $(n "${M7[prim.sqrtf.avg]}") for libm's software \`sqrtf\`; \`atan2\` $(n "${M7[prim.atan2_fast.avg]}") against $(n "${M7[prim.atan2f.avg]}") for \`libm::atan2f\`). Without the codec the tick
   is $(n "$t7 - $codec7").
 - **M7, f32 + compensation + stabilizer $(n "$t7cs")** ($(ratio "$t7cs" "$t7")× the f32 tick):
   $(breakdown "$t7cs" "whole-body compensation|${M7[wholebody.tlipfm.avg]}" \
@@ -358,17 +359,17 @@ their sum):
   sampler ($(n "${M7[sample.f32.tlipfm.avg]}")). The tick's worst case, $(n "${M3[tick.fixed.tlipfm.max]}"), is the sampler's once-per-segment
   plan bookkeeping, still f32 in soft float (the fixed-point sample's max is $(n "${M3[sample.fixed.tlipfm.max]}")). The fixed path saves $(n "$t3f - $t3") instructions per tick on the M3 against
   f32 soft float ($(n "$t3f")).
-- **Control loop, M7 $(n "${M7[control.tick.avg]}")**: $(n "${M7[control.tick.avg]} - $t7") more than the f32 library calls: the
-  loop's own work listed above (not broken down further by this bench).
+- **Control loop, M7 $(n "${M7[control.tick.avg]}")**: the loop alone (the tick minus the f32 library calls)
+  $(n "${M7[control.tick.avg]} - $t7"): the loop's own work listed above (not broken down further by this bench).
 
-### Issue 6 targets
+### Issue 14 targets
 
 | target | measured | verdict |
 | --- | --- | --- |
-| M7 full tick ≤ 3,000 instructions | f32 library tick $(n "$t7"); firmware control loop $(n "${M7[control.tick.avg]}"); with compensation + stabilizer $(n "$t7cs") | $(verdict "$t7" 3000): **$(ratio "$t7" 3000)×** the target (the codec alone, $(n "$codec7"), is $(ratio "$codec7" 3000)×) |
-| M3 fixed path within 3× of the M7 tick | $(n "$t3") = $(ratio "$t3" "$t7" 2)× the measured M7 f32 tick; $(ratio "$t3" 9000 2)× the 9,000 of 3 × 3,000 | $(verdict "$t3" "$(calc "3 * $t7")") 3× the measured M7 tick; $(verdict "$t3" 9000) 3× the 3,000 target |
-| flash ≤ 64 KiB (65,536 B) | \`qemu\` $(commas "$q_flash") B, \`opencr\` $(commas "$o_flash") B | qemu $(verdict "$q_flash" 65536) ($(commas "$((65536 - q_flash))") B left), opencr $(verdict "$o_flash" 65536) ($(commas "$((65536 - o_flash))") B left) |
-| static RAM ≤ 16 KiB (16,384 B) | \`qemu\` $(commas "$q_ram") B, \`opencr\` $(commas "$o_ram") B (stack not included) | qemu $(verdict "$q_ram" 16384), opencr $(verdict "$o_ram" 16384) |
+| M7 firmware control-loop tick, the loop alone (not the library calls) ≤ 8,000 instructions avg | loop alone $(n "${M7[control.tick.avg]} - $t7") = control-loop tick $(n "${M7[control.tick.avg]}") − f32 library-call tick $(n "$t7") | $(verdict "${M7[control.tick.avg]} - $t7" 8000) |
+| codec: decode ≤ 20 per received byte, encode ≤ 12 per sent byte (M7) | decode (block) $(per_rx M7 dxl.feed3), SYNC WRITE $(per_sw M7), BULK READ $(per_br M7) | decode $(verdict "$(per_rx M7 dxl.feed3)" 20), SYNC WRITE $(verdict "$(per_sw M7)" 12), BULK READ $(verdict "$(per_br M7)" 12) |
+| M3 control-loop tick with the fixed-point path ≤ 25,000 | the firmware's loop on the M3 is f32 soft float here ($(n "${M3[control.tick.avg]}")); the library-call fixed tick is $(n "$t3") | not measured (no M3 board build yet) |
+| M3 build ≤ 112 KiB flash, ≤ 16 KiB static RAM | applies to an FPU-less board build; the FPU boards' sizes are below | no M3 board build yet |
 
 ### Dynamixel codec per byte (issue 14 targets: decode ≤ 20 per received byte, encode ≤ 12 per sent byte)
 
@@ -437,7 +438,9 @@ Primitives (per call, including a \`black_box\` store and load of the argument a
 | --- | --- | --- | --- |
 EOF
     for st in "prim.expf:\`libm::expf\`" "prim.sqrtf:\`libm::sqrtf\` (software)" \
-        "prim.atan2f:\`libm::atan2f\`" "prim.sin_cos_fast:\`gait_core::fastmath::sin_cos\`" \
+        "prim.sqrt_fast:\`gait_core::fastmath::sqrt\` (\`VSQRT.F32\` on M7/M4F, libm on M3)" \
+        "prim.atan2f:\`libm::atan2f\`" "prim.atan2_fast:\`gait_core::fastmath::atan2\`" \
+        "prim.sin_cos_fast:\`gait_core::fastmath::sin_cos\`" \
         "prim.sinf_libm:\`libm::sinf\` (software doubles)" "prim.fmul:f32 multiply" \
         "prim.fdiv:f32 divide" "prim.fx_exp_neg:\`fixed_point::exp_neg\`" \
         "prim.fx_sin_cos:\`fixed_point::sin_cos\`" "prim.fx_sqrt:\`fixed_ik::sqrt\` (Fx)" \
@@ -455,10 +458,10 @@ EOF
 every allocated section with contents (vector table, .text, .rodata, the .data image); static
 RAM = .data + .bss + .uninit (the stack comes on top).
 
-| ELF | .text | .rodata | .data | .bss | flash | static RAM | targets: ≤ 64 KiB flash, ≤ 16 KiB RAM |
+| ELF | .text | .rodata | .data | .bss | flash | static RAM | share of the board |
 | --- | --- | --- | --- | --- | --- | --- | --- |
-| \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B ($(kib "$q_flash") KiB) | $(commas "$q_ram") B ($(kib "$q_ram") KiB) | flash $(verdict "$q_flash" 65536), RAM $(verdict "$q_ram" 16384) |
-| \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B ($(kib "$o_flash") KiB) | $(commas "$o_ram") B ($(kib "$o_ram") KiB) | flash $(verdict "$o_flash" 65536), RAM $(verdict "$o_ram" 16384) |
+| \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B ($(kib "$q_flash") KiB) | $(commas "$q_ram") B ($(kib "$q_ram") KiB) | flash $(calc "100 * $q_flash / 4194304" 1) % of 4 MiB |
+| \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B ($(kib "$o_flash") KiB) | $(commas "$o_ram") B ($(kib "$o_ram") KiB) | flash $(calc "100 * $o_flash / 1048576" 1) % of 1 MiB, RAM $(calc "100 * $o_ram / 327680" 1) % of 320 KiB |
 
 Built from the working tree at the time of the run. The firmware keeps its state (sampler,
 plan, IK) on the stack, so static RAM understates its RAM use; the stack is not measured here.

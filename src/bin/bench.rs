@@ -524,6 +524,20 @@ mod firmware {
             ovh,
         );
         report(
+            "prim.sqrt_fast",
+            measure(K, &mut |i| {
+                black_box(gait_core::fastmath::sqrt(x(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.atan2_fast",
+            measure(K, &mut |i| {
+                black_box(gait_core::fastmath::atan2(x(i) - 1.7, 0.9));
+            }),
+            ovh,
+        );
+        report(
             "prim.sin_cos_fast",
             measure(K, &mut |i| {
                 black_box(gait_core::fastmath::sin_cos(x(i)));
