@@ -977,7 +977,7 @@ mod firmware {
                 line: LineTime { baud: cfg.bus_baud },
                 rx: heapless::Deque::new(),
                 sched: TickSchedule::new(cfg.tick_period_us),
-                compute_ns: 150_000,
+                compute_ns: walker_firmware::boards::qemu_mps2::compute_ns(cfg),
                 devs,
                 imu_counter: 0,
                 mark: None,

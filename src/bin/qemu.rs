@@ -45,7 +45,6 @@ mod firmware {
             qemu_mps2::semihosting_exit(ExitCode::ConfigRejected.status());
         };
         let mut board = QemuBoard::new(cp.SYST, &cfg);
-        board.set_compute_us(cfg.compute_us);
         if let Err(e) = args {
             defmt::error!(
                 "bad parameter `{=str}` (token {=u8}): {}",
