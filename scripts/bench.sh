@@ -113,6 +113,39 @@ load "$out/an500.txt" M7
 load "$out/an386.txt" M4
 load "$out/an385.txt" M3
 
+# ---- the QEMU board's compute time per tick (src/boards/tick_cost.rs, generated) ----
+# The firmware's QEMU board charges the measured worst-case instructions per control tick at
+# its modelled core clock (`core_mhz`) as the compute time of each tick; the constants come
+# from this run. When they change, the firmware ELFs are rebuilt before their sizes are read.
+tick_cost=src/boards/tick_cost.rs
+tick_cost_new=$(mktemp)
+cat >"$tick_cost_new" <<TICKCOST
+//! Instructions per control tick measured by \`scripts/bench.sh\` (generated: the script
+//! rewrites this file after each run; do not edit by hand).
+//!
+//! The firmware's control loop (\`control::run\`, default configuration: TLIPFM, f32, paper
+//! pipeline, stabilizer off) on the bench's emulated bus, QEMU \`-icount shift=0\`, per walking
+//! tick: worst case and average over the Table 2 walk. The QEMU board charges the worst case
+//! as its compute time per tick (see [\`super::qemu_mps2::compute_ns\`]).
+
+/// Worst-case instructions per control tick, hard-float build (Cortex-M7/M4F, mps2-an500).
+pub const TICK_INSTRUCTIONS_MAX_FPU: u32 = ${M7[control.tick.max]};
+/// Average instructions per control tick, hard-float build (for reference).
+pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = ${M7[control.tick.avg]%.*};
+/// Worst-case instructions per control tick, soft-float build (Cortex-M3, mps2-an385).
+pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = ${M3[control.tick.max]};
+/// Average instructions per control tick, soft-float build (for reference).
+pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = ${M3[control.tick.avg]%.*};
+TICKCOST
+if cmp -s "$tick_cost_new" "$tick_cost"; then
+    rm -f "$tick_cost_new"
+else
+    mv "$tick_cost_new" "$tick_cost"
+    echo "bench.sh: $tick_cost updated (the QEMU board's compute time per tick); rebuilding the ELFs" >&2
+    cargo build "${qemu_feat[@]}" --bin qemu
+    cargo build --release --no-default-features --features board-opencr --bin opencr
+fi
+
 # ---- helpers ----
 calc() { awk "BEGIN { printf \"%.${2:-0}f\", $1 }"; }
 commas() { # integer or decimal → thousands separators
@@ -196,10 +229,15 @@ t3=${M3[tick.fixed.tlipfm.avg]}
 t3f=${M3[tick.f32.tlipfm.avg]}
 t7cs=${M7[tick.comp_stab.tlipfm.avg]}
 t3cs=${M3[tick.comp_stab.tlipfm.avg]}
-codec() { # array → Dynamixel codec instructions per tick (decode 3 replies + 2 encodes)
+codec() { # array → Dynamixel codec instructions per tick (decode + parse 3 replies + 2 encodes)
     local -n a=$1
-    calc "${a[dxl.decode3.avg]} + ${a[dxl.sync_write12.avg]} + ${a[dxl.bulk_read3.avg]}"
+    calc "${a[dxl.decode3_block.avg]} + ${a[dxl.sync_write12.avg]} + ${a[dxl.bulk_read3.avg]}"
 }
+# Per-byte codec figures (issue 14: decoder ≤ 20 per received byte, encoder ≤ 12 per sent byte).
+rx_bytes=$((${M7[bytes.status_foot_left]} + ${M7[bytes.status_foot_right]} + ${M7[bytes.status_imu]}))
+per_rx() { local -n a=$1; calc "${a[$2.avg]} / $rx_bytes" 1; }
+per_sw() { local -n a=$1; calc "${a[dxl.sync_write12.avg]} / ${M7[bytes.sync_write]}" 1; }
+per_br() { local -n a=$1; calc "${a[dxl.bulk_read3.avg]} / ${M7[bytes.bulk_read]}" 1; }
 codec7=$(codec M7)
 codec3=$(codec M3)
 pct() { calc "100 * ($1) / ($2)"; }
@@ -227,7 +265,7 @@ breakdown() {
 ik_sc=13 ik_at=14 ik_sq=10
 ik_tr() { # array → instructions in the IK's sin_cos/atan2/sqrt (primitive figures × calls)
     local -n a=$1
-    calc "$ik_sc * ${a[prim.sin_cos_fast.avg]} + $ik_at * ${a[prim.atan2f.avg]} + $ik_sq * ${a[prim.sqrtf.avg]}"
+    calc "$ik_sc * ${a[prim.sin_cos_fast.avg]} + $ik_at * ${a[prim.atan2_fast.avg]} + $ik_sq * ${a[prim.sqrt_fast.avg]}"
 }
 ik7=$(ik_tr M7)
 ik3=$(ik_tr M3)
@@ -258,8 +296,8 @@ single call, resolution 40 instructions (one count), call and timer reads includ
 instructions, not cycles: the M7 and M4F run the same ELF and give the same counts (a real M7
 dual-issues; cycles are not modelled). Inputs a stage takes from an earlier stage (the IK's gait
 samples) are computed beforehand, so each stage is timed alone. Release profile of Cargo.toml:
-**opt-level "$opt_level"** (chosen for flash, to fit the 64 KiB target; "s" or 3 would give
-fewer instructions per tick and a larger ELF), fat LTO, one codegen unit.
+**opt-level "$opt_level"** (dxl at 3; chosen by measurement, the figures are in Cargo.toml's
+comment), fat LTO, one codegen unit.
 
 Reproduce one machine by hand:
 
@@ -276,7 +314,7 @@ qemu-system-arm -M mps2-an385 -nographic -monitor none -serial null \\
 
 ### Full control tick, instructions (avg over the walk, max per tick in parentheses)
 
-A tick = decode the three status replies byte by byte (\`dxl::Decoder\`) → pitch-rate filter,
+A tick = decode the three status replies (\`dxl::Decoder::feed\`, block decoding as the bus master does) → pitch-rate filter,
 τ = J·φ̈ (\`imu::PitchAccel\`, f32) → one gait sample with that τ → measured ZMP from the 8
 forces (f32) → joint targets → 12 goal positions in ticks → encode the SYNC WRITE of 12 goal
 positions and the BULK READ of feet + IMU. The paths differ in the middle:
@@ -327,11 +365,12 @@ their sum):
 - **M7, f32 tick $(n "$t7")**: $(breakdown "$t7" "Dynamixel codec|$codec7" \
         "IK|${M7[ik.tlipfm.avg]}" "measured ZMP|${M7[mzmp.tlipfm.avg]}" \
         "gait sample|${M7[sample.f32.tlipfm.avg]}" "pitch filter|${M7[imu.pitch_accel.avg]}").
-  The codec: decoding the 95 reply bytes $(n "${M7[dxl.decode3.avg]}") ≈ $(calc "${M7[dxl.decode3.avg]} / 95") per byte, the
-  74-byte SYNC WRITE $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") — against $(n "${M7[dxl.crc16_72.avg]}") for a 72-byte
-  CRC, so the per-byte state machine and packet assembly cost far more than the CRC. The IK's
-  $ik_sc sin_cos + $ik_at \`atan2f\` + $ik_sq \`sqrtf\` are ≈ $(n "$ik7") by the primitive figures below
-  (\`sqrtf\` is libm's software square root, $(n "${M7[prim.sqrtf.avg]}") a call). Without the codec the tick
+  The codec: decoding and parsing the $rx_bytes reply bytes $(n "${M7[dxl.decode3_block.avg]}") ≈ $(per_rx M7 dxl.decode3_block) per byte, the
+  ${M7[bytes.sync_write]}-byte SYNC WRITE $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") (a 72-byte
+  CRC alone: $(n "${M7[dxl.crc16_72.avg]}"); per-byte figures in the codec table below). The IK's
+  $ik_sc sin_cos + $ik_at \`atan2\` + $ik_sq \`sqrt\` (\`gait_core::fastmath\`) are ≈ $(n "$ik7") by the primitive figures below
+  (\`sqrt\` is the FPU's \`VSQRT.F32\`, $(n "${M7[prim.sqrt_fast.avg]}") a call with the bench's loads and stores, against
+  $(n "${M7[prim.sqrtf.avg]}") for libm's software \`sqrtf\`; \`atan2\` $(n "${M7[prim.atan2_fast.avg]}") against $(n "${M7[prim.atan2f.avg]}") for \`libm::atan2f\`). Without the codec the tick
   is $(n "$t7 - $codec7").
 - **M7, f32 + compensation + stabilizer $(n "$t7cs")** ($(ratio "$t7cs" "$t7")× the f32 tick):
   $(breakdown "$t7cs" "whole-body compensation|${M7[wholebody.tlipfm.avg]}" \
@@ -353,17 +392,37 @@ their sum):
   sampler ($(n "${M7[sample.f32.tlipfm.avg]}")). The tick's worst case, $(n "${M3[tick.fixed.tlipfm.max]}"), is the sampler's once-per-segment
   plan bookkeeping, still f32 in soft float (the fixed-point sample's max is $(n "${M3[sample.fixed.tlipfm.max]}")). The fixed path saves $(n "$t3f - $t3") instructions per tick on the M3 against
   f32 soft float ($(n "$t3f")).
-- **Control loop, M7 $(n "${M7[control.tick.avg]}")**: $(n "${M7[control.tick.avg]} - $t7") more than the f32 library calls: the
-  loop's own work listed above (not broken down further by this bench).
+- **Control loop, M7 $(n "${M7[control.tick.avg]}")**: the loop alone (the tick minus the f32 library calls)
+  $(n "${M7[control.tick.avg]} - $t7"): the loop's own work listed above (not broken down further by this bench).
 
-### Issue 6 targets
+### Issue 14 targets
 
 | target | measured | verdict |
 | --- | --- | --- |
-| M7 full tick ≤ 3,000 instructions | f32 library tick $(n "$t7"); firmware control loop $(n "${M7[control.tick.avg]}"); with compensation + stabilizer $(n "$t7cs") | $(verdict "$t7" 3000): **$(ratio "$t7" 3000)×** the target (the codec alone, $(n "$codec7"), is $(ratio "$codec7" 3000)×) |
-| M3 fixed path within 3× of the M7 tick | $(n "$t3") = $(ratio "$t3" "$t7" 2)× the measured M7 f32 tick; $(ratio "$t3" 9000 2)× the 9,000 of 3 × 3,000 | $(verdict "$t3" "$(calc "3 * $t7")") 3× the measured M7 tick; $(verdict "$t3" 9000) 3× the 3,000 target |
-| flash ≤ 64 KiB (65,536 B) | \`qemu\` $(commas "$q_flash") B, \`opencr\` $(commas "$o_flash") B | qemu $(verdict "$q_flash" 65536) ($(commas "$((65536 - q_flash))") B left), opencr $(verdict "$o_flash" 65536) ($(commas "$((65536 - o_flash))") B left) |
-| static RAM ≤ 16 KiB (16,384 B) | \`qemu\` $(commas "$q_ram") B, \`opencr\` $(commas "$o_ram") B (stack not included) | qemu $(verdict "$q_ram" 16384), opencr $(verdict "$o_ram" 16384) |
+| M7 firmware control-loop tick, the loop alone (not the library calls) ≤ 8,000 instructions avg | loop alone $(n "${M7[control.tick.avg]} - $t7") = control-loop tick $(n "${M7[control.tick.avg]}") − f32 library-call tick $(n "$t7") | $(verdict "${M7[control.tick.avg]} - $t7" 8000) |
+| codec: decode ≤ 20 per received byte, encode ≤ 12 per sent byte (M7) | decode (block) $(per_rx M7 dxl.feed3), SYNC WRITE $(per_sw M7), BULK READ $(per_br M7) | decode $(verdict "$(per_rx M7 dxl.feed3)" 20), SYNC WRITE $(verdict "$(per_sw M7)" 12), BULK READ $(verdict "$(per_br M7)" 12) |
+| M3 control-loop tick with the fixed-point path ≤ 25,000 | the firmware's loop on the M3 is f32 soft float here ($(n "${M3[control.tick.avg]}")); the library-call fixed tick is $(n "$t3") | not measured (no M3 board build yet) |
+| M3 build ≤ 112 KiB flash, ≤ 16 KiB static RAM | applies to an FPU-less board build; the FPU boards' sizes are below | no M3 board build yet |
+
+### Dynamixel codec per byte (issue 14 targets: decode ≤ 20 per received byte, encode ≤ 12 per sent byte)
+
+The three status replies ($rx_bytes bytes: $sfl + $sfr + $simu) and the two instruction packets of a
+tick, instructions per byte (stage avg ÷ bytes). **Block decoding** (\`Decoder::feed\`) is what the
+bus master uses: it reads the rest of a frame from the UART in one \`recv\` (\`Decoder::wanted\`)
+and feeds it at once (a whole clean frame is checked with one CRC pass over it); **byte by byte**
+(\`Decoder::push\`) is the same decoder one byte per call. Parsing (\`Status::from_packet\`, the
+foot and IMU records) comes on top in the "decode + parse" row (the tick's figure).
+
+| per byte | Cortex-M7 | Cortex-M4F | Cortex-M3 | target | M7 verdict |
+| --- | --- | --- | --- | --- | --- |
+| decode, block (\`dxl.feed3\`) | $(per_rx M7 dxl.feed3) | $(per_rx M4 dxl.feed3) | $(per_rx M3 dxl.feed3) | ≤ 20 | $(verdict "$(per_rx M7 dxl.feed3)" 20) |
+| decode + parse, block (\`dxl.decode3_block\`) | $(per_rx M7 dxl.decode3_block) | $(per_rx M4 dxl.decode3_block) | $(per_rx M3 dxl.decode3_block) | | |
+| decode, byte by byte (\`dxl.push3\`) | $(per_rx M7 dxl.push3) | $(per_rx M4 dxl.push3) | $(per_rx M3 dxl.push3) | | |
+| encode SYNC WRITE, 12 goals (${sw} B) | $(per_sw M7) | $(per_sw M4) | $(per_sw M3) | ≤ 12 | $(verdict "$(per_sw M7)" 12) |
+| encode BULK READ (${br} B) | $(per_br M7) | $(per_br M4) | $(per_br M3) | ≤ 12 | $(verdict "$(per_br M7)" 12) |
+| CRC-16, 72 B (\`crc::crc16\`, slicing by 4) | $(calc "${M7[dxl.crc16_72.avg]} / 72" 1) | $(calc "${M4[dxl.crc16_72.avg]} / 72" 1) | $(calc "${M3[dxl.crc16_72.avg]} / 72" 1) | | |
+
+The encode rows include the bench's own assembly of the 12 \`(id, bytes)\` entries.
 
 ### Stages, instructions per call: avg (max)
 
@@ -392,7 +451,10 @@ EOF
         "imu.pitch_accel:pitch-rate filter and τ (\`imu::PitchAccel\`)" \
         "dxl.sync_write12:encode SYNC WRITE, 12 goal positions (${sw} bytes)" \
         "dxl.bulk_read3:encode BULK READ, feet + IMU (${br} bytes)" \
-        "dxl.decode3:decode 3 status replies byte by byte (${sfl} + ${sfr} + ${simu} bytes)" \
+        "dxl.decode3:decode + parse 3 status replies byte by byte (${sfl} + ${sfr} + ${simu} bytes)" \
+        "dxl.decode3_block:decode + parse 3 status replies, block feeds" \
+        "dxl.feed3:decode 3 status replies, block feeds (\`Decoder::feed\`), no parse" \
+        "dxl.push3:decode 3 status replies byte by byte (\`Decoder::push\`), no parse" \
         "dxl.crc16_72:CRC-16 over 72 bytes (\`dxl::crc::crc16\`)"; do
         key=${st%%:*}
         label=${st#*:}
@@ -409,7 +471,9 @@ Primitives (per call, including a \`black_box\` store and load of the argument a
 | --- | --- | --- | --- |
 EOF
     for st in "prim.expf:\`libm::expf\`" "prim.sqrtf:\`libm::sqrtf\` (software)" \
-        "prim.atan2f:\`libm::atan2f\`" "prim.sin_cos_fast:\`gait_core::fastmath::sin_cos\`" \
+        "prim.sqrt_fast:\`gait_core::fastmath::sqrt\` (\`VSQRT.F32\` on M7/M4F, libm on M3)" \
+        "prim.atan2f:\`libm::atan2f\`" "prim.atan2_fast:\`gait_core::fastmath::atan2\`" \
+        "prim.sin_cos_fast:\`gait_core::fastmath::sin_cos\`" \
         "prim.sinf_libm:\`libm::sinf\` (software doubles)" "prim.fmul:f32 multiply" \
         "prim.fdiv:f32 divide" "prim.fx_exp_neg:\`fixed_point::exp_neg\`" \
         "prim.fx_sin_cos:\`fixed_point::sin_cos\`" "prim.fx_sqrt:\`fixed_ik::sqrt\` (Fx)" \
@@ -427,10 +491,10 @@ EOF
 every allocated section with contents (vector table, .text, .rodata, the .data image); static
 RAM = .data + .bss + .uninit (the stack comes on top).
 
-| ELF | .text | .rodata | .data | .bss | flash | static RAM | targets: ≤ 64 KiB flash, ≤ 16 KiB RAM |
+| ELF | .text | .rodata | .data | .bss | flash | static RAM | share of the board |
 | --- | --- | --- | --- | --- | --- | --- | --- |
-| \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B ($(kib "$q_flash") KiB) | $(commas "$q_ram") B ($(kib "$q_ram") KiB) | flash $(verdict "$q_flash" 65536), RAM $(verdict "$q_ram" 16384) |
-| \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B ($(kib "$o_flash") KiB) | $(commas "$o_ram") B ($(kib "$o_ram") KiB) | flash $(verdict "$o_flash" 65536), RAM $(verdict "$o_ram" 16384) |
+| \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B ($(kib "$q_flash") KiB) | $(commas "$q_ram") B ($(kib "$q_ram") KiB) | flash $(calc "100 * $q_flash / 4194304" 1) % of 4 MiB |
+| \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B ($(kib "$o_flash") KiB) | $(commas "$o_ram") B ($(kib "$o_ram") KiB) | flash $(calc "100 * $o_flash / 1048576" 1) % of 1 MiB, RAM $(calc "100 * $o_ram / 327680" 1) % of 320 KiB |
 
 Built from the working tree at the time of the run. The firmware keeps its state (sampler,
 plan, IK) on the stack, so static RAM understates its RAM use; the stack is not measured here.
@@ -456,6 +520,13 @@ EOF
         echo "| $mbps Mbps | $wire µs | $(calc "$packets * $turnaround_us") µs | $total µs | $(n "1000000 / $total - 0.5") Hz | $(n "1000000 / ($total + $compute_us) - 0.5") Hz |"
     done
     cat <<EOF
+
+**The QEMU board's clock** charges each tick's compute time as this run's worst-case control-loop
+tick over the modelled core clock, one instruction per cycle (\`src/boards/tick_cost.rs\`,
+regenerated by this script; \`qemu_mps2::compute_ns\`): $(n "${M7[control.tick.max]}") instructions
+÷ 216 MHz (\`core_mhz\`, the OpenCR) = $(calc "${M7[control.tick.max]} / 216" 1) µs per tick on the hard-float ELF;
+the soft-float (Cortex-M3) figure $(n "${M3[control.tick.max]}") ÷ 72 MHz = $(calc "${M3[control.tick.max]} / 72" 1) µs. \`compute_us=\` still
+overrides it (before issue 14: a fixed 150 µs).
 
 The firmware's default configuration (tick ${M7[tick_us]} µs, bus $(calc "${M7[bus_baud]} / 1000000" 1) Mbps) $fits: the bus
 needs $(calc "$bus_bytes * 10000000 / ${M7[bus_baud]} + $packets * $turnaround_us") µs of it. A 1 kHz tick needs at least 3 Mbps.

@@ -37,6 +37,18 @@ cp target/thumbv7em-none-eabihf/release/qemu target/thumbv7em-none-eabihf/releas
 cargo build --release --no-default-features --features board-qemu --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
 
+step "firmware sizes: flash and static RAM of every board build (FPU-less M3 builds: ≤ 112 KiB flash, ≤ 16 KiB RAM)"
+# M3 board builds, once they exist, are listed with `--limit 112:16` before their ELF.
+python3 scripts/sizes.py \
+    target/thumbv7em-none-eabihf/release/qemu \
+    target/thumbv7em-none-eabihf/release/qemu-fixed \
+    target/thumbv7em-none-eabihf/release/opencr
+# The limit check itself must be able to fail: the qemu ELF is far over 1 KiB of flash.
+if python3 scripts/sizes.py --limit 1:16 target/thumbv7em-none-eabihf/release/qemu >/dev/null; then
+    echo "scripts/sizes.py did not flag an ELF over its limit" >&2
+    exit 1
+fi
+
 step "firmware: on-target tests in QEMU (mps2-an500, Cortex-M7)"
 CARGO_TARGET_THUMBV7EM_NONE_EABIHF_RUNNER=scripts/qemu-run.sh \
     cargo test --release --no-default-features --features board-qemu --test on_target

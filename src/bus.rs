@@ -14,7 +14,8 @@
 //! * [`dxl::Transport::write_all`] collects the packet, [`dxl::Transport::flush`] sends it
 //!   with one [`ServoBus::send`] (the board turns the half-duplex line around itself, so the
 //!   master's direction pin is [`NoDir`]).
-//! * [`dxl::Transport::read_byte`] is `recv(&mut [b], poll)` with a short `poll`
+//! * [`dxl::Transport::read_bytes`] (the master's block read of the rest of a reply frame)
+//!   and [`dxl::Transport::read_byte`] are `recv(buf, poll)` with a short `poll`
 //!   ([`Config::read_poll_us`], default [`DEFAULT_READ_POLL_US`]): on the real board it waits
 //!   at most that long for a byte; under QEMU lock-step a byte of the announced reply comes
 //!   at once and a read beyond it returns at once with the virtual clock advanced by `poll`,
@@ -119,15 +120,18 @@ impl<B: ServoBus + Clock> dxl::Transport for Link<'_, B> {
 
     fn read_byte(&mut self) -> Result<Option<u8>, ErrorKind> {
         let mut b = [0u8; 1];
-        let timeout = if self.draining { 0 } else { self.poll_us };
-        let r = self.board.recv(&mut b, timeout);
-        self.refresh();
+        let n = self.read_bytes(&mut b)?;
         let [byte] = b;
-        match r {
-            Ok(1) => Ok(Some(byte)),
-            Ok(_) => Ok(None),
-            Err(e) => Err(kind_of(e)),
-        }
+        Ok((n == 1).then_some(byte))
+    }
+
+    /// One `recv` of the whole block with the poll timeout: under QEMU lock-step the reply
+    /// bytes come at once; on the OpenCR the read returns what arrived within the poll.
+    fn read_bytes(&mut self, buf: &mut [u8]) -> Result<usize, ErrorKind> {
+        let timeout = if self.draining { 0 } else { self.poll_us };
+        let r = self.board.recv(buf, timeout);
+        self.refresh();
+        r.map(|n| n.min(buf.len())).map_err(kind_of)
     }
 }
 

@@ -68,6 +68,27 @@ mod tests {
     }
 
     #[test]
+    fn vsqrt_matches_libm_bit_for_bit() {
+        // `fastmath::sqrt` is VSQRT.F32 on this target; both it and libm's software sqrtf are
+        // correctly rounded, so they must agree exactly (issue 14).
+        let mut bits = 0x0080_0000u32;
+        for _ in 0..4_000 {
+            let x = black_box(f32::from_bits(bits));
+            let (a, b) = (gait_core::fastmath::sqrt(x), libm::sqrtf(x));
+            assert!(
+                a.to_bits() == b.to_bits(),
+                "sqrt({=f32}) {=f32} vs {=f32}",
+                x,
+                a,
+                b
+            );
+            bits = bits.wrapping_add(0x0007_F3A1) % 0x7F00_0000;
+        }
+        assert!(gait_core::fastmath::sqrt(black_box(-1.0)).is_nan());
+        assert!(gait_core::fastmath::sqrt(black_box(0.0)) == 0.0);
+    }
+
+    #[test]
     fn reference_robot_validates() {
         let r = gait_core::Robot::reference();
         assert!(r.validate().is_ok());

@@ -130,8 +130,12 @@ pub struct Config {
     /// A foot board missing at start-up stops the robot (`true`) or is tolerated (`false`:
     /// the walk runs with the other foot's forces only; see the firmware's `control`).
     pub feet_required: bool,
-    /// Modelled compute time per tick on the QEMU board, µs (ignored by real boards).
+    /// Modelled compute time per tick on the QEMU board, µs; 0 (the default): the bench's
+    /// instructions per tick for the build at [`Config::core_mhz`] (ignored by real boards).
     pub compute_us: u32,
+    /// Modelled core clock of the QEMU board, MHz (216: the OpenCR's STM32F746; 72 for an
+    /// STM32F103 board): the compute time per tick is instructions ÷ MHz.
+    pub core_mhz: u32,
     /// How the pelvis is placed: the paper's pipeline or whole-body compensation.
     pub compensation: Compensation,
     /// The ZMP/DCM feedback stabilizer is on.
@@ -165,6 +169,18 @@ pub struct Config {
 }
 
 impl Config {
+    /// Compute time the QEMU board charges per tick, ns: [`Config::compute_us`] when set
+    /// (non-zero), else `tick_instructions` at [`Config::core_mhz`], one instruction per cycle
+    /// (QEMU counts instructions, not cycles).
+    pub const fn compute_ns(&self, tick_instructions: u32) -> u64 {
+        if self.compute_us > 0 {
+            self.compute_us as u64 * 1000
+        } else {
+            let mhz = if self.core_mhz == 0 { 1 } else { self.core_mhz };
+            tick_instructions as u64 * 1000 / mhz as u64
+        }
+    }
+
     /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
     /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
     /// compensation, stabilizer off, gyro balance feedback on (k_a 0.1 s, k_h 0.05 s), 8 start-up
@@ -195,7 +211,8 @@ impl Config {
             final_hold_us: 1_000_000,
             min_load_n: 2.0,
             feet_required: true,
-            compute_us: 150,
+            compute_us: 0,
+            core_mhz: 216,
             compensation: Compensation::None,
             stabilizer_on: false,
             stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
@@ -255,5 +272,30 @@ impl Config {
 impl Default for Config {
     fn default() -> Self {
         Self::default_config()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn compute_time_is_instructions_over_the_core_clock() {
+        let mut c = Config::default_config();
+        assert_eq!((c.compute_us, c.core_mhz), (0, 216));
+        // 16,200 instructions at 216 MHz = 75 µs; at 72 MHz (an STM32F103) 225 µs.
+        assert_eq!(c.compute_ns(16_200), 75_000);
+        c.core_mhz = 72;
+        assert_eq!(c.compute_ns(16_200), 225_000);
+        // An explicit compute_us wins.
+        c.compute_us = 300;
+        assert_eq!(c.compute_ns(16_200), 300_000);
+        c.compute_us = 0;
+        c.core_mhz = 0;
+        assert_eq!(
+            c.compute_ns(7),
+            7_000,
+            "0 MHz is read as 1, never a division by zero"
+        );
     }
 }

@@ -560,9 +560,18 @@ params! {
         plan_key: None,
         unit: "µs",
         domain: int(0, 1_000_000),
-        doc: "modelled compute time per tick (QEMU)",
+        doc: "modelled compute time per tick (QEMU); 0: the bench's instructions per tick ÷ core_mhz",
         set: |c, v| { c.compute_us = v as u32 },
         get: |c| { Some(Value::Int(c.compute_us)) },
+    },
+    {
+        key: "core_mhz",
+        plan_key: None,
+        unit: "MHz",
+        domain: int(1, 1_000),
+        doc: "modelled core clock for the compute time per tick (QEMU)",
+        set: |c, v| { c.core_mhz = v as u32 },
+        get: |c| { Some(Value::Int(c.core_mhz)) },
     },
     {
         key: "watchdog_ms",
@@ -1352,7 +1361,7 @@ mod tests {
              s_first=1 d1=0.011 d2=0.012 a=0.003 zmp=natural z_c=0.2 w_y=0.001 h_z=0.025 \
              swing=sinusoid t1=0.1 t2=0.5 period=0.7 lead_in=1.0 lead_out=1.2 ramp=0.5 \
              hold=2 min_load=3.5 feet=optional reply_timeout_us=800 read_poll_us=10 \
-             attempts=2 baud=3000000 return_delay_us=4 compute_us=300 watchdog_ms=40 \
+             attempts=2 baud=3000000 return_delay_us=4 compute_us=300 core_mhz=72 watchdog_ms=40 \
              hold_ticks=7 stopping_ticks=50 overrun_burst=3 tilt_limit=0.5 imu_cutoff=10 \
              fault_nan=12 stop_at=99 b=0.002 comp=wholebody stab=on stab_kp=0.5 stab_ki=3 \
              stab_leak=0.1 stab_kg=0.15 stab_k=2 stab_max=0.015 stab_rate=0.1 stab_margin=0.004 \
@@ -1385,8 +1394,8 @@ mod tests {
             (800, 10, 2)
         );
         assert_eq!(
-            (c.bus_baud, c.return_delay_us, c.compute_us),
-            (3_000_000, 4, 300)
+            (c.bus_baud, c.return_delay_us, c.compute_us, c.core_mhz),
+            (3_000_000, 4, 300, 72)
         );
         assert_eq!(c.watchdog_ms, 40);
         assert_eq!(c.supervisor.hold_ticks, 7);

@@ -534,9 +534,8 @@ pub fn encode_bulk_read(
 ) -> Result<usize, EncodeError> {
     let mut w = PacketWriter::new(buf, BROADCAST_ID, opcode::BULK_READ)?;
     for r in requests {
-        w.push(r.id)?;
-        w.push_u16(r.addr)?;
-        w.push_u16(r.len)?;
+        let ([a0, a1], [l0, l1]) = (r.addr.to_le_bytes(), r.len.to_le_bytes());
+        w.extend(&[r.id, a0, a1, l0, l1])?;
     }
     w.finish()
 }

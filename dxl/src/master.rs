@@ -40,7 +40,26 @@ pub trait Transport {
     fn flush(&mut self) -> Result<(), ErrorKind>;
     /// Returns a received byte if one is available now; never blocks.
     fn read_byte(&mut self) -> Result<Option<u8>, ErrorKind>;
+    /// Reads up to `buf.len()` received bytes (a block read); how many. The default reads
+    /// one byte with [`read_byte`](Self::read_byte); a transport that can move a block at once
+    /// (a FIFO, a DMA buffer, a lock-step emulation) overrides it, waiting no longer than its
+    /// `read_byte` would for one byte.
+    fn read_bytes(&mut self, buf: &mut [u8]) -> Result<usize, ErrorKind> {
+        let Some(slot) = buf.first_mut() else {
+            return Ok(0);
+        };
+        Ok(match self.read_byte()? {
+            Some(b) => {
+                *slot = b;
+                1
+            }
+            None => 0,
+        })
+    }
 }
+
+/// Size of the master's receive block (bytes read from the transport at a time, at most).
+pub const RX_BLOCK: usize = 64;
 
 /// Adapts an `embedded_io` UART (`Read + ReadReady + Write`) to [`Transport`].
 #[derive(Debug)]
@@ -193,6 +212,11 @@ pub struct Master<T, P, C, const N: usize = 256> {
     clock: C,
     tx: [u8; N],
     rx: Decoder<N>,
+    /// Received bytes not yet fed to the decoder: `block[head..tail]` (left over when an
+    /// event ended a block early).
+    block: [u8; RX_BLOCK],
+    head: usize,
+    tail: usize,
     timeout_us: u64,
     stats: BusStats,
 }
@@ -211,6 +235,9 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
             clock,
             tx: [0; N],
             rx: Decoder::new(),
+            block: [0; RX_BLOCK],
+            head: 0,
+            tail: 0,
             timeout_us: Self::DEFAULT_TIMEOUT_US,
             stats: BusStats::default(),
         }
@@ -261,6 +288,8 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
                 break;
             }
         }
+        self.head = 0;
+        self.tail = 0;
         self.rx.reset();
         self.rx.set_stuffing(true);
         let bytes = self.tx.get(..len).ok_or(Error::BufferTooSmall)?;
@@ -288,25 +317,40 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
     }
 
     /// Reads bytes until a status packet, a decode error or the deadline.
+    ///
+    /// Block reads: it asks the transport for [`Decoder::wanted`] bytes (at most
+    /// [`RX_BLOCK`]: the rest of the frame being received, never past the end of a valid
+    /// reply) and feeds them to the decoder at once; bytes after an event (possible only
+    /// when a broken frame is interrupted by a new packet) wait in `block` for the next call.
     fn poll(&mut self, deadline: u64) -> Result<Event, Error> {
         loop {
-            if self.clock.now_us() >= deadline {
-                return Ok(Event::Timeout);
+            if self.head >= self.tail {
+                if self.clock.now_us() >= deadline {
+                    return Ok(Event::Timeout);
+                }
+                let want = self.rx.wanted().clamp(1, RX_BLOCK);
+                let dst = self.block.get_mut(..want).unwrap_or(&mut []);
+                let r = self.transport.read_bytes(dst);
+                let got = self.io(r)?;
+                self.head = 0;
+                self.tail = got.min(want);
+                continue;
             }
-            let r = self.transport.read_byte();
-            let Some(b) = self.io(r)? else { continue };
-            match self.rx.push(b) {
-                None => {}
-                Some(Ok(p)) if p.instruction == crate::instruction::opcode::STATUS => {
+            let pending = self.block.get(self.head..self.tail).unwrap_or(&[]);
+            let (used, ev) = self.rx.feed(pending);
+            self.head += used.max(1);
+            let Some(ev) = ev else { continue };
+            match ev {
+                Ok(p) if p.instruction == crate::instruction::opcode::STATUS => {
                     inc(&mut self.stats.rx_status);
                     return Ok(Event::Status(p.id));
                 }
-                Some(Ok(_)) => {} // our own echo or another master's instruction
-                Some(Err(DecodeError::Crc { id })) => {
+                Ok(_) => {} // our own echo or another master's instruction
+                Err(DecodeError::Crc { id }) => {
                     inc(&mut self.stats.crc_errors);
                     return Ok(Event::Crc(id));
                 }
-                Some(Err(_)) => {
+                Err(_) => {
                     inc(&mut self.stats.malformed);
                     return Ok(Event::Framing);
                 }

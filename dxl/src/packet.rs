@@ -65,13 +65,15 @@ pub enum EncodeError {
 }
 
 /// Writes one packet into a byte buffer, stuffing the instruction/parameter region.
+///
+/// The bytes are copied as given; [`finish`](Self::finish) stuffs the region in one pass (a
+/// word-at-a-time scan for `FD`..`FF` finds that nothing is due in the common case; an `FD`
+/// is inserted after each `FF FF FD` otherwise), then fills in LEN and the CRC.
 #[derive(Debug)]
 pub struct PacketWriter<'a> {
     buf: &'a mut [u8],
     pos: usize,
     stuffing: bool,
-    /// The last two bytes written in the stuffed region.
-    hist: [u8; 2],
 }
 
 impl<'a> PacketWriter<'a> {
@@ -89,20 +91,22 @@ impl<'a> PacketWriter<'a> {
         instruction: u8,
         stuffing: bool,
     ) -> Result<Self, EncodeError> {
-        let mut w = PacketWriter {
+        let [h0, h1, h2, h3] = HEADER;
+        // The preamble with a LEN placeholder, and the instruction.
+        let start = [h0, h1, h2, h3, id, 0, 0, instruction];
+        buf.get_mut(..start.len())
+            .ok_or(EncodeError::BufferTooSmall)?
+            .copy_from_slice(&start);
+        Ok(PacketWriter {
             buf,
-            pos: 0,
+            pos: start.len(),
             stuffing,
-            hist: [0; 2],
-        };
-        for b in HEADER.into_iter().chain([id, 0, 0]) {
-            w.put(b)?;
-        }
-        w.push(instruction)?;
-        Ok(w)
+        })
     }
 
-    fn put(&mut self, b: u8) -> Result<(), EncodeError> {
+    /// Appends one parameter byte.
+    #[inline(always)]
+    pub fn push(&mut self, b: u8) -> Result<(), EncodeError> {
         let slot = self
             .buf
             .get_mut(self.pos)
@@ -112,21 +116,17 @@ impl<'a> PacketWriter<'a> {
         Ok(())
     }
 
-    /// Appends one byte of the instruction/parameter region (stuffing as needed).
-    pub fn push(&mut self, b: u8) -> Result<(), EncodeError> {
-        self.put(b)?;
-        if self.stuffing && self.hist == [0xFF, 0xFF] && b == 0xFD {
-            self.put(0xFD)?;
-            self.hist = [0xFD, 0xFD];
-        } else {
-            self.hist = [self.hist[1], b];
-        }
-        Ok(())
-    }
-
     /// Appends parameter bytes.
+    #[inline(always)]
     pub fn extend(&mut self, data: &[u8]) -> Result<(), EncodeError> {
-        data.iter().try_for_each(|&b| self.push(b))
+        let end = self.pos + data.len();
+        let dst = self
+            .buf
+            .get_mut(self.pos..end)
+            .ok_or(EncodeError::BufferTooSmall)?;
+        copy_bytes(dst, data);
+        self.pos = end;
+        Ok(())
     }
 
     /// Appends a little-endian `u16` parameter.
@@ -147,13 +147,53 @@ impl<'a> PacketWriter<'a> {
         }
     }
 
-    /// Bytes written so far (as they will appear on the wire).
+    /// Bytes written so far: as they will appear on the wire for an unstuffed packet; a
+    /// stuffed one gets its stuffing bytes in [`finish`](Self::finish).
     pub fn written(&self) -> &[u8] {
         self.buf.get(..self.pos).unwrap_or(&[])
     }
 
-    /// Fills in LEN and the CRC; returns the total packet length.
+    /// Inserts the stuffing bytes into the instruction/parameter region: an `FD` after each
+    /// `FF FF FD` (matching restarts after an inserted `FD`).
+    fn stuff(&mut self) -> Result<(), EncodeError> {
+        let region = self.buf.get(PREAMBLE_LEN..self.pos).unwrap_or(&[]);
+        // The first FF FF FD ends at `i`: match again from its first FF.
+        let mut at = match first_stuffing(region) {
+            Some(i) => PREAMBLE_LEN + i - 3,
+            None => return Ok(()),
+        };
+        // Rare: make room for each stuffing byte, from the first one on.
+        let mut matched = 0;
+        while at < self.pos {
+            let b = self.buf.get(at).copied().unwrap_or(0);
+            matched = match (matched, b) {
+                (2, 0xFD) => 3,
+                (1 | 2, 0xFF) => 2,
+                (_, 0xFF) => 1,
+                _ => 0,
+            };
+            at += 1;
+            if matched == 3 {
+                if self.pos >= self.buf.len() {
+                    return Err(EncodeError::BufferTooSmall);
+                }
+                self.buf.copy_within(at..self.pos, at + 1);
+                if let Some(slot) = self.buf.get_mut(at) {
+                    *slot = 0xFD;
+                }
+                self.pos += 1;
+                at += 1;
+                matched = 0;
+            }
+        }
+        Ok(())
+    }
+
+    /// Stuffs the region, fills in LEN and the CRC; returns the total packet length.
     pub fn finish(mut self) -> Result<usize, EncodeError> {
+        if self.stuffing {
+            self.stuff()?;
+        }
         let len = self
             .pos
             .checked_sub(PREAMBLE_LEN - 2)
@@ -161,11 +201,42 @@ impl<'a> PacketWriter<'a> {
             .ok_or(EncodeError::TooLong)?;
         self.preset_len(len);
         let crc = crc::crc16(self.written());
-        let [lo, hi] = crc.to_le_bytes();
-        self.put(lo)?;
-        self.put(hi)?;
-        Ok(self.pos)
+        let end = self.pos + 2;
+        self.buf
+            .get_mut(self.pos..end)
+            .ok_or(EncodeError::BufferTooSmall)?
+            .copy_from_slice(&crc.to_le_bytes());
+        Ok(end)
     }
+}
+
+/// The index just after the first `FF FF FD` in `region`, if any (where the first stuffing
+/// byte goes). Words without `FD`..`FF` are skipped four bytes at a time; such a byte ends
+/// any partial match.
+fn first_stuffing(region: &[u8]) -> Option<usize> {
+    let mut matched = 0;
+    let mut i = 0;
+    while i < region.len() {
+        if let Some(s) = region.get(i..i + 4) {
+            if !has_fd_or_above(word(s)) {
+                matched = 0;
+                i += 4;
+                continue;
+            }
+        }
+        let stop = (i + 4).min(region.len());
+        while i < stop {
+            let b = region.get(i).copied().unwrap_or(0);
+            matched = match (matched, b) {
+                (2, 0xFD) => return Some(i + 1),
+                (1 | 2, 0xFF) => 2,
+                (_, 0xFF) => 1,
+                _ => 0,
+            };
+            i += 1;
+        }
+    }
+    None
 }
 
 /// Encodes a complete packet with the given parameters; returns its length.
@@ -282,6 +353,40 @@ fn check_preamble(p: &[u8], from: usize, capacity: usize) -> Result<(), Option<D
         }
     }
     Ok(())
+}
+
+/// The little-endian word of a 4-byte chunk (0 for a shorter slice, never given here).
+#[inline(always)]
+fn word(s: &[u8]) -> u32 {
+    match s {
+        &[a, b, c, d] => u32::from_le_bytes([a, b, c, d]),
+        _ => 0,
+    }
+}
+
+/// Whether any byte of `w` is `FD`, `FE` or `FF` (the bytes that can need stuffing or
+/// advance a header match). Per byte: `(b & 7F) + 3` sets bit 7 exactly when
+/// `b & 7F ≥ 7D` (and never carries into the next byte), so with bit 7 of `b` itself it
+/// flags `b ≥ FD`.
+#[inline(always)]
+fn has_fd_or_above(w: u32) -> bool {
+    ((w & 0x7F7F_7F7F).wrapping_add(0x0303_0303) & w & 0x8080_8080) != 0
+}
+
+/// Copies `src` into the start of `dst` (the shorter length), a word at a time: packets'
+/// pieces are short, and a `memcpy` call costs more than the copy.
+#[inline(always)]
+fn copy_bytes(dst: &mut [u8], src: &[u8]) {
+    let mut d = dst.chunks_exact_mut(4);
+    let mut s = src.chunks_exact(4);
+    for (dw, sw) in (&mut d).zip(&mut s) {
+        if let (Ok(dw), Ok(sw)) = (<&mut [u8; 4]>::try_from(dw), <&[u8; 4]>::try_from(sw)) {
+            *dw = *sw;
+        }
+    }
+    for (db, sb) in d.into_remainder().iter_mut().zip(s.remainder()) {
+        *db = *sb;
+    }
 }
 
 /// One step of matching [`HEADER`] in a byte stream: `state` = header bytes matched so far.
@@ -416,17 +521,186 @@ impl Core {
             }
         }
         if self.pre_len == PREAMBLE_LEN {
-            let [.., id, lo, hi] = self.pre;
-            self.id = id;
-            // `check_preamble` guaranteed LEN >= 3.
-            self.remaining = usize::from(u16::from_le_bytes([lo, hi])).saturating_sub(2);
-            self.crc = crc::crc16(&self.pre);
-            self.params_len = 0;
-            self.have_instruction = false;
-            self.nested = 0;
-            self.state = State::Body;
+            self.start_body();
         }
         first_error.map(Err)
+    }
+
+    /// The whole preamble (checked) is in `pre`: the frame's body comes next.
+    fn start_body(&mut self) {
+        let [.., id, lo, hi] = self.pre;
+        self.id = id;
+        // `check_preamble` guaranteed LEN >= 3.
+        self.remaining = usize::from(u16::from_le_bytes([lo, hi])).saturating_sub(2);
+        self.crc = crc::crc16(&self.pre);
+        self.params_len = 0;
+        self.have_instruction = false;
+        self.nested = 0;
+        self.state = State::Body;
+    }
+
+    /// Block decoding: bytes until an event (how many were used, and the event).
+    ///
+    /// Equivalent to [`push`](Self::push) on each byte in turn (same events, same state
+    /// after, same counters), with fast paths for a whole valid frame without `FF FF FD` in
+    /// its body, a whole clean preamble at the start of a search, the instruction byte, both CRC bytes when they match, and runs of body bytes
+    /// up to a completed `FF FF FD` (only the byte after one can be stuffing or end a
+    /// header; every other body byte only feeds the CRC, the buffer and the header match).
+    fn feed(&mut self, buf: &mut [u8], bytes: &[u8]) -> (usize, Option<Result<(), DecodeError>>) {
+        let mut used = 0;
+        if !bytes.is_empty() {
+            // As `push` does for every byte: the last packet is no longer current.
+            self.complete = false;
+        }
+        while let Some(rest) = bytes.get(used..) {
+            let Some(&first) = rest.first() else { break };
+            match self.state {
+                State::Body if self.nested != 3 && (self.have_instruction || first < 0xFD) => {
+                    if !self.have_instruction {
+                        // The instruction byte, as `push_body` takes it.
+                        self.instruction = first;
+                        self.have_instruction = true;
+                        self.crc = crc::update_byte(self.crc, first);
+                        self.remaining = self.remaining.saturating_sub(1);
+                        if self.remaining == 0 {
+                            self.state = State::CrcLow;
+                        }
+                        used += 1;
+                        continue;
+                    }
+                    let n = self.body_run(buf, rest);
+                    if n > 0 {
+                        used += n;
+                        continue;
+                    }
+                }
+                State::CrcLow => {
+                    if let Some(&[lo, hi]) = rest.get(..2) {
+                        if u16::from_le_bytes([lo, hi]) == self.crc {
+                            // Both CRC bytes at once: the packet is complete.
+                            self.reset();
+                            self.complete = true;
+                            self.stats.packets = self.stats.packets.wrapping_add(1);
+                            return (used + 2, Some(Ok(())));
+                        }
+                    }
+                }
+                State::Preamble if self.pre_len == 0 => {
+                    if let Some(n) = self.whole_frame(buf, rest) {
+                        return (used + n, Some(Ok(())));
+                    }
+                    if let Some(pre) = rest.get(..PREAMBLE_LEN) {
+                        if check_preamble(pre, 0, buf.len()).is_ok() {
+                            self.pre.copy_from_slice(pre);
+                            self.pre_len = PREAMBLE_LEN;
+                            self.start_body();
+                            used += PREAMBLE_LEN;
+                            continue;
+                        }
+                    }
+                }
+                _ => {}
+            }
+            used += 1;
+            if let Some(ev) = self.push(buf, first) {
+                return (used, Some(ev));
+            }
+        }
+        (bytes.len(), None)
+    }
+
+    /// A whole valid frame at the start of `bytes` (searching, nothing buffered) with no
+    /// `FF FF FD` in its body, so without stuffing bytes or a header inside: accepted in one
+    /// go (preamble check, one CRC pass over the frame, one copy of the parameters) with the
+    /// outcome `push` would reach on its last byte; its length. `None` (nothing changed)
+    /// for anything else, which then takes the byte-wise paths.
+    fn whole_frame(&mut self, buf: &mut [u8], bytes: &[u8]) -> Option<usize> {
+        let pre = bytes.get(..PREAMBLE_LEN)?;
+        check_preamble(pre, 0, buf.len()).ok()?;
+        let len = usize::from(u16::from_le_bytes([*pre.get(5)?, *pre.get(6)?]));
+        let end = PREAMBLE_LEN + len;
+        let frame = bytes.get(..end)?;
+        let (covered, [lo, hi]) = frame.split_last_chunk::<2>()?;
+        let body = covered.get(PREAMBLE_LEN..)?;
+        if first_stuffing(body).is_some() || crc::crc16(covered) != u16::from_le_bytes([*lo, *hi]) {
+            return None;
+        }
+        let (&instruction, params) = body.split_first()?;
+        copy_bytes(buf.get_mut(..params.len())?, params);
+        self.id = *pre.get(4)?;
+        self.instruction = instruction;
+        self.params_len = params.len();
+        self.reset();
+        self.complete = true;
+        self.stats.packets = self.stats.packets.wrapping_add(1);
+        Some(end)
+    }
+
+    /// The leading parameter bytes of `bytes` within the frame's body, up to and including
+    /// one that completes `FF FF FD` (the state is `Body` after the instruction, `nested` is
+    /// not 3): CRC'd, stored and matched as [`push_body`](Self::push_body) would; how many (0
+    /// only if the buffer is full).
+    #[inline(always)]
+    fn body_run(&mut self, buf: &mut [u8], bytes: &[u8]) -> usize {
+        let Some(dst) = buf.get_mut(self.params_len..) else {
+            return 0;
+        };
+        let src = bytes.get(..self.remaining).unwrap_or(bytes);
+        let len = dst.len().min(src.len());
+        let mut nested = self.nested;
+        let mut n = 0;
+        'run: while n < len {
+            // Whole words without FD..FF: copied; each such byte ends any header match (a
+            // `00` continues one only after FF FF FD, and `nested` is not 3 here).
+            while let (Some(d), Some(s)) = (dst.get_mut(n..n + 4), src.get(n..n + 4)) {
+                if has_fd_or_above(word(s)) {
+                    break;
+                }
+                d.copy_from_slice(s);
+                n += 4;
+                nested = 0;
+            }
+            // Then up to four bytes one at a time.
+            let stop = (n + 4).min(len);
+            while n < stop {
+                let (Some(d), Some(&b)) = (dst.get_mut(n), src.get(n)) else {
+                    break 'run;
+                };
+                *d = b;
+                n += 1;
+                if b >= 0xFD {
+                    nested = header_step(nested, b);
+                    if nested == 3 {
+                        // After FF FF FD the next byte may be stuffing or start the `00` of
+                        // a header: `push` decides.
+                        break 'run;
+                    }
+                } else {
+                    nested = 0;
+                }
+            }
+        }
+        // The run is stored unchanged (nothing dropped): its CRC in one pass.
+        self.crc = crc::update(self.crc, dst.get(..n).unwrap_or(&[]));
+        self.nested = nested;
+        self.params_len += n;
+        self.remaining -= n;
+        if self.remaining == 0 {
+            self.state = State::CrcLow;
+        }
+        n
+    }
+
+    /// How many more bytes the current frame needs (at least 1; see [`Decoder::wanted`]).
+    fn wanted(&self) -> usize {
+        match self.state {
+            // A packet starting at the earliest possible byte has 3 more after its preamble.
+            State::Preamble => PREAMBLE_LEN - self.pre_len.min(PREAMBLE_LEN - 1),
+            // The rest of the body and the CRC.
+            State::Body => (self.remaining + 2).max(1),
+            State::CrcLow => 2,
+            State::CrcHigh => 1,
+        }
     }
 
     /// One body byte (`nested` already advanced past it; `after_ff_ff_fd`: the raw bytes
@@ -503,17 +777,25 @@ impl<const N: usize> Decoder<N> {
     }
 
     /// Feeds bytes until a packet or error completes; returns the bytes consumed and the event.
+    ///
+    /// The same events and state as [`push`](Self::push) on each byte in turn, faster: a
+    /// clean preamble and the runs of parameter bytes below `FD` take a tight loop (the
+    /// block-read path of the bus master).
     pub fn feed(&mut self, bytes: &[u8]) -> (usize, Option<Result<Packet<'_>, DecodeError>>) {
-        for (i, &b) in bytes.iter().enumerate() {
-            if let Some(r) = self.core.push(&mut self.buf, b) {
-                let ev = match r {
-                    Ok(()) => self.core.packet(&self.buf).map(Ok),
-                    Err(e) => Some(Err(e)),
-                };
-                return (i + 1, ev);
-            }
+        match self.core.feed(&mut self.buf, bytes) {
+            (n, None) => (n, None),
+            (n, Some(Ok(()))) => (n, self.core.packet(&self.buf).map(Ok)),
+            (n, Some(Err(e))) => (n, Some(Err(e))),
         }
-        (bytes.len(), None)
+    }
+
+    /// How many more bytes the frame being received needs (≥ 1): the rest of the preamble,
+    /// or of the body and CRC. A reader asking the line for this many never reads past the
+    /// end of the packet being received, nor of one starting after it; only a packet starting
+    /// inside a broken frame's body (which interrupts it) can end earlier, so a reader keeps
+    /// what [`feed`](Self::feed) did not use for its next call.
+    pub fn wanted(&self) -> usize {
+        self.core.wanted()
     }
 
     /// The packet completed by the last [`push`](Self::push), if it completed one.

@@ -25,6 +25,8 @@ const TIMEOUT_US: u64 = 1_000;
 struct Reply {
     delay_us: u64,
     bytes: Vec<u8>,
+    /// All bytes arrive at once (a FIFO or DMA buffer read late), not one per byte time.
+    burst: bool,
 }
 
 #[derive(Default)]
@@ -41,6 +43,8 @@ struct Bus {
     echo: bool,
     rx: VecDeque<(u64, u8)>,
     scripts: VecDeque<Vec<Reply>>,
+    /// Calls of `read_bytes` that returned bytes.
+    block_reads: u32,
 }
 
 #[derive(Clone, Default)]
@@ -93,8 +97,13 @@ impl Transport for MockTransport {
         let mut t = now;
         for r in replies {
             t = t.max(now + r.delay_us);
+            if r.burst {
+                t += r.bytes.len() as u64 * BYTE_US;
+            }
             for &x in &r.bytes {
-                t += BYTE_US;
+                if !r.burst {
+                    t += BYTE_US;
+                }
                 b.rx.push_back((t, x));
             }
         }
@@ -110,6 +119,26 @@ impl Transport for MockTransport {
             }
             _ => Ok(None),
         }
+    }
+
+    /// Block reads (as the firmware's link does): every byte that has arrived, up to
+    /// `buf.len()`, so the master's leftover queue is exercised whenever a block holds more
+    /// than the event that ends it (echo + reply, corrupted frames, junk).
+    fn read_bytes(&mut self, buf: &mut [u8]) -> Result<usize, ErrorKind> {
+        let mut b = self.0.bus();
+        let mut n = 0;
+        while let (Some(slot), Some(&(t, x))) = (buf.get_mut(n), b.rx.front()) {
+            if t > b.now {
+                break;
+            }
+            *slot = x;
+            b.rx.pop_front();
+            n += 1;
+        }
+        if n > 0 {
+            b.block_reads += 1;
+        }
+        Ok(n)
     }
 }
 
@@ -175,6 +204,7 @@ fn reply(bytes: Vec<u8>) -> Reply {
     Reply {
         delay_us: 20,
         bytes,
+        burst: false,
     }
 }
 
@@ -182,6 +212,7 @@ fn late(bytes: Vec<u8>) -> Reply {
     Reply {
         delay_us: TIMEOUT_US + 500,
         bytes,
+        burst: false,
     }
 }
 
@@ -321,6 +352,37 @@ fn echo_and_stale_input_are_ignored() {
     m.read(3, x_series::MOVING.addr, &mut buf).unwrap();
     assert_eq!(buf, [1]);
     assert!(s.bus().rx.is_empty());
+}
+
+#[test]
+fn block_reads_keep_the_bytes_after_an_event() {
+    // An interrupted frame (its LEN covers the next reply's start), another device's
+    // corrupted reply and then the reply, all in one burst: one block read takes the frame the decoder
+    // wants; every event (framing, CRC) leaves the rest of the block queued, and the reply is
+    // still found. Byte by byte (`read_byte`) the same stream gives the same result.
+    let good = status(1, 0, &[0x10, 0x20]);
+    let mut stream = vec![0xFF, 0xFF, 0xFD, 0x00, 0x02, 0x20, 0x00, 0x55, 0x00];
+    stream.extend(corrupt(status(2, 0, &[0x10, 0x20]), 9));
+    stream.extend(&good);
+    for burst in [true, false] {
+        let (mut m, s) = setup();
+        s.script(vec![Reply {
+            delay_us: 20,
+            bytes: stream.clone(),
+            burst,
+        }]);
+        let mut buf = [0u8; 2];
+        m.read(1, 132, &mut buf).unwrap();
+        assert_eq!(buf, [0x10, 0x20]);
+        let d = m.decoder_stats();
+        assert_eq!((d.packets, d.framing_errors), (1, 1), "burst {burst}");
+        assert_eq!(d.crc_errors, 1, "burst {burst}");
+        // A burst is read in a few blocks, not byte by byte.
+        let reads = s.bus().block_reads;
+        if burst {
+            assert!(reads <= 6, "{reads} block reads");
+        }
+    }
 }
 
 #[test]

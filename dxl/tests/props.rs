@@ -70,10 +70,20 @@ fn frame_start(stream: &[u8], end: usize, pkt: &Pkt, stuffed: bool) -> Option<us
 
 /// Feeds `stream` byte by byte; checks that every accepted packet is a CRC-valid frame that
 /// ends with the byte that completed it and decodes to what the decoder returned.
+///
+/// It also feeds a clone of the decoder the same stream in blocks of pseudo-random sizes
+/// (`Decoder::feed`, the fast path) and checks that it reports exactly the same events at the
+/// same bytes, and ends with the same counters and state.
 fn run<const N: usize>(dec: &mut Decoder<N>, stream: &[u8], stuffed: bool) -> Vec<Placed> {
+    let mut blocks = dec.clone();
     let mut out = Vec::new();
+    let mut events = Vec::new();
     for (i, &b) in stream.iter().enumerate() {
-        if let Some(Ok(p)) = dec.push(b) {
+        let ev = dec.push(b);
+        if let Some(ev) = &ev {
+            events.push((i, ev.map(|p| (p.id, p.instruction, p.params.to_vec()))));
+        }
+        if let Some(Ok(p)) = ev {
             let pkt = Pkt {
                 id: p.id,
                 inst: p.instruction,
@@ -86,7 +96,46 @@ fn run<const N: usize>(dec: &mut Decoder<N>, stream: &[u8], stuffed: bool) -> Ve
             out.push(Placed { start, end: i, pkt });
         }
     }
+    assert_eq!(
+        feed_events(&mut blocks, stream),
+        events,
+        "feed vs push on {stream:02X?}"
+    );
+    assert_eq!(blocks.stats(), dec.stats());
+    assert_eq!(blocks.is_idle(), dec.is_idle());
+    assert_eq!(blocks.wanted(), dec.wanted());
+    assert_eq!(blocks.packet(), dec.packet());
     out
+}
+
+/// An event of the decoder at a byte index: the packet (ID, instruction, params) or the error.
+type Event = (usize, Result<(u8, u8, Vec<u8>), DecodeError>);
+
+/// Feeds `stream` with `Decoder::feed` in blocks of 1 to 40 bytes (sizes from a generator
+/// seeded by the stream); the events with the index of the byte that completed each.
+fn feed_events<const N: usize>(dec: &mut Decoder<N>, stream: &[u8]) -> Vec<Event> {
+    let mut rng = XorShift(0x2545_F491_4F6C_DD1D ^ stream.len() as u64);
+    let mut events = Vec::new();
+    let mut at = 0;
+    while at < stream.len() {
+        let end = (at + 1 + rng.below(40)).min(stream.len());
+        let mut pos = at;
+        while pos < end {
+            let (used, ev) = dec.feed(&stream[pos..end]);
+            assert!(used >= 1 && pos + used <= end);
+            if let Some(ev) = ev {
+                events.push((
+                    pos + used - 1,
+                    ev.map(|p| (p.id, p.instruction, p.params.to_vec())),
+                ));
+            } else {
+                assert_eq!(pos + used, end, "feed stops early only on an event");
+            }
+            pos += used;
+        }
+        at = end;
+    }
+    events
 }
 
 /// Whether `a` overlaps the bytes `p.start..=p.end`.
@@ -246,7 +295,58 @@ fn junk_before() -> impl Strategy<Value = Vec<Junk>> {
         })
 }
 
+/// A packet's bytes built from the protocol's rules, independently of `PacketWriter`: an
+/// `FD` after `FF FF FD` in the instruction + parameter region gets an extra `FD`.
+fn reference_encoding(id: u8, inst: u8, params: &[u8]) -> Vec<u8> {
+    let mut region = Vec::new();
+    for &b in std::iter::once(&inst).chain(params) {
+        region.push(b);
+        if region.ends_with(&[0xFF, 0xFF, 0xFD]) {
+            region.push(0xFD);
+        }
+    }
+    let mut out = HEADER.to_vec();
+    out.push(id);
+    out.extend_from_slice(&(region.len() as u16 + 2).to_le_bytes());
+    out.extend_from_slice(&region);
+    let crc = bitwise_crc(&out);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
 proptest! {
+    #[test]
+    fn encoder_matches_the_reference_in_any_split(
+        id in id(),
+        inst in any::<u8>(),
+        params in prop::collection::vec(byte(), 0..48),
+        cut in any::<prop::sample::Index>(),
+    ) {
+        let want = reference_encoding(id, inst, &params);
+        // `extend` (runs of plain bytes, `push` for FD..FF) in two parts, and byte-wise `push`.
+        let (a, b) = params.split_at(cut.index(params.len() + 1));
+        let mut buf = [0u8; 2 * CAP + 16];
+        let mut w = PacketWriter::new(&mut buf, id, inst).unwrap();
+        w.extend(a).unwrap();
+        w.extend(b).unwrap();
+        let n = w.finish().unwrap();
+        prop_assert_eq!(&buf[..n], &want[..]);
+        let mut buf2 = [0u8; 2 * CAP + 16];
+        let mut w = PacketWriter::new(&mut buf2, id, inst).unwrap();
+        for &x in &params {
+            w.push(x).unwrap();
+        }
+        let n = w.finish().unwrap();
+        prop_assert_eq!(&buf2[..n], &want[..]);
+        // Too small a buffer fails at every length short of the packet.
+        for short in 0..want.len() {
+            let mut small = vec![0u8; short];
+            let r = PacketWriter::new(&mut small, id, inst)
+                .and_then(|mut w| w.extend(&params).and_then(|()| w.finish()));
+            prop_assert_eq!(r, Err(EncodeError::BufferTooSmall));
+        }
+    }
+
     #[test]
     fn roundtrip_any_packet(
         id in id(),

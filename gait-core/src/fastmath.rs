@@ -1,7 +1,26 @@
-//! Fast single-precision sine and cosine for the servo loop.
+//! Fast single-precision sine, cosine, square root and arc tangent for the servo loop.
 //!
 //! On the Cortex-M7F `libm::sinf` / `libm::cosf` compute in software doubles (≈1,260
 //! instructions each); the functions here use only f32 arithmetic (≈34 instructions).
+//!
+//! **Square root** ([`sqrt`]): on hard-float ARM targets (`target_abi = "eabihf"`: the
+//! Cortex-M4F's FPv4-SP and the M7's FPv5 both have it) the FPU's `VSQRT.F32`, through the
+//! one `unsafe` block of gait-core (module `vfp`); it is IEEE 754 correctly rounded, as
+//! `libm::sqrtf` is, so the results are bit-identical — `libm::sqrtf` is a software square
+//! root (≈ 130 instructions on the M7), `VSQRT` one instruction plus two register moves.
+//! Elsewhere (the FPU-less Cortex-M3, the host) `libm::sqrtf`.
+//!
+//! **Arc tangent** ([`atan2`], Cephes `atanf`): with `t = min(|y|, |x|) / max(|y|, |x|)` in
+//! [0, 1], `t > tan(π/8)` is reduced by `atan t = π/4 + atan((t − 1)/(t + 1))`, then for
+//! `|u| ≤ tan(π/8)`, `z = u²`,
+//!
+//! ```text
+//! atan u ≈ u + u·z·(A1 + z·(A2 + z·(A3 + z·A4)))
+//! ```
+//!
+//! and the octant is restored: `π/2 − a` when |y| > |x|, `π − a` for x < 0 (or −0), the sign
+//! of y. One division, no `f64`, no table; |error| ≤ [`ATAN2_MAX_ERR`] rad (checked against
+//! `f64` on a dense grid), NaN in → NaN out, signed zeros and infinities as `libm::atan2f`.
 //!
 //! Method (Cody–Waite reduction plus the Cephes minimax polynomials):
 //!
@@ -46,6 +65,97 @@ const S3: f32 = -1.9515296e-04; // f32 of -1.951_529_589_1e-4
 const C1: f32 = 4.1666646e-02; // f32 of 4.166_664_568_298_827e-2
 const C2: f32 = -1.3887316e-03; // f32 of -1.388_731_625_493_765e-3
 const C3: f32 = 2.4433157e-05; // f32 of 2.443_315_711_809_948e-5
+
+/// atan polynomial coefficients (Cephes `atanf`, |u| ≤ tan(π/8)).
+const A1: f32 = -3.333_295e-1; // f32 of -3.333_294_927e-1
+const A2: f32 = 1.997_771_1e-1; // f32 of 1.997_771_106e-1
+const A3: f32 = -1.387_768_5e-1; // f32 of -1.387_768_56e-1
+const A4: f32 = 8.053_744_6e-2; // f32 of 8.053_744_495e-2
+/// tan(π/8) = √2 − 1.
+const TAN_PI_8: f32 = 0.414_213_57; // f32 of √2 − 1
+
+/// Bound on |`atan2` − the exact value| over all finite arguments, rad (the test
+/// `atan2_agrees_with_f64` measures it on a dense grid of angles and magnitudes).
+pub const ATAN2_MAX_ERR: f32 = 3.6e-7;
+
+/// The FPU's square root (`VSQRT.F32`), on hard-float ARM targets only.
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+#[allow(unsafe_code)]
+mod vfp {
+    /// `VSQRT.F32` of `x`: IEEE 754 correctly rounded (NaN for x < 0).
+    #[inline(always)]
+    pub fn sqrt(x: f32) -> f32 {
+        let out: u32;
+        // SAFETY: the instructions read and write only `s0` (declared clobbered) and the two
+        // core registers given as operands; no memory, no stack, no flags. Every `eabihf`
+        // ARM target has a single-precision FPU with VSQRT (FPv4-SP, FPv5), and cortex-m-rt
+        // enables the FPU before `main`. (rustc 1.95 refuses `sreg` operands on these
+        // targets, hence the moves through core registers.)
+        unsafe {
+            core::arch::asm!(
+                "vmov s0, {x}",
+                "vsqrt.f32 s0, s0",
+                "vmov {out}, s0",
+                x = in(reg) x.to_bits(),
+                out = lateout(reg) out,
+                out("s0") _,
+                options(pure, nomem, nostack, preserves_flags),
+            );
+        }
+        f32::from_bits(out)
+    }
+}
+
+/// Square root of `x`, f32: `VSQRT.F32` on hard-float ARM, `libm::sqrtf` elsewhere (the
+/// same correctly rounded result; NaN for x < 0).
+#[inline(always)]
+pub fn sqrt(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        vfp::sqrt(x)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
+/// Arc tangent of `y / x` in [−π, π], f32 (see the module docs; |error| ≤ [`ATAN2_MAX_ERR`]).
+#[inline]
+pub fn atan2(y: f32, x: f32) -> f32 {
+    use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+    if x.is_nan() || y.is_nan() {
+        return x + y;
+    }
+    let (ax, ay) = (x.abs(), y.abs());
+    let (num, den) = if ay > ax { (ax, ay) } else { (ay, ax) };
+    // t = num / den in [0, 1]; 0/0 is 0 (signs below), ∞/∞ is 1 (the diagonals).
+    let t = if den == 0.0 {
+        0.0
+    } else if num == f32::INFINITY {
+        1.0
+    } else {
+        num / den
+    };
+    let (base, u) = if t > TAN_PI_8 {
+        (FRAC_PI_4, (t - 1.0) / (t + 1.0))
+    } else {
+        (0.0, t)
+    };
+    let z = u * u;
+    let mut a = base + (u + u * z * (A1 + z * (A2 + z * (A3 + z * A4))));
+    if ay > ax {
+        a = FRAC_PI_2 - a;
+    }
+    if x.is_sign_negative() {
+        a = PI - a;
+    }
+    if y.is_sign_negative() {
+        -a
+    } else {
+        a
+    }
+}
 
 /// Brings a large finite `x` into [−2π, 2π] (see the module doc); NaN and ±∞ stay NaN.
 #[inline(never)]
@@ -162,6 +272,74 @@ pub fn sin_cos_real<R: Real>(x: R) -> (R, R) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    extern crate std;
+
+    #[test]
+    fn sqrt_is_correctly_rounded() {
+        for k in 0..20_000u32 {
+            let x = f32::from_bits(0x0080_0000 + k.wrapping_mul(104_729) % 0x7F00_0000);
+            let r = sqrt(x);
+            // Correct rounding: r is the f32 nearest to the exact root (checked in f64).
+            let e = (x as f64).sqrt();
+            let below = f32::from_bits(r.to_bits() - 1) as f64;
+            let above = f32::from_bits(r.to_bits() + 1) as f64;
+            assert!((r as f64 - e).abs() <= (below - e).abs().min((above - e).abs()));
+        }
+        assert_eq!(sqrt(0.0), 0.0);
+        assert_eq!(sqrt(4.0), 2.0);
+        assert!(sqrt(-1.0).is_nan() && sqrt(f32::NAN).is_nan());
+        assert_eq!(sqrt(f32::INFINITY), f32::INFINITY);
+    }
+
+    #[test]
+    fn atan2_agrees_with_f64() {
+        let mut worst = 0.0f64;
+        for i in 0..20_000 {
+            let th = -3.2 + 6.4 * i as f64 / 20_000.0;
+            for r in [1e-30f64, 1e-6, 0.031, 1.0, 7.3, 1e6, 1e30] {
+                let (y, x) = ((r * th.sin()) as f32, (r * th.cos()) as f32);
+                let err = (atan2(y, x) as f64 - (y as f64).atan2(x as f64)).abs();
+                worst = worst.max(err);
+            }
+        }
+        std::println!("fastmath::atan2 worst error {worst:e} rad");
+        assert!(worst <= ATAN2_MAX_ERR as f64, "worst {worst:e}");
+        // Bounds from the f32 rounding of π (8.7e-8) and the polynomial's ≈ 1e-7: the bound
+        // is not loose by more than 2×.
+        assert!(
+            worst > ATAN2_MAX_ERR as f64 / 2.0,
+            "worst {worst:e}: tighten the bound"
+        );
+    }
+
+    #[test]
+    fn atan2_specials_match_libm() {
+        let v = [
+            0.0f32,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            -2.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ];
+        for &y in &v {
+            for &x in &v {
+                let (a, b) = (atan2(y, x), libm::atan2f(y, x));
+                assert!(
+                    (a - b).abs() <= ATAN2_MAX_ERR,
+                    "atan2({y}, {x}) = {a}, libm {b}"
+                );
+                assert_eq!(
+                    a.is_sign_negative(),
+                    b.is_sign_negative(),
+                    "atan2({y}, {x})"
+                );
+            }
+        }
+        assert!(atan2(f32::NAN, 1.0).is_nan() && atan2(1.0, f32::NAN).is_nan());
+    }
 
     #[test]
     fn quadrants_and_specials() {

@@ -1,7 +1,8 @@
 //! gait-core: the walking trajectory generator of seed 000 (Wong et al. 2020, TLIPFM) and
 //! seed 001 (Erbatur et al. 2009), `no_std`, allocation-free, for the servo loop.
 #![no_std]
-#![forbid(unsafe_code)]
+// One audited exception: the FPU's square root (`fastmath::vfp`, inline `VSQRT.F32`).
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod error;

@@ -7,8 +7,10 @@ use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
 /// A floating-point scalar (`f32` or `f64`) with the maths gait-core needs.
 ///
-/// For `f32`, `sin`/`cos` are the short polynomials of [`crate::fastmath`] (|error| < 1e-7;
-/// libm's `sinf` computes in software doubles, ≈ 1,260 instructions on a Cortex-M7).
+/// For `f32`, `sin`/`cos`/`atan2` are the short polynomials of [`crate::fastmath`] (|error|
+/// < 1e-7 for sin/cos, ≤ [`crate::fastmath::ATAN2_MAX_ERR`] for atan2; libm's `sinf` computes
+/// in software doubles, ≈ 1,260 instructions on a Cortex-M7) and `sqrt` is the FPU's
+/// `VSQRT.F32` on hard-float ARM ([`crate::fastmath::sqrt`]).
 pub trait Real:
     Copy
     + PartialOrd
@@ -99,7 +101,7 @@ impl Real for f32 {
     }
     #[inline]
     fn sqrt(self) -> Self {
-        libm::sqrtf(self)
+        crate::fastmath::sqrt(self)
     }
     #[inline]
     fn sin(self) -> Self {
@@ -111,7 +113,7 @@ impl Real for f32 {
     }
     #[inline]
     fn atan2(self, x: Self) -> Self {
-        libm::atan2f(self, x)
+        crate::fastmath::atan2(self, x)
     }
     #[inline]
     fn abs(self) -> Self {

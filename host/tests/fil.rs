@@ -62,6 +62,34 @@ fn stop_reason(log: &DecodedLog) -> Option<StopReason> {
 
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn compute_time_follows_the_core_clock() {
+    // The QEMU board charges the bench's worst-case instructions per tick at `core_mhz`
+    // (issue 14). At the OpenCR's 216 MHz a tick's compute (≈ 16,000 instructions) is ≈ 74 µs
+    // of the 5 ms period: no overrun. At 3 MHz it is ≈ 5.3 ms > 5 ms: every tick overruns and
+    // the supervisor stops the walk for an overrun burst.
+    let (fast, log_fast) = fil("clock-216", short_walk(1), SimConfig::default(), &[]);
+    assert_eq!(fast.exit_code, Some(0));
+    assert_eq!(log_fast.ticks.last().map(|t| t.overruns), Some(0));
+    let (slow, log_slow) = fil(
+        "clock-3",
+        short_walk(1),
+        SimConfig::default(),
+        &["core_mhz=3"],
+    );
+    assert_ne!(slow.exit_code, Some(0));
+    assert!(
+        matches!(
+            stop_reason(&log_slow),
+            Some(StopReason::OverrunBurst { .. })
+        ),
+        "{:?}",
+        stop_reason(&log_slow)
+    );
+    assert!(log_slow.ticks.last().is_some_and(|t| t.overruns > 0));
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn short_walk_completes_and_is_deterministic() {
     let spec = short_walk(4);
     let (a, log_a) = fil(

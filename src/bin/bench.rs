@@ -285,32 +285,39 @@ mod firmware {
         let mut got = 0;
         for &b in bytes {
             if let Some(Ok(p)) = dec.push(b) {
-                if let Ok(st) = Status::from_packet(&p) {
-                    match st.id {
-                        FOOT_L => {
-                            if let Some(f) = FootForces::from_bytes(st.data) {
-                                out.feet[0] = f;
-                                got += 1;
-                            }
-                        }
-                        FOOT_R => {
-                            if let Some(f) = FootForces::from_bytes(st.data) {
-                                out.feet[1] = f;
-                                got += 1;
-                            }
-                        }
-                        IMU => {
-                            if let Some(s) = ImuSample::from_bytes(st.data) {
-                                out.imu = s;
-                                got += 1;
-                            }
-                        }
-                        _ => {}
-                    }
-                }
+                got += store_reply(&p, out);
             }
         }
         got
+    }
+
+    /// Decodes the reply stream with block feeds (`Decoder::feed`, as the bus master does
+    /// with its block reads) into `out`; the number of packets accepted.
+    fn decode_replies_block(dec: &mut Decoder<64>, bytes: &[u8], out: &mut Sensors) -> u32 {
+        let mut got = 0;
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            let (used, ev) = dec.feed(rest);
+            if let Some(Ok(p)) = ev {
+                got += store_reply(&p, out);
+            }
+            rest = rest.get(used..).unwrap_or(&[]);
+        }
+        got
+    }
+
+    /// Parses one status packet into `out`; 1 if it was one of the three replies.
+    fn store_reply(p: &dxl::Packet<'_>, out: &mut Sensors) -> u32 {
+        let Ok(st) = Status::from_packet(p) else {
+            return 0;
+        };
+        match st.id {
+            FOOT_L => FootForces::from_bytes(st.data).map(|f| out.feet[0] = f),
+            FOOT_R => FootForces::from_bytes(st.data).map(|f| out.feet[1] = f),
+            IMU => ImuSample::from_bytes(st.data).map(|s| out.imu = s),
+            _ => None,
+        }
+        .map_or(0, |()| 1)
     }
 
     /// Encodes the SYNC WRITE of the 12 goal positions (ticks); its length.
@@ -373,7 +380,7 @@ mod firmware {
 
         /// Start of a tick: the replies of the last BULK READ → τ (N·m).
         fn sense(&mut self, replies: &[u8]) -> f32 {
-            decode_replies(&mut self.dec, replies, &mut self.sensors);
+            decode_replies_block(&mut self.dec, replies, &mut self.sensors);
             let [roll_rate, rate, _] = self.sensors.imu.gyro_rad_s();
             self.gyro = Some([roll_rate, rate]);
             self.pitch.update(rate);
@@ -517,6 +524,20 @@ mod firmware {
             ovh,
         );
         report(
+            "prim.sqrt_fast",
+            measure(K, &mut |i| {
+                black_box(gait_core::fastmath::sqrt(x(i)));
+            }),
+            ovh,
+        );
+        report(
+            "prim.atan2_fast",
+            measure(K, &mut |i| {
+                black_box(gait_core::fastmath::atan2(x(i) - 1.7, 0.9));
+            }),
+            ovh,
+        );
+        report(
             "prim.sin_cos_fast",
             measure(K, &mut |i| {
                 black_box(gait_core::fastmath::sin_cos(x(i)));
@@ -613,6 +634,56 @@ mod firmware {
         );
         if decode_replies(&mut dec, replies, &mut sensors) != 3 {
             fail("decode");
+        }
+        report(
+            "dxl.decode3_block",
+            measure(K, &mut |_| {
+                let got = decode_replies_block(&mut dec, black_box(replies), &mut sensors);
+                black_box(got);
+            }),
+            ovh,
+        );
+        if decode_replies_block(&mut dec, replies, &mut sensors) != 3 {
+            fail("decode_block");
+        }
+        // The decoder alone: block feeds of the three replies, packets counted, not parsed.
+        let feed3 = |dec: &mut Decoder<64>, bytes: &[u8]| {
+            let mut got = 0u32;
+            let mut rest = bytes;
+            while !rest.is_empty() {
+                let (used, ev) = dec.feed(rest);
+                got += u32::from(matches!(ev, Some(Ok(_))));
+                rest = rest.get(used..).unwrap_or(&[]);
+            }
+            got
+        };
+        report(
+            "dxl.feed3",
+            measure(K, &mut |_| {
+                black_box(feed3(&mut dec, black_box(replies)));
+            }),
+            ovh,
+        );
+        if feed3(&mut dec, replies) != 3 {
+            fail("feed3");
+        }
+        // The decoder alone, byte by byte (`Decoder::push`).
+        let push3 = |dec: &mut Decoder<64>, bytes: &[u8]| {
+            let mut got = 0u32;
+            for &b in bytes {
+                got += u32::from(matches!(dec.push(b), Some(Ok(_))));
+            }
+            got
+        };
+        report(
+            "dxl.push3",
+            measure(K, &mut |_| {
+                black_box(push3(&mut dec, black_box(replies)));
+            }),
+            ovh,
+        );
+        if push3(&mut dec, replies) != 3 {
+            fail("push3");
         }
         let crc_in: [u8; 72] = core::array::from_fn(|k| (k as u8).wrapping_mul(29) ^ 0x5A);
         report(
@@ -907,7 +978,7 @@ mod firmware {
                 line: LineTime { baud: cfg.bus_baud },
                 rx: heapless::Deque::new(),
                 sched: TickSchedule::new(cfg.tick_period_us),
-                compute_ns: 150_000,
+                compute_ns: walker_firmware::boards::qemu_mps2::compute_ns(cfg),
                 devs,
                 imu_counter: 0,
                 crash: CrashCell::new(),

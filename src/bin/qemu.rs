@@ -48,7 +48,6 @@ mod firmware {
             qemu_mps2::semihosting_exit(ExitCode::ConfigRejected.status());
         };
         let mut board = QemuBoard::new(cp.SYST, &cfg);
-        board.set_compute_us(cfg.compute_us);
         if read.is_none() {
             defmt::error!(
                 "command line refused by QEMU (longer than {=usize} bytes)",

@@ -5,3 +5,5 @@
 pub mod opencr;
 #[cfg(feature = "board-qemu")]
 pub mod qemu_mps2;
+#[cfg(feature = "board-qemu")]
+pub mod tick_cost;

@@ -41,12 +41,15 @@
 //!   sent and every byte received, plus the servo Return Delay Time before the first byte of
 //!   each reply ([`crate::Config::return_delay_us`]);
 //! * a timeout: a read past the announced reply jumps to the driver's deadline;
-//! * a fixed modelled compute time per tick ([`QemuBoard::set_compute_us`], default
-//!   [`DEFAULT_COMPUTE_US`]), charged when the tick's work ends (at [`TickTimer::wait_tick`]);
+//! * the compute time per tick, charged when the tick's work ends (at
+//!   [`TickTimer::wait_tick`]): by default the instructions per tick that `scripts/bench.sh`
+//!   measures for this build (worst case over the Table 2 walk, [`super::tick_cost`]) at the
+//!   modelled core clock, `instructions ÷ core_mhz` µs, one instruction per cycle
+//!   ([`compute_ns`]; `core_mhz` defaults to the OpenCR's 216 MHz, `compute_us=` overrides);
 //! * [`TickTimer::wait_tick`] jumping to the next deadline `k · period` (an overrun when it is
 //!   already past; deadlines never drift).
 //!
-//! Why not the measured compute time: SysTick under `-icount shift=0` counts one step per 40
+//! Why a per-build constant and not the time measured while running: SysTick under `-icount shift=0` counts one step per 40
 //! instructions, and where the count boundaries fall relative to the code depends on how many
 //! instructions the blocking UART spins took — which depends on host speed. A measured compute
 //! time would differ by ±1 count between runs and break bit-for-bit determinism. The CPU time
@@ -86,8 +89,20 @@ pub const UART1_BASE: usize = 0x4000_5000;
 pub const UART2_BASE: usize = 0x4000_6000;
 /// UART / SysTick clock of the mps2 boards, Hz.
 pub const SYSCLK_HZ: u32 = 25_000_000;
-/// Default modelled compute time per tick, µs.
-pub const DEFAULT_COMPUTE_US: u32 = 150;
+/// Instructions per control tick charged as compute time: the bench's worst case for this
+/// build (hard float on the M7/M4F ELF, soft float on a Cortex-M3 one).
+#[cfg(target_abi = "eabihf")]
+pub const TICK_INSTRUCTIONS: u32 = super::tick_cost::TICK_INSTRUCTIONS_MAX_FPU;
+/// Instructions per control tick charged as compute time (soft-float build).
+#[cfg(not(target_abi = "eabihf"))]
+pub const TICK_INSTRUCTIONS: u32 = super::tick_cost::TICK_INSTRUCTIONS_MAX_SOFT;
+
+/// Compute time charged per tick, ns: `compute_us` when set (non-zero), else
+/// [`TICK_INSTRUCTIONS`] at `core_mhz` (one instruction per cycle: QEMU counts instructions;
+/// a real M7 dual-issues some and waits on flash for others).
+pub fn compute_ns(cfg: &Config) -> u64 {
+    cfg.compute_ns(TICK_INSTRUCTIONS)
+}
 /// Exit code when the virtual watchdog bites.
 pub const EXIT_WATCHDOG: i32 = walker_contract::ExitCode::Watchdog.status();
 /// Exit code after a panic.
@@ -296,7 +311,7 @@ impl QemuBoard {
             lockstep,
             line: LineTime { baud: cfg.bus_baud },
             return_delay_ns: u64::from(cfg.return_delay_us) * 1000,
-            compute_ns: u64::from(DEFAULT_COMPUTE_US) * 1000,
+            compute_ns: compute_ns(cfg),
             virt_ns: 0,
             last_sync_us: None,
             pending_reply: 0,
@@ -320,9 +335,9 @@ impl QemuBoard {
         self.lockstep
     }
 
-    /// Sets the modelled compute time per tick, µs.
-    pub fn set_compute_us(&mut self, us: u32) {
-        self.compute_ns = u64::from(us) * 1000;
+    /// The compute time charged per tick, ns ([`compute_ns`] of the configuration).
+    pub fn compute_ns(&self) -> u64 {
+        self.compute_ns
     }
 
     /// Protocol errors seen on the lock-step channel.

@@ -1,0 +1,16 @@
+//! Instructions per control tick measured by `scripts/bench.sh` (generated: the script
+//! rewrites this file after each run; do not edit by hand).
+//!
+//! The firmware's control loop (`control::run`, default configuration: TLIPFM, f32, paper
+//! pipeline, stabilizer off) on the bench's emulated bus, QEMU `-icount shift=0`, per walking
+//! tick: worst case and average over the Table 2 walk. The QEMU board charges the worst case
+//! as its compute time per tick (see [`super::qemu_mps2::compute_ns`]).
+
+/// Worst-case instructions per control tick, hard-float build (Cortex-M7/M4F, mps2-an500).
+pub const TICK_INSTRUCTIONS_MAX_FPU: u32 = 16000;
+/// Average instructions per control tick, hard-float build (for reference).
+pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = 14208;
+/// Worst-case instructions per control tick, soft-float build (Cortex-M3, mps2-an385).
+pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = 110880;
+/// Average instructions per control tick, soft-float build (for reference).
+pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = 96484;
