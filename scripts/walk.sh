@@ -2,7 +2,7 @@
 # Main job: the firmware, built for the emulated board (QEMU mps2-an500, Cortex-M7), walks the
 # seed's Table 2 plan (14 steps) against the simulated robot in lock-step, once per model (LIPM,
 # DLIPM, TLIPFM) open loop as the paper (gyro feedback off, factory servo gains), then TLIPFM with the firmware's
-# default closed loop (gyro balance feedback, src/balance.rs; Position I Gain 3000 on the roll servos); each run writes its captured log, the simulator's ground truth and the
+# default closed loop (gyro balance feedback, src/balance.rs); each run writes its captured log, the simulator's ground truth and the
 # ZMP-response report (CSV, SVG/PNG plots like seed 000 Figs. 14-16, Table 3 statistics) to
 # out/fil-MODEL/ (out/fil-tlipfm-closed/), and the four runs are compared in out/compare.md.
 # The paper's timing is walked as published (feasibility=off): Table 2's swing asks the swing

@@ -4,9 +4,11 @@
 
 /// Most footsteps a firmware plan may have.
 pub const MAX_STEPS: usize = 64;
-/// Default Position I Gain of the roll servos (register units): the value that walked best in
-/// the MuJoCo runs of docs/beyond.md (paper timing 13.0 / 34.5 → 8.1 / 15.7 mm true ZMP error).
-pub const DEFAULT_SERVO_I_ROLL: u16 = 3000;
+/// Default Position I Gain of the roll servos (register units): 0, the factory value. 3000
+/// tracks the ZMP best at the paper's timing in the MuJoCo runs of docs/beyond.md (13.0 / 34.5
+/// → 8.1 / 15.7 mm) but not at the default stretched timing (17.8 / 25.6 mm) and loses the
+/// 1 N·s left push there, so it stays opt-in.
+pub const DEFAULT_SERVO_I_ROLL: u16 = 0;
 /// Longest servo-lag feed-forward, s.
 pub const MAX_SERVO_LEAD_S: f64 = 0.3;
 /// Most ticks of servo-lag feed-forward (the firmware's delay line of gait samples: 0.3 s at
@@ -184,8 +186,7 @@ impl Config {
     /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
     /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
     /// compensation, stabilizer off, gyro balance feedback on (k_a 0.1 s, k_h 0.05 s), 8 start-up
-    /// attempts, servo-speed feasibility by stretching the timing, Position I Gain 3000 on the
-    /// roll servos.
+    /// attempts, servo-speed feasibility by stretching the timing, factory servo gains.
     pub const fn default_config() -> Self {
         Config {
             tick_period_us: 5_000,

@@ -966,6 +966,7 @@ mod tests {
             (0.0, 0.0)
         );
         assert!(!paper.stabilizer_on && !paper.com_fourier);
+        assert_eq!((paper.servo_i_roll, paper.servo_i_pitch), (0, 0));
         assert_eq!(
             paper.compensation,
             walker_contract::config::Compensation::None
