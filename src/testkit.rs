@@ -82,6 +82,28 @@ pub struct FakeDevice {
     pub current_raw: i16,
 }
 
+impl FakeDevice {
+    /// A healthy device `id` of `kind` at factory settings, holding position `ticks` (servos).
+    pub fn new(id: u8, kind: Kind, ticks: i32) -> Self {
+        FakeDevice {
+            id,
+            kind,
+            rdt: x_series::DEFAULT_RETURN_DELAY,
+            rdt_stuck: false,
+            torque: false,
+            goal: ticks,
+            present: ticks,
+            dead: false,
+            i_gain: 0,
+            torque_stuck: false,
+            hw_error: 0,
+            temperature: 40,
+            voltage_dv: 120,
+            current_raw: 300,
+        }
+    }
+}
+
 /// Per `wait_tick`: the tick and the number of packets sent before it.
 #[derive(Clone, Copy, Debug)]
 pub struct TickMark {
@@ -151,40 +173,10 @@ impl FakeBoard {
         let mut devices = Vec::new();
         let init = Self::initial_ticks();
         for (j, &t) in init.iter().enumerate() {
-            devices.push(FakeDevice {
-                id: j as u8 + 1,
-                kind: Kind::Servo(j),
-                rdt: x_series::DEFAULT_RETURN_DELAY,
-                rdt_stuck: false,
-                torque: false,
-                goal: t,
-                present: t,
-                dead: false,
-                i_gain: 0,
-                torque_stuck: false,
-                hw_error: 0,
-                temperature: 40,
-                voltage_dv: 120,
-                current_raw: 300,
-            });
+            devices.push(FakeDevice::new(j as u8 + 1, Kind::Servo(j), t));
         }
         for (id, kind) in [(111, Kind::Foot(0)), (112, Kind::Foot(1)), (200, Kind::Imu)] {
-            devices.push(FakeDevice {
-                id,
-                kind,
-                rdt: x_series::DEFAULT_RETURN_DELAY,
-                rdt_stuck: false,
-                torque: false,
-                goal: 0,
-                present: 0,
-                dead: false,
-                i_gain: 0,
-                torque_stuck: false,
-                hw_error: 0,
-                temperature: 40,
-                voltage_dv: 120,
-                current_raw: 300,
-            });
+            devices.push(FakeDevice::new(id, kind, 0));
         }
         FakeBoard {
             now_ns: 0,

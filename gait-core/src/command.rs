@@ -120,7 +120,9 @@ impl CommandLimits {
 /// Footsteps from velocity commands, one per call of [`StepGenerator::next_step`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepGenerator<R> {
+    /// The plan's reach limits.
     reach: StepLimits,
+    /// Velocity and acceleration limits.
     limits: CommandLimits,
     /// Nominal half width w, m.
     half_width: R,

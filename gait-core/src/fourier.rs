@@ -310,17 +310,27 @@ pub struct FourierCom<R, const K: usize> {
     coef: [[R; 4]; K],
     /// N, the number of terms used.
     terms: usize,
+    /// ω, 1/s.
     omega: R,
+    /// Step period T, s.
     period: R,
+    /// End of the first double support, s.
     t1: R,
+    /// End of the single support, s.
     t2: R,
+    /// Step length B, m.
     step_length: R,
     /// Means α₀/2 (x, relative to the trend (B/T)(t − T/2)) and a₀/2 (y).
     mean: [R; 2],
+    /// x knots of step 0 at t = 0, t1, t2, T, m.
     knots_x: [R; 4],
+    /// y knots of step 0, m.
     knots_y: [R; 4],
+    /// CoM truncation bound (x, y), m.
     bound_com: [R; 2],
+    /// CoM velocity truncation bound, m/s.
     bound_vel: [R; 2],
+    /// Series ZMP truncation bound, m.
     bound_zmp: [R; 2],
 }
 

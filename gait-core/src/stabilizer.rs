@@ -127,18 +127,31 @@ pub struct StabilizerInput<'a, R> {
 /// The stabilizer's state (O(1), no allocation).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stabilizer<R> {
+    /// Proportional gain k_p.
     kp: R,
+    /// Integral gain k_i, 1/s.
     ki: R,
+    /// Leak of the integral, 1/s.
     leak: R,
+    /// Gyro gain times the trunk height, k_g·l_u, m·s.
     gyro_gain: R,
+    /// 1/(1 + k) of the DCM error estimate.
     inv_one_plus_k: R,
+    /// Largest |δ| per axis, m.
     max_shift: R,
+    /// Largest change of δ per update, m.
     max_step: R,
+    /// Margin of the ZMP command inside the support polygon, m.
     margin: R,
+    /// Update period, s.
     dt: R,
+    /// Low-pass factor dt/(dt + τ) of the ZMP error filter.
     alpha: R,
+    /// Filtered ZMP error e, m.
     err: [R; 2],
+    /// Integral of the error, m·s.
     integral: [R; 2],
+    /// Present shift δ, m.
     shift: [R; 2],
 }
 

@@ -212,13 +212,21 @@ struct TorqueLine {
 
 #[derive(Clone, Copy, Debug)]
 struct Snapshot {
+    /// Time, µs.
     t_us: u64,
+    /// The mass points, world frame, m.
     points: [V3; 7],
+    /// Pelvis point, m.
     pelvis: V3,
+    /// Pelvis rotation.
     r_pelvis: M3,
+    /// Upper-body rotation.
     r_ub: M3,
+    /// Floor height under the stance foot, m.
     ground_z: f64,
+    /// Each sole on the ground (left, right).
     contact: [bool; 2],
+    /// Each sole's contact (forces, centre of pressure).
     feet: [FootContact; 2],
     /// Sole point and rotation of each foot (before a fall's rotation), m.
     soles: [(V3, M3); 2],

@@ -110,11 +110,17 @@ impl Push {
 
 /// The MuJoCo robot.
 pub struct MjBody {
+    /// MuJoCo's model and state.
     data: MjData<Box<MjModel>>,
+    /// Ids of the bodies, joints, sensors and geoms the body reads.
     ids: Ids,
+    /// The robot the model was generated from.
     robot: Robot,
+    /// The servo model's parameters.
     params: XServoParams,
+    /// One position-mode servo model per joint.
     servos: [XServo; 12],
+    /// Their last outputs (torque, PWM, current).
     outputs: [XServoOutput; 12],
     /// Joint angles at the truth's time, rad.
     q: [f64; 12],
