@@ -221,6 +221,11 @@ impl<R: Real, const N: usize> WalkSampler<R, N> {
         match &self.fourier {
             None => self.sampler.next(tau),
             Some(f) => {
+                // Outside the blend (w = w' = 0) the exact sample stands: no second evaluation.
+                let t = f.walk_time(self.sampler.now_ns());
+                if f.weight(t) == (R::zero(), R::zero()) {
+                    return self.sampler.next(tau);
+                }
                 let exact = self.sampler.com_now();
                 let mut g = self.sampler.next(tau);
                 f.apply(&mut g, exact);
