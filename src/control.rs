@@ -24,7 +24,9 @@
 //!    then [`Targets`] (built once): the paper's pipeline (pelvis on the model's CoM + δ, two-leg
 //!    IK) or, with `comp=wholebody`, whole-body compensation (pelvis placed so the multi-body
 //!    CoM is on the model's CoM + δ, gait-core [`gait_core::wholebody`]); the IK clamps to
-//!    reach and joint limits, [`safe_targets`] to the servo ticks (a non-finite target holds
+//!    reach and joint limits; with `compliance_roll`/`compliance_pitch` = k the servos' predicted static sag under
+//!    the gait's loads is added (k·τ/K per joint, gait-core [`gait_core::compliance`], also on
+//!    the start-up ramp's end pose; f32 only: off with `math=fixed`); the gyro damping; [`safe_targets`] to the servo ticks (a non-finite target holds
 //!    the previous tick and stops); ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes
 //!    each).
 //!    With `servo_lead = Δ` (default 0) the targets come from the gait sample Δ ahead
@@ -90,6 +92,8 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
+use gait_core::compliance::{Compliance, LoadModel};
+use gait_core::gait::Arithmetic;
 use gait_core::measured::{measured_zmp, ForceReading};
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
@@ -600,7 +604,15 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         lead_sample = sampler.next(0.0);
         let _ = delay.push_back(lead_sample.f32);
     }
-    let q0 = sampler.joints(&targets, &lead_sample, [0.0; 2]);
+    // The servos' sag under the gait's loads, fed forward (`compliance_roll`/`_pitch`); f32
+    // maths, so not with the fixed-point path (`math=fixed`: FPU-less cores).
+    let load = LoadModel::new(&robot);
+    let compliance = match cfg.arithmetic {
+        Arithmetic::F32 => cfg.compliance,
+        _ => Compliance::OFF,
+    };
+    let mut q0 = sampler.joints(&targets, &lead_sample, [0.0; 2]);
+    load.apply(&compliance, &mut q0, &lead_sample.f32, [0.0; 2]);
     let mut from = [0.0f32; LEG_JOINTS];
     for (j, (f, &t)) in from.iter_mut().zip(present.iter()).enumerate() {
         *f = map.rad_of_tick(j, t);
@@ -782,6 +794,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             break 'sample None;
                         }
                         let mut q = sampler.joints(&targets, &ahead, shift);
+                        load.apply(&compliance, &mut q, &ahead.f32, shift);
                         cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                         if sampler.is_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);

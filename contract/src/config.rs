@@ -147,6 +147,8 @@ pub struct Config {
     /// Gyro damping through the ankles and hips of the legs on the ground
     /// ([`gait_core::balance`]).
     pub gyro_feedback: gait_core::balance::GyroFeedback,
+    /// Feed-forward of the position servos' static sag ([`gait_core::compliance`]).
+    pub compliance: gait_core::compliance::Compliance,
     /// What start-up does when the plan needs joints faster than the servos.
     pub feasibility: Feasibility,
     /// The number type of the per-sample gait work (f32, or the fixed-point sampler and IK).
@@ -218,6 +220,7 @@ impl Config {
             stabilizer_on: false,
             stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
             gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
+            compliance: gait_core::compliance::Compliance::DEFAULT,
             feasibility: Feasibility::Stretch,
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,

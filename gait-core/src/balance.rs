@@ -35,13 +35,15 @@ pub struct GyroFeedback {
 }
 
 impl GyroFeedback {
-    /// The firmware's default: k_a = 0.1 s, k_h = 0.05 s, ±0.1 rad, chosen on the MuJoCo robot
-    /// (Table 2, TLIPFM, the paper's timing; `docs/beyond.md`): the true centre of pressure's
-    /// mean error 23.7 / 46.4 mm open loop → 13.0 / 34.5 mm, and 1.5 N·s pushes forward and to
-    /// the left survived (open loop: 1.0 N·s).
+    /// The firmware's default: k_a = 0.1 s, k_h = 0.1 s, ±0.1 rad, chosen on the MuJoCo robot
+    /// (Table 2, TLIPFM; `docs/beyond.md`): with k_h = 0.05 s the true centre of pressure's mean
+    /// error went from 23.7 / 46.4 mm open loop to 13.0 / 34.5 mm and 1.5 N·s pushes forward and
+    /// to the left were survived (open loop: 1.0 N·s); with the compliance feed-forward of the
+    /// roll joints ([`crate::compliance`]) k_h = 0.1 s tracks better at both timings (stretched
+    /// 15.4 → 9.8 mm sagittal).
     pub const DEFAULT: GyroFeedback = GyroFeedback {
         ankle: 0.1,
-        hip: 0.05,
+        hip: 0.1,
         max_rad: 0.1,
     };
 

@@ -418,19 +418,56 @@ impl<R: Real> LegKinematics<R> {
 
     /// Hip position and the leg's frames: (hip, knee, ankle, sole, foot rotation columns).
     fn chain(&self, side: Side, pelvis: &Pose<R>, q: &LegAngles<R>) -> ([V3<R>; 4], Cols<R>) {
+        let (points, rf, _) = self.chain_axes(side, pelvis, q);
+        (points, rf)
+    }
+
+    /// [`Self::chain`] and the six joint axes in the world frame (joint order): hip yaw = the
+    /// pelvis z, hip roll = x after the yaw, hip pitch = y after the roll (the knee and ankle
+    /// pitch axes are parallel to it), ankle roll = x after the ankle pitch.
+    #[inline(always)]
+    fn chain_axes(
+        &self,
+        side: Side,
+        pelvis: &Pose<R>,
+        q: &LegAngles<R>,
+    ) -> ([V3<R>; 4], Cols<R>, [V3<R>; JOINTS_PER_LEG]) {
         let rp = rot_cols(pelvis);
         let sigma = R::of(side.sign());
         let hip = axpy(&pelvis.position(), sigma * self.hip_offset_y, &rp[1]);
-        let rt = post_ry(
-            &post_rx(&post_rz(&rp, sin_cos_real(q[0])), sin_cos_real(q[1])),
-            sin_cos_real(q[2]),
-        );
+        let r_yaw = post_rz(&rp, sin_cos_real(q[0]));
+        let r_roll = post_rx(&r_yaw, sin_cos_real(q[1]));
+        let rt = post_ry(&r_roll, sin_cos_real(q[2]));
         let knee = axpy(&hip, -self.thigh, &rt[2]);
         let rc = post_ry(&rt, sin_cos_real(q[3]));
         let ankle = axpy(&knee, -self.calf, &rc[2]);
-        let rf = post_rx(&post_ry(&rc, sin_cos_real(q[4])), sin_cos_real(q[5]));
+        let r_pitch = post_ry(&rc, sin_cos_real(q[4]));
+        let rf = post_rx(&r_pitch, sin_cos_real(q[5]));
         let sole = axpy(&ankle, -self.ankle_height, &rf[2]);
-        ([hip, knee, ankle, sole], rf)
+        let axes = [rp[2], r_yaw[0], r_roll[1], rt[1], rc[1], r_pitch[0]];
+        ([hip, knee, ankle, sole], rf, axes)
+    }
+
+    /// World positions of the joints and mass points of a leg, and its joint axes (unit vectors,
+    /// world frame, joint order; the three hip axes pass through the hip centre, the two ankle
+    /// axes through the ankle centre).
+    pub fn joint_axes(
+        &self,
+        side: Side,
+        pelvis: &Pose<R>,
+        q: &LegAngles<R>,
+    ) -> (LegPoints<R>, [[R; 3]; JOINTS_PER_LEG]) {
+        let ([hip, knee, ankle, sole], rf, axes) = self.chain_axes(side, pelvis, q);
+        let points = LegPoints {
+            hip,
+            knee,
+            ankle,
+            sole,
+            thigh_mass: mid(&hip, &knee),
+            calf_mass: mid(&knee, &ankle),
+            sole_mass: axpy(&sole, self.sole_mass_height, &rf[2]),
+        };
+        (points, axes)
     }
 
     /// Forward kinematics: the foot (sole point) pose in the world frame.
@@ -441,16 +478,7 @@ impl<R: Real> LegKinematics<R> {
 
     /// Forward kinematics: world positions of the joints, sole point and mass points.
     pub fn points(&self, side: Side, pelvis: &Pose<R>, q: &LegAngles<R>) -> LegPoints<R> {
-        let ([hip, knee, ankle, sole], rf) = self.chain(side, pelvis, q);
-        LegPoints {
-            hip,
-            knee,
-            ankle,
-            sole,
-            thigh_mass: mid(&hip, &knee),
-            calf_mass: mid(&knee, &ankle),
-            sole_mass: axpy(&sole, self.sole_mass_height, &rf[2]),
-        }
+        self.joint_axes(side, pelvis, q).0
     }
 
     /// Closed-form inverse kinematics of one leg (see the module documentation).

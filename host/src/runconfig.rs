@@ -185,7 +185,11 @@ mod tests {
             tokens.contains(&"feasibility=stretch".to_string()),
             "{tokens:?}"
         );
-        assert!(tokens.contains(&"gyro_hip=0.05".to_string()), "{tokens:?}");
+        assert!(tokens.contains(&"gyro_hip=0.1".to_string()), "{tokens:?}");
+        assert!(
+            tokens.contains(&"compliance_roll=1".to_string()),
+            "{tokens:?}"
+        );
         assert!(tokens.contains(&"baud=1000000".to_string()), "{tokens:?}");
         let mut sim = crate::sim::SimConfig::default();
         rc.sim.apply("fil", &mut sim).unwrap();

@@ -241,7 +241,13 @@ fn idealised(seed: u64) -> SimConfig {
 /// Whole-body compensation + the stabilizer (default gains), 4 steps; the gyro balance
 /// feedback off: it is made for (and tested on) the MuJoCo robot, while the idealised model's
 /// scripted fall (its ZMP 5 mm outside the soles for 50 ms) is not physics.
-const STAB: &[&str] = &["comp=wholebody", "stab=on", "gyro_ankle=0", "gyro_hip=0"];
+const STAB: &[&str] = &[
+    "comp=wholebody",
+    "stab=on",
+    "gyro_ankle=0",
+    "gyro_hip=0",
+    "compliance_roll=0",
+];
 
 /// The walk with the stabilizer stayed bounded: plan done (exit 0), no fall in the simulator,
 /// no joint target clamped to a servo limit or non-finite (a non-finite one stops with exit
@@ -403,7 +409,12 @@ fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
         "mujoco-table2",
         spec.clone(),
         sim,
-        &["feasibility=off", "gyro_ankle=0", "gyro_hip=0"],
+        &[
+            "feasibility=off",
+            "gyro_ankle=0",
+            "gyro_hip=0",
+            "compliance_roll=0",
+        ],
     );
     assert_eq!(r.exit_code, Some(0));
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
@@ -492,7 +503,12 @@ fn closed_loop_walk_survives_a_sagittal_push() {
         "open-loop-push",
         spec.clone(),
         sim,
-        &["feasibility=off", "gyro_ankle=0", "gyro_hip=0"],
+        &[
+            "feasibility=off",
+            "gyro_ankle=0",
+            "gyro_hip=0",
+            "compliance_roll=0",
+        ],
     );
     assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
     assert!(r.sim.fall_started_us.is_some());

@@ -1190,3 +1190,43 @@ fn position_i_gains_are_written_before_torque_on() {
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(b.servos().filter(|d| d.i_gain > 0).count(), 10);
 }
+
+/// The compliance feed-forward (`compliance_roll`): it changes only the hip-roll and ankle-roll
+/// targets, by at most `compliance_max` (plus the tick rounding), and in single support on the
+/// left foot the left hip roll is raised (the body's weight beside the hip sags it the other
+/// way) by the saturation (the model asks ≈ 0.1 rad there).
+#[test]
+fn compliance_moves_only_the_roll_targets_within_its_bound() {
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 compliance_roll=0");
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0 compliance_roll=1 compliance_max=0.05");
+    let (mut a, mut b) = (
+        board(&off).with_imu_rate(0.0),
+        board(&on).with_imu_rate(0.0),
+    );
+    assert_eq!(run(&mut a, &off), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(run(&mut b, &on), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(a.goals.len(), b.goals.len());
+    let map = JointMap::from_robot(&Robot::reference());
+    let tick = core::f32::consts::TAU / 4096.0;
+    let mut largest = [0.0f32; 12];
+    for (ga, gb) in a.goals.iter().zip(&b.goals).skip(1) {
+        for j in 0..12 {
+            let d = map.rad_of_tick(j, gb[j]) - map.rad_of_tick(j, ga[j]);
+            assert!(d.abs() <= 0.05 + tick, "joint {j}: {d} rad");
+            if matches!(j % 6, 1 | 5) {
+                largest[j] = largest[j].max(d.abs());
+            } else {
+                assert_eq!(ga[j], gb[j], "joint {j}");
+            }
+        }
+    }
+    // Left hip roll (joint 1) reaches the saturation, raised.
+    assert!(largest[1] >= 0.05 - tick, "{largest:?}");
+    let raised = a
+        .goals
+        .iter()
+        .zip(&b.goals)
+        .any(|(ga, gb)| map.rad_of_tick(1, gb[1]) - map.rad_of_tick(1, ga[1]) >= 0.05 - tick);
+    assert!(raised, "{largest:?}");
+    assert_goals_in_limits(&b);
+}
