@@ -53,10 +53,12 @@ done
 # would interleave with the bench's text on semihosting stdout) in its own target directory,
 # so that switching DEFMT_LOG never rebuilds the firmware ELFs in target/.
 qemu_feat=(--release --no-default-features --features board-qemu)
+# The bench runs the control loop on the fake robot (src/fake_robot.rs, feature fake-robot).
+bench_feat=(--release --no-default-features --features board-qemu,fake-robot)
 bench_dir=target/bench-build
 echo "bench.sh: building" >&2
-DEFMT_LOG=off cargo build "${qemu_feat[@]}" --bin bench --target-dir "$bench_dir"
-DEFMT_LOG=off cargo build "${qemu_feat[@]}" --bin bench --target-dir "$bench_dir" \
+DEFMT_LOG=off cargo build "${bench_feat[@]}" --bin bench --target-dir "$bench_dir"
+DEFMT_LOG=off cargo build "${bench_feat[@]}" --bin bench --target-dir "$bench_dir" \
     --target thumbv7m-none-eabi
 cargo build "${qemu_feat[@]}" --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
@@ -302,8 +304,8 @@ comment), fat LTO, one codegen unit.
 Reproduce one machine by hand:
 
 \`\`\`sh
-DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu --bin bench --target-dir target/bench-build
-DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu --bin bench --target-dir target/bench-build --target thumbv7m-none-eabi
+DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench --target-dir target/bench-build
+DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench --target-dir target/bench-build --target thumbv7m-none-eabi
 qemu-system-arm -M mps2-an500 -nographic -monitor none -serial null \\
     -semihosting-config enable=on,target=native -icount shift=0 \\
     -kernel target/bench-build/thumbv7em-none-eabihf/release/bench        # also -M mps2-an386

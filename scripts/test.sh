@@ -27,7 +27,7 @@ step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (r
 DXL_FUZZ_CASES=10000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams
 
 step "firmware: clippy and release builds for both boards"
-cargo clippy --release --no-deps --no-default-features --features board-qemu --bins -- -D warnings
+cargo clippy --release --no-deps --no-default-features --features board-qemu,fake-robot --bins -- -D warnings
 cargo clippy --release --no-deps --no-default-features --features board-opencr --bins -- -D warnings
 # The fixed-point gait (`math=fixed`) is a build feature (≈ 17 KB of flash): its ELF is kept as
 # qemu-fixed for the firmware-in-the-loop test, then the default ELF is built.

@@ -15,6 +15,8 @@
 //!   initial pose;
 //! * [`control`]: the walking loop (sensors → supervisor → gait → IK → servos → log) and the
 //!   exit codes;
+//! * `fake_robot` (feature `fake-robot`, and in the host tests): the one fake robot of the
+//!   host tests, the bench and the on-target tests;
 //! * [`params`] (`walker-contract`): `key=value` overrides of [`Config`] (the QEMU command
 //!   line), one table for the firmware, the host and the docs.
 #![cfg_attr(not(test), no_std)]
@@ -58,8 +60,8 @@ pub use walker_contract::params;
 pub use walker_contract::record;
 pub use walker_contract::ExitCode;
 
-#[cfg(test)]
-mod testkit;
+#[cfg(any(test, feature = "fake-robot"))]
+pub mod fake_robot;
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 pub mod boards;

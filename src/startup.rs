@@ -317,7 +317,7 @@ impl Ramp {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testkit::FakeBoard;
+    use crate::fake_robot::trace::FakeBoard;
     use core::cell::Cell;
     use dxl::opcode;
 
