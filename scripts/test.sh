@@ -70,9 +70,8 @@ if [ "$code" != 2 ]; then
     exit 1
 fi
 code=0
-timeout 60 qemu-system-arm -M mps2-an500 -nographic -monitor none -serial null -serial null \
-    -serial null -semihosting-config enable=on,target=native -icount shift=0 \
-    -kernel target/thumbv7em-none-eabihf/release/qemu -append "$long" >/dev/null || code=$?
+scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --raw --unchecked --timeout 60 \
+    --log null -append "$long" >/dev/null || code=$?
 if [ "$code" != 2 ]; then
     echo "firmware: expected exit 2 (configuration rejected) for a refused command line, got $code" >&2
     exit 1

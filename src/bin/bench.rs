@@ -4,11 +4,10 @@
 //! Build and run (`scripts/bench.sh` does all of this and rewrites BENCHMARKS.md):
 //! ```text
 //! cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench
-//! qemu-system-arm -M mps2-an500 -nographic -semihosting-config enable=on,target=native \
-//!     -icount shift=0 -kernel target/thumbv7em-none-eabihf/release/bench
+//! scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/bench --raw     # mps2-an500
 //! cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench \
 //!     --target thumbv7m-none-eabi
-//! qemu-system-arm -M mps2-an385 ... -kernel target/thumbv7m-none-eabi/release/bench
+//! scripts/qemu-run.sh target/thumbv7m-none-eabi/release/bench --raw        # mps2-an385
 //! ```
 //!
 //! # Method
