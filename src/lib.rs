@@ -91,6 +91,29 @@ const fn parse_u8(s: &str) -> u8 {
     }
 }
 
+/// The walk of a firmware binary once its board is up: logs the build and the configuration,
+/// runs [`control::run`] (start-up, walk, stop) and logs how it ended; the run's end.
+pub fn run_walk<B: board::Board>(board: &mut B, cfg: &Config) -> control::RunEnd {
+    fw_log!(
+        info,
+        "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, model {=str}, {=usize} steps",
+        env!("CARGO_PKG_VERSION"),
+        B::NAME,
+        cfg.tick_period_us,
+        cfg.bus_baud,
+        cfg.model.name(),
+        cfg.walk.steps
+    );
+    let end = control::run(board, cfg);
+    fw_log!(
+        info,
+        "run ended at t = {=u64} us: exit code {=i32}",
+        board.now_us(),
+        end.exit_code()
+    );
+    end
+}
+
 /// The start-up record for `board` (the bus is not probed in this phase: `probed = false`).
 pub fn startup_record<B: board::Board>(
     board: &B,
