@@ -42,7 +42,12 @@ macro_rules! wire_codes {
         #[derive(Clone, Copy, Debug, PartialEq, Eq)]
         #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
         pub enum $name {
-            $($(#[$vmeta])* $variant,)+
+            $(
+                $(#[$vmeta])*
+                #[doc = ""]
+                #[doc = concat!("Wire code ", stringify!($code), ".")]
+                $variant,
+            )+
         }
 
         impl $name {
@@ -74,30 +79,30 @@ pub struct UnknownCode(pub u8);
 wire_codes! {
     /// The reason code of a stop record.
     pub enum StopCode {
-        /// 1: a device did not answer the start-up probe (id).
+        /// A device did not answer the start-up probe (id).
         DeviceMissing = 1,
-        /// 2: a device missed more than `hold_ticks` replies in a row (id).
+        /// A device missed more than `hold_ticks` replies in a row (id).
         DeviceLost = 2,
-        /// 3: the trunk tilted beyond the limit (value = tilt, mrad).
+        /// The trunk tilted beyond the limit (value = tilt, mrad).
         Fall = 3,
-        /// 4: too many consecutive tick overruns (value = count).
+        /// Too many consecutive tick overruns (value = count).
         OverrunBurst = 4,
-        /// 5: a joint target was NaN or infinite (id = joint).
+        /// A joint target was NaN or infinite (id = joint).
         NonFiniteTarget = 5,
-        /// 6: the walking plan finished.
+        /// The walking plan finished.
         PlanDone = 6,
-        /// 7: stop requested from outside.
+        /// Stop requested from outside.
         Requested = 7,
-        /// 8: a gait sample (or the stabilizer's shift) was not finite before the IK (value =
+        /// A gait sample (or the stabilizer's shift) was not finite before the IK (value =
         /// walk tick).
         NonFiniteSample = 8,
-        /// 9: a sensor board gave no plausible reply for longer than `stale_ms` (id = device,
+        /// A sensor board gave no plausible reply for longer than `stale_ms` (id = device,
         /// value = age of its last accepted sample, ms).
         SensorStale = 9,
-        /// 11: the servo monitor saw a servo beyond a limit (id = servo, value = [`ServoCheck`]
+        /// The servo monitor saw a servo beyond a limit (id = servo, value = [`ServoCheck`]
         /// code · 65536 + the reading in the check's unit). (10 is not used: see the module docs.)
         ServoFault = 11,
-        /// 12: the last reset was not a power-on: the firmware does not walk by itself (value =
+        /// The last reset was not a power-on: the firmware does not walk by itself (value =
         /// [`ResetCause`] code).
         NotPowerOn = 12,
     }
@@ -363,14 +368,14 @@ impl From<u8> for FaultKind {
 wire_codes! {
     /// Why a sensor reply was rejected (the `SensorRejected` fault record's `value`).
     pub enum SensorRejection {
-        /// 1: the board's sample counter did not advance since its last accepted sample.
+        /// The board's sample counter did not advance since its last accepted sample.
         FrozenCounter = 1,
-        /// 2: a value is outside the sensor's range.
+        /// A value is outside the sensor's range.
         OutOfRange = 2,
-        /// 3: the foot forces are not consistent with the robot's weight (total above
+        /// The foot forces are not consistent with the robot's weight (total above
         /// m·g·`force_factor`, or below −0.1·m·g).
         Weight = 3,
-        /// 4: the reply data could not be read as a sample.
+        /// The reply data could not be read as a sample.
         Malformed = 4,
     }
 }
@@ -378,16 +383,16 @@ wire_codes! {
 wire_codes! {
     /// Which servo check failed (the `ServoFault` stop's reason; the reading's unit in brackets).
     pub enum ServoCheck {
-        /// 1: Hardware Error Status (70) is not 0 [its bits: 0 input voltage, 2 overheating, 3
+        /// Hardware Error Status (70) is not 0 [its bits: 0 input voltage, 2 overheating, 3
         /// motor encoder, 4 electrical shock, 5 overload].
         HardwareError = 1,
-        /// 2: Present Temperature (146) above the limit [°C].
+        /// Present Temperature (146) above the limit [°C].
         Temperature = 2,
-        /// 3: Present Input Voltage (144) below the limit [0.1 V].
+        /// Present Input Voltage (144) below the limit [0.1 V].
         VoltageLow = 3,
-        /// 4: Present Input Voltage above the limit [0.1 V].
+        /// Present Input Voltage above the limit [0.1 V].
         VoltageHigh = 4,
-        /// 5: |Present Current| (126) above the limit [mA].
+        /// |Present Current| (126) above the limit [mA].
         Current = 5,
     }
 }
@@ -395,19 +400,19 @@ wire_codes! {
 wire_codes! {
     /// What reset the controller (the `ResetCause` fault record's `id`).
     pub enum ResetCause {
-        /// 1: power-on (the only reset after which the firmware walks by itself).
+        /// Power-on (the only reset after which the firmware walks by itself).
         PowerOn = 1,
-        /// 2: brown-out (the supply sagged below the threshold).
+        /// Brown-out (the supply sagged below the threshold).
         BrownOut = 2,
-        /// 3: a watchdog (independent or window).
+        /// A watchdog (independent or window).
         Watchdog = 3,
-        /// 4: a software reset (the panic path, `SCB::sys_reset`).
+        /// A software reset (the panic path, `SCB::sys_reset`).
         Software = 4,
-        /// 5: the reset pin (button, debugger).
+        /// The reset pin (button, debugger).
         Pin = 5,
-        /// 6: low-power management.
+        /// Low-power management.
         LowPower = 6,
-        /// 7: no flag set (unknown).
+        /// No flag set (unknown).
         Unknown = 7,
     }
 }
@@ -415,9 +420,9 @@ wire_codes! {
 wire_codes! {
     /// What a crash record in no-init RAM says (the `CrashRecord` fault record's `id`).
     pub enum CrashCode {
-        /// 1: the firmware panicked.
+        /// The firmware panicked.
         Panic = 1,
-        /// 2: the watchdog reset the controller (the record holds the last tick noted).
+        /// The watchdog reset the controller (the record holds the last tick noted).
         Watchdog = 2,
     }
 }
@@ -425,19 +430,19 @@ wire_codes! {
 wire_codes! {
     /// Which start-up step failed (its code is the `StartupFailed` fault record's `value`).
     pub enum StartupStep {
-        /// 1: reading Return Delay Time.
+        /// Reading Return Delay Time.
         ReturnDelayRead = 1,
-        /// 2: writing Return Delay Time = 0.
+        /// Writing Return Delay Time = 0.
         ReturnDelayWrite = 2,
-        /// 3: the read-back value was not 0.
+        /// The read-back value was not 0.
         ReturnDelayVerify = 3,
-        /// 4: SYNC READ of the present positions.
+        /// SYNC READ of the present positions.
         ReadPositions = 4,
-        /// 5: WRITE Torque Enable = 1.
+        /// WRITE Torque Enable = 1.
         TorqueEnable = 5,
-        /// 6: writing a servo's Position I Gain.
+        /// Writing a servo's Position I Gain.
         GainWrite = 6,
-        /// 7: the read-back Position I Gain differed.
+        /// The read-back Position I Gain differed.
         GainVerify = 7,
     }
 }
@@ -445,35 +450,35 @@ wire_codes! {
 wire_codes! {
     /// The firmware's exit code (see the module docs' table).
     pub enum ExitCode {
-        /// 0: plan done.
+        /// Plan done.
         PlanDone = 0,
-        /// 2: configuration rejected.
+        /// Configuration rejected.
         ConfigRejected = 2,
-        /// 3: virtual watchdog (QEMU board).
+        /// Virtual watchdog (QEMU board).
         Watchdog = 3,
-        /// 11: device missing at start-up.
+        /// Device missing at start-up.
         DeviceMissing = 11,
-        /// 12: device lost while running.
+        /// Device lost while running.
         DeviceLost = 12,
-        /// 13: fall.
+        /// Fall.
         Fall = 13,
-        /// 14: overrun burst.
+        /// Overrun burst.
         OverrunBurst = 14,
-        /// 15: non-finite joint target.
+        /// Non-finite joint target.
         NonFiniteTarget = 15,
-        /// 17: stop requested.
+        /// Stop requested.
         Requested = 17,
-        /// 18: non-finite gait sample.
+        /// Non-finite gait sample.
         NonFiniteSample = 18,
-        /// 19: sensor data stale.
+        /// Sensor data stale.
         SensorStale = 19,
-        /// 21: servo fault seen by the monitor.
+        /// Servo fault seen by the monitor.
         ServoFault = 21,
-        /// 22: not walking after a reset other than power-on.
+        /// Not walking after a reset other than power-on.
         NotPowerOn = 22,
-        /// 20: a start-up step failed after the probe.
+        /// A start-up step failed after the probe.
         StartupFailed = 20,
-        /// 101: panic.
+        /// Panic.
         Panic = 101,
     }
 }
