@@ -53,10 +53,12 @@ done
 # would interleave with the bench's text on semihosting stdout) in its own target directory,
 # so that switching DEFMT_LOG never rebuilds the firmware ELFs in target/.
 qemu_feat=(--release --no-default-features --features board-qemu)
+# The bench runs the control loop on the fake robot (src/fake_robot.rs, feature fake-robot).
+bench_feat=(--release --no-default-features --features board-qemu,fake-robot)
 bench_dir=target/bench-build
 echo "bench.sh: building" >&2
-DEFMT_LOG=off cargo build "${qemu_feat[@]}" --bin bench --target-dir "$bench_dir"
-DEFMT_LOG=off cargo build "${qemu_feat[@]}" --bin bench --target-dir "$bench_dir" \
+DEFMT_LOG=off cargo build "${bench_feat[@]}" --bin bench --target-dir "$bench_dir"
+DEFMT_LOG=off cargo build "${bench_feat[@]}" --bin bench --target-dir "$bench_dir" \
     --target thumbv7m-none-eabi
 cargo build "${qemu_feat[@]}" --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
@@ -64,10 +66,9 @@ elf_hf=$bench_dir/thumbv7em-none-eabihf/release/bench
 elf_m3=$bench_dir/thumbv7m-none-eabi/release/bench
 
 # ---- 2. QEMU runs ----
-run_once() { # machine elf outfile
-    timeout --foreground "$qemu_timeout" qemu-system-arm -M "$1" -nographic -monitor none \
-        -serial null -semihosting-config enable=on,target=native -icount shift=0 \
-        -kernel "$2" >"$3" 2>"$3.err"
+run_once() { # machine elf outfile (QEMU's command line: scripts/qemu-run.sh)
+    scripts/qemu-run.sh "$2" --raw --machine "$1" --timeout "$qemu_timeout" --bus null \
+        --log null >"$3" 2>"$3.err"
 }
 run_machine() { # machine elf name
     local m=$1 elf=$2 name=$3 rc1=0 rc2=0
@@ -302,14 +303,10 @@ comment), fat LTO, one codegen unit.
 Reproduce one machine by hand:
 
 \`\`\`sh
-DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu --bin bench --target-dir target/bench-build
-DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu --bin bench --target-dir target/bench-build --target thumbv7m-none-eabi
-qemu-system-arm -M mps2-an500 -nographic -monitor none -serial null \\
-    -semihosting-config enable=on,target=native -icount shift=0 \\
-    -kernel target/bench-build/thumbv7em-none-eabihf/release/bench        # also -M mps2-an386
-qemu-system-arm -M mps2-an385 -nographic -monitor none -serial null \\
-    -semihosting-config enable=on,target=native -icount shift=0 \\
-    -kernel target/bench-build/thumbv7m-none-eabi/release/bench
+DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench --target-dir target/bench-build
+DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench --target-dir target/bench-build --target thumbv7m-none-eabi
+scripts/qemu-run.sh target/bench-build/thumbv7em-none-eabihf/release/bench --raw  # an500; also --machine mps2-an386
+scripts/qemu-run.sh target/bench-build/thumbv7m-none-eabi/release/bench --raw     # an385 (by the target)
 \`\`\`
 
 ### Full control tick, instructions (avg over the walk, max per tick in parentheses)

@@ -1,5 +1,8 @@
 #!/usr/bin/env bash
 # Runs a walker-firmware ELF (board-qemu build) in qemu-system-arm and decodes its defmt output.
+# This script is the one definition of the QEMU command line: the bench (scripts/bench.sh), CI
+# (scripts/test.sh), cargo's runner and the host's firmware-in-the-loop run (host/src/qemu.rs)
+# all start QEMU through it; the machines are the table scripts/qemu-machines.txt.
 #
 # Usage: scripts/qemu-run.sh ELF [options] [extra qemu args]
 #   --bus SPEC       chardev of UART0, the servo bus   (default: $WALKER_BUS or null)
@@ -8,8 +11,14 @@
 #   --lockstep SPEC  chardev of UART2, the lock-step channel; also turns lock-step on in the
 #                    firmware (semihosting command line "lockstep") (default: $WALKER_LOCKSTEP;
 #                    without it UART2 is null and the bus is unconnected: reads time out)
-#   --machine M      mps2-an500 (Cortex-M7, default: $WALKER_QEMU_MACHINE) or mps2-an386 (M4F)
+#   --machine M      a machine of scripts/qemu-machines.txt: mps2-an500 (Cortex-M7),
+#                    mps2-an386 (M4F), mps2-an385 (M3) (default: $WALKER_QEMU_MACHINE, else the
+#                    table's first machine for the ELF's target directory, e.g.
+#                    thumbv7m-none-eabi → an385; a machine that cannot run that target: exit 2)
 #   --timeout S      wall-clock limit in seconds (default: $WALKER_QEMU_TIMEOUT or 600; 0 = none)
+#   --raw            QEMU's stdout (semihosting) as it is, no defmt decoding; the script execs
+#                    QEMU, so the caller's child process is QEMU itself (killing it stops QEMU)
+#   --unchecked      skip the command-line length check (to test the firmware's own refusal)
 #   SPEC is a qemu chardev, e.g. tcp:127.0.0.1:4000,nodelay=on  file:out.bin  null
 #
 # As a cargo runner (cargo passes the ELF first, then the program's arguments):
@@ -30,7 +39,7 @@
 set -u
 
 if [ $# -lt 1 ]; then
-    echo "usage: $0 ELF [--bus SPEC] [--log SPEC] [--lockstep SPEC] [--machine M] [--timeout S] [qemu args...]" >&2
+    echo "usage: $0 ELF [--bus SPEC] [--log SPEC] [--lockstep SPEC] [--machine M] [--timeout S] [--raw] [--unchecked] [qemu args...]" >&2
     exit 2
 fi
 elf=$1
@@ -48,8 +57,10 @@ fi
 bus=${WALKER_BUS:-null}
 log=${WALKER_LOG:-file:target/qemu-zmp-log.bin}
 lockstep=${WALKER_LOCKSTEP:-}
-machine=${WALKER_QEMU_MACHINE:-mps2-an500}
+machine=${WALKER_QEMU_MACHINE:-}
 timeout_s=${WALKER_QEMU_TIMEOUT:-600}
+raw=0
+checked=1
 extra=()
 while [ $# -gt 0 ]; do
     case "$1" in
@@ -58,9 +69,39 @@ while [ $# -gt 0 ]; do
         --lockstep) lockstep=$2; shift 2 ;;
         --machine) machine=$2; shift 2 ;;
         --timeout) timeout_s=$2; shift 2 ;;
+        --raw) raw=1; shift ;;
+        --unchecked) checked=0; shift ;;
         *) extra+=("$1"); shift ;;
     esac
 done
+
+# The machine: asked for, else the first of the table that runs the ELF's target (its
+# target/<triple>/ directory), else the table's first; refused when the table says it cannot run
+# that target.
+table=$(dirname "$0")/qemu-machines.txt
+elf_target=
+first=
+default=
+while read -r m _core targets; do
+    case "$m" in '#'*|'') continue ;; esac
+    [ -z "$first" ] && first=$m
+    for t in ${targets//,/ }; do
+        if [[ "$elf" == *"/$t/"* ]]; then
+            elf_target=$t
+            [ -z "$default" ] && default=$m
+        fi
+    done
+done < "$table"
+machine=${machine:-${default:-$first}}
+row=$(grep "^$machine " "$table" || true)
+if [ -z "$row" ]; then
+    echo "qemu-run.sh: unknown machine $machine (the machines are in $table)" >&2
+    exit 2
+fi
+if [ -n "$elf_target" ] && [[ ",$(echo "$row" | awk '{print $3}')," != *",$elf_target,"* ]]; then
+    echo "qemu-run.sh: $machine does not run $elf_target ELFs (see $table)" >&2
+    exit 2
+fi
 
 # A log file's directory must exist.
 case "$log" in
@@ -91,7 +132,7 @@ for a in "${cmd[@]}"; do
     prev=$a
 done
 need=$(( ${#elf} + 1 + ${#text} + 1 ))
-if [ -n "$text" ] && [ "$need" -gt "$cmdline_max" ]; then
+if [ "$checked" = 1 ] && [ -n "$text" ] && [ "$need" -gt "$cmdline_max" ]; then
     echo "qemu-run.sh: the firmware command line is $need bytes (ELF path + space + -append text + NUL), over the firmware's $cmdline_max-byte semihosting buffer" >&2
     exit 2
 fi
@@ -101,7 +142,9 @@ if [ "$timeout_s" != "0" ] && command -v timeout >/dev/null 2>&1; then
     limit=(timeout --foreground "$timeout_s")
 fi
 
-if command -v defmt-print >/dev/null 2>&1; then
+if [ "$raw" = 1 ]; then
+    exec "${limit[@]}" "${cmd[@]}"
+elif command -v defmt-print >/dev/null 2>&1; then
     "${limit[@]}" "${cmd[@]}" | defmt-print -e "$elf" --show-skipped-frames stdin
     status=${PIPESTATUS[0]}
 else

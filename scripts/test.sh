@@ -27,7 +27,7 @@ step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (r
 DXL_FUZZ_CASES=10000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams
 
 step "firmware: clippy and release builds for both boards"
-cargo clippy --release --no-deps --no-default-features --features board-qemu --bins -- -D warnings
+cargo clippy --release --no-deps --no-default-features --features board-qemu,fake-robot --bins -- -D warnings
 cargo clippy --release --no-deps --no-default-features --features board-opencr --bins -- -D warnings
 # The fixed-point gait (`math=fixed`) is a build feature (≈ 17 KB of flash): its ELF is kept as
 # qemu-fixed for the firmware-in-the-loop test, then the default ELF is built.
@@ -70,9 +70,8 @@ if [ "$code" != 2 ]; then
     exit 1
 fi
 code=0
-timeout 60 qemu-system-arm -M mps2-an500 -nographic -monitor none -serial null -serial null \
-    -serial null -semihosting-config enable=on,target=native -icount shift=0 \
-    -kernel target/thumbv7em-none-eabihf/release/qemu -append "$long" >/dev/null || code=$?
+scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --raw --unchecked --timeout 60 \
+    --log null -append "$long" >/dev/null || code=$?
 if [ "$code" != 2 ]; then
     echo "firmware: expected exit 2 (configuration rejected) for a refused command line, got $code" >&2
     exit 1

@@ -64,17 +64,9 @@ impl<T: ServoBus + ?Sized> ServoBus for &mut T {
     }
 }
 
-/// Monotonic microsecond clock of the board (virtual and deterministic under QEMU).
-pub trait Clock {
-    /// Microseconds since boot.
-    fn now_us(&self) -> u64;
-}
-
-impl<T: Clock + ?Sized> Clock for &mut T {
-    fn now_us(&self) -> u64 {
-        (**self).now_us()
-    }
-}
+/// Monotonic microsecond clock of the board (virtual and deterministic under QEMU): the one
+/// clock trait, the Dynamixel master's ([`dxl::Clock`]).
+pub use dxl::Clock;
 
 pub use walker_contract::record::LogSink;
 

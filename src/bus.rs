@@ -199,7 +199,7 @@ pub fn counters(s: &BusStats) -> BusCounters {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testkit::FakeBoard;
+    use crate::fake_robot::trace::FakeBoard;
 
     #[test]
     fn ping_through_the_link_and_timeouts_are_exact() {

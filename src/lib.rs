@@ -15,6 +15,8 @@
 //!   initial pose;
 //! * [`control`]: the walking loop (sensors → supervisor → gait → IK → servos → log) and the
 //!   exit codes;
+//! * `fake_robot` (feature `fake-robot`, and in the host tests): the one fake robot of the
+//!   host tests, the bench and the on-target tests;
 //! * [`params`] (`walker-contract`): `key=value` overrides of [`Config`] (the QEMU command
 //!   line), one table for the firmware, the host and the docs.
 #![cfg_attr(not(test), no_std)]
@@ -58,8 +60,8 @@ pub use walker_contract::params;
 pub use walker_contract::record;
 pub use walker_contract::ExitCode;
 
-#[cfg(test)]
-mod testkit;
+#[cfg(any(test, feature = "fake-robot"))]
+pub mod fake_robot;
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 pub mod boards;
@@ -87,6 +89,29 @@ const fn parse_u8(s: &str) -> u8 {
     } else {
         v as u8
     }
+}
+
+/// The walk of a firmware binary once its board is up: logs the build and the configuration,
+/// runs [`control::run`] (start-up, walk, stop) and logs how it ended; the run's end.
+pub fn run_walk<B: board::Board>(board: &mut B, cfg: &Config) -> control::RunEnd {
+    fw_log!(
+        info,
+        "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, model {=str}, {=usize} steps",
+        env!("CARGO_PKG_VERSION"),
+        B::NAME,
+        cfg.tick_period_us,
+        cfg.bus_baud,
+        cfg.model.name(),
+        cfg.walk.steps
+    );
+    let end = control::run(board, cfg);
+    fw_log!(
+        info,
+        "run ended at t = {=u64} us: exit code {=i32}",
+        board.now_us(),
+        end.exit_code()
+    );
+    end
 }
 
 /// The start-up record for `board` (the bus is not probed in this phase: `probed = false`).

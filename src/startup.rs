@@ -144,17 +144,36 @@ pub fn set_return_delay<B: ServoBus + Clock>(
         if v[0] == 0 {
             continue;
         }
-        retry(n, || bus.master().write(id, addr, &[0]))
-            .map_err(|e| fail(StartupStep::ReturnDelayWrite, id, Some(e)))?;
+        let steps = [
+            StartupStep::ReturnDelayWrite,
+            StartupStep::ReturnDelayRead,
+            StartupStep::ReturnDelayVerify,
+        ];
+        write_verified(bus, n, id, addr, [0], steps)?;
         written = written.saturating_add(1);
-        let mut back = [0xFFu8; 1];
-        retry(n, || bus.master().read(id, addr, &mut back))
-            .map_err(|e| fail(StartupStep::ReturnDelayRead, id, Some(e)))?;
-        if back[0] != 0 {
-            return Err(fail(StartupStep::ReturnDelayVerify, id, None));
-        }
     }
     Ok(written)
+}
+
+/// Writes `value` at `addr` of device `id` and reads it back, each retried `attempts` times;
+/// `steps` name the failures: [write, read-back, verify (the read-back differs)].
+fn write_verified<B: ServoBus + Clock, const L: usize>(
+    bus: &mut BoardMaster<'_, B>,
+    attempts: u8,
+    id: u8,
+    addr: u16,
+    value: [u8; L],
+    steps: [StartupStep; 3],
+) -> Result<(), StartupError> {
+    let [write, read, verify] = steps;
+    let fail = |step, error| StartupError { step, id, error };
+    retry(attempts, || bus.master().write(id, addr, &value)).map_err(|e| fail(write, Some(e)))?;
+    let mut back = [0u8; L];
+    retry(attempts, || bus.master().read(id, addr, &mut back)).map_err(|e| fail(read, Some(e)))?;
+    if back != value {
+        return Err(fail(verify, None));
+    }
+    Ok(())
 }
 
 /// The Position I Gain of leg joint `j` from `cfg`: [`Config::servo_i_roll`] for the hip-roll
@@ -178,21 +197,17 @@ pub fn set_position_gains<B: ServoBus + Clock>(
 ) -> Result<u8, StartupError> {
     let addr = x_series::POSITION_I_GAIN.addr;
     let n = cfg.startup_attempts;
-    let fail = |step, id, error| StartupError { step, id, error };
     let mut written = 0u8;
     for (j, &id) in ids::LEGS.iter().enumerate() {
         let Some(gain) = position_i_gain(cfg, j).filter(|g| *g > 0) else {
             continue;
         };
-        let bytes = gain.to_le_bytes();
-        retry(n, || bus.master().write(id, addr, &bytes))
-            .map_err(|e| fail(StartupStep::GainWrite, id, Some(e)))?;
-        let mut back = [0u8; 2];
-        retry(n, || bus.master().read(id, addr, &mut back))
-            .map_err(|e| fail(StartupStep::GainWrite, id, Some(e)))?;
-        if back != bytes {
-            return Err(fail(StartupStep::GainVerify, id, None));
-        }
+        let steps = [
+            StartupStep::GainWrite,
+            StartupStep::GainWrite,
+            StartupStep::GainVerify,
+        ];
+        write_verified(bus, n, id, addr, gain.to_le_bytes(), steps)?;
         written = written.saturating_add(1);
     }
     Ok(written)
@@ -317,7 +332,7 @@ impl Ramp {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testkit::FakeBoard;
+    use crate::fake_robot::trace::FakeBoard;
     use core::cell::Cell;
     use dxl::opcode;
 

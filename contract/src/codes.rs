@@ -1,8 +1,9 @@
 //! Every numeric code that crosses the firmware–host boundary, each in ONE explicit table:
 //! the stop reasons of the log's stop record ([`StopCode`]), the fault kinds of its fault record
-//! ([`FaultKind`]) and the firmware's exit codes ([`ExitCode`]). Each has `code()` and
-//! `TryFrom<u8>` (or `from_code`) written out value by value: reordering variants changes
-//! nothing on the wire, and a round-trip test covers every value.
+//! ([`FaultKind`]) and the firmware's exit codes ([`ExitCode`]). Each variant states its code
+//! once (`Variant = code` in a `wire_codes!` table; [`FaultKind`] by hand), from which `code()`
+//! and `TryFrom<u8>` are generated value by value: reordering variants changes nothing on the
+//! wire, and a round-trip test covers every value.
 //!
 //! # Exit codes (QEMU passes them to the host through semihosting)
 //! | code | meaning |
@@ -26,41 +27,85 @@
 //! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0). Stop
 //! code 10 is never used: its exit code would be start-up's 20.
 
+/// Declares a code table once: an enum whose every variant carries its explicit wire code
+/// (`Variant = code`), and from it the enum, `code()` and `TryFrom<u8>` (unknown values:
+/// [`UnknownCode`]). The codes are written out value by value in the generated matches, so
+/// reordering variants changes nothing on the wire.
+macro_rules! wire_codes {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident {
+            $($(#[$vmeta:meta])* $variant:ident = $code:literal,)+
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+        #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+        pub enum $name {
+            $(
+                $(#[$vmeta])*
+                #[doc = ""]
+                #[doc = concat!("Wire code ", stringify!($code), ".")]
+                $variant,
+            )+
+        }
+
+        impl $name {
+            /// The wire code.
+            pub const fn code(self) -> u8 {
+                match self {
+                    $($name::$variant => $code,)+
+                }
+            }
+        }
+
+        impl TryFrom<u8> for $name {
+            type Error = UnknownCode;
+            fn try_from(c: u8) -> Result<Self, UnknownCode> {
+                Ok(match c {
+                    $($code => $name::$variant,)+
+                    other => return Err(UnknownCode(other)),
+                })
+            }
+        }
+    };
+}
+
 /// An unknown code (the value that could not be decoded).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
 pub struct UnknownCode(pub u8);
 
-/// The reason code of a stop record.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum StopCode {
-    /// 1: a device did not answer the start-up probe (id).
-    DeviceMissing,
-    /// 2: a device missed more than `hold_ticks` replies in a row (id).
-    DeviceLost,
-    /// 3: the trunk tilted beyond the limit (value = tilt, mrad).
-    Fall,
-    /// 4: too many consecutive tick overruns (value = count).
-    OverrunBurst,
-    /// 5: a joint target was NaN or infinite (id = joint).
-    NonFiniteTarget,
-    /// 6: the walking plan finished.
-    PlanDone,
-    /// 7: stop requested from outside.
-    Requested,
-    /// 8: a gait sample (or the stabilizer's shift) was not finite before the IK (value =
-    /// walk tick).
-    NonFiniteSample,
-    /// 9: a sensor board gave no plausible reply for longer than `stale_ms` (id = device,
-    /// value = age of its last accepted sample, ms).
-    SensorStale,
-    /// 11: the servo monitor saw a servo beyond a limit (id = servo, value = [`ServoCheck`]
-    /// code · 65536 + the reading in the check's unit). (10 is not used: see the module docs.)
-    ServoFault,
-    /// 12: the last reset was not a power-on: the firmware does not walk by itself (value =
-    /// [`ResetCause`] code).
-    NotPowerOn,
+wire_codes! {
+    /// The reason code of a stop record.
+    pub enum StopCode {
+        /// A device did not answer the start-up probe (id).
+        DeviceMissing = 1,
+        /// A device missed more than `hold_ticks` replies in a row (id).
+        DeviceLost = 2,
+        /// The trunk tilted beyond the limit (value = tilt, mrad).
+        Fall = 3,
+        /// Too many consecutive tick overruns (value = count).
+        OverrunBurst = 4,
+        /// A joint target was NaN or infinite (id = joint).
+        NonFiniteTarget = 5,
+        /// The walking plan finished.
+        PlanDone = 6,
+        /// Stop requested from outside.
+        Requested = 7,
+        /// A gait sample (or the stabilizer's shift) was not finite before the IK (value =
+        /// walk tick).
+        NonFiniteSample = 8,
+        /// A sensor board gave no plausible reply for longer than `stale_ms` (id = device,
+        /// value = age of its last accepted sample, ms).
+        SensorStale = 9,
+        /// The servo monitor saw a servo beyond a limit (id = servo, value = [`ServoCheck`]
+        /// code · 65536 + the reading in the check's unit). (10 is not used: see the module docs.)
+        ServoFault = 11,
+        /// The last reset was not a power-on: the firmware does not walk by itself (value =
+        /// [`ResetCause`] code).
+        NotPowerOn = 12,
+    }
 }
 
 impl StopCode {
@@ -79,23 +124,6 @@ impl StopCode {
         StopCode::NotPowerOn,
     ];
 
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            StopCode::DeviceMissing => 1,
-            StopCode::DeviceLost => 2,
-            StopCode::Fall => 3,
-            StopCode::OverrunBurst => 4,
-            StopCode::NonFiniteTarget => 5,
-            StopCode::PlanDone => 6,
-            StopCode::Requested => 7,
-            StopCode::NonFiniteSample => 8,
-            StopCode::SensorStale => 9,
-            StopCode::ServoFault => 11,
-            StopCode::NotPowerOn => 12,
-        }
-    }
-
     /// The firmware's exit code for a run that stopped for this reason.
     pub const fn exit(self) -> ExitCode {
         match self {
@@ -111,26 +139,6 @@ impl StopCode {
             StopCode::ServoFault => ExitCode::ServoFault,
             StopCode::NotPowerOn => ExitCode::NotPowerOn,
         }
-    }
-}
-
-impl TryFrom<u8> for StopCode {
-    type Error = UnknownCode;
-    fn try_from(c: u8) -> Result<Self, UnknownCode> {
-        Ok(match c {
-            1 => StopCode::DeviceMissing,
-            2 => StopCode::DeviceLost,
-            3 => StopCode::Fall,
-            4 => StopCode::OverrunBurst,
-            5 => StopCode::NonFiniteTarget,
-            6 => StopCode::PlanDone,
-            7 => StopCode::Requested,
-            8 => StopCode::NonFiniteSample,
-            9 => StopCode::SensorStale,
-            11 => StopCode::ServoFault,
-            12 => StopCode::NotPowerOn,
-            other => return Err(UnknownCode(other)),
-        })
     }
 }
 
@@ -357,257 +365,122 @@ impl From<u8> for FaultKind {
     }
 }
 
-/// Why a sensor reply was rejected (the `SensorRejected` fault record's `value`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum SensorRejection {
-    /// 1: the board's sample counter did not advance since its last accepted sample.
-    FrozenCounter,
-    /// 2: a value is outside the sensor's range.
-    OutOfRange,
-    /// 3: the foot forces are not consistent with the robot's weight (total above
-    /// m·g·`force_factor`, or below −0.1·m·g).
-    Weight,
-    /// 4: the reply data could not be read as a sample.
-    Malformed,
-}
-
-impl SensorRejection {
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            SensorRejection::FrozenCounter => 1,
-            SensorRejection::OutOfRange => 2,
-            SensorRejection::Weight => 3,
-            SensorRejection::Malformed => 4,
-        }
+wire_codes! {
+    /// Why a sensor reply was rejected (the `SensorRejected` fault record's `value`).
+    pub enum SensorRejection {
+        /// The board's sample counter did not advance since its last accepted sample.
+        FrozenCounter = 1,
+        /// A value is outside the sensor's range.
+        OutOfRange = 2,
+        /// The foot forces are not consistent with the robot's weight (total above
+        /// m·g·`force_factor`, or below −0.1·m·g).
+        Weight = 3,
+        /// The reply data could not be read as a sample.
+        Malformed = 4,
     }
 }
 
-impl TryFrom<u8> for SensorRejection {
-    type Error = UnknownCode;
-    fn try_from(c: u8) -> Result<Self, UnknownCode> {
-        Ok(match c {
-            1 => SensorRejection::FrozenCounter,
-            2 => SensorRejection::OutOfRange,
-            3 => SensorRejection::Weight,
-            4 => SensorRejection::Malformed,
-            other => return Err(UnknownCode(other)),
-        })
+wire_codes! {
+    /// Which servo check failed (the `ServoFault` stop's reason; the reading's unit in brackets).
+    pub enum ServoCheck {
+        /// Hardware Error Status (70) is not 0 [its bits: 0 input voltage, 2 overheating, 3
+        /// motor encoder, 4 electrical shock, 5 overload].
+        HardwareError = 1,
+        /// Present Temperature (146) above the limit [°C].
+        Temperature = 2,
+        /// Present Input Voltage (144) below the limit [0.1 V].
+        VoltageLow = 3,
+        /// Present Input Voltage above the limit [0.1 V].
+        VoltageHigh = 4,
+        /// |Present Current| (126) above the limit [mA].
+        Current = 5,
     }
 }
 
-/// Which servo check failed (the `ServoFault` stop's reason; the reading's unit in brackets).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum ServoCheck {
-    /// 1: Hardware Error Status (70) is not 0 [its bits: 0 input voltage, 2 overheating, 3
-    /// motor encoder, 4 electrical shock, 5 overload].
-    HardwareError,
-    /// 2: Present Temperature (146) above the limit [°C].
-    Temperature,
-    /// 3: Present Input Voltage (144) below the limit [0.1 V].
-    VoltageLow,
-    /// 4: Present Input Voltage above the limit [0.1 V].
-    VoltageHigh,
-    /// 5: |Present Current| (126) above the limit [mA].
-    Current,
-}
-
-impl ServoCheck {
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            ServoCheck::HardwareError => 1,
-            ServoCheck::Temperature => 2,
-            ServoCheck::VoltageLow => 3,
-            ServoCheck::VoltageHigh => 4,
-            ServoCheck::Current => 5,
-        }
+wire_codes! {
+    /// What reset the controller (the `ResetCause` fault record's `id`).
+    pub enum ResetCause {
+        /// Power-on (the only reset after which the firmware walks by itself).
+        PowerOn = 1,
+        /// Brown-out (the supply sagged below the threshold).
+        BrownOut = 2,
+        /// A watchdog (independent or window).
+        Watchdog = 3,
+        /// A software reset (the panic path, `SCB::sys_reset`).
+        Software = 4,
+        /// The reset pin (button, debugger).
+        Pin = 5,
+        /// Low-power management.
+        LowPower = 6,
+        /// No flag set (unknown).
+        Unknown = 7,
     }
 }
 
-impl TryFrom<u8> for ServoCheck {
-    type Error = UnknownCode;
-    fn try_from(c: u8) -> Result<Self, UnknownCode> {
-        Ok(match c {
-            1 => ServoCheck::HardwareError,
-            2 => ServoCheck::Temperature,
-            3 => ServoCheck::VoltageLow,
-            4 => ServoCheck::VoltageHigh,
-            5 => ServoCheck::Current,
-            other => return Err(UnknownCode(other)),
-        })
+wire_codes! {
+    /// What a crash record in no-init RAM says (the `CrashRecord` fault record's `id`).
+    pub enum CrashCode {
+        /// The firmware panicked.
+        Panic = 1,
+        /// The watchdog reset the controller (the record holds the last tick noted).
+        Watchdog = 2,
     }
 }
 
-/// What reset the controller (the `ResetCause` fault record's `id`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum ResetCause {
-    /// 1: power-on (the only reset after which the firmware walks by itself).
-    PowerOn,
-    /// 2: brown-out (the supply sagged below the threshold).
-    BrownOut,
-    /// 3: a watchdog (independent or window).
-    Watchdog,
-    /// 4: a software reset (the panic path, `SCB::sys_reset`).
-    Software,
-    /// 5: the reset pin (button, debugger).
-    Pin,
-    /// 6: low-power management.
-    LowPower,
-    /// 7: no flag set (unknown).
-    Unknown,
-}
-
-impl ResetCause {
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            ResetCause::PowerOn => 1,
-            ResetCause::BrownOut => 2,
-            ResetCause::Watchdog => 3,
-            ResetCause::Software => 4,
-            ResetCause::Pin => 5,
-            ResetCause::LowPower => 6,
-            ResetCause::Unknown => 7,
-        }
+wire_codes! {
+    /// Which start-up step failed (its code is the `StartupFailed` fault record's `value`).
+    pub enum StartupStep {
+        /// Reading Return Delay Time.
+        ReturnDelayRead = 1,
+        /// Writing Return Delay Time = 0.
+        ReturnDelayWrite = 2,
+        /// The read-back value was not 0.
+        ReturnDelayVerify = 3,
+        /// SYNC READ of the present positions.
+        ReadPositions = 4,
+        /// WRITE Torque Enable = 1.
+        TorqueEnable = 5,
+        /// Writing a servo's Position I Gain.
+        GainWrite = 6,
+        /// The read-back Position I Gain differed.
+        GainVerify = 7,
     }
 }
 
-impl TryFrom<u8> for ResetCause {
-    type Error = UnknownCode;
-    fn try_from(c: u8) -> Result<Self, UnknownCode> {
-        Ok(match c {
-            1 => ResetCause::PowerOn,
-            2 => ResetCause::BrownOut,
-            3 => ResetCause::Watchdog,
-            4 => ResetCause::Software,
-            5 => ResetCause::Pin,
-            6 => ResetCause::LowPower,
-            7 => ResetCause::Unknown,
-            other => return Err(UnknownCode(other)),
-        })
+wire_codes! {
+    /// The firmware's exit code (see the module docs' table).
+    pub enum ExitCode {
+        /// Plan done.
+        PlanDone = 0,
+        /// Configuration rejected.
+        ConfigRejected = 2,
+        /// Virtual watchdog (QEMU board).
+        Watchdog = 3,
+        /// Device missing at start-up.
+        DeviceMissing = 11,
+        /// Device lost while running.
+        DeviceLost = 12,
+        /// Fall.
+        Fall = 13,
+        /// Overrun burst.
+        OverrunBurst = 14,
+        /// Non-finite joint target.
+        NonFiniteTarget = 15,
+        /// Stop requested.
+        Requested = 17,
+        /// Non-finite gait sample.
+        NonFiniteSample = 18,
+        /// Sensor data stale.
+        SensorStale = 19,
+        /// Servo fault seen by the monitor.
+        ServoFault = 21,
+        /// Not walking after a reset other than power-on.
+        NotPowerOn = 22,
+        /// A start-up step failed after the probe.
+        StartupFailed = 20,
+        /// Panic.
+        Panic = 101,
     }
-}
-
-/// What a crash record in no-init RAM says (the `CrashRecord` fault record's `id`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum CrashCode {
-    /// 1: the firmware panicked.
-    Panic,
-    /// 2: the watchdog reset the controller (the record holds the last tick noted).
-    Watchdog,
-}
-
-impl CrashCode {
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            CrashCode::Panic => 1,
-            CrashCode::Watchdog => 2,
-        }
-    }
-}
-
-impl TryFrom<u8> for CrashCode {
-    type Error = UnknownCode;
-    fn try_from(c: u8) -> Result<Self, UnknownCode> {
-        Ok(match c {
-            1 => CrashCode::Panic,
-            2 => CrashCode::Watchdog,
-            other => return Err(UnknownCode(other)),
-        })
-    }
-}
-
-/// Which start-up step failed (its code is the `StartupFailed` fault record's `value`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum StartupStep {
-    /// 1: reading Return Delay Time.
-    ReturnDelayRead,
-    /// 2: writing Return Delay Time = 0.
-    ReturnDelayWrite,
-    /// 3: the read-back value was not 0.
-    ReturnDelayVerify,
-    /// 4: SYNC READ of the present positions.
-    ReadPositions,
-    /// 5: WRITE Torque Enable = 1.
-    TorqueEnable,
-    /// 6: writing a servo's Position I Gain.
-    GainWrite,
-    /// 7: the read-back Position I Gain differed.
-    GainVerify,
-}
-
-impl StartupStep {
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            StartupStep::ReturnDelayRead => 1,
-            StartupStep::ReturnDelayWrite => 2,
-            StartupStep::ReturnDelayVerify => 3,
-            StartupStep::ReadPositions => 4,
-            StartupStep::TorqueEnable => 5,
-            StartupStep::GainWrite => 6,
-            StartupStep::GainVerify => 7,
-        }
-    }
-}
-
-impl TryFrom<u8> for StartupStep {
-    type Error = UnknownCode;
-    fn try_from(c: u8) -> Result<Self, UnknownCode> {
-        Ok(match c {
-            1 => StartupStep::ReturnDelayRead,
-            2 => StartupStep::ReturnDelayWrite,
-            3 => StartupStep::ReturnDelayVerify,
-            4 => StartupStep::ReadPositions,
-            5 => StartupStep::TorqueEnable,
-            6 => StartupStep::GainWrite,
-            7 => StartupStep::GainVerify,
-            other => return Err(UnknownCode(other)),
-        })
-    }
-}
-
-/// The firmware's exit code (see the module docs' table).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum ExitCode {
-    /// 0: plan done.
-    PlanDone,
-    /// 2: configuration rejected.
-    ConfigRejected,
-    /// 3: virtual watchdog (QEMU board).
-    Watchdog,
-    /// 11: device missing at start-up.
-    DeviceMissing,
-    /// 12: device lost while running.
-    DeviceLost,
-    /// 13: fall.
-    Fall,
-    /// 14: overrun burst.
-    OverrunBurst,
-    /// 15: non-finite joint target.
-    NonFiniteTarget,
-    /// 17: stop requested.
-    Requested,
-    /// 18: non-finite gait sample.
-    NonFiniteSample,
-    /// 19: sensor data stale.
-    SensorStale,
-    /// 21: servo fault seen by the monitor.
-    ServoFault,
-    /// 22: not walking after a reset other than power-on.
-    NotPowerOn,
-    /// 20: a start-up step failed after the probe.
-    StartupFailed,
-    /// 101: panic.
-    Panic,
 }
 
 impl ExitCode {
@@ -629,27 +502,6 @@ impl ExitCode {
         ExitCode::NotPowerOn,
         ExitCode::Panic,
     ];
-
-    /// The numeric exit code.
-    pub const fn code(self) -> u8 {
-        match self {
-            ExitCode::PlanDone => 0,
-            ExitCode::ConfigRejected => 2,
-            ExitCode::Watchdog => 3,
-            ExitCode::DeviceMissing => 11,
-            ExitCode::DeviceLost => 12,
-            ExitCode::Fall => 13,
-            ExitCode::OverrunBurst => 14,
-            ExitCode::NonFiniteTarget => 15,
-            ExitCode::Requested => 17,
-            ExitCode::NonFiniteSample => 18,
-            ExitCode::SensorStale => 19,
-            ExitCode::ServoFault => 21,
-            ExitCode::NotPowerOn => 22,
-            ExitCode::StartupFailed => 20,
-            ExitCode::Panic => 101,
-        }
-    }
 
     /// The numeric exit code as the process status (`i32`, semihosting `exit`).
     pub const fn status(self) -> i32 {
@@ -675,30 +527,6 @@ impl ExitCode {
             ExitCode::StartupFailed => "start-up step failed",
             ExitCode::Panic => "panic",
         }
-    }
-}
-
-impl TryFrom<u8> for ExitCode {
-    type Error = UnknownCode;
-    fn try_from(c: u8) -> Result<Self, UnknownCode> {
-        Ok(match c {
-            0 => ExitCode::PlanDone,
-            2 => ExitCode::ConfigRejected,
-            3 => ExitCode::Watchdog,
-            11 => ExitCode::DeviceMissing,
-            12 => ExitCode::DeviceLost,
-            13 => ExitCode::Fall,
-            14 => ExitCode::OverrunBurst,
-            15 => ExitCode::NonFiniteTarget,
-            17 => ExitCode::Requested,
-            18 => ExitCode::NonFiniteSample,
-            19 => ExitCode::SensorStale,
-            21 => ExitCode::ServoFault,
-            22 => ExitCode::NotPowerOn,
-            20 => ExitCode::StartupFailed,
-            101 => ExitCode::Panic,
-            other => return Err(UnknownCode(other)),
-        })
     }
 }
 

@@ -26,10 +26,16 @@ use crate::instruction::{
 };
 use crate::packet::{DecodeError, Decoder, DecoderStats, EncodeError, Packet, BROADCAST_ID};
 
-/// Monotonic microsecond time source.
+/// Monotonic microsecond time source (the firmware's boards implement it: `board::Clock`).
 pub trait Clock {
-    /// Current time in µs.
+    /// Microseconds since an arbitrary start (boot).
     fn now_us(&self) -> u64;
+}
+
+impl<T: Clock + ?Sized> Clock for &mut T {
+    fn now_us(&self) -> u64 {
+        (**self).now_us()
+    }
 }
 
 /// Byte transport of the bus.
@@ -219,6 +225,23 @@ pub struct Master<T, P, C, const N: usize = 256> {
     tail: usize,
     timeout_us: u64,
     stats: BusStats,
+}
+
+/// Checks the devices of a group read/write: 1 to 253 of them, one result slot each, every id a
+/// device id (not broadcast).
+fn check_targets(
+    ids: impl ExactSizeIterator<Item = u8>,
+    results: &[DeviceResult],
+) -> Result<(), Error> {
+    let n = ids.len();
+    if n == 0 || n > 253 || n != results.len() {
+        return Err(Error::InvalidArgument);
+    }
+    let mut ids = ids;
+    if ids.any(|i| i > crate::packet::MAX_DEVICE_ID) {
+        return Err(Error::InvalidArgument);
+    }
+    Ok(())
 }
 
 impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
@@ -522,22 +545,12 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
         out: &[u8],
         results: &[DeviceResult],
     ) -> Result<usize, Error> {
-        Self::check_group(ids, results)?;
+        check_targets(ids.iter().copied(), results)?;
         let l = usize::from(len);
         if out.len() < ids.len().saturating_mul(l) {
             return Err(Error::BufferTooSmall);
         }
         Ok(l)
-    }
-
-    fn check_group(ids: &[u8], results: &[DeviceResult]) -> Result<(), Error> {
-        if ids.is_empty() || ids.len() > 253 || ids.len() != results.len() {
-            return Err(Error::InvalidArgument);
-        }
-        if ids.iter().any(|&i| i > crate::packet::MAX_DEVICE_ID) {
-            return Err(Error::InvalidArgument);
-        }
-        Ok(())
     }
 
     /// SYNC READ `len` bytes at `addr` from each of `ids`.
@@ -570,12 +583,7 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
         out: &mut [u8],
         results: &mut [DeviceResult],
     ) -> Result<usize, Error> {
-        if requests.is_empty() || requests.len() > 253 || requests.len() != results.len() {
-            return Err(Error::InvalidArgument);
-        }
-        if requests.iter().any(|r| r.id > crate::packet::MAX_DEVICE_ID) {
-            return Err(Error::InvalidArgument);
-        }
+        check_targets(requests.iter().map(|r| r.id), results)?;
         let total: usize = requests.iter().map(|r| usize::from(r.len)).sum();
         if out.len() < total {
             return Err(Error::BufferTooSmall);

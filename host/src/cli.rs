@@ -320,9 +320,6 @@ pub struct SimulateArgs {
     pub sim: SimArgs,
 }
 
-/// The QEMU boards that run the board-qemu firmware.
-pub(crate) const MACHINES: [&str; 2] = ["mps2-an500", "mps2-an386"];
-
 /// The options of a firmware-in-the-loop run shared by `fil`, `beyond` and `sweep`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -335,8 +332,8 @@ pub struct RunArgs {
     /// Firmware ELF (board-qemu build; default target/thumbv7em-none-eabihf/release/qemu).
     #[arg(long, value_name = "ELF")]
     pub elf: Option<PathBuf>,
-    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
-    #[arg(long, value_parser = MACHINES)]
+    /// QEMU machine (scripts/qemu-machines.txt): mps2-an500 (Cortex-M7), mps2-an386 (Cortex-M4F), mps2-an385 (Cortex-M3); default: by the ELF's target.
+    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(crate::qemu::machine_names()))]
     pub machine: Option<String>,
     /// Firmware parameters for every run, 'key=value …' (docs/parameters.md), checked before QEMU starts.
     #[arg(long, value_name = "'K=V …'")]
@@ -416,44 +413,34 @@ fn finite(s: &str) -> Result<f64, String> {
     }
 }
 
-/// A finite number ≥ 0.
-fn non_negative(s: &str) -> Result<f64, String> {
+/// A finite number that `ok` accepts; else the error says it `must be {what}`.
+fn finite_where(s: &str, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, String> {
     let x = finite(s)?;
-    if x >= 0.0 {
+    if ok(x) {
         Ok(x)
     } else {
-        Err(format!("must be >= 0 (got {x})"))
+        Err(format!("must be {what} (got {x})"))
     }
+}
+
+/// A finite number ≥ 0.
+fn non_negative(s: &str) -> Result<f64, String> {
+    finite_where(s, |x| x >= 0.0, ">= 0")
 }
 
 /// A finite number > 0.
 fn positive(s: &str) -> Result<f64, String> {
-    let x = finite(s)?;
-    if x > 0.0 {
-        Ok(x)
-    } else {
-        Err(format!("must be > 0 (got {x})"))
-    }
+    finite_where(s, |x| x > 0.0, "> 0")
 }
 
 /// A probability, 0..=1.
 fn probability(s: &str) -> Result<f64, String> {
-    let x = finite(s)?;
-    if (0.0..=1.0).contains(&x) {
-        Ok(x)
-    } else {
-        Err(format!("must be within 0..=1 (got {x})"))
-    }
+    finite_where(s, |x| (0.0..=1.0).contains(&x), "within 0..=1")
 }
 
 /// A sensor latency, ms (0..=1000).
 fn latency_ms(s: &str) -> Result<f64, String> {
-    let x = finite(s)?;
-    if (0.0..=1000.0).contains(&x) {
-        Ok(x)
-    } else {
-        Err(format!("must be in 0..=1000 (got {x})"))
-    }
+    finite_where(s, |x| (0.0..=1000.0).contains(&x), "in 0..=1000")
 }
 
 /// One push, `T:IMPULSE_NS:DIRECTION_DEG`.
@@ -548,12 +535,19 @@ impl RunSetup {
         // The firmware's own parser, on the host, before QEMU starts.
         crate::fil::check_tokens(&spec, &extra_tokens)
             .map_err(|e| CliError::usage(format!("walker {cmd}: --firmware-args: {e}")))?;
+        let elf = a.elf.or(file.0).unwrap_or_else(|| DEFAULT_ELF.into());
+        let machine = a
+            .machine
+            .or(file.1)
+            .unwrap_or_else(|| crate::qemu::default_machine(&elf).into());
+        crate::qemu::check_machine(&elf, &machine)
+            .map_err(|e| CliError::usage(format!("walker {cmd}: --machine: {e}")))?;
         Ok(RunSetup {
             spec,
             plan_name,
             sim,
-            elf: a.elf.or(file.0).unwrap_or_else(|| DEFAULT_ELF.into()),
-            machine: a.machine.or(file.1).unwrap_or_else(|| MACHINES[0].into()),
+            machine,
+            elf,
             timeout: a.timeout.or(file.2).unwrap_or(Duration::from_secs(1800)),
             extra_tokens,
         })

@@ -2,7 +2,8 @@
 //! (`mps2-an500`, Cortex-M7) against the simulated robot, in lock-step, and its ZMP-response log
 //! is captured and reported.
 //!
-//! Wiring (see `docs/lockstep.md`): QEMU's UART0 (the servo bus) and UART2 (the lock-step
+//! QEMU starts through `scripts/qemu-run.sh` ([`crate::qemu`]), the one definition of its
+//! command line. Wiring (see `docs/lockstep.md`): QEMU's UART0 (the servo bus) and UART2 (the lock-step
 //! channel) connect as TCP clients to the simulator's two listening sockets; UART1 (the log)
 //! goes to `OUT/walk.log`; the semihosting output (defmt frames) to `OUT/firmware.defmt`, decoded
 //! after the run with the ELF's table into `OUT/firmware.log` ([`crate::defmt_log`]). The
@@ -12,7 +13,7 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use crate::planfile::WalkSpec;
@@ -27,7 +28,7 @@ pub struct FilOptions {
     pub spec: WalkSpec,
     /// Output folder.
     pub out_dir: PathBuf,
-    /// QEMU machine (`mps2-an500` Cortex-M7 or `mps2-an386` Cortex-M4F).
+    /// QEMU machine (a name of [`crate::qemu::machines`], e.g. `mps2-an500` Cortex-M7).
     pub machine: String,
     /// Wall-clock limit, s.
     pub timeout: Duration,
@@ -150,7 +151,8 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
     // Checked before anything starts: the firmware's own parser, then the firmware's buffer.
     check_tokens(&opts.spec, &opts.extra_tokens)?;
     let tokens = qemu_append(opts)?;
-    let qemu = which("qemu-system-arm").ok_or_else(|| {
+    crate::qemu::check_machine(&opts.elf, &opts.machine)?;
+    which("qemu-system-arm").ok_or_else(|| {
         "qemu-system-arm not found: install it with `sudo apt-get install -y qemu-system-arm`"
             .to_string()
     })?;
@@ -180,20 +182,12 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
     let defmt_file =
         std::fs::File::create(&defmt).map_err(|e| format!("{}: {e}", defmt.display()))?;
     let started = Instant::now();
-    let mut child = Command::new(qemu)
-        .args(["-M", &opts.machine, "-nographic", "-monitor", "none"])
-        .args(["-serial", &format!("tcp:{bus},nodelay=on")])
-        .args(["-serial", &format!("file:{}", log.display())])
-        .args(["-serial", &format!("tcp:{lockstep},nodelay=on")])
-        .args([
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-icount",
-            "shift=0",
-        ])
-        .arg("-kernel")
-        .arg(&opts.elf)
-        .args(["-append", &tokens])
+    let serials = crate::qemu::Serials {
+        bus: format!("tcp:{bus},nodelay=on"),
+        log: format!("file:{}", log.display()),
+        lockstep: Some(format!("tcp:{lockstep},nodelay=on")),
+    };
+    let mut child = crate::qemu::command(&opts.elf, &opts.machine, &serials, &tokens)
         .stdin(Stdio::null())
         .stdout(Stdio::from(defmt_file))
         .stderr(Stdio::inherit())

@@ -9,6 +9,7 @@ pub mod fil;
 pub mod mcap_export;
 pub mod planfile;
 pub mod plot;
+pub mod qemu;
 pub mod report;
 pub mod runconfig;
 pub mod sim;

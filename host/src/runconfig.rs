@@ -58,7 +58,7 @@ pub struct RunFile {
 pub struct QemuSection {
     /// Firmware ELF (relative to the working directory, as on the command line).
     pub elf: Option<PathBuf>,
-    /// QEMU machine (`mps2-an500`, `mps2-an386`).
+    /// QEMU machine (a name of `scripts/qemu-machines.txt`).
     pub machine: Option<String>,
     /// Wall-clock limit, s.
     pub timeout_s: Option<f64>,
@@ -134,10 +134,11 @@ pub fn parse(text: &str, base: &Path) -> Result<RunConfig, (String, String)> {
     spec.firmware_config().map_err(|e| plan_field("", e))?;
     file.sim.check().map_err(|(f, e)| (format!("sim.{f}"), e))?;
     if let Some(m) = &file.qemu.machine {
-        if !crate::cli::MACHINES.contains(&m.as_str()) {
+        let names = crate::qemu::machine_names();
+        if !names.contains(&m.as_str()) {
             return Err((
                 "qemu.machine".into(),
-                format!("{m:?}: expected one of {}", crate::cli::MACHINES.join(", ")),
+                format!("{m:?}: expected one of {}", names.join(", ")),
             ));
         }
     }

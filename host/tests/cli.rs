@@ -21,6 +21,23 @@ fn walker(args: &[&str]) -> Output {
         .expect("run walker")
 }
 
+/// `walker report --log LOG --truth TRUTH --out OUT EXTRA…`, which must succeed; its stdout.
+fn report_ok(log: &Path, truth: &Path, out: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "report",
+        "--log",
+        s(log),
+        "--truth",
+        s(truth),
+        "--out",
+        s(out),
+    ];
+    args.extend_from_slice(extra);
+    let o = walker(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
@@ -209,6 +226,22 @@ fn turning_export_round_trips_in_memory() {
     }
 }
 
+/// The start-up record of a QEMU run at `time_us` with tick period `tick_period_us`, the bus
+/// probed or not.
+fn startup(time_us: u32, tick_period_us: u32, probed: bool) -> Record {
+    Record::Startup(StartupRecord {
+        seq: 0,
+        time_us,
+        board: BoardId::QemuMps2,
+        fw: [0, 1, 0],
+        tick_period_us,
+        bus_baud: 1_000_000,
+        device_count: 15,
+        probed,
+        missing: Default::default(),
+    })
+}
+
 /// A log with every kind of damage: starts mid-frame, garbage, a truncated frame, a corrupted
 /// frame and an unterminated frame at the end.
 fn damaged_log() -> (Vec<u8>, Vec<u16>) {
@@ -216,17 +249,7 @@ fn damaged_log() -> (Vec<u8>, Vec<u16>) {
     // Mid-stream start: the tail of a frame.
     let prev = frame(&tick(999, [0.0, 0.0], None, LoggedPhase::Standing));
     bytes.extend_from_slice(&prev[prev.len() - 17..]);
-    bytes.extend(frame(&Record::Startup(StartupRecord {
-        seq: 0,
-        time_us: 999_000,
-        board: BoardId::QemuMps2,
-        fw: [0, 1, 0],
-        tick_period_us: 1000,
-        bus_baud: 1_000_000,
-        device_count: 15,
-        probed: false,
-        missing: Default::default(),
-    })));
+    bytes.extend(frame(&startup(999_000, 1000, false)));
     let mut kept = Vec::new();
     for seq in 1..=100u16 {
         let phase = if seq <= 20 {
@@ -837,19 +860,7 @@ fn report_with_truth_file() {
     }
     std::fs::write(&truth, t).unwrap();
     let out = dir.join("report");
-    let o = walker(&[
-        "report",
-        "--log",
-        s(&log),
-        "--truth",
-        s(&truth),
-        "--out",
-        s(&out),
-        "--model",
-        "lipm",
-    ]);
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = report_ok(&log, &truth, &out, &["--model", "lipm"]);
     let x_row = "| x (sagittal) | 3 | 0.006000 | 0.002000 | 0.002160 | 0.003000 |";
     assert_eq!(stdout.matches(x_row).count(), 2, "{stdout}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
@@ -913,17 +924,7 @@ fn synthetic_walk(dir: &Path) -> (PathBuf, PathBuf, usize) {
     let spec = planfile::load(&workspace().join("plans/table2.toml")).unwrap();
     let (rows, _) = export::export_rows(&spec, &Robot::reference(), 0.005).unwrap();
     let mut log = vec![0u8];
-    log.extend(frame(&Record::Startup(StartupRecord {
-        seq: 0,
-        time_us: 0,
-        board: BoardId::QemuMps2,
-        fw: [0, 1, 0],
-        tick_period_us: 5000,
-        bus_baud: 1_000_000,
-        device_count: 15,
-        probed: true,
-        missing: Default::default(),
-    })));
+    log.extend(frame(&startup(0, 5000, true)));
     let header: Vec<&str> = walker_host::sim::truth::HEADER.split(',').collect();
     let mut truth = format!("{}\n", header.join(","));
     for (i, r) in rows.iter().enumerate() {
@@ -975,19 +976,12 @@ fn mcap_of_a_14_step_walk_holds_every_channel() {
     let dir = tmp("mcap");
     let (log, truth, ticks) = synthetic_walk(&dir);
     let mcap_path = dir.join("run.mcap");
-    let o = walker(&[
-        "report",
-        "--log",
-        s(&log),
-        "--truth",
-        s(&truth),
-        "--out",
-        s(&dir.join("report")),
-        "--mcap",
-        s(&mcap_path),
-    ]);
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = report_ok(
+        &log,
+        &truth,
+        &dir.join("report"),
+        &["--mcap", s(&mcap_path)],
+    );
     assert!(stdout.contains("run.mcap: 11 channels"), "{stdout}");
     // The report's joint and foot figures come from the same truth.
     for f in ["joint_speeds.png", "joint_torques.svg", "foot_forces.png"] {

@@ -14,7 +14,7 @@ use walker_contract::bus_map::TickMap;
 use walker_host::sim::forces::{center_of_pressure, distribute, FootContact};
 use walker_host::sim::zmp::{whole_body_zmp, MassPoint};
 use walker_host::sim::{
-    spawn, FaultConfig, PhysicsModel, ServoTorque, SimConfig, Simulator, Support,
+    spawn, FaultConfig, PhysicsModel, ServoTorque, SimConfig, Simulator, Support, TruthSample,
 };
 
 const G: f64 = 9.80665;
@@ -277,10 +277,21 @@ fn imu_request() -> BulkReadRequest {
     }
 }
 
-fn ping(id: u8) -> Vec<u8> {
-    let mut buf = [0u8; 16];
-    let n = Instruction::Ping.encode(&mut buf, id).unwrap();
+/// The instruction packet of `inst` to device `id`.
+fn packet(id: u8, inst: Instruction<'_>) -> Vec<u8> {
+    let mut buf = [0u8; 64];
+    let n = inst.encode(&mut buf, id).unwrap();
     buf[..n].to_vec()
+}
+
+/// The pelvis pose of a truth sample (position, roll-pitch-yaw).
+fn pelvis_pose(tr: &TruthSample) -> Pose<f64> {
+    let ([x, y, z], [roll, pitch, yaw]) = (tr.pelvis, tr.pelvis_rpy);
+    Pose::new(x, y, z, roll, pitch, yaw)
+}
+
+fn ping(id: u8) -> Vec<u8> {
+    packet(id, Instruction::Ping)
 }
 
 fn statuses(bytes: &[u8]) -> Vec<(u8, u8, Vec<u8>)> {
@@ -437,11 +448,7 @@ impl Client {
     }
 
     fn read(&mut self, id: u8, addr: u16, len: u16) -> Vec<u8> {
-        let mut buf = [0u8; 32];
-        let n = Instruction::Read { addr, len }
-            .encode(&mut buf, id)
-            .unwrap();
-        let st = statuses(&self.send(&buf[..n]));
+        let st = statuses(&self.send(&packet(id, Instruction::Read { addr, len })));
         assert_eq!(st.len(), 1);
         assert_eq!((st[0].0, st[0].1), (id, 0));
         st[0].2.clone()
@@ -480,14 +487,12 @@ fn tcp_bus_conversation_with_lockstep() {
         expect.iter().map(|e| e.0).collect::<Vec<_>>()
     );
     // WRITE Return Delay Time, READ it back.
-    let mut buf = [0u8; 256];
-    let n = Instruction::Write {
+    let rdt = Instruction::Write {
         addr: x_series::RETURN_DELAY_TIME.addr,
         data: &[5],
-    }
-    .encode(&mut buf, 3)
-    .unwrap();
-    let st = statuses(&c.send(&buf[..n]));
+    };
+    let st = statuses(&c.send(&packet(3, rdt)));
+    let mut buf = [0u8; 256];
     assert_eq!((st[0].0, st[0].1), (3, 0));
     assert_eq!(c.read(3, x_series::RETURN_DELAY_TIME.addr, 1), vec![5]);
     // Torque on for every servo (broadcast SYNC WRITE: no reply, ack 0).
@@ -821,31 +826,24 @@ fn free_running_follows_wall_clock() {
     bus.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
     bus.write_all(&ping(12)).unwrap();
     assert_eq!(read_statuses(&mut bus, 1)[0].0, 12);
-    let mut buf = [0u8; 64];
-    let n = Instruction::Write {
+    let torque_on = Instruction::Write {
         addr: x_series::TORQUE_ENABLE.addr,
         data: &[1],
-    }
-    .encode(&mut buf, 5)
-    .unwrap();
-    bus.write_all(&buf[..n]).unwrap();
+    };
+    bus.write_all(&packet(5, torque_on)).unwrap();
     read_statuses(&mut bus, 1);
-    let n = Instruction::Write {
+    let goal = Instruction::Write {
         addr: x_series::GOAL_POSITION.addr,
         data: &2100i32.to_le_bytes(),
-    }
-    .encode(&mut buf, 5)
-    .unwrap();
-    bus.write_all(&buf[..n]).unwrap();
+    };
+    bus.write_all(&packet(5, goal)).unwrap();
     read_statuses(&mut bus, 1);
     std::thread::sleep(Duration::from_millis(200));
-    let n = Instruction::Read {
+    let present = Instruction::Read {
         addr: x_series::PRESENT_POSITION.addr,
         len: 4,
-    }
-    .encode(&mut buf, 5)
-    .unwrap();
-    bus.write_all(&buf[..n]).unwrap();
+    };
+    bus.write_all(&packet(5, present)).unwrap();
     let st = read_statuses(&mut bus, 1);
     assert!((i32_of(&st[0].2) - 2100).abs() <= 1);
     let progress = h.progress();
@@ -1061,14 +1059,7 @@ fn static_torques_match_moment_balance() {
     assert!(tr.joint_speed.iter().all(|v| v.abs() < 1e-3), "at rest");
     let robot = Robot::reference();
     let m = robot.masses;
-    let pelvis = Pose::new(
-        tr.pelvis[0],
-        tr.pelvis[1],
-        tr.pelvis[2],
-        tr.pelvis_rpy[0],
-        tr.pelvis_rpy[1],
-        tr.pelvis_rpy[2],
-    );
+    let pelvis = pelvis_pose(&tr);
     assert!(tr.pelvis_rpy[0].abs() < 0.01 && tr.pelvis_rpy[1].abs() < 0.01);
     let q = sim.physics.q();
     let left = leg_points(&robot, Side::Left, &pelvis, &q[..6].try_into().unwrap());
@@ -1272,14 +1263,7 @@ fn swinging_knee_torque_is_inertia_times_acceleration_plus_gravity() {
         }
         let tr = *sim.physics.truth();
         assert_eq!(tr.support, Support::Right);
-        let pelvis = Pose::new(
-            tr.pelvis[0],
-            tr.pelvis[1],
-            tr.pelvis[2],
-            tr.pelvis_rpy[0],
-            tr.pelvis_rpy[1],
-            tr.pelvis_rpy[2],
-        );
+        let pelvis = pelvis_pose(&tr);
         let mut ql: [f64; 6] = sim.physics.q()[..6].try_into().unwrap();
         let lp = leg_points(&robot, Side::Left, &pelvis, &ql);
         let p = lp.knee;

@@ -3,12 +3,11 @@
 //!
 //! Build and run (`scripts/bench.sh` does all of this and rewrites BENCHMARKS.md):
 //! ```text
-//! cargo build --release --no-default-features --features board-qemu --bin bench
-//! qemu-system-arm -M mps2-an500 -nographic -semihosting-config enable=on,target=native \
-//!     -icount shift=0 -kernel target/thumbv7em-none-eabihf/release/bench
-//! cargo build --release --no-default-features --features board-qemu --bin bench \
+//! cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench
+//! scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/bench --raw     # mps2-an500
+//! cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench \
 //!     --target thumbv7m-none-eabi
-//! qemu-system-arm -M mps2-an385 ... -kernel target/thumbv7m-none-eabi/release/bench
+//! scripts/qemu-run.sh target/thumbv7m-none-eabi/release/bench --raw        # mps2-an385
 //! ```
 //!
 //! # Method
@@ -62,15 +61,12 @@ mod firmware {
     use gait_core::{
         ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
     };
-    use walker_firmware::board::{
-        Board, BusError, Clock, CrashCell, LineTime, LogSink, ResetCause, ServoBus, Tick,
-        TickSchedule, TickTimer, Watchdog,
-    };
+    use walker_firmware::board::{ServoBus, Tick, TickTimer};
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
     use walker_firmware::bus_map::{self, TickMap};
     use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache, Targets};
+    use walker_firmware::fake_robot::{FakeRobot, Feet, ImuMotion, Observer};
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
-    use walker_firmware::record::BoardId;
     use walker_firmware::supervisor::StopReason;
     use walker_firmware::Config;
 
@@ -86,9 +82,9 @@ mod firmware {
     const INSN_PER_COUNT: u64 = 40;
     const MASK: u32 = 0x00FF_FFFF;
     /// Foot-board and IMU ids on the bus.
-    const FOOT_L: u8 = 111;
-    const FOOT_R: u8 = 112;
-    const IMU: u8 = 200;
+    const FOOT_L: u8 = bus_map::FOOT_LEFT;
+    const FOOT_R: u8 = bus_map::FOOT_RIGHT;
+    const IMU: u8 = bus_map::IMU;
     /// A foot counts for the measured ZMP from this load on, N.
     const MIN_LOAD_N: f32 = 2.0;
 
@@ -905,41 +901,13 @@ mod firmware {
         semihosting_exit(0)
     }
 
-    // ---- the firmware's control loop on an in-memory bus ----
+    // ---- the firmware's control loop on the fake robot ----
 
-    #[derive(Clone, Copy, PartialEq)]
-    enum Kind {
-        Servo,
-        Foot(usize),
-        Imu,
-    }
-
-    #[derive(Clone, Copy)]
-    struct Dev {
-        id: u8,
-        kind: Kind,
-        rdt: u8,
-        torque: bool,
-        goal: i32,
-        present: i32,
-    }
-
-    /// A board whose bus is a set of emulated devices (12 servos, both foot boards with a
-    /// constant load, the IMU), with a virtual clock like the QEMU board's (line time at the
-    /// configured baud, a modelled compute time, deadlines). It meters the firmware's CPU
-    /// work per tick: SysTick from the return of one `wait_tick` to the next call, minus the
-    /// time spent inside the board's own methods (the device emulation behind `send`, the
-    /// byte queue behind `recv`, the log sink); the calls themselves are counted.
-    struct BenchBoard {
-        now_ns: u64,
-        now_us: u64,
-        line: LineTime,
-        rx: heapless::Deque<u8, 512>,
-        sched: TickSchedule,
-        compute_ns: u64,
-        devs: [Dev; 15],
-        imu_counter: u16,
-        crash: CrashCell,
+    /// The bench's observer of the fake robot: it meters the firmware's CPU work per tick,
+    /// SysTick from the return of one `wait_tick` to the next call, minus the time spent inside
+    /// the board's own code (the device emulation behind `send`, the byte queue behind `recv`,
+    /// the log sink; the calls themselves are counted), and counts the log bytes.
+    struct TickMeter {
         mark: Option<u32>,
         paused_at: u32,
         excluded: u32,
@@ -953,35 +921,9 @@ mod firmware {
     /// torque off).
     const SKIP_FIRST: u32 = 2;
 
-    impl BenchBoard {
-        fn new(cfg: &Config) -> Self {
-            let mut devs = [Dev {
-                id: 0,
-                kind: Kind::Servo,
-                rdt: x_series::DEFAULT_RETURN_DELAY,
-                torque: false,
-                goal: x_series::CENTER_TICK,
-                present: x_series::CENTER_TICK,
-            }; 15];
-            for (k, d) in devs.iter_mut().enumerate() {
-                d.id = bus_map::DEVICE_IDS[k];
-                d.kind = match d.id {
-                    FOOT_L => Kind::Foot(0),
-                    FOOT_R => Kind::Foot(1),
-                    IMU => Kind::Imu,
-                    _ => Kind::Servo,
-                };
-            }
-            BenchBoard {
-                now_ns: 0,
-                now_us: 0,
-                line: LineTime { baud: cfg.bus_baud },
-                rx: heapless::Deque::new(),
-                sched: TickSchedule::new(cfg.tick_period_us),
-                compute_ns: walker_firmware::boards::qemu_mps2::compute_ns(cfg),
-                devs,
-                imu_counter: 0,
-                crash: CrashCell::new(),
+    impl TickMeter {
+        fn new() -> Self {
+            TickMeter {
                 mark: None,
                 paused_at: 0,
                 excluded: 0,
@@ -993,175 +935,6 @@ mod firmware {
                     max: 0,
                 },
                 log_bytes: 0,
-            }
-        }
-
-        fn pause(&mut self) {
-            self.paused_at = now();
-        }
-
-        fn resume(&mut self) {
-            self.excluded += self.paused_at.wrapping_sub(now()) & MASK;
-        }
-
-        fn advance(&mut self, ns: u64) {
-            self.now_ns += ns;
-            self.now_us = self.now_ns / 1000;
-        }
-
-        fn alive(&self, id: u8) -> Option<usize> {
-            self.devs.iter().position(|d| d.id == id)
-        }
-
-        fn status(&mut self, id: u8, data: &[u8]) {
-            let mut buf = [0u8; 64];
-            if let Ok(n) = dxl::encode_status(&mut buf, id, StatusError::OK, data) {
-                for &b in &buf[..n] {
-                    let _ = self.rx.push_back(b);
-                }
-            }
-        }
-
-        fn read_mem(&mut self, i: usize, addr: u16, len: u16, out: &mut [u8; 32]) -> usize {
-            let d = self.devs[i];
-            let put = |out: &mut [u8; 32], b: &[u8]| {
-                out[..b.len()].copy_from_slice(b);
-                b.len()
-            };
-            match (d.kind, addr, len) {
-                (_, 9, 1) => put(out, &[d.rdt]),
-                (Kind::Servo, 132, 4) => put(out, &d.present.to_le_bytes()),
-                (Kind::Servo, 116, 4) => put(out, &d.goal.to_le_bytes()),
-                (Kind::Servo, 64, 1) => put(out, &[u8::from(d.torque)]),
-                // The servo monitor's reads: no hardware error; 0.8 A, 12.0 V, 40 °C.
-                (Kind::Servo, 70, 1) => put(out, &[0]),
-                (Kind::Servo, 126, 21) => {
-                    let mut b = [0u8; 21];
-                    b[0..2].copy_from_slice(&300i16.to_le_bytes());
-                    b[18..20].copy_from_slice(&120u16.to_le_bytes());
-                    b[20] = 40;
-                    put(out, &b)
-                }
-                (Kind::Foot(s), 128, 18) => {
-                    let f = FootForces {
-                        forces_mn: if s == 0 {
-                            [4_100, 3_900, 4_300, 3_700]
-                        } else {
-                            [3_800, 4_200, 3_600, 4_400]
-                        },
-                        counter: self.imu_counter,
-                    };
-                    put(out, &f.to_bytes())
-                }
-                (Kind::Imu, 128, 26) => {
-                    self.imu_counter = self.imu_counter.wrapping_add(1);
-                    let rate = if self.imu_counter.is_multiple_of(2) {
-                        0.02
-                    } else {
-                        -0.01
-                    };
-                    let s =
-                        ImuSample::from_si([0.0, rate, 0.0], [0.0, 0.0, 9.81], self.imu_counter);
-                    put(out, &s.to_bytes())
-                }
-                _ => 0,
-            }
-        }
-
-        fn write_mem(&mut self, i: usize, addr: u16, data: &[u8]) -> bool {
-            let d = &mut self.devs[i];
-            match (d.kind, addr, data) {
-                (_, 9, [v]) => {
-                    d.rdt = *v;
-                    true
-                }
-                (Kind::Servo, 64, [v]) => {
-                    d.torque = *v != 0;
-                    if d.torque {
-                        d.goal = d.present;
-                    }
-                    true
-                }
-                (Kind::Servo, 116, [a, b, c, e]) => {
-                    d.goal = i32::from_le_bytes([*a, *b, *c, *e]);
-                    if d.torque {
-                        d.present = d.goal;
-                    }
-                    true
-                }
-                _ => false,
-            }
-        }
-
-        fn handle(&mut self, packet: &[u8]) {
-            let mut buf = [0u8; 160];
-            let Ok(p) = dxl::decode(packet, &mut buf) else {
-                return;
-            };
-            let Ok(inst) = dxl::Instruction::parse(&p) else {
-                return;
-            };
-            let bcast = p.id == dxl::BROADCAST_ID;
-            let mut data = [0u8; 32];
-            match inst {
-                dxl::Instruction::Ping => {
-                    if let Some(i) = self.alive(p.id) {
-                        let model = match self.devs[i].kind {
-                            Kind::Servo => x_series::MODEL_XM430_W350,
-                            Kind::Foot(_) => foot::MODEL_NUMBER_VALUE,
-                            Kind::Imu => imu::MODEL_NUMBER_VALUE,
-                        };
-                        let [lo, hi] = model.to_le_bytes();
-                        self.status(p.id, &[lo, hi, 48]);
-                    }
-                }
-                dxl::Instruction::Read { addr, len } => {
-                    if let Some(i) = self.alive(p.id) {
-                        let n = self.read_mem(i, addr, len, &mut data);
-                        if n > 0 {
-                            self.status(p.id, &data[..n]);
-                        }
-                    }
-                }
-                dxl::Instruction::Write { addr, data: w } => {
-                    if bcast {
-                        for i in 0..self.devs.len() {
-                            self.write_mem(i, addr, w);
-                        }
-                    } else if let Some(i) = self.alive(p.id) {
-                        if self.write_mem(i, addr, w) {
-                            self.status(p.id, &[]);
-                        }
-                    }
-                }
-                dxl::Instruction::SyncRead { addr, len, ids } => {
-                    for &id in ids {
-                        if let Some(i) = self.alive(id) {
-                            let n = self.read_mem(i, addr, len, &mut data);
-                            if n > 0 {
-                                self.status(id, &data[..n]);
-                            }
-                        }
-                    }
-                }
-                dxl::Instruction::SyncWrite(sw) => {
-                    for (id, d) in sw.entries() {
-                        if let Some(i) = self.alive(id) {
-                            self.write_mem(i, sw.addr, d);
-                        }
-                    }
-                }
-                dxl::Instruction::BulkRead(br) => {
-                    for r in br.entries() {
-                        if let Some(i) = self.alive(r.id) {
-                            let n = self.read_mem(i, r.addr, r.len, &mut data);
-                            if n > 0 {
-                                self.status(r.id, &data[..n]);
-                            }
-                        }
-                    }
-                }
-                _ => {}
             }
         }
 
@@ -1182,115 +955,50 @@ mod firmware {
         }
     }
 
-    impl ServoBus for BenchBoard {
-        fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
-            self.pause();
-            self.rx.clear();
-            self.advance(self.line.bytes_ns(packet.len()));
-            self.handle(packet);
-            self.resume();
-            Ok(())
-        }
-
-        fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
-            self.pause();
-            let start = self.now_ns;
-            let mut n = 0;
-            for slot in buf.iter_mut() {
-                let Some(b) = self.rx.pop_front() else { break };
-                *slot = b;
-                n += 1;
-            }
-            if n > 0 {
-                self.advance(self.line.bytes_ns(n));
-            }
-            if n < buf.len() {
-                let t = self.now_ns.max(start + u64::from(timeout_us) * 1000);
-                self.advance(t - self.now_ns);
-            }
-            self.resume();
-            Ok(n)
-        }
-
-        fn baud(&self) -> u32 {
-            self.line.baud
-        }
-
-        fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
-            self.line = LineTime { baud };
-            Ok(())
-        }
-    }
-
-    impl Clock for BenchBoard {
-        fn now_us(&self) -> u64 {
-            self.now_us
-        }
-    }
-
-    impl TickTimer for BenchBoard {
-        fn period_us(&self) -> u32 {
-            self.sched.period_us()
-        }
-
-        fn wait_tick(&mut self) -> Tick {
+    impl Observer for TickMeter {
+        fn tick_start(&mut self) {
             let t = now();
             if let Some(m) = self.mark {
                 let c = (m.wrapping_sub(t) & MASK).saturating_sub(self.excluded);
                 self.record_tick(c);
             }
-            self.advance(self.compute_ns);
-            let plan = self.sched.plan(self.now_us);
-            if let Some(w) = plan.wait_until_us {
-                let target = self.now_ns.max(w * 1000);
-                self.advance(target - self.now_ns);
-            }
+        }
+
+        fn tick(&mut self, _tick: Tick) {
             self.excluded = 0;
             self.mark = Some(now());
-            plan.tick
         }
 
-        fn overruns(&self) -> u32 {
-            self.sched.overruns()
-        }
-    }
-
-    impl LogSink for BenchBoard {
-        fn write_log(&mut self, bytes: &[u8]) {
-            self.pause();
+        fn log(&mut self, bytes: &[u8]) {
             self.log_bytes = self.log_bytes.wrapping_add(bytes.len() as u32);
-            self.resume();
-        }
-    }
-
-    impl Watchdog for BenchBoard {
-        fn start(&mut self, _timeout_ms: u32) {}
-        fn feed(&mut self) {}
-    }
-
-    impl Board for BenchBoard {
-        const NAME: &'static str = "bench";
-        const ID: BoardId = BoardId::Unknown;
-
-        fn torque_off_best_effort(&mut self) {
-            for d in self.devs.iter_mut() {
-                d.torque = false;
-            }
         }
 
-        fn servo_power(&mut self, _on: bool) {}
-
-        fn reset_cause(&self) -> (ResetCause, u32) {
-            (ResetCause::PowerOn, 0)
+        fn enter(&mut self) {
+            self.paused_at = now();
         }
 
-        fn crash_cell(&mut self) -> &mut CrashCell {
-            &mut self.crash
+        fn leave(&mut self) {
+            self.excluded += self.paused_at.wrapping_sub(now()) & MASK;
         }
 
         fn exit(&mut self, code: i32) -> ! {
             semihosting_exit(code)
         }
+    }
+
+    /// The fake robot as the bench runs it: the configuration's baud, tick and compute time
+    /// (the QEMU board's), constant foot loads and an alternating pitch rate (0.02 / -0.01
+    /// rad/s).
+    fn bench_robot(cfg: &Config) -> FakeRobot<TickMeter> {
+        let mut board = FakeRobot::reference(TickMeter::new()).with_period(cfg.tick_period_us);
+        let _ = board.set_baud(cfg.bus_baud);
+        board.compute_ns = walker_firmware::boards::qemu_mps2::compute_ns(cfg);
+        board.feet = Feet::Constant([[4_100, 3_900, 4_300, 3_700], [3_800, 4_200, 3_600, 4_400]]);
+        board.imu_motion = ImuMotion::Alternating {
+            even: 0.02,
+            odd: -0.01,
+        };
+        board
     }
 
     /// `control::run` with the default configuration (ramp and final hold cut to one tick)
@@ -1299,7 +1007,7 @@ mod firmware {
         let mut cfg = Config::default_config();
         cfg.ramp_us = cfg.tick_period_us;
         cfg.final_hold_us = cfg.tick_period_us;
-        let mut board = BenchBoard::new(&cfg);
+        let mut board = bench_robot(&cfg);
         let end = control::run(&mut board, &cfg);
         if end != RunEnd::Stopped(StopReason::PlanDone) {
             hprintln!("error control.run ended with exit code {}", end.exit_code());
@@ -1308,7 +1016,7 @@ mod firmware {
         hprintln!("control.model {}", cfg.model.name());
         hprintln!("control.ticks {}", board.seen);
         hprintln!("control.log_bytes {}", board.log_bytes);
-        hprintln!("control.overruns {}", board.sched.overruns());
+        hprintln!("control.overruns {}", board.overruns());
         report("control.tick", board.folded, 0);
     }
 

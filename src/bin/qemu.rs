@@ -26,7 +26,7 @@ fn main() {
 mod firmware {
 
     use cortex_m_rt::entry;
-    use walker_firmware::board::{Board, Clock};
+    use walker_firmware::board::Board;
     use walker_firmware::boards::qemu_mps2::{self, QemuBoard, CMDLINE_MAX};
     use walker_firmware::control;
     use walker_firmware::ExitCode;
@@ -66,23 +66,8 @@ mod firmware {
             control::report_arg_error(&mut board, &cfg, &e);
             board.exit(ExitCode::ConfigRejected.status())
         }
-        defmt::info!(
-            "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, lockstep {=bool}, model {=str}, {=usize} steps",
-            env!("CARGO_PKG_VERSION"),
-            QemuBoard::NAME,
-            cfg.tick_period_us,
-            cfg.bus_baud,
-            board.lockstep(),
-            cfg.model.name(),
-            cfg.walk.steps
-        );
-        let end = control::run(&mut board, &cfg);
-        let code = end.exit_code();
-        defmt::info!(
-            "run ended at t = {=u64} us: exit code {=i32}",
-            board.now_us(),
-            code
-        );
+        defmt::info!("lock-step {=bool}", board.lockstep());
+        let code = walker_firmware::run_walk(&mut board, &cfg).exit_code();
         board.exit(code)
     }
 

@@ -4,8 +4,9 @@
 
 use super::*;
 use crate::board::{Clock, ServoBus};
+use crate::fake_robot::trace::{FakeBoard, Pkt};
+use crate::fake_robot::Kind;
 use crate::record::{FaultState, StartupRecord};
-use crate::testkit::{FakeBoard, Kind, Pkt};
 use dxl::opcode;
 use gait_core::support::SupportPolygon;
 use std::vec::Vec;
@@ -460,7 +461,7 @@ fn overruns_are_counted_and_a_burst_stops() {
     let mut b = board(&cfg);
     // Two isolated slow ticks (work 2.09 ms + 3 ms, and + 8 ms: one whole tick missed):
     // counted, the walk goes on.
-    b.slow = vec![(1 + ramp + 20, 3_000), (1 + ramp + 60, 8_000)];
+    b.slow = heapless::Vec::from_slice(&[(1 + ramp + 20, 3_000), (1 + ramp + 60, 8_000)]).unwrap();
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     let tr = ticks_of(&b.records());
     assert_eq!(tr.iter().filter(|t| t.overrun).count(), 2);
@@ -917,7 +918,7 @@ fn the_servo_monitor_stops_on_each_limit() {
     let cfg = Config::default();
     // Each fault set on servo 8 from the start: the monitor reads servo 8 on tick 7 (round-robin
     // from servo 1 at tick 0), so the stop begins on tick 7 of the ramp.
-    type SetFault = fn(&mut crate::testkit::FakeDevice);
+    type SetFault = fn(&mut crate::fake_robot::FakeDevice);
     let cases: [(SetFault, ServoCheck, u16); 5] = [
         (|d| d.hw_error = 0x04, ServoCheck::HardwareError, 4),
         (|d| d.temperature = 75, ServoCheck::Temperature, 75),
@@ -1016,7 +1017,7 @@ fn a_brown_out_reset_logs_its_cause_and_does_not_walk() {
     b.reset = (stm32f7_reset_cause(csr), csr >> 24);
     // Torque was on before the reset (the servos have their own supply).
     for d in b.devices.iter_mut() {
-        d.torque = matches!(d.kind, crate::testkit::Kind::Servo(_));
+        d.torque = matches!(d.kind, crate::fake_robot::Kind::Servo(_));
     }
     let end = run(&mut b, &cfg);
     assert_eq!(

@@ -156,7 +156,7 @@ impl Support {
 
 /// Ground truth at one physics time.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Truth {
+pub struct TruthSample {
     /// Time, µs.
     pub t_us: u64,
     /// Whole-body ZMP, m (the last valid one if `fz ≤ 0`).
@@ -298,7 +298,7 @@ pub struct Physics {
     /// Physics time, µs.
     pub time_us: u64,
     dt_us: u64,
-    truth: Truth,
+    truth: TruthSample,
     dist_rng: Rng,
     cfg: SimConfig,
     /// Largest distance of the ZMP outside the support polygon seen, m.
@@ -350,7 +350,7 @@ impl Physics {
             current: Snapshot::default(),
             time_us: 0,
             dt_us: cfg.physics_dt_us.max(1),
-            truth: Truth::default(),
+            truth: TruthSample::default(),
             dist_rng: Rng::new(cfg.seed, 3),
             cfg: cfg.clone(),
             max_outside: 0.0,
@@ -491,7 +491,7 @@ impl Physics {
         }
     }
 
-    fn compute_truth(&self) -> Truth {
+    fn compute_truth(&self) -> TruthSample {
         // The present positions and those along the Taylor path at ∓ε (see the module docs).
         let h = STENCIL_S;
         let [th, th_d, th_dd] = self.fall_state();
@@ -559,7 +559,7 @@ impl Physics {
         } else {
             [[0.0; 4]; 2]
         };
-        Truth {
+        TruthSample {
             t_us: c.t_us,
             zmp: zmp_xy,
             fz,
@@ -589,7 +589,7 @@ impl Physics {
     }
 
     /// The ground truth at `time_us`.
-    pub fn truth(&self) -> &Truth {
+    pub fn truth(&self) -> &TruthSample {
         &self.truth
     }
 

@@ -45,7 +45,7 @@ use walker_contract::bus_map::{self as ids, TickMap};
 /// The servos' rad ↔ tick map (the contract's one definition).
 const TICKS: TickMap = TickMap::reference();
 
-pub use body::{Physics, ServoCmd, Support, Truth};
+pub use body::{Physics, ServoCmd, Support, TruthSample};
 pub use bus::{BusCounters, BusFaults, DeviceBus, OwnedPacket};
 pub use device::{Device, DeviceKind};
 pub use dynamixel::{XServoOutput, XServoParams, XServoRegisters};
@@ -449,7 +449,7 @@ impl Body {
     }
 
     /// The ground truth.
-    pub fn truth(&self) -> &Truth {
+    pub fn truth(&self) -> &TruthSample {
         match self {
             Body::MuJoCo(b) => b.truth(),
             Body::Kinematic(p) => p.truth(),

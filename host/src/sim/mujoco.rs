@@ -9,7 +9,7 @@
 //!    the seed's upper-body pitch torque, a forced fall) are written to the torso's
 //!    `xfrc_applied`.
 //! 3. `mj_step2`: contact forces, accelerations, sensors at time t, then integration to t + dt.
-//! 4. The ground truth of time t is read off the data ([`Truth`]).
+//! 4. The ground truth of time t is read off the data ([`TruthSample`]).
 //!
 //! # What the truth and the sensors are
 //!
@@ -42,7 +42,7 @@ use gait_core::Robot;
 use mujoco_rs::prelude::*;
 use mujoco_rs::wrappers::mj_model::MjtObjBase;
 
-use super::body::{Support, Truth};
+use super::body::{Support, TruthSample};
 use super::dynamixel::{XServo, XServoOutput, XServoParams, XServoRegisters};
 use super::mjcf::{model_xml, standing_height};
 use super::rng::Rng;
@@ -129,7 +129,7 @@ pub struct MjBody {
     /// Physics time, µs (the truth describes `time_us − dt`).
     pub time_us: u64,
     dt_us: u64,
-    truth: Truth,
+    truth: TruthSample,
     held: bool,
     standing_z: f64,
     cfg: SimConfig,
@@ -265,7 +265,7 @@ impl MjBody {
             qd: [0.0; 12],
             time_us: 0,
             dt_us: cfg.physics_dt_us,
-            truth: Truth::default(),
+            truth: TruthSample::default(),
             held: cfg.hold_until_torque,
             standing_z,
             cfg: cfg.clone(),
@@ -306,7 +306,7 @@ impl MjBody {
     }
 
     /// The ground truth.
-    pub fn truth(&self) -> &Truth {
+    pub fn truth(&self) -> &TruthSample {
         &self.truth
     }
 
@@ -429,7 +429,7 @@ impl MjBody {
         }
     }
 
-    fn read_truth(&self, t_us: u64) -> Truth {
+    fn read_truth(&self, t_us: u64) -> TruthSample {
         let d = &self.data;
         let ids = self.ids;
         let geom_body = d.model().geom_bodyid();
@@ -520,7 +520,7 @@ impl MjBody {
                 limited |= 1 << j;
             }
         }
-        Truth {
+        TruthSample {
             t_us,
             zmp,
             fz: cop_den,

@@ -22,7 +22,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use super::body::Truth;
+use super::body::TruthSample;
 
 /// Header line of the truth CSV (without newline).
 pub const HEADER: &str = "t_s,zmp_x_m,zmp_y_m,fz_n,com_x_m,com_y_m,com_z_m,pelvis_x_m,pelvis_y_m,pelvis_z_m,\
@@ -59,7 +59,7 @@ impl TruthLog {
     }
 
     /// Appends one row.
-    pub fn row(&mut self, t: &Truth) -> std::io::Result<()> {
+    pub fn row(&mut self, t: &TruthSample) -> std::io::Result<()> {
         let mut s = format!("{:.6}", t.t_us as f64 * 1e-6);
         let put = |s: &mut String, v: f64, decimals: usize| {
             s.push(',');
