@@ -36,13 +36,21 @@ cargo build --release --no-default-features --features board-qemu,fixed-gait --b
 cp target/thumbv7em-none-eabihf/release/qemu target/thumbv7em-none-eabihf/release/qemu-fixed
 cargo build --release --no-default-features --features board-qemu --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
+# The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
+# ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3).
+m3=(--profile release-m3 --target thumbv7m-none-eabi --no-default-features)
+cargo clippy "${m3[@]}" --no-deps --features board-opencm --bins -- -D warnings
+cargo build "${m3[@]}" --features board-opencm --bin opencm
+cargo clippy "${m3[@]}" --no-deps --features board-qemu,fixed-gait --bins -- -D warnings
+cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
 
 step "firmware sizes: flash and static RAM of every board build (FPU-less M3 builds: ≤ 112 KiB flash, ≤ 16 KiB RAM)"
-# M3 board builds, once they exist, are listed with `--limit 112:16` before their ELF.
 python3 scripts/sizes.py \
     target/thumbv7em-none-eabihf/release/qemu \
     target/thumbv7em-none-eabihf/release/qemu-fixed \
-    target/thumbv7em-none-eabihf/release/opencr
+    target/thumbv7em-none-eabihf/release/opencr \
+    --limit 112:16 target/thumbv7m-none-eabi/release-m3/opencm \
+    --limit 112:16 target/thumbv7m-none-eabi/release-m3/qemu
 # The limit check itself must be able to fail: the qemu ELF is far over 1 KiB of flash.
 if python3 scripts/sizes.py --limit 1:16 target/thumbv7em-none-eabihf/release/qemu >/dev/null; then
     echo "scripts/sizes.py did not flag an ELF over its limit" >&2
