@@ -321,7 +321,7 @@ pub struct SimulateArgs {
 }
 
 /// The QEMU boards that run the board-qemu firmware.
-pub(crate) const MACHINES: [&str; 2] = ["mps2-an500", "mps2-an386"];
+pub(crate) const MACHINES: [&str; 3] = ["mps2-an500", "mps2-an386", "mps2-an385"];
 
 /// The options of a firmware-in-the-loop run shared by `fil`, `beyond` and `sweep`.
 #[derive(Debug, Args)]
@@ -335,7 +335,8 @@ pub struct RunArgs {
     /// Firmware ELF (board-qemu build; default target/thumbv7em-none-eabihf/release/qemu).
     #[arg(long, value_name = "ELF")]
     pub elf: Option<PathBuf>,
-    /// QEMU machine: mps2-an500 (Cortex-M7, default) or mps2-an386 (Cortex-M4F).
+    /// QEMU machine: mps2-an500 (Cortex-M7, default), mps2-an386 (Cortex-M4F) or mps2-an385
+    /// (Cortex-M3: a thumbv7m-none-eabi ELF, e.g. target/thumbv7m-none-eabi/release-m3/qemu).
     #[arg(long, value_parser = MACHINES)]
     pub machine: Option<String>,
     /// Firmware parameters for every run, 'key=value …' (docs/parameters.md), checked before QEMU starts.

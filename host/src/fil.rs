@@ -27,7 +27,7 @@ pub struct FilOptions {
     pub spec: WalkSpec,
     /// Output folder.
     pub out_dir: PathBuf,
-    /// QEMU machine (`mps2-an500` Cortex-M7 or `mps2-an386` Cortex-M4F).
+    /// QEMU machine (`mps2-an500` Cortex-M7, `mps2-an386` Cortex-M4F, `mps2-an385` Cortex-M3).
     pub machine: String,
     /// Wall-clock limit, s.
     pub timeout: Duration,

@@ -58,7 +58,7 @@ pub struct RunFile {
 pub struct QemuSection {
     /// Firmware ELF (relative to the working directory, as on the command line).
     pub elf: Option<PathBuf>,
-    /// QEMU machine (`mps2-an500`, `mps2-an386`).
+    /// QEMU machine (`mps2-an500`, `mps2-an386`, `mps2-an385`).
     pub machine: Option<String>,
     /// Wall-clock limit, s.
     pub timeout_s: Option<f64>,
