@@ -10,7 +10,9 @@
 //!   `memory.x` is) before any `-L` path — measured: the QEMU ELF came out linked at
 //!   0x0800_0000 and locked up. So the top-level `memory.x` selects the layout with
 //!   `DEFINED(_walker_qemu_mps2)`, and this script passes `--defsym=_walker_qemu_mps2=1` for
-//!   `board-qemu`. The chosen layout is still copied to OUT_DIR (`memory.x`, first on the
+//!   `board-qemu`; likewise `--defsym=_walker_opencm=1` selects the ROBOTIS OpenCM 9.04's
+//!   layout for `board-opencm` (FLASH 0x0800_3000 114 KiB after ROBOTIS' bootloader, RAM
+//!   20 KiB). The chosen layout is still copied to OUT_DIR (`memory.x`, first on the
 //!   search path) for builds whose linker runs elsewhere, and the mps2 one is written there
 //!   as `memory-qemu-mps2.x` for reference.
 use std::env;
@@ -34,9 +36,10 @@ fn main() {
 
     let qemu = env::var_os("CARGO_FEATURE_BOARD_QEMU").is_some();
     let opencr = env::var_os("CARGO_FEATURE_BOARD_OPENCR").is_some();
-    if qemu && opencr {
+    let opencm = env::var_os("CARGO_FEATURE_BOARD_OPENCM").is_some();
+    if usize::from(qemu) + usize::from(opencr) + usize::from(opencm) > 1 {
         eprintln!(
-            "error: features `board-qemu` and `board-opencr` are exclusive \
+            "error: features `board-qemu`, `board-opencr` and `board-opencm` are exclusive \
              (use `--no-default-features --features board-qemu`)"
         );
         std::process::exit(1);
@@ -77,8 +80,11 @@ fn main() {
             println!("cargo:rustc-link-arg-{kind}=--defsym=_walker_qemu_mps2=1");
         }
     }
+    if opencm {
+        println!("cargo:rustc-link-arg-bins=--defsym=_walker_opencm=1");
+    }
 
-    if qemu || opencr {
+    if qemu || opencr || opencm {
         for kind in ["bins", "tests"] {
             println!("cargo:rustc-link-arg-{kind}=-Tlink.x");
             println!("cargo:rustc-link-arg-{kind}=-Tdefmt.x");

@@ -58,12 +58,18 @@ bench_feat=(--release --no-default-features --features board-qemu,fake-robot)
 bench_dir=target/bench-build
 echo "bench.sh: building" >&2
 DEFMT_LOG=off cargo build "${bench_feat[@]}" --bin bench --target-dir "$bench_dir"
-DEFMT_LOG=off cargo build "${bench_feat[@]}" --bin bench --target-dir "$bench_dir" \
+# The Cortex-M3 bench as the M3 firmware is built: profile release-m3, the fixed-point path
+# compiled in (its control loop is measured with math=f32 and math=fixed).
+m3_feat=(--profile release-m3 --no-default-features --features board-qemu,fixed-gait,fake-robot)
+DEFMT_LOG=off cargo build "${m3_feat[@]}" --bin bench --target-dir "$bench_dir" \
     --target thumbv7m-none-eabi
 cargo build "${qemu_feat[@]}" --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
+m3_fw=(--profile release-m3 --target thumbv7m-none-eabi --no-default-features)
+cargo build "${m3_fw[@]}" --features board-qemu,fixed-gait --bin qemu
+cargo build "${m3_fw[@]}" --features board-opencm --bin opencm
 elf_hf=$bench_dir/thumbv7em-none-eabihf/release/bench
-elf_m3=$bench_dir/thumbv7m-none-eabi/release/bench
+elf_m3=$bench_dir/thumbv7m-none-eabi/release-m3/bench
 
 # ---- 2. QEMU runs ----
 run_once() { # machine elf outfile (QEMU's command line: scripts/qemu-run.sh)
@@ -124,9 +130,10 @@ cat >"$tick_cost_new" <<TICKCOST
 //! Instructions per control tick measured by \`scripts/bench.sh\` (generated: the script
 //! rewrites this file after each run; do not edit by hand).
 //!
-//! The firmware's control loop (\`control::run\`, default configuration: TLIPFM, f32, paper
-//! pipeline, stabilizer off) on the bench's emulated bus, QEMU \`-icount shift=0\`, per walking
-//! tick: worst case and average over the Table 2 walk. The QEMU board charges the worst case
+//! The firmware's control loop (\`control::run\`, default configuration: TLIPFM, f32 — or the
+//! fixed-point path where named —, paper pipeline, stabilizer off) on the bench's emulated
+//! bus, QEMU \`-icount shift=0\`, per walking tick: worst case and average over the Table 2
+//! walk. The QEMU board charges the worst case
 //! as its compute time per tick (see [\`super::qemu_mps2::compute_ns\`]).
 
 /// Worst-case instructions per control tick, hard-float build (Cortex-M7/M4F, mps2-an500).
@@ -137,6 +144,11 @@ pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = ${M7[control.tick.avg]%.*};
 pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = ${M3[control.tick.max]};
 /// Average instructions per control tick, soft-float build (for reference).
 pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = ${M3[control.tick.avg]%.*};
+/// Worst-case instructions per control tick, Cortex-M3 build with the fixed-point path
+/// (\`fixed-gait\`, \`math=fixed\`; mps2-an385).
+pub const TICK_INSTRUCTIONS_MAX_FIXED_SOFT: u32 = ${M3[control.tick_fixed.max]};
+/// Average instructions per control tick, Cortex-M3 fixed-point path (for reference).
+pub const TICK_INSTRUCTIONS_AVG_FIXED_SOFT: u32 = ${M3[control.tick_fixed.avg]%.*};
 TICKCOST
 if cmp -s "$tick_cost_new" "$tick_cost"; then
     rm -f "$tick_cost_new"
@@ -145,6 +157,7 @@ else
     echo "bench.sh: $tick_cost updated (the QEMU board's compute time per tick); rebuilding the ELFs" >&2
     cargo build "${qemu_feat[@]}" --bin qemu
     cargo build --release --no-default-features --features board-opencr --bin opencr
+    cargo build "${m3_fw[@]}" --features board-qemu,fixed-gait --bin qemu
 fi
 
 # ---- helpers ----
@@ -183,6 +196,8 @@ elf_sizes() { # elf → "flash ram text rodata data bss" (bytes)
 }
 read -r q_flash q_ram q_text q_ro q_data q_bss < <(elf_sizes target/thumbv7em-none-eabihf/release/qemu)
 read -r o_flash o_ram o_text o_ro o_data o_bss < <(elf_sizes target/thumbv7em-none-eabihf/release/opencr)
+read -r m_flash m_ram m_text m_ro m_data m_bss < <(elf_sizes target/thumbv7m-none-eabi/release-m3/opencm)
+read -r q3_flash q3_ram q3_text q3_ro q3_data q3_bss < <(elf_sizes target/thumbv7m-none-eabi/release-m3/qemu)
 kib() { calc "$1 / 1024" 2; }
 verdict() { # value limit
     if awk "BEGIN { exit !(($1) <= ($2)) }"; then printf 'within'; else printf '**over**'; fi
@@ -304,9 +319,9 @@ Reproduce one machine by hand:
 
 \`\`\`sh
 DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench --target-dir target/bench-build
-DEFMT_LOG=off cargo build --release --no-default-features --features board-qemu,fake-robot --bin bench --target-dir target/bench-build --target thumbv7m-none-eabi
-scripts/qemu-run.sh target/bench-build/thumbv7em-none-eabihf/release/bench --raw  # an500; also --machine mps2-an386
-scripts/qemu-run.sh target/bench-build/thumbv7m-none-eabi/release/bench --raw     # an385 (by the target)
+DEFMT_LOG=off cargo build --profile release-m3 --no-default-features --features board-qemu,fixed-gait,fake-robot --bin bench --target-dir target/bench-build --target thumbv7m-none-eabi
+scripts/qemu-run.sh target/bench-build/thumbv7em-none-eabihf/release/bench --raw      # an500; also --machine mps2-an386
+scripts/qemu-run.sh target/bench-build/thumbv7m-none-eabi/release-m3/bench --raw      # an385 (by the target)
 \`\`\`
 
 ### Full control tick, instructions (avg over the walk, max per tick in parentheses)
@@ -354,7 +369,11 @@ estimate, \`safe_targets\` and the log record (≈ $(calc "${M7[control.log_byte
 | --- | --- | --- |
 | Cortex-M7, mps2-an500 | $(cell M7 control.tick) | $(ratio "${M7[control.tick.avg]}" "$t7" 2)× |
 | Cortex-M4F, mps2-an386 | $(cell M4 control.tick) | $(ratio "${M4[control.tick.avg]}" "$t4" 2)× |
-| Cortex-M3, mps2-an385 (f32 soft float; the loop has no fixed-point path) | $(cell M3 control.tick) | $(ratio "${M3[control.tick.avg]}" "$t3f" 2)× |
+| Cortex-M3, mps2-an385, f32 soft float (\`math=f32\`) | $(cell M3 control.tick) | $(ratio "${M3[control.tick.avg]}" "$t3f" 2)× |
+| Cortex-M3, mps2-an385, fixed-point path (\`math=fixed\`) | $(cell M3 control.tick_fixed) | $(ratio "${M3[control.tick_fixed.avg]}" "$t3" 2)× the fixed library-call tick |
+
+The Cortex-M3 bench is built as the M3 firmware is (profile \`release-m3\`, opt-level "s", with
+the \`fixed-gait\` feature); its stage figures below are of that build too.
 
 What dominates (TLIPFM, avg; the parts are the stage figures below, the rest is the tick minus
 their sum):
@@ -398,8 +417,8 @@ their sum):
 | --- | --- | --- |
 | M7 firmware control-loop tick, the loop alone (not the library calls) ≤ 8,000 instructions avg | loop alone $(n "${M7[control.tick.avg]} - $t7") = control-loop tick $(n "${M7[control.tick.avg]}") − f32 library-call tick $(n "$t7") | $(verdict "${M7[control.tick.avg]} - $t7" 8000) |
 | codec: decode ≤ 20 per received byte, encode ≤ 12 per sent byte (M7) | decode (block) $(per_rx M7 dxl.feed3), SYNC WRITE $(per_sw M7), BULK READ $(per_br M7) | decode $(verdict "$(per_rx M7 dxl.feed3)" 20), SYNC WRITE $(verdict "$(per_sw M7)" 12), BULK READ $(verdict "$(per_br M7)" 12) |
-| M3 control-loop tick with the fixed-point path ≤ 25,000 | the firmware's loop on the M3 is f32 soft float here ($(n "${M3[control.tick.avg]}")); the library-call fixed tick is $(n "$t3") | not measured (no M3 board build yet) |
-| M3 build ≤ 112 KiB flash, ≤ 16 KiB static RAM | applies to an FPU-less board build; the FPU boards' sizes are below | no M3 board build yet |
+| M3 control-loop tick with the fixed-point path ≤ 25,000 | $(n "${M3[control.tick_fixed.avg]}") avg, $(n "${M3[control.tick_fixed.max]}") max (the library-call fixed tick alone is $(n "$t3")) | $(verdict "${M3[control.tick_fixed.avg]}" 25000) |
+| M3 builds ≤ 112 KiB flash, ≤ 16 KiB static RAM | OpenCM 9.04 $(n "$m_flash") B / $(n "$m_ram") B; QEMU M3 $(n "$q3_flash") B / $(n "$q3_ram") B | OpenCM $(verdict "$m_flash" 114688) / $(verdict "$m_ram" 16384); QEMU M3 $(verdict "$q3_flash" 114688) / $(verdict "$q3_ram" 16384) |
 
 ### Dynamixel codec per byte (issue 14 targets: decode ≤ 20 per received byte, encode ≤ 12 per sent byte)
 
@@ -483,8 +502,11 @@ EOF
 
 ### Firmware sizes (release ELFs, \`readelf -S\`)
 
-\`cargo build --release --no-default-features --features board-qemu --bin qemu\` and
-\`cargo build --release --no-default-features --features board-opencr --bin opencr\`. Flash =
+\`cargo build --release --no-default-features --features board-qemu --bin qemu\`,
+\`cargo build --release --no-default-features --features board-opencr --bin opencr\`, and the
+Cortex-M3 builds with the fixed-point path, \`cargo build --profile release-m3 --target
+thumbv7m-none-eabi --no-default-features --features board-opencm --bin opencm\` (and
+\`--features board-qemu,fixed-gait --bin qemu\`; CI limit 112 KiB flash, 16 KiB static RAM). Flash =
 every allocated section with contents (vector table, .text, .rodata, the .data image); static
 RAM = .data + .bss + .uninit (the stack comes on top).
 
@@ -492,6 +514,8 @@ RAM = .data + .bss + .uninit (the stack comes on top).
 | --- | --- | --- | --- | --- | --- | --- | --- |
 | \`qemu\` (mps2) | $(commas "$q_text") | $(commas "$q_ro") | $(commas "$q_data") | $(commas "$q_bss") | $(commas "$q_flash") B ($(kib "$q_flash") KiB) | $(commas "$q_ram") B ($(kib "$q_ram") KiB) | flash $(calc "100 * $q_flash / 4194304" 1) % of 4 MiB |
 | \`opencr\` (STM32F746) | $(commas "$o_text") | $(commas "$o_ro") | $(commas "$o_data") | $(commas "$o_bss") | $(commas "$o_flash") B ($(kib "$o_flash") KiB) | $(commas "$o_ram") B ($(kib "$o_ram") KiB) | flash $(calc "100 * $o_flash / 1048576" 1) % of 1 MiB, RAM $(calc "100 * $o_ram / 327680" 1) % of 320 KiB |
+| \`opencm\` (STM32F103CB, M3, release-m3) | $(commas "$m_text") | $(commas "$m_ro") | $(commas "$m_data") | $(commas "$m_bss") | $(commas "$m_flash") B ($(kib "$m_flash") KiB) | $(commas "$m_ram") B ($(kib "$m_ram") KiB) | flash $(calc "100 * $m_flash / 116736" 1) % of 114 KiB, static RAM $(calc "100 * $m_ram / 20480" 1) % of 20 KiB |
+| \`qemu\` M3 (mps2-an385, release-m3, fixed-gait) | $(commas "$q3_text") | $(commas "$q3_ro") | $(commas "$q3_data") | $(commas "$q3_bss") | $(commas "$q3_flash") B ($(kib "$q3_flash") KiB) | $(commas "$q3_ram") B ($(kib "$q3_ram") KiB) | flash $(calc "100 * $q3_flash / 114688" 1) % of the 112 KiB limit |
 
 Built from the working tree at the time of the run. The firmware keeps its state (sampler,
 plan, IK) on the stack, so static RAM understates its RAM use; the stack is not measured here.

@@ -36,13 +36,21 @@ cargo build --release --no-default-features --features board-qemu,fixed-gait --b
 cp target/thumbv7em-none-eabihf/release/qemu target/thumbv7em-none-eabihf/release/qemu-fixed
 cargo build --release --no-default-features --features board-qemu --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
+# The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
+# ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3).
+m3=(--profile release-m3 --target thumbv7m-none-eabi --no-default-features)
+cargo clippy "${m3[@]}" --no-deps --features board-opencm --bins -- -D warnings
+cargo build "${m3[@]}" --features board-opencm --bin opencm
+cargo clippy "${m3[@]}" --no-deps --features board-qemu,fixed-gait --bins -- -D warnings
+cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
 
-step "firmware sizes: flash and static RAM of every board build (FPU-less M3 builds: ≤ 112 KiB flash, ≤ 16 KiB RAM)"
-# M3 board builds, once they exist, are listed with `--limit 112:16` before their ELF.
+step "firmware sizes: flash and static RAM of every board build (the FPU-less M3 board, OpenCM 9.04: ≤ 112 KiB flash, ≤ 16 KiB RAM)"
 python3 scripts/sizes.py \
     target/thumbv7em-none-eabihf/release/qemu \
     target/thumbv7em-none-eabihf/release/qemu-fixed \
-    target/thumbv7em-none-eabihf/release/opencr
+    target/thumbv7em-none-eabihf/release/opencr \
+    target/thumbv7m-none-eabi/release-m3/qemu \
+    --limit 112:16 target/thumbv7m-none-eabi/release-m3/opencm
 # The limit check itself must be able to fail: the qemu ELF is far over 1 KiB of flash.
 if python3 scripts/sizes.py --limit 1:16 target/thumbv7em-none-eabihf/release/qemu >/dev/null; then
     echo "scripts/sizes.py did not flag an ELF over its limit" >&2
@@ -85,9 +93,10 @@ step "video: MuJoCo renders a walk headless (EGL) into an MP4"
 render_py=$(bash scripts/render-setup.sh | tail -n 1)
 "$render_py" scripts/render_selftest.py
 
-step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism, faults, falls, a 14-step walk with its video)"
+step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism, faults, falls, a 14-step walk with its video, the Cortex-M3 fixed-point walk on mps2-an385, 1 kHz at 4.5 Mbps)"
 WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu \
 WALKER_QEMU_FIXED_ELF=target/thumbv7em-none-eabihf/release/qemu-fixed \
+WALKER_QEMU_M3_ELF=target/thumbv7m-none-eabi/release-m3/qemu \
     cargo test --release --target host-tuple -p walker-host --test fil -- --ignored --test-threads 1
 
 printf '\nall checks passed\n'

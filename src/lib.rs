@@ -22,9 +22,13 @@
 #![cfg_attr(not(test), no_std)]
 #![warn(missing_docs)]
 
-#[cfg(all(feature = "board-qemu", feature = "board-opencr"))]
+#[cfg(any(
+    all(feature = "board-qemu", feature = "board-opencr"),
+    all(feature = "board-qemu", feature = "board-opencm"),
+    all(feature = "board-opencr", feature = "board-opencm")
+))]
 compile_error!(
-    "features `board-qemu` and `board-opencr` are exclusive: build with \
+    "features `board-qemu`, `board-opencr` and `board-opencm` are exclusive: build with \
      `--no-default-features --features board-qemu` for QEMU"
 );
 

@@ -178,6 +178,8 @@ pub enum BoardId {
     QemuMps2 = 1,
     /// ROBOTIS OpenCR 1.0.
     OpenCr = 2,
+    /// ROBOTIS OpenCM 9.04.
+    OpenCm = 3,
 }
 
 impl BoardId {
@@ -187,6 +189,7 @@ impl BoardId {
             Self::Unknown => 0,
             Self::QemuMps2 => 1,
             Self::OpenCr => 2,
+            Self::OpenCm => 3,
         }
     }
     /// From the wire code (unknown codes decode as [`BoardId::Unknown`]).
@@ -194,6 +197,7 @@ impl BoardId {
         match b {
             1 => Self::QemuMps2,
             2 => Self::OpenCr,
+            3 => Self::OpenCm,
             _ => Self::Unknown,
         }
     }

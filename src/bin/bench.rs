@@ -64,6 +64,7 @@ mod firmware {
     use walker_firmware::board::{ServoBus, Tick, TickTimer};
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
     use walker_firmware::bus_map::{self, TickMap};
+    use walker_firmware::config::Arithmetic;
     use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache, Targets};
     use walker_firmware::fake_robot::{FakeRobot, Feet, ImuMotion, Observer};
     use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
@@ -1002,22 +1003,33 @@ mod firmware {
     }
 
     /// `control::run` with the default configuration (ramp and final hold cut to one tick)
-    /// on the in-memory bus: instructions per walking tick of the real control loop.
+    /// on the in-memory bus: instructions per walking tick of the real control loop
+    /// (`control.tick`); in a build with the `fixed-gait` feature (the Cortex-M3 bench of
+    /// scripts/bench.sh) also with the fixed-point path, `math=fixed` (`control.tick_fixed`).
     fn control_loop() {
+        control_loop_with(Arithmetic::F32, "control", "control.tick");
+        #[cfg(feature = "fixed-gait")]
+        control_loop_with(Arithmetic::Fixed, "control_fixed", "control.tick_fixed");
+    }
+
+    /// One `control::run` with `arithmetic`: its counts under `key.*`, the instructions per
+    /// walking tick under `tick.*`.
+    fn control_loop_with(arithmetic: Arithmetic, key: &str, tick: &str) {
         let mut cfg = Config::default_config();
         cfg.ramp_us = cfg.tick_period_us;
         cfg.final_hold_us = cfg.tick_period_us;
+        cfg.arithmetic = arithmetic;
         let mut board = bench_robot(&cfg);
         let end = control::run(&mut board, &cfg);
         if end != RunEnd::Stopped(StopReason::PlanDone) {
-            hprintln!("error control.run ended with exit code {}", end.exit_code());
+            hprintln!("error {}.run ended with exit code {}", key, end.exit_code());
             semihosting_exit(1);
         }
-        hprintln!("control.model {}", cfg.model.name());
-        hprintln!("control.ticks {}", board.seen);
-        hprintln!("control.log_bytes {}", board.log_bytes);
-        hprintln!("control.overruns {}", board.overruns());
-        report("control.tick", board.folded, 0);
+        hprintln!("{}.model {}", key, cfg.model.name());
+        hprintln!("{}.ticks {}", key, board.seen);
+        hprintln!("{}.log_bytes {}", key, board.log_bytes);
+        hprintln!("{}.overruns {}", key, board.overruns());
+        report(tick, board.folded, 0);
     }
 
     /// A small stack string for `prefix + model` keys.

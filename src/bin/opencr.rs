@@ -24,8 +24,8 @@ fn main() {
 mod firmware {
 
     use cortex_m_rt::entry;
-    use walker_firmware::board::{TickTimer, Watchdog};
     use walker_firmware::boards::opencr::{self, OpenCrBoard};
+    use walker_firmware::boards::run_then_idle;
     use walker_firmware::Config;
 
     #[entry]
@@ -36,18 +36,7 @@ mod firmware {
         };
         // The board reads (and clears) the reset flags; `control::run` decides from them.
         let mut board = OpenCrBoard::new(dp, &cfg);
-        let end = walker_firmware::run_walk(&mut board, &cfg);
-        defmt::warn!(
-            "run ended (exit code {=i32}); torque off, idling",
-            end.exit_code()
-        );
-        loop {
-            let tick = board.wait_tick();
-            if tick.overrun {
-                defmt::warn!("overrun at tick {=u64}", tick.index);
-            }
-            board.feed();
-        }
+        run_then_idle(&mut board, &cfg)
     }
 
     #[panic_handler]

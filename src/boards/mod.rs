@@ -1,9 +1,33 @@
 //! Board support: one module per board, compiled only for the bare-metal ARM target with its
-//! feature (`board-qemu` → [`qemu_mps2`], `board-opencr` → [`opencr`]).
+//! feature (`board-qemu` → [`qemu_mps2`], `board-opencr` → [`opencr`], `board-opencm` →
+//! [`opencm`]).
 
+#[cfg(feature = "board-opencm")]
+pub mod opencm;
 #[cfg(feature = "board-opencr")]
 pub mod opencr;
 #[cfg(feature = "board-qemu")]
 pub mod qemu_mps2;
 #[cfg(feature = "board-qemu")]
 pub mod tick_cost;
+
+/// The main of a real robot controller after its board is up: logs the start-up line, runs
+/// [`crate::control::run`] once with `cfg` (probe, torque on, ramp, walk, hold, torque off;
+/// after any reset but a power-on it does not walk), then idles: torque stays off, the tick
+/// keeps running and the watchdog (started by the control loop) is fed, so the board does not
+/// reset into a new walk.
+#[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
+pub fn run_then_idle<B: crate::board::Board>(board: &mut B, cfg: &crate::Config) -> ! {
+    let end = crate::run_walk(board, cfg);
+    defmt::warn!(
+        "run ended (exit code {=i32}); torque off, idling",
+        end.exit_code()
+    );
+    loop {
+        let tick = board.wait_tick();
+        if tick.overrun {
+            defmt::warn!("overrun at tick {=u64}", tick.index);
+        }
+        board.feed();
+    }
+}

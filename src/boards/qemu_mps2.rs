@@ -89,19 +89,31 @@ pub const UART1_BASE: usize = 0x4000_5000;
 pub const UART2_BASE: usize = 0x4000_6000;
 /// UART / SysTick clock of the mps2 boards, Hz.
 pub const SYSCLK_HZ: u32 = 25_000_000;
-/// Instructions per control tick charged as compute time: the bench's worst case for this
-/// build (hard float on the M7/M4F ELF, soft float on a Cortex-M3 one).
-#[cfg(target_abi = "eabihf")]
-pub const TICK_INSTRUCTIONS: u32 = super::tick_cost::TICK_INSTRUCTIONS_MAX_FPU;
-/// Instructions per control tick charged as compute time (soft-float build).
-#[cfg(not(target_abi = "eabihf"))]
-pub const TICK_INSTRUCTIONS: u32 = super::tick_cost::TICK_INSTRUCTIONS_MAX_SOFT;
+/// Instructions per control tick charged as compute time for `cfg`: the bench's worst case
+/// for this build and arithmetic — hard float on the M7/M4F ELF (either `math`; the
+/// fixed-point path is not measured there), soft float on a Cortex-M3 ELF with `math=f32`,
+/// the fixed-point path on a Cortex-M3 ELF with `math=fixed` ([`super::tick_cost`]).
+pub fn tick_instructions(cfg: &Config) -> u32 {
+    #[cfg(target_abi = "eabihf")]
+    {
+        let _ = cfg;
+        super::tick_cost::TICK_INSTRUCTIONS_MAX_FPU
+    }
+    #[cfg(not(target_abi = "eabihf"))]
+    {
+        if cfg.arithmetic == crate::config::Arithmetic::Fixed {
+            super::tick_cost::TICK_INSTRUCTIONS_MAX_FIXED_SOFT
+        } else {
+            super::tick_cost::TICK_INSTRUCTIONS_MAX_SOFT
+        }
+    }
+}
 
 /// Compute time charged per tick, ns: `compute_us` when set (non-zero), else
-/// [`TICK_INSTRUCTIONS`] at `core_mhz` (one instruction per cycle: QEMU counts instructions;
+/// [`tick_instructions`] at `core_mhz` (one instruction per cycle: QEMU counts instructions;
 /// a real M7 dual-issues some and waits on flash for others).
 pub fn compute_ns(cfg: &Config) -> u64 {
-    cfg.compute_ns(TICK_INSTRUCTIONS)
+    cfg.compute_ns(tick_instructions(cfg))
 }
 /// Exit code when the virtual watchdog bites.
 pub const EXIT_WATCHDOG: i32 = walker_contract::ExitCode::Watchdog.status();

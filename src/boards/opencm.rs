@@ -1,0 +1,534 @@
+//! ROBOTIS OpenCM 9.04 (STM32F103CB: Cortex-M3 at 72 MHz, no FPU, 128 KiB flash, 20 KiB RAM)
+//! as a board, on the PAC `stm32f1` at register level (no HAL: the flash budget is 112 KiB).
+//! The firmware runs the fixed-point path here (`math=fixed`, set by `src/bin/opencm.rs`).
+//!
+//! # Hardware assumptions (ROBOTIS' OpenCM 9.04 Arduino core, github ROBOTIS-GIT/OpenCM9.04,
+//! `arduino/opencm_arduino/opencm9.04/variants/OpenCM904/`)
+//! | what | where | source |
+//! | --- | --- | --- |
+//! | HSE crystal | 8 MHz | `bsp/opencm/bsp.c`: HSE 8 MHz, PREDIV1 1, PLLMUL 9 → SYSCLK 72 MHz, flash latency 2 |
+//! | Dynamixel TTL bus | **USART1 remapped**, PB6 TX / PB7 RX | `variant.cpp` pins 29 "DXL TXD" / 30 "DXL RXD"; `hw/driver/drv_uart.c`: USART1 in DXL mode uses `__HAL_AFIO_REMAP_USART1_ENABLE` on PB6/PB7; the Arduino `Serial1` (Dynamixel2Arduino README: OpenCM9.04 → `Serial1`, direction pin 28) |
+//! | bus direction (TX enable) | **PB5**, high = transmit | `variant.cpp` pin 28 "DXL DIR" |
+//! | log UART | **USART2**, PA2 TX / PA3 RX at 921 600 baud | `drv_uart.c` (USART2 on PA2/PA3), `variant.cpp` pins 4/5; the Arduino `Serial2` |
+//! | Dynamixel power switch | **none** the MCU can drive | the 3-pin TTL ports take the board's supply through its slide switch; [`Board::servo_power`] logs the request only |
+//! | application flash | 0x0800_3000, 114 KiB | `bsp/opencm/ldscript/opencm_flash.ld` (the first 12 KiB hold ROBOTIS' USB bootloader) |
+//! | RAM | 0x2000_0000, 20 KiB | same linker script |
+//! | tick and µs clock | TIM2 (16 bit, 1 MHz) clocking TIM3 (16 bit) = one 32-bit µs counter | extended to 64 bits in software |
+//! | watchdog | IWDG (LSI ≈ 40 kHz, ÷ 32) | started at boot (`control::run`), fed in the bus and tick waits |
+//! | reset cause | RCC_CSR (RM0008 §7.3.10) | same flag bits as the STM32F7's, without BORRSTF |
+//! | defmt | RTT (probe-rs over SWD) | |
+//!
+//! The memory layout is the top-level `memory.x`'s OpenCM branch (`--defsym=_walker_opencm=1`
+//! from build.rs). Register addresses and bits are from RM0008 (STM32F101/2/3 reference
+//! manual); the pin choices are the constants below and [`OpenCmBoard::new`].
+//!
+//! # Clocks and baud rates
+//! SYSCLK = HCLK = PCLK2 = 72 MHz, PCLK1 = 36 MHz (APB1 timers at 72 MHz). USART1 (APB2) with
+//! oversampling 16: BRR = 72 MHz ÷ baud ≥ 16, so the bus runs at 1, 2, 3 and 4.5 Mbps exactly
+//! (4.5 Mbps is the F103's fastest). USART2 (APB1): 36 MHz ÷ 921 600 → BRR 39 (+0.16 %).
+//!
+//! # Timing
+//! [`TickTimer::wait_tick`] busy-waits on the µs counter until `k · period` (deadlines never
+//! drift) and meanwhile drains the log ring buffer into USART2; a frame that does not fit the
+//! ring is dropped whole and counted ([`OpenCmBoard::log_dropped`]).
+//!
+//! # Exit and panic
+//! [`Board::exit`] and the panic handler send the broadcast torque-off packet and reset the
+//! MCU (after a reset but a power-on the firmware does not walk). There is no power switch to
+//! cut as a backup.
+
+use core::cell::Cell;
+
+use cortex_m::peripheral::SCB;
+// Link the runtime and the defmt global logger (RTT) into every binary using this board.
+use cortex_m_rt as _;
+use defmt_rtt as _;
+use stm32f1::stm32f103 as pac;
+
+use crate::board::{
+    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogSink, ResetCause,
+    ServoBus, Tick, TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
+};
+use crate::record::BoardId;
+use crate::Config;
+
+/// SYSCLK (= HCLK = PCLK2, the bus UART's clock), Hz.
+pub const SYSCLK_HZ: u32 = 72_000_000;
+/// PCLK1 (the log UART's clock), Hz.
+pub const PCLK1_HZ: u32 = 36_000_000;
+/// HSE crystal of the OpenCM 9.04, Hz.
+pub const HSE_HZ: u32 = 8_000_000;
+/// Log UART baud rate.
+pub const LOG_BAUD: u32 = 921_600;
+/// Log ring buffer size, bytes (the RAM budget is 16 KiB of static RAM).
+pub const LOG_RING: usize = 1024;
+/// Longest busy-wait on a UART or clock flag, loop iterations (≥ 4 ms at 72 MHz, more than a
+/// byte at 9600 baud); beyond it the peripheral is hung ([`BusError::Timeout`]).
+pub const UART_SPIN_LIMIT: u32 = 300_000;
+/// Bus direction pin: PB5 (Arduino pin 28, "DXL DIR").
+pub const BUS_DIR_PIN: u32 = 5;
+
+// RM0008 register bits.
+const RCC_CR_HSEON: u32 = 1 << 16;
+const RCC_CR_HSERDY: u32 = 1 << 17;
+const RCC_CR_PLLON: u32 = 1 << 24;
+const RCC_CR_PLLRDY: u32 = 1 << 25;
+/// CFGR: SW = PLL, HPRE ÷ 1, PPRE1 ÷ 2, PPRE2 ÷ 1, PLLSRC = HSE, PLLXTPRE ÷ 1, PLLMUL × 9.
+const RCC_CFGR_72MHZ: u32 = 0b10 | (0b100 << 8) | (1 << 16) | (0b0111 << 18);
+const RCC_CFGR_SWS_PLL: u32 = 0b10 << 2;
+const RCC_CSR_RMVF: u32 = 1 << 24;
+/// APB2ENR: AFIO, IOPA, IOPB, USART1.
+const RCC_APB2_ENABLE: u32 = 1 | (1 << 2) | (1 << 3) | (1 << 14);
+/// APB1ENR: TIM2, TIM3, USART2.
+const RCC_APB1_ENABLE: u32 = 1 | (1 << 1) | (1 << 17);
+/// FLASH_ACR: 2 wait states (48 < SYSCLK ≤ 72 MHz), prefetch on.
+const FLASH_ACR_72MHZ: u32 = 0b010 | (1 << 4);
+const AFIO_MAPR_USART1_REMAP: u32 = 1 << 2;
+const USART_SR_FE: u32 = 1 << 1;
+const USART_SR_NE: u32 = 1 << 2;
+const USART_SR_ORE: u32 = 1 << 3;
+const USART_SR_RXNE: u32 = 1 << 5;
+const USART_SR_TC: u32 = 1 << 6;
+const USART_SR_TXE: u32 = 1 << 7;
+/// CR1: UE, TE, RE (8N1, oversampling 16).
+const USART_CR1_ON: u32 = (1 << 13) | (1 << 3) | (1 << 2);
+const USART_CR1_UE: u32 = 1 << 13;
+const IWDG_KEY_UNLOCK: u32 = 0x5555;
+const IWDG_KEY_START: u32 = 0xCCCC;
+const IWDG_KEY_FEED: u32 = 0xAAAA;
+/// IWDG clock: LSI ≈ 40 kHz ÷ 32 = 1.25 counts per ms.
+const IWDG_PRESCALER_DIV32: u32 = 3;
+
+/// Waits (bounded) until `ready` holds; `Err(Timeout)` otherwise.
+fn spin(ready: impl Fn() -> bool) -> Result<(), BusError> {
+    for _ in 0..UART_SPIN_LIMIT {
+        if ready() {
+            return Ok(());
+        }
+    }
+    Err(BusError::Timeout)
+}
+
+fn usart1() -> &'static pac::usart1::RegisterBlock {
+    // SAFETY: the USART1 register block is always mapped; the board owns USART1 after `new`
+    // (the panic path uses it on purpose, after which nothing else runs).
+    unsafe { &*pac::USART1::ptr() }
+}
+
+fn usart2() -> &'static pac::usart1::RegisterBlock {
+    // SAFETY: as for `usart1`, for the log UART USART2.
+    unsafe { &*pac::USART2::ptr() }
+}
+
+fn gpiob() -> &'static pac::gpioa::RegisterBlock {
+    // SAFETY: GPIOB is always mapped; only BSRR (atomic single-pin set/reset) is written
+    // after `new`.
+    unsafe { &*pac::GPIOB::ptr() }
+}
+
+/// The bus UART's BRR for `baud` (72 MHz ÷ baud, oversampling 16), if it is in 16..=0xFFFF.
+pub fn bus_brr(baud: u32) -> Option<u32> {
+    let div = SYSCLK_HZ.checked_div(baud)?;
+    (16..=0xFFFF).contains(&div).then_some(div)
+}
+
+/// Bus direction: transmit (PB5 high) or receive (low).
+fn bus_dir(transmit: bool) {
+    let bit = if transmit {
+        1 << BUS_DIR_PIN
+    } else {
+        1 << (BUS_DIR_PIN + 16)
+    };
+    // SAFETY: BSRR writes set/reset single pins atomically; any value is valid.
+    gpiob().bsrr.write(|w| unsafe { w.bits(bit) });
+}
+
+/// Best-effort torque off from anywhere (panic handler): the broadcast Torque Enable = 0
+/// packet on USART1 with bounded spins, direction pin back to receive. Harmless if the board
+/// was never initialised (the writes then go nowhere).
+pub fn panic_torque_off() {
+    let u = usart1();
+    bus_dir(true);
+    for &b in TORQUE_OFF_PACKET.iter() {
+        if spin(|| u.sr.read().bits() & USART_SR_TXE != 0).is_err() {
+            break;
+        }
+        // SAFETY: DR takes any 9-bit value; a byte is one.
+        u.dr.write(|w| unsafe { w.bits(u32::from(b)) });
+    }
+    let _ = spin(|| u.sr.read().bits() & USART_SR_TC != 0);
+    bus_dir(false);
+}
+
+/// The crash record in RAM that is not zeroed at start-up (`.uninit`, NOLOAD in cortex-m-rt's
+/// `link.x`), as on the OpenCR.
+#[link_section = ".uninit.WALKER_CRASH"]
+static mut CRASH: core::mem::MaybeUninit<CrashCell> = core::mem::MaybeUninit::uninit();
+
+/// The crash record (see [`CRASH`]).
+fn crash_cell() -> &'static mut CrashCell {
+    // SAFETY: single core; the board (one value, `Peripherals::take` makes it unique) and the
+    // panic path (after which nothing else runs) are its only users. Every field is a u32, any
+    // bit pattern is a value; `CrashCell` accesses them volatile.
+    unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashCell>() }
+}
+
+/// Panic path of the OpenCM binary: log, record the panic in no-init RAM, torque off, reset
+/// (the next boot logs the record and does not walk).
+pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    crash_cell().record(CrashCode::Panic);
+    panic_torque_off();
+    SCB::sys_reset()
+}
+
+/// The OpenCM 9.04 board.
+pub struct OpenCmBoard {
+    tim_low: pac::TIM2,
+    tim_high: pac::TIM3,
+    iwdg: pac::IWDG,
+    baud: u32,
+    clock_high: Cell<u64>,
+    clock_last: Cell<u32>,
+    schedule: TickSchedule,
+    watchdog_running: bool,
+    ring: [u8; LOG_RING],
+    head: usize,
+    len: usize,
+    log_dropped: u32,
+    uart_errors: u32,
+    reset_csr: u32,
+}
+
+impl OpenCmBoard {
+    /// Brings the board up: 72 MHz from the 8 MHz crystal, USART1 (remapped to PB6/PB7) bus
+    /// at `cfg.bus_baud` (1 Mbps when the rate cannot be generated), PB5 direction low, USART2
+    /// log at [`LOG_BAUD`], TIM2 → TIM3 as a 32-bit 1 MHz counter. The watchdog is not started.
+    pub fn new(dp: pac::Peripherals, cfg: &Config) -> Self {
+        let rcc = &dp.RCC;
+        // The reset flags first, then clear them (RMVF) so that the next boot sees its own.
+        let reset_csr = rcc.csr.read().bits();
+        // SAFETY (all raw register writes below): values composed from RM0008's bit fields
+        // for these registers; reserved bits are kept by the read-modify-writes.
+        rcc.csr
+            .modify(|r, w| unsafe { w.bits(r.bits() | RCC_CSR_RMVF) });
+
+        // 72 MHz: HSE on, flash wait states, PLL × 9, switch. A crystal that never starts
+        // leaves the board on the 8 MHz HSI (bounded waits; the UART rates are then wrong and
+        // the start-up finds no servo, which stops the run).
+        rcc.cr
+            .modify(|r, w| unsafe { w.bits(r.bits() | RCC_CR_HSEON) });
+        if spin(|| rcc.cr.read().bits() & RCC_CR_HSERDY != 0).is_ok() {
+            dp.FLASH.acr.write(|w| unsafe { w.bits(FLASH_ACR_72MHZ) });
+            rcc.cfgr
+                .write(|w| unsafe { w.bits(RCC_CFGR_72MHZ & !0b11) });
+            rcc.cr
+                .modify(|r, w| unsafe { w.bits(r.bits() | RCC_CR_PLLON) });
+            if spin(|| rcc.cr.read().bits() & RCC_CR_PLLRDY != 0).is_ok() {
+                rcc.cfgr.write(|w| unsafe { w.bits(RCC_CFGR_72MHZ) });
+                let _ = spin(|| rcc.cfgr.read().bits() & (0b11 << 2) == RCC_CFGR_SWS_PLL);
+            }
+        }
+        rcc.apb2enr
+            .modify(|r, w| unsafe { w.bits(r.bits() | RCC_APB2_ENABLE) });
+        rcc.apb1enr
+            .modify(|r, w| unsafe { w.bits(r.bits() | RCC_APB1_ENABLE) });
+
+        // USART1 on PB6/PB7 (remap), SWJ configuration untouched.
+        dp.AFIO
+            .mapr
+            .modify(|r, w| unsafe { w.bits(r.bits() | AFIO_MAPR_USART1_REMAP) });
+        // GPIOB CRL nibbles (MODE[1:0] CNF[1:0]): PB5 push-pull output 50 MHz (0x3), PB6
+        // alternate push-pull 50 MHz (0xB), PB7 input with pull-up (0x8, ODR7 = 1).
+        bus_dir(false);
+        dp.GPIOB.crl.modify(|r, w| unsafe {
+            w.bits((r.bits() & 0x000F_FFFF) | (0x3 << 20) | (0xB << 24) | (0x8 << 28))
+        });
+        dp.GPIOB.bsrr.write(|w| unsafe { w.bits(1 << 7) });
+        // GPIOA CRL: PA2 alternate push-pull (0xB), PA3 floating input (0x4).
+        dp.GPIOA
+            .crl
+            .modify(|r, w| unsafe { w.bits((r.bits() & 0xFFFF_00FF) | (0xB << 8) | (0x4 << 12)) });
+
+        let baud = if bus_brr(cfg.bus_baud).is_some() {
+            cfg.bus_baud
+        } else {
+            1_000_000
+        };
+        let bus_div = bus_brr(baud).map_or(72, |d| d);
+        dp.USART1.brr.write(|w| unsafe { w.bits(bus_div) });
+        dp.USART1.cr1.write(|w| unsafe { w.bits(USART_CR1_ON) });
+        dp.USART2
+            .brr
+            .write(|w| unsafe { w.bits(PCLK1_HZ / LOG_BAUD) });
+        dp.USART2.cr1.write(|w| unsafe { w.bits(USART_CR1_ON) });
+
+        // TIM2: 72 MHz ÷ 72 = 1 MHz, update event as TRGO (CR2.MMS = 010); TIM3 counts TIM2's
+        // update events (SMCR: TS = ITR1 = TIM2, SMS = external clock mode 1).
+        let (t2, t3) = (&dp.TIM2, &dp.TIM3);
+        t2.psc
+            .write(|w| unsafe { w.bits(SYSCLK_HZ / 1_000_000 - 1) });
+        t2.arr.write(|w| unsafe { w.bits(0xFFFF) });
+        t2.cr2.write(|w| unsafe { w.bits(0b010 << 4) });
+        t3.psc.write(|w| unsafe { w.bits(0) });
+        t3.arr.write(|w| unsafe { w.bits(0xFFFF) });
+        t3.smcr.write(|w| unsafe { w.bits((0b001 << 4) | 0b111) });
+        t3.cr1.write(|w| unsafe { w.bits(1) });
+        t2.egr.write(|w| unsafe { w.bits(1) });
+        t3.cnt.write(|w| unsafe { w.bits(0) });
+        t2.cr1.write(|w| unsafe { w.bits(1) });
+
+        OpenCmBoard {
+            tim_low: dp.TIM2,
+            tim_high: dp.TIM3,
+            iwdg: dp.IWDG,
+            baud,
+            clock_high: Cell::new(0),
+            clock_last: Cell::new(0),
+            schedule: TickSchedule::new(cfg.tick_period_us),
+            watchdog_running: false,
+            ring: [0; LOG_RING],
+            head: 0,
+            len: 0,
+            log_dropped: 0,
+            uart_errors: 0,
+            reset_csr,
+        }
+    }
+
+    /// Log frames dropped because the ring was full.
+    pub fn log_dropped(&self) -> u32 {
+        self.log_dropped
+    }
+
+    /// Overrun/framing/noise errors seen on the bus UART.
+    pub fn uart_errors(&self) -> u32 {
+        self.uart_errors
+    }
+
+    /// The 32-bit µs counter: TIM3 (high half) and TIM2 (low half), read high-low-high until
+    /// the high half is stable (bounded: it changes once per 65.5 ms).
+    fn counter_us(&self) -> u32 {
+        let mut high = self.tim_high.cnt.read().bits() & 0xFFFF;
+        for _ in 0..4 {
+            let low = self.tim_low.cnt.read().bits() & 0xFFFF;
+            let again = self.tim_high.cnt.read().bits() & 0xFFFF;
+            if again == high {
+                return (high << 16) | low;
+            }
+            high = again;
+        }
+        high << 16
+    }
+
+    /// Moves log bytes from the ring to USART2 while its data register is free.
+    fn pump_log(&mut self) {
+        let u = usart2();
+        while self.len > 0 && u.sr.read().bits() & USART_SR_TXE != 0 {
+            let b = self.ring.get(self.head).copied().map_or(0, |b| b);
+            // SAFETY: DR takes any 9-bit value.
+            u.dr.write(|w| unsafe { w.bits(u32::from(b)) });
+            self.head = (self.head + 1) % LOG_RING;
+            self.len -= 1;
+        }
+    }
+
+    /// Counts and clears the bus UART's error flags (SR then DR read, RM0008 §27.6.1) and
+    /// drops any pending byte.
+    fn discard_input(&mut self) {
+        let u = usart1();
+        let sr = u.sr.read().bits();
+        if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0 {
+            self.uart_errors = self.uart_errors.saturating_add(1);
+        }
+        if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE | USART_SR_RXNE) != 0 {
+            let _ = u.dr.read().bits();
+        }
+    }
+}
+
+impl ServoBus for OpenCmBoard {
+    fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
+        self.feed();
+        self.discard_input();
+        let u = usart1();
+        bus_dir(true);
+        let mut sent = Ok(());
+        for &b in packet {
+            sent = spin(|| u.sr.read().bits() & USART_SR_TXE != 0);
+            if sent.is_err() {
+                break;
+            }
+            // SAFETY: DR takes any 9-bit value.
+            u.dr.write(|w| unsafe { w.bits(u32::from(b)) });
+        }
+        let done = sent.and_then(|()| spin(|| u.sr.read().bits() & USART_SR_TC != 0));
+        bus_dir(false);
+        // Whatever the transceiver echoed while we were driving the line is not a reply.
+        self.discard_input();
+        done
+    }
+
+    fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
+        // Bounded by `timeout_us` (the µs counter); the watchdog is fed once per wait.
+        self.feed();
+        let u = usart1();
+        let deadline = self.now_us() + u64::from(timeout_us);
+        let mut n = 0;
+        while n < buf.len() {
+            let sr = u.sr.read().bits();
+            if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0 {
+                self.uart_errors = self.uart_errors.saturating_add(1);
+            }
+            if sr & USART_SR_RXNE != 0 {
+                // Reading DR also clears ORE/FE/NE after the SR read above.
+                if let Some(slot) = buf.get_mut(n) {
+                    *slot = (u.dr.read().bits() & 0xFF) as u8;
+                }
+                n += 1;
+            } else if self.now_us() >= deadline {
+                break;
+            }
+        }
+        Ok(n)
+    }
+
+    fn baud(&self) -> u32 {
+        self.baud
+    }
+
+    fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
+        let div = bus_brr(baud).ok_or(BusError::UnsupportedBaud)?;
+        let u = usart1();
+        spin(|| u.sr.read().bits() & USART_SR_TC != 0)?;
+        // SAFETY: CR1 without UE, then BRR (any 16-bit value; `div` is in 16..=0xFFFF), then
+        // CR1 with UE again.
+        u.cr1
+            .write(|w| unsafe { w.bits(USART_CR1_ON & !USART_CR1_UE) });
+        u.brr.write(|w| unsafe { w.bits(div) });
+        u.cr1.write(|w| unsafe { w.bits(USART_CR1_ON) });
+        self.baud = baud;
+        Ok(())
+    }
+}
+
+impl Clock for OpenCmBoard {
+    fn now_us(&self) -> u64 {
+        let cnt = self.counter_us();
+        let last = self.clock_last.get();
+        if cnt < last {
+            if last - cnt < 1 << 31 {
+                // A read racing TIM3's increment (cannot go backwards): keep the last value.
+                return self.clock_high.get() | u64::from(last);
+            }
+            self.clock_high.set(self.clock_high.get() + (1u64 << 32));
+        }
+        self.clock_last.set(cnt);
+        self.clock_high.get() | u64::from(cnt)
+    }
+}
+
+impl TickTimer for OpenCmBoard {
+    fn period_us(&self) -> u32 {
+        self.schedule.period_us()
+    }
+
+    fn wait_tick(&mut self) -> Tick {
+        let plan = self.schedule.plan(self.now_us());
+        if let Some(t) = plan.wait_until_us {
+            // Bounded by the tick period; fed once per wait.
+            self.feed();
+            while self.now_us() < t {
+                self.pump_log();
+            }
+        }
+        self.pump_log();
+        plan.tick
+    }
+
+    fn overruns(&self) -> u32 {
+        self.schedule.overruns()
+    }
+}
+
+impl LogSink for OpenCmBoard {
+    fn write_log(&mut self, bytes: &[u8]) {
+        if bytes.len() > LOG_RING - self.len {
+            self.log_dropped = self.log_dropped.saturating_add(1);
+        } else {
+            for &b in bytes {
+                let i = (self.head + self.len) % LOG_RING;
+                if let Some(slot) = self.ring.get_mut(i) {
+                    *slot = b;
+                }
+                self.len += 1;
+            }
+        }
+        self.pump_log();
+    }
+}
+
+impl Watchdog for OpenCmBoard {
+    fn start(&mut self, timeout_ms: u32) {
+        if !self.watchdog_running {
+            // Counts at 1.25 per ms; RLR is 12 bits (≤ 3.27 s).
+            let reload = (timeout_ms.max(1).saturating_mul(5) / 4).clamp(1, 0x0FFF);
+            // SAFETY: the IWDG key sequence of RM0008 §19.3 (unlock, PR, RLR, start); the
+            // values fit their fields.
+            self.iwdg.kr.write(|w| unsafe { w.bits(IWDG_KEY_UNLOCK) });
+            self.iwdg
+                .pr
+                .write(|w| unsafe { w.bits(IWDG_PRESCALER_DIV32) });
+            self.iwdg.rlr.write(|w| unsafe { w.bits(reload) });
+            self.iwdg.kr.write(|w| unsafe { w.bits(IWDG_KEY_START) });
+            self.watchdog_running = true;
+        }
+    }
+    fn feed(&mut self) {
+        if self.watchdog_running {
+            // SAFETY: the reload key.
+            self.iwdg.kr.write(|w| unsafe { w.bits(IWDG_KEY_FEED) });
+        }
+    }
+}
+
+impl Board for OpenCmBoard {
+    const NAME: &'static str = "opencm-9.04";
+    const ID: BoardId = BoardId::OpenCm;
+
+    fn torque_off_best_effort(&mut self) {
+        let _ = self.send(&TORQUE_OFF_PACKET);
+    }
+
+    fn reset_cause(&self) -> (ResetCause, u32) {
+        // RCC_CSR of the F103 has the F7's flags at the same bits (PINRSTF 26, PORRSTF 27,
+        // SFTRSTF 28, IWDGRSTF 29, WWDGRSTF 30, LPWRRSTF 31) and no BORRSTF (a brown-out is
+        // a power-on reset there).
+        (stm32f7_reset_cause(self.reset_csr), self.reset_csr >> 24)
+    }
+
+    fn crash_cell(&mut self) -> &mut CrashCell {
+        crash_cell()
+    }
+
+    fn servo_power(&mut self, on: bool) {
+        // The OpenCM 9.04 feeds its Dynamixel ports from the board supply through a manual
+        // slide switch: there is no MCU-driven power switch (see the module table).
+        defmt::warn!(
+            "servo power {=bool} requested: the OpenCM 9.04 has no switch for it",
+            on
+        );
+    }
+
+    fn exit(&mut self, code: i32) -> ! {
+        defmt::warn!("exit({=i32}): torque off, reset", code);
+        self.torque_off_best_effort();
+        // Let the log drain (bounded: ≤ LOG_RING bytes at 921 600 baud ≈ 11 ms).
+        let start = self.now_us();
+        while self.len > 0 && self.now_us() < start + 20_000 {
+            self.pump_log();
+        }
+        panic_torque_off();
+        SCB::sys_reset()
+    }
+}
