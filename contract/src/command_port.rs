@@ -476,6 +476,17 @@ impl CommandTable {
         }
     }
 
+    /// The command registers in their wire units: mode code, vx, vy (mm/s), yaw rate (mrad/s).
+    pub fn raw_command(&self) -> [i32; 4] {
+        let mode = self.mem.get(usize::from(MODE.addr)).copied().unwrap_or(0);
+        [
+            i32::from(mode),
+            i32::from(self.get_i16(VELOCITY_X)),
+            i32::from(self.get_i16(VELOCITY_Y)),
+            i32::from(self.get_i16(YAW_RATE)),
+        ]
+    }
+
     /// Takes the oldest step-list entry.
     pub fn take_step(&mut self) -> Option<StepEntry> {
         let s = self.steps.pop_front();

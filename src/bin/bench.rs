@@ -1299,6 +1299,7 @@ mod firmware {
         let mut cfg = Config::default_config();
         cfg.ramp_us = cfg.tick_period_us;
         cfg.final_hold_us = cfg.tick_period_us;
+        cfg.autostart = true;
         let mut board = BenchBoard::new(&cfg);
         let end = control::run(&mut board, &cfg);
         if end != RunEnd::Stopped(StopReason::PlanDone) {
