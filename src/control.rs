@@ -620,6 +620,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         None => (first, sampler.joints(&targets, &lead_sample, [0.0; 2])),
     };
     let mut link = commanded::CommandLink::new();
+    if online.is_some() {
+        let now = bus.board().now_us();
+        let rec = fault(now, FaultKind::Footstep, 0, commanded::period_us(cfg));
+        log.write(bus.board(), rec);
+    }
     let mut from = [0.0f32; LEG_JOINTS];
     for (j, (f, &t)) in from.iter_mut().zip(present.iter()).enumerate() {
         *f = map.rad_of_tick(j, t);

@@ -310,7 +310,8 @@ pub enum FaultKind {
     /// value in the register's unit: mode code, mm/s or mrad/s); logged when it changes.
     CommandReceived,
     /// 15: the online walk committed a footstep (three records per step: `id` = side (1 left,
-    /// 2 right) · 16 + component (0 x, 1 y, 2 yaw), `value` = µm or µrad, world frame).
+    /// 2 right) · 16 + component (0 x, 1 y, 2 yaw), `value` = µm or µrad, world frame); once at
+    /// start `id` = 0: the online walk's step period, µs.
     Footstep,
     /// Other kind (code kept for forward compatibility).
     Other(u8),

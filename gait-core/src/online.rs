@@ -65,6 +65,10 @@ use crate::swing::{swing_foot, FootSample};
 
 /// Steps previewed beyond the current one.
 pub const PREVIEW_STEPS: usize = 3;
+/// Default inset of the single-support ZMP reference from the sole point towards the other
+/// foot, m: the CoM swings less sideways (with Table 2's timing the LIPM swing is ≈ the full
+/// half width w without it; 1.5 cm brings it near the paper walk's ±3.2 cm).
+pub const DEFAULT_ZMP_INSET: f64 = 0.015;
 /// Largest ZMP correction of the DCM feedback per axis, m.
 pub const ZMP_MARGIN: f64 = 0.02;
 
@@ -87,6 +91,8 @@ pub struct OnlineParams {
     pub limits: CommandLimits,
     /// Tick, s.
     pub dt: f64,
+    /// Inset of the single-support ZMP reference towards the other foot, m.
+    pub zmp_inset: f64,
 }
 
 /// Standing on both feet, CoM held on the feet's midpoint.
@@ -293,38 +299,100 @@ impl<R: Real> OnlineWalk<R> {
         }
     }
 
-    /// ξ at the end of the step under way, whose generator state (after its own landing) is
-    /// `gen`: [`PREVIEW_STEPS`] more steps under the command, then rest (D2).
-    fn preview(&self, gen: &StepGenerator<R>) -> [R; 2] {
+    /// The steps the generator makes from `gen` under the command (at most
+    /// [`PREVIEW_STEPS`]; none once it stands under the zero command), and its feet after them.
+    fn preview_steps(
+        &self,
+        gen: &StepGenerator<R>,
+    ) -> ([Option<Step<R>>; PREVIEW_STEPS], [Place<R>; 2]) {
         let mut g = *gen;
-        let mut supports = [Place {
-            x: R::zero(),
-            y: R::zero(),
-            yaw: R::zero(),
-        }; PREVIEW_STEPS];
-        let mut n = 0;
-        for s in supports.iter_mut() {
+        let mut out = [None; PREVIEW_STEPS];
+        for slot in out.iter_mut() {
             // Under the zero command the walk ends when the generator stands (as in the
             // transitions): no more steps.
             if self.cmd.is_zero() && g.is_standing() {
                 break;
             }
-            // The next step stands on the foot that landed last.
+            let side = g.next_swing();
             let [l, r] = g.feet();
-            *s = match g.next_swing() {
-                Side::Left => r,
-                Side::Right => l,
+            let (support, from) = match side {
+                Side::Left => (r, l),
+                Side::Right => (l, r),
             };
-            let _ = g.next_step(&self.cmd);
-            n += 1;
+            let fs = g.next_step(&self.cmd);
+            *slot = Some(Step {
+                t: R::zero(),
+                support,
+                side,
+                from,
+                to: fs.place,
+            });
         }
-        let [l, r] = g.feet();
+        (out, g.feet())
+    }
+
+    /// ξ at the end of the step under way, whose generator state (after its own landing) is
+    /// `gen`: the previewed steps, then rest on the final feet's midpoint (D2).
+    fn preview(&self, gen: &StepGenerator<R>) -> [R; 2] {
+        let (steps, [l, r]) = self.preview_steps(gen);
         let mut xi = mid(&l, &r);
-        let decay = (-self.omega * R::of(self.p.period)).exp();
-        for s in supports.iter().take(n).rev() {
-            xi = [s.x + decay * (xi[0] - s.x), s.y + decay * (xi[1] - s.y)];
+        for st in steps.iter().rev().flatten() {
+            xi = self.step_back(st, xi, R::zero()).0;
         }
         xi
+    }
+
+    /// ξ_ref and the ZMP reference at time `t` of `step`, from ξ at its end (D2 through the
+    /// step's three ZMP segments, backwards).
+    fn step_back(&self, step: &Step<R>, xi_end: [R; 2], t: R) -> ([R; 2], [R; 2]) {
+        let (t1, t2, period) = (R::of(self.p.t1), R::of(self.p.t2), R::of(self.p.period));
+        let p = self.support_zmp(step);
+        let a = mid(&step.support, &step.from);
+        let b = mid(&step.support, &step.to);
+        let segs = [(R::zero(), t1, a, p), (t1, t2, p, p), (t2, period, p, b)];
+        let mut xi = xi_end;
+        for &(t0, t_end, pa, pb) in segs.iter().rev() {
+            let tau = if t >= t0 { t - t0 } else { R::zero() };
+            let (x, zmp) = self.segment(xi, pa, pb, t_end - t0, tau);
+            if t >= t0 {
+                return (x, zmp);
+            }
+            xi = x;
+        }
+        (xi, a)
+    }
+
+    /// The single-support ZMP reference of `step`: the support foot's sole point moved
+    /// [`OnlineParams::zmp_inset`] towards the other foot (lateral axis of the support foot).
+    fn support_zmp(&self, step: &Step<R>) -> [R; 2] {
+        let sup = step.support;
+        // The support foot is the other side of the swing: inward is towards the swing side.
+        let inward = R::of(step.side.sign() * self.p.zmp_inset);
+        let (s, c) = (sup.yaw.sin(), sup.yaw.cos());
+        [sup.x - s * inward, sup.y + c * inward]
+    }
+
+    /// ξ and the ZMP at `tau` of a segment of duration `dur` whose ZMP moves linearly from
+    /// `pa` to `pb`, ξ = `xi_end` at its end: with slope s = (pb − pa)/dur,
+    /// ξ(τ) = p(τ) + s/ω + e^{ω(τ − dur)}(ξ_end − pb − s/ω).
+    fn segment(&self, xi_end: [R; 2], pa: [R; 2], pb: [R; 2], dur: R, tau: R) -> ([R; 2], [R; 2]) {
+        let w = self.omega;
+        let tiny = R::of(1e-9);
+        let tau = tau.min(dur);
+        let e = (w * (tau - dur)).exp();
+        let f = |i: usize| {
+            let at = |v: [R; 2]| if i == 0 { v[0] } else { v[1] };
+            let slope = if dur > tiny {
+                (at(pb) - at(pa)) / dur
+            } else {
+                R::zero()
+            };
+            let p = at(pa) + slope * tau;
+            (p + slope / w + e * (at(xi_end) - at(pb) - slope / w), p)
+        };
+        let (x0, p0) = f(0);
+        let (x1, p1) = f(1);
+        ([x0, x1], [p0, p1])
     }
 
     fn replan(&mut self) {
@@ -335,17 +403,21 @@ impl<R: Real> OnlineWalk<R> {
     fn replan_start(&mut self) {
         let mut g = self.gen;
         let side = g.next_swing();
-        let support = match side {
-            Side::Left => self.feet[1],
-            Side::Right => self.feet[0],
+        let [l, r] = self.feet;
+        let (support, from) = match side {
+            Side::Left => (r, l),
+            Side::Right => (l, r),
         };
-        let _ = g.next_step(&self.cmd);
+        let fs = g.next_step(&self.cmd);
+        let first = Step {
+            t: R::zero(),
+            support,
+            side,
+            from,
+            to: fs.place,
+        };
         let eos = self.preview(&g);
-        let decay = (-self.omega * R::of(self.p.period)).exp();
-        self.xi_eos = [
-            support.x + decay * (eos[0] - support.x),
-            support.y + decay * (eos[1] - support.y),
-        ];
+        self.xi_eos = self.step_back(&first, eos, R::zero()).0;
         // The constant ZMP that brings ξ from now to the target in the remaining time.
         let t = match self.mode {
             WalkMode::Starting(s) => s.t,
@@ -418,13 +490,25 @@ impl<R: Real> OnlineWalk<R> {
                 (s.vrp, xi, both)
             }
             WalkMode::Walking(Walking { step }) | WalkMode::Stopping(Stopping { step }) => {
-                let e = (w * (step.t - period)).exp();
-                let p0 = [step.support.x, step.support.y];
-                let xi = [
-                    p0[0] + e * (self.xi_eos[0] - p0[0]),
-                    p0[1] + e * (self.xi_eos[1] - p0[1]),
-                ];
-                (p0, xi, ([p0[0] - m, p0[1] - m], [p0[0] + m, p0[1] + m]))
+                let (xi, p0) = self.step_back(step, self.xi_eos, step.t);
+                let (t1, t2) = (R::of(self.p.t1), R::of(self.p.t2));
+                let sup = step.support;
+                let [zx, zy] = self.support_zmp(step);
+                let sup = Place {
+                    x: zx,
+                    y: zy,
+                    yaw: sup.yaw,
+                };
+                let other = if step.t < t1 { step.from } else { step.to };
+                let bx = if step.t > t1 && step.t < t2 {
+                    ([sup.x - m, sup.y - m], [sup.x + m, sup.y + m])
+                } else {
+                    (
+                        [sup.x.min(other.x) - m, sup.y.min(other.y) - m],
+                        [sup.x.max(other.x) + m, sup.y.max(other.y) + m],
+                    )
+                };
+                (p0, xi, bx)
             }
         };
         let xi = self.dcm();

@@ -4,7 +4,7 @@
 
 use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::kinematics::LegKinematics;
-use gait_core::online::{OnlineParams, OnlineWalk, WalkMode, ZMP_MARGIN};
+use gait_core::online::{OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, ZMP_MARGIN};
 use gait_core::pipeline::joint_targets;
 use gait_core::plan::SwingShape;
 use gait_core::{GaitSample, Place, Robot, Side};
@@ -28,6 +28,7 @@ fn params() -> OnlineParams {
         },
         limits: CommandLimits::DEFAULT,
         dt: DT,
+        zmp_inset: DEFAULT_ZMP_INSET,
     }
 }
 

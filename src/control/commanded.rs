@@ -11,7 +11,7 @@
 //! [`gait_core::command::CommandLimits::DEFAULT`]. `servo_lead` does not apply to it.
 
 use gait_core::command::{CommandLimits, WalkCommand};
-use gait_core::online::{OnlineParams, OnlineWalk, WalkMode};
+use gait_core::online::{OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET};
 use gait_core::plan::SwingShape;
 use gait_core::{GaitError, Place, Robot, Side, SupportPhase};
 use walker_contract::codes::CommandField;
@@ -37,13 +37,14 @@ pub fn online_walk(cfg: &Config, robot: &Robot) -> Result<OnlineWalk<f32>, GaitE
     };
     let p = OnlineParams {
         z_c: w.z_c,
-        period: w.period,
+        period: f64::from(period_us(cfg)) * 1e-6,
         t1: w.t1,
         t2: w.t2,
         half_width: w.step_width,
         swing,
         limits: CommandLimits::DEFAULT,
         dt: cfg.dt_s(),
+        zmp_inset: DEFAULT_ZMP_INSET,
     };
     let y = w.step_width as f32;
     let feet = [
@@ -59,6 +60,17 @@ pub fn online_walk(cfg: &Config, robot: &Robot) -> Result<OnlineWalk<f32>, GaitE
         },
     ];
     OnlineWalk::new(robot, p, feet)
+}
+
+/// The online walk's step period, µs: the configured (stretched) T rounded up to a whole µs, so
+/// that the `Footstep` record (id 0) logging it gives the host the exact value.
+pub fn period_us(cfg: &Config) -> i32 {
+    let us = libm::ceil(cfg.walk.period * 1e6);
+    if us.is_finite() && us > 0.0 && us < 1e9 {
+        us as i32
+    } else {
+        0
+    }
 }
 
 /// The command port in the loop.

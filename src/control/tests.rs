@@ -1411,6 +1411,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
         let Record::Fault(f) = r else { continue };
         match f.kind {
             FaultKind::CommandReceived => cmd[usize::from(f.id)] = f.value,
+            FaultKind::Footstep if f.id == 0 => {}
             FaultKind::Footstep => {
                 parts.push((f.id, f.value));
                 if parts.len() < 3 {
@@ -1435,7 +1436,8 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
                             w.z_c,
                             gait_core::command::CommandLimits::DEFAULT,
                             w.step_width as f32,
-                            w.period as f32,
+                            (f64::from(commanded::period_us(&Config { walk: w, ..cfg })) * 1e-6)
+                                as f32,
                             feet,
                             side,
                         )
