@@ -11,6 +11,8 @@
 #   --lockstep SPEC  chardev of UART2, the lock-step channel; also turns lock-step on in the
 #                    firmware (semihosting command line "lockstep") (default: $WALKER_LOCKSTEP;
 #                    without it UART2 is null and the bus is unconnected: reads time out)
+#   --command SPEC   chardev of UART3, the command port (the firmware as a Dynamixel device)
+#                    (default: $WALKER_COMMAND or null)
 #   --machine M      a machine of scripts/qemu-machines.txt: mps2-an500 (Cortex-M7),
 #                    mps2-an386 (M4F), mps2-an385 (M3) (default: $WALKER_QEMU_MACHINE, else the
 #                    table's first machine for the ELF's target directory, e.g.
@@ -39,7 +41,7 @@
 set -u
 
 if [ $# -lt 1 ]; then
-    echo "usage: $0 ELF [--bus SPEC] [--log SPEC] [--lockstep SPEC] [--machine M] [--timeout S] [--raw] [--unchecked] [qemu args...]" >&2
+    echo "usage: $0 ELF [--bus SPEC] [--log SPEC] [--lockstep SPEC] [--command SPEC] [--machine M] [--timeout S] [--raw] [--unchecked] [qemu args...]" >&2
     exit 2
 fi
 elf=$1
@@ -57,6 +59,7 @@ fi
 bus=${WALKER_BUS:-null}
 log=${WALKER_LOG:-file:target/qemu-zmp-log.bin}
 lockstep=${WALKER_LOCKSTEP:-}
+command_port=${WALKER_COMMAND:-null}
 machine=${WALKER_QEMU_MACHINE:-}
 timeout_s=${WALKER_QEMU_TIMEOUT:-600}
 raw=0
@@ -67,6 +70,7 @@ while [ $# -gt 0 ]; do
         --bus) bus=$2; shift 2 ;;
         --log) log=$2; shift 2 ;;
         --lockstep) lockstep=$2; shift 2 ;;
+        --command) command_port=$2; shift 2 ;;
         --machine) machine=$2; shift 2 ;;
         --timeout) timeout_s=$2; shift 2 ;;
         --raw) raw=1; shift ;;
@@ -116,7 +120,7 @@ else
 fi
 
 cmd=(qemu-system-arm -M "$machine" -nographic -monitor none
-    -serial "$bus" -serial "$log" -serial "$lockstep"
+    -serial "$bus" -serial "$log" -serial "$lockstep" -serial "$command_port"
     -semihosting-config enable=on,target=native
     -icount shift=0
     -kernel "$elf" "${append[@]}" "${extra[@]}")

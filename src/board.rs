@@ -3,7 +3,7 @@
 //! bus time model, the broadcast torque-off packet).
 //!
 //! A board is one value implementing [`Board`] (= [`ServoBus`] + [`Clock`] + [`TickTimer`] +
-//! [`LogSink`] + [`Watchdog`], plus the servo power switch). Because the bus transport and the clock live on the *same*
+//! [`LogSink`] + [`Watchdog`], plus the servo power switch and the command port's bytes). Because the bus transport and the clock live on the *same*
 //! value, a driver borrowing `&mut board` as its [`ServoBus`] can still read the clock through
 //! it (`impl ServoBus for &mut T` below), and a board whose clock is virtual (QEMU) can advance
 //! it from inside its bus transport.
@@ -128,6 +128,18 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
     /// Ends the firmware: under QEMU exits with `code` through semihosting; on the real board
     /// sends torque off and parks/resets (see the board module).
     fn exit(&mut self, code: i32) -> !;
+    /// The command port ([`walker_contract::command_port`]): reads the bytes received since
+    /// the last call into `buf`, without waiting (at most `buf.len()`); returns how many. A
+    /// board without a command port returns 0 (the default).
+    fn command_rx(&mut self, buf: &mut [u8]) -> usize {
+        let _ = buf;
+        0
+    }
+    /// Sends a reply on the command port (bounded waits; bytes the port cannot take are
+    /// dropped: the master times out and asks again). A board without a port drops them.
+    fn command_tx(&mut self, bytes: &[u8]) {
+        let _ = bytes;
+    }
 }
 
 pub use walker_contract::codes::{CrashCode, ResetCause};

@@ -114,6 +114,9 @@ use crate::startup::{self, Ramp, StartupError};
 use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
 use crate::{startup_record, Config};
 use walker_contract::codes::SensorRejection;
+use walker_contract::command_port::{Mode, PortState, PortStatus};
+
+pub mod commanded;
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
@@ -507,7 +510,15 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let engine = timing.and_then(|_| {
         gait_core::gait::Engine::<MAX_STEPS>::new(&cfg.walk_config(), cfg.arithmetic, &robot)
     });
-    let mut sampler = match engine {
+    // Without autostart the robot stands up and walks on command (the online walk).
+    let engine = engine.and_then(|e| {
+        if cfg.autostart {
+            Ok((e, None))
+        } else {
+            commanded::online_walk(cfg, &robot).map(|o| (e, Some(o)))
+        }
+    });
+    let (mut sampler, mut online) = match engine {
         Ok(s) => s,
         Err(e) => {
             crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
@@ -611,8 +622,26 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         Arithmetic::F32 => cfg.compliance,
         _ => Compliance::OFF,
     };
-    let mut q0 = sampler.joints(&targets, &lead_sample, [0.0; 2]);
-    load.apply(&compliance, &mut q0, &lead_sample.f32, [0.0; 2]);
+    // The initial pose: the plan's first sample, or the online walk's standing pose.
+    let (first, q0) = match &online {
+        Some(o) => {
+            let s = o.clone().tick();
+            let mut q = targets.joints(&s, [0.0; 2]).0;
+            load.apply(&compliance, &mut q, &s, [0.0; 2]);
+            (s, q)
+        }
+        None => {
+            let mut q = sampler.joints(&targets, &lead_sample, [0.0; 2]);
+            load.apply(&compliance, &mut q, &lead_sample.f32, [0.0; 2]);
+            (first, q)
+        }
+    };
+    let mut link = commanded::CommandLink::new();
+    if online.is_some() {
+        let now = bus.board().now_us();
+        let rec = fault(now, FaultKind::Footstep, 0, commanded::period_us(cfg));
+        log.write(bus.board(), rec);
+    }
     let mut from = [0.0f32; LEG_JOINTS];
     for (j, (f, &t)) in from.iter_mut().zip(present.iter()).enumerate() {
         *f = map.rad_of_tick(j, t);
@@ -737,6 +766,18 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             cfg.min_load_n,
         );
 
+        // The command port: answered every tick; torque off on command; the online walk's
+        // command.
+        link.poll(bus.board(), &mut log);
+        if link.mode() == Mode::TorqueOff {
+            sup.stop(StopReason::Requested);
+        }
+        if let Some(o) = online.as_mut() {
+            if ramp_k.is_none() {
+                o.set_command(link.velocity());
+            }
+        }
+
         // Supervisor, targets, servos.
         let action = sup.step();
         let mut rec = TickRecord {
@@ -758,22 +799,43 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     None => 'sample: {
                         let k = walk_tick;
                         walk_tick = walk_tick.saturating_add(1);
-                        let mut ahead = match pending.take() {
-                            Some(p) => p,
+                        // The online walk's sample (no lead) or the plan's (`servo_lead` ahead).
+                        let (s, mut ahead) = match online.as_mut() {
+                            Some(o) => {
+                                let s = o.tick();
+                                if let Some(f) = o.take_footstep() {
+                                    commanded::log_footstep(
+                                        bus.board(),
+                                        &mut log,
+                                        f.side,
+                                        &f.place,
+                                    );
+                                }
+                                (s, None)
+                            }
                             None => {
-                                let a = sampler.next(tau);
-                                let _ = delay.push_back(a.f32);
-                                a
+                                let ahead = match pending.take() {
+                                    Some(p) => p,
+                                    None => {
+                                        let a = sampler.next(tau);
+                                        let _ = delay.push_back(a.f32);
+                                        a
+                                    }
+                                };
+                                (delay.pop_front().unwrap_or(ahead.f32), Some(ahead))
                             }
                         };
+                        let mut s_ahead = ahead.map_or(s, |a| a.f32);
                         if cfg.fault_nan_com_tick == Some(k) {
-                            ahead.f32.com[0] = f32::NAN;
+                            s_ahead.com[0] = f32::NAN;
+                            if let Some(a) = ahead.as_mut() {
+                                a.f32.com[0] = f32::NAN;
+                            }
                         }
-                        let s = delay.pop_front().unwrap_or(ahead.f32);
                         // The finite check before the IK (which would clamp a NaN pelvis to
                         // finite, meaningless angles): the sample the IK takes (`servo_lead`
                         // ahead) and the present one; hold the last targets and stop.
-                        if !(s.is_finite() && ahead.f32.is_finite()) {
+                        if !(s.is_finite() && s_ahead.is_finite()) {
                             crate::fw_log!(error, "non-finite gait sample at walk tick {}", k);
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
@@ -793,10 +855,13 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
                         }
-                        let mut q = sampler.joints(&targets, &ahead, shift);
-                        load.apply(&compliance, &mut q, &ahead.f32, shift);
+                        let (mut q, loaded) = match &ahead {
+                            Some(a) => (sampler.joints(&targets, a, shift), a.f32),
+                            None => (targets.joints(&s, shift).0, s),
+                        };
+                        load.apply(&compliance, &mut q, &loaded, shift);
                         cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
-                        if sampler.is_done() {
+                        if online.is_none() && sampler.is_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);
                         }
                         if cfg.stop_at_tick == Some(k) {
@@ -875,6 +940,22 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             Action::HoldPose => FaultState::Stopping,
             Action::SendTorqueOff | Action::Idle => FaultState::TorqueOff,
         };
+        let state = match (action, &online, ramp_k) {
+            (Action::Run, _, Some(_)) => PortState::Starting,
+            (Action::Run, Some(o), None) => commanded::state_of(o.mode()),
+            (Action::Run, None, None) => PortState::Walking,
+            _ => PortState::Stopped,
+        };
+        link.publish(&PortStatus {
+            state,
+            support: commanded::support_code(prev.phase),
+            step_count: u16::try_from(online.as_ref().map_or(prev.steps_done, |o| o.steps_done()))
+                .unwrap_or(u16::MAX),
+            zmp_m: meas.zmp,
+            stop_code: sup.stop_reason().map_or(0, |r| r.kind().code()),
+            fault_kind: 0,
+            walk_velocity: online.as_ref().map_or([0.0; 3], |o| o.velocity()),
+        });
         rec.bus = bus.counters();
         rec.overruns = u16::try_from(bus.board().overruns()).unwrap_or(u16::MAX);
         log.write(bus.board(), Record::Tick(rec));

@@ -314,6 +314,13 @@ pub enum FaultKind {
     /// 13: a panic or watchdog record found in no-init RAM at boot, from the previous run
     /// (`id` = [`CrashCode`], `value` = the last control tick index it noted).
     CrashRecord,
+    /// 14: the command port accepted a command (`id` = [`CommandField`] code, `value` = the
+    /// value in the register's unit: mode code, mm/s or mrad/s); logged when it changes.
+    CommandReceived,
+    /// 15: the online walk committed a footstep (three records per step: `id` = side (1 left,
+    /// 2 right) · 16 + component (0 x, 1 y, 2 yaw), `value` = µm or µrad, world frame); once at
+    /// start `id` = 0: the online walk's step period, µs.
+    Footstep,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -335,6 +342,8 @@ impl FaultKind {
             Self::TorqueOffUnconfirmed => 11,
             Self::ResetCause => 12,
             Self::CrashRecord => 13,
+            Self::CommandReceived => 14,
+            Self::Footstep => 15,
             Self::Other(c) => c,
         }
     }
@@ -354,6 +363,8 @@ impl FaultKind {
             11 => Self::TorqueOffUnconfirmed,
             12 => Self::ResetCause,
             13 => Self::CrashRecord,
+            14 => Self::CommandReceived,
+            15 => Self::Footstep,
             c => Self::Other(c),
         }
     }
@@ -362,6 +373,49 @@ impl FaultKind {
 impl From<u8> for FaultKind {
     fn from(c: u8) -> Self {
         Self::from_code(c)
+    }
+}
+
+/// Which command a `CommandReceived` fault record carries (its `id`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum CommandField {
+    /// 0: the mode (value = the command port's mode code).
+    Mode,
+    /// 1: forward velocity, mm/s.
+    VelocityX,
+    /// 2: leftward velocity, mm/s.
+    VelocityY,
+    /// 3: yaw rate, mrad/s.
+    YawRate,
+}
+
+impl CommandField {
+    /// Every field.
+    pub const ALL: [CommandField; 4] = [
+        CommandField::Mode,
+        CommandField::VelocityX,
+        CommandField::VelocityY,
+        CommandField::YawRate,
+    ];
+    /// Wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            CommandField::Mode => 0,
+            CommandField::VelocityX => 1,
+            CommandField::VelocityY => 2,
+            CommandField::YawRate => 3,
+        }
+    }
+    /// From a wire code.
+    pub const fn from_code(c: u8) -> Option<Self> {
+        match c {
+            0 => Some(CommandField::Mode),
+            1 => Some(CommandField::VelocityX),
+            2 => Some(CommandField::VelocityY),
+            3 => Some(CommandField::YawRate),
+            _ => None,
+        }
     }
 }
 

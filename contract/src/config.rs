@@ -170,6 +170,9 @@ pub struct Config {
     /// Fault injection: make the gait sample's CoM NaN at this walk tick (the finite check
     /// before the IK must stop).
     pub fault_nan_com_tick: Option<u32>,
+    /// Walk the configured forward plan at power-on (`true`: demos and the FIL tests), or
+    /// stand up and wait for commands on the command port (`false`, the default).
+    pub autostart: bool,
 }
 
 impl Config {
@@ -230,6 +233,7 @@ impl Config {
             force_factor: 6.0,
             torque_off_attempts: 3,
             servo_limits: ServoLimits::xm430(),
+            autostart: false,
         }
     }
 

@@ -1,6 +1,7 @@
 //! walker-contract: what the firmware and the host tools must agree on, each fact once.
 //!
 //! * [`bus_map`]: device IDs, joint order and names, the ONE joint-angle ↔ servo-tick map;
+//! * [`command_port`]: the command port (the firmware as a Dynamixel device: control table, packet handling);
 //! * [`codes`]: stop reasons, fault kinds and exit codes with explicit numeric values;
 //! * [`config`]: the firmware's run-time configuration;
 //! * [`params`]: the run-time parameter table (one declaration per key), its parser and the
@@ -24,6 +25,7 @@
 
 pub mod bus_map;
 pub mod codes;
+pub mod command_port;
 pub mod config;
 pub mod params;
 pub mod record;

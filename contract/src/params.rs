@@ -970,6 +970,15 @@ params! {
         set: |c, v| { c.servo_limits.current_max_a = v as f32 },
         get: |c| { Some(Value::Num32(c.servo_limits.current_max_a)) },
     },
+    {
+        key: "autostart",
+        plan_key: None,
+        unit: "",
+        domain: Domain::Word(&["0", "1"]),
+        doc: "1: walk the configured forward plan at power-on (demos, the FIL tests); 0 (default): stand up and wait for the command port",
+        set: |c, v| { c.autostart = v as usize == 1 },
+        get: |c| { Some(Value::Word(usize::from(c.autostart))) },
+    },
 }
 
 /// Key index meaning "not a known key".

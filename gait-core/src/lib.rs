@@ -20,6 +20,7 @@ pub mod fourier;
 pub mod fourier_walk;
 pub mod measured;
 pub mod model;
+pub mod online;
 pub mod plan;
 pub mod sampler;
 pub mod support;

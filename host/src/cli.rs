@@ -358,6 +358,11 @@ pub struct FilArgs {
     /// Render the walk to this video (MuJoCo, headless; needs `bash scripts/render-setup.sh`).
     #[arg(long, value_name = "FILE")]
     pub video: Option<PathBuf>,
+    /// Walk on command: the firmware starts without autostart and this script of `[[command]]`
+    /// tables (`t` s from standing ready; `vx`, `vy` m/s, `vyaw` rad/s, or `stop = true`)
+    /// drives it through its command port; e.g. plans/commands-demo.toml.
+    #[arg(long, value_name = "FILE")]
+    pub commands: Option<PathBuf>,
     /// The run.
     #[command(flatten)]
     pub run: RunArgs,
@@ -1096,6 +1101,34 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
     };
     // A command line QEMU would refuse: a clear error before anything starts.
     crate::fil::qemu_append(&opts).map_err(|e| CliError::usage(format!("walker fil: {e}")))?;
+    if let Some(path) = &a.commands {
+        let script = crate::commands::CommandScript::read(path)
+            .map_err(|e| CliError::usage(format!("walker fil: --commands {e}")))?;
+        eprintln!(
+            "walker fil: {} on command ({}, {} commands) in QEMU {}",
+            plan_name,
+            path.display(),
+            script.command.len(),
+            opts.machine
+        );
+        let (r, d) = crate::fil::run_commands(&opts, &script, |t, _| {
+            eprint!("\r  simulated time {t:6.2} s");
+        })?;
+        eprintln!();
+        eprintln!("  {}", crate::fil::summary_line(&r.sim));
+        eprintln!(
+            "  stood ready at {:.2} s; commands sent at {:?} s",
+            d.ready_us as f64 * 1e-6,
+            d.sent_us
+                .iter()
+                .map(|t| (*t as f64 * 1e-6 * 100.0).round() / 100.0)
+                .collect::<Vec<_>>()
+        );
+        let f = crate::fil::command_figures(&r, &spec, &opts.extra_tokens)?;
+        println!("{}", f.line());
+        println!("log: {}, truth: {}", r.log.display(), r.truth.display());
+        return Ok(());
+    }
     eprintln!(
         "walker fil: {} ({:?}) in QEMU {} against the simulated robot",
         plan_name, spec.model, opts.machine

@@ -76,10 +76,12 @@ pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
     spec.firmware_tokens().map_err(|e| e.to_string())
 }
 
-/// The firmware's command-line tokens of a run: `lockstep`, the plan's tokens, then `extra`.
+/// The firmware's command-line tokens of a run: `lockstep`, the plan's tokens, `autostart=1`
+/// (the plan walks at power-on; a command-script run appends `autostart=0`), then `extra`.
 fn command_tokens(spec: &WalkSpec, extra: &[String]) -> Result<Vec<String>, String> {
     let mut t = vec!["lockstep".to_string()];
     t.extend(firmware_tokens(spec)?);
+    t.push("autostart=1".to_string());
     t.extend(extra.iter().cloned());
     Ok(t)
 }
@@ -148,6 +150,31 @@ pub fn qemu_append(opts: &FilOptions) -> Result<String, String> {
 
 /// Runs the firmware in QEMU against the simulator; blocks until the firmware exits.
 pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, String> {
+    run_inner(opts, None, progress).map(|(r, _)| r)
+}
+
+/// Runs the firmware without autostart and drives it through its command port (QEMU's UART3,
+/// a TCP connection to the host) with `script` ([`crate::commands`]); blocks until the
+/// firmware exits (the script ends with torque off). Returns what the driver did too.
+pub fn run_commands(
+    opts: &FilOptions,
+    script: &crate::commands::CommandScript,
+    progress: impl Fn(f64, u64),
+) -> Result<(FilResult, crate::commands::DriveReport), String> {
+    let mut o = opts.clone();
+    o.extra_tokens.push("autostart=0".into());
+    let (r, d) = run_inner(&o, Some(script), progress)?;
+    let d = d.ok_or("command driver: no report")??;
+    Ok((r, d))
+}
+
+type DriveOutcome = Option<Result<crate::commands::DriveReport, String>>;
+
+fn run_inner(
+    opts: &FilOptions,
+    script: Option<&crate::commands::CommandScript>,
+    progress: impl Fn(f64, u64),
+) -> Result<(FilResult, DriveOutcome), String> {
     // Checked before anything starts: the firmware's own parser, then the firmware's buffer.
     check_tokens(&opts.spec, &opts.extra_tokens)?;
     let tokens = qemu_append(opts)?;
@@ -181,11 +208,26 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
         .ok_or("simulator: no lock-step socket")?;
     let defmt_file =
         std::fs::File::create(&defmt).map_err(|e| format!("{}: {e}", defmt.display()))?;
+    // The command port (UART3): a socket the host owns, QEMU connects to it.
+    let port_listener = match script {
+        Some(_) => Some(
+            std::net::TcpListener::bind("127.0.0.1:0").map_err(|e| format!("command port: {e}"))?,
+        ),
+        None => None,
+    };
+    let port_serial = match &port_listener {
+        Some(l) => format!(
+            "tcp:{},nodelay=on",
+            l.local_addr().map_err(|e| format!("command port: {e}"))?
+        ),
+        None => "null".to_string(),
+    };
     let started = Instant::now();
     let serials = crate::qemu::Serials {
         bus: format!("tcp:{bus},nodelay=on"),
         log: format!("file:{}", log.display()),
         lockstep: Some(format!("tcp:{lockstep},nodelay=on")),
+        command: Some(port_serial),
     };
     let mut child = crate::qemu::command(&opts.elf, &opts.machine, &serials, &tokens)
         .stdin(Stdio::null())
@@ -194,6 +236,20 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
         .spawn()
         .map_err(|e| format!("starting QEMU: {e}"))?;
     let p = handle.progress();
+    let quit = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let driver = match (&port_listener, script) {
+        (Some(l), Some(s)) => {
+            l.set_nonblocking(false).ok();
+            let (stream, _) = l.accept().map_err(|e| format!("command port: {e}"))?;
+            Some(crate::commands::spawn_driver(
+                stream,
+                s.clone(),
+                handle.progress(),
+                std::sync::Arc::clone(&quit),
+            ))
+        }
+        _ => None,
+    };
     let exit_code = loop {
         match child.try_wait() {
             Ok(Some(status)) => break status.code(),
@@ -201,6 +257,7 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
             Err(e) => return Err(format!("waiting for QEMU: {e}")),
         }
         if started.elapsed() > opts.timeout {
+            quit.store(true, std::sync::atomic::Ordering::Relaxed);
             let _ = child.kill();
             let _ = child.wait();
             handle.stop();
@@ -224,15 +281,20 @@ pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, 
         );
         std::thread::sleep(Duration::from_millis(200));
     };
+    quit.store(true, std::sync::atomic::Ordering::Relaxed);
+    let drove = driver.map(|d| d.join().unwrap_or_else(|_| Err("driver panicked".into())));
     let summary = handle.join().map_err(|e| format!("simulator: {e}"))?;
-    Ok(FilResult {
-        exit_code,
-        sim: summary,
-        log,
-        truth,
-        wall: started.elapsed(),
-        firmware_log: decode_defmt(&opts.elf, &opts.out_dir),
-    })
+    Ok((
+        FilResult {
+            exit_code,
+            sim: summary,
+            log,
+            truth,
+            wall: started.elapsed(),
+            firmware_log: decode_defmt(&opts.elf, &opts.out_dir),
+        },
+        drove,
+    ))
 }
 
 /// One line about the simulator's run.
@@ -262,6 +324,112 @@ fn which(name: &str) -> Option<PathBuf> {
 
 fn is_exe(p: &Path) -> bool {
     p.is_file()
+}
+
+/// What a command-script run did: its footsteps against the commands, and the torso's final
+/// pose in the physics against the commanded one.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CommandFigures {
+    /// Footsteps against the commands integrated through the step limits.
+    pub footsteps: crate::commands::FootstepCheck,
+    /// When the truth first marked a fall, s.
+    pub fell_at: Option<f64>,
+    /// The commanded displacement: the feet's midpoint after the last step (x, y, m) and
+    /// their heading (rad), from the start (0, 0, 0).
+    pub commanded: [f64; 3],
+    /// The torso's (pelvis) displacement in the physics from the first truth row to the last
+    /// (x, y, m) and its heading change (rad).
+    pub walked: [f64; 3],
+}
+
+impl CommandFigures {
+    /// |walked − commanded| in the plane over the commanded distance.
+    pub fn distance_error(&self) -> f64 {
+        let [cx, cy, _] = self.commanded;
+        let [wx, wy, _] = self.walked;
+        (wx - cx).hypot(wy - cy) / cx.hypot(cy).max(1e-9)
+    }
+
+    /// walked − commanded heading, rad (wrapped to ±π).
+    pub fn heading_error(&self) -> f64 {
+        let d = self.walked[2] - self.commanded[2];
+        d.sin().atan2(d.cos())
+    }
+
+    /// One line for the terminal.
+    pub fn line(&self) -> String {
+        format!(
+            "{}; {} footsteps, {} not the commands'; commanded ({:.3} m, {:.3} m, {:+.1}°), torso ({:.3} m, {:.3} m, {:+.1}°): distance error {:.1} %, heading error {:+.1}°",
+            self.fell_at
+                .map_or("no fall".to_string(), |t| format!("FELL at {t:.2} s")),
+            self.footsteps.steps,
+            self.footsteps.mismatches.len(),
+            self.commanded[0],
+            self.commanded[1],
+            self.commanded[2].to_degrees(),
+            self.walked[0],
+            self.walked[1],
+            self.walked[2].to_degrees(),
+            100.0 * self.distance_error(),
+            self.heading_error().to_degrees()
+        )
+    }
+}
+
+/// The figures of a command-script run: the log's footsteps replayed
+/// ([`crate::commands::replay_footsteps`], with the firmware's own configuration of the run:
+/// [`check_tokens`]) and the truth's pelvis pose.
+pub fn command_figures(
+    r: &FilResult,
+    spec: &WalkSpec,
+    extra: &[String],
+) -> Result<CommandFigures, String> {
+    let mut extra = extra.to_vec();
+    extra.push("autostart=0".into());
+    let (_, cfg) = check_tokens(spec, &extra)?;
+    let log = crate::report::decode_file(&r.log)?;
+    let footsteps =
+        crate::commands::replay_footsteps(&log.events, cfg.walk.z_c, cfg.walk.step_width as f32)?;
+    let [l, rt] = footsteps.feet;
+    let mid = |a: f32, b: f32| 0.5 * (f64::from(a) + f64::from(b));
+    let yaw = {
+        let d = f64::from(rt.yaw - l.yaw);
+        f64::from(l.yaw) + 0.5 * d.sin().atan2(d.cos())
+    };
+    let commanded = [mid(l.x, rt.x), mid(l.y, rt.y), yaw];
+    let table = crate::report::read_truth(&r.truth)?;
+    let col = |n: &str| {
+        table
+            .column(n)
+            .ok_or_else(|| format!("truth: no column {n}"))
+    };
+    let (px, py, pyaw) = (
+        col("pelvis_x_m")?,
+        col("pelvis_y_m")?,
+        col("pelvis_yaw_rad")?,
+    );
+    let first_last = |c: &[f64]| -> Result<(f64, f64), String> {
+        match (c.first(), c.last()) {
+            (Some(a), Some(b)) => Ok((*a, *b)),
+            _ => Err("truth: empty".into()),
+        }
+    };
+    let (x0, x1) = first_last(px)?;
+    let (y0, y1) = first_last(py)?;
+    let (w0, w1) = first_last(pyaw)?;
+    let dyaw = w1 - w0;
+    let falling = col("falling")?;
+    let fell_at = falling
+        .iter()
+        .zip(&table.t)
+        .find(|(f, _)| **f > 0.5)
+        .map(|(_, t)| *t);
+    Ok(CommandFigures {
+        footsteps,
+        fell_at,
+        commanded,
+        walked: [x1 - x0, y1 - y0, dyaw.sin().atan2(dyaw.cos())],
+    })
 }
 
 /// What the physics says of a walk: did the robot fall, how far did it go, how straight.

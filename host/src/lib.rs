@@ -3,6 +3,7 @@
 pub mod beyond;
 pub mod capture;
 pub mod cli;
+pub mod commands;
 pub mod defmt_log;
 pub mod export;
 pub mod fil;

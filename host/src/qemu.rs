@@ -100,6 +100,8 @@ pub struct Serials {
     pub log: String,
     /// UART2, the lock-step channel (turns lock-step on in the firmware), if any.
     pub lockstep: Option<String>,
+    /// UART3, the command port (the firmware as a Dynamixel device), if any.
+    pub command: Option<String>,
 }
 
 /// The command that runs `elf` on `machine` with `serials` and the semihosting command line
@@ -112,6 +114,9 @@ pub fn command(elf: &Path, machine: &str, serials: &Serials, append: &str) -> Co
         .args(["--bus", &serials.bus, "--log", &serials.log]);
     if let Some(l) = &serials.lockstep {
         c.args(["--lockstep", l]);
+    }
+    if let Some(p) = &serials.command {
+        c.args(["--command", p]);
     }
     c.args(["-append", append]);
     c

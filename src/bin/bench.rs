@@ -1019,6 +1019,7 @@ mod firmware {
         cfg.ramp_us = cfg.tick_period_us;
         cfg.final_hold_us = cfg.tick_period_us;
         cfg.arithmetic = arithmetic;
+        cfg.autostart = true;
         let mut board = bench_robot(&cfg);
         let end = control::run(&mut board, &cfg);
         if end != RunEnd::Stopped(StopReason::PlanDone) {

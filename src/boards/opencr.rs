@@ -8,6 +8,7 @@
 //! | bus direction (TX enable) | **PC9**, high = transmit | Arduino pin 84, `DXL_DIR_PIN` |
 //! | Dynamixel power switch (FET) | **PF15**, high = on | `BDPIN_DXL_PWR_EN` |
 //! | log UART | **USART6**, PC6 TX / PC7 RX (AF8) at 921 600 baud | Arduino header pins 1 (TX) / 0 (RX), `Serial1`; spare on this robot |
+//! | command port | **USART2**, PD5 TX / PD6 RX (AF7) at [`COMMAND_BAUD`] | the 4-pin "UART" connector of the OpenCR (Arduino `Serial2`, `huart_inst[DRV_UART_NUM_2]` in ROBOTIS' `drv_uart.c`), where ROBOTIS' BT-210/BT-410 modules and a USB–TTL adapter plug in |
 //! | tick and µs clock | TIM2, 32-bit, free-running at 1 MHz | extended to 64 bits in software |
 //! | watchdog | IWDG (LSI ≈ 32 kHz) | started at boot (`control::run`), fed in the bus and tick waits, the dry run and each tick |
 //! | defmt | RTT (probe-rs) | |
@@ -54,6 +55,10 @@ pub const SYSCLK_HZ: u32 = 216_000_000;
 pub const HSE_HZ: u32 = 25_000_000;
 /// Log UART baud rate.
 pub const LOG_BAUD: u32 = 921_600;
+/// Command port baud rate (USART2; the Dynamixel SDK's usual 1 Mbps).
+pub const COMMAND_BAUD: u32 = 1_000_000;
+/// Bytes read from the command port per tick at most (bounded work; the rest waits).
+pub const COMMAND_RX_PER_TICK: usize = 64;
 /// Log ring buffer size, bytes (≈ 25 tick records).
 pub const LOG_RING: usize = 1024;
 /// Longest busy-wait on a bus UART flag (TXE, TC), loop iterations: one iteration is a few
@@ -101,6 +106,11 @@ fn usart3() -> &'static pac::usart1::RegisterBlock {
 fn usart6() -> &'static pac::usart1::RegisterBlock {
     // SAFETY: as for `usart3`, for the log UART USART6.
     unsafe { &*pac::USART6::ptr() }
+}
+
+fn usart2() -> &'static pac::usart1::RegisterBlock {
+    // SAFETY: as for `usart3`, for the command port USART2 (owned by the board after `new`).
+    unsafe { &*pac::USART2::ptr() }
 }
 
 fn brr(baud: u32) -> Option<u32> {
@@ -199,6 +209,7 @@ impl OpenCrBoard<DxlDir> {
             .freeze();
 
         let gpioc = dp.GPIOC.split();
+        let gpiod = dp.GPIOD.split();
         let gpiof = dp.GPIOF.split();
 
         let mut dir = gpioc.pc9.into_push_pull_output();
@@ -234,9 +245,27 @@ impl OpenCrBoard<DxlDir> {
             &clocks,
             log_cfg,
         );
-        // Keep both configured; drive them at register level (no DMA requests).
+        let cmd_cfg = serial::Config {
+            baud_rate: COMMAND_BAUD.bps(),
+            sysclock: true,
+            ..Default::default()
+        };
+        let cmd = Serial::new(
+            dp.USART2,
+            (
+                gpiod.pd5.into_alternate::<7>(),
+                gpiod.pd6.into_alternate::<7>(),
+            ),
+            &clocks,
+            cmd_cfg,
+        );
+        // Keep all three configured; drive them at register level (no DMA requests).
         let (_u3, _p3) = bus.release();
         let (_u6, _p6) = log.release();
+        let (_u2, _p2) = cmd.release();
+        usart2()
+            .cr3
+            .write(|w| w.dmat().disabled().dmar().disabled());
         usart3()
             .cr3
             .write(|w| w.dmat().disabled().dmar().disabled());
@@ -469,6 +498,42 @@ impl<D: OutputPin> Board for OpenCrBoard<D> {
             self.dxl_power.set_low();
         }
         defmt::warn!("servo power {=bool} (PF15)", on);
+    }
+
+    fn command_rx(&mut self, buf: &mut [u8]) -> usize {
+        let u = usart2();
+        let isr = u.isr.read();
+        if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
+            u.icr
+                .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
+        }
+        let mut n = 0;
+        for slot in buf.iter_mut().take(COMMAND_RX_PER_TICK) {
+            if !u.isr.read().rxne().bit_is_set() {
+                break;
+            }
+            *slot = (u.rdr.read().rdr().bits() & 0xFF) as u8;
+            n += 1;
+        }
+        n
+    }
+
+    fn command_tx(&mut self, bytes: &[u8]) {
+        // ≤ 312 bytes at 1 Mbps ≈ 3.1 ms, each wait bounded.
+        let u = usart2();
+        for &b in bytes {
+            let mut ok = false;
+            for _ in 0..UART_SPIN_LIMIT {
+                if u.isr.read().txe().bit_is_set() {
+                    ok = true;
+                    break;
+                }
+            }
+            if !ok {
+                return;
+            }
+            u.tdr.write(|w| w.tdr().bits(u16::from(b)));
+        }
     }
 
     fn exit(&mut self, code: i32) -> ! {

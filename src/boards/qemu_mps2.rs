@@ -7,6 +7,7 @@
 //! | UART0 | 0x4000_4000 | the servo bus (`-serial tcp:127.0.0.1:PORT,nodelay=on` to the simulator; `null` = unconnected) |
 //! | UART1 | 0x4000_5000 | the binary ZMP-response log ([`crate::record`]; to a file or TCP) |
 //! | UART2 | 0x4000_6000 | the lock-step channel (TCP to the simulator) |
+//! | UART3 | 0x4000_7000 | the command port ([`walker_contract::command_port`]; `-serial tcp:…` from the host, or absent) |
 //!
 //! CMSDK APB UART registers: DATA 0x00, STATE 0x04 (bit 0 TX full, bit 1 RX full), CTRL 0x08
 //! (bit 0 TX enable, bit 1 RX enable), BAUDDIV 0x10 (≥ 16, 25 MHz clock). defmt goes out over
@@ -87,6 +88,10 @@ pub const UART0_BASE: usize = 0x4000_4000;
 pub const UART1_BASE: usize = 0x4000_5000;
 /// CMSDK UART2 (lock-step).
 pub const UART2_BASE: usize = 0x4000_6000;
+/// CMSDK UART3 (command port).
+pub const UART3_BASE: usize = 0x4000_7000;
+/// Bytes read from the command port per tick at most (bounded work; the rest waits).
+pub const COMMAND_RX_PER_TICK: usize = 64;
 /// UART / SysTick clock of the mps2 boards, Hz.
 pub const SYSCLK_HZ: u32 = 25_000_000;
 /// Instructions per control tick charged as compute time for `cfg`: the bench's worst case
@@ -276,6 +281,7 @@ pub struct QemuBoard {
     bus: Uart,
     log: Uart,
     lockstep_uart: Uart,
+    command: Uart,
     lockstep: bool,
     line: LineTime,
     return_delay_ns: u64,
@@ -306,6 +312,8 @@ impl QemuBoard {
         let bus = Uart { base: UART0_BASE };
         let log = Uart { base: UART1_BASE };
         let ls = Uart { base: UART2_BASE };
+        let command = Uart { base: UART3_BASE };
+        command.init(1_000_000);
         bus.init(cfg.bus_baud);
         log.init(921_600);
         ls.init(SYSCLK_HZ / 16);
@@ -320,6 +328,7 @@ impl QemuBoard {
             bus,
             log,
             lockstep_uart: ls,
+            command,
             lockstep,
             line: LineTime { baud: cfg.bus_baud },
             return_delay_ns: u64::from(cfg.return_delay_us) * 1000,
@@ -567,6 +576,28 @@ impl Board for QemuBoard {
             "servo power {=bool} (no switch on this board: nothing done)",
             on
         );
+    }
+
+    fn command_rx(&mut self, buf: &mut [u8]) -> usize {
+        let mut n = 0;
+        for slot in buf.iter_mut().take(COMMAND_RX_PER_TICK) {
+            if !self.command.rx_full() {
+                break;
+            }
+            *slot = (self.command.read(DATA) & 0xFF) as u8;
+            n += 1;
+        }
+        n
+    }
+
+    fn command_tx(&mut self, bytes: &[u8]) {
+        self.cpu.pause();
+        for &b in bytes {
+            if !self.command.put_bounded(b) {
+                break;
+            }
+        }
+        self.cpu.resume();
     }
 
     fn exit(&mut self, code: i32) -> ! {

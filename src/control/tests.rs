@@ -90,7 +90,7 @@ fn torque_off_sent(b: &FakeBoard) -> bool {
 
 #[test]
 fn table2_walk_runs_to_plan_done() {
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let mut b = board(&cfg);
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::PlanDone));
@@ -238,7 +238,7 @@ fn table2_walk_runs_to_plan_done() {
 #[test]
 fn at_1_mbps_a_500_hz_tick_cannot_carry_the_traffic() {
     // 99 bytes out + 95 in = 1.94 ms of line time + 0.15 ms compute > 2 ms.
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     crate::params::apply(&mut cfg, b"elf dt=0.002 steps=2").unwrap();
     let mut b = board(&cfg);
     let end = run(&mut b, &cfg);
@@ -248,7 +248,7 @@ fn at_1_mbps_a_500_hz_tick_cannot_carry_the_traffic() {
 #[test]
 fn every_model_walks() {
     for model in gait_core::ModelKind::ALL {
-        let mut cfg = Config::default();
+        let mut cfg = autostart_config();
         cfg.model = model;
         cfg.walk.steps = 3;
         cfg.ramp_us = 100_000;
@@ -265,7 +265,7 @@ fn every_model_walks() {
 
 #[test]
 fn missing_servo_stops_at_startup() {
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let mut b = board(&cfg);
     b.remove(7);
     let end = run(&mut b, &cfg);
@@ -289,7 +289,7 @@ fn missing_servo_stops_at_startup() {
 
 #[test]
 fn unconnected_bus_reports_everything_missing_quickly() {
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let mut b = FakeBoard::empty().with_period(cfg.tick_period_us);
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::DeviceMissing { id: 1 }));
@@ -305,7 +305,7 @@ fn unconnected_bus_reports_everything_missing_quickly() {
 
 #[test]
 fn missing_foot_board_required_or_optional() {
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.walk.steps = 2;
     cfg.ramp_us = 50_000;
     cfg.final_hold_us = 50_000;
@@ -339,7 +339,7 @@ fn missing_foot_board_required_or_optional() {
 
 #[test]
 fn dead_foot_board_is_held_then_stops() {
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
     // Dies after the start-up SYNC WRITE, the ramp and 50 walk ticks.
@@ -375,7 +375,7 @@ fn dead_foot_board_is_held_then_stops() {
 
 #[test]
 fn a_short_dropout_recovers() {
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.walk.steps = 2;
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
@@ -394,7 +394,7 @@ fn fall_stops_and_turns_torque_off() {
     // fall): the attitude filter follows it with its accelerometer time constant and stops the
     // walk when the estimate passes the 0.6 rad limit (k = dt/(τ + dt) per tick: the estimate
     // is 1 − (1 − k)ⁿ of the way after n ticks, 0.6 after n ≈ 91 at 5 ms and τ = 0.5 s).
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
     b.fall_at = Some(1 + ramp + 100);
@@ -445,7 +445,7 @@ fn run_fault_at_tick_40(cfg: &Config, stop: StopReason, exit: i32) -> (FakeBoard
 
 #[test]
 fn nan_target_never_reaches_the_servos() {
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.fault_nan_tick = Some(40);
     let stop = StopReason::NonFiniteTarget { joint: 0 };
     let (b, k) = run_fault_at_tick_40(&cfg, stop, 15);
@@ -455,7 +455,7 @@ fn nan_target_never_reaches_the_servos() {
 
 #[test]
 fn overruns_are_counted_and_a_burst_stops() {
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.walk.steps = 2;
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
@@ -483,7 +483,7 @@ fn overruns_are_counted_and_a_burst_stops() {
 
 #[test]
 fn startup_failure_and_rejected_plan() {
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let mut b = board(&cfg);
     b.device_mut(3).unwrap().rdt_stuck = true;
     let end = run(&mut b, &cfg);
@@ -496,7 +496,7 @@ fn startup_failure_and_rejected_plan() {
         Record::Fault(f) if f.kind == FaultKind::StartupFailed && f.id == 3)));
     assert!(torque_off_sent(&b));
 
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.walk.t2 = 0.1; // < t1
     let mut b = board(&cfg);
     let end = run(&mut b, &cfg);
@@ -509,14 +509,14 @@ fn startup_failure_and_rejected_plan() {
 
 #[test]
 fn requested_stop_and_arg_error_report() {
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.stop_at_tick = Some(10);
     let mut b = board(&cfg);
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
     assert_eq!(end.exit_code(), 17);
 
-    let mut c = Config::default();
+    let mut c = autostart_config();
     let e = crate::params::apply(&mut c, b"elf lockstep dt=7").unwrap_err();
     let mut b = board(&cfg);
     report_arg_error(&mut b, &c, &e);
@@ -528,7 +528,7 @@ fn requested_stop_and_arg_error_report() {
 
 #[test]
 fn other_rates_and_shapes() {
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     crate::params::apply(
         &mut cfg,
         b"elf dt=0.002 baud=3000000 steps=3 zmp=continuous swing=sinusoid ramp=0.2 hold=0.1",
@@ -553,7 +553,7 @@ fn faults_of(recs: &[Record], kind: FaultKind) -> Vec<FaultRecord> {
 }
 
 fn cfg_with(tokens: &str) -> Config {
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     crate::params::apply(&mut cfg, tokens.as_bytes()).unwrap();
     cfg
 }
@@ -562,7 +562,7 @@ fn cfg_with(tokens: &str) -> Config {
 fn table2_is_stretched_for_the_servo_speed_limit() {
     // Default `feasibility=stretch`: the Table 2 swing needs ≈ 5.8 rad/s > 4.8 rad/s.
     let robot = Robot::reference();
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let plain = Targets::new(&robot, Compensation::None);
     let off = startup::dry_run(&cfg, &robot, &plain).unwrap();
     assert!(off.worst_speed > 5.0 && off.worst_speed < 7.0, "{off:?}");
@@ -669,7 +669,7 @@ fn no_shift_can_push_a_target_outside_the_limits() {
     // the IK clamps to the joint limits and safe_targets to the servo ticks.
     let robot = Robot::reference();
     let map = JointMap::from_robot(&robot);
-    let cfg = Config::default();
+    let cfg = autostart_config();
     for comp in [Compensation::None, Compensation::WholeBody] {
         let targets = Targets::new(&robot, comp);
         let mut s = build_sampler(&cfg, &robot).unwrap();
@@ -705,7 +705,7 @@ fn no_shift_can_push_a_target_outside_the_limits() {
 
 #[test]
 fn support_cache_equals_the_fresh_polygon_every_tick_and_rebuilds_rarely() {
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let robot = gait_core::Robot::reference();
     let mut s = build_sampler(&cfg, &robot).unwrap();
     let mut cache = SupportCache::default();
@@ -770,7 +770,7 @@ fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
 #[test]
 fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
     use walker_contract::codes::SensorRejection;
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     // The IMU keeps answering (CRC fine) but repeats its sample from walk tick 50 on: every
     // reply is rejected as frozen, held for hold_ticks, then the device is lost.
@@ -796,7 +796,7 @@ fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
     // With a (too) long hold, the staleness bound stops: 100 ms after the last accepted
     // sample, i.e. on the 21st frozen tick at 5 ms (age 21 × 5 = 105 ms > 100 ms; the 20th
     // is exactly 100 ms old), which starts the stop sequence in the same tick.
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.supervisor.hold_ticks = 65_535;
     let mut b = board(&cfg);
     b.freeze_at = Some((111, 1 + ramp + 50));
@@ -834,7 +834,7 @@ fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
 #[test]
 fn an_out_of_range_reply_is_rejected_and_held() {
     use walker_contract::codes::SensorRejection;
-    let mut cfg = Config::default();
+    let mut cfg = autostart_config();
     cfg.walk.steps = 2;
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     for id in [111u8, 200] {
@@ -915,7 +915,7 @@ fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
 #[test]
 fn the_servo_monitor_stops_on_each_limit() {
     use walker_contract::codes::ServoCheck;
-    let cfg = Config::default();
+    let cfg = autostart_config();
     // Each fault set on servo 8 from the start: the monitor reads servo 8 on tick 7 (round-robin
     // from servo 1 at tick 0), so the stop begins on tick 7 of the ramp.
     type SetFault = fn(&mut crate::fake_robot::FakeDevice);
@@ -1010,7 +1010,7 @@ fn a_power_on_logs_its_cause_and_walks() {
 #[test]
 fn a_brown_out_reset_logs_its_cause_and_does_not_walk() {
     use crate::board::{stm32f7_reset_cause, ResetCause};
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let mut b = board(&cfg);
     // RCC_CSR after a brown-out: BORRSTF and PINRSTF, no PORRSTF.
     let csr = (1u32 << 25) | (1 << 26);
@@ -1039,7 +1039,7 @@ fn a_brown_out_reset_logs_its_cause_and_does_not_walk() {
 #[test]
 fn a_watchdog_reset_writes_its_record_at_the_next_boot() {
     use crate::board::ResetCause;
-    let cfg = Config::default();
+    let cfg = autostart_config();
     // A first run stops mid-walk; then the loop hangs (it does not return here: the last noted
     // tick is what the watchdog reset leaves in no-init RAM).
     let mut b = board(&cfg);
@@ -1073,7 +1073,7 @@ fn a_watchdog_reset_writes_its_record_at_the_next_boot() {
 #[test]
 fn a_panic_writes_its_record_at_the_next_boot() {
     use crate::board::{CrashCode, ResetCause};
-    let cfg = Config::default();
+    let cfg = autostart_config();
     let mut b = board(&cfg);
     // What the panic path does on the OpenCR: the loop had noted tick 1234, the handler
     // records the panic, then a software reset (SFTRSTF + PINRSTF).
@@ -1230,4 +1230,294 @@ fn compliance_moves_only_the_roll_targets_within_its_bound() {
         .any(|(ga, gb)| map.rad_of_tick(1, gb[1]) - map.rad_of_tick(1, ga[1]) >= 0.05 - tick);
     assert!(raised, "{largest:?}");
     assert_goals_in_limits(&b);
+}
+
+/// The default configuration walking its forward plan at power-on (`autostart=1`): the tests
+/// above exercise the plan replay; the commanded walk has its own tests below.
+fn autostart_config() -> Config {
+    Config {
+        autostart: true,
+        ..Config::default()
+    }
+}
+
+/// The fake robot with a command port: instruction packets delivered at given control ticks,
+/// the port's replies kept with the tick they were sent at.
+struct PortBoard {
+    inner: FakeBoard,
+    script: Vec<(usize, Vec<u8>)>,
+    replies: Vec<(usize, Vec<u8>)>,
+}
+
+impl PortBoard {
+    fn tick(&self) -> usize {
+        self.inner.ticks.len()
+    }
+}
+
+impl ServoBus for PortBoard {
+    fn send(&mut self, packet: &[u8]) -> Result<(), crate::board::BusError> {
+        self.inner.send(packet)
+    }
+    fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, crate::board::BusError> {
+        self.inner.recv(buf, timeout_us)
+    }
+    fn baud(&self) -> u32 {
+        self.inner.baud()
+    }
+    fn set_baud(&mut self, baud: u32) -> Result<(), crate::board::BusError> {
+        self.inner.set_baud(baud)
+    }
+}
+impl Clock for PortBoard {
+    fn now_us(&self) -> u64 {
+        self.inner.now_us()
+    }
+}
+impl crate::board::TickTimer for PortBoard {
+    fn period_us(&self) -> u32 {
+        self.inner.period_us()
+    }
+    fn wait_tick(&mut self) -> crate::board::Tick {
+        self.inner.wait_tick()
+    }
+    fn overruns(&self) -> u32 {
+        self.inner.overruns()
+    }
+}
+impl crate::board::LogSink for PortBoard {
+    fn write_log(&mut self, bytes: &[u8]) {
+        self.inner.write_log(bytes)
+    }
+}
+impl crate::board::Watchdog for PortBoard {
+    fn start(&mut self, timeout_ms: u32) {
+        self.inner.start(timeout_ms)
+    }
+    fn feed(&mut self) {
+        self.inner.feed()
+    }
+}
+impl Board for PortBoard {
+    const NAME: &'static str = "fake+port";
+    const ID: crate::record::BoardId = crate::record::BoardId::Unknown;
+    fn torque_off_best_effort(&mut self) {
+        self.inner.torque_off_best_effort()
+    }
+    fn servo_power(&mut self, on: bool) {
+        self.inner.servo_power(on)
+    }
+    fn reset_cause(&self) -> (crate::board::ResetCause, u32) {
+        self.inner.reset_cause()
+    }
+    fn crash_cell(&mut self) -> &mut crate::board::CrashCell {
+        self.inner.crash_cell()
+    }
+    fn exit(&mut self, code: i32) -> ! {
+        self.inner.exit(code)
+    }
+    fn command_rx(&mut self, buf: &mut [u8]) -> usize {
+        let t = self.tick();
+        let Some(i) = self.script.iter().position(|(k, _)| *k <= t) else {
+            return 0;
+        };
+        let (_, bytes) = self.script.remove(i);
+        let n = bytes.len().min(buf.len());
+        buf[..n].copy_from_slice(&bytes[..n]);
+        n
+    }
+    fn command_tx(&mut self, bytes: &[u8]) {
+        let t = self.tick();
+        self.replies.push((t, bytes.to_vec()));
+    }
+}
+
+fn port_packet(ins: dxl::Instruction<'_>) -> Vec<u8> {
+    let mut buf = [0u8; 64];
+    let n = ins
+        .encode(&mut buf, walker_contract::command_port::PORT_ID)
+        .unwrap();
+    buf[..n].to_vec()
+}
+
+fn reply_of(bytes: &[u8]) -> (Option<dxl::ErrorCode>, Vec<u8>) {
+    let mut buf = [0u8; 600];
+    let p = dxl::decode(bytes, &mut buf).unwrap();
+    let s = dxl::Status::from_packet(&p).unwrap();
+    (s.error.code, s.data.to_vec())
+}
+
+/// Without autostart the robot stands after the ramp and waits; it walks on a velocity
+/// command, stops to standing on Mode = stand, and torque goes off on Mode = torque off
+/// (stop `Requested`). A bad command gets Data Range and changes nothing. The footsteps it
+/// logs are the generator's for the logged commands (replayed here in f32: identical).
+#[test]
+fn commanded_walk_stands_walks_stops_on_the_port() {
+    use walker_contract::command_port::{MODE, STATE, VELOCITY_X};
+    let cfg = Config::default();
+    assert!(!cfg.autostart);
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let read_state = || {
+        port_packet(dxl::Instruction::Read {
+            addr: STATE.addr,
+            len: 1,
+        })
+    };
+    let mut v = 50i16.to_le_bytes().to_vec();
+    v.extend_from_slice(&0i16.to_le_bytes());
+    v.extend_from_slice(&100i16.to_le_bytes());
+    let script = vec![
+        (ramp + 40, read_state()),
+        (
+            ramp + 50,
+            port_packet(dxl::Instruction::Write {
+                addr: VELOCITY_X.addr,
+                data: &v,
+            }),
+        ),
+        (
+            ramp + 51,
+            port_packet(dxl::Instruction::Write {
+                addr: MODE.addr,
+                data: &[7],
+            }),
+        ),
+        (
+            ramp + 52,
+            port_packet(dxl::Instruction::Write {
+                addr: MODE.addr,
+                data: &[2],
+            }),
+        ),
+        (ramp + 300, read_state()),
+        (
+            ramp + 1100,
+            port_packet(dxl::Instruction::Write {
+                addr: MODE.addr,
+                data: &[1],
+            }),
+        ),
+        (ramp + 2300, read_state()),
+        (
+            ramp + 2310,
+            port_packet(dxl::Instruction::Write {
+                addr: MODE.addr,
+                data: &[0],
+            }),
+        ),
+    ];
+    let mut b = PortBoard {
+        inner: board(&cfg),
+        script,
+        replies: Vec::new(),
+    };
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
+    let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    assert_eq!(
+        replies,
+        vec![
+            (None, vec![PortState::Standing.code()]),
+            (None, vec![]),
+            (Some(dxl::ErrorCode::DataRange), vec![]),
+            (None, vec![]),
+            (None, vec![PortState::Walking.code()]),
+            (None, vec![]),
+            (None, vec![PortState::Standing.code()]),
+            (None, vec![]),
+        ]
+    );
+    assert!(torque_off_sent(&b.inner));
+    assert_goals_in_limits(&b.inner);
+
+    // Replay the logged footsteps through the generator with the logged commands.
+    let recs = b.inner.records();
+    let mut cmd = [1i32, 0, 0, 0];
+    let mut gen: Option<gait_core::command::StepGenerator<f32>> = None;
+    let mut feet = [
+        gait_core::Place {
+            x: 0.0f32,
+            y: cfg.walk.step_width as f32,
+            yaw: 0.0,
+        },
+        gait_core::Place {
+            x: 0.0f32,
+            y: -(cfg.walk.step_width as f32),
+            yaw: 0.0,
+        },
+    ];
+    let mut parts = Vec::new();
+    let mut steps = 0;
+    for r in &recs {
+        let Record::Fault(f) = r else { continue };
+        match f.kind {
+            FaultKind::CommandReceived => cmd[usize::from(f.id)] = f.value,
+            FaultKind::Footstep if f.id == 0 => {}
+            FaultKind::Footstep => {
+                parts.push((f.id, f.value));
+                if parts.len() < 3 {
+                    continue;
+                }
+                let side = if parts[0].0 >> 4 == 1 {
+                    Side::Left
+                } else {
+                    Side::Right
+                };
+                if gen.as_ref().is_none_or(|g| g.is_standing()) {
+                    let w = startup::servo_timing(
+                        &cfg,
+                        &Robot::reference(),
+                        &Targets::new(&Robot::reference(), cfg.compensation),
+                    )
+                    .unwrap()
+                    .walk;
+                    gen = Some(
+                        gait_core::command::StepGenerator::new(
+                            &Robot::reference(),
+                            w.z_c,
+                            gait_core::command::CommandLimits::DEFAULT,
+                            w.step_width as f32,
+                            (f64::from(commanded::period_us(&Config { walk: w, ..cfg })) * 1e-6)
+                                as f32,
+                            feet,
+                            side,
+                        )
+                        .unwrap(),
+                    );
+                }
+                let g = gen.as_mut().unwrap();
+                let c = if cmd[0] == 2 {
+                    gait_core::command::WalkCommand {
+                        vx: cmd[1] as f32 / 1000.0,
+                        vy: cmd[2] as f32 / 1000.0,
+                        yaw_rate: cmd[3] as f32 / 1000.0,
+                    }
+                } else {
+                    gait_core::command::WalkCommand::zero()
+                };
+                let s = g.next_step(&c);
+                feet = g.feet();
+                assert_eq!(s.side, side, "step {steps}");
+                let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
+                let got = [parts[0].1, parts[1].1, parts[2].1];
+                assert_eq!(got, want, "step {steps}");
+                parts.clear();
+                steps += 1;
+            }
+            _ => {}
+        }
+    }
+    assert!(gen.unwrap().is_standing(), "ends standing");
+    // 1050 ticks (5.25 s) of walk command at 0.05 m/s with a 0.1 rad/s turn, less one period
+    // of start, then the stop steps (the stretched period is longer than Table 2's 0.64 s).
+    assert!(steps >= 6, "{steps} steps");
+    eprintln!("{steps} steps, feet {feet:?}");
+    let ticks = ticks_of(&recs);
+    let last = ticks
+        .iter()
+        .rev()
+        .find(|t| t.phase == LoggedPhase::Standing);
+    assert!(last.is_some());
+    let fwd = feet[0].x.max(feet[1].x);
+    assert!(fwd > 0.1 && fwd < 0.3, "forward {fwd} m");
 }

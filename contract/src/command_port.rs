@@ -1,0 +1,640 @@
+//! The command port: the firmware as a Dynamixel Protocol 2.0 device on a second serial port,
+//! so any Dynamixel master (the official ROBOTIS SDK, `walker`) commands the walk with the
+//! project's own codec on both ends.
+//!
+//! The device has ID [`PORT_ID`] (not on the servo bus: [`crate::bus_map::DEVICE_IDS`]) and
+//! model number [`MODEL_NUMBER_VALUE`]. It answers PING, READ, WRITE, SYNC READ, SYNC WRITE,
+//! BULK READ and BULK WRITE (its own entry); every other instruction gets the Instruction
+//! error. Broadcast packets are executed without a reply except PING (the protocol's rule).
+//!
+//! # Control table (all values little-endian)
+//! | addr | size | name | access | unit / values |
+//! |---:|---:|---|---|---|
+//! | 0 | 2 | Model Number | R | [`MODEL_NUMBER_VALUE`] |
+//! | 6 | 1 | Firmware Version | R | [`FIRMWARE_VERSION_VALUE`] |
+//! | 7 | 1 | ID | R | [`PORT_ID`] |
+//! | 64 | 1 | Mode | RW | [`Mode`]: 0 torque off, 1 stand, 2 walk (velocity), 3 stop |
+//! | 66 | 2 | Velocity X | RW | i16, mm/s forward, −100 ..= 200 |
+//! | 68 | 2 | Velocity Y | RW | i16, mm/s leftward, −100 ..= 100 |
+//! | 70 | 2 | Yaw Rate | RW | i16, mrad/s counter-clockwise, −600 ..= 600 |
+//! | 80 | 8 | Step Entry | RW | dx, dy (i16 mm), dyaw (i16 mrad), side (1 left, 2 right), 0; each write appends to the step list |
+//! | 128 | 1 | State | R | [`PortState`] |
+//! | 129 | 1 | Support Foot | R | 0 both, 1 left, 2 right |
+//! | 130 | 2 | Step Count | R | u16, steps finished since power-on |
+//! | 132 | 2 | Measured ZMP X | R | i16, mm (robot frame) |
+//! | 134 | 2 | Measured ZMP Y | R | i16, mm |
+//! | 136 | 1 | ZMP Valid | R | 1 when the feet measure a ZMP |
+//! | 137 | 1 | Stop Code | R | the last [`crate::StopCode`], 0 none |
+//! | 138 | 1 | Fault Kind | R | the last [`crate::FaultKind`] logged, 0 none |
+//! | 139 | 1 | Step List Length | R | entries waiting (≤ [`STEP_LIST_LEN`]) |
+//! | 140 | 2 | Walk Velocity X | R | i16, mm/s: the velocity the feet step (after the limits) |
+//! | 142 | 2 | Walk Velocity Y | R | i16, mm/s |
+//! | 144 | 2 | Walk Yaw Rate | R | i16, mrad/s |
+//! | 146 | 2 | Command Count | R | u16, accepted writes to the command registers (wraps) |
+//!
+//! The velocity ranges are [`gait_core::command::CommandLimits::DEFAULT`]'s in the wire's units.
+//!
+//! # Checks (the protocol's error statuses; a rejected write changes nothing)
+//! * an address beyond the table or in a gap: **Data Range**; a read-only byte: **Access**;
+//! * a write that covers part of a multi-byte register: **Data Length**;
+//! * a value outside its register's range (mode > 3, |vx| beyond the limit, a step entry with
+//!   side ∉ {1, 2} or beyond [`STEP_ENTRY_MAX`]): **Data Range**;
+//! * a step entry with the step list full: **Data Limit**;
+//! * a READ longer than the table: **Data Range**; a packet whose parameters do not fit its
+//!   instruction: **Data Length**; an unknown instruction: **Instruction**.
+//!
+//! Fixed-point units make a non-finite command unrepresentable on the wire; the typed
+//! accessors ([`CommandTable::velocity`]) return finite values in SI units only.
+//!
+//! Everything is bounded: one packet of at most [`RX_PARAMS`] parameter bytes at a time,
+//! replies built in a caller's buffer of [`REPLY_MAX`] bytes; no allocation, no panic.
+
+use dxl::instruction::{ErrorCode, Instruction, ParseError, StatusError};
+use dxl::packet::{Decoder, Packet, BROADCAST_ID};
+use gait_core::command::{CommandLimits, WalkCommand};
+
+/// The command port's device ID (not used on the servo bus).
+pub const PORT_ID: u8 = 150;
+/// Model number the port answers PING with.
+pub const MODEL_NUMBER_VALUE: u16 = 0x5A30;
+/// Firmware version byte (the control table's layout version).
+pub const FIRMWARE_VERSION_VALUE: u8 = 1;
+/// Size of the control table, bytes.
+pub const TABLE_LEN: usize = 148;
+/// Entries of the step list.
+pub const STEP_LIST_LEN: usize = 8;
+/// Largest |dx|, |dy| (mm) and |dyaw| (mrad) of a step entry.
+pub const STEP_ENTRY_MAX: [i16; 3] = [80, 80, 600];
+/// Largest instruction parameter length the port decodes, bytes.
+pub const RX_PARAMS: usize = 2 * TABLE_LEN + 16;
+/// A reply buffer large enough for any reply (a READ of the whole table, stuffed).
+pub const REPLY_MAX: usize = 2 * TABLE_LEN + 16;
+
+/// A register of the table: address and size.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Reg {
+    /// Address.
+    pub addr: u16,
+    /// Size, bytes.
+    pub len: u16,
+}
+
+const fn reg(addr: u16, len: u16) -> Reg {
+    Reg { addr, len }
+}
+
+/// Model Number (R).
+pub const MODEL_NUMBER: Reg = reg(0, 2);
+/// Firmware Version (R).
+pub const FIRMWARE_VERSION: Reg = reg(6, 1);
+/// ID (R).
+pub const ID: Reg = reg(7, 1);
+/// Mode (RW, [`Mode`]).
+pub const MODE: Reg = reg(64, 1);
+/// Velocity X, mm/s (RW).
+pub const VELOCITY_X: Reg = reg(66, 2);
+/// Velocity Y, mm/s (RW).
+pub const VELOCITY_Y: Reg = reg(68, 2);
+/// Yaw rate, mrad/s (RW).
+pub const YAW_RATE: Reg = reg(70, 2);
+/// Step entry (RW; a write appends).
+pub const STEP_ENTRY: Reg = reg(80, 8);
+/// State (R, [`PortState`]).
+pub const STATE: Reg = reg(128, 1);
+/// Support foot (R).
+pub const SUPPORT_FOOT: Reg = reg(129, 1);
+/// Step count (R).
+pub const STEP_COUNT: Reg = reg(130, 2);
+/// Measured ZMP x, mm (R).
+pub const ZMP_X: Reg = reg(132, 2);
+/// Measured ZMP y, mm (R).
+pub const ZMP_Y: Reg = reg(134, 2);
+/// ZMP valid (R).
+pub const ZMP_VALID: Reg = reg(136, 1);
+/// Last stop code (R).
+pub const STOP_CODE: Reg = reg(137, 1);
+/// Last fault kind (R).
+pub const FAULT_KIND: Reg = reg(138, 1);
+/// Step list length (R).
+pub const STEP_LIST: Reg = reg(139, 1);
+/// Walk velocity x, mm/s (R).
+pub const WALK_VX: Reg = reg(140, 2);
+/// Walk velocity y, mm/s (R).
+pub const WALK_VY: Reg = reg(142, 2);
+/// Walk yaw rate, mrad/s (R).
+pub const WALK_YAW: Reg = reg(144, 2);
+/// Command count (R).
+pub const COMMAND_COUNT: Reg = reg(146, 2);
+
+/// Every register, in address order.
+pub const REGISTERS: [Reg; 21] = [
+    MODEL_NUMBER,
+    FIRMWARE_VERSION,
+    ID,
+    MODE,
+    VELOCITY_X,
+    VELOCITY_Y,
+    YAW_RATE,
+    STEP_ENTRY,
+    STATE,
+    SUPPORT_FOOT,
+    STEP_COUNT,
+    ZMP_X,
+    ZMP_Y,
+    ZMP_VALID,
+    STOP_CODE,
+    FAULT_KIND,
+    STEP_LIST,
+    WALK_VX,
+    WALK_VY,
+    WALK_YAW,
+    COMMAND_COUNT,
+];
+
+/// The writable registers.
+pub const WRITABLE: [Reg; 5] = [MODE, VELOCITY_X, VELOCITY_Y, YAW_RATE, STEP_ENTRY];
+
+/// What the higher level asks for (the Mode register).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// 0: torque off (the run ends).
+    TorqueOff,
+    /// 1: stand (walking slows to a stop through the acceleration limits, then stands).
+    #[default]
+    Stand,
+    /// 2: walk at the commanded velocity (and the step list first, if any).
+    Walk,
+    /// 3: stop: like stand, the velocity registers are cleared.
+    Stop,
+}
+
+impl Mode {
+    /// The wire value.
+    pub const fn code(self) -> u8 {
+        match self {
+            Mode::TorqueOff => 0,
+            Mode::Stand => 1,
+            Mode::Walk => 2,
+            Mode::Stop => 3,
+        }
+    }
+
+    /// From the wire value.
+    pub const fn from_code(c: u8) -> Option<Self> {
+        match c {
+            0 => Some(Mode::TorqueOff),
+            1 => Some(Mode::Stand),
+            2 => Some(Mode::Walk),
+            3 => Some(Mode::Stop),
+            _ => None,
+        }
+    }
+}
+
+/// What the firmware is doing (the State register).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum PortState {
+    /// 0: starting up (probe, ramp to the initial pose).
+    #[default]
+    Starting,
+    /// 1: standing, ready for commands.
+    Standing,
+    /// 2: walking.
+    Walking,
+    /// 3: stopping (the last steps to standing).
+    Stopping,
+    /// 4: stopped: torque off (see Stop Code).
+    Stopped,
+}
+
+impl PortState {
+    /// The wire value.
+    pub const fn code(self) -> u8 {
+        match self {
+            PortState::Starting => 0,
+            PortState::Standing => 1,
+            PortState::Walking => 2,
+            PortState::Stopping => 3,
+            PortState::Stopped => 4,
+        }
+    }
+
+    /// From the wire value.
+    pub const fn from_code(c: u8) -> Option<Self> {
+        match c {
+            0 => Some(PortState::Starting),
+            1 => Some(PortState::Standing),
+            2 => Some(PortState::Walking),
+            3 => Some(PortState::Stopping),
+            4 => Some(PortState::Stopped),
+            _ => None,
+        }
+    }
+}
+
+/// One entry of the step list: the swing foot's displacement in the support foot's frame
+/// beyond the nominal in-place step (mm, mm, mrad).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct StepEntry {
+    /// Forward, mm.
+    pub dx: i16,
+    /// Leftward, mm.
+    pub dy: i16,
+    /// Heading change, mrad.
+    pub dyaw: i16,
+    /// The swinging foot: 1 left, 2 right.
+    pub side: u8,
+}
+
+impl StepEntry {
+    /// The entry's 8 bytes.
+    pub fn to_bytes(&self) -> [u8; 8] {
+        let [a, b] = self.dx.to_le_bytes();
+        let [c, d] = self.dy.to_le_bytes();
+        let [e, f] = self.dyaw.to_le_bytes();
+        [a, b, c, d, e, f, self.side, 0]
+    }
+
+    /// From 8 bytes, checked ([`STEP_ENTRY_MAX`], side 1 or 2, last byte 0).
+    pub fn from_bytes(b: &[u8]) -> Option<Self> {
+        let &[a, b1, c, d, e, f, side, z] = b else {
+            return None;
+        };
+        let s = StepEntry {
+            dx: i16::from_le_bytes([a, b1]),
+            dy: i16::from_le_bytes([c, d]),
+            dyaw: i16::from_le_bytes([e, f]),
+            side,
+        };
+        let within = [s.dx, s.dy, s.dyaw]
+            .iter()
+            .zip(STEP_ENTRY_MAX)
+            .all(|(v, m)| v.unsigned_abs() <= m.unsigned_abs());
+        (within && (side == 1 || side == 2) && z == 0).then_some(s)
+    }
+}
+
+/// The status the firmware publishes each tick.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct PortStatus {
+    /// State.
+    pub state: PortState,
+    /// Support foot: 0 both, 1 left, 2 right.
+    pub support: u8,
+    /// Steps finished since power-on.
+    pub step_count: u16,
+    /// Measured ZMP (m), if the feet measure one.
+    pub zmp_m: Option<[f32; 2]>,
+    /// The last stop code (0 none).
+    pub stop_code: u8,
+    /// The last fault kind logged (0 none).
+    pub fault_kind: u8,
+    /// The walking velocity the feet step (m/s, m/s, rad/s).
+    pub walk_velocity: [f32; 3],
+}
+
+/// Velocity limits of the wire (mm/s, mm/s, mrad/s): the default command limits.
+pub const VELOCITY_RANGE: [(i16, i16); 3] = [
+    (
+        -((CommandLimits::DEFAULT.vx_backward * 1000.0) as i16),
+        (CommandLimits::DEFAULT.vx_forward * 1000.0) as i16,
+    ),
+    (
+        -((CommandLimits::DEFAULT.vy * 1000.0) as i16),
+        (CommandLimits::DEFAULT.vy * 1000.0) as i16,
+    ),
+    (
+        -((CommandLimits::DEFAULT.yaw_rate * 1000.0) as i16),
+        (CommandLimits::DEFAULT.yaw_rate * 1000.0) as i16,
+    ),
+];
+
+/// A float in SI units to the wire's milli-units, saturated; NaN → 0.
+pub fn milli_i16(v: f32) -> i16 {
+    if !v.is_finite() {
+        return 0;
+    }
+    let m = libm::roundf(v * 1000.0);
+    libm::fmaxf(-32768.0, libm::fminf(32767.0, m)) as i16
+}
+
+/// The control table's memory and its access rules (the device side of the port).
+#[derive(Clone, Debug)]
+pub struct CommandTable {
+    mem: [u8; TABLE_LEN],
+    steps: heapless::Deque<StepEntry, STEP_LIST_LEN>,
+    commands: u16,
+}
+
+impl Default for CommandTable {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+fn span(r: Reg) -> core::ops::Range<usize> {
+    usize::from(r.addr)..usize::from(r.addr) + usize::from(r.len)
+}
+
+/// The register holding byte `a`, if any.
+fn register_of(a: usize) -> Option<Reg> {
+    REGISTERS.iter().copied().find(|r| span(*r).contains(&a))
+}
+
+impl CommandTable {
+    /// A fresh table: mode stand, velocity 0, state starting.
+    pub fn new() -> Self {
+        let mut t = CommandTable {
+            mem: [0; TABLE_LEN],
+            steps: heapless::Deque::new(),
+            commands: 0,
+        };
+        t.put(MODEL_NUMBER, &MODEL_NUMBER_VALUE.to_le_bytes());
+        t.put(FIRMWARE_VERSION, &[FIRMWARE_VERSION_VALUE]);
+        t.put(ID, &[PORT_ID]);
+        t.put(MODE, &[Mode::Stand.code()]);
+        t
+    }
+
+    fn put(&mut self, r: Reg, data: &[u8]) {
+        if let Some(s) = self.mem.get_mut(span(r)) {
+            for (d, v) in s.iter_mut().zip(data) {
+                *d = *v;
+            }
+        }
+    }
+
+    fn get_i16(&self, r: Reg) -> i16 {
+        match self.mem.get(span(r)) {
+            Some(&[a, b]) => i16::from_le_bytes([a, b]),
+            _ => 0,
+        }
+    }
+
+    /// READ access: `len` bytes at `addr` (Data Range beyond the table).
+    pub fn read(&self, addr: u16, len: u16) -> Result<&[u8], ErrorCode> {
+        let start = usize::from(addr);
+        self.mem
+            .get(start..start + usize::from(len))
+            .ok_or(ErrorCode::DataRange)
+    }
+
+    /// WRITE access with the checks of the module docs; all or nothing.
+    pub fn write(&mut self, addr: u16, data: &[u8]) -> Result<(), ErrorCode> {
+        let start = usize::from(addr);
+        let end = start + data.len();
+        if data.is_empty() || end > TABLE_LEN {
+            return Err(ErrorCode::DataRange);
+        }
+        // Every byte in a known register; every register covered whole; all writable.
+        let mut a = start;
+        while a < end {
+            let r = register_of(a).ok_or(ErrorCode::DataRange)?;
+            if !WRITABLE.contains(&r) {
+                return Err(ErrorCode::Access);
+            }
+            let s = span(r);
+            if s.start < start || s.end > end {
+                return Err(ErrorCode::DataLength);
+            }
+            a = s.end;
+        }
+        let covered = |r: Reg| {
+            let s = span(r);
+            (s.start >= start && s.end <= end)
+                .then(|| data.get(s.start - start..s.end - start))
+                .flatten()
+        };
+        let mut mode = None;
+        if let Some(&[m]) = covered(MODE) {
+            mode = Some(Mode::from_code(m).ok_or(ErrorCode::DataRange)?);
+        }
+        for (r, (lo, hi)) in [VELOCITY_X, VELOCITY_Y, YAW_RATE]
+            .iter()
+            .zip(VELOCITY_RANGE)
+        {
+            if let Some(&[a, b]) = covered(*r) {
+                let v = i16::from_le_bytes([a, b]);
+                if v < lo || v > hi {
+                    return Err(ErrorCode::DataRange);
+                }
+            }
+        }
+        let mut entry = None;
+        if let Some(b) = covered(STEP_ENTRY) {
+            entry = Some(StepEntry::from_bytes(b).ok_or(ErrorCode::DataRange)?);
+            if self.steps.is_full() {
+                return Err(ErrorCode::DataLimit);
+            }
+        }
+        // Accepted: commit.
+        if let Some(s) = self.mem.get_mut(start..end) {
+            s.copy_from_slice(data);
+        }
+        if let Some(e) = entry {
+            let _ = self.steps.push_back(e);
+        }
+        if mode == Some(Mode::Stop) {
+            for r in [VELOCITY_X, VELOCITY_Y, YAW_RATE] {
+                self.put(r, &[0, 0]);
+            }
+            self.steps.clear();
+        }
+        self.commands = self.commands.wrapping_add(1);
+        self.put(COMMAND_COUNT, &self.commands.to_le_bytes());
+        self.put(STEP_LIST, &[self.steps.len() as u8]);
+        Ok(())
+    }
+
+    /// The commanded mode.
+    pub fn mode(&self) -> Mode {
+        self.mem
+            .get(usize::from(MODE.addr))
+            .and_then(|&m| Mode::from_code(m))
+            .unwrap_or(Mode::Stand)
+    }
+
+    /// Sets the mode from the firmware's side (after torque off, or to clear a stop).
+    pub fn set_mode(&mut self, m: Mode) {
+        self.put(MODE, &[m.code()]);
+    }
+
+    /// The commanded velocity in SI units (m/s, m/s, rad/s; finite, within the limits);
+    /// zero unless the mode is [`Mode::Walk`].
+    pub fn velocity(&self) -> WalkCommand<f32> {
+        if self.mode() != Mode::Walk {
+            return WalkCommand {
+                vx: 0.0,
+                vy: 0.0,
+                yaw_rate: 0.0,
+            };
+        }
+        WalkCommand {
+            vx: f32::from(self.get_i16(VELOCITY_X)) / 1000.0,
+            vy: f32::from(self.get_i16(VELOCITY_Y)) / 1000.0,
+            yaw_rate: f32::from(self.get_i16(YAW_RATE)) / 1000.0,
+        }
+    }
+
+    /// The command registers in their wire units: mode code, vx, vy (mm/s), yaw rate (mrad/s).
+    pub fn raw_command(&self) -> [i32; 4] {
+        let mode = self.mem.get(usize::from(MODE.addr)).copied().unwrap_or(0);
+        [
+            i32::from(mode),
+            i32::from(self.get_i16(VELOCITY_X)),
+            i32::from(self.get_i16(VELOCITY_Y)),
+            i32::from(self.get_i16(YAW_RATE)),
+        ]
+    }
+
+    /// Takes the oldest step-list entry.
+    pub fn take_step(&mut self) -> Option<StepEntry> {
+        let s = self.steps.pop_front();
+        self.put(STEP_LIST, &[self.steps.len() as u8]);
+        s
+    }
+
+    /// Accepted command writes so far (wraps).
+    pub fn command_count(&self) -> u16 {
+        self.commands
+    }
+
+    /// Publishes the firmware's status in the status registers.
+    pub fn set_status(&mut self, s: &PortStatus) {
+        self.put(STATE, &[s.state.code()]);
+        self.put(SUPPORT_FOOT, &[s.support]);
+        self.put(STEP_COUNT, &s.step_count.to_le_bytes());
+        let [zx, zy] = s.zmp_m.unwrap_or([0.0; 2]);
+        self.put(ZMP_X, &milli_i16(zx).to_le_bytes());
+        self.put(ZMP_Y, &milli_i16(zy).to_le_bytes());
+        self.put(ZMP_VALID, &[u8::from(s.zmp_m.is_some())]);
+        self.put(STOP_CODE, &[s.stop_code]);
+        self.put(FAULT_KIND, &[s.fault_kind]);
+        let [vx, vy, w] = s.walk_velocity;
+        self.put(WALK_VX, &milli_i16(vx).to_le_bytes());
+        self.put(WALK_VY, &milli_i16(vy).to_le_bytes());
+        self.put(WALK_YAW, &milli_i16(w).to_le_bytes());
+    }
+
+    /// The published state.
+    pub fn state(&self) -> PortState {
+        self.mem
+            .get(usize::from(STATE.addr))
+            .and_then(|&s| PortState::from_code(s))
+            .unwrap_or_default()
+    }
+}
+
+/// The protocol's status for an error.
+fn status_of(code: ErrorCode) -> StatusError {
+    StatusError {
+        alert: false,
+        code: Some(code),
+    }
+}
+
+/// The command port's device: the table plus the packet handling of one port.
+#[derive(Clone, Debug, Default)]
+pub struct CommandPort {
+    /// The control table.
+    pub table: CommandTable,
+    decoder: Decoder<RX_PARAMS>,
+}
+
+impl CommandPort {
+    /// A fresh port (table as [`CommandTable::new`]).
+    pub fn new() -> Self {
+        CommandPort {
+            table: CommandTable::new(),
+            decoder: Decoder::new(),
+        }
+    }
+
+    /// Feeds one received byte; when it completes an instruction packet addressed to the
+    /// port, executes it and returns the reply's length in `reply` (0 = no reply due).
+    pub fn push(&mut self, byte: u8, reply: &mut [u8]) -> usize {
+        let CommandPort { table, decoder } = self;
+        match decoder.push(byte) {
+            Some(Ok(p)) => handle(table, &p, reply),
+            _ => 0,
+        }
+    }
+
+    /// Feeds received bytes (at most `bytes.len()`); replies go to `out` through `send`.
+    pub fn feed(&mut self, bytes: &[u8], mut send: impl FnMut(&[u8])) {
+        let mut reply = [0u8; REPLY_MAX];
+        for &b in bytes {
+            let n = self.push(b, &mut reply);
+            if let Some(r) = reply.get(..n).filter(|r| !r.is_empty()) {
+                send(r);
+            }
+        }
+    }
+}
+
+/// Executes one instruction packet on `table`; returns the reply's length in `reply` (0 = no
+/// reply: not addressed to the port, or broadcast other than PING).
+pub fn handle(table: &mut CommandTable, p: &Packet<'_>, reply: &mut [u8]) -> usize {
+    let own = p.id == PORT_ID;
+    if !own && p.id != BROADCAST_ID {
+        return 0;
+    }
+    let status = |reply: &mut [u8], err: StatusError, data: &[u8]| {
+        dxl::encode_status(reply, PORT_ID, err, data).unwrap_or(0)
+    };
+    let ins = match Instruction::parse(p) {
+        Ok(i) => i,
+        Err(ParseError::BadLength) if own => {
+            return status(reply, status_of(ErrorCode::DataLength), &[])
+        }
+        Err(_) if own => return status(reply, status_of(ErrorCode::Instruction), &[]),
+        Err(_) => return 0,
+    };
+    match ins {
+        Instruction::Ping => {
+            let [lo, hi] = MODEL_NUMBER_VALUE.to_le_bytes();
+            status(reply, StatusError::OK, &[lo, hi, FIRMWARE_VERSION_VALUE])
+        }
+        Instruction::Read { addr, len } if own => match table.read(addr, len) {
+            Ok(d) => status(reply, StatusError::OK, d),
+            Err(e) => status(reply, status_of(e), &[]),
+        },
+        Instruction::Write { addr, data } => {
+            let r = table.write(addr, data);
+            if !own {
+                return 0;
+            }
+            match r {
+                Ok(()) => status(reply, StatusError::OK, &[]),
+                Err(e) => status(reply, status_of(e), &[]),
+            }
+        }
+        Instruction::SyncRead { addr, len, ids } if ids.contains(&PORT_ID) => {
+            match table.read(addr, len) {
+                Ok(d) => status(reply, StatusError::OK, d),
+                Err(e) => status(reply, status_of(e), &[]),
+            }
+        }
+        Instruction::SyncWrite(sw) => {
+            if let Some(d) = sw.data_for(PORT_ID) {
+                let _ = table.write(sw.addr, d);
+            }
+            0
+        }
+        Instruction::BulkRead(b) => match b.entries().find(|e| e.id == PORT_ID) {
+            Some(e) => match table.read(e.addr, e.len) {
+                Ok(d) => status(reply, StatusError::OK, d),
+                Err(err) => status(reply, status_of(err), &[]),
+            },
+            None => 0,
+        },
+        Instruction::BulkWrite(b) => {
+            if let Some(e) = b.entries().find(|e| e.id == PORT_ID) {
+                let _ = table.write(e.addr, e.data);
+            }
+            0
+        }
+        _ if own => status(reply, status_of(ErrorCode::Instruction), &[]),
+        _ => 0,
+    }
+}

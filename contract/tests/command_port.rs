@@ -1,0 +1,304 @@
+//! The command port's register handling: the checks of `walker_contract::command_port`'s docs,
+//! through whole packets (the master side of the project's codec) and by property tests.
+
+use dxl::instruction::{ErrorCode, Instruction, Status, StatusError};
+use dxl::packet::{decode, BROADCAST_ID};
+use proptest::prelude::*;
+use walker_contract::command_port::*;
+
+/// Sends one instruction to `port`; returns the decoded reply (error code, data), if any.
+fn ask(port: &mut CommandPort, id: u8, ins: Instruction<'_>) -> Option<(StatusError, Vec<u8>)> {
+    let mut pkt = [0u8; 600];
+    let n = ins.encode(&mut pkt, id).unwrap();
+    let mut out: Vec<Vec<u8>> = Vec::new();
+    port.feed(&pkt[..n], |r| out.push(r.to_vec()));
+    assert!(out.len() <= 1, "one reply at most");
+    let r = out.pop()?;
+    let mut buf = [0u8; 600];
+    let p = decode(&r, &mut buf).unwrap();
+    let s = Status::from_packet(&p).unwrap();
+    assert_eq!(s.id, PORT_ID);
+    Some((s.error, s.data.to_vec()))
+}
+
+fn write(port: &mut CommandPort, addr: u16, data: &[u8]) -> Option<ErrorCode> {
+    let (e, d) = ask(port, PORT_ID, Instruction::Write { addr, data }).unwrap();
+    assert!(d.is_empty());
+    e.code
+}
+
+fn read(port: &mut CommandPort, addr: u16, len: u16) -> Result<Vec<u8>, ErrorCode> {
+    let (e, d) = ask(port, PORT_ID, Instruction::Read { addr, len }).unwrap();
+    match e.code {
+        None => Ok(d),
+        Some(c) => Err(c),
+    }
+}
+
+#[test]
+fn ping_answers_model_and_version_also_to_broadcast() {
+    let mut p = CommandPort::new();
+    let want = vec![0x30, 0x5A, FIRMWARE_VERSION_VALUE];
+    assert_eq!(
+        ask(&mut p, PORT_ID, Instruction::Ping),
+        Some((StatusError::OK, want.clone()))
+    );
+    assert_eq!(
+        ask(&mut p, BROADCAST_ID, Instruction::Ping),
+        Some((StatusError::OK, want))
+    );
+    // Another device's packet: silence.
+    assert_eq!(ask(&mut p, 1, Instruction::Ping), None);
+}
+
+#[test]
+fn velocity_write_reaches_the_command_in_si_units() {
+    let mut p = CommandPort::new();
+    let mut v = Vec::new();
+    v.extend_from_slice(&50i16.to_le_bytes());
+    v.extend_from_slice(&(-30i16).to_le_bytes());
+    v.extend_from_slice(&349i16.to_le_bytes());
+    assert_eq!(write(&mut p, VELOCITY_X.addr, &v), None);
+    // Mode stand: the gait sees 0.
+    assert_eq!(p.table.velocity().vx, 0.0);
+    assert_eq!(write(&mut p, MODE.addr, &[2]), None);
+    let c = p.table.velocity();
+    assert_eq!((c.vx, c.vy, c.yaw_rate), (0.05, -0.03, 0.349));
+    assert_eq!(read(&mut p, VELOCITY_X.addr, 6), Ok(v));
+    assert_eq!(p.table.command_count(), 2);
+    assert_eq!(read(&mut p, COMMAND_COUNT.addr, 2), Ok(vec![2, 0]));
+    // Stop clears the velocity.
+    assert_eq!(write(&mut p, MODE.addr, &[3]), None);
+    assert_eq!(read(&mut p, VELOCITY_X.addr, 6), Ok(vec![0; 6]));
+    assert_eq!(p.table.mode(), Mode::Stop);
+}
+
+#[test]
+fn bad_writes_get_the_protocol_errors_and_change_nothing() {
+    let mut p = CommandPort::new();
+    let before = read(&mut p, 0, TABLE_LEN as u16).unwrap();
+    // Out of range values: mode 4, vx 201 mm/s, vx −101, vy 101, yaw 601.
+    assert_eq!(write(&mut p, MODE.addr, &[4]), Some(ErrorCode::DataRange));
+    assert_eq!(
+        write(&mut p, 66, &201i16.to_le_bytes()),
+        Some(ErrorCode::DataRange)
+    );
+    assert_eq!(
+        write(&mut p, 66, &(-101i16).to_le_bytes()),
+        Some(ErrorCode::DataRange)
+    );
+    assert_eq!(
+        write(&mut p, 68, &101i16.to_le_bytes()),
+        Some(ErrorCode::DataRange)
+    );
+    assert_eq!(
+        write(&mut p, 70, &601i16.to_le_bytes()),
+        Some(ErrorCode::DataRange)
+    );
+    // A valid vx with an invalid vy in the same write: nothing is stored.
+    let mut v = 50i16.to_le_bytes().to_vec();
+    v.extend_from_slice(&500i16.to_le_bytes());
+    assert_eq!(write(&mut p, 66, &v), Some(ErrorCode::DataRange));
+    // Half a register.
+    assert_eq!(write(&mut p, 66, &[1]), Some(ErrorCode::DataLength));
+    assert_eq!(write(&mut p, 67, &[1]), Some(ErrorCode::DataLength));
+    // Read-only: model number, ID, state, step count.
+    assert_eq!(write(&mut p, 0, &[1, 2]), Some(ErrorCode::Access));
+    assert_eq!(write(&mut p, 7, &[9]), Some(ErrorCode::Access));
+    assert_eq!(write(&mut p, STATE.addr, &[1]), Some(ErrorCode::Access));
+    // Unknown addresses (a gap, beyond the table).
+    assert_eq!(write(&mut p, 65, &[0]), Some(ErrorCode::DataRange));
+    assert_eq!(write(&mut p, 100, &[0]), Some(ErrorCode::DataRange));
+    assert_eq!(write(&mut p, 400, &[0]), Some(ErrorCode::DataRange));
+    // Reads beyond the table.
+    assert_eq!(read(&mut p, 140, 20), Err(ErrorCode::DataRange));
+    // A READ with a bad parameter length.
+    let mut pkt = [0u8; 32];
+    let n = dxl::packet::encode(&mut pkt, PORT_ID, dxl::opcode::READ, &[64, 0, 1]).unwrap();
+    let mut out = Vec::new();
+    p.feed(&pkt[..n], |r| out.push(r.to_vec()));
+    let mut buf = [0u8; 32];
+    let s = decode(&out[0], &mut buf).unwrap();
+    assert_eq!(
+        Status::from_packet(&s).unwrap().error.code,
+        Some(ErrorCode::DataLength)
+    );
+    // Unsupported instructions.
+    let e = ask(&mut p, PORT_ID, Instruction::Reboot).unwrap().0.code;
+    assert_eq!(e, Some(ErrorCode::Instruction));
+    assert_eq!(read(&mut p, 0, TABLE_LEN as u16).unwrap(), before);
+    assert_eq!(p.table.command_count(), 0);
+}
+
+#[test]
+fn step_list_appends_checks_and_fills() {
+    let mut p = CommandPort::new();
+    let e = StepEntry {
+        dx: 40,
+        dy: -10,
+        dyaw: 100,
+        side: 1,
+    };
+    for k in 0..STEP_LIST_LEN {
+        assert_eq!(write(&mut p, STEP_ENTRY.addr, &e.to_bytes()), None);
+        assert_eq!(read(&mut p, STEP_LIST.addr, 1), Ok(vec![k as u8 + 1]));
+    }
+    assert_eq!(
+        write(&mut p, STEP_ENTRY.addr, &e.to_bytes()),
+        Some(ErrorCode::DataLimit)
+    );
+    let bad = [
+        StepEntry { side: 3, ..e },
+        StepEntry { dx: 81, ..e },
+        StepEntry { dyaw: -601, ..e },
+    ];
+    for b in bad {
+        assert_eq!(
+            write(&mut p, STEP_ENTRY.addr, &b.to_bytes()),
+            Some(ErrorCode::DataRange)
+        );
+    }
+    assert_eq!(p.table.take_step(), Some(e));
+    assert_eq!(read(&mut p, STEP_LIST.addr, 1), Ok(vec![7]));
+    assert_eq!(
+        write(&mut p, STEP_ENTRY.addr, &e.to_bytes()[..6]),
+        Some(ErrorCode::DataLength)
+    );
+}
+
+#[test]
+fn status_registers_read_back_in_wire_units() {
+    let mut p = CommandPort::new();
+    p.table.set_status(&PortStatus {
+        state: PortState::Walking,
+        support: 2,
+        step_count: 513,
+        zmp_m: Some([0.0125, -0.047]),
+        stop_code: 0,
+        fault_kind: 3,
+        walk_velocity: [0.05, 0.0, -0.2],
+    });
+    let d = read(&mut p, STATE.addr, 20).unwrap();
+    assert_eq!(d[0], 2);
+    assert_eq!(d[1], 2);
+    assert_eq!(u16::from_le_bytes([d[2], d[3]]), 513);
+    assert_eq!(i16::from_le_bytes([d[4], d[5]]), 13);
+    assert_eq!(i16::from_le_bytes([d[6], d[7]]), -47);
+    assert_eq!(d[8], 1);
+    assert_eq!(d[10], 3);
+    assert_eq!(i16::from_le_bytes([d[12], d[13]]), 50);
+    assert_eq!(i16::from_le_bytes([d[16], d[17]]), -200);
+    assert_eq!(p.table.state(), PortState::Walking);
+}
+
+#[test]
+fn sync_and_bulk_reach_the_port_entry_only() {
+    let mut p = CommandPort::new();
+    // SYNC WRITE of Mode to devices 3 and PORT_ID.
+    let raw = [3u8, 1, PORT_ID, 2];
+    let sw = dxl::SyncWrite::from_raw(MODE.addr, 1, &raw).unwrap();
+    assert_eq!(ask(&mut p, BROADCAST_ID, Instruction::SyncWrite(sw)), None);
+    assert_eq!(p.table.mode(), Mode::Walk);
+    // SYNC READ answers when listed.
+    let ids = [PORT_ID];
+    let (e, d) = ask(
+        &mut p,
+        BROADCAST_ID,
+        Instruction::SyncRead {
+            addr: MODEL_NUMBER.addr,
+            len: 2,
+            ids: &ids,
+        },
+    )
+    .unwrap();
+    assert_eq!((e, d), (StatusError::OK, vec![0x30, 0x5A]));
+    // BULK READ of two bytes at 64.
+    let mut buf = [0u8; 64];
+    let n = dxl::encode_bulk_read(
+        &mut buf,
+        &[dxl::BulkReadRequest {
+            id: PORT_ID,
+            addr: MODE.addr,
+            len: 1,
+        }],
+    )
+    .unwrap();
+    let mut out = Vec::new();
+    p.feed(&buf[..n], |r| out.push(r.to_vec()));
+    let mut b2 = [0u8; 64];
+    let s = decode(&out[0], &mut b2).unwrap();
+    assert_eq!(Status::from_packet(&s).unwrap().data, &[2]);
+}
+
+fn arb_write() -> impl Strategy<Value = (u16, Vec<u8>)> {
+    (0u16..200, proptest::collection::vec(any::<u8>(), 0..24))
+}
+
+proptest! {
+    /// Any write: either accepted (and then every written register holds a value in its
+    /// range, the command count advanced by one) or rejected with the table unchanged.
+    #[test]
+    fn any_write_is_all_or_nothing_and_in_range(writes in proptest::collection::vec(arb_write(), 1..12)) {
+        let mut t = CommandTable::new();
+        for (addr, data) in writes {
+            let before = t.clone();
+            let count = t.command_count();
+            let before_mem = before.read(0, TABLE_LEN as u16).unwrap().to_vec();
+            match t.write(addr, &data) {
+                Ok(()) => {
+                    prop_assert_eq!(t.command_count(), count.wrapping_add(1));
+                    // Only writable registers, wholly covered.
+                    let (s, e) = (usize::from(addr), usize::from(addr) + data.len());
+                    for r in WRITABLE {
+                        let (rs, re) = (usize::from(r.addr), usize::from(r.addr + r.len));
+                        prop_assert!(re <= s || rs >= e || (rs >= s && re <= e));
+                    }
+                    prop_assert!(Mode::from_code(t.read(MODE.addr, 1).unwrap()[0]).is_some());
+                    let c = t.velocity();
+                    for (v, (lo, hi)) in [c.vx, c.vy, c.yaw_rate].iter().zip(VELOCITY_RANGE) {
+                        prop_assert!(v.is_finite());
+                        prop_assert!(*v >= f32::from(lo) * 1e-3 - 1e-6 && *v <= f32::from(hi) * 1e-3 + 1e-6);
+                    }
+                    for (i, b) in before_mem.iter().enumerate() {
+                        let inside = i >= s && i < e;
+                        let derived = [COMMAND_COUNT, STEP_LIST, VELOCITY_X, VELOCITY_Y, YAW_RATE]
+                            .iter().any(|r| (usize::from(r.addr)..usize::from(r.addr + r.len)).contains(&i));
+                        if !inside && !derived {
+                            prop_assert_eq!(t.read(i as u16, 1).unwrap()[0], *b);
+                        }
+                    }
+                }
+                Err(e) => {
+                    prop_assert!(matches!(e, ErrorCode::DataRange | ErrorCode::DataLength | ErrorCode::Access | ErrorCode::DataLimit));
+                    prop_assert_eq!(t.read(0, TABLE_LEN as u16).unwrap(), &before_mem[..]);
+                    prop_assert_eq!(t.command_count(), count);
+                }
+            }
+        }
+    }
+
+    /// Any byte stream into the port: no panic, every reply a well-formed status packet of
+    /// the port's ID.
+    #[test]
+    fn any_bytes_get_well_formed_replies(bytes in proptest::collection::vec(any::<u8>(), 0..400)) {
+        let mut p = CommandPort::new();
+        let mut replies = Vec::new();
+        p.feed(&bytes, |r| replies.push(r.to_vec()));
+        for r in replies {
+            let mut buf = [0u8; 600];
+            let s = decode(&r, &mut buf).unwrap();
+            let s = Status::from_packet(&s).unwrap();
+            prop_assert_eq!(s.id, PORT_ID);
+        }
+    }
+
+    /// Any well-formed WRITE packet to the port is answered, OK exactly when the table accepts it.
+    #[test]
+    fn write_packets_answer_the_table_verdict((addr, data) in arb_write()) {
+        let mut p = CommandPort::new();
+        let mut t = CommandTable::new();
+        let want = t.write(addr, &data).err();
+        let got = ask(&mut p, PORT_ID, Instruction::Write { addr, data: &data }).unwrap().0.code;
+        prop_assert_eq!(got, want);
+    }
+}

@@ -1,0 +1,626 @@
+//! Online walking: footsteps from velocity commands ([`crate::command::StepGenerator`]) and the
+//! CoM from a bounded preview of the divergent component of motion (DCM), one sample per tick,
+//! in walk modes with explicit transitions (standing, starting, walking, stopping).
+//!
+//! # Model (LIPM, height z_c, ω = √(g/z_c))
+//! CoM x (horizontal, per axis), ZMP p, DCM ξ = x + ẋ/ω:
+//!
+//! ```text
+//!   ẍ = ω²(x − p),      ξ̇ = ω(ξ − p),      ẋ = ω(ξ − x)                           (D1)
+//! ```
+//!
+//! **Reference (constant ZMP per step).** Step i (period T) stands on support point p_i (the
+//! support foot's sole point). With a constant p over a step, ξ(t) = p + e^{ω(t−T)}(ξ_eos − p).
+//! The preview holds the current step and the next [`PREVIEW_STEPS`] steps of the generator
+//! under the present command, and ends at rest: after the last previewed step the feet stand
+//! and ξ rests on their midpoint p_end. Backwards (Englsberger et al. 2015, constant VRP):
+//!
+//! ```text
+//!   ξ_eos,N = p_end,    ξ_eos,i−1 = ξ_ini,i = p_i + e^{−ωT}(ξ_eos,i − p_i)               (D2)
+//! ```
+//!
+//! and the reference of the current step at time t ∈ [0, T) is
+//! ξ_ref(t) = p_0 + e^{ω(t−T)}(ξ_eos,0 − p_0). The preview is computed again when a step
+//! starts and when the command changes (at most 1 + [`PREVIEW_STEPS`] generator steps), never
+//! per tick; the current step's landing place is never changed once the step began.
+//!
+//! **Tracking (DCM feedback).** The commanded ZMP is
+//!
+//! ```text
+//!   p_cmd = p_ref + (1 + k/ω)(ξ − ξ_ref),   p_ref = ξ_ref − ξ̇_ref/ω = p_0              (D3)
+//! ```
+//!
+//! (k = ω), clamped to [`ZMP_MARGIN`] around p_ref per axis (inside the sole). A re-plan
+//! changes ξ_ref, never the state: the CoM is integrated exactly over one tick dt with the
+//! constant p_cmd,
+//!
+//! ```text
+//!   x⁺ = p + (x − p)·cosh ωdt + (ẋ/ω)·sinh ωdt,   ẋ⁺ = ω(x − p)·sinh ωdt + ẋ·cosh ωdt    (D4)
+//! ```
+//!
+//! so CoM position and velocity are continuous whatever the commands: per tick
+//! |Δẋ| ≤ ω·sinh(ωdt)·|x − p| + (cosh ωdt − 1)·|ẋ| (the bound the tests assert).
+//!
+//! **Modes.** [`Standing`]: ZMP reference on the feet's midpoint (D3 holds the CoM there);
+//! a non-zero command starts. [`Starting`]: one period T on both feet with a constant ZMP
+//! p_s chosen so that ξ reaches the first step's ξ_ini at the end,
+//! p_s = (ξ_ini − e^{ωT}ξ₀)/(1 − e^{ωT}) (from D1), clamped to the feet. [`Walking`]: steps
+//! of the generator under the present command; a zero command at a step's end goes to
+//! [`Stopping`]: steps under the zero command (the generator decelerates within its limits and
+//! closes the feet) until it stands, then [`Standing`]; a non-zero command in stopping walks
+//! again. Transitions happen at step boundaries only (the swing foot's landing is committed),
+//! except Standing → Starting. (A catching step of the closed-loop issue would be one more
+//! mode entered from any other, with its own preview.)
+//!
+//! **Swing.** The swing foot follows [`crate::swing::swing_foot`] between lift-off t1 and
+//! touch-down t2 of the walk's timing; both feet are on the ground outside it.
+
+use crate::command::{CommandLimits, StepGenerator, WalkCommand};
+use crate::error::GaitError;
+use crate::plan::{Footstep, Place, SwingShape};
+use crate::real::Real;
+use crate::robot::{Robot, Side};
+use crate::sampler::{GaitSample, SupportPhase};
+use crate::swing::{swing_foot, FootSample};
+
+/// Steps previewed beyond the current one.
+pub const PREVIEW_STEPS: usize = 3;
+/// Default inset of the single-support ZMP reference from the sole point towards the other
+/// foot, m: the CoM swings less sideways (with Table 2's timing the LIPM swing is ≈ the full
+/// half width w without it; 1.5 cm brings it near the paper walk's ±3.2 cm).
+pub const DEFAULT_ZMP_INSET: f64 = 0.015;
+/// Largest ZMP correction of the DCM feedback per axis, m.
+pub const ZMP_MARGIN: f64 = 0.02;
+
+/// Timing and shape of the online steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OnlineParams {
+    /// CoM height z_c, m.
+    pub z_c: f64,
+    /// Step period T, s.
+    pub period: f64,
+    /// Lift-off t1 and touch-down t2 inside the step, s.
+    pub t1: f64,
+    /// Touch-down, s.
+    pub t2: f64,
+    /// Nominal half width w, m.
+    pub half_width: f64,
+    /// Swing shape.
+    pub swing: SwingShape<f64>,
+    /// Command limits.
+    pub limits: CommandLimits,
+    /// Tick, s.
+    pub dt: f64,
+    /// Inset of the single-support ZMP reference towards the other foot, m.
+    pub zmp_inset: f64,
+}
+
+/// Standing on both feet, CoM held on the feet's midpoint.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Standing;
+
+/// The weight shift before the first step: both feet down, constant ZMP `vrp`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Starting<R> {
+    /// Time in the mode, s.
+    pub t: R,
+    /// The constant ZMP of the shift.
+    pub vrp: [R; 2],
+}
+
+/// A step under way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step<R> {
+    /// Time in the step, s.
+    pub t: R,
+    /// The support foot's place (ZMP reference p_0).
+    pub support: Place<R>,
+    /// The swinging foot.
+    pub side: Side,
+    /// Where the swing foot lifts off.
+    pub from: Place<R>,
+    /// Where it lands.
+    pub to: Place<R>,
+}
+
+/// Walking under a non-zero command.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Walking<R> {
+    /// The step under way.
+    pub step: Step<R>,
+}
+
+/// Walking under the zero command until the generator stands.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stopping<R> {
+    /// The step under way.
+    pub step: Step<R>,
+}
+
+/// The walk mode.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum WalkMode<R> {
+    /// See [`Standing`].
+    Standing(Standing),
+    /// See [`Starting`].
+    Starting(Starting<R>),
+    /// See [`Walking`].
+    Walking(Walking<R>),
+    /// See [`Stopping`].
+    Stopping(Stopping<R>),
+}
+
+/// The online walk: modes, generator, preview, CoM state (see the module docs).
+#[derive(Clone, Debug)]
+pub struct OnlineWalk<R> {
+    robot: Robot,
+    p: OnlineParams,
+    omega: R,
+    /// The mode.
+    mode: WalkMode<R>,
+    /// The generator after the committed steps (its feet: where the feet will be at the end
+    /// of the step under way).
+    gen: StepGenerator<R>,
+    /// The command.
+    cmd: WalkCommand<R>,
+    /// ξ at the end of the current step (or of the start phase), from the preview (D2).
+    xi_eos: [R; 2],
+    /// Feet on the ground now (left, right), before the step under way lands.
+    feet: [Place<R>; 2],
+    /// CoM position and velocity (x, y).
+    x: [R; 2],
+    v: [R; 2],
+    /// The last commanded ZMP.
+    zmp: [R; 2],
+    /// Steps finished.
+    steps_done: u32,
+    /// Footsteps committed, not yet taken by [`OnlineWalk::take_footstep`] (the log).
+    committed: Option<Footstep<R>>,
+    time_ns: u64,
+}
+
+fn mid<R: Real>(a: &Place<R>, b: &Place<R>) -> [R; 2] {
+    let h = R::of(0.5);
+    [(a.x + b.x) * h, (a.y + b.y) * h]
+}
+
+impl<R: Real> OnlineWalk<R> {
+    /// Standing with the feet at `feet` (left, right) and the CoM at rest on their midpoint.
+    pub fn new(robot: &Robot, p: OnlineParams, feet: [Place<R>; 2]) -> Result<Self, GaitError> {
+        let ok = [p.z_c, p.period, p.t1, p.t2, p.dt, p.half_width]
+            .iter()
+            .all(|v| v.is_finite())
+            && p.z_c > 0.0
+            && p.dt > 0.0
+            && 0.0 <= p.t1
+            && p.t1 < p.t2
+            && p.t2 <= p.period;
+        if !ok {
+            return Err(GaitError::NonPositiveParameter);
+        }
+        let gen = Self::generator(robot, &p, feet, Side::Left)?;
+        let m = mid(&feet[0], &feet[1]);
+        Ok(OnlineWalk {
+            robot: *robot,
+            p,
+            omega: R::of(libm::sqrt(robot.gravity / p.z_c)),
+            mode: WalkMode::Standing(Standing),
+            gen,
+            cmd: WalkCommand::zero(),
+            xi_eos: m,
+            feet,
+            x: m,
+            v: [R::zero(); 2],
+            zmp: m,
+            steps_done: 0,
+            committed: None,
+            time_ns: 0,
+        })
+    }
+
+    fn generator(
+        robot: &Robot,
+        p: &OnlineParams,
+        feet: [Place<R>; 2],
+        first: Side,
+    ) -> Result<StepGenerator<R>, GaitError> {
+        StepGenerator::new(
+            robot,
+            p.z_c,
+            p.limits,
+            R::of(p.half_width),
+            R::of(p.period),
+            feet,
+            first,
+        )
+    }
+
+    /// The mode.
+    pub fn mode(&self) -> &WalkMode<R> {
+        &self.mode
+    }
+
+    /// The walking velocity of the generator (m/s, m/s, rad/s).
+    pub fn velocity(&self) -> [R; 3] {
+        self.gen.velocity()
+    }
+
+    /// Steps finished.
+    pub fn steps_done(&self) -> u32 {
+        self.steps_done
+    }
+
+    /// The footstep committed since the last call (at most one per step), for the log.
+    pub fn take_footstep(&mut self) -> Option<Footstep<R>> {
+        self.committed.take()
+    }
+
+    /// Sets the command (non-finite components count as 0); the preview is re-planned.
+    pub fn set_command(&mut self, cmd: WalkCommand<R>) {
+        let f = |v: R| if v.is_finite() { v } else { R::zero() };
+        let cmd = WalkCommand {
+            vx: f(cmd.vx),
+            vy: f(cmd.vy),
+            yaw_rate: f(cmd.yaw_rate),
+        };
+        if cmd == self.cmd {
+            return;
+        }
+        self.cmd = cmd;
+        match self.mode {
+            WalkMode::Standing(_) if !cmd.is_zero() => self.start(),
+            WalkMode::Walking(w) if cmd.is_zero() => {
+                self.mode = WalkMode::Stopping(Stopping { step: w.step });
+                self.replan();
+            }
+            WalkMode::Stopping(s) if !cmd.is_zero() => {
+                self.mode = WalkMode::Walking(Walking { step: s.step });
+                self.replan();
+            }
+            WalkMode::Walking(_) | WalkMode::Stopping(_) => self.replan(),
+            WalkMode::Starting(_) => self.replan_start(),
+            WalkMode::Standing(_) => {}
+        }
+    }
+
+    /// Standing → Starting: a generator from the present feet, the first swing chosen by the
+    /// command (right first for a rightward or clockwise command).
+    fn start(&mut self) {
+        let right =
+            self.cmd.vy < R::zero() || (self.cmd.vy == R::zero() && self.cmd.yaw_rate < R::zero());
+        let first = if right { Side::Right } else { Side::Left };
+        if let Ok(g) = Self::generator(&self.robot, &self.p, self.feet, first) {
+            self.gen = g;
+            self.mode = WalkMode::Starting(Starting {
+                t: R::zero(),
+                vrp: self.x,
+            });
+            self.replan_start();
+        }
+    }
+
+    /// The steps the generator makes from `gen` under the command (at most
+    /// [`PREVIEW_STEPS`]; none once it stands under the zero command), and its feet after them.
+    fn preview_steps(
+        &self,
+        gen: &StepGenerator<R>,
+    ) -> ([Option<Step<R>>; PREVIEW_STEPS], [Place<R>; 2]) {
+        let mut g = *gen;
+        let mut out = [None; PREVIEW_STEPS];
+        for slot in out.iter_mut() {
+            // Under the zero command the walk ends when the generator stands (as in the
+            // transitions): no more steps.
+            if self.cmd.is_zero() && g.is_standing() {
+                break;
+            }
+            let side = g.next_swing();
+            let [l, r] = g.feet();
+            let (support, from) = match side {
+                Side::Left => (r, l),
+                Side::Right => (l, r),
+            };
+            let fs = g.next_step(&self.cmd);
+            *slot = Some(Step {
+                t: R::zero(),
+                support,
+                side,
+                from,
+                to: fs.place,
+            });
+        }
+        (out, g.feet())
+    }
+
+    /// ξ at the end of the step under way, whose generator state (after its own landing) is
+    /// `gen`: the previewed steps, then rest on the final feet's midpoint (D2).
+    fn preview(&self, gen: &StepGenerator<R>) -> [R; 2] {
+        let (steps, [l, r]) = self.preview_steps(gen);
+        let mut xi = mid(&l, &r);
+        for st in steps.iter().rev().flatten() {
+            xi = self.step_back(st, xi, R::zero()).0;
+        }
+        xi
+    }
+
+    /// ξ_ref and the ZMP reference at time `t` of `step`, from ξ at its end (D2 through the
+    /// step's three ZMP segments, backwards).
+    fn step_back(&self, step: &Step<R>, xi_end: [R; 2], t: R) -> ([R; 2], [R; 2]) {
+        let (t1, t2, period) = (R::of(self.p.t1), R::of(self.p.t2), R::of(self.p.period));
+        let p = self.support_zmp(step);
+        let a = mid(&step.support, &step.from);
+        let b = mid(&step.support, &step.to);
+        let segs = [(R::zero(), t1, a, p), (t1, t2, p, p), (t2, period, p, b)];
+        let mut xi = xi_end;
+        for &(t0, t_end, pa, pb) in segs.iter().rev() {
+            let tau = if t >= t0 { t - t0 } else { R::zero() };
+            let (x, zmp) = self.segment(xi, pa, pb, t_end - t0, tau);
+            if t >= t0 {
+                return (x, zmp);
+            }
+            xi = x;
+        }
+        (xi, a)
+    }
+
+    /// The single-support ZMP reference of `step`: the support foot's sole point moved
+    /// [`OnlineParams::zmp_inset`] towards the other foot (lateral axis of the support foot).
+    fn support_zmp(&self, step: &Step<R>) -> [R; 2] {
+        let sup = step.support;
+        // The support foot is the other side of the swing: inward is towards the swing side.
+        let inward = R::of(step.side.sign() * self.p.zmp_inset);
+        let (s, c) = (sup.yaw.sin(), sup.yaw.cos());
+        [sup.x - s * inward, sup.y + c * inward]
+    }
+
+    /// ξ and the ZMP at `tau` of a segment of duration `dur` whose ZMP moves linearly from
+    /// `pa` to `pb`, ξ = `xi_end` at its end: with slope s = (pb − pa)/dur,
+    /// ξ(τ) = p(τ) + s/ω + e^{ω(τ − dur)}(ξ_end − pb − s/ω).
+    fn segment(&self, xi_end: [R; 2], pa: [R; 2], pb: [R; 2], dur: R, tau: R) -> ([R; 2], [R; 2]) {
+        let w = self.omega;
+        let tiny = R::of(1e-9);
+        let tau = tau.min(dur);
+        let e = (w * (tau - dur)).exp();
+        let f = |i: usize| {
+            let at = |v: [R; 2]| if i == 0 { v[0] } else { v[1] };
+            let slope = if dur > tiny {
+                (at(pb) - at(pa)) / dur
+            } else {
+                R::zero()
+            };
+            let p = at(pa) + slope * tau;
+            (p + slope / w + e * (at(xi_end) - at(pb) - slope / w), p)
+        };
+        let (x0, p0) = f(0);
+        let (x1, p1) = f(1);
+        ([x0, x1], [p0, p1])
+    }
+
+    fn replan(&mut self) {
+        self.xi_eos = self.preview(&self.gen);
+    }
+
+    /// The start phase's target: ξ_ini of the first step (its ξ_eos brought back one period).
+    fn replan_start(&mut self) {
+        let mut g = self.gen;
+        let side = g.next_swing();
+        let [l, r] = self.feet;
+        let (support, from) = match side {
+            Side::Left => (r, l),
+            Side::Right => (l, r),
+        };
+        let fs = g.next_step(&self.cmd);
+        let first = Step {
+            t: R::zero(),
+            support,
+            side,
+            from,
+            to: fs.place,
+        };
+        let eos = self.preview(&g);
+        self.xi_eos = self.step_back(&first, eos, R::zero()).0;
+        // The constant ZMP that brings ξ from now to the target in the remaining time.
+        let t = match self.mode {
+            WalkMode::Starting(s) => s.t,
+            _ => R::zero(),
+        };
+        let xi0 = self.dcm();
+        let e = (self.omega * (R::of(self.p.period) - t)).exp();
+        let vrp = [
+            (self.xi_eos[0] - e * xi0[0]) / (R::one() - e),
+            (self.xi_eos[1] - e * xi0[1]) / (R::one() - e),
+        ];
+        if let WalkMode::Starting(s) = &mut self.mode {
+            s.vrp = vrp;
+        }
+    }
+
+    fn dcm(&self) -> [R; 2] {
+        [
+            self.x[0] + self.v[0] / self.omega,
+            self.x[1] + self.v[1] / self.omega,
+        ]
+    }
+
+    /// Begins the next step from the generator (committing its landing place).
+    fn begin_step(&mut self) -> Step<R> {
+        let side = self.gen.next_swing();
+        let [l, r] = self.feet;
+        let (support, from) = match side {
+            Side::Left => (r, l),
+            Side::Right => (l, r),
+        };
+        let fs = self.gen.next_step(&self.cmd);
+        self.committed = Some(fs);
+        let step = Step {
+            t: R::zero(),
+            support,
+            side,
+            from,
+            to: fs.place,
+        };
+        self.xi_eos = self.preview(&self.gen);
+        step
+    }
+
+    /// One tick: the mode's reference, the DCM feedback (D3), the CoM (D4), transitions.
+    pub fn tick(&mut self) -> GaitSample<R> {
+        let dt = R::of(self.p.dt);
+        let w = self.omega;
+        let period = R::of(self.p.period);
+        // The ZMP reference, the DCM reference and the box the commanded ZMP stays in: the
+        // support foot ± ZMP_MARGIN in a step, the feet's bounding box ± ZMP_MARGIN on both.
+        let m = R::of(ZMP_MARGIN);
+        let [fl, fr] = self.feet;
+        let both = (
+            [fl.x.min(fr.x) - m, fl.y.min(fr.y) - m],
+            [fl.x.max(fr.x) + m, fl.y.max(fr.y) + m],
+        );
+        let (p_ref, xi_ref, (lo, hi)) = match &self.mode {
+            WalkMode::Standing(_) => {
+                let c = mid(&fl, &fr);
+                (c, c, both)
+            }
+            WalkMode::Starting(s) => {
+                // ξ_ref(t) = vrp + e^{ω(t−T)}(ξ_target − vrp).
+                let e = (w * (s.t - period)).exp();
+                let xi = [
+                    s.vrp[0] + e * (self.xi_eos[0] - s.vrp[0]),
+                    s.vrp[1] + e * (self.xi_eos[1] - s.vrp[1]),
+                ];
+                (s.vrp, xi, both)
+            }
+            WalkMode::Walking(Walking { step }) | WalkMode::Stopping(Stopping { step }) => {
+                let (xi, p0) = self.step_back(step, self.xi_eos, step.t);
+                let (t1, t2) = (R::of(self.p.t1), R::of(self.p.t2));
+                let sup = step.support;
+                let [zx, zy] = self.support_zmp(step);
+                let sup = Place {
+                    x: zx,
+                    y: zy,
+                    yaw: sup.yaw,
+                };
+                let other = if step.t < t1 { step.from } else { step.to };
+                let bx = if step.t > t1 && step.t < t2 {
+                    ([sup.x - m, sup.y - m], [sup.x + m, sup.y + m])
+                } else {
+                    (
+                        [sup.x.min(other.x) - m, sup.y.min(other.y) - m],
+                        [sup.x.max(other.x) + m, sup.y.max(other.y) + m],
+                    )
+                };
+                (p0, xi, bx)
+            }
+        };
+        let xi = self.dcm();
+        let gain = R::of(2.0);
+        let zmp_of = |i: usize| {
+            let at = |a: [R; 2]| if i == 0 { a[0] } else { a[1] };
+            let c = at(p_ref) + gain * (at(xi) - at(xi_ref));
+            if c.is_finite() {
+                c.clamp_to(at(lo), at(hi))
+            } else {
+                at(p_ref)
+            }
+        };
+        let p = [zmp_of(0), zmp_of(1)];
+        // (D4).
+        let (ch, sh) = {
+            let e = (w * dt).exp();
+            let ei = R::one() / e;
+            ((e + ei) * R::of(0.5), (e - ei) * R::of(0.5))
+        };
+        for ((x, v), p) in self.x.iter_mut().zip(self.v.iter_mut()).zip(p) {
+            let d = *x - p;
+            let x1 = p + d * ch + *v / w * sh;
+            *v = w * d * sh + *v * ch;
+            *x = x1;
+        }
+        self.zmp = p;
+        self.time_ns = self.time_ns.saturating_add((self.p.dt * 1e9) as u64);
+
+        // The feet of this tick and the mode's clock.
+        let mut feet = [
+            FootSample::on_ground(&self.feet[0]),
+            FootSample::on_ground(&self.feet[1]),
+        ];
+        let mut phase = SupportPhase::Standing;
+        let mut support_foot = None;
+        match &mut self.mode {
+            WalkMode::Standing(_) => {}
+            WalkMode::Starting(s) => {
+                s.t += dt;
+                phase = SupportPhase::Double;
+            }
+            WalkMode::Walking(Walking { step }) | WalkMode::Stopping(Stopping { step }) => {
+                step.t += dt;
+                let (t1, t2) = (R::of(self.p.t1), R::of(self.p.t2));
+                support_foot = Some(step.side.other());
+                if step.t > t1 && step.t < t2 {
+                    let u = (step.t - t1) / (t2 - t1);
+                    let shape = match self.p.swing {
+                        SwingShape::Cycloid { height, width } => SwingShape::Cycloid {
+                            height: R::of(height),
+                            width: R::of(width),
+                        },
+                        SwingShape::Sinusoid { height } => SwingShape::Sinusoid {
+                            height: R::of(height),
+                        },
+                    };
+                    if let Some(f) = feet.get_mut(step.side.index()) {
+                        *f = swing_foot(&shape, &step.from, &step.to, u, R::of(step.side.sign()));
+                    }
+                    phase = SupportPhase::Single(step.side.other());
+                } else {
+                    if step.t >= t2 {
+                        if let Some(f) = feet.get_mut(step.side.index()) {
+                            *f = FootSample::on_ground(&step.to);
+                        }
+                    }
+                    phase = SupportPhase::Double;
+                }
+            }
+        }
+        let sample = GaitSample {
+            time_ns: self.time_ns,
+            zmp: p,
+            com: [self.x[0], self.x[1], R::of(self.p.z_c)],
+            com_vel: self.v,
+            feet,
+            phase,
+            support_foot,
+            steps_done: self.steps_done,
+        };
+        self.transition(period, dt);
+        sample
+    }
+
+    /// The transitions at the end of a tick.
+    fn transition(&mut self, period: R, dt: R) {
+        let half = dt * R::of(0.5);
+        match self.mode {
+            WalkMode::Starting(s) if s.t + half >= period => {
+                let step = self.begin_step();
+                self.mode = WalkMode::Walking(Walking { step });
+            }
+            WalkMode::Walking(Walking { step }) | WalkMode::Stopping(Stopping { step })
+                if step.t + half >= period =>
+            {
+                if let Some(f) = self.feet.get_mut(step.side.index()) {
+                    *f = step.to;
+                }
+                self.steps_done = self.steps_done.saturating_add(1);
+                if self.cmd.is_zero() && self.gen.is_standing() {
+                    self.mode = WalkMode::Standing(Standing);
+                    return;
+                }
+                let next = self.begin_step();
+                self.mode = if self.cmd.is_zero() {
+                    WalkMode::Stopping(Stopping { step: next })
+                } else {
+                    WalkMode::Walking(Walking { step: next })
+                };
+            }
+            _ => {}
+        }
+    }
+}

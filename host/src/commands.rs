@@ -1,0 +1,389 @@
+//! Command scripts for the firmware's command port (`walker fil --commands FILE`) and the
+//! host's side of the port: a Dynamixel master over a byte stream (the project's `dxl` codec).
+//!
+//! A script is TOML: `[[command]]` tables, each with `t` (s, counted from the moment the
+//! firmware reports it stands ready: State = standing) and either a velocity — `vx`, `vy` (m/s,
+//! robot frame) and `vyaw` (rad/s), omitted ones 0 — or `stop = true`. Commands are sent in
+//! order when the simulated (virtual) time reaches them: the velocity registers, then Mode =
+//! walk (or Mode = stop). After the last command the driver waits until the firmware stands
+//! again and sends Mode = torque off: the run ends (stop `Requested`).
+//!
+//! The firmware logs every command as it takes it (`CommandReceived`) and every footstep
+//! (`Footstep`): [`replay_footsteps`] integrates the logged commands through the step
+//! generator exactly as the firmware does (f32) — the check that the footsteps are the
+//! commands' ([`FootstepCheck`]).
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use dxl::{Decoder, ErrorCode, Instruction, Status};
+use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
+use gait_core::{Place, Robot, Side};
+use serde::Deserialize;
+use walker_contract::codes::{CommandField, FaultKind};
+use walker_contract::command_port::{self as port, Mode, PortState, PORT_ID, VELOCITY_RANGE};
+use walker_contract::record::Record;
+
+use crate::sim::transport::SimProgress;
+
+/// One command of a script.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScriptCommand {
+    /// When, s after the firmware stood ready.
+    pub t: f64,
+    /// Forward velocity, m/s.
+    #[serde(default)]
+    pub vx: f64,
+    /// Leftward velocity, m/s.
+    #[serde(default)]
+    pub vy: f64,
+    /// Yaw rate, rad/s.
+    #[serde(default)]
+    pub vyaw: f64,
+    /// Stop (Mode = stop) instead of a velocity.
+    #[serde(default)]
+    pub stop: bool,
+}
+
+impl ScriptCommand {
+    /// The velocity registers' values (mm/s, mm/s, mrad/s), checked against the port's ranges.
+    pub fn wire(&self) -> Result<[i16; 3], String> {
+        let mut out = [0i16; 3];
+        for ((o, v), (lo, hi)) in out
+            .iter_mut()
+            .zip([self.vx, self.vy, self.vyaw])
+            .zip(VELOCITY_RANGE)
+        {
+            let m = (v * 1000.0).round();
+            if !m.is_finite() || m < f64::from(lo) || m > f64::from(hi) {
+                return Err(format!(
+                    "command at t = {} s: {v} outside {} ..= {} (milli-units)",
+                    self.t, lo, hi
+                ));
+            }
+            *o = m as i16;
+        }
+        Ok(out)
+    }
+}
+
+/// A command script.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandScript {
+    /// The commands, in time order.
+    pub command: Vec<ScriptCommand>,
+}
+
+impl CommandScript {
+    /// Parses and checks a script (times finite, non-negative and increasing; velocities in
+    /// the port's ranges; `stop` without a velocity).
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let s: CommandScript = toml::from_str(text).map_err(|e| e.to_string())?;
+        let mut last = -1.0;
+        for c in &s.command {
+            if !(c.t.is_finite() && c.t >= 0.0 && c.t > last) {
+                return Err(format!("command times must increase from 0: t = {}", c.t));
+            }
+            last = c.t;
+            c.wire()?;
+            if c.stop && (c.vx != 0.0 || c.vy != 0.0 || c.vyaw != 0.0) {
+                return Err(format!("command at t = {} s: stop with a velocity", c.t));
+            }
+        }
+        Ok(s)
+    }
+
+    /// Reads a script file.
+    pub fn read(path: &Path) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        Self::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// Time of the last command, s.
+    pub fn end(&self) -> f64 {
+        self.command.last().map_or(0.0, |c| c.t)
+    }
+}
+
+/// A Dynamixel master on the command port's byte stream.
+pub struct PortMaster {
+    stream: TcpStream,
+    decoder: Decoder<{ port::RX_PARAMS }>,
+    /// Wall-clock reply timeout.
+    pub timeout: Duration,
+}
+
+impl PortMaster {
+    /// A master on `stream`.
+    pub fn new(stream: TcpStream) -> Self {
+        let _ = stream.set_nodelay(true);
+        let _ = stream.set_read_timeout(Some(Duration::from_millis(20)));
+        PortMaster {
+            stream,
+            decoder: Decoder::new(),
+            timeout: Duration::from_secs(5),
+        }
+    }
+
+    /// Sends one instruction to the port and waits for its status: the error code (None =
+    /// OK) and the data.
+    pub fn transact(
+        &mut self,
+        ins: Instruction<'_>,
+    ) -> Result<(Option<ErrorCode>, Vec<u8>), String> {
+        let mut buf = [0u8; 600];
+        let n = ins
+            .encode(&mut buf, PORT_ID)
+            .map_err(|e| format!("{e:?}"))?;
+        self.stream
+            .write_all(buf.get(..n).unwrap_or(&[]))
+            .map_err(|e| format!("command port: {e}"))?;
+        let start = Instant::now();
+        let mut byte = [0u8; 1];
+        while start.elapsed() < self.timeout {
+            match self.stream.read(&mut byte) {
+                Ok(0) => return Err("command port closed".into()),
+                Ok(_) => {
+                    if let Some(Ok(p)) = self.decoder.push(byte[0]) {
+                        let s = Status::from_packet(&p).map_err(|e| format!("{e:?}"))?;
+                        return Ok((s.error.code, s.data.to_vec()));
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) => {}
+                Err(e) => return Err(format!("command port: {e}")),
+            }
+        }
+        Err("command port: no reply".into())
+    }
+
+    /// WRITE, the status checked.
+    pub fn write(&mut self, addr: u16, data: &[u8]) -> Result<(), String> {
+        match self.transact(Instruction::Write { addr, data })? {
+            (None, _) => Ok(()),
+            (Some(e), _) => Err(format!("command port: WRITE {addr}: {e:?}")),
+        }
+    }
+
+    /// The State register.
+    pub fn state(&mut self) -> Result<Option<PortState>, String> {
+        let (e, d) = self.transact(Instruction::Read {
+            addr: port::STATE.addr,
+            len: 1,
+        })?;
+        match (e, d.first()) {
+            (None, Some(&s)) => Ok(PortState::from_code(s)),
+            _ => Err("command port: READ State failed".into()),
+        }
+    }
+}
+
+/// What the driver did: the virtual time the firmware stood ready, and when each command was
+/// sent (virtual µs).
+#[derive(Clone, Debug, Default)]
+pub struct DriveReport {
+    /// Virtual time of standing ready, µs.
+    pub ready_us: u64,
+    /// Virtual time each command was sent, µs.
+    pub sent_us: Vec<u64>,
+}
+
+/// Drives a script on the port (see the module docs); `progress` is the simulator's virtual
+/// clock; `quit` aborts.
+pub fn drive(
+    master: &mut PortMaster,
+    script: &CommandScript,
+    progress: &SimProgress,
+    quit: &AtomicBool,
+) -> Result<DriveReport, String> {
+    let now = || progress.time_us.load(Ordering::Relaxed);
+    let wait_state = |m: &mut PortMaster, want: PortState| -> Result<(), String> {
+        loop {
+            if quit.load(Ordering::Relaxed) {
+                return Err("aborted".into());
+            }
+            if m.state()? == Some(want) {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait_state(master, PortState::Standing)?;
+    let mut rep = DriveReport {
+        ready_us: now(),
+        sent_us: Vec::new(),
+    };
+    for c in &script.command {
+        let at = rep.ready_us + (c.t * 1e6) as u64;
+        while now() < at {
+            if quit.load(Ordering::Relaxed) {
+                return Err("aborted".into());
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        rep.sent_us.push(now());
+        if c.stop {
+            master.write(port::MODE.addr, &[Mode::Stop.code()])?;
+        } else {
+            let w = c.wire()?;
+            let mut data = Vec::new();
+            for v in w {
+                data.extend_from_slice(&v.to_le_bytes());
+            }
+            master.write(port::VELOCITY_X.addr, &data)?;
+            master.write(port::MODE.addr, &[Mode::Walk.code()])?;
+        }
+    }
+    // Past the last command: wait for standing, then torque off ends the run.
+    let settle = now() + 1_000_000;
+    while now() < settle {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    wait_state(master, PortState::Standing)?;
+    master.write(port::MODE.addr, &[Mode::TorqueOff.code()])?;
+    Ok(rep)
+}
+
+/// Spawns the driver on `stream` in a thread.
+pub fn spawn_driver(
+    stream: TcpStream,
+    script: CommandScript,
+    progress: Arc<SimProgress>,
+    quit: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<Result<DriveReport, String>> {
+    std::thread::spawn(move || {
+        let mut m = PortMaster::new(stream);
+        drive(&mut m, &script, &progress, &quit)
+    })
+}
+
+/// The footsteps of a log against the logged commands integrated through the generator.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FootstepCheck {
+    /// Footsteps logged.
+    pub steps: usize,
+    /// Footsteps that differ from the generator's (index, logged, expected; µm / µrad).
+    pub mismatches: Vec<(usize, [i32; 3], [i32; 3])>,
+    /// The feet after the last step (left, right), m and rad.
+    pub feet: [Place<f32>; 2],
+}
+
+/// Replays a log's `CommandReceived` and `Footstep` records through [`StepGenerator`] (f32,
+/// the firmware's arithmetic) for a walk of CoM height `z_c` and half width `half_width`, with
+/// the step period the firmware logged (`Footstep` id 0): a new generator at each start from
+/// standing, first swing = the logged step's side.
+pub fn replay_footsteps(
+    records: &[Record],
+    z_c: f64,
+    half_width: f32,
+) -> Result<FootstepCheck, String> {
+    let mut period = 0.0f32;
+    let robot = Robot::reference();
+    let mut cmd = [Mode::Stand.code() as i32, 0, 0, 0];
+    let mut feet = [
+        Place {
+            x: 0.0f32,
+            y: half_width,
+            yaw: 0.0,
+        },
+        Place {
+            x: 0.0,
+            y: -half_width,
+            yaw: 0.0,
+        },
+    ];
+    let mut gen: Option<StepGenerator<f32>> = None;
+    let mut parts: Vec<(u8, i32)> = Vec::new();
+    let mut out = FootstepCheck::default();
+    for r in records {
+        let Record::Fault(f) = r else { continue };
+        match f.kind {
+            FaultKind::CommandReceived => {
+                if let (Some(field), Some(slot)) = (
+                    CommandField::from_code(f.id),
+                    cmd.get_mut(usize::from(f.id)),
+                ) {
+                    let _ = field;
+                    *slot = f.value;
+                }
+            }
+            FaultKind::Footstep if f.id == 0 => {
+                period = (f64::from(f.value) * 1e-6) as f32;
+            }
+            FaultKind::Footstep => {
+                parts.push((f.id, f.value));
+                if parts.len() < 3 {
+                    continue;
+                }
+                let side = if parts[0].0 >> 4 == 1 {
+                    Side::Left
+                } else {
+                    Side::Right
+                };
+                if gen.as_ref().is_none_or(|g| g.is_standing()) {
+                    gen = Some(
+                        StepGenerator::new(
+                            &robot,
+                            z_c,
+                            CommandLimits::DEFAULT,
+                            half_width,
+                            period,
+                            feet,
+                            side,
+                        )
+                        .map_err(|e| format!("{e:?}"))?,
+                    );
+                }
+                let Some(g) = gen.as_mut() else { continue };
+                let c = if cmd[0] == i32::from(Mode::Walk.code()) {
+                    WalkCommand {
+                        vx: cmd[1] as f32 / 1000.0,
+                        vy: cmd[2] as f32 / 1000.0,
+                        yaw_rate: cmd[3] as f32 / 1000.0,
+                    }
+                } else {
+                    WalkCommand::zero()
+                };
+                let s = g.next_step(&c);
+                feet = g.feet();
+                let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
+                let got = [parts[0].1, parts[1].1, parts[2].1];
+                if got != want || s.side != side {
+                    out.mismatches.push((out.steps, got, want));
+                }
+                out.steps += 1;
+                parts.clear();
+            }
+            _ => {}
+        }
+    }
+    out.feet = feet;
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_the_demo_script_and_refuses_bad_ones() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../plans/commands-demo.toml");
+        let s = CommandScript::read(Path::new(path)).unwrap();
+        assert_eq!(s.command.first().map(|c| c.t), Some(0.0));
+        assert!(s.command.last().is_some_and(|c| c.stop));
+        assert_eq!(s.command[1].wire(), Ok([50, 0, 0]), "0.05 m/s forward");
+        assert!(CommandScript::parse("[[command]]\nt = 0\nvx = 0.5\n").is_err());
+        assert!(CommandScript::parse("[[command]]\nt = 1\n[[command]]\nt = 0.5\n").is_err());
+        assert!(CommandScript::parse("[[command]]\nt = 1\nstop = true\nvx = 0.01\n").is_err());
+        assert!(CommandScript::parse("[[command]]\nt = 1\nspeed = 1\n").is_err());
+    }
+}

@@ -1,0 +1,176 @@
+//! Walking on command in the loop: the command port polled each tick (bounded: at most
+//! [`RX_PER_TICK`] bytes, each reply sent at once), the commands logged as they change
+//! (`CommandReceived` fault records), the online walk of gait-core
+//! ([`gait_core::online::OnlineWalk`]: standing, starting, walking, stopping) built from the
+//! configured walk's timing and swing, its footsteps logged (`Footstep` fault records), and the
+//! status registers published.
+//!
+//! The online walk starts standing with the feet at (0, ±`step_width`), heading 0, the CoM at
+//! rest on their midpoint at `z_c`; it steps with the configured walk's T, t1, t2 (after the
+//! servo-speed check's stretch) and swing shape, the command limits of
+//! [`gait_core::command::CommandLimits::DEFAULT`]. `servo_lead` does not apply to it.
+
+use gait_core::command::{CommandLimits, WalkCommand};
+use gait_core::online::{OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET};
+use gait_core::plan::SwingShape;
+use gait_core::{GaitError, Place, Robot, Side, SupportPhase};
+use walker_contract::codes::CommandField;
+use walker_contract::command_port::{CommandPort, Mode, PortState, PortStatus, REPLY_MAX};
+
+use crate::board::Board;
+use crate::record::{FaultKind, LogWriter};
+use crate::Config;
+
+/// Bytes taken from the command port per tick at most.
+pub const RX_PER_TICK: usize = 64;
+
+/// The online walk of `cfg` (see the module docs).
+pub fn online_walk(cfg: &Config, robot: &Robot) -> Result<OnlineWalk<f32>, GaitError> {
+    let w = &cfg.walk;
+    let swing = if cfg.swing_sinusoid {
+        SwingShape::Sinusoid { height: w.h_z }
+    } else {
+        SwingShape::Cycloid {
+            height: w.h_z,
+            width: w.w_y,
+        }
+    };
+    let p = OnlineParams {
+        z_c: w.z_c,
+        period: f64::from(period_us(cfg)) * 1e-6,
+        t1: w.t1,
+        t2: w.t2,
+        half_width: w.step_width,
+        swing,
+        limits: CommandLimits::DEFAULT,
+        dt: cfg.dt_s(),
+        zmp_inset: DEFAULT_ZMP_INSET,
+    };
+    let y = w.step_width as f32;
+    let feet = [
+        Place {
+            x: 0.0,
+            y,
+            yaw: 0.0,
+        },
+        Place {
+            x: 0.0,
+            y: -y,
+            yaw: 0.0,
+        },
+    ];
+    OnlineWalk::new(robot, p, feet)
+}
+
+/// The online walk's step period, µs: the configured (stretched) T rounded up to a whole µs, so
+/// that the `Footstep` record (id 0) logging it gives the host the exact value.
+pub fn period_us(cfg: &Config) -> i32 {
+    let us = libm::ceil(cfg.walk.period * 1e6);
+    if us.is_finite() && us > 0.0 && us < 1e9 {
+        us as i32
+    } else {
+        0
+    }
+}
+
+/// The command port in the loop.
+pub struct CommandLink {
+    /// The device (control table and decoder).
+    pub port: CommandPort,
+    logged: [i32; 4],
+    count: u16,
+}
+
+impl Default for CommandLink {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl CommandLink {
+    /// A fresh port: mode stand, velocity 0.
+    pub fn new() -> Self {
+        let port = CommandPort::new();
+        let logged = port.table.raw_command();
+        CommandLink {
+            port,
+            logged,
+            count: 0,
+        }
+    }
+
+    /// Reads what arrived (at most [`RX_PER_TICK`] bytes), answers each instruction, and logs
+    /// the command fields that changed.
+    pub fn poll<B: Board>(&mut self, board: &mut B, log: &mut LogWriter) {
+        let mut rx = [0u8; RX_PER_TICK];
+        let n = board.command_rx(&mut rx);
+        let mut reply = [0u8; REPLY_MAX];
+        for &b in rx.iter().take(n) {
+            let len = self.port.push(b, &mut reply);
+            if let Some(r) = reply.get(..len).filter(|r| !r.is_empty()) {
+                board.command_tx(r);
+            }
+        }
+        let count = self.port.table.command_count();
+        if count != self.count {
+            self.count = count;
+            let now = board.now_us();
+            let cmd = self.port.table.raw_command();
+            for ((field, v), old) in CommandField::ALL.iter().zip(cmd).zip(self.logged.iter()) {
+                if v != *old {
+                    let rec = super::fault(now, FaultKind::CommandReceived, field.code(), v);
+                    log.write(board, rec);
+                }
+            }
+            self.logged = cmd;
+        }
+    }
+
+    /// The commanded mode.
+    pub fn mode(&self) -> Mode {
+        self.port.table.mode()
+    }
+
+    /// The commanded velocity (zero unless the mode is walk).
+    pub fn velocity(&self) -> WalkCommand<f32> {
+        self.port.table.velocity()
+    }
+
+    /// Publishes the status.
+    pub fn publish(&mut self, s: &PortStatus) {
+        self.port.table.set_status(s);
+    }
+}
+
+/// The port state of an online walk mode.
+pub fn state_of(m: &WalkMode<f32>) -> PortState {
+    match m {
+        WalkMode::Standing(_) => PortState::Standing,
+        WalkMode::Starting(_) | WalkMode::Walking(_) => PortState::Walking,
+        WalkMode::Stopping(_) => PortState::Stopping,
+    }
+}
+
+/// The Support Foot register's value of a phase: 0 both, 1 left, 2 right.
+pub fn support_code(p: SupportPhase) -> u8 {
+    match p {
+        SupportPhase::Single(Side::Left) => 1,
+        SupportPhase::Single(Side::Right) => 2,
+        _ => 0,
+    }
+}
+
+/// Logs a committed footstep: three `Footstep` records (x, y in µm; yaw in µrad).
+pub fn log_footstep<B: Board>(board: &mut B, log: &mut LogWriter, side: Side, place: &Place<f32>) {
+    let s: u8 = match side {
+        Side::Left => 1,
+        Side::Right => 2,
+    };
+    let now = board.now_us();
+    for (c, v) in [place.x, place.y, place.yaw].iter().enumerate() {
+        let micro = libm::roundf(v * 1e6);
+        let micro = if micro.is_finite() { micro as i32 } else { 0 };
+        let rec = super::fault(now, FaultKind::Footstep, s * 16 + c as u8, micro);
+        log.write(board, rec);
+    }
+}
