@@ -661,15 +661,14 @@ fn capture_from_file_and_missing_port() {
     let (_, events) = read_csv(&dir.join("walk.events.csv"));
     assert_eq!(events.len(), 2);
 
-    let o = walker(&[
-        "capture",
-        "--port",
-        "/dev/ttyDOESNOTEXIST",
-        "--out",
-        s(&dir.join("x.log")),
-        "--seconds",
-        "1",
-    ]);
+    // `walker capture` from a serial port that does not exist, into x.log.
+    let capture_missing = |extra: &[&str]| {
+        let x = dir.join("x.log");
+        let mut args = vec!["capture", "--port", "/dev/ttyDOESNOTEXIST", "--out", s(&x)];
+        args.extend_from_slice(extra);
+        walker(&args)
+    };
+    let o = capture_missing(&["--seconds", "1"]);
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
@@ -699,15 +698,7 @@ fn capture_from_file_and_missing_port() {
         ("--baud", "0"),
         ("--baud", "-5"),
     ] {
-        let o = walker(&[
-            "capture",
-            "--port",
-            "/dev/ttyDOESNOTEXIST",
-            "--out",
-            s(&dir.join("x.log")),
-            flag,
-            bad,
-        ]);
+        let o = capture_missing(&[flag, bad]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{flag} {bad}: {err}");
         assert!(err.contains(flag), "{flag} {bad}: {err}");
