@@ -390,6 +390,33 @@ mod tests {
     use super::*;
 
     #[test]
+    fn wrap_clock_counts_wraps_and_ignores_a_racing_read() {
+        let c = WrapClock::new();
+        assert_eq!(c.extend(10), 10);
+        assert_eq!(c.extend(u32::MAX - 5), u64::from(u32::MAX - 5));
+        // The counter wrapped: 2^32 + 3.
+        assert_eq!(c.extend(3), (1u64 << 32) + 3);
+        // A read 2 counts behind (racing the carry) keeps the last time.
+        assert_eq!(c.extend(1), (1u64 << 32) + 3);
+        assert_eq!(c.extend(7), (1u64 << 32) + 7);
+    }
+
+    #[test]
+    fn log_ring_keeps_records_whole_in_order() {
+        let mut r = LogRing::<8>::new();
+        r.push(&[1, 2, 3, 4, 5]);
+        r.push(&[6, 7, 8, 9]); // 4 > 3 free: dropped whole
+        assert_eq!(r.dropped(), 1);
+        assert_eq!((r.pop(), r.pop()), (Some(1), Some(2)));
+        r.push(&[6, 7, 8, 9, 10]); // wraps around the end
+        let rest: std::vec::Vec<u8> = core::iter::from_fn(|| r.pop()).collect();
+        assert_eq!(rest, [3, 4, 5, 6, 7, 8, 9, 10]);
+        assert!(r.is_empty());
+        assert_eq!(r.pop(), None);
+        assert_eq!(r.dropped(), 1);
+    }
+
+    #[test]
     fn stm32f7_reset_flags() {
         let f = |bits: &[u32]| bits.iter().fold(0u32, |a, b| a | 1 << b);
         assert_eq!(stm32f7_reset_cause(f(&[25, 26, 27])), ResetCause::PowerOn);
@@ -505,5 +532,101 @@ mod tests {
         assert_eq!(l.bytes_ns(14), 140_000);
         let l = LineTime { baud: 0 };
         assert!(l.bytes_ns(1) > 0);
+    }
+}
+
+/// The 64-bit microsecond clock of a board whose hardware counter is 32 bits wide: the
+/// high word counts the counter's wraps. A reading less than 2³¹ below the last one is a read
+/// racing the counter's carry (a counter cannot go backwards) and returns the last value; a
+/// larger drop is a wrap. Interior mutability so that [`Clock::now_us`] can take `&self`.
+#[derive(Debug, Default)]
+pub struct WrapClock {
+    high: core::cell::Cell<u64>,
+    last: core::cell::Cell<u32>,
+}
+
+impl WrapClock {
+    /// A clock at counter 0, no wrap seen.
+    pub const fn new() -> Self {
+        WrapClock {
+            high: core::cell::Cell::new(0),
+            last: core::cell::Cell::new(0),
+        }
+    }
+
+    /// The 64-bit time of the counter reading `cnt`, µs.
+    pub fn extend(&self, cnt: u32) -> u64 {
+        let last = self.last.get();
+        if cnt < last {
+            if last - cnt < 1 << 31 {
+                return self.high.get() | u64::from(last);
+            }
+            self.high.set(self.high.get() + (1u64 << 32));
+        }
+        self.last.set(cnt);
+        self.high.get() | u64::from(cnt)
+    }
+}
+
+/// The log bytes waiting for a board's log UART: a ring of `N` bytes that takes a record whole
+/// or drops it whole (counted), so the decoder never sees half a record.
+#[derive(Debug)]
+pub struct LogRing<const N: usize> {
+    buf: [u8; N],
+    head: usize,
+    len: usize,
+    dropped: u32,
+}
+
+impl<const N: usize> Default for LogRing<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> LogRing<N> {
+    /// An empty ring.
+    pub const fn new() -> Self {
+        LogRing {
+            buf: [0; N],
+            head: 0,
+            len: 0,
+            dropped: 0,
+        }
+    }
+
+    /// Queues `bytes` whole, or drops them and counts the drop when they do not fit.
+    pub fn push(&mut self, bytes: &[u8]) {
+        if bytes.len() > N - self.len {
+            self.dropped = self.dropped.saturating_add(1);
+            return;
+        }
+        for &b in bytes {
+            if let Some(slot) = self.buf.get_mut((self.head + self.len) % N) {
+                *slot = b;
+            }
+            self.len += 1;
+        }
+    }
+
+    /// The oldest queued byte, removed from the ring.
+    pub fn pop(&mut self) -> Option<u8> {
+        if self.len == 0 {
+            return None;
+        }
+        let b = self.buf.get(self.head).copied();
+        self.head = (self.head + 1) % N;
+        self.len -= 1;
+        b
+    }
+
+    /// True when nothing waits.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Records dropped because the ring was full.
+    pub fn dropped(&self) -> u32 {
+        self.dropped
     }
 }

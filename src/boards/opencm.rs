@@ -37,8 +37,6 @@
 //! MCU (after a reset but a power-on the firmware does not walk). There is no power switch to
 //! cut as a backup.
 
-use core::cell::Cell;
-
 use cortex_m::peripheral::SCB;
 // Link the runtime and the defmt global logger (RTT) into every binary using this board.
 use cortex_m_rt as _;
@@ -46,8 +44,8 @@ use defmt_rtt as _;
 use stm32f1::stm32f103 as pac;
 
 use crate::board::{
-    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogSink, ResetCause,
-    ServoBus, Tick, TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
+    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogRing, LogSink,
+    ResetCause, ServoBus, Tick, TickSchedule, TickTimer, Watchdog, WrapClock, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
 use crate::Config;
@@ -188,14 +186,10 @@ pub struct OpenCmBoard {
     tim_high: pac::TIM3,
     iwdg: pac::IWDG,
     baud: u32,
-    clock_high: Cell<u64>,
-    clock_last: Cell<u32>,
+    clock: WrapClock,
     schedule: TickSchedule,
     watchdog_running: bool,
-    ring: [u8; LOG_RING],
-    head: usize,
-    len: usize,
-    log_dropped: u32,
+    ring: LogRing<LOG_RING>,
     uart_errors: u32,
     reset_csr: u32,
 }
@@ -283,14 +277,10 @@ impl OpenCmBoard {
             tim_high: dp.TIM3,
             iwdg: dp.IWDG,
             baud,
-            clock_high: Cell::new(0),
-            clock_last: Cell::new(0),
+            clock: WrapClock::new(),
             schedule: TickSchedule::new(cfg.tick_period_us),
             watchdog_running: false,
-            ring: [0; LOG_RING],
-            head: 0,
-            len: 0,
-            log_dropped: 0,
+            ring: LogRing::new(),
             uart_errors: 0,
             reset_csr,
         }
@@ -298,7 +288,7 @@ impl OpenCmBoard {
 
     /// Log frames dropped because the ring was full.
     pub fn log_dropped(&self) -> u32 {
-        self.log_dropped
+        self.ring.dropped()
     }
 
     /// Overrun/framing/noise errors seen on the bus UART.
@@ -324,12 +314,12 @@ impl OpenCmBoard {
     /// Moves log bytes from the ring to USART2 while its data register is free.
     fn pump_log(&mut self) {
         let u = usart2();
-        while self.len > 0 && u.sr.read().bits() & USART_SR_TXE != 0 {
-            let b = self.ring.get(self.head).copied().map_or(0, |b| b);
+        while u.sr.read().bits() & USART_SR_TXE != 0 {
+            let Some(b) = self.ring.pop() else {
+                break;
+            };
             // SAFETY: DR takes any 9-bit value.
             u.dr.write(|w| unsafe { w.bits(u32::from(b)) });
-            self.head = (self.head + 1) % LOG_RING;
-            self.len -= 1;
         }
     }
 
@@ -415,16 +405,7 @@ impl ServoBus for OpenCmBoard {
 impl Clock for OpenCmBoard {
     fn now_us(&self) -> u64 {
         let cnt = self.counter_us();
-        let last = self.clock_last.get();
-        if cnt < last {
-            if last - cnt < 1 << 31 {
-                // A read racing TIM3's increment (cannot go backwards): keep the last value.
-                return self.clock_high.get() | u64::from(last);
-            }
-            self.clock_high.set(self.clock_high.get() + (1u64 << 32));
-        }
-        self.clock_last.set(cnt);
-        self.clock_high.get() | u64::from(cnt)
+        self.clock.extend(cnt)
     }
 }
 
@@ -453,17 +434,7 @@ impl TickTimer for OpenCmBoard {
 
 impl LogSink for OpenCmBoard {
     fn write_log(&mut self, bytes: &[u8]) {
-        if bytes.len() > LOG_RING - self.len {
-            self.log_dropped = self.log_dropped.saturating_add(1);
-        } else {
-            for &b in bytes {
-                let i = (self.head + self.len) % LOG_RING;
-                if let Some(slot) = self.ring.get_mut(i) {
-                    *slot = b;
-                }
-                self.len += 1;
-            }
-        }
+        self.ring.push(bytes);
         self.pump_log();
     }
 }
@@ -525,7 +496,7 @@ impl Board for OpenCmBoard {
         self.torque_off_best_effort();
         // Let the log drain (bounded: ≤ LOG_RING bytes at 921 600 baud ≈ 11 ms).
         let start = self.now_us();
-        while self.len > 0 && self.now_us() < start + 20_000 {
+        while !self.ring.is_empty() && self.now_us() < start + 20_000 {
             self.pump_log();
         }
         panic_torque_off();

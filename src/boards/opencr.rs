@@ -28,8 +28,6 @@
 //! Dynamixel power FET off as a backup, then reset the MCU (after a reset the firmware does
 //! not enable torque until it is told to walk).
 
-use core::cell::Cell;
-
 use cortex_m::peripheral::SCB;
 // Link the runtime and the defmt global logger (RTT) into every binary using this board.
 use cortex_m_rt as _;
@@ -43,8 +41,8 @@ use stm32f7xx_hal::serial::{self, Serial};
 use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
 use crate::board::{
-    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogSink, ResetCause,
-    ServoBus, Tick, TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
+    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogRing, LogSink,
+    ResetCause, ServoBus, Tick, TickSchedule, TickTimer, Watchdog, WrapClock, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
 use crate::Config;
@@ -181,15 +179,11 @@ pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     dxl_power: PF15<Output<PushPull>>,
     baud: u32,
     tim: pac::TIM2,
-    clock_high: Cell<u64>,
-    clock_last: Cell<u32>,
+    clock: WrapClock,
     schedule: TickSchedule,
     iwdg: IndependentWatchdog,
     watchdog_running: bool,
-    ring: [u8; LOG_RING],
-    head: usize,
-    len: usize,
-    log_dropped: u32,
+    ring: LogRing<LOG_RING>,
     uart_errors: u32,
     reset_csr: u32,
 }
@@ -292,15 +286,11 @@ impl OpenCrBoard<DxlDir> {
             dxl_power: power,
             baud: cfg.bus_baud,
             tim,
-            clock_high: Cell::new(0),
-            clock_last: Cell::new(0),
+            clock: WrapClock::new(),
             schedule: TickSchedule::new(cfg.tick_period_us),
             iwdg,
             watchdog_running: false,
-            ring: [0; LOG_RING],
-            head: 0,
-            len: 0,
-            log_dropped: 0,
+            ring: LogRing::new(),
             uart_errors: 0,
             reset_csr,
         }
@@ -310,7 +300,7 @@ impl OpenCrBoard<DxlDir> {
 impl<D: OutputPin> OpenCrBoard<D> {
     /// Log frames dropped because the ring was full.
     pub fn log_dropped(&self) -> u32 {
-        self.log_dropped
+        self.ring.dropped()
     }
 
     /// Overrun/framing/noise errors seen on the bus UART.
@@ -321,11 +311,11 @@ impl<D: OutputPin> OpenCrBoard<D> {
     /// Moves log bytes from the ring to USART6 while its data register is free.
     fn pump_log(&mut self) {
         let u = usart6();
-        while self.len > 0 && u.isr.read().txe().bit_is_set() {
-            let b = self.ring.get(self.head).copied().map_or(0, |b| b);
+        while u.isr.read().txe().bit_is_set() {
+            let Some(b) = self.ring.pop() else {
+                break;
+            };
             u.tdr.write(|w| w.tdr().bits(u16::from(b)));
-            self.head = (self.head + 1) % LOG_RING;
-            self.len -= 1;
         }
     }
 
@@ -410,11 +400,7 @@ impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
 impl<D: OutputPin> Clock for OpenCrBoard<D> {
     fn now_us(&self) -> u64 {
         let cnt = self.tim.cnt.read().bits();
-        if cnt < self.clock_last.get() {
-            self.clock_high.set(self.clock_high.get() + (1u64 << 32));
-        }
-        self.clock_last.set(cnt);
-        self.clock_high.get() | u64::from(cnt)
+        self.clock.extend(cnt)
     }
 }
 
@@ -443,17 +429,7 @@ impl<D: OutputPin> TickTimer for OpenCrBoard<D> {
 
 impl<D: OutputPin> LogSink for OpenCrBoard<D> {
     fn write_log(&mut self, bytes: &[u8]) {
-        if bytes.len() > LOG_RING - self.len {
-            self.log_dropped = self.log_dropped.saturating_add(1);
-        } else {
-            for &b in bytes {
-                let i = (self.head + self.len) % LOG_RING;
-                if let Some(slot) = self.ring.get_mut(i) {
-                    *slot = b;
-                }
-                self.len += 1;
-            }
-        }
+        self.ring.push(bytes);
         self.pump_log();
     }
 }
@@ -541,7 +517,7 @@ impl<D: OutputPin> Board for OpenCrBoard<D> {
         self.torque_off_best_effort();
         // Let the log drain (bounded: ≤ LOG_RING bytes at 921 600 baud ≈ 11 ms).
         let start = self.now_us();
-        while self.len > 0 && self.now_us() < start + 20_000 {
+        while !self.ring.is_empty() && self.now_us() < start + 20_000 {
             self.pump_log();
         }
         panic_torque_off();
