@@ -376,47 +376,29 @@ impl From<u8> for FaultKind {
     }
 }
 
-/// Which command a `CommandReceived` fault record carries (its `id`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum CommandField {
-    /// 0: the mode (value = the command port's mode code).
-    Mode,
-    /// 1: forward velocity, mm/s.
-    VelocityX,
-    /// 2: leftward velocity, mm/s.
-    VelocityY,
-    /// 3: yaw rate, mrad/s.
-    YawRate,
+wire_codes! {
+    /// Which command a `CommandReceived` fault record carries (its `id`; the code is also the
+    /// field's index in the logged command).
+    pub enum CommandField {
+        /// The mode (value = the command port's mode code).
+        Mode = 0,
+        /// Forward velocity, mm/s.
+        VelocityX = 1,
+        /// Leftward velocity, mm/s.
+        VelocityY = 2,
+        /// Yaw rate, mrad/s.
+        YawRate = 3,
+    }
 }
 
 impl CommandField {
-    /// Every field.
+    /// Every field, in code order.
     pub const ALL: [CommandField; 4] = [
         CommandField::Mode,
         CommandField::VelocityX,
         CommandField::VelocityY,
         CommandField::YawRate,
     ];
-    /// Wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            CommandField::Mode => 0,
-            CommandField::VelocityX => 1,
-            CommandField::VelocityY => 2,
-            CommandField::YawRate => 3,
-        }
-    }
-    /// From a wire code.
-    pub const fn from_code(c: u8) -> Option<Self> {
-        match c {
-            0 => Some(CommandField::Mode),
-            1 => Some(CommandField::VelocityX),
-            2 => Some(CommandField::VelocityY),
-            3 => Some(CommandField::YawRate),
-            _ => None,
-        }
-    }
 }
 
 wire_codes! {

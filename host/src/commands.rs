@@ -308,11 +308,9 @@ pub fn replay_footsteps(
         let Record::Fault(f) = r else { continue };
         match f.kind {
             FaultKind::CommandReceived => {
-                if let (Some(field), Some(slot)) = (
-                    CommandField::from_code(f.id),
-                    cmd.get_mut(usize::from(f.id)),
-                ) {
-                    let _ = field;
+                if let (Ok(_), Some(slot)) =
+                    (CommandField::try_from(f.id), cmd.get_mut(usize::from(f.id)))
+                {
                     *slot = f.value;
                 }
             }
