@@ -9,28 +9,35 @@
 //!   ẍ = ω²(x − p),      ξ̇ = ω(ξ − p),      ẋ = ω(ξ − x)                           (D1)
 //! ```
 //!
-//! **Reference (constant ZMP per step).** Step i (period T) stands on support point p_i (the
-//! support foot's sole point). With a constant p over a step, ξ(t) = p + e^{ω(t−T)}(ξ_eos − p).
-//! The preview holds the current step and the next [`PREVIEW_STEPS`] steps of the generator
-//! under the present command, and ends at rest: after the last previewed step the feet stand
-//! and ξ rests on their midpoint p_end. Backwards (Englsberger et al. 2015, constant VRP):
+//! **Reference (ZMP per step, transferred in double support).** Step i (period T, lift-off t1,
+//! touch-down t2) stands on support point p_i (the support foot's sole point moved
+//! [`OnlineParams::zmp_inset`] towards the other foot). Its ZMP reference runs in three linear
+//! segments: from a_i (the feet's midpoint at the step's start) to p_i over [0, t1], p_i over
+//! [t1, t2], from p_i to b_i (the midpoint once the swing foot landed, = a_{i+1}) over [t2, T]:
+//! continuous. On a segment of duration Δ where the ZMP goes from p_a to p_b (slope
+//! s = (p_b − p_a)/Δ), (D1) gives, from ξ at the segment's end,
 //!
 //! ```text
-//!   ξ_eos,N = p_end,    ξ_eos,i−1 = ξ_ini,i = p_i + e^{−ωT}(ξ_eos,i − p_i)               (D2)
+//!   ξ(τ) = p(τ) + s/ω + e^{ω(τ−Δ)}(ξ_end − p_b − s/ω)                                  (D2)
 //! ```
 //!
-//! and the reference of the current step at time t ∈ [0, T) is
-//! ξ_ref(t) = p_0 + e^{ω(t−T)}(ξ_eos,0 − p_0). The preview is computed again when a step
-//! starts and when the command changes (at most 1 + [`PREVIEW_STEPS`] generator steps), never
-//! per tick; the current step's landing place is never changed once the step began.
+//! The preview holds the current step and the next [`PREVIEW_STEPS`] steps of the generator
+//! under the present command (fewer once it stands under the zero command) and ends at rest:
+//! after the last previewed step ξ rests on the final feet's midpoint. (D2) applied backwards
+//! through the previewed steps' segments gives ξ_eos,0, the end of the current step, and
+//! through the current step's segments ξ_ref(t) and p_ref(t) at its time t (at most three
+//! exponentials per tick). The preview is computed again when a step starts and when the
+//! command changes (at most 1 + [`PREVIEW_STEPS`] generator steps), never per tick; the
+//! current step's landing place is never changed once the step began.
 //!
 //! **Tracking (DCM feedback).** The commanded ZMP is
 //!
 //! ```text
-//!   p_cmd = p_ref + (1 + k/ω)(ξ − ξ_ref),   p_ref = ξ_ref − ξ̇_ref/ω = p_0              (D3)
+//!   p_cmd = p_ref + (1 + k/ω)(ξ − ξ_ref),   p_ref = ξ_ref − ξ̇_ref/ω                    (D3)
 //! ```
 //!
-//! (k = ω), clamped to [`ZMP_MARGIN`] around p_ref per axis (inside the sole). A re-plan
+//! (k = ω), clamped per axis to [`ZMP_MARGIN`] around the support point in single support,
+//! around the box of both feet on two feet. A re-plan
 //! changes ξ_ref, never the state: the CoM is integrated exactly over one tick dt with the
 //! constant p_cmd,
 //!
