@@ -16,13 +16,20 @@ use walker_host::report::{decode_file, DecodedLog};
 use walker_host::sim::SimConfig;
 
 fn elf() -> PathBuf {
+    elf_at(
+        "WALKER_QEMU_ELF",
+        "target/thumbv7em-none-eabihf/release/qemu",
+    )
+}
+
+/// The firmware ELF named by the environment variable `var` (a path relative to the
+/// workspace root), `default` without it; scripts/test.sh builds each of them.
+fn elf_at(var: &str, default: &str) -> PathBuf {
     let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    let p = std::env::var("WALKER_QEMU_ELF")
-        .unwrap_or_else(|_| "target/thumbv7em-none-eabihf/release/qemu".into());
-    let p = root.join(p);
+    let p = root.join(std::env::var(var).unwrap_or_else(|_| default.into()));
     assert!(
         p.is_file(),
-        "firmware ELF {} missing: build it first (scripts/test.sh does)",
+        "firmware ELF {} ({var}) missing: build it first (scripts/test.sh does)",
         p.display()
     );
     p
@@ -38,13 +45,24 @@ fn short_walk(steps: i64) -> WalkSpec {
 }
 
 fn fil(name: &str, spec: WalkSpec, sim: SimConfig, tokens: &[&str]) -> (FilResult, DecodedLog) {
-    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    fil_on(name, elf(), "mps2-an500", spec, sim, tokens)
+}
+
+/// Firmware in the loop with an explicit ELF and QEMU machine.
+fn fil_on(
+    name: &str,
+    elf: PathBuf,
+    machine: &str,
+    spec: WalkSpec,
+    sim: SimConfig,
+    tokens: &[&str],
+) -> (FilResult, DecodedLog) {
     let opts = FilOptions {
-        elf: elf(),
+        elf,
         spec,
-        out_dir: out,
-        machine: "mps2-an500".into(),
-        timeout: Duration::from_secs(600),
+        out_dir: PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name),
+        machine: machine.into(),
+        timeout: Duration::from_secs(1800),
         sim,
         extra_tokens: tokens.iter().map(|s| s.to_string()).collect(),
     };
@@ -525,16 +543,10 @@ fn closed_loop_walk_survives_a_sagittal_push() {
 /// The firmware ELF built with `--features fixed-gait` (scripts/test.sh builds it and sets
 /// `WALKER_QEMU_FIXED_ELF`).
 fn fixed_elf() -> PathBuf {
-    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    let p = std::env::var("WALKER_QEMU_FIXED_ELF")
-        .unwrap_or_else(|_| "target/thumbv7em-none-eabihf/release/qemu-fixed".into());
-    let p = root.join(p);
-    assert!(
-        p.is_file(),
-        "fixed-gait firmware ELF {} missing: scripts/test.sh builds it",
-        p.display()
-    );
-    p
+    elf_at(
+        "WALKER_QEMU_FIXED_ELF",
+        "target/thumbv7em-none-eabihf/release/qemu-fixed",
+    )
 }
 
 /// `math=fixed` (the fixed-point sampler and the integer-only IK) walks in the loop, and its
@@ -707,39 +719,10 @@ fn fourier_com_walks_on_the_mujoco_robot() {
 /// The Cortex-M3 QEMU firmware: `board-qemu` + `fixed-gait` built for thumbv7m-none-eabi with
 /// the profile release-m3 (scripts/test.sh builds it and sets `WALKER_QEMU_M3_ELF`).
 fn m3_elf() -> PathBuf {
-    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    let p = std::env::var("WALKER_QEMU_M3_ELF")
-        .unwrap_or_else(|_| "target/thumbv7m-none-eabi/release-m3/qemu".into());
-    let p = root.join(p);
-    assert!(
-        p.is_file(),
-        "Cortex-M3 firmware ELF {} missing: scripts/test.sh builds it",
-        p.display()
-    );
-    p
-}
-
-/// Firmware in the loop with an explicit ELF and QEMU machine (the MuJoCo robot unless `sim`
-/// says otherwise).
-fn fil_on(
-    name: &str,
-    elf: PathBuf,
-    machine: &str,
-    spec: WalkSpec,
-    tokens: &[&str],
-) -> (FilResult, DecodedLog) {
-    let opts = FilOptions {
-        elf,
-        spec,
-        out_dir: PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name),
-        machine: machine.into(),
-        timeout: Duration::from_secs(1800),
-        sim: SimConfig::default(),
-        extra_tokens: tokens.iter().map(|s| s.to_string()).collect(),
-    };
-    let r = run(&opts, |_, _| {}).expect("firmware-in-the-loop run");
-    let log = decode_file(&r.log).expect("log");
-    (r, log)
+    elf_at(
+        "WALKER_QEMU_M3_ELF",
+        "target/thumbv7m-none-eabi/release-m3/qemu",
+    )
 }
 
 /// Overruns the firmware counted (its last tick record), the number it logs.
@@ -760,11 +743,10 @@ fn logged_overruns(log: &DecodedLog) -> Option<u16> {
 fn m3_fixed_point_walks_table2_and_agrees_with_the_m7_f32_walk() {
     const NO_TAU: &str = "imu_cutoff=0.001";
     let spec = WalkSpec::default();
-    let (r7, f32_walk) = fil_on(
+    let (r7, f32_walk) = fil(
         "m7-f32-table2",
-        elf(),
-        "mps2-an500",
         spec.clone(),
+        SimConfig::default(),
         &[NO_TAU],
     );
     let (r3, fixed_walk) = fil_on(
@@ -772,6 +754,7 @@ fn m3_fixed_point_walks_table2_and_agrees_with_the_m7_f32_walk() {
         m3_elf(),
         "mps2-an385",
         spec.clone(),
+        SimConfig::default(),
         &["math=fixed", "core_mhz=72", NO_TAU],
     );
     let w7 = walker_host::fil::walk_figures(&r7.truth, &spec).unwrap();
@@ -816,11 +799,10 @@ fn table2_at_1_khz_and_4_5_mbps_has_no_overrun_on_the_m7() {
         dt: 0.001,
         ..WalkSpec::default()
     };
-    let (r, log) = fil_on(
+    let (r, log) = fil(
         "m7-1khz",
-        elf(),
-        "mps2-an500",
         spec.clone(),
+        SimConfig::default(),
         &["baud=4500000"],
     );
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
