@@ -93,8 +93,9 @@ use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::compliance::{Compliance, LoadModel};
+use gait_core::fixed_point::{FixedFoot, Fx};
 use gait_core::gait::Arithmetic;
-use gait_core::measured::{measured_zmp, ForceReading};
+use gait_core::measured::{measured_zmp, FixedZmpMeter, ForceReading};
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
 use gait_core::{GaitError, GaitSample, Robot, Side};
@@ -103,7 +104,7 @@ use walker_contract::ExitCode;
 
 use crate::board::{Board, CrashCode, CrashNote, ResetCause, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
-use crate::imu::{AttitudeFilter, PitchAccel, PitchAccelConfig};
+use crate::imu::{AttitudeFilter, FixedAttitudeFilter, PitchAccel, PitchAccelConfig};
 use crate::monitor::ServoMonitor;
 use crate::params::ArgError;
 use crate::plausible::Plausibility;
@@ -111,7 +112,9 @@ use crate::record::{
     FaultKind, FaultRecord, FaultState, LogWriter, LoggedPhase, Record, StopRecord, TickRecord,
 };
 use crate::startup::{self, Ramp, StartupError};
-use crate::supervisor::{safe_targets, Action, Freshness, JointMap, StopReason, Supervisor};
+use crate::supervisor::{
+    safe_targets, safe_targets_fx, Action, Freshness, JointMap, StopReason, Supervisor,
+};
 use crate::{startup_record, Config};
 use walker_contract::codes::SensorRejection;
 use walker_contract::command_port::{Mode, PortState, PortStatus};
@@ -464,6 +467,24 @@ impl Checked {
     }
 }
 
+/// A tick's joint targets: f32 rad, or I16F16 rad straight from the integer IK (`math=fixed`).
+enum Goal {
+    /// f32 rad (may be non-finite: [`safe_targets`] catches it).
+    Rad([f32; LEG_JOINTS]),
+    /// I16F16 rad ([`safe_targets_fx`]).
+    Fx([Fx; LEG_JOINTS]),
+}
+
+/// A foot sample in fixed point (exact for a sample the fixed-point sampler made).
+fn fixed_foot(f: &gait_core::swing::FootSample<f32>) -> FixedFoot {
+    FixedFoot {
+        x: Fx::saturating_from_num(f.x),
+        y: Fx::saturating_from_num(f.y),
+        z: Fx::saturating_from_num(f.z),
+        yaw: Fx::saturating_from_num(f.yaw),
+    }
+}
+
 /// Last good sensor values.
 struct SensorState {
     feet: [Option<FootForces>; 2],
@@ -661,6 +682,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         inertia: robot.masses.upper_body_inertia as f32,
     });
     let mut attitude = AttitudeFilter::new();
+    // `math=fixed` (FPU-less cores): the tilt estimate, the measured ZMP and the joint path
+    // (integer IK → ticks) in integers; the f32 ones otherwise.
+    let fixed_math = cfg!(feature = "fixed-gait") && cfg.arithmetic == Arithmetic::Fixed;
+    let dt_f32 = cfg.dt_s() as f32;
+    let mut attitude_fx = FixedAttitudeFilter::new(dt_f32);
+    let zmp_meter = FixedZmpMeter::new(&robot, cfg.min_load_n);
     let mut stab =
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
@@ -740,31 +767,50 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             }
         }
         // A non-finite or missing gyro sample never reaches the stabilizer.
-        let gyro = match imu_fresh {
+        let (gyro, tilt) = match imu_fresh {
             Some(s) => {
-                let [roll_rate, rate, _] = s.gyro_rad_s();
+                let g = s.gyro_rad_s();
+                let [roll_rate, rate, _] = g;
                 pitch.update(rate);
-                attitude.update(s.gyro_rad_s(), s.accel_m_s2(), cfg.dt_s() as f32);
-                Some([roll_rate, rate]).filter(|g| g.iter().all(|v| v.is_finite()))
+                let tilt = if fixed_math {
+                    attitude_fx.update(s.gyro_urad_s, s.accel_um_s2)
+                } else {
+                    attitude.update(g, s.accel_m_s2(), dt_f32).tilt
+                };
+                let g = Some([roll_rate, rate]).filter(|g| g.iter().all(|v| v.is_finite()));
+                (g, tilt)
             }
             None => {
                 pitch.update(f32::NAN);
-                None
+                let tilt = if fixed_math {
+                    attitude_fx.tilt()
+                } else {
+                    attitude.tilt().tilt
+                };
+                (None, tilt)
             }
         };
-        sup.tilt(attitude.tilt().tilt);
+        sup.tilt(tilt);
         let tau = pitch.torque();
         let reading = |f: &Option<FootForces>| {
             ForceReading::new(f.map_or([f32::NAN; 4], |f| f.forces_mn.map(|v| v as f32 * 1e-3)))
         };
         let [fl, fr] = &state.feet;
         let [pl, pr] = &prev.feet;
-        let meas = measured_zmp(
-            &robot,
-            (pl, &reading(fl)),
-            (pr, &reading(fr)),
-            cfg.min_load_n,
-        );
+        let meas_zmp = if fixed_math {
+            let forces = |f: &Option<FootForces>| f.map(|f| f.forces_mn);
+            zmp_meter
+                .zmp((&fixed_foot(pl), forces(fl)), (&fixed_foot(pr), forces(fr)))
+                .map(|z| z.map(|v| v.to_num::<f32>()))
+        } else {
+            measured_zmp(
+                &robot,
+                (pl, &reading(fl)),
+                (pr, &reading(fr)),
+                cfg.min_load_n,
+            )
+            .zmp
+        };
 
         // The command port: answered every tick; torque off on command; the online walk's
         // command.
@@ -794,7 +840,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         } else {
                             Some(k + 1)
                         };
-                        Some(ramp.at(k))
+                        Some(Goal::Rad(ramp.at(k)))
                     }
                     None => 'sample: {
                         let k = walk_tick;
@@ -844,7 +890,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             // The measurement answers the previous command: compare with it.
                             stab.update(&StabilizerInput {
                                 zmp_ref: prev.zmp,
-                                zmp_meas: meas.zmp,
+                                zmp_meas: meas_zmp,
                                 gyro,
                                 support: support_cache.get(&robot, &prev),
                             })
@@ -855,12 +901,34 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
                         }
-                        let (mut q, loaded) = match &ahead {
-                            Some(a) => (sampler.joints(&targets, a, shift), a.f32),
-                            None => (targets.joints(&s, shift).0, s),
+                        // The integer IK's angles go to the ticks without an f32 round trip
+                        // (`math=fixed`; compliance is off there); the f32 path otherwise
+                        // (and for the NaN fault injection).
+                        let fx_q = match &ahead {
+                            Some(a) if cfg.fault_nan_tick != Some(k) => {
+                                sampler.joints_fx(&targets, a, shift)
+                            }
+                            _ => None,
                         };
-                        load.apply(&compliance, &mut q, &loaded, shift);
-                        cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
+                        let mut goal = match fx_q {
+                            Some(mut q) => {
+                                cfg.gyro_feedback.for_each(s.phase, gyro, |j, d| {
+                                    if let Some(v) = q.get_mut(j) {
+                                        *v = v.saturating_add(Fx::saturating_from_num(d));
+                                    }
+                                });
+                                Goal::Fx(q)
+                            }
+                            None => {
+                                let (mut q, loaded) = match &ahead {
+                                    Some(a) => (sampler.joints(&targets, a, shift), a.f32),
+                                    None => (targets.joints(&s, shift).0, s),
+                                };
+                                load.apply(&compliance, &mut q, &loaded, shift);
+                                cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
+                                Goal::Rad(q)
+                            }
+                        };
                         if online.is_none() && sampler.is_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);
                         }
@@ -868,8 +936,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             sup.stop(StopReason::Requested);
                         }
                         if cfg.fault_nan_tick == Some(k) {
-                            if let Some(v) = q.first_mut() {
-                                *v = f32::NAN;
+                            if let Goal::Rad(q) = &mut goal {
+                                if let Some(v) = q.first_mut() {
+                                    *v = f32::NAN;
+                                }
                             }
                         }
                         let ([zx, zy], [cx, cy, _]) = (s.zmp, s.com);
@@ -877,10 +947,13 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         rec.set_com_m(cx + shift[0], cy + shift[1]);
                         rec.phase = phase_of(&s);
                         prev = s;
-                        Some(q)
+                        Some(goal)
                     }
                 };
-                let ticks = match q.map(|q| safe_targets(&q, &map, &last_ticks)) {
+                let ticks = match q.map(|g| match g {
+                    Goal::Rad(q) => safe_targets(&q, &map, &last_ticks),
+                    Goal::Fx(q) => Ok(safe_targets_fx(&q, &map)),
+                }) {
                     // A non-finite sample: the last targets again (the stop has begun); the
                     // log shows the last finite sample.
                     None => {
@@ -928,7 +1001,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 _ => LoggedPhase::Stopped,
             };
         }
-        if let Some([zx, zy]) = meas.zmp {
+        if let Some([zx, zy]) = meas_zmp {
             rec.set_zmp_meas_m(zx, zy);
             rec.zmp_valid = true;
         }
@@ -951,7 +1024,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             support: commanded::support_code(prev.phase),
             step_count: u16::try_from(online.as_ref().map_or(prev.steps_done, |o| o.steps_done()))
                 .unwrap_or(u16::MAX),
-            zmp_m: meas.zmp,
+            zmp_m: meas_zmp,
             stop_code: sup.stop_reason().map_or(0, |r| r.kind().code()),
             fault_kind: 0,
             walk_velocity: online.as_ref().map_or([0.0; 3], |o| o.velocity()),

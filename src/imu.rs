@@ -256,6 +256,130 @@ impl AttitudeFilter {
     }
 }
 
+/// π in 2⁻³⁰ rad.
+const PI_30: i64 = 3_373_259_426;
+/// 1 in 2⁻³⁰ units.
+const ONE_30: i64 = 1 << 30;
+
+/// [`AttitudeFilter`] in integers for FPU-less cores (`math=fixed`): the same equations on
+/// the IMU's raw units (µrad/s, µm/s²), angles in 2⁻³⁰ rad (`i64`), sin/cos by
+/// `gait_core::fixed_point::sin_cos`, atan2 and √ by `gait_core::fixed_ik` (|error| < 2e-8 rad
+/// and exact floor); one 64-bit division per sample (tan θ). It agrees with the f32 filter
+/// to ≈ 1e-4 rad (I16F16 sin/cos arguments; test `fixed_attitude_tracks_the_f32_filter`).
+#[derive(Clone, Debug, Default)]
+pub struct FixedAttitudeFilter {
+    roll: i64,
+    pitch: i64,
+    started: bool,
+    /// Δangle (2⁻³⁰ rad) = rate (µrad/s) · `dt_k` >> 20.
+    dt_k: i64,
+    /// Complementary gain k = dt/(τ + dt), 2⁻³⁰ units.
+    k30: i64,
+    /// Squared norm windows of the specific force, (µm/s²)²: plausible, quiet.
+    ok2: [u64; 2],
+    quiet2: [u64; 2],
+}
+
+impl FixedAttitudeFilter {
+    /// Upright until the first good accelerometer sample, at sample period `dt_s` (s).
+    pub fn new(dt_s: f32) -> Self {
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            f64::from(dt_s)
+        } else {
+            0.0
+        };
+        let g_um = f64::from(G) * 1e6;
+        let sq = |f: f64| {
+            let v = f * g_um;
+            (v * v) as u64
+        };
+        FixedAttitudeFilter {
+            roll: 0,
+            pitch: 0,
+            started: false,
+            dt_k: (dt * 1e-6 * (1u64 << 50) as f64) as i64,
+            k30: (dt / (f64::from(ATTITUDE_TAU_S) + dt) * ONE_30 as f64) as i64,
+            ok2: [sq(0.25), sq(4.0)],
+            quiet2: [sq(0.8), sq(1.2)],
+        }
+    }
+
+    /// Feeds one IMU sample (body rates µrad/s, specific force µm/s²); returns the tilt
+    /// from vertical, rad.
+    pub fn update(&mut self, gyro_urad_s: [i32; 3], accel_um_s2: [i32; 3]) -> f32 {
+        use gait_core::fixed_ik::{atan2_fac, isqrt};
+        let [ax, ay, az] = accel_um_s2.map(i64::from);
+        let sq = |v: i64| v.unsigned_abs() * v.unsigned_abs();
+        // < 3·2⁶² < 2⁶⁴.
+        let n2 = sq(ax) + sq(ay) + sq(az);
+        let within = |w: [u64; 2]| (w[0]..=w[1]).contains(&n2);
+        let from_accel = || {
+            // √(a_y² + a_z²) < 2³²: fits i64.
+            let yz = isqrt(sq(ay) + sq(az)) as i64;
+            (atan2_fac(ay, az), atan2_fac(-ax, yz))
+        };
+        if !self.started {
+            if within(self.ok2) {
+                (self.roll, self.pitch) = from_accel();
+                self.started = true;
+            }
+            return self.tilt();
+        }
+        let [p, q, r] = gyro_urad_s.map(i64::from);
+        let (sr, cr) = sin_cos30(self.roll);
+        let (sp, cp) = sin_cos30(self.pitch);
+        // tan θ (2⁻³⁰), bounded away from the gimbal singularity as in the f32 filter.
+        let tp = (sp << 30) / cp.max(ONE_30 / 20);
+        // Rates < 2³¹ µrad/s, factors ≤ 2³⁰·20: every product < 2⁶³.
+        let qr = (q * sr + r * cr) >> 30;
+        let roll_rate = p + ((qr * tp) >> 30);
+        let pitch_rate = (q * cr - r * sr) >> 30;
+        self.roll += (roll_rate * self.dt_k) >> 20;
+        self.pitch += (pitch_rate * self.dt_k) >> 20;
+        if within(self.quiet2) {
+            let (roll_a, pitch_a) = from_accel();
+            self.roll += (self.k30 * wrap30(roll_a - self.roll)) >> 30;
+            self.pitch += (self.k30 * (pitch_a - self.pitch)) >> 30;
+        }
+        self.roll = wrap30(self.roll);
+        self.pitch = self.pitch.clamp(-PI_30 / 2, PI_30 / 2);
+        self.tilt()
+    }
+
+    /// Roll and pitch, rad.
+    pub fn roll_pitch(&self) -> [f32; 2] {
+        [self.roll, self.pitch].map(|a| a as f32 / ONE_30 as f32)
+    }
+
+    /// The present tilt from vertical, rad: cos(tilt) = cos φ · cos θ.
+    pub fn tilt(&self) -> f32 {
+        let c = ((sin_cos30(self.roll).1 * sin_cos30(self.pitch).1) >> 30).clamp(-ONE_30, ONE_30);
+        let s = gait_core::fixed_ik::isqrt((ONE_30 * ONE_30 - c * c) as u64) as i64;
+        gait_core::fixed_ik::atan2_fac(s, c) as f32 / ONE_30 as f32
+    }
+}
+
+/// sin and cos (2⁻³⁰) of an angle in 2⁻³⁰ rad within [−π, π].
+fn sin_cos30(a: i64) -> (i64, i64) {
+    let bits = ((a + (1 << 13)) >> 14) as i32;
+    gait_core::fixed_point::sin_cos(gait_core::fixed_point::Fx::from_bits(bits))
+}
+
+/// Wraps an angle in 2⁻³⁰ rad to (−π, π] (0 when it is more than 8 turns out).
+fn wrap30(a: i64) -> i64 {
+    let mut x = a;
+    for _ in 0..8 {
+        if x > PI_30 {
+            x -= 2 * PI_30;
+        } else if x <= -PI_30 {
+            x += 2 * PI_30;
+        } else {
+            return x;
+        }
+    }
+    0
+}
+
 /// Wraps an angle to (−π, π].
 fn wrap(a: f32) -> f32 {
     use core::f32::consts::{PI, TAU};
@@ -540,5 +664,47 @@ mod tests {
         }
         assert_eq!(t.rejected(), 4);
         assert_eq!(t.last(), good);
+    }
+    #[test]
+    fn fixed_attitude_tracks_the_f32_filter() {
+        // A tumbling motion with all three rates and a tilting, partly accelerating specific
+        // force (quiet and not), 600 ticks at 5 ms, both filters fed the same integer sample.
+        let dt = 0.005f32;
+        let mut f = AttitudeFilter::new();
+        let mut x = FixedAttitudeFilter::new(dt);
+        let mut worst = [0.0f32; 3];
+        for k in 0..600 {
+            let t = k as f32 * dt;
+            let gyro = [
+                0.8 * libm::sinf(3.0 * t),
+                1.5 * libm::cosf(2.0 * t),
+                0.3 * libm::sinf(t),
+            ];
+            let (r, p) = (0.4 * libm::sinf(1.5 * t), 0.5 * libm::sinf(t));
+            let gain = if k % 50 < 10 { 0.7 } else { 1.0 };
+            let acc = [
+                -G * gain * libm::sinf(p),
+                G * gain * libm::sinf(r) * libm::cosf(p),
+                G * gain * libm::cosf(r) * libm::cosf(p),
+            ];
+            let s = dxl::table::imu::ImuSample::from_si(gyro, acc, 0);
+            let a = f.update(s.gyro_rad_s(), s.accel_m_s2(), dt);
+            let b = x.update(s.gyro_urad_s, s.accel_um_s2);
+            let [br, bp] = x.roll_pitch();
+            for (w, d) in worst
+                .iter_mut()
+                .zip([a.roll - br, a.pitch - bp, a.tilt - b])
+            {
+                *w = w.max(d.abs());
+            }
+        }
+        assert!(worst.iter().all(|&w| w < 2e-4), "{worst:?}");
+        // Upright until a plausible sample; a 2 g shock is not used.
+        let mut x = FixedAttitudeFilter::new(dt);
+        assert_eq!(x.update([0; 3], [0; 3]), 0.0);
+        let tilt = x.update([0; 3], [0, 0, 9_806_650]);
+        assert!(tilt.abs() < 1e-6, "{tilt}");
+        let shocked = x.update([0; 3], [2 * 9_806_650, 0, 9_806_650]);
+        assert!(shocked.abs() < 1e-6, "{shocked}");
     }
 }

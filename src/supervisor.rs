@@ -257,6 +257,10 @@ pub struct JointMap {
     pub tick_min: i32,
     /// Highest tick the servo accepts.
     pub tick_max: i32,
+    /// The joint limits in I16F16 rad bits (lower, upper; the fixed-point path).
+    pub limits_fx: [[i32; 2]; LEG_JOINTS],
+    /// [`TickMap::ticks_per_fx_rad_32`], computed once.
+    pub fx_k: i64,
 }
 
 impl JointMap {
@@ -275,12 +279,19 @@ impl JointMap {
             *hi = l.max as f32;
         }
         let ticks = TickMap::from_robot(robot);
+        let bits = |v: f32| gait_core::fixed_point::Fx::saturating_from_num(v).to_bits();
+        let mut limits_fx = [[0i32; 2]; LEG_JOINTS];
+        for (l, (&lo, &hi)) in limits_fx.iter_mut().zip(min_rad.iter().zip(max_rad.iter())) {
+            *l = [bits(lo), bits(hi)];
+        }
         JointMap {
             ticks,
             min_rad,
             max_rad,
             tick_min: 0,
             tick_max: ticks.ticks_per_turn - 1,
+            limits_fx,
+            fx_k: ticks.ticks_per_fx_rad_32(),
         }
     }
 
@@ -373,6 +384,31 @@ pub fn safe_targets(
             clamped,
         })
     }
+}
+
+/// [`safe_targets`] for joint targets in I16F16 rad (the fixed-point path: integer only,
+/// [`TickMap::tick_fx_k`]); fixed-point angles are always finite, so it cannot fail.
+pub fn safe_targets_fx(
+    targets: &[gait_core::fixed_point::Fx; LEG_JOINTS],
+    map: &JointMap,
+) -> SafeTargets {
+    let mut ticks = [0i32; LEG_JOINTS];
+    let mut clamped = 0u16;
+    for (j, ((out, q), l)) in ticks
+        .iter_mut()
+        .zip(targets.iter())
+        .zip(map.limits_fx.iter())
+        .enumerate()
+    {
+        let b = q.to_bits();
+        let c = b.max(l[0]).min(l[1]);
+        let t = map.ticks.tick_fx_k(j, c, map.fx_k);
+        *out = t.clamp(map.tick_min, map.tick_max);
+        if c != b || *out != t {
+            clamped |= 1 << j;
+        }
+    }
+    SafeTargets { ticks, clamped }
 }
 
 #[cfg(test)]
@@ -563,6 +599,32 @@ mod tests {
             2048 + libm::roundf(0.9 * m.ticks.ticks_per_rad_f32()) as i32
         );
         assert_eq!(ok.clamped, (1 << 3) | (1 << 2));
+    }
+
+    #[test]
+    fn fixed_point_targets_match_the_f32_conversion() {
+        use gait_core::fixed_point::Fx;
+        let m = map();
+        let prev = [2048; 12];
+        // In range, below and above the limits (knee 0..2.5, hip pitch ..0.9).
+        for (j, rad) in [
+            (3, 0.5f32),
+            (3, -1.0),
+            (2, 10.0),
+            (0, -0.123),
+            (9, 1.7),
+            (7, -0.69),
+        ] {
+            let mut t = [0.0f32; 12];
+            t[j] = rad;
+            let want = safe_targets(&t, &m, &prev).unwrap();
+            let got = safe_targets_fx(&t.map(Fx::from_num), &m);
+            assert!(
+                (got.ticks[j] - want.ticks[j]).abs() <= 1,
+                "{j} {rad}: {got:?} vs {want:?}"
+            );
+            assert_eq!(got.clamped, want.clamped, "{j} {rad}");
+        }
     }
 
     #[test]

@@ -144,14 +144,19 @@ impl TickMap {
     /// round half up): `tick = zero + (bits · K + 2³¹) >> 32` with
     /// K = round(ticks_per_turn · 2¹⁶ · 2³² / (2π · 2³²)) = ticks per rad · 2⁻¹⁶ · 2³².
     pub fn tick_fx(&self, j: usize, bits: i32) -> i32 {
-        let k = self.ticks_per_fx_rad_32();
+        self.tick_fx_k(j, bits, self.ticks_per_fx_rad_32())
+    }
+
+    /// [`TickMap::tick_fx`] with its factor `k` = [`TickMap::ticks_per_fx_rad_32`] computed
+    /// once by the caller (it takes an f64 rounding: soft float on FPU-less cores).
+    pub fn tick_fx_k(&self, j: usize, bits: i32, k: i64) -> i32 {
         let s = i64::from(bits) * i64::from(self.sign_of(j) as i8);
         let t = (s * k + (1 << 31)) >> 32;
         (t as i32).saturating_add(self.zero_tick)
     }
 
     /// Ticks per rad × 2⁻¹⁶ × 2³² (42 722 830 for 4096 ticks per turn).
-    fn ticks_per_fx_rad_32(&self) -> i64 {
+    pub fn ticks_per_fx_rad_32(&self) -> i64 {
         libm::round(f64::from(self.ticks_per_turn) * 65536.0 / core::f64::consts::TAU) as i64
     }
 }

@@ -57,6 +57,21 @@ impl GyroFeedback {
     /// Adds the feedback for trunk rates `gyro` = [ω_x, ω_y] to the 12 joint targets `q` (left
     /// leg then right leg, joint order) of the legs on the ground in `phase`.
     pub fn apply(&self, q: &mut [f32; 12], phase: SupportPhase, gyro: Option<[f32; 2]>) {
+        self.for_each(phase, gyro, |j, d| {
+            if let Some(v) = q.get_mut(j) {
+                *v += d;
+            }
+        });
+    }
+
+    /// The corrections of [`GyroFeedback::apply`] one by one: `add(joint index, Δq rad)` for
+    /// every joint it changes (the fixed-point path adds them to its I16F16 angles).
+    pub fn for_each(
+        &self,
+        phase: SupportPhase,
+        gyro: Option<[f32; 2]>,
+        mut add: impl FnMut(usize, f32),
+    ) {
         let Some([wx, wy]) = gyro.filter(|g| g.iter().all(|v| v.is_finite())) else {
             return;
         };
@@ -90,9 +105,7 @@ impl GyroFeedback {
                 (4, ankle_pitch),
                 (5, ankle_roll),
             ] {
-                if let Some(v) = q.get_mut(6 * leg + j) {
-                    *v += d;
-                }
+                add(6 * leg + j, d);
             }
         }
     }

@@ -236,12 +236,27 @@ impl<const N: usize> Engine<N> {
     /// The joint targets (rad) of `s` with its CoM shifted by `shift` (m): the integer IK for
     /// a fixed-point sample with [`Targets::Plain`], `targets` otherwise.
     pub fn joints(&self, targets: &Targets, s: &Sample, shift: [f32; 2]) -> [f32; LEG_JOINTS] {
-        #[cfg(feature = "fixed-engine")]
-        if let (Engine::Fixed(_, ik), Some(f), Targets::Plain(_)) = (self, &s.fixed, targets) {
-            let (q, _) = crate::fixed_ik::joint_targets(ik, &f.shifted(shift));
+        if let Some(q) = self.joints_fx(targets, s, shift) {
             return q.map(|a| a.to_num());
         }
         targets.joints(&s.f32, shift).0
+    }
+
+    /// The joint targets of `s` in I16F16 rad straight from the integer IK (no f32 round
+    /// trip), when [`Engine::joints`] would take that path (a fixed-point sample with
+    /// [`Targets::Plain`]); `None` otherwise.
+    pub fn joints_fx(
+        &self,
+        targets: &Targets,
+        s: &Sample,
+        shift: [f32; 2],
+    ) -> Option<[crate::fixed_point::Fx; LEG_JOINTS]> {
+        #[cfg(feature = "fixed-engine")]
+        if let (Engine::Fixed(_, ik), Some(f), Targets::Plain(_)) = (self, &s.fixed, targets) {
+            return Some(crate::fixed_ik::joint_targets(ik, &f.shifted(shift)).0);
+        }
+        let _ = (targets, s, shift);
+        None
     }
 }
 

@@ -647,3 +647,69 @@ fn inside_fraction_against_the_support_polygon() {
     );
     assert_eq!(ZmpErrorStats::<f32>::new().inside_fraction(), 0.0);
 }
+
+// ---------------------------------------------------------------------------------------------
+// The fixed-point measured ZMP
+// ---------------------------------------------------------------------------------------------
+
+fn fixed_foot(x: f64, y: f64, yaw: f64) -> gait_core::fixed_point::FixedFoot {
+    use gait_core::fixed_point::Fx;
+    gait_core::fixed_point::FixedFoot {
+        x: Fx::from_num(x),
+        y: Fx::from_num(y),
+        z: Fx::ZERO,
+        yaw: Fx::from_num(yaw),
+    }
+}
+
+proptest! {
+    /// The fixed-point meter against the f64 formula on the same (fixed-point-representable)
+    /// poses and whole-mN forces: within 2 I16F16 steps (≈ 31 µm) of the f64 ZMP, and `None`
+    /// exactly when the f64 ZMP is `None`.
+    #[test]
+    fn fixed_zmp_matches_f64(
+        lx in -0.3f64..0.3, ly in 0.0f64..0.2, lyaw in -0.8f64..0.8,
+        rx in -0.3f64..0.3, ry in -0.2f64..0.0, ryaw in -0.8f64..0.8,
+        lf in prop::array::uniform4(-2_000i32..40_000),
+        rf in prop::array::uniform4(-2_000i32..40_000),
+        min_load in 0.0f32..30.0,
+    ) {
+        use gait_core::measured::FixedZmpMeter;
+        let (l, r) = (fixed_foot(lx, ly, lyaw), fixed_foot(rx, ry, ryaw));
+        let meter = FixedZmpMeter::new(&ROBOT, min_load);
+        let got = meter.zmp((&l, Some(lf)), (&r, Some(rf)));
+        let pl = place(l.x.to_num(), l.y.to_num(), l.yaw.to_num());
+        let pr = place(r.x.to_num(), r.y.to_num(), r.yaw.to_num());
+        let n = |f: [i32; 4]| reading(f.map(|v| f64::from(v) * 1e-3));
+        // The meter rounds min_load to whole mN.
+        let min = f64::from((min_load * 1000.0).round()) * 1e-3;
+        let want = measured_zmp(&ROBOT, (&pl, &n(lf)), (&pr, &n(rf)), min).zmp;
+        match (got, want) {
+            (None, None) => {}
+            (Some(g), Some(w)) => {
+                let tol = 2.0 / 65536.0;
+                prop_assert!(
+                    close(g[0].to_num(), w[0], tol) && close(g[1].to_num(), w[1], tol),
+                    "fixed {:?} vs f64 {:?}", g, w
+                );
+            }
+            (g, w) => prop_assert!(false, "fixed {:?} vs f64 {:?}", g, w),
+        }
+    }
+}
+
+#[test]
+fn fixed_zmp_without_readings_or_load_is_none() {
+    use gait_core::measured::FixedZmpMeter;
+    let meter = FixedZmpMeter::new(&ROBOT, 5.0);
+    let f = fixed_foot(0.0, 0.05, 0.0);
+    assert_eq!(meter.zmp((&f, None), (&f, None)), None);
+    // 4 × 1 N = 4 N < 5 N on both feet.
+    assert_eq!(
+        meter.zmp((&f, Some([1000; 4])), (&f, Some([1000; 4]))),
+        None
+    );
+    // Equal forces: the ankle of the one loaded foot.
+    let z = meter.zmp((&f, Some([2000; 4])), (&f, None)).expect("a ZMP");
+    assert_eq!(z, [f.x, f.y]);
+}

@@ -472,6 +472,20 @@ mod firmware {
         );
         hprintln!("tick_us {}", Config::default_config().tick_period_us);
         hprintln!("bus_baud {}", Config::default_config().bus_baud);
+        // `BENCH_CONTROL_ONLY=1` at build time: the control loop alone (quick iterations on
+        // the firmware's loop; scripts/bench.sh never sets it).
+        if let Some(only) = option_env!("BENCH_CONTROL_ONLY") {
+            #[cfg(feature = "fixed-gait")]
+            if only == "fixed" {
+                control_loop_with(Arithmetic::Fixed, "control_fixed", "control.tick_fixed");
+                hprintln!("done 1");
+                semihosting_exit(0)
+            }
+            let _ = only;
+            control_loop();
+            hprintln!("done 1");
+            semihosting_exit(0)
+        }
 
         // Loop overhead: an empty call, once per loop shape.
         let empty = measure(K, &mut |i| {
