@@ -22,6 +22,8 @@ cargo build -p gait-core --target thumbv7em-none-eabihf
 
 step "host tests"
 cargo test --target host-tuple --workspace
+# The control loop with the fixed-point path (`math=fixed`, feature fixed-gait) against f32.
+cargo test --target host-tuple -p walker-firmware --features fixed-gait --lib control::tests::fixed
 
 step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (release)"
 DXL_FUZZ_CASES=10000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams

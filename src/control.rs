@@ -92,6 +92,7 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
+use gait_core::balance::FixedGyroFeedback;
 use gait_core::compliance::{Compliance, LoadModel};
 use gait_core::fixed_point::{FixedFoot, Fx};
 use gait_core::gait::Arithmetic;
@@ -104,7 +105,9 @@ use walker_contract::ExitCode;
 
 use crate::board::{Board, CrashCode, CrashNote, ResetCause, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
-use crate::imu::{AttitudeFilter, FixedAttitudeFilter, PitchAccel, PitchAccelConfig};
+use crate::imu::{
+    AttitudeFilter, FixedAttitudeFilter, FixedPitchAccel, PitchAccel, PitchAccelConfig,
+};
 use crate::monitor::ServoMonitor;
 use crate::params::ArgError;
 use crate::plausible::Plausibility;
@@ -676,18 +679,22 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         held: [0; 3],
         rejecting: [false; 3],
     };
-    let mut pitch = PitchAccel::new(PitchAccelConfig {
+    let pitch_cfg = PitchAccelConfig {
         dt_s: cfg.dt_s() as f32,
         cutoff_hz: cfg.imu_cutoff_hz,
         inertia: robot.masses.upper_body_inertia as f32,
-    });
+    };
+    let mut pitch = PitchAccel::new(pitch_cfg);
     let mut attitude = AttitudeFilter::new();
-    // `math=fixed` (FPU-less cores): the tilt estimate, the measured ZMP and the joint path
-    // (integer IK → ticks) in integers; the f32 ones otherwise.
+    // `math=fixed` (FPU-less cores): the pitch filter and τ, the tilt estimate, the measured
+    // ZMP, the gyro feedback and the joint path (integer IK → ticks) in integers; the f32
+    // ones otherwise.
     let fixed_math = cfg!(feature = "fixed-gait") && cfg.arithmetic == Arithmetic::Fixed;
     let dt_f32 = cfg.dt_s() as f32;
+    let mut pitch_fx = FixedPitchAccel::new(pitch_cfg);
     let mut attitude_fx = FixedAttitudeFilter::new(dt_f32);
     let zmp_meter = FixedZmpMeter::new(&robot, cfg.min_load_n);
+    let feedback_fx = FixedGyroFeedback::new(&cfg.gyro_feedback);
     let mut stab =
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
@@ -716,7 +723,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         let now = bus.board().now_us();
         let checked = sensors.check(&mut plausible, now);
         let mut imu_fresh = None;
-        for &(k, _) in sensors.slots.clone().iter() {
+        for &(k, _) in sensors.slots.iter() {
             let Some(&id) = SENSOR_IDS.get(k) else {
                 continue;
             };
@@ -771,27 +778,37 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             Some(s) => {
                 let g = s.gyro_rad_s();
                 let [roll_rate, rate, _] = g;
-                pitch.update(rate);
                 let tilt = if fixed_math {
+                    pitch_fx.update(Some(s.gyro_urad_s[1]));
                     attitude_fx.update(s.gyro_urad_s, s.accel_um_s2)
                 } else {
+                    pitch.update(rate);
                     attitude.update(g, s.accel_m_s2(), dt_f32).tilt
                 };
                 let g = Some([roll_rate, rate]).filter(|g| g.iter().all(|v| v.is_finite()));
                 (g, tilt)
             }
             None => {
-                pitch.update(f32::NAN);
-                let tilt = if fixed_math {
-                    attitude_fx.tilt()
+                if fixed_math {
+                    pitch_fx.update(None);
+                    (None, attitude_fx.tilt())
                 } else {
-                    attitude.tilt().tilt
-                };
-                (None, tilt)
+                    pitch.update(f32::NAN);
+                    (None, attitude.tilt().tilt)
+                }
             }
         };
+        // The integer rates for the fixed-point gyro feedback (when the f32 ones pass).
+        let gyro_raw = imu_fresh
+            .filter(|_| gyro.is_some())
+            .map(|s| [s.gyro_urad_s[0], s.gyro_urad_s[1]]);
         sup.tilt(tilt);
-        let tau = pitch.torque();
+        // τ: N·m (f32 path) or whole mN·m (`math=fixed`, no float).
+        let (tau, tau_mnm) = if fixed_math {
+            (0.0, pitch_fx.torque_mnm())
+        } else {
+            (pitch.torque(), 0)
+        };
         let reading = |f: &Option<FootForces>| {
             ForceReading::new(f.map_or([f32::NAN; 4], |f| f.forces_mn.map(|v| v as f32 * 1e-3)))
         };
@@ -863,7 +880,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 let ahead = match pending.take() {
                                     Some(p) => p,
                                     None => {
-                                        let a = sampler.next(tau);
+                                        let a = if fixed_math {
+                                            sampler.next_mnm(tau_mnm)
+                                        } else {
+                                            sampler.next(tau)
+                                        };
                                         let _ = delay.push_back(a.f32);
                                         a
                                     }
@@ -912,9 +933,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         };
                         let mut goal = match fx_q {
                             Some(mut q) => {
-                                cfg.gyro_feedback.for_each(s.phase, gyro, |j, d| {
+                                feedback_fx.for_each(s.phase, gyro_raw, |j, d| {
                                     if let Some(v) = q.get_mut(j) {
-                                        *v = v.saturating_add(Fx::saturating_from_num(d));
+                                        *v = v.saturating_add(Fx::from_bits(d));
                                     }
                                 });
                                 Goal::Fx(q)
@@ -1005,7 +1026,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             rec.set_zmp_meas_m(zx, zy);
             rec.zmp_valid = true;
         }
-        rec.set_tau_nm(tau);
+        if fixed_math {
+            rec.tau_mnm = tau_mnm.clamp(-32_767, 32_767) as i16;
+        } else {
+            rec.set_tau_nm(tau);
+        }
         // The state that produced this tick's action.
         rec.fault = match action {
             Action::Run if sup.any_holding() => FaultState::Holding,

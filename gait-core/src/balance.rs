@@ -70,7 +70,7 @@ impl GyroFeedback {
         &self,
         phase: SupportPhase,
         gyro: Option<[f32; 2]>,
-        mut add: impl FnMut(usize, f32),
+        add: impl FnMut(usize, f32),
     ) {
         let Some([wx, wy]) = gyro.filter(|g| g.iter().all(|v| v.is_finite())) else {
             return;
@@ -90,23 +90,86 @@ impl GyroFeedback {
         };
         let (ankle_pitch, ankle_roll) = (sat(self.ankle * wy), sat(self.ankle * wx));
         let (hip_pitch, hip_roll) = (sat(self.hip * wy), sat(self.hip * wx));
-        let legs: [bool; 2] = match phase {
-            SupportPhase::Single(Side::Left) => [true, false],
-            SupportPhase::Single(Side::Right) => [false, true],
-            _ => [true, true],
+        spread(phase, [hip_roll, hip_pitch, ankle_pitch, ankle_roll], add);
+    }
+}
+
+/// [`GyroFeedback`] in integers for FPU-less cores: rates in µrad/s as the IMU sends them,
+/// corrections in I16F16 rad bits (gains and limit converted once).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FixedGyroFeedback {
+    /// Δq bits = ω (µrad/s) · k >> 32, ankle and hip.
+    ankle_k: i64,
+    hip_k: i64,
+    /// Largest correction, I16F16 bits.
+    max_bits: i64,
+}
+
+impl FixedGyroFeedback {
+    /// The integer form of `g` (non-finite gains count as 0, as a non-finite product there).
+    pub fn new(g: &GyroFeedback) -> Self {
+        let k = |v: f32| {
+            if v.is_finite() {
+                (f64::from(v) * 1e-6 * 65536.0 * 4_294_967_296.0) as i64
+            } else {
+                0
+            }
         };
-        for (leg, on_ground) in legs.into_iter().enumerate() {
-            if !on_ground {
-                continue;
-            }
-            for (j, d) in [
-                (1, hip_roll),
-                (2, hip_pitch),
-                (4, ankle_pitch),
-                (5, ankle_roll),
-            ] {
-                add(6 * leg + j, d);
-            }
+        let m = if g.max_rad.is_finite() {
+            libm::fmaxf(g.max_rad, 0.0)
+        } else {
+            0.0
+        };
+        FixedGyroFeedback {
+            ankle_k: k(g.ankle),
+            hip_k: k(g.hip),
+            max_bits: (f64::from(m) * 65536.0) as i64,
+        }
+    }
+
+    /// [`GyroFeedback::for_each`] for trunk rates `gyro` = [ω_x, ω_y] in µrad/s:
+    /// `add(joint index, Δq in I16F16 rad bits)`.
+    pub fn for_each(
+        &self,
+        phase: SupportPhase,
+        gyro_urad_s: Option<[i32; 2]>,
+        add: impl FnMut(usize, i32),
+    ) {
+        let Some([wx, wy]) = gyro_urad_s.map(|g| g.map(i64::from)) else {
+            return;
+        };
+        let m = self.max_bits;
+        // |ω| < 2³¹, |k| < 2³² for gains under ≈ 60 s: the product fits.
+        let sat = |w: i64, k: i64| {
+            let k = k.clamp(-(1 << 32), 1 << 32);
+            ((w * k) >> 32).clamp(-m, m) as i32
+        };
+        let (ankle_pitch, ankle_roll) = (sat(wy, self.ankle_k), sat(wx, self.ankle_k));
+        let (hip_pitch, hip_roll) = (sat(wy, self.hip_k), sat(wx, self.hip_k));
+        spread(phase, [hip_roll, hip_pitch, ankle_pitch, ankle_roll], add);
+    }
+}
+
+/// The four corrections [hip roll, hip pitch, ankle pitch, ankle roll] to the joints of the legs
+/// on the ground in `phase`.
+fn spread<T: Copy>(phase: SupportPhase, d: [T; 4], mut add: impl FnMut(usize, T)) {
+    let [hip_roll, hip_pitch, ankle_pitch, ankle_roll] = d;
+    let legs: [bool; 2] = match phase {
+        SupportPhase::Single(Side::Left) => [true, false],
+        SupportPhase::Single(Side::Right) => [false, true],
+        _ => [true, true],
+    };
+    for (leg, on_ground) in legs.into_iter().enumerate() {
+        if !on_ground {
+            continue;
+        }
+        for (j, d) in [
+            (1, hip_roll),
+            (2, hip_pitch),
+            (4, ankle_pitch),
+            (5, ankle_roll),
+        ] {
+            add(6 * leg + j, d);
         }
     }
 }
@@ -114,6 +177,39 @@ impl GyroFeedback {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fixed_point_feedback_matches_the_f32_law() {
+        let g = GyroFeedback {
+            ankle: 0.1,
+            hip: 0.05,
+            max_rad: 0.02,
+        };
+        let x = FixedGyroFeedback::new(&g);
+        for phase in [
+            SupportPhase::Double,
+            SupportPhase::Single(Side::Left),
+            SupportPhase::Single(Side::Right),
+        ] {
+            for w in [[0.1f32, -0.3], [0.013, 0.002], [-2.0, 0.5]] {
+                let mut q = [0.0f32; 12];
+                g.apply(&mut q, phase, Some(w));
+                let mut b = [0i32; 12];
+                let raw = w.map(|v| (v * 1e6) as i32);
+                x.for_each(phase, Some(raw), |j, d| b[j] += d);
+                for (j, (&f, &i)) in q.iter().zip(b.iter()).enumerate() {
+                    let got = i as f32 / 65536.0;
+                    assert!(
+                        (got - f).abs() <= 2.0 / 65536.0,
+                        "{phase:?} {w:?} {j}: {got} vs {f}"
+                    );
+                }
+            }
+        }
+        let mut n = 0;
+        x.for_each(SupportPhase::Double, None, |_, _| n += 1);
+        assert_eq!(n, 0);
+    }
 
     #[test]
     fn damps_only_the_legs_on_the_ground_and_saturates() {

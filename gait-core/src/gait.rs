@@ -218,13 +218,28 @@ impl<const N: usize> Engine<N> {
                 fixed: None,
             },
             #[cfg(feature = "fixed-engine")]
-            Engine::Fixed(s, _) => {
+            Engine::Fixed(..) => {
                 let mnm = if tau.is_finite() {
                     libm::roundf(tau * 1000.0).clamp(-1.0e9, 1.0e9) as i32
                 } else {
                     0
                 };
-                let f = s.next(mnm);
+                self.next_mnm(mnm)
+            }
+        }
+    }
+
+    /// [`Engine::next`] with τ in whole mN·m (the fixed-point sampler's unit: no float on the
+    /// way there).
+    pub fn next_mnm(&mut self, tau_mnm: i32) -> Sample {
+        match self {
+            Engine::F32(s) => Sample {
+                f32: s.next(tau_mnm as f32 * 1e-3),
+                fixed: None,
+            },
+            #[cfg(feature = "fixed-engine")]
+            Engine::Fixed(s, _) => {
+                let f = s.next(tau_mnm);
                 Sample {
                     f32: f.to_f32(),
                     fixed: Some(f),

@@ -1521,3 +1521,84 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
     let fwd = feet[0].x.max(feet[1].x);
     assert!(fwd > 0.1 && fwd < 0.3, "forward {fwd} m");
 }
+
+/// `math=fixed` (the integer tilt, pitch filter, measured ZMP, gyro feedback and IK → ticks)
+/// against the f32 path (compliance feed-forward off, as `math=fixed` has it) on the same fake
+/// robot: both walk Table 2 to `PlanDone` in the same
+/// ticks; the logged ZMP reference within 3 log units (30 µm; the fixed-point sampler's
+/// accuracy is 54 µm worst case against f64), the measured ZMP within 3 units (but on ≤ 5
+/// ticks, see below), τ within 2 mN·m,
+/// every goal within 3 servo ticks (0.005 rad). Fixed-point feature only (`fixed-gait`).
+#[cfg(feature = "fixed-gait")]
+#[test]
+fn fixed_point_loop_agrees_with_the_f32_loop() {
+    let walk = |arithmetic| {
+        // The compliance feed-forward is f32 only (off with `math=fixed`): off in both.
+        let cfg = Config {
+            arithmetic,
+            compliance: Compliance::OFF,
+            ..autostart_config()
+        };
+        let mut b = board(&cfg);
+        let end = run(&mut b, &cfg);
+        assert_eq!(end, RunEnd::Stopped(StopReason::PlanDone), "{arithmetic:?}");
+        b
+    };
+    let (f, x) = (walk(Arithmetic::F32), walk(Arithmetic::Fixed));
+    let (tf, tx) = (ticks_of(&f.records()), ticks_of(&x.records()));
+    assert_eq!(tf.len(), tx.len());
+    assert!(tf.len() > 2000);
+    let mut worst = [0i32; 4];
+    // The fake robot loads the feet whose goal-pose FK is within 2 mm of the lowest: goals a
+    // tick or two apart flip that set at a few support changes (the measured ZMP jumps by half
+    // the feet's spacing, 45 mm = 4,500 units, or by ≈ 10 mm along x).
+    let mut flips = 0;
+    for (a, b) in tf.iter().zip(tx.iter()) {
+        assert_eq!((a.phase, a.zmp_valid), (b.phase, b.zmp_valid));
+        let d = |p: [i32; 2], q: [i32; 2]| (p[0] - q[0]).abs().max((p[1] - q[1]).abs());
+        let meas = d(a.zmp_meas, b.zmp_meas);
+        if meas > 3 {
+            flips += 1;
+            assert!(meas <= 4_500, "{:?} vs {:?}", a.zmp_meas, b.zmp_meas);
+            continue;
+        }
+        for (w, v) in worst.iter_mut().zip([
+            d(a.zmp_ref, b.zmp_ref),
+            meas,
+            i32::from((a.tau_mnm - b.tau_mnm).abs()),
+            0,
+        ]) {
+            *w = (*w).max(v);
+        }
+    }
+    for (a, b) in f.goals.iter().zip(x.goals.iter()) {
+        for (p, q) in a.iter().zip(b.iter()) {
+            worst[3] = worst[3].max((p - q).abs());
+        }
+    }
+    assert_eq!(f.goals.len(), x.goals.len());
+    let [zr, zm, tau, goal] = worst;
+    assert!(zr <= 3 && zm <= 3 && tau <= 2 && goal <= 3, "{worst:?}");
+    assert!(flips <= 5, "{flips} ticks with another loaded-foot set");
+    // Not all equal by accident: the fake robot's gyro makes τ and the feedback non-zero.
+    assert!(tx.iter().any(|t| t.tau_mnm != 0));
+}
+
+/// The integer tilt estimate stops a fall like the f32 one (`fall_stops_and_turns_torque_off`).
+#[cfg(feature = "fixed-gait")]
+#[test]
+fn fixed_point_loop_detects_a_fall() {
+    let cfg = Config {
+        arithmetic: Arithmetic::Fixed,
+        ..autostart_config()
+    };
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let mut b = board(&cfg);
+    b.fall_at = Some(1 + ramp + 100);
+    let end = run(&mut b, &cfg);
+    let RunEnd::Stopped(StopReason::Fall { tilt_mrad }) = end else {
+        panic!("{end:?}");
+    };
+    assert!((600..650).contains(&tilt_mrad), "{tilt_mrad}");
+    assert!(b.servos().all(|d| !d.torque));
+}
