@@ -488,6 +488,14 @@ fn fixed_foot(f: &gait_core::swing::FootSample<f32>) -> FixedFoot {
     }
 }
 
+/// An I16F16 position (m) in the log's unit ([`crate::record::POS_UNIT_M`] = 10 µm), rounded
+/// half up: bits · 10⁵ / 2¹⁶ (integer only), saturating at the record's ±8,388,607 like
+/// `pos_from_m`.
+fn pos_of_fx(v: Fx) -> i32 {
+    let p = (i64::from(v.to_bits()) * 100_000 + (1 << 15)) >> 16;
+    p.clamp(-8_388_607, 8_388_607) as i32
+}
+
 /// Last good sensor values.
 struct SensorState {
     feet: [Option<FootForces>; 2],
@@ -814,11 +822,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         };
         let [fl, fr] = &state.feet;
         let [pl, pr] = &prev.feet;
+        // The fixed-point ZMP also goes to the log as is (no float).
+        let mut meas_fx = None;
         let meas_zmp = if fixed_math {
             let forces = |f: &Option<FootForces>| f.map(|f| f.forces_mn);
-            zmp_meter
-                .zmp((&fixed_foot(pl), forces(fl)), (&fixed_foot(pr), forces(fr)))
-                .map(|z| z.map(|v| v.to_num::<f32>()))
+            meas_fx = zmp_meter.zmp((&fixed_foot(pl), forces(fl)), (&fixed_foot(pr), forces(fr)));
+            meas_fx.map(|z| z.map(|v| v.to_num::<f32>()))
         } else {
             measured_zmp(
                 &robot,
@@ -963,9 +972,23 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 }
                             }
                         }
-                        let ([zx, zy], [cx, cy, _]) = (s.zmp, s.com);
-                        rec.set_zmp_ref_m(zx, zy);
-                        rec.set_com_m(cx + shift[0], cy + shift[1]);
+                        // The present sample in fixed point (`math=fixed` without lead or
+                        // shift: it is the one the IK took) goes to the log without float.
+                        let present_fx = ahead
+                            .as_ref()
+                            .and_then(|a| a.fixed)
+                            .filter(|_| cfg.lead_ticks() == 0 && !cfg.stabilizer_on);
+                        match present_fx {
+                            Some(f) => {
+                                rec.zmp_ref = f.zmp.map(pos_of_fx);
+                                rec.com = [pos_of_fx(f.com[0]), pos_of_fx(f.com[1])];
+                            }
+                            None => {
+                                let ([zx, zy], [cx, cy, _]) = (s.zmp, s.com);
+                                rec.set_zmp_ref_m(zx, zy);
+                                rec.set_com_m(cx + shift[0], cy + shift[1]);
+                            }
+                        }
                         rec.phase = phase_of(&s);
                         prev = s;
                         Some(goal)
@@ -1022,7 +1045,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 _ => LoggedPhase::Stopped,
             };
         }
-        if let Some([zx, zy]) = meas_zmp {
+        if let Some(z) = meas_fx {
+            rec.zmp_meas = z.map(pos_of_fx);
+            rec.zmp_valid = true;
+        } else if let Some([zx, zy]) = meas_zmp {
             rec.set_zmp_meas_m(zx, zy);
             rec.zmp_valid = true;
         }
