@@ -210,16 +210,19 @@ impl FixedPitchAccel {
             } else {
                 d
             };
+            // Rounded to nearest (a floor would drift the output down by ½ µrad/s² a sample
+            // with a small α).
             let step = (d - self.acc).clamp(-(1 << 33), 1 << 33);
-            self.acc += (self.alpha30 * step) >> 30;
+            self.acc += (self.alpha30 * step + (1 << 29)) >> 30;
         }
         self.prev_rate = Some(rate);
         self.gap = 1;
     }
 
-    /// τ = J·φ̈, whole mN·m (saturating).
+    /// τ = J·φ̈, whole mN·m, rounded to nearest like the f32 path's `roundf` (a floor would
+    /// report −1 mN·m for any tiny negative φ̈), saturating.
     pub fn torque_mnm(&self) -> i32 {
-        let t = (self.acc.clamp(-(1 << 40), 1 << 40) * self.inertia_k) >> 32;
+        let t = (self.acc.clamp(-(1 << 40), 1 << 40) * self.inertia_k + (1 << 31)) >> 32;
         t.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
     }
 }

@@ -254,7 +254,15 @@ type FixedFootLoad = Option<(i64, [i64; 2])>;
 impl FixedZmpMeter {
     /// The meter of `robot` with feet under `min_load_n` (N) ignored.
     pub fn new(robot: &Robot, min_load_n: f32) -> Self {
-        let bits = |v: f64| crate::fixed_point::Fx::saturating_from_num(v).to_bits() as i64;
+        // Offsets of a few cm: nearest I16F16 step (a plain product, not the `fixed` crate's
+        // generic f64 conversion: ≈ 600 B less flash on the M3).
+        let bits = |v: f64| {
+            if v.is_finite() {
+                libm::round(libm::fmin(libm::fmax(v, -1.0), 1.0) * 65536.0) as i64
+            } else {
+                0
+            }
+        };
         let min = if min_load_n.is_finite() {
             libm::roundf(min_load_n * 1000.0) as i64
         } else {
