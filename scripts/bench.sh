@@ -291,6 +291,7 @@ fik_at=14 fik_sc=4
 fik3=$(calc "$fik_at * ${M3[prim.fx_atan2.avg]} + $fik_sc * ${M3[prim.fx_sin_cos.avg]}")
 exp3=$(calc "2 * ${M3[prim.fx_exp_neg.avg]}")
 opt_level=$(sed -n '/^\[profile\.release\]/,/^\[/ s/^opt-level *= *"\{0,1\}\([^"]*\)"\{0,1\}.*/\1/p' Cargo.toml)
+opt_level_m3=$(sed -n '/^\[profile\.release-m3\]/,/^\[/ s/^opt-level *= *"\{0,1\}\([^"]*\)"\{0,1\}.*/\1/p' Cargo.toml)
 
 section=$out/section.md
 {
@@ -337,10 +338,12 @@ positions and the BULK READ of feet + IMU. The paths differ in the middle:
   the stabilizer's per-tick call (support polygon of the previous sample, \`Stabilizer::update\`
   with the measured ZMP and the gyro) and the whole-body compensation with its shift
   (\`control::Targets::WholeBody\`, 2 iterations: 4 two-leg IK and 3 FK/CoM evaluations).
-- **fixed**: fixed-point sampler (\`FixedSampler::next\`, τ in mN·m), integer-only two-leg IK
-  (\`fixed_ik::joint_targets\`) and an integer rad → tick conversion; the pitch-rate filter
-  and the measured ZMP stay f32 (the soles' places converted from fixed point), so on the M3
-  these two are the only soft-float work left in the tick.
+- **fixed** (the firmware's \`math=fixed\`): integer pitch-rate filter with τ in mN·m
+  (\`imu::FixedPitchAccel\`), fixed-point sampler (\`FixedSampler::next\`), fixed-point
+  measured ZMP (\`measured::FixedZmpMeter\`), integer-only two-leg IK
+  (\`fixed_ik::joint_targets\`) and the integer limit and rad → tick conversion
+  (\`supervisor::safe_targets_fx\`): no float in the tick but the sampler's once-per-segment
+  bookkeeping.
 
 These are the library calls alone; the firmware's own loop is measured below.
 
@@ -372,7 +375,7 @@ estimate, \`safe_targets\` and the log record (≈ $(calc "${M7[control.log_byte
 | Cortex-M3, mps2-an385, f32 soft float (\`math=f32\`) | $(cell M3 control.tick) | $(ratio "${M3[control.tick.avg]}" "$t3f" 2)× |
 | Cortex-M3, mps2-an385, fixed-point path (\`math=fixed\`) | $(cell M3 control.tick_fixed) | $(ratio "${M3[control.tick_fixed.avg]}" "$t3" 2)× the fixed library-call tick |
 
-The Cortex-M3 bench is built as the M3 firmware is (profile \`release-m3\`, opt-level "s", with
+The Cortex-M3 bench is built as the M3 firmware is (profile \`release-m3\`, opt-level "$opt_level_m3", with
 the \`fixed-gait\` feature); its stage figures below are of that build too.
 
 What dominates (TLIPFM, avg; the parts are the stage figures below, the rest is the tick minus
@@ -396,8 +399,8 @@ their sum):
   from \`control::SupportCache\`; building one (\`control::support_of\`, $(n "${M7[support.tlipfm.avg]}")) is paid
   only when the support phase or a supporting foot changes.
 - **M3, fixed tick $(n "$t3")**: $(breakdown "$t3" "Dynamixel codec|$codec3" \
-        "fixed-point IK|${M3[ik.fixed.tlipfm.avg]}" "measured ZMP (soft float)|${M3[mzmp.tlipfm.avg]}" \
-        "fixed-point sample|${M3[sample.fixed.tlipfm.avg]}" "pitch filter (soft float)|${M3[imu.pitch_accel.avg]}").
+        "fixed-point IK|${M3[ik.fixed.tlipfm.avg]}" "measured ZMP (fixed point)|${M3[mzmp.fixed.tlipfm.avg]}" \
+        "fixed-point sample|${M3[sample.fixed.tlipfm.avg]}" "pitch filter (integer)|${M3[imu.pitch_accel_fixed.avg]}").
   The fixed-point IK's $fik_at \`atan2\` + $fik_sc \`sin_cos\` are ≈ $(n "$fik3") by the primitives, plus 10 exact
   integer square roots of up to 62-bit operands (\`isqrt\`; the \`fixed_ik::sqrt\` primitive,
   $(n "${M3[prim.fx_sqrt.avg]}"), takes a shorter operand). The fixed-point IK costs $(n "${M3[ik.fixed.tlipfm.avg]}") against
@@ -454,6 +457,7 @@ EOF
         "support:support polygon of a sample (\`control::support_of\`)" \
         "stab:stabilizer step: support polygon + \`Stabilizer::update\`" \
         "mzmp:measured ZMP, f32 (\`measured::measured_zmp\`)" \
+        "mzmp.fixed:measured ZMP, fixed point (\`measured::FixedZmpMeter::zmp\`)" \
         "tick.f32:full tick, f32" \
         "tick.comp_stab:full tick, f32 + compensation + stabilizer" \
         "tick.fixed:full tick, fixed"; do
@@ -465,6 +469,7 @@ EOF
     done
     for st in "swing.cycloid:swing foot alone, cycloid (\`swing::swing_foot\`)" \
         "imu.pitch_accel:pitch-rate filter and τ (\`imu::PitchAccel\`)" \
+        "imu.pitch_accel_fixed:pitch-rate filter and τ, integer (\`imu::FixedPitchAccel\`)" \
         "dxl.sync_write12:encode SYNC WRITE, 12 goal positions (${sw} bytes)" \
         "dxl.bulk_read3:encode BULK READ, feet + IMU (${br} bytes)" \
         "dxl.decode3:decode + parse 3 status replies byte by byte (${sfl} + ${sfr} + ${simu} bytes)" \

@@ -41,6 +41,13 @@
 //! 7. The tick log record (nominal time, ZMP reference, measured ZMP, CoM, τ, support phase,
 //!    fault state, bus error counters, overruns); the watchdog is fed.
 //!
+//! With `math=fixed` (FPU-less cores, feature `fixed-gait`) steps 4-5 and 7 run in integers:
+//! the pitch filter with τ in whole mN·m ([`FixedPitchAccel`]), the tilt
+//! ([`FixedAttitudeFilter`]), the measured ZMP ([`FixedZmpMeter`]), the fixed-point sample and
+//! IK, the gyro feedback ([`FixedGyroFeedback`]), the limits and ticks ([`safe_targets_fx`], no
+//! f32 round trip) and the log's positions (`pos_of_fx`); the sample is still copied to f32
+//! for the support phase, the stabilizer and the command port.
+//!
 //! Bus traffic per tick at 1 Mbps (no byte stuffing needed for typical data): BULK READ
 //! instruction 25 bytes out; replies 29 + 29 + 37 = 95 bytes in; SYNC WRITE 74 bytes out — 99
 //! bytes out and 95 in, ≈ 1.94 ms of line time (+ the Return Delay Times, 0 after start-up);

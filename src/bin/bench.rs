@@ -52,7 +52,7 @@ mod firmware {
     use gait_core::fixed_point::{FixedSample, FixedSampler, Fx};
     use gait_core::fourier::FourierCom;
     use gait_core::kinematics::LegKinematics;
-    use gait_core::measured::{measured_zmp, ForceReading, MeasuredZmp, SolePose};
+    use gait_core::measured::{measured_zmp, FixedZmpMeter, ForceReading, MeasuredZmp, SolePose};
     use gait_core::pipeline::joint_targets;
     use gait_core::plan::SwingShape;
     use gait_core::stabilizer::{Stabilizer, StabilizerInput};
@@ -67,8 +67,8 @@ mod firmware {
     use walker_firmware::config::Arithmetic;
     use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache, Targets};
     use walker_firmware::fake_robot::{FakeRobot, Feet, ImuMotion, Observer};
-    use walker_firmware::imu::{PitchAccel, PitchAccelConfig};
-    use walker_firmware::supervisor::StopReason;
+    use walker_firmware::imu::{FixedPitchAccel, PitchAccel, PitchAccelConfig};
+    use walker_firmware::supervisor::{safe_targets_fx, JointMap, StopReason};
     use walker_firmware::Config;
 
     /// Plan capacity (Table 2 has 14 steps).
@@ -185,15 +185,6 @@ mod firmware {
         // SAFETY: (caller) exclusive; an array of MaybeUninit needs no initialisation and has
         // the layout of the uninitialised array.
         unsafe { &mut *buf.cast::<[MaybeUninit<T>; MAX_TICKS]>() }
-    }
-
-    /// The ground place of a fixed-point foot, for the (f32) measured ZMP.
-    fn fx_place(f: &gait_core::fixed_point::FixedFoot) -> Place<f32> {
-        Place {
-            x: f.x.to_num::<f32>(),
-            y: f.y.to_num::<f32>(),
-            yaw: f.yaw.to_num::<f32>(),
-        }
     }
 
     /// The stabilizer's per-tick call in `control::run`: the (cached) support polygon of the
@@ -347,6 +338,10 @@ mod firmware {
         stab: Stabilizer<f32>,
         support: SupportCache,
         pitch: PitchAccel,
+        /// The fixed-point path's pitch filter, measured ZMP and joint map (`math=fixed`).
+        pitch_fx: FixedPitchAccel,
+        meter: FixedZmpMeter,
+        map: JointMap,
         dec: Decoder<64>,
         sensors: Sensors,
         gyro: Option<[f32; 2]>,
@@ -366,6 +361,9 @@ mod firmware {
                 stab: new_stabilizer(&robot),
                 support: SupportCache::default(),
                 pitch: PitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
+                pitch_fx: FixedPitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
+                meter: FixedZmpMeter::new(&robot, MIN_LOAD_N),
+                map: JointMap::from_robot(&robot),
                 dec: Decoder::new(),
                 sensors: Sensors::default(),
                 gyro: None,
@@ -382,6 +380,13 @@ mod firmware {
             self.gyro = Some([roll_rate, rate]);
             self.pitch.update(rate);
             self.pitch.torque()
+        }
+
+        /// Start of a fixed-point tick: the replies → τ in mN·m (integer pitch filter).
+        fn sense_fixed(&mut self, replies: &[u8]) -> i32 {
+            decode_replies_block(&mut self.dec, replies, &mut self.sensors);
+            self.pitch_fx.update(Some(self.sensors.imu.gyro_urad_s[1]));
+            self.pitch_fx.torque_mnm()
         }
 
         /// Measured ZMP from the 8 forces, the soles at `l` and `r`.
@@ -434,15 +439,15 @@ mod firmware {
             self.send(&q)
         }
 
-        /// Rest of a fixed-point tick: measured ZMP (f32, on the soles converted from fixed
-        /// point), integer-only IK, integer tick conversion, goals out, next BULK READ.
+        /// Rest of a fixed-point tick as `control::run` does it with `math=fixed`: measured
+        /// ZMP in fixed point, integer-only IK, the integer limit and tick conversion
+        /// (`supervisor::safe_targets_fx`), goals out, next BULK READ.
         fn act_fixed(&mut self, s: &FixedSample) -> usize {
-            black_box(self.measured(&fx_place(&s.feet[0]), &fx_place(&s.feet[1])));
+            let f = self.sensors.feet.map(|f| Some(f.forces_mn));
+            black_box(self.meter.zmp((&s.feet[0], f[0]), (&s.feet[1], f[1])));
             let (q, rep) = fixed_ik::joint_targets(&self.fkin, s);
             black_box(&rep);
-            for (j, (g, &a)) in self.goals.iter_mut().zip(&q).enumerate() {
-                *g = TickMap::reference().tick_fx(j, a.to_bits());
-            }
+            self.goals = safe_targets_fx(&q, &self.map).ticks;
             self.encode()
         }
     }
@@ -715,6 +720,15 @@ mod firmware {
             }),
             ovh,
         );
+        let mut pitch_fx = FixedPitchAccel::new(PitchAccelConfig::reference(DT_S as f32));
+        report(
+            "imu.pitch_accel_fixed",
+            measure(K, &mut |i| {
+                pitch_fx.update(Some((x(i) * 1.0e6) as i32));
+                black_box(pitch_fx.torque_mnm());
+            }),
+            ovh,
+        );
 
         // ---- swing foot alone (cycloid, one single support) ----
         let (params, _) = walk_plan(ModelKind::Tlipfm);
@@ -894,16 +908,31 @@ mod firmware {
                 ovh,
             );
 
-            // Full tick, fixed path: the same with the fixed-point sampler (τ in mN·m), the
-            // fixed-point IK and an integer rad → tick conversion; the measured ZMP stays f32
-            // (on the soles converted from fixed point), as does the pitch-rate filter.
+            // The measured ZMP in fixed point on the fixed-point samples' soles.
+            let meter = FixedZmpMeter::new(&robot, MIN_LOAD_N);
+            let (lf, rf) = ([4_100, 3_900, 4_300, 3_700], [3_800, 4_200, 3_600, 4_400]);
+            report(
+                name.set("mzmp.fixed.", m),
+                measure(fx_samples.len() as u32, &mut |i| {
+                    let smp = black_box(&fx_samples[i as usize]);
+                    black_box(meter.zmp(
+                        (&smp.feet[0], black_box(Some(lf))),
+                        (&smp.feet[1], black_box(Some(rf))),
+                    ));
+                }),
+                ovh,
+            );
+
+            // Full tick, fixed path as `control::run` with `math=fixed`: the integer pitch
+            // filter (τ in mN·m), the fixed-point sampler, the fixed-point measured ZMP, the
+            // fixed-point IK and the integer limit and rad → tick conversion.
             let mut io = TickIo::new();
             let mut fs = fresh_fx.clone();
             report(
                 name.set("tick.fixed.", m),
                 measure(n, &mut |_| {
-                    let tau = io.sense(black_box(replies));
-                    let smp = fs.next((tau * 1000.0) as i32);
+                    let tau = io.sense_fixed(black_box(replies));
+                    let smp = fs.next(tau);
                     black_box(io.act_fixed(&smp));
                 }),
                 ovh,

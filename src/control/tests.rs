@@ -390,11 +390,19 @@ fn a_short_dropout_recovers() {
 
 #[test]
 fn fall_stops_and_turns_torque_off() {
-    // The fake IMU's accelerometer jumps to a 1 rad tilt with no rotation rate (an unphysical
-    // fall): the attitude filter follows it with its accelerometer time constant and stops the
-    // walk when the estimate passes the 0.6 rad limit (k = dt/(τ + dt) per tick: the estimate
-    // is 1 − (1 − k)ⁿ of the way after n ticks, 0.6 after n ≈ 91 at 5 ms and τ = 0.5 s).
-    let cfg = autostart_config();
+    fall_stops_with(Arithmetic::F32);
+}
+
+/// The fake IMU's accelerometer jumps to a 1 rad tilt with no rotation rate (an unphysical
+/// fall): the attitude filter (f32, or the integer one with `math=fixed`) follows it with its
+/// accelerometer time constant and stops the walk when the estimate passes the 0.6 rad limit
+/// (k = dt/(τ + dt) per tick: the estimate is 1 − (1 − k)ⁿ of the way after n ticks, 0.6
+/// after n ≈ 91 at 5 ms and τ = 0.5 s).
+fn fall_stops_with(arithmetic: Arithmetic) {
+    let cfg = Config {
+        arithmetic,
+        ..autostart_config()
+    };
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
     b.fall_at = Some(1 + ramp + 100);
@@ -1588,17 +1596,5 @@ fn fixed_point_loop_agrees_with_the_f32_loop() {
 #[cfg(feature = "fixed-gait")]
 #[test]
 fn fixed_point_loop_detects_a_fall() {
-    let cfg = Config {
-        arithmetic: Arithmetic::Fixed,
-        ..autostart_config()
-    };
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
-    let mut b = board(&cfg);
-    b.fall_at = Some(1 + ramp + 100);
-    let end = run(&mut b, &cfg);
-    let RunEnd::Stopped(StopReason::Fall { tilt_mrad }) = end else {
-        panic!("{end:?}");
-    };
-    assert!((600..650).contains(&tilt_mrad), "{tilt_mrad}");
-    assert!(b.servos().all(|d| !d.torque));
+    fall_stops_with(Arithmetic::Fixed);
 }
