@@ -99,7 +99,7 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
-use gait_core::balance::FixedGyroFeedback;
+use gait_core::balance::{FixedGyroFeedback, FootForceControl, FootForceState};
 use gait_core::compliance::{Compliance, LoadModel};
 use gait_core::fixed_point::{FixedFoot, Fx};
 use gait_core::gait::Arithmetic;
@@ -661,6 +661,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         Arithmetic::F32 => cfg.compliance,
         _ => Compliance::OFF,
     };
+    // Foot force difference control (`fdc_gain`): f32 only, like the compliance feed-forward.
+    let foot_force = match cfg.arithmetic {
+        Arithmetic::F32 => cfg.foot_force,
+        _ => FootForceControl::OFF,
+    };
+    let mut foot_force_state = FootForceState::default();
     // The initial pose: the plan's first sample, or the online walk's standing pose.
     let (first, q0) = match &online {
         Some(o) => {
@@ -844,6 +850,25 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             )
             .zmp
         };
+        let foot_load = |f: &Option<FootForces>| {
+            reading(f)
+                .compression()
+                .map_or(f32::NAN, |c| c.iter().sum::<f32>())
+        };
+        // Not on the start-up ramp (its targets do not take the offsets: no jump at its end);
+        // off with `math=fixed` (f32 only: its state stays 0, so it is not run there).
+        let sole_dz = match ramp_k {
+            Some(_) => [0.0; 2],
+            None if fixed_math => [0.0; 2],
+            None => foot_force_state.update(
+                &foot_force,
+                prev.zmp,
+                [[pl.x, pl.y], [pr.x, pr.y]],
+                [foot_load(fl), foot_load(fr)],
+                prev.phase,
+                cfg.dt_s() as f32,
+            ),
+        };
 
         // The command port: answered every tick; torque off on command; the online walk's
         // command.
@@ -938,9 +963,16 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
                         }
+                        // The soles' heights of the force difference control (F4).
+                        let lift = |mut g: GaitSample<f32>| {
+                            for (f, dz) in g.feet.iter_mut().zip(sole_dz) {
+                                f.z += dz;
+                            }
+                            g
+                        };
                         // The integer IK's angles go to the ticks without an f32 round trip
-                        // (`math=fixed`; compliance is off there); the f32 path otherwise
-                        // (and for the NaN fault injection).
+                        // (`math=fixed`; compliance and the force difference control are off
+                        // there); the f32 path otherwise (and for the NaN fault injection).
                         let fx_q = match &ahead {
                             Some(a) if cfg.fault_nan_tick != Some(k) => {
                                 sampler.joints_fx(&targets, a, shift)
@@ -958,8 +990,13 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             }
                             None => {
                                 let (mut q, loaded) = match &ahead {
+                                    Some(a) if foot_force_state.dz != 0.0 => {
+                                        let mut lifted = *a;
+                                        lifted.f32 = lift(a.f32);
+                                        (sampler.joints(&targets, &lifted, shift), a.f32)
+                                    }
                                     Some(a) => (sampler.joints(&targets, a, shift), a.f32),
-                                    None => (targets.joints(&s, shift).0, s),
+                                    None => (targets.joints(&lift(s), shift).0, s),
                                 };
                                 load.apply(&compliance, &mut q, &loaded, shift);
                                 cfg.gyro_feedback.apply(&mut q, s.phase, gyro);

@@ -149,6 +149,8 @@ pub struct Config {
     pub gyro_feedback: gait_core::balance::GyroFeedback,
     /// Feed-forward of the position servos' static sag ([`gait_core::compliance`]).
     pub compliance: gait_core::compliance::Compliance,
+    /// Foot force difference control in double support ([`gait_core::balance`]).
+    pub foot_force: gait_core::balance::FootForceControl,
     /// What start-up does when the plan needs joints faster than the servos.
     pub feasibility: Feasibility,
     /// The number type of the per-sample gait work (f32, or the fixed-point sampler and IK).
@@ -224,6 +226,7 @@ impl Config {
             stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
             gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
             compliance: gait_core::compliance::Compliance::DEFAULT,
+            foot_force: gait_core::balance::FootForceControl::OFF,
             feasibility: Feasibility::Stretch,
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,

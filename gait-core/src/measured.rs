@@ -32,9 +32,11 @@
 //! [`FixedZmpMeter`] computes the same ZMP without floating point (FPU-less cores): forces in
 //! whole mN (as the foot boards send them), sensor offsets and sole poses in I16F16 m, the
 //! rotation by ψ with the fixed-point `sin_cos` (skipped at ψ = 0), and for both feet together
-//! `p_zmp = (Σ_k F_k·(x_k, y_k) + R(ψ_k)·Σ_i f_i·s_i) / Σ_k F_k` in `i64` with two divisions;
-//! a product that would overflow makes the foot invalid. It agrees with the f32 formula to the
-//! I16F16 resolution (2⁻¹⁶ m ≈ 15 µm; test `fixed_zmp_matches_f32`).
+//! `p_zmp = (Σ_k F_k·(x_k, y_k) + R(ψ_k)·Σ_i f_i·s_i) / Σ_k F_k` in `i64` with two divisions.
+//! No product can overflow: each reading is clamped to [0, 2²⁴] mN (16.8 kN, far beyond any
+//! plausible load), the offsets to ±0.25 m, and the rotation takes sin and cos to 2⁻²⁰. It
+//! agrees with the f32 formula to the I16F16 resolution (2⁻¹⁶ m ≈ 15 µm; test
+//! `fixed_zmp_matches_f64`).
 //!
 //! The sum of squares is kept scaled (`Σ e² = scale²·ssq` with `scale = max |e|`), so it cannot
 //! overflow; the sum saturates at `f64::MAX`. Memory is O(1).
@@ -247,8 +249,8 @@ pub struct FixedZmpMeter {
     min_load_mn: i64,
 }
 
-/// One foot's load (mN) and its moment about the sole point in the world axes
-/// (mN · I16F16 m bits), `None` when invalid (no reading or an overflow).
+/// One foot's load (mN) and its moment about the origin in the world axes
+/// (mN · I16F16 m bits), `None` without a reading.
 type FixedFootLoad = Option<(i64, [i64; 2])>;
 
 impl FixedZmpMeter {
@@ -258,7 +260,7 @@ impl FixedZmpMeter {
         // generic f64 conversion: ≈ 600 B less flash on the M3).
         let bits = |v: f64| {
             if v.is_finite() {
-                libm::round(libm::fmin(libm::fmax(v, -1.0), 1.0) * 65536.0) as i64
+                libm::round(libm::fmin(libm::fmax(v, -0.25), 0.25) * 65536.0) as i64
             } else {
                 0
             }
@@ -283,23 +285,25 @@ impl FixedZmpMeter {
         let mut load = 0i64;
         let mut m = [0i64; 2];
         for (&fi, s) in f.iter().zip(self.sensors.iter()) {
-            let fi = i64::from(fi.max(0));
+            // f ≤ 2²⁴, |s| ≤ 2¹⁴: |m| ≤ 2⁴⁰.
+            let fi = i64::from(fi.clamp(0, 1 << 24));
             load += fi;
-            m[0] = m[0].checked_add(fi.checked_mul(s[0])?)?;
-            m[1] = m[1].checked_add(fi.checked_mul(s[1])?)?;
+            m[0] += fi * s[0];
+            m[1] += fi * s[1];
         }
         let yaw = foot.yaw;
         if yaw != Fx::ZERO {
             let (sn, cs) = crate::fixed_point::sin_cos(yaw);
-            // |m| < 2⁵⁰ for any i32 forces and offsets under 2¹⁶ bits; sin, cos ≤ 2³⁰.
-            let r = |a: i64, b: i64| a.checked_mul(b).map(|v| v >> 30);
-            let x = r(m[0], cs)?.checked_sub(r(m[1], sn)?)?;
-            let y = r(m[0], sn)?.checked_add(r(m[1], cs)?)?;
-            m = [x, y];
+            // sin, cos to 2⁻²⁰: products ≤ 2⁶⁰.
+            let (sn, cs) = (sn >> 10, cs >> 10);
+            m = [(m[0] * cs - m[1] * sn) >> 20, (m[0] * sn + m[1] * cs) >> 20];
         }
-        let px = load.checked_mul(i64::from(foot.x.to_bits()))?;
-        let py = load.checked_mul(i64::from(foot.y.to_bits()))?;
-        Some((load, [px.checked_add(m[0])?, py.checked_add(m[1])?]))
+        // load ≤ 2²⁶, |x|, |y| < 2³¹: ≤ 2⁵⁷.
+        let p = [
+            load * i64::from(foot.x.to_bits()),
+            load * i64::from(foot.y.to_bits()),
+        ];
+        Some((load, [p[0] + m[0], p[1] + m[1]]))
     }
 
     /// The measured ZMP (I16F16 m) of the feet at `left` / `right` with their forces (mN;
@@ -316,10 +320,8 @@ impl FixedZmpMeter {
         let (load, m) = match (l, r) {
             (None, None) => return None,
             (Some(a), None) | (None, Some(a)) => a,
-            (Some((fl, ml)), Some((fr, mr))) => (
-                fl.checked_add(fr)?,
-                [ml[0].checked_add(mr[0])?, ml[1].checked_add(mr[1])?],
-            ),
+            // Sums of two terms ≤ 2⁵⁸.
+            (Some((fl, ml)), Some((fr, mr))) => (fl + fr, [ml[0] + mr[0], ml[1] + mr[1]]),
         };
         let q = |v: i64| i32::try_from(v / load).ok().map(Fx::from_bits);
         Some([q(m[0])?, q(m[1])?])

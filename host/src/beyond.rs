@@ -61,6 +61,8 @@ pub struct Variant {
     pub compensation: CompensationName,
     /// Feedback stabilizer.
     pub stabilizer: bool,
+    /// Firmware tokens of this run, after the options' own (the ablation's feedback switches).
+    pub tokens: &'static [&'static str],
 }
 
 /// The six runs of the report, in table order.
@@ -71,6 +73,7 @@ pub fn variants() -> [Variant; 6] {
         com,
         compensation,
         stabilizer,
+        tokens: &[],
     };
     use ComName::{Exact, Fourier};
     use CompensationName::{None as Plain, Wholebody};
@@ -81,6 +84,44 @@ pub fn variants() -> [Variant; 6] {
         v("tlipfm-fourier", ModelName::Tlipfm, Fourier, Plain, false),
         v("tlipfm-wb", ModelName::Tlipfm, Exact, Wholebody, false),
         v("tlipfm-wb-fb", ModelName::Tlipfm, Exact, Wholebody, true),
+    ]
+}
+
+/// The firmware's feedback switched off: no gyro damping, no compliance feed-forward (the
+/// paper's open loop, as in `plans/table2-paper.toml` but at the plan's timing).
+pub const OPEN_LOOP: &[&str] = &["gyro_ankle=0", "gyro_hip=0", "compliance_roll=0"];
+
+/// The ablation of the closed-loop issue (item 4), in table order: the paper's three models
+/// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
+/// the ankles, at the hips (the gains are the firmware's defaults), the servo compliance
+/// feed-forward (this run is the firmware's default), whole-body compensation of the swing
+/// leg, the DCM/ZMP stabilizer.
+pub fn ablation() -> [Variant; 8] {
+    let v = |name, model, compensation, stabilizer, tokens| Variant {
+        name,
+        model,
+        com: ComName::Exact,
+        compensation,
+        stabilizer,
+        tokens,
+    };
+    use CompensationName::{None as Plain, Wholebody};
+    use ModelName::{Dlipm, Lipm, Tlipfm};
+    [
+        v("lipm-open", Lipm, Plain, false, OPEN_LOOP),
+        v("dlipm-open", Dlipm, Plain, false, OPEN_LOOP),
+        v("tlipfm-open", Tlipfm, Plain, false, OPEN_LOOP),
+        v(
+            "+gyro-ankle",
+            Tlipfm,
+            Plain,
+            false,
+            &["gyro_hip=0", "compliance_roll=0"],
+        ),
+        v("+gyro-hip", Tlipfm, Plain, false, &["compliance_roll=0"]),
+        v("+compliance (default)", Tlipfm, Plain, false, &[]),
+        v("+wholebody", Tlipfm, Wholebody, false, &[]),
+        v("+stabilizer", Tlipfm, Wholebody, true, &[]),
     ]
 }
 
@@ -158,6 +199,10 @@ pub struct RunMetrics {
     pub torque_limited: f64,
     /// Reference samples that disagreed with the host's rebuild of the firmware's sampler.
     pub ref_mismatch: usize,
+    /// Pelvis yaw at the end minus at the start, rad (NaN: not read).
+    pub heading_drift: f64,
+    /// Largest torso tilt from the vertical, rad (NaN: not read).
+    pub max_tilt: f64,
 }
 
 /// The largest entry of a per-joint array and its joint's name (NaN entries skipped).
@@ -420,6 +465,8 @@ pub fn score(
             f64::NAN
         },
         ref_mismatch: mismatch,
+        heading_drift: f64::NAN,
+        max_tilt: f64::NAN,
     })
 }
 
@@ -462,14 +509,21 @@ pub struct BeyondOptions {
     pub sim: SimConfig,
 }
 
-/// Walks the six variants and scores them; `progress(name)` before each run.
-pub fn run(opts: &BeyondOptions, progress: impl Fn(&str)) -> Result<Vec<RunMetrics>, String> {
+/// Walks `variants` ([`variants`] or [`ablation`]) and scores them; `progress(name)` before
+/// each run.
+pub fn run(
+    opts: &BeyondOptions,
+    variants: &[Variant],
+    progress: impl Fn(&str),
+) -> Result<Vec<RunMetrics>, String> {
     // Every variant's firmware command line is checked before the first run starts.
-    let runs = variants()
-        .into_iter()
+    let runs = variants
+        .iter()
+        .cloned()
         .map(|v| {
             let spec = v.spec(&opts.spec);
             let mut extra = opts.extra_tokens.clone();
+            extra.extend(v.tokens.iter().map(|t| t.to_string()));
             if v.stabilizer {
                 extra.extend(opts.feedback_tokens.iter().cloned());
             }
@@ -498,7 +552,11 @@ pub fn run(opts: &BeyondOptions, progress: impl Fn(&str)) -> Result<Vec<RunMetri
         };
         let r = fil::run(&fopts, |_, _| {})?;
         let fell = r.sim.fall_started_us.map(|t| t as f64 * 1e-6);
-        out.push(score(&v, &cfg, &r.log, &r.truth, r.exit_code, fell)?);
+        let mut m = score(&v, &cfg, &r.log, &r.truth, r.exit_code, fell)?;
+        let f = fil::walk_figures(&r.truth, &fopts.spec)?;
+        m.heading_drift = f.heading_drift;
+        m.max_tilt = f.max_tilt;
+        out.push(m);
     }
     Ok(out)
 }
@@ -513,18 +571,18 @@ fn mm(v: f64) -> String {
 
 /// Header of `beyond.csv`: units as name suffixes (`_frac`: a fraction of the walking ticks);
 /// an absent value (no fall, no truth column, no torque model) is an empty field.
-pub const CSV_HEADER: &str = "run,exit_code,fell_at_s,timing_factor,true_mean_x_m,true_mean_y_m,true_max_x_m,true_max_y_m,meas_mean_x_m,meas_mean_y_m,meas_max_x_m,meas_max_y_m,inside_frac,walking_ticks,walked_m,planned_m,peak_speed_max_rad_s,true_peak_speed_max_rad_s,peak_torque_max_nm,torque_limited_frac,ref_mismatch";
+pub const CSV_HEADER: &str = "run,exit_code,fell_at_s,timing_factor,true_mean_x_m,true_mean_y_m,true_max_x_m,true_max_y_m,meas_mean_x_m,meas_mean_y_m,meas_max_x_m,meas_max_y_m,inside_frac,walking_ticks,walked_m,planned_m,peak_speed_max_rad_s,true_peak_speed_max_rad_s,peak_torque_max_nm,torque_limited_frac,ref_mismatch,heading_drift_rad,max_tilt_rad";
 
 /// The side-by-side table (Markdown).
 pub fn table(runs: &[RunMetrics]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "| run | exit | timing × | true ZMP mean \\|e\\| x / y (mm) | true max \\|e\\| x / y (mm) | measured mean \\|e\\| x / y (mm) | measured max x / y (mm) | true ZMP inside (5 mm margin) | walked / planned (m) | peak joint speed, true / target (rad/s) | peak motor torque (N·m) | time at torque bound |"
+        "| run | exit | timing × | true ZMP mean \\|e\\| x / y (mm) | true max \\|e\\| x / y (mm) | measured mean \\|e\\| x / y (mm) | measured max x / y (mm) | true ZMP inside (5 mm margin) | walked / planned (m) | heading drift | torso tilt max | peak joint speed, true / target (rad/s) | peak motor torque (N·m) | time at torque bound |"
     );
     let _ = writeln!(
         s,
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- | ---: |"
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- | ---: |"
     );
     let num = |v: f64, d: usize| {
         if v.is_finite() {
@@ -544,7 +602,7 @@ pub fn table(runs: &[RunMetrics]) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {:.3} | {} / {} | {} / {} | {} / {} | {} / {} | {:.1} % | {:.3} / {:.3} | {} ({}) / {:.2} ({}) | {} ({}) | {} % |",
+            "| {} | {} | {:.3} | {} / {} | {} / {} | {} / {} | {} / {} | {:.1} % | {:.3} / {:.3} | {}° | {}° | {} ({}) / {:.2} ({}) | {} ({}) | {} % |",
             r.variant.name,
             exit,
             r.timing_factor,
@@ -559,6 +617,8 @@ pub fn table(runs: &[RunMetrics]) -> String {
             r.inside * 100.0,
             r.walked,
             r.planned,
+            num(r.heading_drift.to_degrees(), 1),
+            num(r.max_tilt.to_degrees(), 1),
             num(tv, 2),
             tn,
             jv,
@@ -579,7 +639,7 @@ pub fn csv(runs: &[RunMetrics]) -> String {
         let n = report::csv_number;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.variant.name,
             r.exit_code.map_or(String::new(), |c| c.to_string()),
             r.fell_at.map_or(String::new(), |t| n(t, 3)),
@@ -600,7 +660,9 @@ pub fn csv(runs: &[RunMetrics]) -> String {
             n(r.worst_true_joint().1, 3),
             n(r.worst_torque_joint().1, 3),
             n(r.torque_limited, 4),
-            r.ref_mismatch
+            r.ref_mismatch,
+            n(r.heading_drift, 4),
+            n(r.max_tilt, 4)
         );
     }
     s
@@ -695,6 +757,8 @@ pub(crate) mod tests {
             peak_torque: [0.0; LEG_JOINTS],
             torque_limited: 0.0,
             ref_mismatch: 0,
+            heading_drift: 0.0,
+            max_tilt: 0.0,
         }
     }
 
@@ -772,9 +836,11 @@ pub(crate) mod tests {
     #[test]
     fn variants_map_to_firmware_tokens() {
         let spec = WalkSpec::default();
-        for v in variants() {
+        for v in variants().into_iter().chain(ablation()) {
             let s = v.spec(&spec);
-            let cfg = firmware_config(&fil::firmware_tokens(&s).unwrap()).unwrap();
+            let mut tokens = fil::firmware_tokens(&s).unwrap();
+            tokens.extend(v.tokens.iter().map(|t| t.to_string()));
+            let cfg = firmware_config(&tokens).unwrap();
             assert_eq!(cfg.stabilizer_on, v.stabilizer, "{}", v.name);
             assert_eq!(
                 cfg.compensation == walker_contract::config::Compensation::WholeBody,
@@ -783,6 +849,47 @@ pub(crate) mod tests {
             assert_eq!(cfg.model, gait_core::ModelKind::from(v.model));
             assert_eq!(cfg.com_fourier, v.com == ComName::Fourier, "{}", v.name);
         }
+    }
+
+    /// Each ablation run adds exactly one part to the one before it (after the three open-loop
+    /// models), the open loop has every feedback off and the "(default)" run is the firmware's
+    /// defaults.
+    #[test]
+    fn the_ablation_adds_one_part_at_a_time() {
+        let spec = WalkSpec::default();
+        let cfgs: Vec<Config> = ablation()
+            .iter()
+            .map(|v| {
+                let mut tokens = fil::firmware_tokens(&v.spec(&spec)).unwrap();
+                tokens.extend(v.tokens.iter().map(|t| t.to_string()));
+                firmware_config(&tokens).unwrap()
+            })
+            .collect();
+        let parts = |c: &Config| {
+            [
+                c.gyro_feedback.ankle > 0.0,
+                c.gyro_feedback.hip > 0.0,
+                c.compliance.roll > 0.0,
+                c.compensation == walker_contract::config::Compensation::WholeBody,
+                c.stabilizer_on,
+            ]
+        };
+        for c in &cfgs[..3] {
+            assert_eq!(parts(c), [false; 5]);
+        }
+        for w in cfgs[2..].windows(2) {
+            let (a, b) = (parts(&w[0]), parts(&w[1]));
+            let added: Vec<usize> = (0..5).filter(|&i| b[i] && !a[i]).collect();
+            assert_eq!(added.len(), 1, "{a:?} -> {b:?}");
+            assert!((0..5).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
+        }
+        let default_run = ablation()
+            .iter()
+            .position(|v| v.name.contains("default"))
+            .unwrap();
+        let base = firmware_config(&fil::firmware_tokens(&spec).unwrap()).unwrap();
+        assert_eq!(parts(&cfgs[default_run]), parts(&base));
+        assert_eq!(parts(&base), [true, true, true, false, false]);
     }
 
     #[test]

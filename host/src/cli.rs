@@ -117,6 +117,12 @@ pub enum Command {
     /// friction 0.5 / 0.75, +5 ms sensor latency, 5 % dropped status packets; host/src/sweep.rs)
     /// and writes OUT/sweep.md with the goals each case misses, and OUT/<case>/.
     Sweep(SweepArgs),
+    /// Largest torso push survived: four directions, standing and walking, on the MuJoCo robot.
+    ///
+    /// For each condition and direction (forward, left, backward, right) climbs the push's
+    /// impulse in steps of 2·STEP until the robot falls, then tries the level in between
+    /// (host/src/pushes.rs); writes OUT/pushes.md and one folder per run.
+    Pushes(PushesArgs),
 }
 
 /// `walker export`.
@@ -377,6 +383,11 @@ pub struct BeyondArgs {
     /// Firmware parameters for the feedback run only, e.g. 'stab_ki=2'.
     #[arg(long, value_name = "'K=V …'")]
     pub feedback_args: Option<String>,
+    /// The closed-loop ablation instead of the six methods: LIPM, DLIPM, TLIPFM open loop,
+    /// then TLIPFM + gyro at the ankles, + at the hips, + servo compliance feed-forward (the
+    /// default), + whole-body compensation, + stabilizer (eight walks, OUT/beyond.md).
+    #[arg(long)]
+    pub ablation: bool,
     /// The runs.
     #[command(flatten)]
     pub run: RunArgs,
@@ -389,6 +400,32 @@ pub struct SweepArgs {
     #[arg(long, value_name = "DIR", default_value = "out/sweep")]
     pub out: PathBuf,
     /// The runs (each case changes one knob of the nominal simulated robot).
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// `walker pushes`.
+#[derive(Debug, Args)]
+pub struct PushesArgs {
+    /// Output folder (pushes.md, one folder per run).
+    #[arg(long, value_name = "DIR", default_value = "out/pushes")]
+    pub out: PathBuf,
+    /// The search's resolution, N·s.
+    #[arg(long, value_name = "NS", default_value_t = 0.25)]
+    pub step: f64,
+    /// The largest impulse tried, N·s.
+    #[arg(long, value_name = "NS", default_value_t = 4.0)]
+    pub max: f64,
+    /// When a walking push lands, s of simulated time (Table 2: 6 s is left single support).
+    #[arg(long, value_name = "S", default_value_t = 6.0)]
+    pub walk_at: f64,
+    /// How long after standing ready a standing push lands, s.
+    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    pub stand_after: f64,
+    /// Only standing or only walking (default both).
+    #[arg(long, value_parser = ["standing", "walking"])]
+    pub only: Option<String>,
+    /// The runs.
     #[command(flatten)]
     pub run: RunArgs,
 }
@@ -505,6 +542,7 @@ pub fn run(command: Command) -> Result<(), CliError> {
         Command::Fil(a) => run_fil(a),
         Command::Beyond(a) => run_beyond(a),
         Command::Sweep(a) => run_sweep(a),
+        Command::Pushes(a) => run_pushes(a),
     }
 }
 
@@ -1016,8 +1054,16 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
         servo_torque: sim.servo_torque,
         sim,
     };
-    eprintln!("walker beyond: {plan_name}, six firmware-in-the-loop walks");
-    let runs = crate::beyond::run(&opts, |name| eprintln!("  walking {name} …"))?;
+    let variants: Vec<crate::beyond::Variant> = if a.ablation {
+        crate::beyond::ablation().to_vec()
+    } else {
+        crate::beyond::variants().to_vec()
+    };
+    eprintln!(
+        "walker beyond: {plan_name}, {} firmware-in-the-loop walks",
+        variants.len()
+    );
+    let runs = crate::beyond::run(&opts, &variants, |name| eprintln!("  walking {name} …"))?;
     let table = crate::beyond::table(&runs);
     let servo_torque = opts.servo_torque;
     let servos = match opts.sim.physics {
@@ -1037,8 +1083,13 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
             ))
         ),
     };
+    let title = if a.ablation {
+        "The closed loop, one part at a time"
+    } else {
+        "Beyond the paper"
+    };
     let mut md = format!(
-        "# Beyond the paper: {plan_name}\n\n{servos}\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the simulator's (true) and the firmware's targets'.\n\n"
+        "# {title}: {plan_name}\n\n{servos}\nErrors against the firmware's ZMP reference over the walking ticks; peak joint speeds are the simulator's (true) and the firmware's targets'.\n\n"
     );
     md.push_str(&table);
     md.push('\n');
@@ -1260,6 +1311,64 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
             code: 3,
         }),
     }
+}
+
+fn run_pushes(a: PushesArgs) -> Result<(), CliError> {
+    use crate::pushes::{self, Condition};
+    let RunSetup {
+        spec,
+        plan_name,
+        sim,
+        elf,
+        machine,
+        timeout,
+        extra_tokens,
+    } = RunSetup::new("pushes", a.run)?;
+    if !(a.walk_at.is_finite()
+        && a.walk_at >= 0.0
+        && a.stand_after.is_finite()
+        && a.stand_after >= 0.0
+        && a.stand_after < pushes::STAND_HOLD)
+    {
+        return Err(CliError::usage(format!(
+            "walker pushes: --walk-at must be ≥ 0 and --stand-after in [0, {}) s",
+            pushes::STAND_HOLD
+        )));
+    }
+    let conditions = match a.only.as_deref() {
+        Some("standing") => vec![Condition::Standing],
+        Some("walking") => vec![Condition::Walking],
+        _ => vec![Condition::Standing, Condition::Walking],
+    };
+    let out = a.out;
+    let opts = pushes::PushOptions {
+        elf,
+        spec,
+        out_dir: out.clone(),
+        machine,
+        sim,
+        extra_tokens,
+        timeout,
+        step: a.step,
+        max: a.max,
+        walk_at: a.walk_at,
+        stand_after: a.stand_after,
+        conditions,
+    };
+    eprintln!("walker pushes: {plan_name}");
+    let rows = pushes::run(&opts, |line| eprintln!("  {line} …")).map_err(CliError::failed)?;
+    let mut md = format!(
+        "# Largest torso push survived: {plan_name}\n\nThe firmware's defaults on the MuJoCo robot; a push is a 10 ms horizontal force on the torso. Walking: pushed at {:.2} s of the walk, survived = no fall and the walk ends normally. Standing: pushed {:.2} s after standing ready, survived = no fall and the run ends by the commanded torque off. Resolution {:.2} N·s, up to {:.2} N·s; one run per level (host/src/pushes.rs).\n\n",
+        a.walk_at, a.stand_after, a.step, a.max
+    );
+    md.push_str(&pushes::table(&rows, a.max));
+    std::fs::create_dir_all(&out)
+        .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
+    let path = out.join("pushes.md");
+    std::fs::write(&path, &md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
+    print!("{md}");
+    println!("\nwritten: {}", path.display());
+    Ok(())
 }
 
 #[cfg(test)]

@@ -111,6 +111,9 @@ impl CommandScript {
     }
 }
 
+/// How many times [`PortMaster::transact`] sends an instruction that gets no reply.
+pub const PORT_ATTEMPTS: usize = 3;
+
 /// A Dynamixel master on the command port's byte stream.
 pub struct PortMaster {
     stream: TcpStream,
@@ -132,8 +135,27 @@ impl PortMaster {
     }
 
     /// Sends one instruction to the port and waits for its status: the error code (None =
-    /// OK) and the data.
+    /// OK) and the data. Without a reply within [`PortMaster::timeout`] the instruction is sent
+    /// again (the decoder restarted), up to [`PORT_ATTEMPTS`] times in all: every instruction
+    /// the driver sends (READ, WRITE of a register to a value) can be repeated.
     pub fn transact(
+        &mut self,
+        ins: Instruction<'_>,
+    ) -> Result<(Option<ErrorCode>, Vec<u8>), String> {
+        let mut last = String::new();
+        for _ in 0..PORT_ATTEMPTS {
+            match self.transact_once(ins) {
+                Err(e) if e.ends_with("no reply") => {
+                    self.decoder = Decoder::new();
+                    last = e;
+                }
+                other => return other,
+            }
+        }
+        Err(format!("{last} ({PORT_ATTEMPTS} attempts)"))
+    }
+
+    fn transact_once(
         &mut self,
         ins: Instruction<'_>,
     ) -> Result<(Option<ErrorCode>, Vec<u8>), String> {

@@ -250,11 +250,27 @@ fn run_inner(
         }
         _ => None,
     };
+    let mut driver = driver;
+    let mut drove: DriveOutcome = None;
     let exit_code = loop {
         match child.try_wait() {
             Ok(Some(status)) => break status.code(),
             Ok(None) => {}
             Err(e) => return Err(format!("waiting for QEMU: {e}")),
+        }
+        // A command driver that gave up (the port stopped answering) would leave the firmware
+        // waiting for commands until the wall-clock limit: end the run with its error.
+        if driver.as_ref().is_some_and(|d| d.is_finished()) {
+            let outcome = driver
+                .take()
+                .map(|d| d.join().unwrap_or_else(|_| Err("driver panicked".into())));
+            if let Some(Err(e)) = &outcome {
+                let _ = child.kill();
+                let _ = child.wait();
+                handle.stop();
+                return Err(format!("command driver: {e}"));
+            }
+            drove = outcome;
         }
         if started.elapsed() > opts.timeout {
             quit.store(true, std::sync::atomic::Ordering::Relaxed);
@@ -282,7 +298,9 @@ fn run_inner(
         std::thread::sleep(Duration::from_millis(200));
     };
     quit.store(true, std::sync::atomic::Ordering::Relaxed);
-    let drove = driver.map(|d| d.join().unwrap_or_else(|_| Err("driver panicked".into())));
+    if let Some(d) = driver {
+        drove = Some(d.join().unwrap_or_else(|_| Err("driver panicked".into())));
+    }
     let summary = handle.join().map_err(|e| format!("simulator: {e}"))?;
     Ok((
         FilResult {

@@ -10,6 +10,7 @@ pub mod fil;
 pub mod mcap_export;
 pub mod planfile;
 pub mod plot;
+pub mod pushes;
 pub mod qemu;
 pub mod report;
 pub mod runconfig;

@@ -1598,3 +1598,56 @@ fn fixed_point_loop_agrees_with_the_f32_loop() {
 fn fixed_point_loop_detects_a_fall() {
     fall_stops_with(Arithmetic::Fixed);
 }
+
+/// Foot force difference control (`fdc_gain`, gait-core `balance` F1–F4): the left foot
+/// reports the whole weight and the right nothing, so in double support the left carries more
+/// than any split the ZMP reference asks for (ΔF − ΔF_d = 80·(1 − α) N ≥ 0): the left sole is
+/// raised and the right lowered by the same height (the soles' heights in the pelvis frame,
+/// from the goal ticks through the leg FK), never by more than `fdc_max`/2; off, the goals do
+/// not move.
+#[test]
+fn foot_force_difference_raises_the_overloaded_sole_within_its_bound() {
+    use gait_core::kinematics::{leg_fk, Pose};
+    use gait_core::Side;
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 fdc_gain=0");
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0 fdc_gain=0.002 fdc_max=0.01");
+    let weight = [[10_000; 4], [0; 4]];
+    let (mut a, mut b) = (
+        board(&off).with_imu_rate(0.0),
+        board(&on).with_imu_rate(0.0),
+    );
+    a.feet = crate::fake_robot::Feet::Constant(weight);
+    b.feet = crate::fake_robot::Feet::Constant(weight);
+    assert_eq!(run(&mut a, &off), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(run(&mut b, &on), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(a.goals.len(), b.goals.len());
+    let robot = Robot::reference();
+    let map = JointMap::from_robot(&robot);
+    let pelvis = Pose::level(0.0f64, 0.0, 0.0, 0.0);
+    let sole_z = |g: &[i32; 12], leg: usize, side: Side| {
+        let q: [f64; 6] =
+            core::array::from_fn(|j| f64::from(map.rad_of_tick(6 * leg + j, g[6 * leg + j])));
+        leg_fk(&robot, side, &pelvis, &q).z
+    };
+    // One goal tick is 1.5 mrad: ≈ 0.3 mm of sole height through a 0.2 m leg.
+    let tol = 6e-4;
+    let (mut raised, mut moved_off) = (0.0f64, 0usize);
+    for (ga, gb) in a.goals.iter().zip(&b.goals) {
+        let dl = sole_z(gb, 0, Side::Left) - sole_z(ga, 0, Side::Left);
+        let dr = sole_z(gb, 1, Side::Right) - sole_z(ga, 1, Side::Right);
+        assert!(dl >= -tol && dl <= 0.005 + tol, "left {dl}");
+        assert!(dr <= tol && dr >= -0.005 - tol, "right {dr}");
+        assert!((dl + dr).abs() <= 2.0 * tol, "{dl} {dr}");
+        raised = raised.max(dl);
+        moved_off += usize::from(ga != gb);
+    }
+    assert!(raised > 0.004, "left sole raised at most {raised} m");
+    assert!(moved_off > 100, "{moved_off} ticks changed");
+    // Off: the same goals as a run that never heard of the control.
+    let plain = cfg_with("gyro_ankle=0 gyro_hip=0");
+    let mut c = board(&plain).with_imu_rate(0.0);
+    c.feet = crate::fake_robot::Feet::Constant(weight);
+    assert_eq!(run(&mut c, &plain), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(a.goals, c.goals);
+    assert_goals_in_limits(&b);
+}

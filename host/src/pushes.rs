@@ -1,0 +1,374 @@
+//! `walker pushes`: the largest torso push the firmware survives on the MuJoCo robot, in four
+//! directions, while standing and while walking (the closed-loop issue, item 7).
+//!
+//! A push is a horizontal force on the torso spread over 10 ms ([`crate::sim::Push`]), given by
+//! its impulse J (N·s) and its direction in the ground plane (0° forward, 90° left, 180°
+//! backward, 270° right).
+//!
+//! - **Walking**: the plan (default Table 2) walked by the firmware's defaults, the push at
+//!   `walk_at` s of simulated time (default 6 s: the middle of single support on the left foot
+//!   in Table 2). Survived: no fall in the physics and the firmware ends the walk normally
+//!   (exit `PlanDone`).
+//! - **Standing**: the firmware without autostart stands ready (State = standing on its command
+//!   port), is pushed `stand_after` s later (default 1 s) and is told to stop and turn its torque
+//!   off [`STAND_HOLD`] s after standing ready. Survived: no fall and the run ends by that torque
+//!   off (exit `Requested`). The time the firmware stands ready comes from a first run
+//!   without a push (the same for every run: lock-step, virtual time), which must survive.
+//!
+//! The search ([`search`]) climbs in coarse steps of 2·`step` from 2·`step` until the first fall
+//! or `max`, then tries the level one `step` below that fall: the result is the largest level
+//! survived and the smallest level seen to fall, both to within `step`. It assumes that a push
+//! harder than one that fell falls too — one run per level, no repetition, so a non-monotone
+//! robot (a lucky foot placement) can report more than it reliably survives; every run is
+//! listed in the table for that reason.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use crate::commands::{CommandScript, ScriptCommand};
+use crate::fil::{self, FilOptions};
+use crate::planfile::WalkSpec;
+use crate::sim::{Push, SimConfig};
+use walker_contract::codes::ExitCode;
+
+/// Seconds from standing ready to the stop command in a standing run.
+pub const STAND_HOLD: f64 = 3.0;
+
+/// What the robot is doing when pushed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Condition {
+    /// Standing ready, on command (no autostart).
+    Standing,
+    /// Walking the plan.
+    Walking,
+}
+
+impl Condition {
+    /// Lower-case name (also the output sub-folder's prefix).
+    pub fn name(self) -> &'static str {
+        match self {
+            Condition::Standing => "standing",
+            Condition::Walking => "walking",
+        }
+    }
+}
+
+/// The four push directions: name and angle in the ground plane, degrees.
+pub const DIRECTIONS: [(&str, f64); 4] = [
+    ("forward", 0.0),
+    ("left", 90.0),
+    ("backward", 180.0),
+    ("right", 270.0),
+];
+
+/// One run of a search: the impulse (N·s) and whether the robot survived it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trial {
+    /// Impulse, N·s.
+    pub impulse: f64,
+    /// Survived (see the module docs).
+    pub survived: bool,
+}
+
+/// What a search found.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SearchResult {
+    /// Largest impulse survived, N·s (`None`: even the smallest level fell).
+    pub survived: Option<f64>,
+    /// Smallest impulse seen to fall, N·s (`None`: survived up to `max`).
+    pub fell: Option<f64>,
+    /// Every run, in order.
+    pub trials: Vec<Trial>,
+}
+
+/// The climbing search of the module docs over levels k·`step` (k ≥ 1) up to `max`;
+/// `survives(J)` runs one push.
+pub fn search(
+    step: f64,
+    max: f64,
+    mut survives: impl FnMut(f64) -> Result<bool, String>,
+) -> Result<SearchResult, String> {
+    if !(step.is_finite() && step > 0.0 && max.is_finite() && max >= step) {
+        return Err(format!("push search: step {step} and max {max} N·s"));
+    }
+    let kmax = (max / step + 1e-9).floor() as u32;
+    let mut out = SearchResult::default();
+    let mut run = |k: u32, out: &mut SearchResult| -> Result<bool, String> {
+        let impulse = f64::from(k) * step;
+        let survived = survives(impulse)?;
+        out.trials.push(Trial { impulse, survived });
+        Ok(survived)
+    };
+    // Coarse climb: k = 2, 4, 6, … (the first coarse level is k = 2 unless kmax < 2).
+    let mut last_ok = 0u32;
+    let mut first_fall = None;
+    let mut k = 2.min(kmax);
+    while k <= kmax {
+        if run(k, &mut out)? {
+            last_ok = k;
+            if k == kmax {
+                break;
+            }
+            k = (k + 2).min(kmax);
+        } else {
+            first_fall = Some(k);
+            break;
+        }
+    }
+    if let Some(f) = first_fall {
+        // The level between the last survived and the first fall, if there is one.
+        let mut fell = f;
+        if f >= last_ok + 2 {
+            let mid = f - 1;
+            if run(mid, &mut out)? {
+                last_ok = mid;
+            } else {
+                fell = mid;
+            }
+        }
+        out.fell = Some(f64::from(fell) * step);
+    }
+    out.survived = (last_ok > 0).then(|| f64::from(last_ok) * step);
+    Ok(out)
+}
+
+/// Options of [`run`].
+#[derive(Clone, Debug)]
+pub struct PushOptions {
+    /// Firmware ELF.
+    pub elf: PathBuf,
+    /// The walking plan.
+    pub spec: WalkSpec,
+    /// Output folder (one sub-folder per run, `pushes.md`).
+    pub out_dir: PathBuf,
+    /// QEMU machine.
+    pub machine: String,
+    /// The simulated robot (MuJoCo by default); its own pushes are replaced.
+    pub sim: SimConfig,
+    /// Extra firmware tokens for every run.
+    pub extra_tokens: Vec<String>,
+    /// Wall-clock limit per run.
+    pub timeout: Duration,
+    /// The search's resolution, N·s.
+    pub step: f64,
+    /// The largest impulse tried, N·s.
+    pub max: f64,
+    /// When a walking push lands, s of simulated time.
+    pub walk_at: f64,
+    /// How long after standing ready a standing push lands, s.
+    pub stand_after: f64,
+    /// Which conditions to search.
+    pub conditions: Vec<Condition>,
+}
+
+/// One searched case.
+#[derive(Clone, Debug)]
+pub struct PushRow {
+    /// Standing or walking.
+    pub condition: Condition,
+    /// Direction name.
+    pub direction: &'static str,
+    /// Direction, degrees.
+    pub direction_deg: f64,
+    /// When the push landed, s of simulated time.
+    pub at_s: f64,
+    /// What the search found.
+    pub result: SearchResult,
+}
+
+/// One push run; `Ok(true)` if the robot survived it.
+fn push_run(
+    opts: &PushOptions,
+    condition: Condition,
+    push: Option<Push>,
+    name: &str,
+) -> Result<(bool, Option<u64>), String> {
+    let mut sim = opts.sim.clone();
+    sim.pushes = push.into_iter().collect();
+    let fopts = FilOptions {
+        elf: opts.elf.clone(),
+        spec: opts.spec.clone(),
+        out_dir: opts.out_dir.join(name),
+        machine: opts.machine.clone(),
+        timeout: opts.timeout,
+        sim,
+        extra_tokens: opts.extra_tokens.clone(),
+    };
+    let (r, ready) = match condition {
+        Condition::Walking => (fil::run(&fopts, |_, _| {})?, None),
+        Condition::Standing => {
+            let script = CommandScript {
+                command: vec![ScriptCommand {
+                    t: STAND_HOLD,
+                    vx: 0.0,
+                    vy: 0.0,
+                    vyaw: 0.0,
+                    stop: true,
+                }],
+            };
+            match fil::run_commands(&fopts, &script, |_, _| {}) {
+                Ok((r, d)) => (r, Some(d.ready_us)),
+                // A fall ends the firmware before the script does: the driver is aborted.
+                Err(e) if e.contains("aborted") => return Ok((false, None)),
+                Err(e) => return Err(e),
+            }
+        }
+    };
+    let want = match condition {
+        Condition::Walking => ExitCode::PlanDone,
+        Condition::Standing => ExitCode::Requested,
+    };
+    Ok((
+        r.sim.fall_started_us.is_none() && r.exit_code == Some(i32::from(want.code())),
+        ready,
+    ))
+}
+
+/// Searches every condition and direction; `progress(line)` before each run.
+pub fn run(opts: &PushOptions, progress: impl Fn(&str)) -> Result<Vec<PushRow>, String> {
+    let mut rows = Vec::new();
+    for &condition in &opts.conditions {
+        let at_s = match condition {
+            Condition::Walking => opts.walk_at,
+            Condition::Standing => {
+                progress("standing without a push (the time it stands ready)");
+                let name = "standing-nopush";
+                match push_run(opts, condition, None, name)? {
+                    (true, Some(ready_us)) => ready_us as f64 * 1e-6 + opts.stand_after,
+                    _ => {
+                        return Err(format!(
+                            "standing without a push did not end by torque off: see {}",
+                            opts.out_dir.join(name).display()
+                        ))
+                    }
+                }
+            }
+        };
+        for (direction, deg) in DIRECTIONS {
+            let result = search(opts.step, opts.max, |j| {
+                let name = format!("{}-{direction}-{j:.2}", condition.name());
+                progress(&format!("{name} (push at {at_s:.2} s)"));
+                let push = Push {
+                    at_s,
+                    impulse_ns: j,
+                    direction_rad: deg.to_radians(),
+                    duration_s: 0.01,
+                };
+                push_run(opts, condition, Some(push), &name).map(|(ok, _)| ok)
+            })?;
+            rows.push(PushRow {
+                condition,
+                direction,
+                direction_deg: deg,
+                at_s,
+                result,
+            });
+        }
+    }
+    Ok(rows)
+}
+
+/// The table of largest pushes survived (Markdown).
+pub fn table(rows: &[PushRow], max: f64) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| condition | direction | push at (s) | largest survived (N·s) | smallest fell (N·s) | runs (N·s: ✓ survived, ✗ fell) |"
+    );
+    let _ = writeln!(s, "| --- | --- | ---: | ---: | ---: | --- |");
+    for r in rows {
+        let runs: Vec<String> = r
+            .result
+            .trials
+            .iter()
+            .map(|t| format!("{:.2} {}", t.impulse, if t.survived { "✓" } else { "✗" }))
+            .collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} ({:.0}°) | {:.2} | {} | {} | {} |",
+            r.condition.name(),
+            r.direction,
+            r.direction_deg,
+            r.at_s,
+            r.result
+                .survived
+                .map_or("none".into(), |j| format!("{j:.2}")),
+            r.result
+                .fell
+                .map_or(format!("> {max:.2}"), |j| format!("{j:.2}")),
+            runs.join(", ")
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A robot that survives up to `limit` N·s, recording what it was asked.
+    fn threshold(limit: f64) -> impl FnMut(f64) -> Result<bool, String> {
+        move |j| Ok(j <= limit + 1e-9)
+    }
+
+    #[test]
+    fn search_brackets_a_threshold_to_one_step() {
+        // Threshold 1.3: coarse 0.5 ✓ 1.0 ✓ 1.5 ✗, then 1.25 ✓.
+        let r = search(0.25, 4.0, threshold(1.3)).unwrap();
+        assert_eq!(r.survived, Some(1.25));
+        assert_eq!(r.fell, Some(1.5));
+        let asked: Vec<f64> = r.trials.iter().map(|t| t.impulse).collect();
+        assert_eq!(asked, [0.5, 1.0, 1.5, 1.25]);
+        // Threshold 1.1: 1.25 falls too, so the smallest fall is 1.25.
+        let r = search(0.25, 4.0, threshold(1.1)).unwrap();
+        assert_eq!((r.survived, r.fell), (Some(1.0), Some(1.25)));
+        // Every threshold between 0.25 and 3.9: survived ≤ threshold < fell = survived + step.
+        for i in 1..156 {
+            let limit = 0.25 + 0.0234 * f64::from(i);
+            let r = search(0.25, 4.0, threshold(limit)).unwrap();
+            let ok = r.survived.unwrap();
+            let fell = r.fell.unwrap();
+            assert!(ok <= limit + 1e-9 && limit < fell, "{limit}: {r:?}");
+            assert!((fell - ok - 0.25).abs() < 1e-9, "{limit}: {r:?}");
+            assert!(
+                r.trials.len() <= 2 + (limit / 0.5) as usize,
+                "{limit}: {r:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn search_reports_the_ends() {
+        // Falls at the smallest level: 0.5 ✗, 0.25 ✗.
+        let r = search(0.25, 4.0, threshold(0.1)).unwrap();
+        assert_eq!((r.survived, r.fell), (None, Some(0.25)));
+        assert_eq!(r.trials.len(), 2);
+        // Survives everything up to max (odd number of steps: the last level is max itself).
+        let r = search(0.25, 1.75, threshold(9.0)).unwrap();
+        assert_eq!((r.survived, r.fell), (Some(1.75), None));
+        let asked: Vec<f64> = r.trials.iter().map(|t| t.impulse).collect();
+        assert_eq!(asked, [0.5, 1.0, 1.5, 1.75]);
+        // Errors pass through; bad ranges are refused.
+        assert!(search(0.25, 4.0, |_| Err("x".into())).is_err());
+        assert!(search(0.0, 4.0, threshold(1.0)).is_err());
+        assert!(search(0.5, 0.25, threshold(1.0)).is_err());
+        assert!(search(f64::NAN, 4.0, threshold(1.0)).is_err());
+    }
+
+    #[test]
+    fn the_table_lists_every_run() {
+        let rows = [PushRow {
+            condition: Condition::Walking,
+            direction: "backward",
+            direction_deg: 180.0,
+            at_s: 6.0,
+            result: search(0.25, 4.0, threshold(1.3)).unwrap(),
+        }];
+        let t = table(&rows, 4.0);
+        assert!(
+            t.contains("| walking | backward (180°) | 6.00 | 1.25 | 1.50 | 0.50 ✓, 1.00 ✓, 1.50 ✗, 1.25 ✓ |"),
+            "{t}"
+        );
+    }
+}
