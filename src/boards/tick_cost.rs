@@ -8,15 +8,15 @@
 //! as its compute time per tick (see [`super::qemu_mps2::compute_ns`]).
 
 /// Worst-case instructions per control tick, hard-float build (Cortex-M7/M4F, mps2-an500).
-pub const TICK_INSTRUCTIONS_MAX_FPU: u32 = 24400;
+pub const TICK_INSTRUCTIONS_MAX_FPU: u32 = 24840;
 /// Average instructions per control tick, hard-float build (for reference).
-pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = 22670;
+pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = 23041;
 /// Worst-case instructions per control tick, soft-float build (Cortex-M3, mps2-an385).
-pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = 210520;
+pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = 213240;
 /// Average instructions per control tick, soft-float build (for reference).
-pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = 192003;
+pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = 194656;
 /// Worst-case instructions per control tick, Cortex-M3 build with the fixed-point path
 /// (`fixed-gait`, `math=fixed`; mps2-an385).
-pub const TICK_INSTRUCTIONS_MAX_FIXED_SOFT: u32 = 63040;
+pub const TICK_INSTRUCTIONS_MAX_FIXED_SOFT: u32 = 62800;
 /// Average instructions per control tick, Cortex-M3 fixed-point path (for reference).
-pub const TICK_INSTRUCTIONS_AVG_FIXED_SOFT: u32 = 42606;
+pub const TICK_INSTRUCTIONS_AVG_FIXED_SOFT: u32 = 42438;
