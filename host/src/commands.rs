@@ -297,6 +297,8 @@ pub struct FootstepCheck {
     pub mismatches: Vec<(usize, [i32; 3], [i32; 3])>,
     /// The feet after the last step (left, right), m and rad.
     pub feet: [Place<f32>; 2],
+    /// The commanded path: the feet's midpoint's travel summed over the footsteps, m.
+    pub path: f64,
 }
 
 /// Replays a log's `CommandReceived` and `Footstep` records through [`StepGenerator`] (f32,
@@ -326,6 +328,13 @@ pub fn replay_footsteps(
     let mut gen: Option<StepGenerator<f32>> = None;
     let mut parts: Vec<(u8, i32)> = Vec::new();
     let mut out = FootstepCheck::default();
+    let midpoint = |f: &[Place<f32>; 2]| {
+        [
+            0.5 * (f64::from(f[0].x) + f64::from(f[1].x)),
+            0.5 * (f64::from(f[0].y) + f64::from(f[1].y)),
+        ]
+    };
+    let mut mid = midpoint(&feet);
     for r in records {
         let Record::Fault(f) = r else { continue };
         match f.kind {
@@ -375,6 +384,9 @@ pub fn replay_footsteps(
                 };
                 let s = g.next_step(&c);
                 feet = g.feet();
+                let m = midpoint(&feet);
+                out.path += (m[0] - mid[0]).hypot(m[1] - mid[1]);
+                mid = m;
                 let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
                 let got = [parts[0].1, parts[1].1, parts[2].1];
                 if got != want || s.side != side {

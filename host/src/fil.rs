@@ -361,11 +361,26 @@ pub struct CommandFigures {
 }
 
 impl CommandFigures {
-    /// |walked − commanded| in the plane over the commanded distance.
-    pub fn distance_error(&self) -> f64 {
+    /// |walked − commanded| in the plane, m: how far the torso ended from the commanded place.
+    pub fn position_error(&self) -> f64 {
         let [cx, cy, _] = self.commanded;
         let [wx, wy, _] = self.walked;
-        (wx - cx).hypot(wy - cy) / cx.hypot(cy).max(1e-9)
+        (wx - cx).hypot(wy - cy)
+    }
+
+    /// [`Self::position_error`] over the commanded path length ([`FootstepCheck::path`]).
+    ///
+    /// [`FootstepCheck::path`]: crate::commands::FootstepCheck::path
+    pub fn path_error(&self) -> f64 {
+        self.position_error() / self.footsteps.path.max(1e-9)
+    }
+
+    /// [`Self::position_error`] over the commanded net displacement; `None` when that is
+    /// under 1 cm (a script that comes back to its start).
+    pub fn displacement_error(&self) -> Option<f64> {
+        let [cx, cy, _] = self.commanded;
+        let d = cx.hypot(cy);
+        (d >= 0.01).then(|| self.position_error() / d)
     }
 
     /// walked − commanded heading, rad (wrapped to ±π).
@@ -377,7 +392,7 @@ impl CommandFigures {
     /// One line for the terminal.
     pub fn line(&self) -> String {
         format!(
-            "{}; {} footsteps, {} not the commands'; commanded ({:.3} m, {:.3} m, {:+.1}°), torso ({:.3} m, {:.3} m, {:+.1}°): distance error {:.1} %, heading error {:+.1}°",
+            "{}; {} footsteps, {} not the commands'; commanded ({:.3} m, {:.3} m, {:+.1}°) over a {:.3} m path, torso ({:.3} m, {:.3} m, {:+.1}°): position error {:.3} m = {:.1} % of the path, {} of the net displacement; heading error {:+.1}°",
             self.fell_at
                 .map_or("no fall".to_string(), |t| format!("FELL at {t:.2} s")),
             self.footsteps.steps,
@@ -385,10 +400,14 @@ impl CommandFigures {
             self.commanded[0],
             self.commanded[1],
             self.commanded[2].to_degrees(),
+            self.footsteps.path,
             self.walked[0],
             self.walked[1],
             self.walked[2].to_degrees(),
-            100.0 * self.distance_error(),
+            self.position_error(),
+            100.0 * self.path_error(),
+            self.displacement_error()
+                .map_or("n/a".to_string(), |e| format!("{:.1} %", 100.0 * e)),
             self.heading_error().to_degrees()
         )
     }
@@ -528,6 +547,39 @@ pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn command_figures_measure_the_end_pose_against_the_commanded_one() {
+        let f = CommandFigures {
+            footsteps: crate::commands::FootstepCheck {
+                path: 0.5,
+                ..Default::default()
+            },
+            fell_at: None,
+            commanded: [0.3, 0.4, 170f64.to_radians()],
+            walked: [0.33, 0.44, -170f64.to_radians()],
+        };
+        // (0.03, 0.04) off: 0.05 m, 10 % of the 0.5 m path and of the 0.5 m displacement.
+        assert!((f.position_error() - 0.05).abs() < 1e-12);
+        assert!((f.path_error() - 0.10).abs() < 1e-12);
+        assert!((f.displacement_error().unwrap() - 0.10).abs() < 1e-12);
+        // −170° − 170° wraps to +20°.
+        assert!((f.heading_error().to_degrees() - 20.0).abs() < 1e-9);
+        let back = CommandFigures {
+            commanded: [0.004, -0.003, 0.0],
+            ..f.clone()
+        };
+        assert_eq!(
+            back.displacement_error(),
+            None,
+            "no ratio to a 5 mm displacement"
+        );
+        assert!(
+            back.line().contains("n/a of the net displacement"),
+            "{}",
+            back.line()
+        );
+    }
 
     fn opts(elf: &str, extra: Vec<String>) -> FilOptions {
         FilOptions {
