@@ -113,7 +113,7 @@ use walker_contract::ExitCode;
 use crate::board::{Board, CrashCode, CrashNote, ResetCause, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
 use crate::imu::{
-    AttitudeFilter, FixedAttitudeFilter, FixedPitchAccel, PitchAccel, PitchAccelConfig,
+    AttitudeFilter, FixedAttitudeFilter, FixedPitchAccel, Heading, PitchAccel, PitchAccelConfig,
 };
 use crate::monitor::ServoMonitor;
 use crate::params::ArgError;
@@ -707,10 +707,14 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     };
     let mut pitch = PitchAccel::new(pitch_cfg);
     let mut attitude = AttitudeFilter::new();
+    let mut heading = Heading::new();
     // `math=fixed` (FPU-less cores): the pitch filter and τ, the tilt estimate, the measured
     // ZMP, the gyro feedback and the joint path (integer IK → ticks) in integers; the f32
     // ones otherwise.
-    let fixed_math = cfg!(feature = "fixed-gait") && cfg.arithmetic == Arithmetic::Fixed;
+    // The OpenCM 9.04 (no FPU) always runs the fixed path: a constant, so its build leaves
+    // the f32 branches out (flash).
+    let fixed_math = cfg!(feature = "board-opencm")
+        || (cfg!(feature = "fixed-gait") && cfg.arithmetic == Arithmetic::Fixed);
     let dt_f32 = cfg.dt_s() as f32;
     let mut pitch_fx = FixedPitchAccel::new(pitch_cfg);
     let mut attitude_fx = FixedAttitudeFilter::new(dt_f32);
@@ -804,7 +808,14 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     attitude_fx.update(s.gyro_urad_s, s.accel_um_s2)
                 } else {
                     pitch.update(rate);
-                    attitude.update(g, s.accel_m_s2(), dt_f32).tilt
+                    let att = attitude.update(g, s.accel_m_s2(), dt_f32);
+                    // The online walk's heading hold (f32 path): the gyro's yaw, the bias
+                    // learnt while it stands.
+                    if let Some(o) = online.as_mut() {
+                        let still = matches!(o.mode(), gait_core::online::WalkMode::Standing(_));
+                        o.set_heading(heading.update(g, &att, dt_f32, still));
+                    }
+                    att.tilt
                 };
                 let g = Some([roll_rate, rate]).filter(|g| g.iter().all(|v| v.is_finite()));
                 (g, tilt)
@@ -913,6 +924,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                         &mut log,
                                         f.side,
                                         &f.place,
+                                        o.last_turn(),
                                     );
                                 }
                                 (s, None)

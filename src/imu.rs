@@ -40,6 +40,18 @@
 //! once, a gyro bias `b` leaves a steady error of `b·τ` only. Tilt from vertical:
 //! `cos(tilt) = cos φ · cos θ`.
 
+//!
+//! # Heading (the online walk's heading hold)
+//! [`Heading`] integrates the yaw of the same kinematics with the attitude's roll φ and pitch θ,
+//! less a bias b of the gyro's z axis estimated while the robot stands still:
+//!
+//! ```text
+//! ψ̇ = (q sin φ + (r − b) cos φ) / cos θ,     still: b ← b + (r − b)·dt/τ_b
+//! ```
+//!
+//! (τ_b = [`HEADING_BIAS_TAU_S`]; cos θ bounded below by 0.05). Nothing corrects ψ: a bias
+//! left after standing drifts it by b·t.
+
 /// Default low-pass cutoff of the φ̈ filter, Hz.
 pub use walker_contract::config::DEFAULT_IMU_CUTOFF_HZ as DEFAULT_CUTOFF_HZ;
 /// Standard gravity used for the accelerometer plausibility window, m/s².
@@ -317,6 +329,50 @@ impl AttitudeFilter {
     }
 }
 
+/// Time constant of the heading's gyro-bias estimate while standing still, s.
+pub const HEADING_BIAS_TAU_S: f32 = 2.0;
+
+/// The gyro's yaw integrated (see the module doc, "Heading"), rad from the start.
+#[derive(Clone, Debug, Default)]
+pub struct Heading {
+    yaw: f32,
+    bias: f32,
+}
+
+impl Heading {
+    /// Heading 0, no bias.
+    pub const fn new() -> Self {
+        Heading {
+            yaw: 0.0,
+            bias: 0.0,
+        }
+    }
+
+    /// Feeds one gyro sample (body rates, rad/s) at the attitude `tilt` over `dt_s` seconds;
+    /// `still`: the robot stands (the bias estimate follows r). Non-finite input is ignored.
+    pub fn update(&mut self, gyro: [f32; 3], tilt: &Tilt, dt_s: f32, still: bool) -> f32 {
+        let [_, q, r] = gyro;
+        if !(q.is_finite() && r.is_finite() && dt_s.is_finite() && dt_s > 0.0) {
+            return self.yaw;
+        }
+        if still {
+            self.bias += (r - self.bias) * libm::fminf(dt_s / HEADING_BIAS_TAU_S, 1.0);
+        }
+        let (sr, cr) = sin_cos(tilt.roll);
+        let cp = libm::fmaxf(sin_cos(tilt.pitch).1, 0.05);
+        let yaw = self.yaw + (q * sr + (r - self.bias) * cr) / cp * dt_s;
+        if yaw.is_finite() {
+            self.yaw = yaw;
+        }
+        self.yaw
+    }
+
+    /// The heading, rad.
+    pub fn yaw(&self) -> f32 {
+        self.yaw
+    }
+}
+
 /// π in 2⁻³⁰ rad.
 const PI_30: i64 = 3_373_259_426;
 /// 1 in 2⁻³⁰ units.
@@ -511,6 +567,51 @@ impl TiltEstimator {
 mod tests {
     use super::*;
     use core::f64::consts::TAU as TAU64;
+
+    #[test]
+    fn heading_integrates_yaw_and_removes_the_bias_learnt_standing() {
+        let upright = Tilt {
+            roll: 0.0,
+            pitch: 0.0,
+            tilt: 0.0,
+        };
+        let dt = 0.005;
+        // Upright, r = 0.2 rad/s for 1 s: ψ = 0.2 rad.
+        let mut h = Heading::new();
+        for _ in 0..200 {
+            h.update([0.0, 0.0, 0.2], &upright, dt, false);
+        }
+        assert!((h.yaw() - 0.2).abs() < 1e-4, "{}", h.yaw());
+        // Rolled by φ = 0.3: ψ̇ = q sin φ + r cos φ (θ = 0).
+        let rolled = Tilt {
+            roll: 0.3,
+            ..upright
+        };
+        let mut g = Heading::new();
+        g.update([0.0, 0.1, 0.2], &rolled, 1.0, false);
+        let want = 0.1 * 0.3f32.sin() + 0.2 * 0.3f32.cos();
+        assert!((g.yaw() - want).abs() < 1e-3, "{} {want}", g.yaw());
+        // A 0.01 rad/s bias: 20 s standing still learns it (e^-10 left), then 10 s walking
+        // straight drifts ≤ 0.01 · e^-10 · 10 s + rounding instead of 0.1 rad.
+        let mut b = Heading::new();
+        for _ in 0..4000 {
+            b.update([0.0, 0.0, 0.01], &upright, dt, true);
+        }
+        let at_start = b.yaw();
+        for _ in 0..2000 {
+            b.update([0.0, 0.0, 0.01], &upright, dt, false);
+        }
+        assert!(
+            (b.yaw() - at_start).abs() < 1e-4,
+            "drift {}",
+            b.yaw() - at_start
+        );
+        // Non-finite samples change nothing.
+        let before = b.yaw();
+        b.update([0.0, f32::NAN, 0.0], &upright, dt, false);
+        b.update([0.0, 0.0, 1.0], &upright, f32::INFINITY, false);
+        assert_eq!(b.yaw(), before);
+    }
 
     /// Feeds A sin(Ω t) for `settle` s, then fits the output to a sin + b cos over whole
     /// periods; returns (amplitude, phase) of the output relative to sin(Ω t).

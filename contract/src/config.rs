@@ -79,6 +79,9 @@ impl ServoLimits {
     }
 }
 
+/// Default heading-hold gain of the online walk (share of the heading error turned back per step).
+pub const DEFAULT_HEADING_GAIN: f32 = 0.5;
+
 /// Run-time configuration shared by the boards and the control loop. On QEMU every field
 /// named in [`crate::params::PARAMS`] can be overridden from the semihosting command line; on the real
 /// board the configuration is compiled in.
@@ -151,6 +154,9 @@ pub struct Config {
     pub compliance: gait_core::compliance::Compliance,
     /// Foot force difference control in double support ([`gait_core::balance`]).
     pub foot_force: gait_core::balance::FootForceControl,
+    /// The online walk's heading hold: share of the gyro-measured heading error each walking
+    /// step turns back ([`gait_core::online`] H1–H2; 0 = off).
+    pub heading_gain: f32,
     /// What start-up does when the plan needs joints faster than the servos.
     pub feasibility: Feasibility,
     /// The number type of the per-sample gait work (f32, or the fixed-point sampler and IK).
@@ -227,6 +233,7 @@ impl Config {
             gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
             compliance: gait_core::compliance::Compliance::DEFAULT,
             foot_force: gait_core::balance::FootForceControl::OFF,
+            heading_gain: DEFAULT_HEADING_GAIN,
             feasibility: Feasibility::Stretch,
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,

@@ -848,6 +848,15 @@ params! {
         get: |c| { Some(Value::Num32(c.foot_force.max_m)) },
     },
     {
+        key: "heading_gain",
+        plan_key: None,
+        unit: "1/step",
+        domain: range(0.0, 1.0),
+        doc: "online walk: heading hold, share of the gyro-measured heading error each walking step turns back (gait-core online H2; 0 = off)",
+        set: |c, v| { c.heading_gain = v as f32 },
+        get: |c| { Some(Value::Num32(c.heading_gain)) },
+    },
+    {
         key: "fault_nan",
         plan_key: None,
         unit: "tick",

@@ -22,6 +22,13 @@
 //! robot moves at v; the offset turns by half the step's heading change so that a turn is
 //! symmetric. Zero velocity gives a step in place beside the support foot, parallel to it.
 //!
+//! A heading correction δ (rad, [`StepGenerator::next_step_turned`]) is added to the step's
+//! turn, d_ω ← d_ω + δ, without entering the velocity state v:
+//!
+//! ```text
+//!   θ = θ_S + d_ω + δ                                                                   (S3)
+//! ```
+//!
 //! **Limits.** Each footprint must pass the plan's reach check ([`StepLimits::check`]: forward
 //! distance, lateral distance ≥ sole width + 1 cm, heading change) and the sole-corner check: all
 //! four corners of the swing sole lie at least [`SOLE_GAP`] beyond the support sole's inner edge
@@ -268,6 +275,16 @@ impl<R: Real> StepGenerator<R> {
 
     /// The next footstep for the command `cmd` (S1, S2 and the limits; see the module doc).
     pub fn next_step(&mut self, cmd: &WalkCommand<R>) -> Footstep<R> {
+        self.next_step_turned(cmd, R::zero()).0
+    }
+
+    /// [`Self::next_step`] with an extra heading change `turn` (rad) of the swing foot on top
+    /// of the command's d_ω (S3): the heading hold's correction. The walking velocity stays the
+    /// command's (the turn is not integrated into ω); the limits apply to the whole step.
+    /// Returns the footstep and the correction stepped (λ·δ: less when the limits scaled the
+    /// step back).
+    pub fn next_step_turned(&mut self, cmd: &WalkCommand<R>, turn: R) -> (Footstep<R>, R) {
+        let turn = if turn.is_finite() { turn } else { R::zero() };
         let l = &self.limits;
         let target = [
             clamp_r(cmd.vx, R::of(-l.vx_backward), R::of(l.vx_forward)),
@@ -282,7 +299,8 @@ impl<R: Real> StepGenerator<R> {
         }
         let side = self.next_swing;
         let support = self.support();
-        let full = v.map(|vi| vi * t);
+        let [fx, fy, fw] = v.map(|vi| vi * t);
+        let full = [fx, fy, fw + turn];
         let full_place = self.footprint(&support, side, full);
         let (place, scale) = if self.fits(side, &support, &full_place) {
             (full_place, R::one())
@@ -306,7 +324,7 @@ impl<R: Real> StepGenerator<R> {
             *f = place;
         }
         self.next_swing = side.other();
-        Footstep { side, place }
+        (Footstep { side, place }, turn * scale)
     }
 }
 
@@ -325,6 +343,45 @@ mod tests {
             Side::Left,
         )
         .unwrap()
+    }
+
+    #[test]
+    fn a_turn_rotates_the_footprint_but_not_the_velocity() {
+        let cmd = WalkCommand {
+            vx: 0.05,
+            vy: 0.0,
+            yaw_rate: 0.0,
+        };
+        let (mut a, mut b) = (gen(CommandLimits::DEFAULT), gen(CommandLimits::DEFAULT));
+        let plain = a.next_step(&cmd);
+        let (turned, stepped) = b.next_step_turned(&cmd, 0.04);
+        assert_eq!(stepped, 0.04, "within the limits: all of it");
+        // (S1): 0.1 m/s² · 0.64 s = 0.064 m/s ≥ 0.05: v reaches the command in one step.
+        assert_eq!(a.velocity(), [0.05, 0.0, 0.0]);
+        assert_eq!(
+            b.velocity(),
+            a.velocity(),
+            "the turn is not integrated into ω"
+        );
+        assert!((turned.place.yaw - plain.place.yaw - 0.04).abs() < 1e-12);
+        // (S2) with d_ω = 0.04 around the support foot (0, −0.045): offset (0.032, 0.09)
+        // rotated by 0.02 rad.
+        let (s, c) = 0.02f64.sin_cos();
+        assert!((turned.place.x - (c * 0.032 - s * 0.09)).abs() < 1e-12);
+        assert!((turned.place.y - (-0.045 + s * 0.032 + c * 0.09)).abs() < 1e-12);
+        // A non-finite turn counts as none.
+        let mut n = gen(CommandLimits::DEFAULT);
+        assert_eq!(n.next_step_turned(&cmd, f64::NAN), (plain, 0.0));
+        // Beyond the reach's heading limit the step is scaled back, and so is the turn.
+        let mut big = gen(CommandLimits::DEFAULT);
+        let (f, stepped) = big.next_step_turned(&cmd, 3.0);
+        assert!(stepped > 0.0 && stepped < 3.0, "{stepped}");
+        // (S2–S3) scaled by λ with d_ω = 0: θ = λ·δ, exactly the turn stepped.
+        assert!(
+            (f.place.yaw - stepped).abs() < 1e-12,
+            "{} {stepped}",
+            f.place.yaw
+        );
     }
 
     #[test]

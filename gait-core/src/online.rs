@@ -59,6 +59,28 @@
 //! except Standing → Starting. (A catching step of the closed-loop issue would be one more
 //! mode entered from any other, with its own preview.)
 //!
+//! **Heading hold.** The feet's planned yaw drifts from the robot's in the world when the
+//! soles slip in yaw (turning, side steps). With the measured heading ψ (the gyro's yaw
+//! integrated, [`OnlineWalk::set_heading`]), Σδ the corrections stepped so far and δ₋ the last
+//! one, the commanded heading and its error when a walking step begins (both feet on the
+//! ground) are
+//!
+//! ```text
+//!   θ_c = mid(θ_L, θ_R) − Σδ + δ₋/2,      e = wrap(ψ − θ_c)                             (H1)
+//! ```
+//!
+//! (mid: the feet's mean yaw; a correction enters every later footprint through the support
+//! foot, so the feet's mean holds all of Σδ but half of the last one), and the step turns the
+//! swing foot by
+//!
+//! ```text
+//!   δ = clamp(−k·e, ±δ_max)      (k = `heading_gain`, δ_max = MAX_HEADING_TURN)          (H2)
+//! ```
+//!
+//! on top of the command's turn ((S3) of [`crate::command`]; scaled with the step by the
+//! limits, the stepped λ·δ is what Σδ adds). Not in the start phase nor while stopping: a stop
+//! ends with the feet parallel as commanded.
+//!
 //! **Swing.** The swing foot follows [`crate::swing::swing_foot`] between lift-off t1 and
 //! touch-down t2 of the walk's timing; both feet are on the ground outside it.
 
@@ -78,6 +100,8 @@ pub const PREVIEW_STEPS: usize = 3;
 pub const DEFAULT_ZMP_INSET: f64 = 0.015;
 /// Largest ZMP correction of the DCM feedback per axis, m.
 pub const ZMP_MARGIN: f64 = 0.02;
+/// Largest heading correction of one step (H2), rad (≈ 2.9°).
+pub const MAX_HEADING_TURN: f64 = 0.05;
 
 /// Timing and shape of the online steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -100,6 +124,9 @@ pub struct OnlineParams {
     pub dt: f64,
     /// Inset of the single-support ZMP reference towards the other foot, m.
     pub zmp_inset: f64,
+    /// Heading hold (H1–H2): the share of the measured heading error each walking step turns
+    /// back (0 = off, 1 = all of it), within ±[`MAX_HEADING_TURN`].
+    pub heading_gain: f64,
 }
 
 /// Standing on both feet, CoM held on the feet's midpoint.
@@ -184,6 +211,14 @@ pub struct OnlineWalk<R> {
     /// Footsteps committed, not yet taken by [`OnlineWalk::take_footstep`] (the log).
     committed: Option<Footstep<R>>,
     time_ns: u64,
+    /// The measured heading ψ (rad, same origin as the feet's yaw), if any.
+    heading: Option<R>,
+    /// The heading corrections stepped so far (Σδ of H2, after the limits), rad.
+    turned: R,
+    /// The correction λ·δ the last committed step stepped, rad (δ₋ of H1).
+    stepped_turn: R,
+    /// The correction δ requested for the last committed step (the generator's input), rad.
+    requested_turn: R,
 }
 
 fn mid<R: Real>(a: &Place<R>, b: &Place<R>) -> [R; 2] {
@@ -222,6 +257,10 @@ impl<R: Real> OnlineWalk<R> {
             steps_done: 0,
             committed: None,
             time_ns: 0,
+            heading: None,
+            turned: R::zero(),
+            stepped_turn: R::zero(),
+            requested_turn: R::zero(),
         })
     }
 
@@ -260,6 +299,42 @@ impl<R: Real> OnlineWalk<R> {
     /// The footstep committed since the last call (at most one per step), for the log.
     pub fn take_footstep(&mut self) -> Option<Footstep<R>> {
         self.committed.take()
+    }
+
+    /// The measured heading ψ (rad, the feet's yaw origin: the gyro's yaw integrated since the
+    /// walk stood at heading 0) for the heading hold; a non-finite value is ignored.
+    pub fn set_heading(&mut self, psi: R) {
+        if psi.is_finite() {
+            self.heading = Some(psi);
+        }
+    }
+
+    /// The heading correction δ requested for the last committed step (H2, the input of
+    /// [`StepGenerator::next_step_turned`], a whole number of µrad), rad: 0 unless the heading
+    /// hold turned it.
+    pub fn last_turn(&self) -> R {
+        self.requested_turn
+    }
+
+    /// The heading hold's correction for the step about to begin (H1–H2): 0 when off, without
+    /// a measurement, or when not walking.
+    fn heading_turn(&self) -> R {
+        let k = self.p.heading_gain;
+        let (Some(psi), WalkMode::Walking(_)) = (self.heading, &self.mode) else {
+            return R::zero();
+        };
+        if !(k > 0.0 && k.is_finite()) {
+            return R::zero();
+        }
+        let wrap = |a: R| a.sin().atan2(a.cos());
+        let [l, r] = self.feet;
+        let half = R::of(0.5);
+        let commanded = l.yaw + wrap(r.yaw - l.yaw) * half - self.turned + self.stepped_turn * half;
+        let e = wrap(psi - commanded);
+        let m = R::of(MAX_HEADING_TURN);
+        let turn = (-(e * R::of(k))).clamp_to(-m, m);
+        // A whole number of µrad, as logged: the host replays the footsteps bit for bit.
+        R::of(libm::round(turn.to_f64() * 1e6) * 1e-6)
     }
 
     /// Sets the command (non-finite components count as 0); the preview is re-planned.
@@ -456,7 +531,11 @@ impl<R: Real> OnlineWalk<R> {
             Side::Left => (r, l),
             Side::Right => (l, r),
         };
-        let fs = self.gen.next_step(&self.cmd);
+        let turn = self.heading_turn();
+        let (fs, stepped) = self.gen.next_step_turned(&self.cmd, turn);
+        self.requested_turn = turn;
+        self.stepped_turn = stepped;
+        self.turned += stepped;
         self.committed = Some(fs);
         let step = Step {
             t: R::zero(),

@@ -4,7 +4,9 @@
 
 use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::kinematics::LegKinematics;
-use gait_core::online::{OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, ZMP_MARGIN};
+use gait_core::online::{
+    OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, MAX_HEADING_TURN, ZMP_MARGIN,
+};
 use gait_core::pipeline::joint_targets;
 use gait_core::plan::SwingShape;
 use gait_core::{GaitSample, Place, Robot, Side};
@@ -29,6 +31,7 @@ fn params() -> OnlineParams {
         limits: CommandLimits::DEFAULT,
         dt: DT,
         zmp_inset: DEFAULT_ZMP_INSET,
+        heading_gain: 0.0,
     }
 }
 
@@ -240,4 +243,67 @@ fn non_finite_commands_never_reach_the_com() {
     });
     assert!(s.iter().all(|x| x.is_finite()));
     assert!(matches!(w.mode(), WalkMode::Standing(_)));
+}
+
+/// The heading hold (H1–H2) against a world whose soles slipped 0.1 rad to the left: the
+/// measured heading is the feet's mean yaw (what the pelvis follows) plus the slip. Each walking
+/// step turns back k = 0.5 of the error within ±δ_max, the corrections sum to −slip, and the
+/// robot's world heading comes back to the commanded 0 (straight walk). With k = 0 the feet are
+/// the generator's exactly.
+#[test]
+fn heading_hold_turns_a_slip_back_within_its_bound() {
+    let slip = 0.1;
+    let mut p = params();
+    p.heading_gain = 0.5;
+    let mut w = OnlineWalk::new(&Robot::reference(), p, feet()).unwrap();
+    let mut plain = walk();
+    let mut feet_now = feet();
+    let mut turns = Vec::new();
+    let mut world = Vec::new();
+    for k in 0..3000 {
+        if k == 10 {
+            w.set_command(cmd(0.05, 0.0, 0.0));
+            plain.set_command(cmd(0.05, 0.0, 0.0));
+        }
+        let [l, r] = feet_now;
+        let mean = 0.5 * (l.yaw + r.yaw);
+        w.set_heading(mean + slip);
+        w.tick();
+        plain.tick();
+        if let Some(f) = w.take_footstep() {
+            turns.push(w.last_turn());
+            feet_now[f.side.index()] = f.place;
+            let [l, r] = feet_now;
+            world.push(0.5 * (l.yaw + r.yaw) + slip);
+        }
+        assert!(plain.last_turn() == 0.0, "no heading, no turn");
+    }
+    // 3000 ticks = 15 s: the start phase, then ≈ 21 steps of 0.64 s.
+    assert!(turns.len() > 15, "{} steps", turns.len());
+    assert_eq!(turns[0], 0.0, "the start phase's step does not turn");
+    assert!(
+        (turns[1] + MAX_HEADING_TURN).abs() < 1e-12,
+        "0.5 · 0.1 = the bound 0.05: {}",
+        turns[1]
+    );
+    assert!(turns.iter().all(|t| t.abs() <= MAX_HEADING_TURN + 1e-12));
+    let total: f64 = turns.iter().sum();
+    assert!((total + slip).abs() < 2e-3, "Σδ = {total}");
+    let last = *world.last().unwrap();
+    assert!(last.abs() < 2e-3, "world heading {last}");
+    // Off: the same walk steps as the generator alone.
+    let mut q = params();
+    q.heading_gain = 0.0;
+    let mut off = OnlineWalk::new(&Robot::reference(), q, feet()).unwrap();
+    let mut on_plain = walk();
+    for k in 0..1500 {
+        if k == 10 {
+            off.set_command(cmd(0.05, 0.0, 0.0));
+            on_plain.set_command(cmd(0.05, 0.0, 0.0));
+        }
+        off.set_heading(1.0);
+        off.tick();
+        on_plain.tick();
+        assert_eq!(off.take_footstep(), on_plain.take_footstep(), "tick {k}");
+    }
 }

@@ -297,12 +297,18 @@ pub struct FootstepCheck {
     pub mismatches: Vec<(usize, [i32; 3], [i32; 3])>,
     /// The feet after the last step (left, right), m and rad.
     pub feet: [Place<f32>; 2],
-    /// The commanded path: the feet's midpoint's travel summed over the footsteps, m.
+    /// The feet after the last step of the commands alone (the same steps without the heading
+    /// hold's corrections): the commanded end pose, m and rad.
+    pub commanded_feet: [Place<f32>; 2],
+    /// The commanded path: the commanded feet's midpoint's travel summed over the steps, m.
     pub path: f64,
+    /// The heading hold's corrections logged (requested δ), summed, rad.
+    pub turned: f64,
 }
 
 /// Replays a log's `CommandReceived` and `Footstep` records through [`StepGenerator`] (f32,
-/// the firmware's arithmetic) for a walk of CoM height `z_c` and half width `half_width`, with
+/// the firmware's arithmetic; a footstep's logged heading-hold correction, id s·16 + 3, is
+/// passed to [`StepGenerator::next_step_turned`]) for a walk of CoM height `z_c` and half width `half_width`, with
 /// the step period the firmware logged (`Footstep` id 0): a new generator at each start from
 /// standing, first swing = the logged step's side.
 pub fn replay_footsteps(
@@ -326,6 +332,8 @@ pub fn replay_footsteps(
         },
     ];
     let mut gen: Option<StepGenerator<f32>> = None;
+    let mut pure: Option<StepGenerator<f32>> = None;
+    let mut pure_feet = feet;
     let mut parts: Vec<(u8, i32)> = Vec::new();
     let mut out = FootstepCheck::default();
     let midpoint = |f: &[Place<f32>; 2]| {
@@ -335,6 +343,7 @@ pub fn replay_footsteps(
         ]
     };
     let mut mid = midpoint(&feet);
+    let mut turn = 0.0f32;
     for r in records {
         let Record::Fault(f) = r else { continue };
         match f.kind {
@@ -348,6 +357,10 @@ pub fn replay_footsteps(
             FaultKind::Footstep if f.id == 0 => {
                 period = (f64::from(f.value) * 1e-6) as f32;
             }
+            // The heading hold's correction of the next footstep, µrad (logged before it).
+            FaultKind::Footstep if f.id & 15 == 3 => {
+                turn = (f64::from(f.value) * 1e-6) as f32;
+            }
             FaultKind::Footstep => {
                 parts.push((f.id, f.value));
                 if parts.len() < 3 {
@@ -358,19 +371,23 @@ pub fn replay_footsteps(
                 } else {
                     Side::Right
                 };
+                let new_gen = |feet| {
+                    StepGenerator::new(
+                        &robot,
+                        z_c,
+                        CommandLimits::DEFAULT,
+                        half_width,
+                        period,
+                        feet,
+                        side,
+                    )
+                    .map_err(|e| format!("{e:?}"))
+                };
                 if gen.as_ref().is_none_or(|g| g.is_standing()) {
-                    gen = Some(
-                        StepGenerator::new(
-                            &robot,
-                            z_c,
-                            CommandLimits::DEFAULT,
-                            half_width,
-                            period,
-                            feet,
-                            side,
-                        )
-                        .map_err(|e| format!("{e:?}"))?,
-                    );
+                    gen = Some(new_gen(feet)?);
+                }
+                if pure.as_ref().is_none_or(|g| g.is_standing()) {
+                    pure = Some(new_gen(pure_feet)?);
                 }
                 let Some(g) = gen.as_mut() else { continue };
                 let c = if cmd[0] == i32::from(Mode::Walk.code()) {
@@ -382,9 +399,15 @@ pub fn replay_footsteps(
                 } else {
                     WalkCommand::zero()
                 };
-                let s = g.next_step(&c);
+                let (s, _) = g.next_step_turned(&c, turn);
+                out.turned += f64::from(turn);
+                turn = 0.0;
                 feet = g.feet();
-                let m = midpoint(&feet);
+                if let Some(p) = pure.as_mut() {
+                    p.next_step(&c);
+                    pure_feet = p.feet();
+                }
+                let m = midpoint(&pure_feet);
                 out.path += (m[0] - mid[0]).hypot(m[1] - mid[1]);
                 mid = m;
                 let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
@@ -399,6 +422,7 @@ pub fn replay_footsteps(
         }
     }
     out.feet = feet;
+    out.commanded_feet = pure_feet;
     Ok(out)
 }
 

@@ -352,8 +352,10 @@ pub struct CommandFigures {
     pub footsteps: crate::commands::FootstepCheck,
     /// When the truth first marked a fall, s.
     pub fell_at: Option<f64>,
-    /// The commanded displacement: the feet's midpoint after the last step (x, y, m) and
-    /// their heading (rad), from the start (0, 0, 0).
+    /// The commanded displacement: the commanded feet's midpoint after the last step (x, y,
+    /// m) and their heading (rad), from the start (0, 0, 0) ([`FootstepCheck::commanded_feet`]).
+    ///
+    /// [`FootstepCheck::commanded_feet`]: crate::commands::FootstepCheck::commanded_feet
     pub commanded: [f64; 3],
     /// The torso's (pelvis) displacement in the physics from the first truth row to the last
     /// (x, y, m) and its heading change (rad).
@@ -392,7 +394,7 @@ impl CommandFigures {
     /// One line for the terminal.
     pub fn line(&self) -> String {
         format!(
-            "{}; {} footsteps, {} not the commands'; commanded ({:.3} m, {:.3} m, {:+.1}°) over a {:.3} m path, torso ({:.3} m, {:.3} m, {:+.1}°): position error {:.3} m = {:.1} % of the path, {} of the net displacement; heading error {:+.1}°",
+            "{}; {} footsteps, {} not the commands'; commanded ({:.3} m, {:.3} m, {:+.1}°) over a {:.3} m path, torso ({:.3} m, {:.3} m, {:+.1}°): position error {:.3} m = {:.1} % of the path, {} of the net displacement; heading error {:+.1}° (heading hold turned {:+.1}°)",
             self.fell_at
                 .map_or("no fall".to_string(), |t| format!("FELL at {t:.2} s")),
             self.footsteps.steps,
@@ -408,7 +410,8 @@ impl CommandFigures {
             100.0 * self.path_error(),
             self.displacement_error()
                 .map_or("n/a".to_string(), |e| format!("{:.1} %", 100.0 * e)),
-            self.heading_error().to_degrees()
+            self.heading_error().to_degrees(),
+            self.footsteps.turned.to_degrees()
         )
     }
 }
@@ -427,7 +430,7 @@ pub fn command_figures(
     let log = crate::report::decode_file(&r.log)?;
     let footsteps =
         crate::commands::replay_footsteps(&log.events, cfg.walk.z_c, cfg.walk.step_width as f32)?;
-    let [l, rt] = footsteps.feet;
+    let [l, rt] = footsteps.commanded_feet;
     let mid = |a: f32, b: f32| 0.5 * (f64::from(a) + f64::from(b));
     let yaw = {
         let d = f64::from(rt.yaw - l.yaw);

@@ -45,6 +45,7 @@ pub fn online_walk(cfg: &Config, robot: &Robot) -> Result<OnlineWalk<f32>, GaitE
         limits: CommandLimits::DEFAULT,
         dt: cfg.dt_s(),
         zmp_inset: DEFAULT_ZMP_INSET,
+        heading_gain: f64::from(cfg.heading_gain),
     };
     let y = w.step_width as f32;
     let feet = [
@@ -160,17 +161,36 @@ pub fn support_code(p: SupportPhase) -> u8 {
     }
 }
 
-/// Logs a committed footstep: three `Footstep` records (x, y in µm; yaw in µrad).
-pub fn log_footstep<B: Board>(board: &mut B, log: &mut LogWriter, side: Side, place: &Place<f32>) {
+/// Logs a committed footstep: the heading hold's correction δ if any (`Footstep` id s·16 + 3,
+/// µrad), then three `Footstep` records (x, y in µm; yaw in µrad).
+pub fn log_footstep<B: Board>(
+    board: &mut B,
+    log: &mut LogWriter,
+    side: Side,
+    place: &Place<f32>,
+    turn: f32,
+) {
     let s: u8 = match side {
         Side::Left => 1,
         Side::Right => 2,
     };
     let now = board.now_us();
+    let micro = |v: f32| {
+        let m = libm::roundf(v * 1e6);
+        if m.is_finite() {
+            m as i32
+        } else {
+            0
+        }
+    };
+    if micro(turn) != 0 {
+        log.write(
+            board,
+            super::fault(now, FaultKind::Footstep, s * 16 + 3, micro(turn)),
+        );
+    }
     for (c, v) in [place.x, place.y, place.yaw].iter().enumerate() {
-        let micro = libm::roundf(v * 1e6);
-        let micro = if micro.is_finite() { micro as i32 } else { 0 };
-        let rec = super::fault(now, FaultKind::Footstep, s * 16 + c as u8, micro);
+        let rec = super::fault(now, FaultKind::Footstep, s * 16 + c as u8, micro(*v));
         log.write(board, rec);
     }
 }
