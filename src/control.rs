@@ -890,6 +890,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         if let Some(o) = online.as_mut() {
             if ramp_k.is_none() {
                 o.set_command(link.velocity());
+                link.feed_steps(o);
             }
         }
 
@@ -925,6 +926,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                         f.side,
                                         &f.place,
                                         o.last_turn(),
+                                        o.last_given(),
                                     );
                                 }
                                 (s, None)
@@ -1133,8 +1135,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 .unwrap_or(u16::MAX),
             zmp_m: meas_zmp,
             stop_code: sup.stop_reason().map_or(0, |r| r.kind().code()),
-            fault_kind: 0,
+            fault_kind: log.last_fault(),
             walk_velocity: online.as_ref().map_or([0.0; 3], |o| o.velocity()),
+            queued: online.as_ref().map_or(0, |o| o.queued()),
         });
         rec.bus = bus.counters();
         rec.overruns = u16::try_from(bus.board().overruns()).unwrap_or(u16::MAX);

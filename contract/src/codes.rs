@@ -318,14 +318,25 @@ pub enum FaultKind {
     /// value in the register's unit: mode code, mm/s or mrad/s); logged when it changes.
     CommandReceived,
     /// 15: the online walk committed a footstep (three records per step: `id` = side (1 left,
-    /// 2 right) · 16 + component (0 x, 1 y, 2 yaw), `value` = µm or µrad, world frame); once at
-    /// start `id` = 0: the online walk's step period, µs.
+    /// 2 right) · 16 + component (0 x, 1 y, 2 yaw), `value` = µm or µrad, world frame; before
+    /// them, component 3: the heading hold's correction, µrad, if any, and components 4, 5, 6:
+    /// an explicit step's travel, mm, mm, mrad); once at start `id` = 0: the online walk's step
+    /// period, µs.
     Footstep,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
 
 impl FaultKind {
+    /// A fault, not an event of the walk: false for [`FaultKind::CommandReceived`],
+    /// [`FaultKind::Footstep`] and [`FaultKind::ResetCause`] (logged at every boot).
+    pub const fn is_fault(self) -> bool {
+        !matches!(
+            self,
+            Self::CommandReceived | Self::Footstep | Self::ResetCause
+        )
+    }
+
     /// Wire code.
     pub const fn code(self) -> u8 {
         match self {

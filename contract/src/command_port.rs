@@ -26,7 +26,7 @@
 //! | 136 | 1 | ZMP Valid | R | 1 when the feet measure a ZMP |
 //! | 137 | 1 | Stop Code | R | the last [`crate::StopCode`], 0 none |
 //! | 138 | 1 | Fault Kind | R | the last [`crate::FaultKind`] logged, 0 none |
-//! | 139 | 1 | Step List Length | R | entries waiting (≤ [`STEP_LIST_LEN`]) |
+//! | 139 | 1 | Step List Length | R | entries not yet stepped: in the port (≤ [`STEP_LIST_LEN`]) and taken by the walk (≤ 8) |
 //! | 140 | 2 | Walk Velocity X | R | i16, mm/s: the velocity the feet step (after the limits) |
 //! | 142 | 2 | Walk Velocity Y | R | i16, mm/s |
 //! | 144 | 2 | Walk Yaw Rate | R | i16, mrad/s |
@@ -291,6 +291,8 @@ pub struct PortStatus {
     pub fault_kind: u8,
     /// The walking velocity the feet step (m/s, m/s, rad/s).
     pub walk_velocity: [f32; 3],
+    /// Explicit steps the walk took from the step list and has not stepped yet.
+    pub queued: usize,
 }
 
 /// Velocity limits of the wire (mm/s, mm/s, mrad/s): the default command limits.
@@ -324,6 +326,8 @@ pub struct CommandTable {
     mem: [u8; TABLE_LEN],
     steps: heapless::Deque<StepEntry, STEP_LIST_LEN>,
     commands: u16,
+    /// Steps the walk took from the list and has not stepped (published).
+    queued: u8,
 }
 
 impl Default for CommandTable {
@@ -348,6 +352,7 @@ impl CommandTable {
             mem: [0; TABLE_LEN],
             steps: heapless::Deque::new(),
             commands: 0,
+            queued: 0,
         };
         t.put(MODEL_NUMBER, &MODEL_NUMBER_VALUE.to_le_bytes());
         t.put(FIRMWARE_VERSION, &[FIRMWARE_VERSION_VALUE]);
@@ -442,7 +447,7 @@ impl CommandTable {
         }
         self.commands = self.commands.wrapping_add(1);
         self.put(COMMAND_COUNT, &self.commands.to_le_bytes());
-        self.put(STEP_LIST, &[self.steps.len() as u8]);
+        self.put_step_list();
         Ok(())
     }
 
@@ -490,7 +495,7 @@ impl CommandTable {
     /// Takes the oldest step-list entry.
     pub fn take_step(&mut self) -> Option<StepEntry> {
         let s = self.steps.pop_front();
-        self.put(STEP_LIST, &[self.steps.len() as u8]);
+        self.put_step_list();
         s
     }
 
@@ -514,6 +519,14 @@ impl CommandTable {
         self.put(WALK_VX, &milli_i16(vx).to_le_bytes());
         self.put(WALK_VY, &milli_i16(vy).to_le_bytes());
         self.put(WALK_YAW, &milli_i16(w).to_le_bytes());
+        self.queued = u8::try_from(s.queued).unwrap_or(u8::MAX);
+        self.put_step_list();
+    }
+
+    /// Step List Length: the entries in the port and those the walk took but has not stepped.
+    fn put_step_list(&mut self) {
+        let n = u8::try_from(self.steps.len()).unwrap_or(u8::MAX);
+        self.put(STEP_LIST, &[n.saturating_add(self.queued)]);
     }
 
     /// The published state.

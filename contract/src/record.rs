@@ -975,6 +975,7 @@ pub trait LogSink {
 pub struct LogWriter {
     next_seq: u16,
     dropped: u32,
+    last_fault: u8,
 }
 
 impl LogWriter {
@@ -983,6 +984,7 @@ impl LogWriter {
         LogWriter {
             next_seq: 0,
             dropped: 0,
+            last_fault: 0,
         }
     }
 
@@ -991,8 +993,19 @@ impl LogWriter {
         self.dropped
     }
 
+    /// The code of the last fault record written that is a fault ([`FaultKind::is_fault`]),
+    /// 0 none: the command port's Fault Kind register.
+    pub fn last_fault(&self) -> u8 {
+        self.last_fault
+    }
+
     /// Stamps `rec` with the next sequence number, encodes it and writes it to `sink`.
     pub fn write(&mut self, sink: &mut impl LogSink, mut rec: Record) {
+        if let Record::Fault(f) = &rec {
+            if f.kind.is_fault() {
+                self.last_fault = f.kind.code();
+            }
+        }
         rec.set_seq(self.next_seq);
         self.next_seq = self.next_seq.wrapping_add(1);
         let mut frame = [0u8; MAX_FRAME];

@@ -177,8 +177,11 @@ fn status_registers_read_back_in_wire_units() {
         stop_code: 0,
         fault_kind: 3,
         walk_velocity: [0.05, 0.0, -0.2],
+        queued: 3,
     });
     let d = read(&mut p, STATE.addr, 20).unwrap();
+    // Step List Length: none in the port, 3 taken by the walk.
+    assert_eq!(d[11], 3);
     assert_eq!(d[0], 2);
     assert_eq!(d[1], 2);
     assert_eq!(u16::from_le_bytes([d[2], d[3]]), 513);

@@ -297,10 +297,30 @@ impl<R: Real> StepGenerator<R> {
         for ((vi, ti), di) in v.iter_mut().zip(target).zip(dv) {
             *vi = *vi + clamp_r(ti - *vi, -di, di);
         }
+        let [fx, fy, fw] = v.map(|vi| vi * t);
+        let (step, scale) = self.step_by([fx, fy, fw + turn]);
+        self.velocity = v.map(|vi| vi * scale);
+        (step, turn * scale)
+    }
+
+    /// An explicit step (a footstep list's entry): the next swing foot at the per-step travel
+    /// `d` = (d_x, d_y, d_ω) of (S2) (m, m, rad, beyond the in-place step, in the support foot's
+    /// frame), within the limits (scaled back like a commanded step); the walking velocity
+    /// becomes the travel stepped over T, so the velocity filter (S1) continues from what the
+    /// feet did. A non-finite component counts as 0.
+    pub fn next_step_given(&mut self, d: [R; 3]) -> Footstep<R> {
+        let d = d.map(|v| if v.is_finite() { v } else { R::zero() });
+        let (step, scale) = self.step_by(d);
+        let t = self.period;
+        self.velocity = d.map(|di| di * scale / t);
+        step
+    }
+
+    /// The next swing foot at travel `d` (S2), scaled back by λ until it fits; returns the
+    /// step and λ.
+    fn step_by(&mut self, full: [R; 3]) -> (Footstep<R>, R) {
         let side = self.next_swing;
         let support = self.support();
-        let [fx, fy, fw] = v.map(|vi| vi * t);
-        let full = [fx, fy, fw + turn];
         let full_place = self.footprint(&support, side, full);
         let (place, scale) = if self.fits(side, &support, &full_place) {
             (full_place, R::one())
@@ -319,12 +339,11 @@ impl<R: Real> StepGenerator<R> {
             }
             (self.footprint(&support, side, full.map(|d| d * lo)), lo)
         };
-        self.velocity = v.map(|vi| vi * scale);
         if let Some(f) = self.feet.get_mut(side.index()) {
             *f = place;
         }
         self.next_swing = side.other();
-        (Footstep { side, place }, turn * scale)
+        (Footstep { side, place }, scale)
     }
 }
 
@@ -382,6 +401,31 @@ mod tests {
             "{} {stepped}",
             f.place.yaw
         );
+    }
+
+    #[test]
+    fn a_given_step_lands_where_its_entry_says_and_sets_the_velocity() {
+        let mut g = gen(CommandLimits::DEFAULT);
+        // Left foot, 4 cm forward, 1 cm out, 0.2 rad: (S2) around the support (0, −0.045).
+        let f = g.next_step_given([0.04, 0.01, 0.2]);
+        assert_eq!(f.side, Side::Left);
+        let (s, c) = 0.1f64.sin_cos();
+        assert!((f.place.x - (c * 0.04 - s * 0.1)).abs() < 1e-12);
+        assert!((f.place.y - (-0.045 + s * 0.04 + c * 0.1)).abs() < 1e-12);
+        assert!((f.place.yaw - 0.2).abs() < 1e-12);
+        let v = g.velocity();
+        assert!((v[0] - 0.04 / 0.64).abs() < 1e-12 && (v[2] - 0.2 / 0.64).abs() < 1e-12);
+        assert_eq!(g.next_swing(), Side::Right);
+        // Beyond the reach (0.5 m forward) it is scaled back to the largest step that fits,
+        // and the velocity with it.
+        let mut h = gen(CommandLimits::DEFAULT);
+        let far = h.next_step_given([0.5, 0.0, 0.0]);
+        assert!(far.place.x > 0.0 && far.place.x < 0.5, "{}", far.place.x);
+        assert!((h.velocity()[0] - far.place.x / 0.64).abs() < 1e-9);
+        // Non-finite components count as 0: the in-place step.
+        let mut n = gen(CommandLimits::DEFAULT);
+        let z = n.next_step_given([f64::NAN, 0.0, f64::INFINITY]);
+        assert_eq!(z.place, Place::new(0.0, 0.045, 0.0));
     }
 
     #[test]

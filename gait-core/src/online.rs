@@ -49,7 +49,7 @@
 //! |Δẋ| ≤ ω·sinh(ωdt)·|x − p| + (cosh ωdt − 1)·|ẋ| (the bound the tests assert).
 //!
 //! **Modes.** [`Standing`]: ZMP reference on the feet's midpoint (D3 holds the CoM there);
-//! a non-zero command starts. [`Starting`]: one period T on both feet with a constant ZMP
+//! a non-zero command (or a listed step) starts. [`Starting`]: one period T on both feet with a constant ZMP
 //! p_s chosen so that ξ reaches the first step's ξ_ini at the end,
 //! p_s = (ξ_ini − e^{ωT}ξ₀)/(1 − e^{ωT}) (from D1), clamped to the feet. [`Walking`]: steps
 //! of the generator under the present command; a zero command at a step's end goes to
@@ -58,6 +58,13 @@
 //! again. Transitions happen at step boundaries only (the swing foot's landing is committed),
 //! except Standing → Starting. (A catching step of the closed-loop issue would be one more
 //! mode entered from any other, with its own preview.)
+//!
+//! **Footstep lists.** [`OnlineWalk::push_step`] queues explicit steps (at most
+//! [`STEP_QUEUE_LEN`]): each is the swing foot's travel d of (S2) ([`StepGenerator::next_step_given`],
+//! within the same limits), walked before the command's steps and previewed like them. A
+//! standing walk starts with the first one's foot; a step queued for the foot that does not
+//! swing next gets an in-place step first. With the zero command the walk stops after the last
+//! listed step (the generator decelerates from the listed steps' velocity and closes the feet).
 //!
 //! **Heading hold.** The feet's planned yaw drifts from the robot's in the world when the
 //! soles slip in yaw (turning, side steps). With the measured heading ψ (the gyro's yaw
@@ -84,6 +91,8 @@
 //! **Swing.** The swing foot follows [`crate::swing::swing_foot`] between lift-off t1 and
 //! touch-down t2 of the walk's timing; both feet are on the ground outside it.
 
+use heapless::Deque;
+
 use crate::command::{CommandLimits, StepGenerator, WalkCommand};
 use crate::error::GaitError;
 use crate::plan::{Footstep, Place, SwingShape};
@@ -100,6 +109,18 @@ pub const PREVIEW_STEPS: usize = 3;
 pub const DEFAULT_ZMP_INSET: f64 = 0.015;
 /// Largest ZMP correction of the DCM feedback per axis, m.
 pub const ZMP_MARGIN: f64 = 0.02;
+/// Explicit steps the walk holds at most ([`OnlineWalk::push_step`]).
+pub const STEP_QUEUE_LEN: usize = 8;
+
+/// An explicit step of a footstep list: the swinging foot and its travel (S2's d: m, m, rad).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ListedStep<R> {
+    /// The foot that swings.
+    pub side: Side,
+    /// Travel beyond the in-place step, in the support foot's frame (m, m, rad).
+    pub d: [R; 3],
+}
+
 /// Largest heading correction of one step (H2), rad (≈ 2.9°).
 pub const MAX_HEADING_TURN: f64 = 0.05;
 
@@ -219,6 +240,10 @@ pub struct OnlineWalk<R> {
     stepped_turn: R,
     /// The correction δ requested for the last committed step (the generator's input), rad.
     requested_turn: R,
+    /// Explicit steps waiting (a footstep list), walked before the command's steps.
+    queue: Deque<ListedStep<R>, STEP_QUEUE_LEN>,
+    /// The travel of the last committed step if it was an explicit one (for the log).
+    given: Option<[R; 3]>,
 }
 
 fn mid<R: Real>(a: &Place<R>, b: &Place<R>) -> [R; 2] {
@@ -261,6 +286,8 @@ impl<R: Real> OnlineWalk<R> {
             turned: R::zero(),
             stepped_turn: R::zero(),
             requested_turn: R::zero(),
+            queue: Deque::new(),
+            given: None,
         })
     }
 
@@ -299,6 +326,65 @@ impl<R: Real> OnlineWalk<R> {
     /// The footstep committed since the last call (at most one per step), for the log.
     pub fn take_footstep(&mut self) -> Option<Footstep<R>> {
         self.committed.take()
+    }
+
+    /// Appends an explicit step (a footstep list's entry) to the walk: walked before the
+    /// command's steps, in order; a standing walk starts with it (first swing = its side).
+    /// False (nothing changes) when [`STEP_QUEUE_LEN`] steps wait or `d` is not finite.
+    pub fn push_step(&mut self, step: ListedStep<R>) -> bool {
+        if !step.d.iter().all(|v| v.is_finite()) || self.queue.push_back(step).is_err() {
+            return false;
+        }
+        match self.mode {
+            WalkMode::Standing(_) => self.start(),
+            WalkMode::Stopping(st) => {
+                self.mode = WalkMode::Walking(Walking { step: st.step });
+                self.replan();
+            }
+            WalkMode::Walking(_) => self.replan(),
+            WalkMode::Starting(_) => self.replan_start(),
+        }
+        true
+    }
+
+    /// Explicit steps waiting.
+    pub fn queued(&self) -> usize {
+        self.queue.len()
+    }
+
+    /// The travel (S2's d) of the last committed step if it was an explicit one, else `None`.
+    pub fn last_given(&self) -> Option<[R; 3]> {
+        self.given
+    }
+
+    /// The walk has somewhere to go: a non-zero command or explicit steps waiting.
+    fn wants_walk(&self) -> bool {
+        !self.cmd.is_zero() || !self.queue.is_empty()
+    }
+
+    /// The next step of generator `g`: the explicit step `listed` (if its side swings next; an
+    /// in-place step to change feet if not: `true` = `listed` was used), else the command's
+    /// with the heading correction `turn`. Returns the footstep, the correction stepped, the
+    /// explicit travel and whether `listed` was consumed.
+    fn next_of(
+        &self,
+        g: &mut StepGenerator<R>,
+        listed: Option<&ListedStep<R>>,
+        turn: R,
+    ) -> (Footstep<R>, R, Option<[R; 3]>, bool) {
+        match listed {
+            Some(l) if l.side == g.next_swing() => {
+                (g.next_step_given(l.d), R::zero(), Some(l.d), true)
+            }
+            Some(_) => {
+                let z = [R::zero(); 3];
+                (g.next_step_given(z), R::zero(), Some(z), false)
+            }
+            None => {
+                let (f, t) = g.next_step_turned(&self.cmd, turn);
+                (f, t, None, false)
+            }
+        }
     }
 
     /// The measured heading ψ (rad, the feet's yaw origin: the gyro's yaw integrated since the
@@ -351,11 +437,11 @@ impl<R: Real> OnlineWalk<R> {
         self.cmd = cmd;
         match self.mode {
             WalkMode::Standing(_) if !cmd.is_zero() => self.start(),
-            WalkMode::Walking(w) if cmd.is_zero() => {
+            WalkMode::Walking(w) if !self.wants_walk() => {
                 self.mode = WalkMode::Stopping(Stopping { step: w.step });
                 self.replan();
             }
-            WalkMode::Stopping(s) if !cmd.is_zero() => {
+            WalkMode::Stopping(s) if self.wants_walk() => {
                 self.mode = WalkMode::Walking(Walking { step: s.step });
                 self.replan();
             }
@@ -370,7 +456,11 @@ impl<R: Real> OnlineWalk<R> {
     fn start(&mut self) {
         let right =
             self.cmd.vy < R::zero() || (self.cmd.vy == R::zero() && self.cmd.yaw_rate < R::zero());
-        let first = if right { Side::Right } else { Side::Left };
+        let first = match self.queue.front() {
+            Some(l) => l.side,
+            None if right => Side::Right,
+            None => Side::Left,
+        };
         if let Ok(g) = Self::generator(&self.robot, &self.p, self.feet, first) {
             self.gen = g;
             self.mode = WalkMode::Starting(Starting {
@@ -386,13 +476,17 @@ impl<R: Real> OnlineWalk<R> {
     fn preview_steps(
         &self,
         gen: &StepGenerator<R>,
+        skip: usize,
     ) -> ([Option<Step<R>>; PREVIEW_STEPS], [Place<R>; 2]) {
         let mut g = *gen;
         let mut out = [None; PREVIEW_STEPS];
+        // The explicit steps waiting first (less the `skip` that `gen` made), then the command's.
+        let mut next = skip;
         for slot in out.iter_mut() {
+            let listed = self.queue.iter().nth(next);
             // Under the zero command the walk ends when the generator stands (as in the
             // transitions): no more steps.
-            if self.cmd.is_zero() && g.is_standing() {
+            if listed.is_none() && self.cmd.is_zero() && g.is_standing() {
                 break;
             }
             let side = g.next_swing();
@@ -401,7 +495,10 @@ impl<R: Real> OnlineWalk<R> {
                 Side::Left => (r, l),
                 Side::Right => (l, r),
             };
-            let fs = g.next_step(&self.cmd);
+            let (fs, _, _, used) = self.next_of(&mut g, listed, R::zero());
+            if used {
+                next += 1;
+            }
             *slot = Some(Step {
                 t: R::zero(),
                 support,
@@ -415,8 +512,8 @@ impl<R: Real> OnlineWalk<R> {
 
     /// ξ at the end of the step under way, whose generator state (after its own landing) is
     /// `gen`: the previewed steps, then rest on the final feet's midpoint (D2).
-    fn preview(&self, gen: &StepGenerator<R>) -> [R; 2] {
-        let (steps, [l, r]) = self.preview_steps(gen);
+    fn preview(&self, gen: &StepGenerator<R>, skip: usize) -> [R; 2] {
+        let (steps, [l, r]) = self.preview_steps(gen, skip);
         let mut xi = mid(&l, &r);
         for st in steps.iter().rev().flatten() {
             xi = self.step_back(st, xi, R::zero()).0;
@@ -478,7 +575,7 @@ impl<R: Real> OnlineWalk<R> {
     }
 
     fn replan(&mut self) {
-        self.xi_eos = self.preview(&self.gen);
+        self.xi_eos = self.preview(&self.gen, 0);
     }
 
     /// The start phase's target: ξ_ini of the first step (its ξ_eos brought back one period).
@@ -490,7 +587,7 @@ impl<R: Real> OnlineWalk<R> {
             Side::Left => (r, l),
             Side::Right => (l, r),
         };
-        let fs = g.next_step(&self.cmd);
+        let (fs, _, _, used) = self.next_of(&mut g, self.queue.front(), R::zero());
         let first = Step {
             t: R::zero(),
             support,
@@ -498,7 +595,7 @@ impl<R: Real> OnlineWalk<R> {
             from,
             to: fs.place,
         };
-        let eos = self.preview(&g);
+        let eos = self.preview(&g, usize::from(used));
         self.xi_eos = self.step_back(&first, eos, R::zero()).0;
         // The constant ZMP that brings ξ from now to the target in the remaining time.
         let t = match self.mode {
@@ -531,8 +628,18 @@ impl<R: Real> OnlineWalk<R> {
             Side::Left => (r, l),
             Side::Right => (l, r),
         };
-        let turn = self.heading_turn();
-        let (fs, stepped) = self.gen.next_step_turned(&self.cmd, turn);
+        let listed = self.queue.front().copied();
+        let turn = match listed {
+            Some(_) => R::zero(),
+            None => self.heading_turn(),
+        };
+        let mut g = self.gen;
+        let (fs, stepped, given, used) = self.next_of(&mut g, listed.as_ref(), turn);
+        self.gen = g;
+        if used {
+            self.queue.pop_front();
+        }
+        self.given = given;
         self.requested_turn = turn;
         self.stepped_turn = stepped;
         self.turned += stepped;
@@ -544,7 +651,7 @@ impl<R: Real> OnlineWalk<R> {
             from,
             to: fs.place,
         };
-        self.xi_eos = self.preview(&self.gen);
+        self.xi_eos = self.preview(&self.gen, 0);
         step
     }
 
@@ -695,12 +802,12 @@ impl<R: Real> OnlineWalk<R> {
                     *f = step.to;
                 }
                 self.steps_done = self.steps_done.saturating_add(1);
-                if self.cmd.is_zero() && self.gen.is_standing() {
+                if !self.wants_walk() && self.gen.is_standing() {
                     self.mode = WalkMode::Standing(Standing);
                     return;
                 }
                 let next = self.begin_step();
-                self.mode = if self.cmd.is_zero() {
+                self.mode = if !self.wants_walk() {
                     WalkMode::Stopping(Stopping { step: next })
                 } else {
                     WalkMode::Walking(Walking { step: next })

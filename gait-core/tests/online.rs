@@ -5,7 +5,8 @@
 use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::kinematics::LegKinematics;
 use gait_core::online::{
-    OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, MAX_HEADING_TURN, ZMP_MARGIN,
+    ListedStep, OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, MAX_HEADING_TURN,
+    STEP_QUEUE_LEN, ZMP_MARGIN,
 };
 use gait_core::pipeline::joint_targets;
 use gait_core::plan::SwingShape;
@@ -306,4 +307,146 @@ fn heading_hold_turns_a_slip_back_within_its_bound() {
         on_plain.tick();
         assert_eq!(off.take_footstep(), on_plain.take_footstep(), "tick {k}");
     }
+}
+
+/// A footstep list walked from standing: four explicit steps (forward, a turn, a side step,
+/// right foot first) land where the generator's explicit steps put them, in order; the walk
+/// stops by itself after them (stopping steps of the generator closing the feet) and stands;
+/// CoM and joint targets continuous throughout. A step for the foot that does not swing next
+/// gets an in-place step first; a full queue refuses more; non-finite entries are refused.
+#[test]
+fn a_footstep_list_is_walked_in_order_and_the_walk_stops_after_it() {
+    let list = [
+        ListedStep {
+            side: Side::Right,
+            d: [0.03, 0.0, 0.0],
+        },
+        ListedStep {
+            side: Side::Left,
+            d: [0.03, 0.0, 0.1],
+        },
+        ListedStep {
+            side: Side::Right,
+            d: [0.0, -0.02, 0.1],
+        },
+        ListedStep {
+            side: Side::Left,
+            d: [0.02, 0.0, 0.0],
+        },
+    ];
+    let mut w = walk();
+    let mut steps = Vec::new();
+    let mut modes = Vec::new();
+    let mut samples = Vec::new();
+    for k in 0..2400 {
+        if k == 10 {
+            for l in list {
+                assert!(w.push_step(l));
+            }
+            assert_eq!(w.queued(), 4);
+        }
+        samples.push(w.tick());
+        let m = std::mem::discriminant(w.mode());
+        if modes.last() != Some(&m) {
+            modes.push(m);
+        }
+        if let Some(f) = w.take_footstep() {
+            steps.push((f, w.last_given()));
+        }
+    }
+    assert!(matches!(w.mode(), WalkMode::Standing(_)), "stands again");
+    assert_eq!(w.queued(), 0);
+    assert_eq!(
+        modes.len(),
+        5,
+        "standing, starting, walking, stopping, standing"
+    );
+    // The generator alone: the four listed steps, then zero-command steps until it stands.
+    let mut g = StepGenerator::new(
+        &Robot::reference(),
+        0.217,
+        CommandLimits::DEFAULT,
+        W,
+        0.64,
+        feet(),
+        Side::Right,
+    )
+    .unwrap();
+    for (n, (f, given)) in steps.iter().enumerate() {
+        match list.get(n) {
+            Some(l) => {
+                assert_eq!(f.side, l.side, "step {n}");
+                assert_eq!(*given, Some(l.d), "step {n}");
+                assert_eq!(g.next_step_given(l.d), *f, "step {n}");
+            }
+            None => {
+                assert_eq!(*given, None, "step {n}: the stop's");
+                assert_eq!(g.next_step(&cmd(0.0, 0.0, 0.0)), *f, "step {n}");
+            }
+        }
+    }
+    assert!(steps.len() > list.len(), "stopping steps after the list");
+    assert!(g.is_standing());
+    // Independently: the first (right) step lands 3 cm ahead of the left support at (0, W),
+    // 2W to its right.
+    let first = steps[0].0.place;
+    assert!((first.x - 0.03).abs() < 1e-12 && (first.y + W).abs() < 1e-12);
+    // The turns add up: 0.2 rad on both feet at the end.
+    let [l, r] = g.feet();
+    assert!(
+        (l.yaw - 0.2).abs() < 1e-9 && (r.yaw - 0.2).abs() < 1e-9,
+        "{l:?} {r:?}"
+    );
+    assert_continuous(&samples);
+
+    // Walking under a command, a step queued for the foot that does not swing next: one
+    // in-place step first, then the listed one.
+    let mut v = walk();
+    v.set_command(cmd(0.03, 0.0, 0.0));
+    let mut seen = Vec::new();
+    let mut pushed = None;
+    for _ in 0..1500 {
+        v.tick();
+        if let Some(f) = v.take_footstep() {
+            seen.push((f, v.last_given()));
+            if seen.len() == 3 && pushed.is_none() {
+                // The step just committed swings f.side; the next swings the other: ask for
+                // f.side again.
+                let l = ListedStep {
+                    side: f.side,
+                    d: [0.01, 0.0, 0.0],
+                };
+                assert!(v.push_step(l));
+                pushed = Some(l);
+            }
+        }
+    }
+    let l = pushed.unwrap();
+    assert_eq!(seen[3].1, Some([0.0; 3]), "an in-place step to change feet");
+    assert_eq!(seen[4].0.side, l.side);
+    assert_eq!(seen[4].1, Some(l.d));
+    assert_eq!(seen[5].1, None, "then the command's steps again");
+
+    // Bounded and checked.
+    let mut q = walk();
+    for _ in 0..STEP_QUEUE_LEN {
+        assert!(q.push_step(ListedStep {
+            side: Side::Left,
+            d: [0.0; 3]
+        }));
+    }
+    assert!(
+        !q.push_step(ListedStep {
+            side: Side::Left,
+            d: [0.0; 3]
+        }),
+        "full"
+    );
+    let mut n = walk();
+    assert!(!n.push_step(ListedStep {
+        side: Side::Left,
+        d: [f64::NAN, 0.0, 0.0]
+    }));
+    assert_eq!(n.queued(), 0);
+    assert!(matches!(n.mode(), WalkMode::Standing(_)));
 }

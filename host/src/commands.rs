@@ -344,6 +344,7 @@ pub fn replay_footsteps(
     };
     let mut mid = midpoint(&feet);
     let mut turn = 0.0f32;
+    let mut given: [Option<i32>; 3] = [None; 3];
     for r in records {
         let Record::Fault(f) = r else { continue };
         match f.kind {
@@ -360,6 +361,12 @@ pub fn replay_footsteps(
             // The heading hold's correction of the next footstep, µrad (logged before it).
             FaultKind::Footstep if f.id & 15 == 3 => {
                 turn = (f64::from(f.value) * 1e-6) as f32;
+            }
+            // An explicit step's travel (the step list), mm, mm, mrad (logged before it).
+            FaultKind::Footstep if (4..=6).contains(&(f.id & 15)) => {
+                if let Some(g) = given.get_mut(usize::from(f.id & 15) - 4) {
+                    *g = Some(f.value);
+                }
             }
             FaultKind::Footstep => {
                 parts.push((f.id, f.value));
@@ -399,12 +406,24 @@ pub fn replay_footsteps(
                 } else {
                     WalkCommand::zero()
                 };
-                let (s, _) = g.next_step_turned(&c, turn);
+                // The firmware's conversion of the port's units (f32 · 0.001).
+                let listed = match given {
+                    [Some(x), Some(y), Some(w)] => Some([x, y, w].map(|v| v as f32 * 0.001)),
+                    _ => None,
+                };
+                let s = match listed {
+                    Some(d) => g.next_step_given(d),
+                    None => g.next_step_turned(&c, turn).0,
+                };
                 out.turned += f64::from(turn);
                 turn = 0.0;
+                given = [None; 3];
                 feet = g.feet();
                 if let Some(p) = pure.as_mut() {
-                    p.next_step(&c);
+                    match listed {
+                        Some(d) => p.next_step_given(d),
+                        None => p.next_step(&c),
+                    };
                     pure_feet = p.feet();
                 }
                 let m = midpoint(&pure_feet);

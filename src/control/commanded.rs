@@ -11,7 +11,9 @@
 //! [`gait_core::command::CommandLimits::DEFAULT`]. `servo_lead` does not apply to it.
 
 use gait_core::command::{CommandLimits, WalkCommand};
-use gait_core::online::{OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET};
+use gait_core::online::{
+    ListedStep, OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, STEP_QUEUE_LEN,
+};
 use gait_core::plan::SwingShape;
 use gait_core::{GaitError, Place, Robot, Side, SupportPhase};
 use walker_contract::codes::CommandField;
@@ -127,6 +129,22 @@ impl CommandLink {
         }
     }
 
+    /// In Mode = walk, moves the port's step list into the online walk (while it has room):
+    /// each entry becomes an explicit step (mm and mrad → m and rad).
+    pub fn feed_steps(&mut self, walk: &mut OnlineWalk<f32>) {
+        if self.mode() != Mode::Walk {
+            return;
+        }
+        while walk.queued() < STEP_QUEUE_LEN {
+            let Some(e) = self.port.table.take_step() else {
+                return;
+            };
+            let side = if e.side == 1 { Side::Left } else { Side::Right };
+            let d = [e.dx, e.dy, e.dyaw].map(|v| f32::from(v) * 0.001);
+            walk.push_step(ListedStep { side, d });
+        }
+    }
+
     /// The commanded mode.
     pub fn mode(&self) -> Mode {
         self.port.table.mode()
@@ -162,13 +180,15 @@ pub fn support_code(p: SupportPhase) -> u8 {
 }
 
 /// Logs a committed footstep: the heading hold's correction δ if any (`Footstep` id s·16 + 3,
-/// µrad), then three `Footstep` records (x, y in µm; yaw in µrad).
+/// µrad), an explicit step's travel if it was one (ids s·16 + 4, 5, 6: mm, mm, mrad), then
+/// three `Footstep` records (x, y in µm; yaw in µrad).
 pub fn log_footstep<B: Board>(
     board: &mut B,
     log: &mut LogWriter,
     side: Side,
     place: &Place<f32>,
     turn: f32,
+    given: Option<[f32; 3]>,
 ) {
     let s: u8 = match side {
         Side::Left => 1,
@@ -188,6 +208,14 @@ pub fn log_footstep<B: Board>(
             board,
             super::fault(now, FaultKind::Footstep, s * 16 + 3, micro(turn)),
         );
+    }
+    if let Some(d) = given {
+        for (c, v) in d.iter().enumerate() {
+            let milli = libm::roundf(v * 1000.0);
+            let milli = if milli.is_finite() { milli as i32 } else { 0 };
+            let rec = super::fault(now, FaultKind::Footstep, s * 16 + 4 + c as u8, milli);
+            log.write(board, rec);
+        }
     }
     for (c, v) in [place.x, place.y, place.yaw].iter().enumerate() {
         let rec = super::fault(now, FaultKind::Footstep, s * 16 + c as u8, micro(*v));

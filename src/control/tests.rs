@@ -1468,6 +1468,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
                 turn = (f64::from(f.value) * 1e-6) as f32;
                 turns += 1;
             }
+            FaultKind::Footstep if f.id & 15 > 3 => panic!("no step list in this walk"),
             FaultKind::Footstep => {
                 parts.push((f.id, f.value));
                 if parts.len() < 3 {
@@ -1659,4 +1660,189 @@ fn foot_force_difference_raises_the_overloaded_sole_within_its_bound() {
     assert_eq!(run(&mut c, &plain), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(a.goals, c.goals);
     assert_goals_in_limits(&b);
+}
+
+/// The step list through the port: three entries written while standing wait (Step List
+/// Length 3, nothing moves); Mode = walk with zero velocity walks them in order and stops to
+/// standing by itself; each footstep logs its entry's travel (ids s·16 + 4..6) and lands
+/// where the generator's explicit step puts it (replayed here); the Fault Kind register shows
+/// the last fault logged (start-up's timing stretch; not the walk's events).
+#[test]
+fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
+    use walker_contract::command_port::{
+        StepEntry, FAULT_KIND, MODE, STATE, STEP_ENTRY, STEP_LIST,
+    };
+    let cfg = Config::default();
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let read = |r: walker_contract::command_port::Reg| {
+        port_packet(dxl::Instruction::Read {
+            addr: r.addr,
+            len: r.len,
+        })
+    };
+    let entries = [
+        StepEntry {
+            dx: 30,
+            dy: 0,
+            dyaw: 0,
+            side: 1,
+        },
+        StepEntry {
+            dx: 30,
+            dy: 0,
+            dyaw: 150,
+            side: 2,
+        },
+        StepEntry {
+            dx: 20,
+            dy: 10,
+            dyaw: 0,
+            side: 1,
+        },
+    ];
+    let mut script: Vec<(usize, Vec<u8>)> = entries
+        .iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let b = e.to_bytes();
+            (
+                ramp + 40 + i,
+                port_packet(dxl::Instruction::Write {
+                    addr: STEP_ENTRY.addr,
+                    data: &b,
+                }),
+            )
+        })
+        .collect();
+    script.push((ramp + 60, read(STEP_LIST)));
+    script.push((ramp + 100, read(STATE)));
+    script.push((
+        ramp + 110,
+        port_packet(dxl::Instruction::Write {
+            addr: MODE.addr,
+            data: &[2],
+        }),
+    ));
+    script.push((ramp + 200, read(STEP_LIST)));
+    script.push((ramp + 1800, read(STATE)));
+    script.push((ramp + 1801, read(STEP_LIST)));
+    script.push((ramp + 1802, read(FAULT_KIND)));
+    script.push((
+        ramp + 1810,
+        port_packet(dxl::Instruction::Write {
+            addr: MODE.addr,
+            data: &[0],
+        }),
+    ));
+    let mut b = PortBoard {
+        inner: board(&cfg),
+        script,
+        replies: Vec::new(),
+    };
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
+    let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    assert_eq!(
+        replies,
+        vec![
+            (None, vec![]),
+            (None, vec![]),
+            (None, vec![]),
+            (None, vec![3]),
+            (None, vec![PortState::Standing.code()]),
+            (None, vec![]),
+            // One period of start: the walk holds all three (one is the step under way).
+            (None, vec![3]),
+            (None, vec![PortState::Standing.code()]),
+            (None, vec![0]),
+            // The last fault logged: start-up stretched the timing for the servo speed (the
+            // walk's footsteps and commands are events, not faults).
+            (None, vec![FaultKind::TimingStretched.code()]),
+            (None, vec![]),
+        ]
+    );
+    // The log: each listed step's travel, then its place; replayed through the generator.
+    let recs = b.inner.records();
+    let w = startup::servo_timing(
+        &cfg,
+        &Robot::reference(),
+        &Targets::new(&Robot::reference(), cfg.compensation),
+    )
+    .unwrap()
+    .walk;
+    let y = w.step_width as f32;
+    let mut gen = gait_core::command::StepGenerator::new(
+        &Robot::reference(),
+        w.z_c,
+        gait_core::command::CommandLimits::DEFAULT,
+        y,
+        (f64::from(commanded::period_us(&Config { walk: w, ..cfg })) * 1e-6) as f32,
+        [
+            gait_core::Place {
+                x: 0.0,
+                y,
+                yaw: 0.0,
+            },
+            gait_core::Place {
+                x: 0.0,
+                y: -y,
+                yaw: 0.0,
+            },
+        ],
+        Side::Left,
+    )
+    .unwrap();
+    let mut given = Vec::new();
+    let mut parts = Vec::new();
+    let mut steps = Vec::new();
+    for r in &recs {
+        let Record::Fault(f) = r else { continue };
+        if f.kind != FaultKind::Footstep || f.id == 0 {
+            continue;
+        }
+        match f.id & 15 {
+            4..=6 => given.push(f.value),
+            0..=2 => {
+                parts.push(f.value);
+                if parts.len() == 3 {
+                    steps.push((f.id >> 4, core::mem::take(&mut given), parts.clone()));
+                    parts.clear();
+                }
+            }
+            _ => panic!("unexpected footstep record {}", f.id),
+        }
+    }
+    assert!(
+        steps.len() > 3,
+        "the list, then the stop's steps: {}",
+        steps.len()
+    );
+    for (n, (side, g, got)) in steps.iter().enumerate() {
+        let s = match entries.get(n) {
+            Some(e) => {
+                assert_eq!(*side, e.side, "step {n}");
+                assert_eq!(
+                    g,
+                    &vec![i32::from(e.dx), i32::from(e.dy), i32::from(e.dyaw)]
+                );
+                gen.next_step_given([e.dx, e.dy, e.dyaw].map(|v| f32::from(v) * 0.001))
+            }
+            None => {
+                assert!(g.is_empty(), "step {n}: a stop step");
+                gen.next_step(&gait_core::command::WalkCommand::zero())
+            }
+        };
+        let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
+        assert_eq!(got, &want.to_vec(), "step {n}");
+    }
+    assert!(gen.is_standing(), "the stop's steps closed the feet");
+    // Independently: the first (left) step lands 3 cm ahead, 2W to the left of the right foot.
+    let first = &steps[0].2;
+    assert_eq!(first[0], 30_000);
+    assert!(
+        (first[1] - (1e6 * y).round() as i32).abs() <= 1,
+        "{first:?}"
+    );
+    assert!(torque_off_sent(&b.inner));
+    assert_goals_in_limits(&b.inner);
 }
