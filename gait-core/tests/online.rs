@@ -40,6 +40,20 @@ fn feet() -> [Place<f64>; 2] {
     [Place::new(0.0, W, 0.0), Place::new(0.0, -W, 0.0)]
 }
 
+/// The generator alone from the walk's standing feet, `first` swinging first.
+fn generator(first: Side) -> StepGenerator<f64> {
+    StepGenerator::new(
+        &Robot::reference(),
+        0.217,
+        CommandLimits::DEFAULT,
+        W,
+        0.64,
+        feet(),
+        first,
+    )
+    .unwrap()
+}
+
 fn walk() -> OnlineWalk<f64> {
     OnlineWalk::new(&Robot::reference(), params(), feet()).unwrap()
 }
@@ -157,16 +171,7 @@ fn forward_then_stop_ends_standing_where_the_steps_went() {
         "standing, starting, walking, stopping, standing"
     );
     // The generator alone, stepped by the same commands at the same step boundaries.
-    let mut g = StepGenerator::new(
-        &Robot::reference(),
-        0.217,
-        CommandLimits::DEFAULT,
-        W,
-        0.64,
-        feet(),
-        Side::Left,
-    )
-    .unwrap();
+    let mut g = generator(Side::Left);
     // Starting takes one period from tick 10; step n starts at tick 10 + 128 (n + 1).
     for (n, f) in steps.iter().enumerate() {
         let start = 10 + 128 * (n + 1);
@@ -362,16 +367,7 @@ fn a_footstep_list_is_walked_in_order_and_the_walk_stops_after_it() {
         "standing, starting, walking, stopping, standing"
     );
     // The generator alone: the four listed steps, then zero-command steps until it stands.
-    let mut g = StepGenerator::new(
-        &Robot::reference(),
-        0.217,
-        CommandLimits::DEFAULT,
-        W,
-        0.64,
-        feet(),
-        Side::Right,
-    )
-    .unwrap();
+    let mut g = generator(Side::Right);
     for (n, (f, given)) in steps.iter().enumerate() {
         match list.get(n) {
             Some(l) => {

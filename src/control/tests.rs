@@ -1348,11 +1348,63 @@ fn port_packet(ins: dxl::Instruction<'_>) -> Vec<u8> {
     buf[..n].to_vec()
 }
 
+/// A WRITE of Mode = `m` to the command port.
+fn write_mode(m: u8) -> Vec<u8> {
+    port_packet(dxl::Instruction::Write {
+        addr: walker_contract::command_port::MODE.addr,
+        data: &[m],
+    })
+}
+
 fn reply_of(bytes: &[u8]) -> (Option<dxl::ErrorCode>, Vec<u8>) {
     let mut buf = [0u8; 600];
     let p = dxl::decode(bytes, &mut buf).unwrap();
     let s = dxl::Status::from_packet(&p).unwrap();
     (s.error.code, s.data.to_vec())
+}
+
+/// The step generator of the firmware's online walk for `cfg` (the servo-speed check's timing,
+/// the logged whole-µs period), from `feet` with `first` swinging first: the host's replay.
+fn port_walk_generator(
+    cfg: &Config,
+    feet: [gait_core::Place<f32>; 2],
+    first: Side,
+) -> gait_core::command::StepGenerator<f32> {
+    let w = startup::servo_timing(
+        cfg,
+        &Robot::reference(),
+        &Targets::new(&Robot::reference(), cfg.compensation),
+    )
+    .unwrap()
+    .walk;
+    gait_core::command::StepGenerator::new(
+        &Robot::reference(),
+        w.z_c,
+        gait_core::command::CommandLimits::DEFAULT,
+        w.step_width as f32,
+        (f64::from(commanded::period_us(&Config { walk: w, ..*cfg })) * 1e-6) as f32,
+        feet,
+        first,
+    )
+    .unwrap()
+}
+
+/// Runs the firmware on the fake robot with `script` on its command port until the script's
+/// torque off (asserted: stop `Requested`); the board and the port's replies (error, data).
+#[allow(clippy::type_complexity)]
+fn run_port_script(
+    cfg: &Config,
+    script: Vec<(usize, Vec<u8>)>,
+) -> (PortBoard, Vec<(Option<dxl::ErrorCode>, Vec<u8>)>) {
+    let mut b = PortBoard {
+        inner: board(cfg),
+        script,
+        replies: Vec::new(),
+    };
+    let end = run(&mut b, cfg);
+    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
+    let replies = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    (b, replies)
 }
 
 /// Without autostart the robot stands after the ramp and waits; it walks on a velocity
@@ -1361,7 +1413,7 @@ fn reply_of(bytes: &[u8]) -> (Option<dxl::ErrorCode>, Vec<u8>) {
 /// logs are the generator's for the logged commands (replayed here in f32: identical).
 #[test]
 fn commanded_walk_stands_walks_stops_on_the_port() {
-    use walker_contract::command_port::{MODE, STATE, VELOCITY_X};
+    use walker_contract::command_port::{STATE, VELOCITY_X};
     let cfg = Config::default();
     assert!(!cfg.autostart);
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
@@ -1383,45 +1435,14 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
                 data: &v,
             }),
         ),
-        (
-            ramp + 51,
-            port_packet(dxl::Instruction::Write {
-                addr: MODE.addr,
-                data: &[7],
-            }),
-        ),
-        (
-            ramp + 52,
-            port_packet(dxl::Instruction::Write {
-                addr: MODE.addr,
-                data: &[2],
-            }),
-        ),
+        (ramp + 51, write_mode(7)),
+        (ramp + 52, write_mode(2)),
         (ramp + 300, read_state()),
-        (
-            ramp + 1100,
-            port_packet(dxl::Instruction::Write {
-                addr: MODE.addr,
-                data: &[1],
-            }),
-        ),
+        (ramp + 1100, write_mode(1)),
         (ramp + 2300, read_state()),
-        (
-            ramp + 2310,
-            port_packet(dxl::Instruction::Write {
-                addr: MODE.addr,
-                data: &[0],
-            }),
-        ),
+        (ramp + 2310, write_mode(0)),
     ];
-    let mut b = PortBoard {
-        inner: board(&cfg),
-        script,
-        replies: Vec::new(),
-    };
-    let end = run(&mut b, &cfg);
-    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
-    let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    let (b, replies) = run_port_script(&cfg, script);
     assert_eq!(
         replies,
         vec![
@@ -1480,26 +1501,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
                     Side::Right
                 };
                 if gen.as_ref().is_none_or(|g| g.is_standing()) {
-                    let w = startup::servo_timing(
-                        &cfg,
-                        &Robot::reference(),
-                        &Targets::new(&Robot::reference(), cfg.compensation),
-                    )
-                    .unwrap()
-                    .walk;
-                    gen = Some(
-                        gait_core::command::StepGenerator::new(
-                            &Robot::reference(),
-                            w.z_c,
-                            gait_core::command::CommandLimits::DEFAULT,
-                            w.step_width as f32,
-                            (f64::from(commanded::period_us(&Config { walk: w, ..cfg })) * 1e-6)
-                                as f32,
-                            feet,
-                            side,
-                        )
-                        .unwrap(),
-                    );
+                    gen = Some(port_walk_generator(&cfg, feet, side));
                 }
                 let g = gen.as_mut().unwrap();
                 let c = if cmd[0] == 2 {
@@ -1669,9 +1671,7 @@ fn foot_force_difference_raises_the_overloaded_sole_within_its_bound() {
 /// the last fault logged (start-up's timing stretch; not the walk's events).
 #[test]
 fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
-    use walker_contract::command_port::{
-        StepEntry, FAULT_KIND, MODE, STATE, STEP_ENTRY, STEP_LIST,
-    };
+    use walker_contract::command_port::{StepEntry, FAULT_KIND, STATE, STEP_ENTRY, STEP_LIST};
     let cfg = Config::default();
     let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let read = |r: walker_contract::command_port::Reg| {
@@ -1716,32 +1716,13 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
         .collect();
     script.push((ramp + 60, read(STEP_LIST)));
     script.push((ramp + 100, read(STATE)));
-    script.push((
-        ramp + 110,
-        port_packet(dxl::Instruction::Write {
-            addr: MODE.addr,
-            data: &[2],
-        }),
-    ));
+    script.push((ramp + 110, write_mode(2)));
     script.push((ramp + 200, read(STEP_LIST)));
     script.push((ramp + 1800, read(STATE)));
     script.push((ramp + 1801, read(STEP_LIST)));
     script.push((ramp + 1802, read(FAULT_KIND)));
-    script.push((
-        ramp + 1810,
-        port_packet(dxl::Instruction::Write {
-            addr: MODE.addr,
-            data: &[0],
-        }),
-    ));
-    let mut b = PortBoard {
-        inner: board(&cfg),
-        script,
-        replies: Vec::new(),
-    };
-    let end = run(&mut b, &cfg);
-    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
-    let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    script.push((ramp + 1810, write_mode(0)));
+    let (b, replies) = run_port_script(&cfg, script);
     assert_eq!(
         replies,
         vec![
@@ -1763,20 +1744,9 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
     );
     // The log: each listed step's travel, then its place; replayed through the generator.
     let recs = b.inner.records();
-    let w = startup::servo_timing(
+    let y = cfg.walk.step_width as f32;
+    let mut gen = port_walk_generator(
         &cfg,
-        &Robot::reference(),
-        &Targets::new(&Robot::reference(), cfg.compensation),
-    )
-    .unwrap()
-    .walk;
-    let y = w.step_width as f32;
-    let mut gen = gait_core::command::StepGenerator::new(
-        &Robot::reference(),
-        w.z_c,
-        gait_core::command::CommandLimits::DEFAULT,
-        y,
-        (f64::from(commanded::period_us(&Config { walk: w, ..cfg })) * 1e-6) as f32,
         [
             gait_core::Place {
                 x: 0.0,
@@ -1790,8 +1760,7 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
             },
         ],
         Side::Left,
-    )
-    .unwrap();
+    );
     let mut given = Vec::new();
     let mut parts = Vec::new();
     let mut steps = Vec::new();
