@@ -365,8 +365,9 @@ pub struct FilArgs {
     #[arg(long, value_name = "FILE")]
     pub video: Option<PathBuf>,
     /// Walk on command: the firmware starts without autostart and this script of `[[command]]`
-    /// tables (`t` s from standing ready; `vx`, `vy` m/s, `vyaw` rad/s, or `stop = true`)
-    /// drives it through its command port; e.g. plans/commands-demo.toml.
+    /// tables (`t` s from standing ready; `vx`, `vy` m/s, `vyaw` rad/s, or `stop = true`; a
+    /// footstep list `steps = [{ foot = "left", dx = 0.03, dy = 0, dyaw = 0 }, …]`) drives it
+    /// through its command port; e.g. plans/commands-demo.toml, plans/steps-demo.toml.
     #[arg(long, value_name = "FILE")]
     pub commands: Option<PathBuf>,
     /// The run.

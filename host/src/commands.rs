@@ -30,8 +30,63 @@ use walker_contract::record::Record;
 
 use crate::sim::transport::SimProgress;
 
-/// One command of a script.
+/// The foot of a listed step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Foot {
+    /// The left foot swings.
+    Left,
+    /// The right foot swings.
+    Right,
+}
+
+/// One explicit step of a script's footstep list: the swing foot's travel beyond the in-place
+/// step in the support foot's frame (the port's Step Entry in SI units).
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScriptStep {
+    /// The foot that swings.
+    pub foot: Foot,
+    /// Forward, m.
+    #[serde(default)]
+    pub dx: f64,
+    /// Leftward, m.
+    #[serde(default)]
+    pub dy: f64,
+    /// Heading change, rad.
+    #[serde(default)]
+    pub dyaw: f64,
+}
+
+impl ScriptStep {
+    /// The port's Step Entry (mm, mm, mrad), checked against its ranges.
+    pub fn entry(&self) -> Result<port::StepEntry, String> {
+        let mut v = [0i16; 3];
+        for ((o, x), m) in v
+            .iter_mut()
+            .zip([self.dx, self.dy, self.dyaw])
+            .zip(port::STEP_ENTRY_MAX)
+        {
+            let r = (x * 1000.0).round();
+            if !r.is_finite() || r.abs() > f64::from(m) {
+                return Err(format!("step {self:?}: {x} beyond ±{m} (milli-units)"));
+            }
+            *o = r as i16;
+        }
+        Ok(port::StepEntry {
+            dx: v[0],
+            dy: v[1],
+            dyaw: v[2],
+            side: match self.foot {
+                Foot::Left => 1,
+                Foot::Right => 2,
+            },
+        })
+    }
+}
+
+/// One command of a script.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScriptCommand {
     /// When, s after the firmware stood ready.
@@ -48,6 +103,11 @@ pub struct ScriptCommand {
     /// Stop (Mode = stop) instead of a velocity.
     #[serde(default)]
     pub stop: bool,
+    /// A footstep list (`steps = [{ foot = "left", dx = 0.03 }, …]`, at most
+    /// [`port::STEP_LIST_LEN`]): written to the step list before the velocity and Mode = walk;
+    /// walked first, then the velocity's steps (with velocity 0 the robot stops after them).
+    #[serde(default)]
+    pub steps: Vec<ScriptStep>,
 }
 
 impl ScriptCommand {
@@ -92,8 +152,22 @@ impl CommandScript {
             }
             last = c.t;
             c.wire()?;
-            if c.stop && (c.vx != 0.0 || c.vy != 0.0 || c.vyaw != 0.0) {
-                return Err(format!("command at t = {} s: stop with a velocity", c.t));
+            if c.stop && (c.vx != 0.0 || c.vy != 0.0 || c.vyaw != 0.0 || !c.steps.is_empty()) {
+                return Err(format!(
+                    "command at t = {} s: stop with a velocity or steps",
+                    c.t
+                ));
+            }
+            if c.steps.len() > port::STEP_LIST_LEN {
+                return Err(format!(
+                    "command at t = {} s: {} steps, the port holds {}",
+                    c.t,
+                    c.steps.len(),
+                    port::STEP_LIST_LEN
+                ));
+            }
+            for st in &c.steps {
+                st.entry()?;
             }
         }
         Ok(s)
@@ -256,6 +330,9 @@ pub fn drive(
         if c.stop {
             master.write(port::MODE.addr, &[Mode::Stop.code()])?;
         } else {
+            for st in &c.steps {
+                master.write(port::STEP_ENTRY.addr, &st.entry()?.to_bytes())?;
+            }
             let w = c.wire()?;
             let mut data = Vec::new();
             for v in w {
@@ -460,5 +537,32 @@ mod tests {
         assert!(CommandScript::parse("[[command]]\nt = 1\n[[command]]\nt = 0.5\n").is_err());
         assert!(CommandScript::parse("[[command]]\nt = 1\nstop = true\nvx = 0.01\n").is_err());
         assert!(CommandScript::parse("[[command]]\nt = 1\nspeed = 1\n").is_err());
+        // Footstep lists: in the port's units, checked against its ranges and length.
+        let l = CommandScript::parse(
+            "[[command]]\nt = 1\nsteps = [{ foot = \"right\", dx = 0.03, dyaw = -0.1 }]\n",
+        )
+        .unwrap();
+        assert_eq!(
+            l.command[0].steps[0].entry(),
+            Ok(port::StepEntry {
+                dx: 30,
+                dy: 0,
+                dyaw: -100,
+                side: 2
+            })
+        );
+        assert!(CommandScript::parse(
+            "[[command]]\nt = 1\nsteps = [{ foot = \"left\", dx = 0.09 }]\n"
+        )
+        .is_err());
+        assert!(
+            CommandScript::parse("[[command]]\nt = 1\nsteps = [{ foot = \"middle\" }]\n").is_err()
+        );
+        assert!(CommandScript::parse(
+            "[[command]]\nt = 1\nstop = true\nsteps = [{ foot = \"left\" }]\n"
+        )
+        .is_err());
+        let nine = vec!["{ foot = \"left\" }"; 9].join(", ");
+        assert!(CommandScript::parse(&format!("[[command]]\nt = 1\nsteps = [{nine}]\n")).is_err());
     }
 }

@@ -205,6 +205,7 @@ fn push_run(
                     vy: 0.0,
                     vyaw: 0.0,
                     stop: true,
+                    steps: Vec::new(),
                 }],
             };
             match fil::run_commands(&fopts, &script, |_, _| {}) {
