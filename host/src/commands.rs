@@ -562,7 +562,7 @@ mod tests {
             "[[command]]\nt = 1\nstop = true\nsteps = [{ foot = \"left\" }]\n"
         )
         .is_err());
-        let nine = vec!["{ foot = \"left\" }"; 9].join(", ");
+        let nine = ["{ foot = \"left\" }"; 9].join(", ");
         assert!(CommandScript::parse(&format!("[[command]]\nt = 1\nsteps = [{nine}]\n")).is_err());
     }
 }
