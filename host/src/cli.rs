@@ -123,6 +123,12 @@ pub enum Command {
     /// impulse in steps of 2·STEP until the robot falls, then tries the level in between
     /// (host/src/pushes.rs); writes OUT/pushes.md and one folder per run.
     Pushes(PushesArgs),
+    /// Fastest forward velocity and turn rate sustained for 10 s on the MuJoCo robot, on command.
+    ///
+    /// One run per level through the firmware's command port (host/src/speed.rs): sustained =
+    /// no fall, the run ends by the commanded torque off and the pelvis's mean over the 10 s
+    /// hold reaches 90 % of the level; writes OUT/speed.md and one folder per run.
+    Speed(SpeedArgs),
 }
 
 /// `walker export`.
@@ -431,6 +437,23 @@ pub struct PushesArgs {
     pub run: RunArgs,
 }
 
+/// `walker speed`.
+#[derive(Debug, Args)]
+pub struct SpeedArgs {
+    /// Output folder (speed.md, one folder per run).
+    #[arg(long, value_name = "DIR", default_value = "out/speed")]
+    pub out: PathBuf,
+    /// Resolution of the forward velocity search, m/s.
+    #[arg(long, value_name = "M_S", default_value_t = 0.01)]
+    pub step_v: f64,
+    /// Resolution of the turn rate search, rad/s.
+    #[arg(long, value_name = "RAD_S", default_value_t = 0.05)]
+    pub step_w: f64,
+    /// The runs.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
 /// The longest duration any option takes, s (11.6 days; `Duration::from_secs_f64` panics on
 /// non-finite or huge values, so every duration is checked against this first).
 pub const MAX_SECONDS: f64 = 1e6;
@@ -544,6 +567,7 @@ pub fn run(command: Command) -> Result<(), CliError> {
         Command::Beyond(a) => run_beyond(a),
         Command::Sweep(a) => run_sweep(a),
         Command::Pushes(a) => run_pushes(a),
+        Command::Speed(a) => run_speed(a),
     }
 }
 
@@ -1366,6 +1390,54 @@ fn run_pushes(a: PushesArgs) -> Result<(), CliError> {
     std::fs::create_dir_all(&out)
         .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
     let path = out.join("pushes.md");
+    std::fs::write(&path, &md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
+    print!("{md}");
+    println!("\nwritten: {}", path.display());
+    Ok(())
+}
+
+fn run_speed(a: SpeedArgs) -> Result<(), CliError> {
+    use crate::speed;
+    let RunSetup {
+        spec,
+        plan_name,
+        sim,
+        elf,
+        machine,
+        timeout,
+        extra_tokens,
+    } = RunSetup::new("speed", a.run)?;
+    let ok = |v: f64| v.is_finite() && v > 0.0;
+    if !(ok(a.step_v) && ok(a.step_w)) {
+        return Err(CliError::usage(
+            "walker speed: --step-v and --step-w must be > 0".to_string(),
+        ));
+    }
+    let out = a.out;
+    let opts = speed::SpeedOptions {
+        elf,
+        spec,
+        out_dir: out.clone(),
+        machine,
+        sim,
+        extra_tokens,
+        timeout,
+        step_v: a.step_v,
+        step_w: a.step_w,
+    };
+    eprintln!("walker speed: {plan_name}");
+    let rows = speed::run(&opts, |line| eprintln!("  {line} …")).map_err(CliError::failed)?;
+    let mut md = format!(
+        "# Fastest sustained walk on command: {plan_name}\n\nThe firmware's defaults on the MuJoCo robot, through the command port: the level held {:.0} s after the acceleration ramp; sustained = no fall, the run ends by the commanded torque off and the pelvis's mean over the hold ≥ {:.0} % of the level. \"Delivered\" is what the step generator steps for the level after the leg's reach (host/src/speed.rs). Resolution {:.3} m/s and {:.3} rad/s, up to the command limits.\n\n",
+        speed::HOLD_S,
+        100.0 * speed::SUSTAIN_SHARE,
+        a.step_v,
+        a.step_w
+    );
+    md.push_str(&speed::table(&rows));
+    std::fs::create_dir_all(&out)
+        .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
+    let path = out.join("speed.md");
     std::fs::write(&path, &md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
     print!("{md}");
     println!("\nwritten: {}", path.display());

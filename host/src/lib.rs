@@ -15,5 +15,6 @@ pub mod qemu;
 pub mod report;
 pub mod runconfig;
 pub mod sim;
+pub mod speed;
 pub mod sweep;
 pub mod video;
