@@ -373,7 +373,7 @@ pub struct FilArgs {
     /// Walk on command: the firmware starts without autostart and this script of `[[command]]`
     /// tables (`t` s from standing ready; `vx`, `vy` m/s, `vyaw` rad/s, or `stop = true`; a
     /// footstep list `steps = [{ foot = "left", dx = 0.03, dy = 0, dyaw = 0 }, …]`) drives it
-    /// through its command port; e.g. plans/commands-demo.toml, plans/steps-demo.toml.
+    /// through its command port; e.g. plans/commands-demo.toml, plans/commands-steps.toml.
     #[arg(long, value_name = "FILE")]
     pub commands: Option<PathBuf>,
     /// The run.
@@ -1323,12 +1323,7 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
         goal::ZMP_Y * 1e3
     );
     md.push_str(&crate::sweep::table(&rows));
-    std::fs::create_dir_all(&out)
-        .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
-    let path = out.join("sweep.md");
-    std::fs::write(&path, &md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
-    print!("{md}");
-    println!("\nwritten: {}", path.display());
+    write_report(&out, "sweep.md", &md)?;
     match rows.iter().find(|r| r.exit_code != Some(0)) {
         None => Ok(()),
         Some(r) => Err(CliError {
@@ -1387,10 +1382,15 @@ fn run_pushes(a: PushesArgs) -> Result<(), CliError> {
         a.walk_at, a.stand_after, a.step, a.max
     );
     md.push_str(&pushes::table(&rows, a.max));
-    std::fs::create_dir_all(&out)
+    write_report(&out, "pushes.md", &md)
+}
+
+/// Writes the Markdown report `md` to OUT/`name` and prints it.
+fn write_report(out: &std::path::Path, name: &str, md: &str) -> Result<(), CliError> {
+    std::fs::create_dir_all(out)
         .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
-    let path = out.join("pushes.md");
-    std::fs::write(&path, &md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
+    let path = out.join(name);
+    std::fs::write(&path, md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
     print!("{md}");
     println!("\nwritten: {}", path.display());
     Ok(())
@@ -1435,13 +1435,7 @@ fn run_speed(a: SpeedArgs) -> Result<(), CliError> {
         a.step_w
     );
     md.push_str(&speed::table(&rows));
-    std::fs::create_dir_all(&out)
-        .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
-    let path = out.join("speed.md");
-    std::fs::write(&path, &md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
-    print!("{md}");
-    println!("\nwritten: {}", path.display());
-    Ok(())
+    write_report(&out, "speed.md", &md)
 }
 
 #[cfg(test)]

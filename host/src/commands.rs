@@ -383,6 +383,22 @@ pub struct FootstepCheck {
     pub turned: f64,
 }
 
+/// The online walk's feet standing at power-on: (0, ±`half_width`), heading 0 (left, right).
+pub fn standing_feet(half_width: f32) -> [Place<f32>; 2] {
+    [
+        Place {
+            x: 0.0,
+            y: half_width,
+            yaw: 0.0,
+        },
+        Place {
+            x: 0.0,
+            y: -half_width,
+            yaw: 0.0,
+        },
+    ]
+}
+
 /// Replays a log's `CommandReceived` and `Footstep` records through [`StepGenerator`] (f32,
 /// the firmware's arithmetic; a footstep's logged heading-hold correction, id s·16 + 3, is
 /// passed to [`StepGenerator::next_step_turned`]) for a walk of CoM height `z_c` and half width `half_width`, with
@@ -396,18 +412,7 @@ pub fn replay_footsteps(
     let mut period = 0.0f32;
     let robot = Robot::reference();
     let mut cmd = [Mode::Stand.code() as i32, 0, 0, 0];
-    let mut feet = [
-        Place {
-            x: 0.0f32,
-            y: half_width,
-            yaw: 0.0,
-        },
-        Place {
-            x: 0.0,
-            y: -half_width,
-            yaw: 0.0,
-        },
-    ];
+    let mut feet = standing_feet(half_width);
     let mut gen: Option<StepGenerator<f32>> = None;
     let mut pure: Option<StepGenerator<f32>> = None;
     let mut pure_feet = feet;

@@ -416,6 +416,16 @@ impl CommandFigures {
     }
 }
 
+/// When a truth table first marks a fall (its `falling` column), s.
+pub fn fell_at(table: &crate::report::TruthTable) -> Result<Option<f64>, String> {
+    let falling = table.column("falling").ok_or("truth: no column falling")?;
+    Ok(falling
+        .iter()
+        .zip(&table.t)
+        .find(|(f, _)| **f > 0.5)
+        .map(|(_, t)| *t))
+}
+
 /// The figures of a command-script run: the log's footsteps replayed
 /// ([`crate::commands::replay_footsteps`], with the firmware's own configuration of the run:
 /// [`check_tokens`]) and the truth's pelvis pose.
@@ -458,12 +468,7 @@ pub fn command_figures(
     let (y0, y1) = first_last(py)?;
     let (w0, w1) = first_last(pyaw)?;
     let dyaw = w1 - w0;
-    let falling = col("falling")?;
-    let fell_at = falling
-        .iter()
-        .zip(&table.t)
-        .find(|(f, _)| **f > 0.5)
-        .map(|(_, t)| *t);
+    let fell_at = fell_at(&table)?;
     Ok(CommandFigures {
         footsteps,
         fell_at,

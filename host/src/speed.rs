@@ -23,7 +23,7 @@ use crate::fil::{self, FilOptions};
 use crate::planfile::WalkSpec;
 use crate::sim::SimConfig;
 use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
-use gait_core::{Place, Robot, Side};
+use gait_core::{Robot, Side};
 use walker_contract::codes::{ExitCode, FaultKind};
 use walker_contract::record::Record;
 
@@ -132,18 +132,7 @@ pub fn delivered(
     half_width: f32,
     period_s: f32,
 ) -> Result<f64, String> {
-    let feet = [
-        Place {
-            x: 0.0f32,
-            y: half_width,
-            yaw: 0.0,
-        },
-        Place {
-            x: 0.0,
-            y: -half_width,
-            yaw: 0.0,
-        },
-    ];
+    let feet = crate::commands::standing_feet(half_width);
     let mut g = StepGenerator::new(
         &Robot::reference(),
         z_c,
@@ -279,12 +268,7 @@ fn speed_run(opts: &SpeedOptions, axis: Axis, level: f64) -> Result<SpeedRun, St
             .column(n)
             .ok_or_else(|| format!("truth: no column {n}"))
     };
-    let falling = col("falling")?;
-    let fell_at = falling
-        .iter()
-        .zip(&table.t)
-        .find(|(f, _)| **f > 0.5)
-        .map(|(_, t)| *t);
+    let fell_at = fil::fell_at(&table)?;
     let ready = ready_us.map_or(0.0, |u| u as f64 * 1e-6);
     let measured = measured_mean(
         axis,

@@ -847,7 +847,7 @@ fn command_script_run(
     (r, drove, script, f)
 }
 
-/// A footstep list on the command port (issue 17): `plans/steps-demo.toml` (stand 1 s, six
+/// A footstep list on the command port (issue 17): `plans/commands-steps.toml` (stand 1 s, six
 /// listed steps: two forward, a 0.3 rad left turn in two, a 2 cm side step) on the MuJoCo
 /// robot. No fall; the six listed steps and one stop step, each the generator's explicit step
 /// for the logged entry (replayed exactly); the robot stops by itself after the list (the run
@@ -856,7 +856,7 @@ fn command_script_run(
 #[test]
 #[ignore]
 fn steps_demo_walks_a_footstep_list_on_mujoco() {
-    let (r, _, _, f) = command_script_run("steps-demo");
+    let (r, _, _, f) = command_script_run("commands-steps");
     eprintln!("{}", f.line());
     assert_eq!(r.exit_code, Some(17), "ends by the script's torque off");
     assert_eq!(f.fell_at, None, "{}", f.line());
