@@ -4,19 +4,36 @@
 # host/tests/sdk/test_dynamixel_sdk.py, which pings, reads and writes every simulated device.
 #
 #   scripts/sdk-test.sh [path/to/walker]     (default target/x86_64-unknown-linux-gnu/release/walker)
+#   scripts/sdk-test.sh --fil [path/to/walker] [path/to/qemu-elf]
+#
+# With --fil it runs host/tests/sdk/test_sdk_command_port.py instead: the SDK drives the
+# firmware's command port (ID 150) in a firmware-in-the-loop run (`walker fil --command-port`,
+# QEMU + the MuJoCo robot; default ELF target/thumbv7em-none-eabihf/release/qemu): identity,
+# bad commands rejected with error statuses, walk, read status, stop, torque off.
 #
 # Needs python3 (3.8+) with pip. Without the venv module's ensurepip (Debian's python3-venv not
 # installed), the packages are installed with `pip install --target .venv-sdk/site-packages`
 # instead. The last line of the output is `N passed, M failed`; the exit status is non-zero on
 # any failure.
 set -euo pipefail
-# A walker path given as argument is relative to the caller's directory, the default to the repo.
-if [[ $# -ge 1 && "$1" != /* ]]; then
-    set -- "$PWD/$1"
+TEST=host/tests/sdk/test_dynamixel_sdk.py
+if [[ "${1:-}" == --fil ]]; then
+    TEST=host/tests/sdk/test_sdk_command_port.py
+    shift
 fi
+# Paths given as arguments are relative to the caller's directory, the defaults to the repo.
+args=()
+for a in "$@"; do
+    if [[ "$a" != /* ]]; then a="$PWD/$a"; fi
+    args+=("$a")
+done
+set -- "${args[@]}"
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
 WALKER="${1:-$PWD/target/x86_64-unknown-linux-gnu/release/walker}"
+if [[ $# -ge 2 ]]; then
+    export QEMU_ELF="$2"
+fi
 PYTHON="${PYTHON:-python3}"
 VENV=.venv-sdk
 # Versions the test was written against (the test subclasses the SDK's PortHandler).
@@ -54,4 +71,4 @@ elif ! "${py[@]}" -c 'import dynamixel_sdk, serial' >/dev/null 2>&1; then
         --target "$VENV/site-packages" "${PACKAGES[@]}"
 fi
 
-WALKER="$WALKER" exec "${py[@]}" host/tests/sdk/test_dynamixel_sdk.py
+WALKER="$WALKER" exec "${py[@]}" "$TEST"

@@ -91,6 +91,10 @@ step "the official ROBOTIS dynamixel-sdk (PyPI) reads and writes every simulated
 cargo build --release --target host-tuple -p walker-host --bin walker
 bash scripts/sdk-test.sh "target/$(rustc -vV | sed -n 's/^host: //p')/release/walker"
 
+step "the official dynamixel-sdk drives the firmware's command port in a firmware-in-the-loop run (walk, read status, stop; bad commands rejected with error statuses; README's example script)"
+bash scripts/sdk-test.sh --fil "target/$(rustc -vV | sed -n 's/^host: //p')/release/walker" \
+    target/thumbv7em-none-eabihf/release/qemu
+
 step "video: MuJoCo renders a walk headless (EGL) into an MP4"
 render_py=$(bash scripts/render-setup.sh | tail -n 1)
 "$render_py" scripts/render_selftest.py

@@ -376,6 +376,12 @@ pub struct FilArgs {
     /// through its command port; e.g. plans/commands-demo.toml, plans/commands-steps.toml.
     #[arg(long, value_name = "FILE")]
     pub commands: Option<PathBuf>,
+    /// Walk on command from outside: the firmware starts without autostart and its command
+    /// port (Dynamixel Protocol 2.0, ID 150) listens on 127.0.0.1:PORT (0 = a free port, printed)
+    /// for any master: `walker drive --connect`, the ROBOTIS SDK (pyserial URL
+    /// `socket://127.0.0.1:PORT`). Writing Mode = 0 (torque off) ends the run.
+    #[arg(long, value_name = "PORT", conflicts_with = "commands")]
+    pub command_port: Option<u16>,
     /// The run.
     #[command(flatten)]
     pub run: RunArgs,
@@ -1142,6 +1148,48 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
     }
 }
 
+/// `walker fil --command-port`: the firmware waits for an external master; the run ends when
+/// it exits (torque off on command is a normal end).
+fn run_fil_command_port(
+    opts: &crate::fil::FilOptions,
+    spec: &WalkSpec,
+    plan_name: &str,
+    port: u16,
+) -> Result<(), CliError> {
+    let port = match port {
+        0 => crate::fil::free_port()?,
+        p => p,
+    };
+    eprintln!(
+        "walker fil: {plan_name} on command in QEMU {}; command port on 127.0.0.1:{port} \
+         (Dynamixel Protocol 2.0, ID {}, QEMU listening; Mode = 0 ends the run)",
+        opts.machine,
+        walker_contract::command_port::PORT_ID
+    );
+    let last = std::cell::Cell::new(-1.0f64);
+    let r = crate::fil::run_command_port(opts, port, |t, _| {
+        if t - last.get() >= 0.5 {
+            eprint!("\r  simulated time {t:6.2} s");
+            last.set(t);
+        }
+    })?;
+    eprintln!();
+    eprintln!("  {}", crate::fil::summary_line(&r.sim));
+    eprintln!("  wall clock {:.1} s", r.wall.as_secs_f64());
+    match crate::fil::command_figures(&r, spec, &opts.extra_tokens) {
+        Ok(f) => println!("{}", f.line()),
+        Err(e) => println!("no command figures: {e}"),
+    }
+    println!("log: {}, truth: {}", r.log.display(), r.truth.display());
+    match r.exit_code {
+        Some(0) | Some(crate::fil::END_BY_COMMAND) => Ok(()),
+        code => Err(CliError {
+            message: format!("the firmware exited with code {code:?}"),
+            code: 3,
+        }),
+    }
+}
+
 fn run_fil(a: FilArgs) -> Result<(), CliError> {
     let RunSetup {
         mut spec,
@@ -1204,6 +1252,9 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         println!("{}", f.line());
         println!("log: {}, truth: {}", r.log.display(), r.truth.display());
         return Ok(());
+    }
+    if let Some(port) = a.command_port {
+        return run_fil_command_port(&opts, &spec, &plan_name, port);
     }
     eprintln!(
         "walker fil: {} ({:?}) in QEMU {} against the simulated robot",

@@ -150,7 +150,7 @@ pub fn qemu_append(opts: &FilOptions) -> Result<String, String> {
 
 /// Runs the firmware in QEMU against the simulator; blocks until the firmware exits.
 pub fn run(opts: &FilOptions, progress: impl Fn(f64, u64)) -> Result<FilResult, String> {
-    run_inner(opts, None, progress).map(|(r, _)| r)
+    run_inner(opts, PortDriver::None, progress).map(|(r, _)| r)
 }
 
 /// Runs the firmware without autostart and drives it through its command port (QEMU's UART3,
@@ -163,16 +163,55 @@ pub fn run_commands(
 ) -> Result<(FilResult, crate::commands::DriveReport), String> {
     let mut o = opts.clone();
     o.extra_tokens.push("autostart=0".into());
-    let (r, d) = run_inner(&o, Some(script), progress)?;
+    let (r, d) = run_inner(&o, PortDriver::Script(script), progress)?;
     let d = d.ok_or("command driver: no report")??;
     Ok((r, d))
+}
+
+/// Runs the firmware without autostart with its command port (QEMU's UART3) listening on
+/// `127.0.0.1:port` for any Dynamixel master (the ROBOTIS SDK, `walker drive`): QEMU is the TCP
+/// server (`server=on,wait=off`: the firmware starts at once and answers whoever connects; a
+/// master that disconnects can connect again). Blocks until the firmware exits — a master
+/// writing Mode = 0 (torque off) ends the run (exit code 17, [`END_BY_COMMAND`]).
+pub fn run_command_port(
+    opts: &FilOptions,
+    port: u16,
+    progress: impl Fn(f64, u64),
+) -> Result<FilResult, String> {
+    let mut o = opts.clone();
+    o.extra_tokens.push("autostart=0".into());
+    run_inner(&o, PortDriver::External(port), progress).map(|(r, _)| r)
+}
+
+/// The firmware's exit code of a run ended by torque off on the command port (stop code
+/// `Requested`).
+pub const END_BY_COMMAND: i32 = walker_contract::codes::ExitCode::Requested.code() as i32;
+
+/// A free TCP port on 127.0.0.1 (bound, read and released: another process may take it before
+/// QEMU binds it, then QEMU fails to start and says so).
+pub fn free_port() -> Result<u16, String> {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .map_err(|e| format!("command port: {e}"))
+}
+
+/// Who drives the command port (QEMU's UART3) of a run.
+#[derive(Clone, Copy)]
+enum PortDriver<'a> {
+    /// Nobody: UART3 is `null` (a plan run with autostart).
+    None,
+    /// A command script, through the host's own master (QEMU connects to the host).
+    Script(&'a crate::commands::CommandScript),
+    /// An external master on `127.0.0.1:port` (QEMU listens).
+    External(u16),
 }
 
 type DriveOutcome = Option<Result<crate::commands::DriveReport, String>>;
 
 fn run_inner(
     opts: &FilOptions,
-    script: Option<&crate::commands::CommandScript>,
+    port: PortDriver<'_>,
     progress: impl Fn(f64, u64),
 ) -> Result<(FilResult, DriveOutcome), String> {
     // Checked before anything starts: the firmware's own parser, then the firmware's buffer.
@@ -209,18 +248,19 @@ fn run_inner(
     let defmt_file =
         std::fs::File::create(&defmt).map_err(|e| format!("{}: {e}", defmt.display()))?;
     // The command port (UART3): a socket the host owns, QEMU connects to it.
-    let port_listener = match script {
-        Some(_) => Some(
+    let port_listener = match port {
+        PortDriver::Script(_) => Some(
             std::net::TcpListener::bind("127.0.0.1:0").map_err(|e| format!("command port: {e}"))?,
         ),
-        None => None,
+        PortDriver::None | PortDriver::External(_) => None,
     };
-    let port_serial = match &port_listener {
-        Some(l) => format!(
+    let port_serial = match (&port_listener, port) {
+        (Some(l), _) => format!(
             "tcp:{},nodelay=on",
             l.local_addr().map_err(|e| format!("command port: {e}"))?
         ),
-        None => "null".to_string(),
+        (None, PortDriver::External(p)) => external_port_serial(p),
+        (None, _) => "null".to_string(),
     };
     let started = Instant::now();
     let serials = crate::qemu::Serials {
@@ -237,8 +277,8 @@ fn run_inner(
         .map_err(|e| format!("starting QEMU: {e}"))?;
     let p = handle.progress();
     let quit = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let driver = match (&port_listener, script) {
-        (Some(l), Some(s)) => {
+    let driver = match (&port_listener, port) {
+        (Some(l), PortDriver::Script(s)) => {
             l.set_nonblocking(false).ok();
             let (stream, _) = l.accept().map_err(|e| format!("command port: {e}"))?;
             Some(crate::commands::spawn_driver(
@@ -313,6 +353,12 @@ fn run_inner(
         },
         drove,
     ))
+}
+
+/// QEMU's chardev of a command port listening on `127.0.0.1:port`: QEMU is the server, does not
+/// wait for a client before the firmware starts, and accepts a new one after a disconnect.
+fn external_port_serial(port: u16) -> String {
+    format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on")
 }
 
 /// One line about the simulator's run.

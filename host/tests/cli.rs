@@ -1056,3 +1056,102 @@ fn run_configuration_file_errors_name_the_field() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("`stab_kp=20`: out of range"), "{err}");
 }
+
+/// `NAME = value` (an integer, decimal or hex) from a Python file's top level.
+fn python_constant(text: &str, name: &str) -> i64 {
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(&format!("{name} = ")))
+        .unwrap_or_else(|| panic!("{name} not in the Python test"));
+    let v = line[name.len() + 3..]
+        .split('#')
+        .next()
+        .unwrap_or_default()
+        .trim();
+    match v.strip_prefix("0x") {
+        Some(h) => i64::from_str_radix(h, 16).unwrap(),
+        None => v.parse().unwrap_or_else(|e| panic!("{name} = {v}: {e}")),
+    }
+}
+
+#[test]
+fn sdk_example_uses_the_contract_registers() {
+    use walker_contract::codes::FaultKind;
+    use walker_contract::command_port::{self as port, Mode, PortState};
+    // The example's register map (the SDK test imports it) and the test's own codes.
+    let read = |p: &str| std::fs::read_to_string(workspace().join(p)).unwrap();
+    let example = read("host/examples/sdk_drive.py");
+    let test = read("host/tests/sdk/test_sdk_command_port.py");
+    let c = |n: &str| python_constant(&example, n);
+    let t = |n: &str| python_constant(&test, n);
+    let regs = [
+        ("ADDR_MODEL", port::MODEL_NUMBER.addr),
+        ("ADDR_FIRMWARE_VERSION", port::FIRMWARE_VERSION.addr),
+        ("ADDR_ID", port::ID.addr),
+        ("ADDR_MODE", port::MODE.addr),
+        ("ADDR_VELOCITY_X", port::VELOCITY_X.addr),
+        ("ADDR_STATUS", port::STATE.addr),
+        ("ADDR_STEP_COUNT", port::STEP_COUNT.addr),
+        ("ADDR_COMMAND_COUNT", port::COMMAND_COUNT.addr),
+    ];
+    for (name, addr) in regs {
+        assert_eq!(c(name), i64::from(addr), "{name}");
+    }
+    // The status block: State to the end of Command Count, the registers in the order decoded.
+    let end = port::COMMAND_COUNT.addr + port::COMMAND_COUNT.len;
+    assert_eq!(c("STATUS_LEN"), i64::from(end - port::STATE.addr));
+    let decoded = [
+        (port::STATE, 0),
+        (port::SUPPORT_FOOT, 1),
+        (port::STEP_COUNT, 2),
+        (port::ZMP_X, 4),
+        (port::ZMP_Y, 6),
+        (port::ZMP_VALID, 8),
+        (port::STOP_CODE, 9),
+        (port::FAULT_KIND, 10),
+        (port::STEP_LIST, 11),
+        (port::WALK_VX, 12),
+        (port::WALK_VY, 14),
+        (port::WALK_YAW, 16),
+        (port::COMMAND_COUNT, 18),
+    ];
+    for (r, off) in decoded {
+        assert_eq!(
+            r.addr - port::STATE.addr,
+            off,
+            "status block offset of {}",
+            r.addr
+        );
+    }
+    assert_eq!(c("PORT_ID"), i64::from(port::PORT_ID));
+    assert_eq!(c("PORT_MODEL"), i64::from(port::MODEL_NUMBER_VALUE));
+    assert_eq!(c("VELOCITY_X_MAX"), i64::from(port::VELOCITY_RANGE[0].1));
+    for (name, m) in [
+        ("MODE_TORQUE_OFF", Mode::TorqueOff),
+        ("MODE_STAND", Mode::Stand),
+        ("MODE_WALK", Mode::Walk),
+        ("MODE_STOP", Mode::Stop),
+    ] {
+        assert_eq!(c(name), i64::from(m.code()), "{name}");
+    }
+    assert_eq!(c("STATE_STANDING"), i64::from(PortState::Standing.code()));
+    assert_eq!(c("STATE_WALKING"), i64::from(PortState::Walking.code()));
+    assert_eq!(
+        t("FAULT_TIMING_STRETCHED"),
+        i64::from(FaultKind::TimingStretched.code())
+    );
+    for (name, e) in [
+        ("ERR_DATA_RANGE", dxl::ErrorCode::DataRange),
+        ("ERR_DATA_LENGTH", dxl::ErrorCode::DataLength),
+        ("ERR_ACCESS", dxl::ErrorCode::Access),
+    ] {
+        let byte = dxl::StatusError {
+            alert: false,
+            code: Some(e),
+        }
+        .to_byte();
+        assert_eq!(t(name), i64::from(byte), "{name}");
+    }
+    // The bad velocity the test sends is out of range.
+    assert!(300 > port::VELOCITY_RANGE[0].1 && -300 < port::VELOCITY_RANGE[0].0);
+}

@@ -11,18 +11,9 @@ Run it through `scripts/sdk-test.sh [path/to/walker]`, which installs the SDK in
 directly with `WALKER=path/to/walker python3 host/tests/sdk/test_dynamixel_sdk.py`.
 WALKER defaults to target/x86_64-unknown-linux-gnu/release/walker (relative to the repo root).
 
-How the SDK reaches a TCP socket: the SDK's PortHandler.setupPort() opens
-`serial.Serial(port=name, ...)`, which only accepts device paths. pyserial's
-`serial.serial_for_url()` also accepts URLs and its `socket://host:port` handler offers the
-same read/write/in_waiting/reset_input_buffer interface the SDK uses, so SocketPortHandler
-below only replaces setupPort() to call serial_for_url() with the port name as URL. It also
-sets TCP_NODELAY (pyserial does not): without it, an instruction sent right after one that gets
-no reply (SYNC WRITE) waits for the peer's delayed ACK (~40 ms on Linux, Nagle's algorithm) and
-its status packet misses the SDK's 34 ms packet timeout. Finally it adds SOCKET_MARGIN_MS to the
-SDK's packet timeout (34 ms + transfer time, sized for a USB serial adapter's latency timer):
-the simulator runs its physics up to the present before it answers, and on a busy 2-core
-machine (a cargo build, QEMU) the reply can come 50 ms late. A late reply still counts as a
-failure once the margin is exceeded; a missing device just takes the margin longer to time out.
+How the SDK reaches a TCP socket: through host/examples/sdk_drive.py's SocketPortHandler (a
+PortHandler on pyserial's socket:// URL, TCP_NODELAY, a margin over the SDK's packet timeout for
+a simulator that answers when its physics has caught up; see its docstring).
 """
 
 import os
@@ -34,15 +25,16 @@ import threading
 import time
 from pathlib import Path
 
-import serial
-from dynamixel_sdk import (
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples"))
+from sdk_drive import SocketPortHandler, s16  # noqa: E402 (the TCP port handler: see its doc)
+
+from dynamixel_sdk import (  # noqa: E402
     COMM_RX_TIMEOUT,
     COMM_SUCCESS,
     GroupBulkRead,
     GroupSyncRead,
     GroupSyncWrite,
     PacketHandler,
-    PortHandler,
 )
 
 REPO = Path(__file__).resolve().parents[3]
@@ -88,37 +80,6 @@ LEG_DELTA = {"left": [0, 0, -D, +2 * D, -D, 0],
              "right": [0, 0, -D, +2 * D, -D, 0]}
 GOAL_DELTA = dict(zip(SERVOS, LEG_DELTA["left"] + LEG_DELTA["right"]))
 RAMP_S = 0.3
-# Extra packet timeout for the TCP simulator (see the module docstring), ms.
-SOCKET_MARGIN_MS = float(os.environ.get("SDK_TEST_MARGIN_MS", "250"))
-
-
-class SocketPortHandler(PortHandler):
-    """A dynamixel_sdk PortHandler whose port name is a pyserial URL, e.g. socket://127.0.0.1:5760.
-
-    Only setupPort() differs from the SDK's: serial.serial_for_url() instead of serial.Serial()
-    (same settings: non-blocking reads, as the SDK polls), plus TCP_NODELAY on a socket:// port;
-    setPacketTimeout() adds SOCKET_MARGIN_MS (see the module docstring). The baud rate only sets
-    the SDK's packet timeouts (the socket handler ignores it).
-    """
-
-    def setPacketTimeout(self, packet_length):
-        super().setPacketTimeout(packet_length)
-        self.packet_timeout += SOCKET_MARGIN_MS
-
-    def setupPort(self, cflag_baud):
-        if self.is_open:
-            self.closePort()
-        self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate,
-                                         bytesize=serial.EIGHTBITS, timeout=0)
-        sock = getattr(self.ser, "_socket", None)  # pyserial's socket:// handler keeps it here
-        if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.is_open = True
-        self.ser.reset_input_buffer()
-        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
-        return True
-
-
 class Checks:
     def __init__(self):
         self.passed = 0
@@ -135,10 +96,6 @@ class Checks:
 
 def s32(v):
     return struct.unpack("<i", struct.pack("<I", v & 0xFFFFFFFF))[0]
-
-
-def s16(v):
-    return struct.unpack("<h", struct.pack("<H", v & 0xFFFF))[0]
 
 
 def free_port():
