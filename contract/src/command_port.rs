@@ -126,6 +126,10 @@ pub const WALK_YAW: Reg = reg(144, 2);
 /// Command count (R).
 pub const COMMAND_COUNT: Reg = reg(146, 2);
 
+/// The status registers as one block, State through Command Count: what a master reads in
+/// one READ ([`StatusBlock::decode`]).
+pub const STATUS_BLOCK: Reg = reg(128, 20);
+
 /// Every register, in address order.
 pub const REGISTERS: [Reg; 21] = [
     MODEL_NUMBER,
@@ -293,6 +297,55 @@ pub struct PortStatus {
     pub walk_velocity: [f32; 3],
     /// Explicit steps the walk took from the step list and has not stepped yet.
     pub queued: usize,
+}
+
+/// The status block as a master reads it ([`STATUS_BLOCK`]), in wire units.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct StatusBlock {
+    /// State (None: a code this contract does not know).
+    pub state: Option<PortState>,
+    /// Support foot: 0 both, 1 left, 2 right.
+    pub support: u8,
+    /// Steps finished since power-on.
+    pub step_count: u16,
+    /// Measured ZMP (mm, mm), if valid.
+    pub zmp_mm: Option<[i16; 2]>,
+    /// The stop record's code (0 none).
+    pub stop_code: u8,
+    /// The last fault record's kind (0 none).
+    pub fault_kind: u8,
+    /// Step List Length: entries not yet stepped.
+    pub step_list: u8,
+    /// The velocity the feet step (mm/s, mm/s, mrad/s).
+    pub walk_velocity: [i16; 3],
+    /// Accepted command writes (wraps).
+    pub command_count: u16,
+}
+
+impl StatusBlock {
+    /// Decodes the [`STATUS_BLOCK`] bytes read from the port; None when `block` is shorter.
+    pub fn decode(block: &[u8]) -> Option<Self> {
+        let at = |r: Reg| {
+            let off = usize::from(r.addr.checked_sub(STATUS_BLOCK.addr)?);
+            block.get(off..off + usize::from(r.len))
+        };
+        let u8_of = |r: Reg| at(r).and_then(|b| b.first().copied());
+        let u16_of =
+            |r: Reg| at(r).and_then(|b| Some(u16::from_le_bytes([*b.first()?, *b.get(1)?])));
+        let i16_of = |r: Reg| u16_of(r).map(|v| i16::from_le_bytes(v.to_le_bytes()));
+        let zmp = [i16_of(ZMP_X)?, i16_of(ZMP_Y)?];
+        Some(StatusBlock {
+            state: PortState::from_code(u8_of(STATE)?),
+            support: u8_of(SUPPORT_FOOT)?,
+            step_count: u16_of(STEP_COUNT)?,
+            zmp_mm: (u8_of(ZMP_VALID)? != 0).then_some(zmp),
+            stop_code: u8_of(STOP_CODE)?,
+            fault_kind: u8_of(FAULT_KIND)?,
+            step_list: u8_of(STEP_LIST)?,
+            walk_velocity: [i16_of(WALK_VX)?, i16_of(WALK_VY)?, i16_of(WALK_YAW)?],
+            command_count: u16_of(COMMAND_COUNT)?,
+        })
+    }
 }
 
 /// Velocity limits of the wire (mm/s, mm/s, mrad/s): the default command limits.

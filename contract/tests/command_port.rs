@@ -192,6 +192,37 @@ fn status_registers_read_back_in_wire_units() {
     assert_eq!(i16::from_le_bytes([d[12], d[13]]), 50);
     assert_eq!(i16::from_le_bytes([d[16], d[17]]), -200);
     assert_eq!(p.table.state(), PortState::Walking);
+    // The master's decoder reads the same block back.
+    let b = StatusBlock::decode(
+        read(&mut p, STATUS_BLOCK.addr, STATUS_BLOCK.len)
+            .unwrap()
+            .as_slice(),
+    )
+    .unwrap();
+    assert_eq!(
+        b,
+        StatusBlock {
+            state: Some(PortState::Walking),
+            support: 2,
+            step_count: 513,
+            zmp_mm: Some([13, -47]),
+            stop_code: 0,
+            fault_kind: 3,
+            step_list: 3,
+            walk_velocity: [50, 0, -200],
+            command_count: 0,
+        }
+    );
+    assert_eq!(StatusBlock::decode(&d[..19]), None);
+    // The block ends where the table does.
+    assert_eq!(
+        usize::from(STATUS_BLOCK.addr + STATUS_BLOCK.len),
+        usize::from(COMMAND_COUNT.addr + COMMAND_COUNT.len)
+    );
+    assert_eq!(
+        usize::from(COMMAND_COUNT.addr + COMMAND_COUNT.len),
+        TABLE_LEN
+    );
 }
 
 #[test]
@@ -238,6 +269,36 @@ fn arb_write() -> impl Strategy<Value = (u16, Vec<u8>)> {
 }
 
 proptest! {
+    /// Whatever the firmware publishes (in wire units), a master's READ of the status block
+    /// decodes to it.
+    #[test]
+    fn the_status_block_decodes_what_was_published(
+        state in 0u8..5, support in 0u8..3, steps: u16, zmp in proptest::option::of([-3000i16..3000, -3000i16..3000]),
+        stop: u8, fault: u8, queued in 0usize..9, v in [-200i16..=200, -100i16..=100, -600i16..=600],
+    ) {
+        let mut t = CommandTable::new();
+        let m = |x: i16| f32::from(x) / 1000.0;
+        t.set_status(&PortStatus {
+            state: PortState::from_code(state).unwrap(),
+            support,
+            step_count: steps,
+            zmp_m: zmp.map(|[x, y]| [m(x), m(y)]),
+            stop_code: stop,
+            fault_kind: fault,
+            walk_velocity: v.map(m),
+            queued,
+        });
+        let b = StatusBlock::decode(t.read(STATUS_BLOCK.addr, STATUS_BLOCK.len).unwrap()).unwrap();
+        prop_assert_eq!(b.state, PortState::from_code(state));
+        prop_assert_eq!(b.support, support);
+        prop_assert_eq!(b.step_count, steps);
+        prop_assert_eq!(b.zmp_mm, zmp);
+        prop_assert_eq!((b.stop_code, b.fault_kind), (stop, fault));
+        prop_assert_eq!(usize::from(b.step_list), queued);
+        prop_assert_eq!(b.walk_velocity, v);
+        prop_assert_eq!(b.command_count, 0);
+    }
+
     /// Any write: either accepted (and then every written register holds a value in its
     /// range, the command count advanced by one) or rejected with the table unchanged.
     #[test]

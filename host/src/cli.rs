@@ -129,6 +129,13 @@ pub enum Command {
     /// no fall, the run ends by the commanded torque off and the pelvis's mean over the 10 s
     /// hold reaches 90 % of the level; writes OUT/speed.md and one folder per run.
     Speed(SpeedArgs),
+    /// Keyboard teleoperation of the walk on the firmware's command port (arrows/WASD, space =
+    /// stop, t = torque off, Esc = quit), with a live status line.
+    ///
+    /// On a TCP command port (`--connect`, e.g. a `walker fil --command-port` run), a serial port
+    /// (`--serial`, the OpenCR's UART connector) or the simulated robot started in the
+    /// background (`--sim`: the firmware in QEMU against the MuJoCo robot). host/src/drive.rs.
+    Drive(DriveArgs),
 }
 
 /// `walker export`.
@@ -443,6 +450,35 @@ pub struct PushesArgs {
     pub run: RunArgs,
 }
 
+/// `walker drive`.
+#[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("port").required(true).args(["connect", "serial", "sim"])))]
+pub struct DriveArgs {
+    /// A command port on TCP, e.g. 127.0.0.1:5770 (`walker fil --command-port 5770`).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub connect: Option<String>,
+    /// A serial port, e.g. /dev/ttyUSB0 (the OpenCR's UART connector through a USB–TTL adapter).
+    #[arg(long, value_name = "DEV")]
+    pub serial: Option<String>,
+    /// Baud rate of --serial (the firmware's command UART runs at 1 Mbps).
+    #[arg(long, value_name = "BAUD", default_value_t = 1_000_000)]
+    pub baud: u32,
+    /// Start the simulated robot in the background (`walker fil --command-port`: the firmware in
+    /// QEMU against the MuJoCo robot, its output in --out) and drive it; quitting stops the walk,
+    /// turns the torque off (ending the run) and prints the run's figures.
+    #[arg(long)]
+    pub sim: bool,
+    /// With --sim: the plan file (walking parameters; default the built-in Table 2 walk).
+    #[arg(long, value_name = "FILE", requires = "sim")]
+    pub plan: Option<PathBuf>,
+    /// With --sim: the firmware ELF (default target/thumbv7em-none-eabihf/release/qemu).
+    #[arg(long, value_name = "ELF", requires = "sim")]
+    pub elf: Option<PathBuf>,
+    /// With --sim: the run's output folder (walk.log, truth.csv, fil.out, fil.err).
+    #[arg(long, value_name = "DIR", default_value = "out/drive")]
+    pub out: PathBuf,
+}
+
 /// `walker speed`.
 #[derive(Debug, Args)]
 pub struct SpeedArgs {
@@ -574,6 +610,7 @@ pub fn run(command: Command) -> Result<(), CliError> {
         Command::Sweep(a) => run_sweep(a),
         Command::Pushes(a) => run_pushes(a),
         Command::Speed(a) => run_speed(a),
+        Command::Drive(a) => run_drive(a),
     }
 }
 
@@ -1444,6 +1481,73 @@ fn write_report(out: &std::path::Path, name: &str, md: &str) -> Result<(), CliEr
     std::fs::write(&path, md).map_err(|e| CliError::failed(format!("{}: {e}", path.display())))?;
     print!("{md}");
     println!("\nwritten: {}", path.display());
+    Ok(())
+}
+
+/// `walker drive`: the port, the terminal in raw mode, the session, then (with `--sim`) the
+/// run's end.
+fn run_drive(a: DriveArgs) -> Result<(), CliError> {
+    use std::io::Write as _;
+    let mut sim = match a.sim {
+        true => Some(crate::drive::SimRun::start(
+            a.plan.as_deref(),
+            a.elf.as_deref(),
+            &a.out,
+        )?),
+        false => None,
+    };
+    let master = match (&a.connect, &a.serial, &mut sim) {
+        (Some(addr), _, _) => crate::drive::connect(addr, None),
+        (_, Some(dev), _) => crate::commands::PortMaster::serial(dev, a.baud),
+        (_, _, Some(run)) => {
+            eprintln!(
+                "walker drive: the simulated robot starts (walker fil --command-port {}, output in {})",
+                run.port,
+                a.out.display()
+            );
+            crate::drive::connect(&format!("127.0.0.1:{}", run.port), Some(run))
+        }
+        _ => Err("walker drive: give --connect, --serial or --sim".to_string()),
+    };
+    let mut master = match master {
+        Ok(m) => m,
+        Err(e) => {
+            if let Some(run) = sim.as_mut() {
+                run.kill();
+            }
+            return Err(CliError::failed(e));
+        }
+    };
+    eprintln!("{}", crate::drive::HELP);
+    let ended = {
+        let _raw = crate::drive::RawTerminal::enter()?;
+        let mut out = std::io::stderr();
+        crate::drive::session(&mut master, crate::drive::terminal_key, |line| {
+            let _ = write!(out, "\r{line}\x1b[K");
+            let _ = out.flush();
+        })
+    };
+    eprintln!();
+    let ended = match ended {
+        Ok(e) => e,
+        Err(e) => {
+            if let Some(run) = sim.as_mut() {
+                run.kill();
+            }
+            return Err(CliError::failed(format!("walker drive: {e}")));
+        }
+    };
+    eprintln!("walker drive: {ended:?}");
+    if let Some(mut run) = sim {
+        if ended == crate::drive::Ended::Quit {
+            eprintln!("walker drive: waiting for the robot to stand, then torque off");
+            let st = crate::drive::wait_standing(&mut master, Duration::from_secs(20))?;
+            eprintln!("  {}", crate::drive::status_line(&st, &Default::default()));
+            crate::drive::send(&mut master, crate::drive::Action::TorqueOff)?;
+        }
+        let text = run.finish(Duration::from_secs(120))?;
+        print!("{text}");
+    }
     Ok(())
 }
 

@@ -188,24 +188,61 @@ impl CommandScript {
 /// How many times [`PortMaster::transact`] sends an instruction that gets no reply.
 pub const PORT_ATTEMPTS: usize = 3;
 
+/// A byte stream a [`PortMaster`] talks on: a TCP connection (QEMU's UART3) or a serial port.
+/// Reads must time out (a short read timeout), not block for ever.
+pub trait PortStream: Read + Write + Send {}
+
+impl<T: Read + Write + Send> PortStream for T {}
+
 /// A Dynamixel master on the command port's byte stream.
 pub struct PortMaster {
-    stream: TcpStream,
+    stream: Box<dyn PortStream>,
     decoder: Decoder<{ port::RX_PARAMS }>,
     /// Wall-clock reply timeout.
     pub timeout: Duration,
 }
 
 impl PortMaster {
-    /// A master on `stream`.
+    /// A master on a TCP connection (no Nagle delay, 20 ms read timeout).
     pub fn new(stream: TcpStream) -> Self {
         let _ = stream.set_nodelay(true);
         let _ = stream.set_read_timeout(Some(Duration::from_millis(20)));
+        Self::on(Box::new(stream))
+    }
+
+    /// A master on a serial port (8N1, `baud`; the board's command UART).
+    pub fn serial(path: &str, baud: u32) -> Result<Self, String> {
+        let mut p = crate::capture::open_serial(path, baud)?;
+        p.set_timeout(Duration::from_millis(20))
+            .map_err(|e| format!("{path}: {e}"))?;
+        Ok(Self::on(Box::new(p)))
+    }
+
+    /// A master on any stream whose reads time out.
+    pub fn on(stream: Box<dyn PortStream>) -> Self {
         PortMaster {
             stream,
             decoder: Decoder::new(),
             timeout: Duration::from_secs(5),
         }
+    }
+
+    /// READ of `len` bytes at `addr`, the status checked.
+    pub fn read(&mut self, addr: u16, len: u16) -> Result<Vec<u8>, String> {
+        match self.transact(Instruction::Read { addr, len })? {
+            (None, d) if d.len() == usize::from(len) => Ok(d),
+            (None, d) => Err(format!(
+                "command port: READ {addr}: {} bytes, not {len}",
+                d.len()
+            )),
+            (Some(e), _) => Err(format!("command port: READ {addr}: {e:?}")),
+        }
+    }
+
+    /// The status block ([`port::STATUS_BLOCK`]) in one READ.
+    pub fn status(&mut self) -> Result<port::StatusBlock, String> {
+        let d = self.read(port::STATUS_BLOCK.addr, port::STATUS_BLOCK.len)?;
+        port::StatusBlock::decode(&d).ok_or_else(|| "command port: short status block".into())
     }
 
     /// Sends one instruction to the port and waits for its status: the error code (None =

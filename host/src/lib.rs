@@ -5,6 +5,7 @@ pub mod capture;
 pub mod cli;
 pub mod commands;
 pub mod defmt_log;
+pub mod drive;
 pub mod export;
 pub mod fil;
 pub mod mcap_export;

@@ -18,7 +18,11 @@ the SDK over TCP (Protocol 2.0, ID 150):
 5. stops: Mode = stop; waits for State = standing with the step count settled;
 6. Mode = torque off ends the run: `walker fil` must exit 0 and report no fall;
 7. runs README's example, host/examples/sdk_drive.py (walk, turn, stop, torque off), against a
-   second run: it must exit 0 having printed walking status lines, and the robot not fall.
+   second run: it must exit 0 having printed walking status lines, and the robot not fall;
+8. `walker drive --sim` (keyboard teleoperation) in a pseudo-terminal: waits for the standing
+   status line, types w w w w (walk +40 mm/s), a (turn +100 mrad/s), x (quit: stop, torque off)
+   and reads the status line back; the run must end without a fall, every footstep the
+   commands'.
 
 Every check prints one `ok` / `FAIL` line; the last line is `N passed, M failed` and the exit
 status is non-zero when anything failed. Run it through `scripts/sdk-test.sh --fil [walker]`,
@@ -31,6 +35,10 @@ and fault codes below against the contract.
 """
 
 import os
+import pty
+import re
+import select
+import signal
 import subprocess
 import sys
 import tempfile
@@ -264,6 +272,71 @@ def example(c, walker, elf):
         print(f"     output in {out}")
 
 
+def drive(c, walker, elf):
+    """`walker drive --sim` in a pseudo-terminal: keys typed, the status line read back."""
+    out = Path(tempfile.mkdtemp(prefix="sdk-drive-"))
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: walker drive on the pty
+        os.chdir(REPO)
+        os.execv(str(walker), [str(walker), "drive", "--sim", "--out", str(out), "--elf", str(elf)])
+    text = []
+
+    def pump(seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            r, _, _ = select.select([fd], [], [], 0.05)
+            if r:
+                try:
+                    data = os.read(fd, 65536)
+                except OSError:  # the child closed the pty
+                    return False
+                if not data:
+                    return False
+                text.append(data.decode(errors="replace"))
+        return True
+
+    def until(pattern, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            if re.search(pattern, "".join(text)):
+                return True
+            if not pump(0.2):
+                return bool(re.search(pattern, "".join(text)))
+        return False
+
+    def last_status():
+        lines = "".join(text).replace("\x1b[K", "").replace("\r", "\n").splitlines()
+        st = [ln for ln in lines if re.match(r"(starting|standing|walking|stopping|STOPPED) ", ln)]
+        return st[-1] if st else "no status line"
+
+    try:
+        ok = until(r"standing support", STAND_S)
+        c.check("walker drive --sim: the status line shows the robot standing", ok, last_status())
+        for _ in range(4):
+            os.write(fd, b"w")
+            pump(0.3)
+        ok = until(r"walking .*steps +([4-9]|\d\d+) \| cmd  \+40", WALK_S)
+        c.check("4 x 'w': walking at the commanded +40 mm/s, 4 steps", ok, last_status())
+        os.write(fd, b"a")
+        ok = until(r"cmd  \+40   \+0 mm/s \+100 mrad/s \| walk  \+40   \+0 \+100", WALK_S)
+        c.check("'a': the walk turns left at +100 mrad/s", ok, last_status())
+        os.write(fd, b"x")
+        ok = until(r"no fall; \d+ footsteps, 0 not the commands'", EXIT_S)
+        c.check("'x': stop, standing, torque off: the run's figures say no fall and every footstep "
+                "the commands'", ok, "".join(text)[-600:])
+        _, status = os.waitpid(pid, 0)
+        pid = None
+        c.check("walker drive exits 0", os.waitstatus_to_exitcode(status) == 0, f"status {status}")
+        for line in "".join(text).splitlines()[-3:]:
+            print(f"     drive: {line.strip()}")
+    finally:
+        if pid is not None:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        os.close(fd)
+        print(f"     output in {out}")
+
+
 def main():
     c = Checks()
     t_start = time.monotonic()
@@ -273,7 +346,7 @@ def main():
         if not p.is_file():
             print(f"{what} not found: {p}", file=sys.stderr)
             return 2
-    for part in (session, example):
+    for part in (session, example, drive):
         try:
             part(c, walker, elf)
         except Exception as e:  # a crash of the test itself counts as a failure
