@@ -54,6 +54,10 @@
 //! while walking the servo monitor adds two READs (14 + 14 bytes out, 12 + 32 in): 2.66 ms.
 //!
 //! # Phases
+//! What moves the legs is a walk mode ([`modes`]: one type per mode, explicit transitions):
+//! [`modes::Starting`] (the ramp) hands over to the gait — the online walk (its modes standing,
+//! starting, walking, stopping are gait-core's types) or the autostart plan ([`modes::Plan`]);
+//! the supervisor's stop ends every mode.
 //! * Servo-speed check (before the bus is touched for motion): the plan is run through the
 //!   sampler and [`Targets`] at dt ([`startup::servo_timing`]); when a joint would need more
 //!   than the servo's speed limit, the step timing is stretched or the swing lowered
@@ -130,6 +134,9 @@ use walker_contract::codes::SensorRejection;
 use walker_contract::command_port::{Mode, PortState, PortStatus};
 
 pub mod commanded;
+pub mod modes;
+
+use modes::{Gait, Motion, Plan, Walk};
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
@@ -550,14 +557,14 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         gait_core::gait::Engine::<MAX_STEPS>::new(&cfg.walk_config(), cfg.arithmetic, &robot)
     });
     // Without autostart the robot stands up and walks on command (the online walk).
-    let engine = engine.and_then(|e| {
+    let gait = engine.and_then(|e| {
         if cfg.autostart {
-            Ok((e, None))
+            Ok(Gait::Plan(Plan::new(e, cfg.lead_ticks())))
         } else {
-            commanded::online_walk(cfg, &robot).map(|o| (e, Some(o)))
+            commanded::online_walk(cfg, &robot).map(Gait::Online)
         }
     });
-    let (mut sampler, mut online) = match engine {
+    let gait = match gait {
         Ok(s) => s,
         Err(e) => {
             crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
@@ -640,20 +647,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         }
     };
 
-    // 5. The initial pose and the ramp to it.
+    // 5. The initial pose and the ramp to it (the plan's delay line of the servo-lag
+    // feed-forward was primed with it: [`Plan::new`]).
     let map = JointMap::from_robot(&robot);
-    // The delay line of the servo-lag feed-forward: gait samples from "now" (reference, log,
-    // stabilizer) to `lead` ticks ahead (joint targets).
-    let mut delay: heapless::Deque<GaitSample<f32>, { MAX_LEAD_TICKS + 1 }> =
-        heapless::Deque::new();
-    let first_sample = sampler.next(0.0);
-    let first = first_sample.f32;
-    let _ = delay.push_back(first);
-    let mut lead_sample = first_sample;
-    for _ in 0..cfg.lead_ticks() {
-        lead_sample = sampler.next(0.0);
-        let _ = delay.push_back(lead_sample.f32);
-    }
     // The servos' sag under the gait's loads, fed forward (`compliance_roll`/`_pitch`); f32
     // maths, so not with the fixed-point path (`math=fixed`: FPU-less cores).
     let load = LoadModel::new(&robot);
@@ -668,21 +664,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     };
     let mut foot_force_state = FootForceState::default();
     // The initial pose: the plan's first sample, or the online walk's standing pose.
-    let (first, q0) = match &online {
-        Some(o) => {
-            let s = o.clone().tick();
-            let mut q = targets.joints(&s, [0.0; 2]).0;
-            load.apply(&compliance, &mut q, &s, [0.0; 2]);
-            (s, q)
-        }
-        None => {
-            let mut q = sampler.joints(&targets, &lead_sample, [0.0; 2]);
-            load.apply(&compliance, &mut q, &lead_sample.f32, [0.0; 2]);
-            (first, q)
-        }
-    };
+    let (first, mut q0, loaded) = gait.initial_pose(&targets);
+    load.apply(&compliance, &mut q0, &loaded, [0.0; 2]);
     let mut link = commanded::CommandLink::new();
-    if online.is_some() {
+    if gait.online().is_some() {
         let now = bus.board().now_us();
         let rec = fault(now, FaultKind::Footstep, 0, commanded::period_us(cfg));
         log.write(bus.board(), rec);
@@ -692,6 +677,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         *f = map.rad_of_tick(j, t);
     }
     let ramp = Ramp::new(from, q0, cfg.ticks_for_us(cfg.ramp_us));
+    let ramp_ticks = ramp.ticks();
+    let mut walk = Walk::new(ramp, gait);
     let final_hold = u16::try_from(cfg.ticks_for_us(cfg.final_hold_us)).unwrap_or(u16::MAX);
 
     let mut sensors = Sensors::new(&missing);
@@ -723,18 +710,15 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut stab =
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
-    let mut ramp_k: Option<u32> = Some(0);
-    let mut pending = Some(lead_sample);
     let mut prev = first;
     let mut support_cache = SupportCache::default();
-    let mut walk_tick: u32 = 0;
     let mut clamped_seen = 0u16;
 
     if !first.is_finite() {
         // The initial pose would come from a non-finite sample: hold the present pose, stop.
         sup.stop(StopReason::NonFiniteSample { tick: 0 });
     }
-    crate::fw_log!(info, "walking: ramp {} ticks", ramp.ticks());
+    crate::fw_log!(info, "walking: ramp {} ticks", ramp_ticks);
     let weight_n = (robot.masses.total() * robot.gravity) as f32;
     let mut plausible = Plausibility::<3>::new(cfg, weight_n, bus.board().now_us());
     let mut monitor = ServoMonitor::new();
@@ -811,7 +795,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     let att = attitude.update(g, s.accel_m_s2(), dt_f32);
                     // The online walk's heading hold (f32 path): the gyro's yaw, the bias
                     // learnt while it stands.
-                    if let Some(o) = online.as_mut() {
+                    if let Some(o) = walk.gait.online_mut() {
                         let still = matches!(o.mode(), gait_core::online::WalkMode::Standing(_));
                         o.set_heading(heading.update(g, &att, dt_f32, still));
                     }
@@ -868,10 +852,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         };
         // Not on the start-up ramp (its targets do not take the offsets: no jump at its end);
         // off with `math=fixed` (f32 only: its state stays 0, so it is not run there).
-        let sole_dz = match ramp_k {
-            Some(_) => [0.0; 2],
-            None if fixed_math => [0.0; 2],
-            None => foot_force_state.update(
+        let sole_dz = match walk.is_starting() {
+            true => [0.0; 2],
+            false if fixed_math => [0.0; 2],
+            false => foot_force_state.update(
                 &foot_force,
                 prev.zmp,
                 [[pl.x, pl.y], [pr.x, pr.y]],
@@ -887,8 +871,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         if link.mode() == Mode::TorqueOff {
             sup.stop(StopReason::Requested);
         }
-        if let Some(o) = online.as_mut() {
-            if ramp_k.is_none() {
+        if !walk.is_starting() {
+            if let Some(o) = walk.gait.online_mut() {
                 o.set_command(link.velocity());
                 link.feed_steps(o);
             }
@@ -903,50 +887,26 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         };
         match action {
             Action::Run => {
-                let q = match ramp_k {
-                    Some(k) => {
-                        ramp_k = if k + 1 >= ramp.ticks() {
-                            None
-                        } else {
-                            Some(k + 1)
-                        };
-                        Some(Goal::Rad(ramp.at(k)))
-                    }
-                    None => 'sample: {
-                        let k = walk_tick;
-                        walk_tick = walk_tick.saturating_add(1);
+                // The walk's mode says what moves the legs ([`modes`]).
+                let q = match walk.tick(fixed_math, tau, tau_mnm) {
+                    Motion::Ramp(q) => Some(Goal::Rad(q)),
+                    Motion::Gait {
+                        k,
+                        present: s,
+                        mut ahead,
+                        footstep,
+                    } => 'sample: {
                         // The online walk's sample (no lead) or the plan's (`servo_lead` ahead).
-                        let (s, mut ahead) = match online.as_mut() {
-                            Some(o) => {
-                                let s = o.tick();
-                                if let Some(f) = o.take_footstep() {
-                                    commanded::log_footstep(
-                                        bus.board(),
-                                        &mut log,
-                                        f.side,
-                                        &f.place,
-                                        o.last_turn(),
-                                        o.last_given(),
-                                    );
-                                }
-                                (s, None)
-                            }
-                            None => {
-                                let ahead = match pending.take() {
-                                    Some(p) => p,
-                                    None => {
-                                        let a = if fixed_math {
-                                            sampler.next_mnm(tau_mnm)
-                                        } else {
-                                            sampler.next(tau)
-                                        };
-                                        let _ = delay.push_back(a.f32);
-                                        a
-                                    }
-                                };
-                                (delay.pop_front().unwrap_or(ahead.f32), Some(ahead))
-                            }
-                        };
+                        if let Some(f) = footstep {
+                            commanded::log_footstep(
+                                bus.board(),
+                                &mut log,
+                                f.step.side,
+                                &f.step.place,
+                                f.turn,
+                                f.given,
+                            );
+                        }
                         let mut s_ahead = ahead.map_or(s, |a| a.f32);
                         if cfg.fault_nan_com_tick == Some(k) {
                             s_ahead.com[0] = f32::NAN;
@@ -987,9 +947,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         // The integer IK's angles go to the ticks without an f32 round trip
                         // (`math=fixed`; compliance and the force difference control are off
                         // there); the f32 path otherwise (and for the NaN fault injection).
-                        let fx_q = match &ahead {
-                            Some(a) if cfg.fault_nan_tick != Some(k) => {
-                                sampler.joints_fx(&targets, a, shift)
+                        let plan = walk.gait.plan();
+                        let fx_q = match (&ahead, plan) {
+                            (Some(a), Some(p)) if cfg.fault_nan_tick != Some(k) => {
+                                p.engine().joints_fx(&targets, a, shift)
                             }
                             _ => None,
                         };
@@ -1003,21 +964,23 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 Goal::Fx(q)
                             }
                             None => {
-                                let (mut q, loaded) = match &ahead {
-                                    Some(a) if foot_force_state.dz != 0.0 => {
+                                let (mut q, loaded) = match (&ahead, plan) {
+                                    (Some(a), Some(p)) if foot_force_state.dz != 0.0 => {
                                         let mut lifted = *a;
                                         lifted.f32 = lift(a.f32);
-                                        (sampler.joints(&targets, &lifted, shift), a.f32)
+                                        (p.engine().joints(&targets, &lifted, shift), a.f32)
                                     }
-                                    Some(a) => (sampler.joints(&targets, a, shift), a.f32),
-                                    None => (targets.joints(&lift(s), shift).0, s),
+                                    (Some(a), Some(p)) => {
+                                        (p.engine().joints(&targets, a, shift), a.f32)
+                                    }
+                                    _ => (targets.joints(&lift(s), shift).0, s),
                                 };
                                 load.apply(&compliance, &mut q, &loaded, shift);
                                 cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                                 Goal::Rad(q)
                             }
                         };
-                        if online.is_none() && sampler.is_done() {
+                        if walk.gait.plan_done() {
                             sup.stop_with_hold(StopReason::PlanDone, final_hold);
                         }
                         if cfg.stop_at_tick == Some(k) {
@@ -1122,22 +1085,21 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             Action::HoldPose => FaultState::Stopping,
             Action::SendTorqueOff | Action::Idle => FaultState::TorqueOff,
         };
-        let state = match (action, &online, ramp_k) {
-            (Action::Run, _, Some(_)) => PortState::Starting,
-            (Action::Run, Some(o), None) => commanded::state_of(o.mode()),
-            (Action::Run, None, None) => PortState::Walking,
+        let state = match action {
+            Action::Run => walk.port_state(),
             _ => PortState::Stopped,
         };
+        let online = walk.gait.online();
         link.publish(&PortStatus {
             state,
             support: commanded::support_code(prev.phase),
-            step_count: u16::try_from(online.as_ref().map_or(prev.steps_done, |o| o.steps_done()))
+            step_count: u16::try_from(online.map_or(prev.steps_done, |o| o.steps_done()))
                 .unwrap_or(u16::MAX),
             zmp_m: meas_zmp,
             stop_code: sup.stop_reason().map_or(0, |r| r.kind().code()),
             fault_kind: log.last_fault(),
-            walk_velocity: online.as_ref().map_or([0.0; 3], |o| o.velocity()),
-            queued: online.as_ref().map_or(0, |o| o.queued()),
+            walk_velocity: online.map_or([0.0; 3], |o| o.velocity()),
+            queued: online.map_or(0, |o| o.queued()),
         });
         rec.bus = bus.counters();
         rec.overruns = u16::try_from(bus.board().overruns()).unwrap_or(u16::MAX);

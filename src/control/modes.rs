@@ -1,0 +1,369 @@
+//! The control loop's motion as walk modes: one type per mode, explicit transitions (the style
+//! of HULKs' walking engine). [`run`](super::run) keeps the tick's plumbing — sensors, command
+//! port, supervisor, the IK and the servo writes, the log — and asks a [`Walk`] what moves the
+//! legs this tick ([`Walk::tick`]):
+//!
+//! ```text
+//!  Starting ──ramp done──▶ Gait::Online  (without autostart: gait-core's OnlineWalk, whose own
+//!  (the minimum-jerk         mode types are standing → starting → walking → stopping →
+//!   ramp from the present    standing, driven by the command port)
+//!   pose to the initial  ──▶ Gait::Plan    (autostart: the configured plan's samples, then the
+//!   pose)                    supervisor's final hold when the plan is done)
+//!  any mode ── supervisor stop ──▶ hold the pose, torque off (the supervisor's own states)
+//! ```
+//!
+//! The command port's State register is the mode's ([`Walk::port_state`]): starting,
+//! standing / walking / stopping (the online walk's mode), walking (the plan), stopped (the
+//! supervisor stopped).
+
+use gait_core::gait::{Engine, Sample, Targets};
+use gait_core::online::OnlineWalk;
+use gait_core::plan::Footstep;
+use gait_core::robot::LEG_JOINTS;
+use gait_core::GaitSample;
+use walker_contract::command_port::PortState;
+
+use super::{commanded, MAX_LEAD_TICKS, MAX_STEPS};
+use crate::startup::Ramp;
+
+/// Starting: the ramp from the servos' present pose to the gait's initial pose
+/// (State = starting).
+#[derive(Clone, Debug)]
+pub struct Starting {
+    ramp: Ramp,
+    k: u32,
+}
+
+impl Starting {
+    /// At the ramp's first tick.
+    pub fn new(ramp: Ramp) -> Self {
+        Starting { ramp, k: 0 }
+    }
+
+    /// This tick's joint targets (rad) and whether the ramp is over after them.
+    pub fn step(&mut self) -> ([f32; LEG_JOINTS], bool) {
+        let q = self.ramp.at(self.k);
+        let done = self.k.saturating_add(1) >= self.ramp.ticks();
+        self.k = self.k.saturating_add(1);
+        (q, done)
+    }
+}
+
+/// The plan walked at power-on (autostart; State = walking): the sampler and the delay line
+/// of the servo-lag feed-forward (`servo_lead`: the joint targets come from the sample
+/// `lead` ticks ahead, the reference and the log from the present one).
+#[derive(Clone, Debug)]
+pub struct Plan {
+    engine: Engine<MAX_STEPS>,
+    delay: heapless::Deque<GaitSample<f32>, { MAX_LEAD_TICKS + 1 }>,
+    /// The sample `lead` ticks ahead of the delay line's front, not yet handed out.
+    pending: Option<Sample>,
+    /// The first sample (the initial pose's reference).
+    first: GaitSample<f32>,
+}
+
+impl Plan {
+    /// The plan with its delay line primed: the first sample and `lead_ticks` more (the
+    /// sampler's first `lead_ticks + 1` samples, τ = 0).
+    pub fn new(mut engine: Engine<MAX_STEPS>, lead_ticks: usize) -> Self {
+        let mut delay = heapless::Deque::new();
+        let first = engine.next(0.0);
+        let _ = delay.push_back(first.f32);
+        let mut lead = first;
+        for _ in 0..lead_ticks {
+            lead = engine.next(0.0);
+            let _ = delay.push_back(lead.f32);
+        }
+        Plan {
+            engine,
+            delay,
+            pending: Some(lead),
+            first: first.f32,
+        }
+    }
+
+    /// The present sample and the one `lead` ticks ahead (which the IK takes), the sampler
+    /// fed the measured τ (N·m, or whole mN·m on the fixed-point path).
+    pub fn next(&mut self, fixed_math: bool, tau: f32, tau_mnm: i32) -> (GaitSample<f32>, Sample) {
+        let ahead = match self.pending.take() {
+            Some(p) => p,
+            None => {
+                let a = if fixed_math {
+                    self.engine.next_mnm(tau_mnm)
+                } else {
+                    self.engine.next(tau)
+                };
+                let _ = self.delay.push_back(a.f32);
+                a
+            }
+        };
+        (self.delay.pop_front().unwrap_or(ahead.f32), ahead)
+    }
+
+    /// The sampler (its IK paths: [`Engine::joints`], [`Engine::joints_fx`]).
+    pub fn engine(&self) -> &Engine<MAX_STEPS> {
+        &self.engine
+    }
+}
+
+/// What the legs follow once the ramp is over.
+// One gait lives for the whole run and no_std has no Box: the larger variant's size is the cost.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+pub enum Gait {
+    /// On command (no autostart): the online walk.
+    Online(OnlineWalk<f32>),
+    /// At power-on (autostart): the plan.
+    Plan(Plan),
+}
+
+impl Gait {
+    /// The initial pose: its reference sample, the 12 joint targets (before the compliance
+    /// feed-forward) and the sample that feed-forward loads (the one the IK took).
+    pub fn initial_pose(
+        &self,
+        targets: &Targets,
+    ) -> (GaitSample<f32>, [f32; LEG_JOINTS], GaitSample<f32>) {
+        match self {
+            Gait::Online(o) => {
+                let s = o.clone().tick();
+                (s, targets.joints(&s, [0.0; 2]).0, s)
+            }
+            Gait::Plan(p) => match &p.pending {
+                Some(lead) => (p.first, p.engine.joints(targets, lead, [0.0; 2]), lead.f32),
+                None => (p.first, targets.joints(&p.first, [0.0; 2]).0, p.first),
+            },
+        }
+    }
+
+    /// The online walk, if this is one.
+    pub fn online(&self) -> Option<&OnlineWalk<f32>> {
+        match self {
+            Gait::Online(o) => Some(o),
+            Gait::Plan(_) => None,
+        }
+    }
+
+    /// The online walk, mutable, if this is one.
+    pub fn online_mut(&mut self) -> Option<&mut OnlineWalk<f32>> {
+        match self {
+            Gait::Online(o) => Some(o),
+            Gait::Plan(_) => None,
+        }
+    }
+
+    /// The plan, if this is one.
+    pub fn plan(&self) -> Option<&Plan> {
+        match self {
+            Gait::Plan(p) => Some(p),
+            Gait::Online(_) => None,
+        }
+    }
+
+    /// True when the plan's samples are over (never for the online walk).
+    pub fn plan_done(&self) -> bool {
+        self.plan().is_some_and(|p| p.engine.is_done())
+    }
+}
+
+/// A footstep the online walk committed this tick, with what the log records of it.
+#[derive(Clone, Copy, Debug)]
+pub struct TakenStep {
+    /// The footstep.
+    pub step: Footstep<f32>,
+    /// The heading hold's correction (rad).
+    pub turn: f32,
+    /// An explicit step's travel (m, m, rad), if the step came from the step list.
+    pub given: Option<[f32; 3]>,
+}
+
+/// What moves the legs this tick.
+// A value of one tick on the stack (no_std has no Box); the ramp's variant is the smaller.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug)]
+pub enum Motion {
+    /// The ramp's joint targets (rad).
+    Ramp([f32; LEG_JOINTS]),
+    /// The gait's samples at walk tick `k`.
+    Gait {
+        /// Walk tick (0 at the first tick after the ramp).
+        k: u32,
+        /// The present sample (reference, log, stabilizer, support phase).
+        present: GaitSample<f32>,
+        /// The sample the IK takes (`servo_lead` ahead): the plan's only; the online walk's
+        /// IK takes the present one.
+        ahead: Option<Sample>,
+        /// A footstep the online walk committed.
+        footstep: Option<TakenStep>,
+    },
+}
+
+/// The loop's walk mode: starting (the ramp), then the gait.
+#[derive(Clone, Debug)]
+enum Mode {
+    /// The ramp to the initial pose.
+    Starting(Starting),
+    /// The gait (walk tick count).
+    Gait(u32),
+}
+
+/// The walk: its mode and its gait.
+#[derive(Clone, Debug)]
+pub struct Walk {
+    mode: Mode,
+    /// The gait the ramp hands over to.
+    pub gait: Gait,
+}
+
+impl Walk {
+    /// Starting on `ramp`, then `gait`.
+    pub fn new(ramp: Ramp, gait: Gait) -> Self {
+        Walk {
+            mode: Mode::Starting(Starting::new(ramp)),
+            gait,
+        }
+    }
+
+    /// True while the ramp runs.
+    pub fn is_starting(&self) -> bool {
+        matches!(self.mode, Mode::Starting(_))
+    }
+
+    /// The command port's State while the supervisor runs the walk.
+    pub fn port_state(&self) -> PortState {
+        match (&self.mode, &self.gait) {
+            (Mode::Starting(_), _) => PortState::Starting,
+            (Mode::Gait(_), Gait::Online(o)) => commanded::state_of(o.mode()),
+            (Mode::Gait(_), Gait::Plan(_)) => PortState::Walking,
+        }
+    }
+
+    /// This tick's motion; the ramp's last tick hands over to the gait (Starting → Gait).
+    pub fn tick(&mut self, fixed_math: bool, tau: f32, tau_mnm: i32) -> Motion {
+        match &mut self.mode {
+            Mode::Starting(s) => {
+                let (q, done) = s.step();
+                if done {
+                    self.mode = Mode::Gait(0);
+                }
+                Motion::Ramp(q)
+            }
+            Mode::Gait(walk_tick) => {
+                let k = *walk_tick;
+                *walk_tick = walk_tick.saturating_add(1);
+                match &mut self.gait {
+                    Gait::Online(o) => {
+                        let present = o.tick();
+                        let footstep = o.take_footstep().map(|step| TakenStep {
+                            step,
+                            turn: o.last_turn(),
+                            given: o.last_given(),
+                        });
+                        Motion::Gait {
+                            k,
+                            present,
+                            ahead: None,
+                            footstep,
+                        }
+                    }
+                    Gait::Plan(p) => {
+                        let (present, ahead) = p.next(fixed_math, tau, tau_mnm);
+                        Motion::Gait {
+                            k,
+                            present,
+                            ahead: Some(ahead),
+                            footstep: None,
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Config;
+    use gait_core::Robot;
+
+    fn plan(lead: usize) -> (Plan, Engine<MAX_STEPS>) {
+        let cfg = Config {
+            autostart: true,
+            ..Config::default()
+        };
+        let robot = Robot::reference();
+        let e = Engine::<MAX_STEPS>::new(&cfg.walk_config(), cfg.arithmetic, &robot).unwrap();
+        (Plan::new(e.clone(), lead), e)
+    }
+
+    #[test]
+    fn the_plan_hands_out_the_present_sample_and_the_one_lead_ticks_ahead() {
+        let lead = 3;
+        let (mut p, mut reference) = plan(lead);
+        let all: Vec<_> = (0..40).map(|_| reference.next(0.0)).collect();
+        for k in 0..(all.len() - lead) {
+            let (present, ahead) = p.next(false, 0.0, 0);
+            assert_eq!(present, all[k].f32, "tick {k}");
+            assert_eq!(ahead, all[k + lead], "tick {k}");
+        }
+    }
+
+    #[test]
+    fn starting_ramps_then_hands_over_to_the_gait_with_walk_tick_zero() {
+        let (p, _) = plan(0);
+        let first = p.first;
+        let ramp = Ramp::new([0.1; LEG_JOINTS], [0.0; LEG_JOINTS], 5);
+        let mut w = Walk::new(ramp, Gait::Plan(p));
+        assert_eq!(w.port_state(), PortState::Starting);
+        for k in 0..ramp.ticks() {
+            assert!(w.is_starting());
+            match w.tick(false, 0.0, 0) {
+                Motion::Ramp(q) => assert_eq!(q, ramp.at(k)),
+                m => panic!("tick {k}: {m:?}"),
+            }
+        }
+        assert!(!w.is_starting());
+        assert_eq!(w.port_state(), PortState::Walking);
+        for k in 0..3 {
+            match w.tick(false, 0.0, 0) {
+                Motion::Gait {
+                    k: wk,
+                    present,
+                    ahead: Some(_),
+                    footstep: None,
+                } => {
+                    assert_eq!(wk, k);
+                    if k == 0 {
+                        assert_eq!(present, first);
+                    }
+                }
+                m => panic!("walk tick {k}: {m:?}"),
+            }
+        }
+        assert!(!w.gait.plan_done());
+        assert!(w.gait.online().is_none());
+    }
+
+    #[test]
+    fn the_online_walk_stands_after_the_ramp() {
+        let cfg = Config::default();
+        let o = commanded::online_walk(&cfg, &Robot::reference()).unwrap();
+        let mut w = Walk::new(
+            Ramp::new([0.0; LEG_JOINTS], [0.0; LEG_JOINTS], 1),
+            Gait::Online(o),
+        );
+        assert!(matches!(w.tick(false, 0.0, 0), Motion::Ramp(_)));
+        assert_eq!(w.port_state(), PortState::Standing);
+        match w.tick(false, 0.0, 0) {
+            Motion::Gait {
+                k: 0,
+                ahead: None,
+                footstep: None,
+                ..
+            } => {}
+            m => panic!("{m:?}"),
+        }
+        assert!(!w.gait.plan_done());
+    }
+}
