@@ -110,7 +110,12 @@ def decode_status(d):
 def read_status(port, ph):
     """One READ of the status block, decoded; None when it failed."""
     data, r, err = ph.readTxRx(port, PORT_ID, ADDR_STATUS, STATUS_LEN)
-    if r != COMM_SUCCESS or err != 0 or len(data) != STATUS_LEN:
+    if r != COMM_SUCCESS:
+        # A reply that comes after the SDK gave up must not pass for the next one's.
+        time.sleep(0.3)
+        port.clearPort()
+        return None
+    if err != 0 or len(data) != STATUS_LEN:
         return None
     return decode_status(data)
 
@@ -163,6 +168,27 @@ def hold(port, ph, seconds, every_s=0.5):
         time.sleep(every_s)
 
 
+def wait_ready(port, ph, timeout_s=120.0):
+    """Waits until the firmware answers, leaving no late reply on the way: it answers its
+    command port from its control loop only, so instructions sent during its start-up (probe,
+    servo-speed check) queue up and are all answered at once when the loop starts — replies the
+    SDK would take for the next instruction's. So: PING until one is answered, drop what comes
+    for 0.5 s, then READ the ID register, which must be the port's (a late PING reply would
+    carry the model number). True when ready."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        _, r, err = ph.ping(port, PORT_ID)
+        if r == COMM_SUCCESS and err == 0:
+            time.sleep(0.5)
+            port.clearPort()
+            value, r, err = ph.read1ByteTxRx(port, PORT_ID, ADDR_ID)
+            if r == COMM_SUCCESS and err == 0 and value == PORT_ID:
+                return True
+        time.sleep(0.3)
+        port.clearPort()
+    return False
+
+
 def open_port(name, baud, timeout_s=30.0):
     """Opens a device path or a socket:// URL, retrying until it opens (a `walker fil` run's
     QEMU listens a moment after it starts); None when it did not."""
@@ -189,6 +215,9 @@ def main():
     if port is None:
         return 1
     ph = PacketHandler(2.0)
+    if not wait_ready(port, ph):
+        print(f"no answer from ID {PORT_ID} on {a.port}")
+        return 1
     model, r, err = ph.ping(port, PORT_ID)
     if r != COMM_SUCCESS or model != PORT_MODEL:
         print(f"no walking firmware at ID {PORT_ID}: {ph.getTxRxResult(r)}, model {model:#x}")

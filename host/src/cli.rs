@@ -1518,6 +1518,12 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
             return Err(CliError::failed(e));
         }
     };
+    if let Err(e) = master.wait_ready(crate::drive::CONNECT_WAIT) {
+        if let Some(run) = sim.as_mut() {
+            run.kill();
+        }
+        return Err(CliError::failed(format!("walker drive: {e}")));
+    }
     eprintln!("{}", crate::drive::HELP);
     let ended = {
         let _raw = crate::drive::RawTerminal::enter()?;

@@ -227,6 +227,54 @@ impl PortMaster {
         }
     }
 
+    /// Waits up to `limit` until the port answers, and leaves no late reply on the way: the
+    /// firmware answers its command port from its control loop only, so instructions sent
+    /// during its start-up (probe, servo-speed check) queue up and are all answered at once
+    /// when the loop starts — replies that must not pass for the next instruction's. So: PING
+    /// (2 s per try, few queue up) until one is answered, drop bytes until the line is quiet
+    /// for 0.5 s, then a READ of the ID register must come back with the port's ID (a late
+    /// PING reply would not: it carries the model number).
+    pub fn wait_ready(&mut self, limit: Duration) -> Result<(), String> {
+        let start = Instant::now();
+        let timeout = self.timeout;
+        self.timeout = Duration::from_secs(2);
+        let id = [PORT_ID];
+        let ready = loop {
+            if self.transact_once(Instruction::Ping).is_ok() {
+                self.drain_until_quiet(Duration::from_millis(500));
+                let read_id = Instruction::Read {
+                    addr: port::ID.addr,
+                    len: port::ID.len,
+                };
+                if matches!(self.transact_once(read_id), Ok((None, d)) if d == id) {
+                    break Ok(());
+                }
+            }
+            if start.elapsed() >= limit {
+                break Err(format!("command port: not ready within {limit:?}"));
+            }
+            self.drain_until_quiet(Duration::from_millis(200));
+        };
+        self.timeout = timeout;
+        ready
+    }
+
+    /// Reads and drops bytes until none came for `quiet` (at most 10 s), then restarts the
+    /// decoder.
+    fn drain_until_quiet(&mut self, quiet: Duration) {
+        let start = Instant::now();
+        let mut last = Instant::now();
+        let mut buf = [0u8; 256];
+        while last.elapsed() < quiet && start.elapsed() < Duration::from_secs(10) {
+            match self.stream.read(&mut buf) {
+                Ok(0) => break,
+                Ok(_) => last = Instant::now(),
+                Err(_) => {}
+            }
+        }
+        self.decoder = Decoder::new();
+    }
+
     /// READ of `len` bytes at `addr`, the status checked.
     pub fn read(&mut self, addr: u16, len: u16) -> Result<Vec<u8>, String> {
         match self.transact(Instruction::Read { addr, len })? {
@@ -350,6 +398,7 @@ pub fn drive(
             std::thread::sleep(Duration::from_millis(20));
         }
     };
+    master.wait_ready(Duration::from_secs(120))?;
     wait_state(master, PortState::Standing)?;
     let mut rep = DriveReport {
         ready_us: now(),

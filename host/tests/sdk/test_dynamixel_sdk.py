@@ -109,29 +109,18 @@ def walker_path():
     return Path(w).resolve() if w else REPO / DEFAULT_WALKER
 
 
-class Simulator:
-    """`walker simulate --port PORT` in the background; stderr/stdout collected by threads."""
+class Background:
+    """A walker command in the background on a free TCP port (self.port); its stdout and stderr
+    collected by threads into self.out / self.err."""
 
-    def __init__(self, walker):
+    def __init__(self, args, cwd=None):
         self.port = free_port()
-        self.proc = subprocess.Popen(
-            [str(walker), "simulate", "--port", str(self.port), "--timeout", "30"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen([str(a).replace("{port}", str(self.port)) for a in args],
+                                     cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True)
         self.out, self.err = [], []
         for stream, sink in ((self.proc.stdout, self.out), (self.proc.stderr, self.err)):
             threading.Thread(target=lambda s=stream, k=sink: k.extend(s), daemon=True).start()
-
-    def wait_listening(self, timeout=15.0):
-        """Waits for the 'simulated robot on 127.0.0.1:PORT' banner (printed once the socket is
-        bound). Probing with a connect() would consume the simulator's only connection."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if any("simulated robot on" in line for line in self.err):
-                return True
-            if self.proc.poll() is not None:
-                return False
-            time.sleep(0.02)
-        return False
 
     def wait_exit(self, timeout):
         try:
@@ -144,6 +133,24 @@ class Simulator:
             self.proc.kill()
             self.proc.wait(5)
 
+
+class Simulator(Background):
+    """`walker simulate --port PORT` in the background."""
+
+    def __init__(self, walker):
+        super().__init__([walker, "simulate", "--port", "{port}", "--timeout", "30"])
+
+    def wait_listening(self, timeout=15.0):
+        """Waits for the 'simulated robot on 127.0.0.1:PORT' banner (printed once the socket is
+        bound). Probing with a connect() would consume the simulator's only connection."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if any("simulated robot on" in line for line in self.err):
+                return True
+            if self.proc.poll() is not None:
+                return False
+            time.sleep(0.02)
+        return False
 
 def bulk_read_sensors(port, ph):
     """One BULK READ of the three sensor boards; returns ({id: (forces_mN, counter)}, imu) or a

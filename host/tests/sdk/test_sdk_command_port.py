@@ -42,21 +42,24 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
+# QEMU in lock-step with MuJoCo stalls longer than the simulator alone when the machine is busy:
+# a larger margin over the SDK's packet timeout (read by sdk_drive at import).
+os.environ.setdefault("SDK_TEST_MARGIN_MS", "1000")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples"))
-from test_dynamixel_sdk import REPO, Checks, free_port, walker_path  # noqa: E402
+from test_dynamixel_sdk import REPO, Background, Checks, walker_path  # noqa: E402
 
-from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, PacketHandler  # noqa: E402
+from dynamixel_sdk import (  # noqa: E402
+    COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, GroupSyncRead, PacketHandler)
 # The register map and helpers of the example script (checked against the contract by
 # host/tests/cli.rs `sdk_example_uses_the_contract_registers`).
 from sdk_drive import (  # noqa: E402
     ADDR_FIRMWARE_VERSION, ADDR_ID, ADDR_MODE, ADDR_MODEL, ADDR_STATUS, ADDR_VELOCITY_X,
     MODE_STOP, MODE_TORQUE_OFF, MODE_WALK, PORT_ID, PORT_MODEL, STATE_STANDING, STATE_WALKING,
-    STATUS_LEN, decode_status, open_port, read_status, set_mode, set_velocity)
+    STATUS_LEN, decode_status, open_port, read_status, set_mode, set_velocity, wait_ready)
 
 DEFAULT_QEMU_ELF = "target/thumbv7em-none-eabihf/release/qemu"
 EXAMPLE = REPO / "host/examples/sdk_drive.py"
@@ -79,29 +82,12 @@ WALK_S = 300.0
 EXIT_S = 120.0
 
 
-class FilRun:
-    """`walker fil --command-port PORT` in the background; its output collected by threads."""
+class FilRun(Background):
+    """`walker fil --command-port PORT` in the background."""
 
     def __init__(self, walker, elf, out):
-        self.port = free_port()
-        cmd = [str(walker), "fil", "--plan", "plans/table2.toml", "--command-port",
-               str(self.port), "--out", str(out), "--elf", str(elf), "--timeout", "900"]
-        self.proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True)
-        self.out, self.err = [], []
-        for stream, sink in ((self.proc.stdout, self.out), (self.proc.stderr, self.err)):
-            threading.Thread(target=lambda s=stream, k=sink: k.extend(s), daemon=True).start()
-
-    def wait_exit(self, timeout):
-        try:
-            return self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            return None
-
-    def kill(self):
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(5)
+        super().__init__([walker, "fil", "--plan", "plans/table2.toml", "--command-port", "{port}",
+                          "--out", out, "--elf", elf, "--timeout", "900"], cwd=REPO)
 
 
 def connect(run):
@@ -123,12 +109,28 @@ def wait_for(port, ph, what, timeout, run):
     return st, False
 
 
+def again(port, transaction, attempts=3):
+    """A side-effect-free transaction (PING, READ) repeated when it got no reply: on a busy
+    machine the lock-stepped firmware can answer after the SDK's timeout; the late reply is
+    dropped before the next attempt. Writes are never repeated (the test counts them)."""
+    for _ in range(attempts):
+        result = transaction()
+        r = result if isinstance(result, int) else result[-2]
+        if r != COMM_RX_TIMEOUT and r != COMM_RX_CORRUPT:
+            return result
+        time.sleep(0.3)
+        port.clearPort()
+    return result
+
+
 def run_checks(c, port, ph, run):
-    model, r, err = ph.ping(port, PORT_ID)
+    c.check("the command port answers once the firmware's loop runs (PING, late replies dropped)",
+            wait_ready(port, ph, STAND_S))
+    model, r, err = again(port, lambda: ph.ping(port, PORT_ID))
     c.check("PING ID 150: the firmware's command port answers", r == COMM_SUCCESS and err == 0,
             ph.getTxRxResult(r))
     c.check("PING reports model number 0x5A30", model == PORT_MODEL, f"model {model:#x}")
-    ident, r, err = ph.readTxRx(port, PORT_ID, ADDR_MODEL, 8)
+    ident, r, err = again(port, lambda: ph.readTxRx(port, PORT_ID, ADDR_MODEL, 8))
     ok = r == COMM_SUCCESS and err == 0 and len(ident) == 8
     c.check("READ the identity (model, firmware version, ID)",
             ok and ident[0] | ident[1] << 8 == PORT_MODEL and ident[ADDR_ID] == PORT_ID
@@ -159,7 +161,7 @@ def run_checks(c, port, ph, run):
         r, err = send()
         c.check(f"rejected: {name} -> error status {want}", r == COMM_SUCCESS and err == want,
                 f"{ph.getTxRxResult(r)}, error {err}")
-    vx, r, err = ph.read2ByteTxRx(port, PORT_ID, ADDR_VELOCITY_X)
+    vx, r, err = again(port, lambda: ph.read2ByteTxRx(port, PORT_ID, ADDR_VELOCITY_X))
     c.check("the rejected writes left Velocity X at 0", r == COMM_SUCCESS and vx == 0, f"{vx}")
     st = read_status(port, ph)
     c.check("... and Command Count and State unchanged (nothing reached the gait)",
@@ -192,8 +194,11 @@ def run_checks(c, port, ph, run):
     # The same block through the SDK's GroupSyncRead (SYNC READ of the status block).
     gsr = GroupSyncRead(port, ph, ADDR_STATUS, STATUS_LEN)
     gsr.addParam(PORT_ID)
-    r = gsr.txRxPacket()
+    r = again(port, gsr.txRxPacket)
     ok = r == COMM_SUCCESS and gsr.isAvailable(PORT_ID, ADDR_STATUS, STATUS_LEN)
+    if r != COMM_SUCCESS:  # a late reply must not pass for the next instruction's
+        time.sleep(0.3)
+        port.clearPort()
     sync = None
     if ok:
         sync = decode_status([gsr.getData(PORT_ID, ADDR_STATUS + i, 1) for i in range(STATUS_LEN)])
