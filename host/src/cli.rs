@@ -1390,7 +1390,7 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
         extra_tokens,
     } = RunSetup::new("sweep", a.run)?;
     let out = a.out;
-    let opts = crate::sweep::SweepOptions {
+    let opts = crate::fil::FilOptions {
         elf,
         spec,
         out_dir: out.clone(),
@@ -1450,13 +1450,15 @@ fn run_pushes(a: PushesArgs) -> Result<(), CliError> {
     };
     let out = a.out;
     let opts = pushes::PushOptions {
-        elf,
-        spec,
-        out_dir: out.clone(),
-        machine,
-        sim,
-        extra_tokens,
-        timeout,
+        base: crate::fil::FilOptions {
+            elf,
+            spec,
+            out_dir: out.clone(),
+            machine,
+            sim,
+            extra_tokens,
+            timeout,
+        },
         step: a.step,
         max: a.max,
         walk_at: a.walk_at,
@@ -1576,13 +1578,15 @@ fn run_speed(a: SpeedArgs) -> Result<(), CliError> {
     }
     let out = a.out;
     let opts = speed::SpeedOptions {
-        elf,
-        spec,
-        out_dir: out.clone(),
-        machine,
-        sim,
-        extra_tokens,
-        timeout,
+        base: crate::fil::FilOptions {
+            elf,
+            spec,
+            out_dir: out.clone(),
+            machine,
+            sim,
+            extra_tokens,
+            timeout,
+        },
         step_v: a.step_v,
         step_w: a.step_w,
     };

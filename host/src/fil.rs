@@ -38,6 +38,17 @@ pub struct FilOptions {
     pub extra_tokens: Vec<String>,
 }
 
+impl FilOptions {
+    /// The same run with its output in the sub-folder `name` of [`FilOptions::out_dir`] (one
+    /// run of a sweep, a push or a speed search).
+    pub fn in_sub(&self, name: &str) -> FilOptions {
+        FilOptions {
+            out_dir: self.out_dir.join(name),
+            ..self.clone()
+        }
+    }
+}
+
 /// What came out.
 #[derive(Debug)]
 pub struct FilResult {

@@ -23,13 +23,10 @@
 //! listed in the table for that reason.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
-use std::time::Duration;
 
 use crate::commands::{CommandScript, ScriptCommand};
 use crate::fil::{self, FilOptions};
-use crate::planfile::WalkSpec;
-use crate::sim::{Push, SimConfig};
+use crate::sim::Push;
 use walker_contract::codes::ExitCode;
 
 /// Seconds from standing ready to the stop command in a standing run.
@@ -136,20 +133,9 @@ pub fn search(
 /// Options of [`run`].
 #[derive(Clone, Debug)]
 pub struct PushOptions {
-    /// Firmware ELF.
-    pub elf: PathBuf,
-    /// The walking plan.
-    pub spec: WalkSpec,
-    /// Output folder (one sub-folder per run, `pushes.md`).
-    pub out_dir: PathBuf,
-    /// QEMU machine.
-    pub machine: String,
-    /// The simulated robot (MuJoCo by default); its own pushes are replaced.
-    pub sim: SimConfig,
-    /// Extra firmware tokens for every run.
-    pub extra_tokens: Vec<String>,
-    /// Wall-clock limit per run.
-    pub timeout: Duration,
+    /// The runs: plan, robot (its own pushes are replaced), QEMU; `out_dir` holds one
+    /// sub-folder per run and `pushes.md`.
+    pub base: FilOptions,
     /// The search's resolution, N·s.
     pub step: f64,
     /// The largest impulse tried, N·s.
@@ -184,16 +170,11 @@ fn push_run(
     push: Option<Push>,
     name: &str,
 ) -> Result<(bool, Option<u64>), String> {
-    let mut sim = opts.sim.clone();
+    let mut sim = opts.base.sim.clone();
     sim.pushes = push.into_iter().collect();
     let fopts = FilOptions {
-        elf: opts.elf.clone(),
-        spec: opts.spec.clone(),
-        out_dir: opts.out_dir.join(name),
-        machine: opts.machine.clone(),
-        timeout: opts.timeout,
         sim,
-        extra_tokens: opts.extra_tokens.clone(),
+        ..opts.base.in_sub(name)
     };
     let (r, ready) = match condition {
         Condition::Walking => (fil::run(&fopts, |_, _| {})?, None),
@@ -240,7 +221,7 @@ pub fn run(opts: &PushOptions, progress: impl Fn(&str)) -> Result<Vec<PushRow>, 
                     _ => {
                         return Err(format!(
                             "standing without a push did not end by torque off: see {}",
-                            opts.out_dir.join(name).display()
+                            opts.base.out_dir.join(name).display()
                         ))
                     }
                 }

@@ -15,13 +15,9 @@
 //! 2·`step`, then the level between the last sustained and the first not: both to `step`).
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
-use std::time::Duration;
 
 use crate::commands::{CommandScript, ScriptCommand};
 use crate::fil::{self, FilOptions};
-use crate::planfile::WalkSpec;
-use crate::sim::SimConfig;
 use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::{Robot, Side};
 use walker_contract::codes::{ExitCode, FaultKind};
@@ -194,20 +190,9 @@ pub fn measured_mean(
 /// Options of [`run`].
 #[derive(Clone, Debug)]
 pub struct SpeedOptions {
-    /// Firmware ELF.
-    pub elf: PathBuf,
-    /// The walk (its timing and width set the online walk's).
-    pub spec: WalkSpec,
-    /// Output folder (one sub-folder per run, `speed.md`).
-    pub out_dir: PathBuf,
-    /// QEMU machine.
-    pub machine: String,
-    /// The simulated robot.
-    pub sim: SimConfig,
-    /// Extra firmware tokens for every run.
-    pub extra_tokens: Vec<String>,
-    /// Wall-clock limit per run.
-    pub timeout: Duration,
+    /// The runs: the walk (its timing and width set the online walk's), robot, QEMU;
+    /// `out_dir` holds one sub-folder per run and `speed.md`.
+    pub base: FilOptions,
     /// Resolution of the forward search, m/s.
     pub step_v: f64,
     /// Resolution of the turn search, rad/s.
@@ -216,19 +201,11 @@ pub struct SpeedOptions {
 
 /// One run of `axis` at `level` on the MuJoCo robot.
 fn speed_run(opts: &SpeedOptions, axis: Axis, level: f64) -> Result<SpeedRun, String> {
-    let mut extra = opts.extra_tokens.clone();
+    let mut extra = opts.base.extra_tokens.clone();
     extra.push("autostart=0".into());
-    let (_, cfg) = fil::check_tokens(&opts.spec, &extra)?;
+    let (_, cfg) = fil::check_tokens(&opts.base.spec, &extra)?;
     let name = format!("{}-{level:.3}", axis.name());
-    let fopts = FilOptions {
-        elf: opts.elf.clone(),
-        spec: opts.spec.clone(),
-        out_dir: opts.out_dir.join(&name),
-        machine: opts.machine.clone(),
-        timeout: opts.timeout,
-        sim: opts.sim.clone(),
-        extra_tokens: opts.extra_tokens.clone(),
-    };
+    let fopts = opts.base.in_sub(&name);
     // The online walk's period is the configured (stretched) one, logged as Footstep id 0;
     // the script is made with the configured value first, the delivered speed with the logged.
     let (script, hold) = script(axis, level, cfg.walk.period);

@@ -18,12 +18,9 @@
 //! < 14 mm lateral.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
-use std::time::Duration;
 
 use crate::beyond::{self, RunMetrics};
 use crate::fil::{self, FilOptions, WalkFigures};
-use crate::planfile::WalkSpec;
 use crate::sim::SimConfig;
 
 /// The goals of the closed-loop issue, per run.
@@ -85,25 +82,6 @@ pub fn cases() -> [SweepCase; 11] {
     ]
 }
 
-/// Options of [`run`].
-#[derive(Clone, Debug)]
-pub struct SweepOptions {
-    /// Firmware ELF.
-    pub elf: PathBuf,
-    /// The plan.
-    pub spec: WalkSpec,
-    /// Output folder (one sub-folder per case, `sweep.md`).
-    pub out_dir: PathBuf,
-    /// QEMU machine.
-    pub machine: String,
-    /// The nominal simulated robot (MuJoCo by default).
-    pub sim: SimConfig,
-    /// Extra firmware tokens for every run.
-    pub extra_tokens: Vec<String>,
-    /// Wall-clock limit per run.
-    pub timeout: Duration,
-}
-
 /// One scored run of the sweep.
 #[derive(Clone, Debug)]
 pub struct SweepRow {
@@ -147,7 +125,7 @@ impl SweepRow {
 }
 
 /// Walks every case and scores it; `progress(name)` before each run.
-pub fn run(opts: &SweepOptions, progress: impl Fn(&str)) -> Result<Vec<SweepRow>, String> {
+pub fn run(opts: &FilOptions, progress: impl Fn(&str)) -> Result<Vec<SweepRow>, String> {
     let variant = beyond::variants()
         .into_iter()
         .find(|v| v.name == "tlipfm")
@@ -161,13 +139,8 @@ pub fn run(opts: &SweepOptions, progress: impl Fn(&str)) -> Result<Vec<SweepRow>
         let mut sim = opts.sim.clone();
         (case.apply)(&mut sim);
         let fopts = FilOptions {
-            elf: opts.elf.clone(),
-            spec: opts.spec.clone(),
-            out_dir: opts.out_dir.join(case.name),
-            machine: opts.machine.clone(),
-            timeout: opts.timeout,
             sim,
-            extra_tokens: opts.extra_tokens.clone(),
+            ..opts.in_sub(case.name)
         };
         let r = fil::run(&fopts, |_, _| {})?;
         let fell = r.sim.fall_started_us.map(|t| t as f64 * 1e-6);
