@@ -669,7 +669,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut link = commanded::CommandLink::new();
     if gait.online().is_some() {
         let now = bus.board().now_us();
-        let rec = fault(now, FaultKind::Footstep, 0, commanded::period_us(cfg));
+        let rec = fault(
+            now,
+            FaultKind::Footstep,
+            walker_contract::footstep_log::PERIOD_ID,
+            commanded::period_us(cfg),
+        );
         log.write(bus.board(), rec);
     }
     let mut from = [0.0f32; LEG_JOINTS];

@@ -27,6 +27,7 @@ pub mod bus_map;
 pub mod codes;
 pub mod command_port;
 pub mod config;
+pub mod footstep_log;
 pub mod params;
 pub mod record;
 

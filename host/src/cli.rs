@@ -665,6 +665,22 @@ impl RunSetup {
     }
 }
 
+impl RunSetup {
+    /// The runs' options with their output in `out_dir`, and the plan's name.
+    fn into_fil(self, out_dir: PathBuf) -> (crate::fil::FilOptions, String) {
+        let opts = crate::fil::FilOptions {
+            elf: self.elf,
+            spec: self.spec,
+            out_dir,
+            machine: self.machine,
+            timeout: self.timeout,
+            sim: self.sim,
+            extra_tokens: self.extra_tokens,
+        };
+        (opts, self.plan_name)
+    }
+}
+
 /// Loads `--plan` (or the built-in Table 2 walk); the plan's name for the reports.
 fn load_plan(plan: Option<&Path>) -> Result<(WalkSpec, String), CliError> {
     match plan {
@@ -1380,25 +1396,8 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
 }
 
 fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
-    let RunSetup {
-        spec,
-        plan_name,
-        sim,
-        elf,
-        machine,
-        timeout,
-        extra_tokens,
-    } = RunSetup::new("sweep", a.run)?;
     let out = a.out;
-    let opts = crate::fil::FilOptions {
-        elf,
-        spec,
-        out_dir: out.clone(),
-        machine,
-        sim,
-        extra_tokens,
-        timeout,
-    };
+    let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
     let n = crate::sweep::cases().len();
     eprintln!("walker sweep: {plan_name}, {n} firmware-in-the-loop walks");
     let rows = crate::sweep::run(&opts, |name| eprintln!("  walking {name} …"))?;
@@ -1423,15 +1422,8 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
 
 fn run_pushes(a: PushesArgs) -> Result<(), CliError> {
     use crate::pushes::{self, Condition};
-    let RunSetup {
-        spec,
-        plan_name,
-        sim,
-        elf,
-        machine,
-        timeout,
-        extra_tokens,
-    } = RunSetup::new("pushes", a.run)?;
+    let out = a.out;
+    let (base, plan_name) = RunSetup::new("pushes", a.run)?.into_fil(out.clone());
     if !(a.walk_at.is_finite()
         && a.walk_at >= 0.0
         && a.stand_after.is_finite()
@@ -1448,17 +1440,8 @@ fn run_pushes(a: PushesArgs) -> Result<(), CliError> {
         Some("walking") => vec![Condition::Walking],
         _ => vec![Condition::Standing, Condition::Walking],
     };
-    let out = a.out;
     let opts = pushes::PushOptions {
-        base: crate::fil::FilOptions {
-            elf,
-            spec,
-            out_dir: out.clone(),
-            machine,
-            sim,
-            extra_tokens,
-            timeout,
-        },
+        base,
         step: a.step,
         max: a.max,
         walk_at: a.walk_at,
@@ -1561,32 +1544,16 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
 
 fn run_speed(a: SpeedArgs) -> Result<(), CliError> {
     use crate::speed;
-    let RunSetup {
-        spec,
-        plan_name,
-        sim,
-        elf,
-        machine,
-        timeout,
-        extra_tokens,
-    } = RunSetup::new("speed", a.run)?;
+    let out = a.out;
+    let (base, plan_name) = RunSetup::new("speed", a.run)?.into_fil(out.clone());
     let ok = |v: f64| v.is_finite() && v > 0.0;
     if !(ok(a.step_v) && ok(a.step_w)) {
         return Err(CliError::usage(
             "walker speed: --step-v and --step-w must be > 0".to_string(),
         ));
     }
-    let out = a.out;
     let opts = speed::SpeedOptions {
-        base: crate::fil::FilOptions {
-            elf,
-            spec,
-            out_dir: out.clone(),
-            machine,
-            sim,
-            extra_tokens,
-            timeout,
-        },
+        base,
         step_v: a.step_v,
         step_w: a.step_w,
     };

@@ -24,8 +24,8 @@ use dxl::{Decoder, ErrorCode, Instruction, Status};
 use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::{Place, Robot, Side};
 use serde::Deserialize;
-use walker_contract::codes::{CommandField, FaultKind};
 use walker_contract::command_port::{self as port, Mode, PortState, PORT_ID, VELOCITY_RANGE};
+use walker_contract::footstep_log::{self, FootstepLog};
 use walker_contract::record::Record;
 
 use crate::sim::transport::SimProgress;
@@ -495,14 +495,12 @@ pub fn replay_footsteps(
     z_c: f64,
     half_width: f32,
 ) -> Result<FootstepCheck, String> {
-    let mut period = 0.0f32;
     let robot = Robot::reference();
-    let mut cmd = [Mode::Stand.code() as i32, 0, 0, 0];
+    let mut log = FootstepLog::new();
     let mut feet = standing_feet(half_width);
     let mut gen: Option<StepGenerator<f32>> = None;
     let mut pure: Option<StepGenerator<f32>> = None;
     let mut pure_feet = feet;
-    let mut parts: Vec<(u8, i32)> = Vec::new();
     let mut out = FootstepCheck::default();
     let midpoint = |f: &[Place<f32>; 2]| {
         [
@@ -511,102 +509,70 @@ pub fn replay_footsteps(
         ]
     };
     let mut mid = midpoint(&feet);
-    let mut turn = 0.0f32;
-    let mut given: [Option<i32>; 3] = [None; 3];
     for r in records {
         let Record::Fault(f) = r else { continue };
-        match f.kind {
-            FaultKind::CommandReceived => {
-                if let (Ok(_), Some(slot)) =
-                    (CommandField::try_from(f.id), cmd.get_mut(usize::from(f.id)))
-                {
-                    *slot = f.value;
-                }
-            }
-            FaultKind::Footstep if f.id == 0 => {
-                period = (f64::from(f.value) * 1e-6) as f32;
-            }
-            // The heading hold's correction of the next footstep, µrad (logged before it).
-            FaultKind::Footstep if f.id & 15 == 3 => {
-                turn = (f64::from(f.value) * 1e-6) as f32;
-            }
-            // An explicit step's travel (the step list), mm, mm, mrad (logged before it).
-            FaultKind::Footstep if (4..=6).contains(&(f.id & 15)) => {
-                if let Some(g) = given.get_mut(usize::from(f.id & 15) - 4) {
-                    *g = Some(f.value);
-                }
-            }
-            FaultKind::Footstep => {
-                parts.push((f.id, f.value));
-                if parts.len() < 3 {
-                    continue;
-                }
-                let side = if parts[0].0 >> 4 == 1 {
-                    Side::Left
-                } else {
-                    Side::Right
-                };
-                let new_gen = |feet| {
-                    StepGenerator::new(
-                        &robot,
-                        z_c,
-                        CommandLimits::DEFAULT,
-                        half_width,
-                        period,
-                        feet,
-                        side,
-                    )
-                    .map_err(|e| format!("{e:?}"))
-                };
-                if gen.as_ref().is_none_or(|g| g.is_standing()) {
-                    gen = Some(new_gen(feet)?);
-                }
-                if pure.as_ref().is_none_or(|g| g.is_standing()) {
-                    pure = Some(new_gen(pure_feet)?);
-                }
-                let Some(g) = gen.as_mut() else { continue };
-                let c = if cmd[0] == i32::from(Mode::Walk.code()) {
-                    WalkCommand {
-                        vx: cmd[1] as f32 / 1000.0,
-                        vy: cmd[2] as f32 / 1000.0,
-                        yaw_rate: cmd[3] as f32 / 1000.0,
-                    }
-                } else {
-                    WalkCommand::zero()
-                };
-                // The firmware's conversion of the port's units (f32 · 0.001).
-                let listed = match given {
-                    [Some(x), Some(y), Some(w)] => Some([x, y, w].map(|v| v as f32 * 0.001)),
-                    _ => None,
-                };
-                let s = match listed {
-                    Some(d) => g.next_step_given(d),
-                    None => g.next_step_turned(&c, turn).0,
-                };
-                out.turned += f64::from(turn);
-                turn = 0.0;
-                given = [None; 3];
-                feet = g.feet();
-                if let Some(p) = pure.as_mut() {
-                    match listed {
-                        Some(d) => p.next_step_given(d),
-                        None => p.next_step(&c),
-                    };
-                    pure_feet = p.feet();
-                }
-                let m = midpoint(&pure_feet);
-                out.path += (m[0] - mid[0]).hypot(m[1] - mid[1]);
-                mid = m;
-                let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
-                let got = [parts[0].1, parts[1].1, parts[2].1];
-                if got != want || s.side != side {
-                    out.mismatches.push((out.steps, got, want));
-                }
-                out.steps += 1;
-                parts.clear();
-            }
-            _ => {}
+        let Some(logged) = log.push(f.kind, f.id, f.value) else {
+            continue;
+        };
+        let side = if logged.foot == footstep_log::foot_code(true) {
+            Side::Left
+        } else {
+            Side::Right
+        };
+        let period = (f64::from(log.period_us().unwrap_or(0)) * 1e-6) as f32;
+        let new_gen = |feet| {
+            StepGenerator::new(
+                &robot,
+                z_c,
+                CommandLimits::DEFAULT,
+                half_width,
+                period,
+                feet,
+                side,
+            )
+            .map_err(|e| format!("{e:?}"))
+        };
+        if gen.as_ref().is_none_or(|g| g.is_standing()) {
+            gen = Some(new_gen(feet)?);
         }
+        if pure.as_ref().is_none_or(|g| g.is_standing()) {
+            pure = Some(new_gen(pure_feet)?);
+        }
+        let Some(g) = gen.as_mut() else { continue };
+        let [mode, vx, vy, w] = logged.command;
+        let c = if mode == i32::from(Mode::Walk.code()) {
+            WalkCommand {
+                vx: vx as f32 / 1000.0,
+                vy: vy as f32 / 1000.0,
+                yaw_rate: w as f32 / 1000.0,
+            }
+        } else {
+            WalkCommand::zero()
+        };
+        // The firmware's conversion of the port's units (f32 · 0.001).
+        let listed = logged.given.map(|d| d.map(|v| v as f32 * 0.001));
+        let turn = (f64::from(logged.turn) * 1e-6) as f32;
+        let s = match listed {
+            Some(d) => g.next_step_given(d),
+            None => g.next_step_turned(&c, turn).0,
+        };
+        out.turned += f64::from(turn);
+        feet = g.feet();
+        if let Some(p) = pure.as_mut() {
+            match listed {
+                Some(d) => p.next_step_given(d),
+                None => p.next_step(&c),
+            };
+            pure_feet = p.feet();
+        }
+        let m = midpoint(&pure_feet);
+        out.path += (m[0] - mid[0]).hypot(m[1] - mid[1]);
+        mid = m;
+        let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
+        if logged.place != want || s.side != side {
+            out.mismatches.push((out.steps, logged.place, want));
+        }
+        out.steps += 1;
     }
     out.feet = feet;
     out.commanded_feet = pure_feet;

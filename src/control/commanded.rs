@@ -18,6 +18,7 @@ use gait_core::plan::SwingShape;
 use gait_core::{GaitError, Place, Robot, Side, SupportPhase};
 use walker_contract::codes::CommandField;
 use walker_contract::command_port::{CommandPort, Mode, PortState, PortStatus, REPLY_MAX};
+use walker_contract::footstep_log;
 
 use crate::board::Board;
 use crate::record::{FaultKind, LogWriter};
@@ -179,9 +180,9 @@ pub fn support_code(p: SupportPhase) -> u8 {
     }
 }
 
-/// Logs a committed footstep: the heading hold's correction δ if any (`Footstep` id s·16 + 3,
-/// µrad), an explicit step's travel if it was one (ids s·16 + 4, 5, 6: mm, mm, mrad), then
-/// three `Footstep` records (x, y in µm; yaw in µrad).
+/// Logs a committed footstep as `Footstep` records (the contract's
+/// [`walker_contract::footstep_log`]: the heading hold's correction δ if any, µrad; an explicit
+/// step's travel if it was one, mm, mm, mrad; the footprint x, y in µm and yaw in µrad).
 pub fn log_footstep<B: Board>(
     board: &mut B,
     log: &mut LogWriter,
@@ -190,35 +191,21 @@ pub fn log_footstep<B: Board>(
     turn: f32,
     given: Option<[f32; 3]>,
 ) {
-    let s: u8 = match side {
-        Side::Left => 1,
-        Side::Right => 2,
-    };
     let now = board.now_us();
-    let micro = |v: f32| {
-        let m = libm::roundf(v * 1e6);
+    let scaled = |v: f32, k: f32| {
+        let m = libm::roundf(v * k);
         if m.is_finite() {
             m as i32
         } else {
             0
         }
     };
-    if micro(turn) != 0 {
-        log.write(
-            board,
-            super::fault(now, FaultKind::Footstep, s * 16 + 3, micro(turn)),
-        );
-    }
-    if let Some(d) = given {
-        for (c, v) in d.iter().enumerate() {
-            let milli = libm::roundf(v * 1000.0);
-            let milli = if milli.is_finite() { milli as i32 } else { 0 };
-            let rec = super::fault(now, FaultKind::Footstep, s * 16 + 4 + c as u8, milli);
-            log.write(board, rec);
-        }
-    }
-    for (c, v) in [place.x, place.y, place.yaw].iter().enumerate() {
-        let rec = super::fault(now, FaultKind::Footstep, s * 16 + c as u8, micro(*v));
-        log.write(board, rec);
-    }
+    let micro = |v: f32| scaled(v, 1e6);
+    footstep_log::encode_footstep(
+        footstep_log::foot_code(side == Side::Left),
+        [micro(place.x), micro(place.y), micro(place.yaw)],
+        micro(turn),
+        given.map(|d| d.map(|v| scaled(v, 1000.0))),
+        |id, value| log.write(board, super::fault(now, FaultKind::Footstep, id, value)),
+    );
 }

@@ -1461,7 +1461,6 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
 
     // Replay the logged footsteps through the generator with the logged commands.
     let recs = b.inner.records();
-    let mut cmd = [1i32, 0, 0, 0];
     let mut gen: Option<gait_core::command::StepGenerator<f32>> = None;
     let mut feet = [
         gait_core::Place {
@@ -1475,56 +1474,45 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
             yaw: 0.0,
         },
     ];
-    let mut parts = Vec::new();
+    let mut log = walker_contract::footstep_log::FootstepLog::new();
     let mut steps = 0;
-    let (mut turn, mut turns) = (0.0f32, 0);
+    let mut turns = 0;
     for r in &recs {
         let Record::Fault(f) = r else { continue };
-        match f.kind {
-            FaultKind::CommandReceived => cmd[usize::from(f.id)] = f.value,
-            FaultKind::Footstep if f.id == 0 => {}
-            // The heading hold's correction of the next footstep, µrad: the fake robot's gyro
-            // does not turn with the commanded turn, so the hold turns the feet back.
-            FaultKind::Footstep if f.id & 15 == 3 => {
-                turn = (f64::from(f.value) * 1e-6) as f32;
-                turns += 1;
-            }
-            FaultKind::Footstep if f.id & 15 > 3 => panic!("no step list in this walk"),
-            FaultKind::Footstep => {
-                parts.push((f.id, f.value));
-                if parts.len() < 3 {
-                    continue;
-                }
-                let side = if parts[0].0 >> 4 == 1 {
-                    Side::Left
-                } else {
-                    Side::Right
-                };
-                if gen.as_ref().is_none_or(|g| g.is_standing()) {
-                    gen = Some(port_walk_generator(&cfg, feet, side));
-                }
-                let g = gen.as_mut().unwrap();
-                let c = if cmd[0] == 2 {
-                    gait_core::command::WalkCommand {
-                        vx: cmd[1] as f32 / 1000.0,
-                        vy: cmd[2] as f32 / 1000.0,
-                        yaw_rate: cmd[3] as f32 / 1000.0,
-                    }
-                } else {
-                    gait_core::command::WalkCommand::zero()
-                };
-                let (s, _) = g.next_step_turned(&c, turn);
-                turn = 0.0;
-                feet = g.feet();
-                assert_eq!(s.side, side, "step {steps}");
-                let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
-                let got = [parts[0].1, parts[1].1, parts[2].1];
-                assert_eq!(got, want, "step {steps}");
-                parts.clear();
-                steps += 1;
-            }
-            _ => {}
+        let Some(logged) = log.push(f.kind, f.id, f.value) else {
+            continue;
+        };
+        // The heading hold's correction of the footstep, µrad: the fake robot's gyro does not
+        // turn with the commanded turn, so the hold turns the feet back.
+        if logged.turn != 0 {
+            turns += 1;
         }
+        assert_eq!(logged.given, None, "no step list in this walk");
+        let side = if logged.foot == 1 {
+            Side::Left
+        } else {
+            Side::Right
+        };
+        if gen.as_ref().is_none_or(|g| g.is_standing()) {
+            gen = Some(port_walk_generator(&cfg, feet, side));
+        }
+        let g = gen.as_mut().unwrap();
+        let [mode, vx, vy, w] = logged.command;
+        let c = if mode == 2 {
+            gait_core::command::WalkCommand {
+                vx: vx as f32 / 1000.0,
+                vy: vy as f32 / 1000.0,
+                yaw_rate: w as f32 / 1000.0,
+            }
+        } else {
+            gait_core::command::WalkCommand::zero()
+        };
+        let (s, _) = g.next_step_turned(&c, (f64::from(logged.turn) * 1e-6) as f32);
+        feet = g.feet();
+        assert_eq!(s.side, side, "step {steps}");
+        let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
+        assert_eq!(logged.place, want, "step {steps}");
+        steps += 1;
     }
     assert!(gen.unwrap().is_standing(), "ends standing");
     assert!(turns > 0, "the heading hold turned steps");
@@ -1761,24 +1749,14 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
         ],
         Side::Left,
     );
-    let mut given = Vec::new();
-    let mut parts = Vec::new();
+    let mut log = walker_contract::footstep_log::FootstepLog::new();
     let mut steps = Vec::new();
     for r in &recs {
         let Record::Fault(f) = r else { continue };
-        if f.kind != FaultKind::Footstep || f.id == 0 {
-            continue;
-        }
-        match f.id & 15 {
-            4..=6 => given.push(f.value),
-            0..=2 => {
-                parts.push(f.value);
-                if parts.len() == 3 {
-                    steps.push((f.id >> 4, core::mem::take(&mut given), parts.clone()));
-                    parts.clear();
-                }
-            }
-            _ => panic!("unexpected footstep record {}", f.id),
+        if let Some(logged) = log.push(f.kind, f.id, f.value) {
+            assert_eq!(logged.turn, 0, "no heading-hold record in a listed walk");
+            let given = logged.given.map_or(Vec::new(), |g| g.to_vec());
+            steps.push((logged.foot, given, logged.place.to_vec()));
         }
     }
     assert!(
