@@ -912,17 +912,20 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 f.given,
                             );
                         }
-                        let mut s_ahead = ahead.map_or(s, |a| a.f32);
-                        if cfg.fault_nan_com_tick == Some(k) {
-                            s_ahead.com[0] = f32::NAN;
-                            if let Some(a) = ahead.as_mut() {
-                                a.f32.com[0] = f32::NAN;
-                            }
+                        // The fault injection spoils the sample the IK takes (`ahead`, or
+                        // the present one: then only its check sees it).
+                        let nan_com = cfg.fault_nan_com_tick == Some(k);
+                        if let (true, Some(a)) = (nan_com, ahead.as_mut()) {
+                            a.f32.com[0] = f32::NAN;
                         }
+                        let ahead_finite = match &ahead {
+                            Some(a) => a.f32.is_finite(),
+                            None => !nan_com,
+                        };
                         // The finite check before the IK (which would clamp a NaN pelvis to
                         // finite, meaningless angles): the sample the IK takes (`servo_lead`
                         // ahead) and the present one; hold the last targets and stop.
-                        if !(s.is_finite() && s_ahead.is_finite()) {
+                        if !(s.is_finite() && ahead_finite) {
                             crate::fw_log!(error, "non-finite gait sample at walk tick {}", k);
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
@@ -973,14 +976,14 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                     (Some(a), Some(p)) if foot_force_state.dz != 0.0 => {
                                         let mut lifted = *a;
                                         lifted.f32 = lift(a.f32);
-                                        (p.engine().joints(&targets, &lifted, shift), a.f32)
+                                        (p.engine().joints(&targets, &lifted, shift), &a.f32)
                                     }
                                     (Some(a), Some(p)) => {
-                                        (p.engine().joints(&targets, a, shift), a.f32)
+                                        (p.engine().joints(&targets, a, shift), &a.f32)
                                     }
-                                    _ => (targets.joints(&lift(s), shift).0, s),
+                                    _ => (targets.joints(&lift(s), shift).0, &s),
                                 };
-                                load.apply(&compliance, &mut q, &loaded, shift);
+                                load.apply(&compliance, &mut q, loaded, shift);
                                 cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
                                 Goal::Rad(q)
                             }

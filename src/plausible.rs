@@ -30,8 +30,10 @@ pub const NEGATIVE_LOAD_FRACTION: f32 = 0.1;
 /// The per-board state of the checks for `N` sensor boards.
 #[derive(Clone, Debug)]
 pub struct Plausibility<const N: usize> {
-    weight_mn: f32,
-    factor: f32,
+    /// f·W, mN, rounded down: the bound of a cell, of a foot's total and of both feet's total.
+    max_mn: i64,
+    /// −0.1·W, mN, rounded up: the lower bound of a foot's total.
+    min_total_mn: i64,
     stale_us: u64,
     counters: [Option<u16>; N],
     last_ok_us: [u64; N],
@@ -41,9 +43,13 @@ impl<const N: usize> Plausibility<N> {
     /// Checks for a robot of weight `weight_n` (N) with `cfg`'s force factor and staleness
     /// bound; every board counts as fresh at `now_us`.
     pub fn new(cfg: &Config, weight_n: f32, now_us: u64) -> Self {
+        // The bounds in whole mN, once: the per-tick checks are integer compares (no soft
+        // float on the FPU-less boards). `as` rounds toward zero — down for the positive bound,
+        // up for the negative one, as an integer reading compares — saturates, and makes NaN 0.
+        let weight_mn = weight_n * 1000.0;
         Plausibility {
-            weight_mn: weight_n * 1000.0,
-            factor: cfg.force_factor,
+            max_mn: (cfg.force_factor * weight_mn) as i64,
+            min_total_mn: (-NEGATIVE_LOAD_FRACTION * weight_mn) as i64,
             stale_us: u64::from(cfg.sensor_stale_ms).saturating_mul(1000),
             counters: [None; N],
             last_ok_us: [now_us; N],
@@ -58,22 +64,21 @@ impl<const N: usize> Plausibility<N> {
     }
 
     /// A foot's total load is plausible.
-    fn total_ok(&self, mn: f32) -> bool {
-        mn >= -NEGATIVE_LOAD_FRACTION * self.weight_mn && mn <= self.factor * self.weight_mn
+    fn total_ok(&self, mn: i64) -> bool {
+        mn >= self.min_total_mn && mn <= self.max_mn
     }
 
     /// Checks a foot board's sample (board index `k`).
     pub fn foot(&self, k: usize, f: &FootForces) -> Result<(), SensorRejection> {
         self.counter_advanced(k, f.counter)?;
-        let cell_max = self.factor * self.weight_mn;
         if !f
             .forces_mn
             .iter()
-            .all(|&v| libm::fabsf(v as f32) <= cell_max)
+            .all(|&v| i64::from(v).abs() <= self.max_mn)
         {
             return Err(SensorRejection::OutOfRange);
         }
-        let total: f32 = f.forces_mn.iter().map(|&v| v as f32).sum();
+        let total: i64 = f.forces_mn.iter().map(|&v| i64::from(v)).sum();
         if !self.total_ok(total) {
             return Err(SensorRejection::Weight);
         }
@@ -82,13 +87,13 @@ impl<const N: usize> Plausibility<N> {
 
     /// Checks the two feet together (both accepted this tick): their total ≤ f·W.
     pub fn feet_together(&self, a: &FootForces, b: &FootForces) -> Result<(), SensorRejection> {
-        let total: f32 = a
+        let total: i64 = a
             .forces_mn
             .iter()
             .chain(b.forces_mn.iter())
-            .map(|&v| v as f32)
+            .map(|&v| i64::from(v))
             .sum();
-        if total <= self.factor * self.weight_mn {
+        if total <= self.max_mn {
             Ok(())
         } else {
             Err(SensorRejection::Weight)
@@ -166,6 +171,21 @@ mod tests {
             Err(SensorRejection::OutOfRange)
         );
         assert_eq!(c.foot(0, &foot([-240_000, 240_000, 8_000, 0], 2)), Ok(()));
+        // The extremes of the wire's i32 (integer bounds, no overflow).
+        for v in [i32::MIN, i32::MAX] {
+            assert_eq!(
+                c.foot(0, &foot([v; 4], 2)),
+                Err(SensorRejection::OutOfRange)
+            );
+            assert_eq!(
+                c.feet_together(&foot([v; 4], 3), &foot([v; 4], 3)),
+                if v < 0 {
+                    Ok(())
+                } else {
+                    Err(SensorRejection::Weight)
+                }
+            );
+        }
         // Cells in range but the foot's total below −0.1·W = −4 N or above 6·W = 240 N.
         assert_eq!(
             c.foot(0, &foot([-4_001, 0, 0, 0], 2)),

@@ -381,7 +381,6 @@ mod tests {
         let cfg = Config::default();
         let mut bus = BoardMaster::new(&mut board, &time, &cfg);
         let err = read_positions(&mut bus, &cfg).unwrap_err();
-        drop(bus);
         assert_eq!(err.step, StartupStep::ReadPositions);
         assert_eq!(err.id, 3);
         let sizes: Vec<usize> = board
@@ -399,7 +398,6 @@ mod tests {
             read_positions(&mut bus, &cfg),
             Ok(FakeBoard::initial_ticks())
         );
-        drop(bus);
         assert_eq!(board.count(dxl::opcode::SYNC_READ), 1);
     }
 
@@ -418,7 +416,6 @@ mod tests {
         let ticks = read_positions(&mut bus, &cfg).unwrap();
         assert_eq!(ticks, FakeBoard::initial_ticks());
         enable_torque(&mut bus, &cfg).unwrap();
-        drop(bus);
         // Every device pinged, written (addr 9 = 0) and read back.
         for id in ids::DEVICE_IDS {
             let pk = |op: u8| {
@@ -467,7 +464,6 @@ mod tests {
         assert_eq!((e.step, e.id), (StartupStep::ReadPositions, 7));
         let e = enable_torque(&mut bus, &cfg).unwrap_err();
         assert_eq!((e.step, e.id), (StartupStep::TorqueEnable, 7));
-        drop(bus);
         // Each missing device was pinged `startup_attempts` times.
         let pings = board
             .packets

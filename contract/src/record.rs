@@ -479,21 +479,33 @@ impl<'a> Cursor<'a> {
             None => self.ok = false,
         }
     }
+    /// [`put`](Self::put) of a fixed number of bytes: inlined, the copy is N byte stores
+    /// (a tick record has 16 fields; a `memcpy` call each cost ≈ 100 instructions on the M3).
+    fn put_n<const N: usize>(&mut self, bytes: [u8; N]) {
+        let dst = self.buf.get_mut(self.pos..self.pos + N);
+        match dst.and_then(|d| <&mut [u8; N]>::try_from(d).ok()) {
+            Some(dst) => {
+                *dst = bytes;
+                self.pos += N;
+            }
+            None => self.ok = false,
+        }
+    }
     fn u8(&mut self, v: u8) {
-        self.put(&[v]);
+        self.put_n([v]);
     }
     fn u16(&mut self, v: u16) {
-        self.put(&v.to_le_bytes());
+        self.put_n(v.to_le_bytes());
     }
     fn u32(&mut self, v: u32) {
-        self.put(&v.to_le_bytes());
+        self.put_n(v.to_le_bytes());
     }
     fn i32(&mut self, v: i32) {
-        self.put(&v.to_le_bytes());
+        self.put_n(v.to_le_bytes());
     }
     fn i24(&mut self, v: i32) {
         let b = v.to_le_bytes();
-        self.put(&[b[0], b[1], b[2]]);
+        self.put_n([b[0], b[1], b[2]]);
     }
 }
 
@@ -566,7 +578,7 @@ fn build_payload(rec: &Record, out: &mut [u8]) -> Option<usize> {
             {
                 c.i24(clamp_i24(*v));
             }
-            c.put(&r.tau_mnm.to_le_bytes());
+            c.put_n(r.tau_mnm.to_le_bytes());
             c.u8(status_byte(r));
             c.u16(r.bus.timeouts);
             c.u16(r.bus.crc);

@@ -177,9 +177,12 @@ impl<'a> PacketWriter<'a> {
                 if self.pos >= self.buf.len() {
                     return Err(EncodeError::BufferTooSmall);
                 }
-                self.buf.copy_within(at..self.pos, at + 1);
-                if let Some(slot) = self.buf.get_mut(at) {
-                    *slot = 0xFD;
+                // Shift the rest up by one, the FD going in at `at`: each byte takes the one
+                // before it (a carried byte, not `copy_within`: this rare path would otherwise
+                // link `memmove`, 1.6 KB of the OpenCM's flash).
+                let mut carry = 0xFD;
+                for slot in self.buf.get_mut(at..=self.pos).unwrap_or(&mut []) {
+                    core::mem::swap(slot, &mut carry);
                 }
                 self.pos += 1;
                 at += 1;

@@ -13,7 +13,9 @@
 //! - Internally every length is an `i64` in 2⁻³⁰ m units ("P30", resolution 9.3e-10 m) and every
 //!   rotation-matrix entry, sine and cosine an `i64` in 2⁻³⁰ units (`Fac` bits); products are
 //!   formed in `i64` (at most 2⁶² in magnitude, bounds noted at each step) and shifted back.
-//! - Square roots: [`isqrt`], exact digit-by-digit integer square root (shifts, adds, compares).
+//! - Square roots: [`isqrt`], exact integer square root: Newton's iteration with 32-bit `udiv`
+//!   for 32-bit operands; for wider ones a 16-bit estimate from the top bits and one Newton step
+//!   whose division is two 32-bit `udiv`s (no 64-bit division).
 //! - Angles: [`atan2_fac`], octant reduction, one 32-bit division seeding a Newton reciprocal
 //!   step (`i64` multiplications only) for the ratio in [0, 1], then a degree-17 odd polynomial
 //!   (Chebyshev fit in t², measured |error| < 1.6e-8 rad). No 64-bit division anywhere: the
@@ -129,27 +131,68 @@ impl FixedIkReport {
 // ---------------------------------------------------------------------------------------------
 // Primitives.
 
-/// Floor of the square root of `n`, exact (digit-by-digit: 32 steps of shift, add, compare at
-/// most; no multiplication or division).
+/// Floor of the square root of `n`, exact: [`isqrt32`] for 32-bit operands, [`isqrt_wide`]
+/// above (no 64-bit division, no float).
 pub fn isqrt(n: u64) -> u64 {
-    if n == 0 {
+    let Ok(small) = u32::try_from(n) else {
+        return isqrt_wide(n);
+    };
+    u64::from(isqrt32(small))
+}
+
+/// ⌊√m⌋ for a 32-bit m: Newton's iteration `x ← ⌊(x + ⌊m/x⌋)/2⌋` from above (one 32-bit
+/// `udiv` a step), started at 2^⌈b/2⌉ ≥ √m (b the bit length of m, so the start is within a
+/// factor 2). The relative error e goes to e²/(2(1+e)): 1, 0.25, 0.025, 3e-4, 5e-8 — after four
+/// steps the iterate is ⌊√m⌋ or ⌊√m⌋ + 1 (√m < 2¹⁶), and the iteration stops at the first step
+/// that does not decrease, ⌊√m⌋ (integer Newton from above never passes below ⌊√m⌋, by AM–GM).
+fn isqrt32(m: u32) -> u32 {
+    if m == 0 {
         return 0;
     }
-    let mut rem = n;
-    let mut res = 0u64;
-    // Highest power of four ≤ n.
-    let mut bit = 1u64 << ((63 - n.leading_zeros()) & !1);
-    while bit != 0 {
-        // res < 2³³ and bit ≤ 2⁶²: no overflow.
-        if rem >= res + bit {
-            rem -= res + bit;
-            res = (res >> 1) + bit;
-        } else {
-            res >>= 1;
+    let bits = 32 - m.leading_zeros();
+    // ≤ 2¹⁶: m / x and x + m / x stay below 2¹⁷.
+    let mut x = 1u32 << bits.div_ceil(2);
+    // Six steps suffice (see above); the bound only makes the loop visibly finite.
+    for _ in 0..8 {
+        let y = (x + m / x) >> 1;
+        if y >= x {
+            break;
         }
-        bit >>= 2;
+        x = y;
     }
-    res
+    x
+}
+
+/// ⌊√n⌋ for n ≥ 2³², without a 64-bit division (the Cortex-M3 has only a 32-bit `udiv`):
+///
+/// 1. n = m·2^s + low with s even and m ∈ [2³⁰, 2³²): r₀ = ⌊√m⌋ ∈ [2¹⁵, 2¹⁶) ([`isqrt32`]), so
+///    r = (r₀+1)·2^(s/2) ≥ √n with relative error δ ≤ 1/r₀ ≤ 2⁻¹⁵.
+/// 2. One Newton step r' = ⌊(r + ⌊n/r⌋)/2⌋; ⌊n/r⌋ = ⌊⌊n/2^(s/2)⌋/(r₀+1)⌋, a number below 2⁴⁸
+///    by one of 17 bits, in two 32-bit divisions (16-bit long division). r' ≥ ⌊√n⌋ (AM–GM) and
+///    r' − √n ≤ √n·δ²/2 < 2³²·2⁻³¹ = 2.
+/// 3. r' decreases while r'² > n: at most two steps.
+fn isqrt_wide(n: u64) -> u64 {
+    let bits = 64 - n.leading_zeros(); // 33..=64
+    let s = (bits - 31) & !1; // even; n >> s has 31 or 32 bits
+    let half = s / 2;
+    let m = (n >> s) as u32;
+    let d = isqrt32(m) + 1; // ≤ 2¹⁶
+    let r = u64::from(d) << half;
+    // ⌊(n >> half) / d⌋ with the numerator below 2⁴⁸ (64 − bits + … : bits − half ≤ 48).
+    let num = n >> half;
+    let hi = (num >> 16) as u32;
+    let (q1, r1) = (hi / d, hi % d);
+    let lo = (r1 << 16) | (num as u32 & 0xFFFF);
+    let q = (u64::from(q1) << 16) + u64::from(lo / d);
+    let mut x = (r + q) >> 1;
+    // At most two corrections (step 3); the bound only makes the loop visibly finite.
+    for _ in 0..4 {
+        match x.checked_mul(x) {
+            Some(sq) if sq <= n => break,
+            _ => x -= 1,
+        }
+    }
+    x
 }
 
 /// √x for x in Fx (negative counts as 0), rounded down to the Fx resolution.

@@ -100,6 +100,24 @@ fn isqrt_is_exact() {
         check(r * r);
         check((r * r).saturating_sub(1));
     }
+    // The wide path (n ≥ 2³²: estimate from the top bits, one Newton step, corrections):
+    // squares and their neighbours where the estimate is worst (r₀ = 2¹⁵, the bottom of its
+    // range) and at the ends of u64, every operand width 33..=64 bits.
+    for r in (1u64 << 16..1 << 16 | 64).chain((1u64 << 32) - 64..1 << 32) {
+        for n in [r * r - 2, r * r - 1, r * r, r * r + 1, r * r + 2 * r] {
+            check(n);
+        }
+    }
+    for bits in 33..=64u32 {
+        let top = 1u64 << (bits - 1);
+        for _ in 0..20_000 {
+            let n = top | (rng.next() & (top - 1));
+            check(n);
+            let r = isqrt(n);
+            check(r * r);
+            check(r * r - 1);
+        }
+    }
 }
 
 #[test]

@@ -1234,8 +1234,14 @@ fn run_fil_command_port(
         Err(e) => println!("no command figures: {e}"),
     }
     println!("log: {}, truth: {}", r.log.display(), r.truth.display());
-    match r.exit_code {
-        Some(0) | Some(crate::fil::END_BY_COMMAND) => Ok(()),
+    firmware_end(r.exit_code, &[0, crate::fil::END_BY_COMMAND])
+}
+
+/// The run's result by the firmware's exit code: `ok` codes are a normal end, anything else
+/// (or no code: killed, timed out) exit code 3.
+fn firmware_end(code: Option<i32>, ok: &[i32]) -> Result<(), CliError> {
+    match code {
+        Some(c) if ok.contains(&c) => Ok(()),
         code => Err(CliError {
             message: format!("the firmware exited with code {code:?}"),
             code: 3,
@@ -1386,13 +1392,7 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
             .map_err(|e| CliError::failed(format!("walker fil: --video: {e}")))?;
         println!("video: {}", v.display());
     }
-    match r.exit_code {
-        Some(0) => Ok(()),
-        code => Err(CliError {
-            message: format!("the firmware exited with code {code:?}"),
-            code: 3,
-        }),
-    }
+    firmware_end(r.exit_code, &[0])
 }
 
 fn run_sweep(a: SweepArgs) -> Result<(), CliError> {

@@ -583,6 +583,33 @@ pub fn replay_footsteps(
 mod tests {
     use super::*;
 
+    /// Every shipped file in plans/ loads as what its name says: `commands-*.toml` a command
+    /// script whose velocities fit the port, `run-*.toml` a run configuration (its own
+    /// tests), every other one a checked plan.
+    #[test]
+    fn every_shipped_plan_and_command_script_loads() {
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../plans"));
+        let mut seen = (0, 0);
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            if !name.ends_with(".toml") || name.starts_with("run-") {
+                continue;
+            }
+            if name.starts_with("commands-") {
+                let s = CommandScript::read(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+                for c in &s.command {
+                    c.wire().unwrap_or_else(|e| panic!("{name}: {e}"));
+                }
+                seen.0 += 1;
+            } else {
+                crate::planfile::load(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+                seen.1 += 1;
+            }
+        }
+        assert!(seen.0 >= 3 && seen.1 >= 7, "scripts, plans: {seen:?}");
+    }
+
     #[test]
     fn parses_the_demo_script_and_refuses_bad_ones() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../plans/commands-demo.toml");

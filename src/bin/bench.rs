@@ -1000,6 +1000,7 @@ mod firmware {
     }
 
     impl Observer for TickMeter {
+        #[cfg_attr(feature = "tick-profile", inline(never))]
         fn tick_start(&mut self) {
             let t = now();
             if let Some(m) = self.mark {
@@ -1008,6 +1009,7 @@ mod firmware {
             }
         }
 
+        #[cfg_attr(feature = "tick-profile", inline(never))]
         fn tick(&mut self, _tick: Tick) {
             self.excluded = 0;
             self.mark = Some(now());
@@ -1017,10 +1019,12 @@ mod firmware {
             self.log_bytes = self.log_bytes.wrapping_add(bytes.len() as u32);
         }
 
+        #[cfg_attr(feature = "tick-profile", inline(never))]
         fn enter(&mut self) {
             self.paused_at = now();
         }
 
+        #[cfg_attr(feature = "tick-profile", inline(never))]
         fn leave(&mut self) {
             self.excluded += self.paused_at.wrapping_sub(now()) & MASK;
         }

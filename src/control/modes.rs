@@ -131,6 +131,9 @@ impl Gait {
             }
             Gait::Plan(p) => match &p.pending {
                 Some(lead) => (p.first, p.engine.joints(targets, lead, [0.0; 2]), lead.f32),
+                // Not reached in the firmware: `initial_pose` is asked before the first
+                // `Plan::next`, while the lead sample is still pending. Kept total: the first
+                // sample's own pose.
                 None => (p.first, targets.joints(&p.first, [0.0; 2]).0, p.first),
             },
         }

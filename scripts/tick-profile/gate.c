@@ -1,0 +1,108 @@
+/* QEMU TCG plugin (QEMU 7.2, plugin API version 1): counts every executed guest instruction
+ * by its address, but only while counting is switched on. Executing the first instruction of
+ * an address listed in PROF_ON switches it on, of one in PROF_OFF off (comma-separated hex).
+ * At exit it writes "address count" lines for every address executed while on to PROF_OUT.
+ *
+ * scripts/tick-profile.sh builds it and switches on at the bench's TickMeter::tick and
+ * TickMeter::leave, off at TickMeter::tick_start and TickMeter::enter: the instructions the
+ * bench counts as the firmware's control tick.
+ *
+ * The few declarations of QEMU's plugin API used here are written out below (Debian's
+ * qemu-system-arm ships plugin support but not <qemu-plugin.h>).
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef uint64_t qemu_plugin_id_t;
+struct qemu_plugin_tb;
+struct qemu_plugin_insn;
+typedef struct qemu_info_t qemu_info_t;
+enum qemu_plugin_cb_flags { QEMU_PLUGIN_CB_NO_REGS };
+
+__attribute__((visibility("default"))) int qemu_plugin_version = 1;
+
+void qemu_plugin_register_vcpu_tb_trans_cb(qemu_plugin_id_t id,
+                                           void (*cb)(qemu_plugin_id_t, struct qemu_plugin_tb *));
+size_t qemu_plugin_tb_n_insns(const struct qemu_plugin_tb *tb);
+struct qemu_plugin_insn *qemu_plugin_tb_get_insn(const struct qemu_plugin_tb *tb, size_t idx);
+uint64_t qemu_plugin_insn_vaddr(const struct qemu_plugin_insn *insn);
+void qemu_plugin_register_vcpu_insn_exec_cb(struct qemu_plugin_insn *insn,
+                                            void (*cb)(unsigned int, void *),
+                                            enum qemu_plugin_cb_flags flags, void *userdata);
+void qemu_plugin_register_atexit_cb(qemu_plugin_id_t id, void (*cb)(qemu_plugin_id_t, void *),
+                                    void *userdata);
+
+/* Code addresses below 16 MiB (the mps2 machines' flash/code region), two bytes apart. */
+#define SLOTS (8u << 20)
+#define MAX_MARKS 8
+
+static uint64_t *counts;
+static int on;
+static uint64_t on_at[MAX_MARKS], off_at[MAX_MARKS];
+static int n_on, n_off;
+static const char *out_path = "tick-profile.txt";
+
+static void executed(unsigned int vcpu, void *udata) {
+    uint64_t pc = (uintptr_t)udata;
+    (void)vcpu;
+    for (int i = 0; i < n_off; i++)
+        if (pc == off_at[i]) on = 0;
+    for (int i = 0; i < n_on; i++)
+        if (pc == on_at[i]) on = 1;
+    if (on) counts[pc / 2]++;
+}
+
+static void translated(qemu_plugin_id_t id, struct qemu_plugin_tb *tb) {
+    (void)id;
+    size_t n = qemu_plugin_tb_n_insns(tb);
+    for (size_t i = 0; i < n; i++) {
+        struct qemu_plugin_insn *insn = qemu_plugin_tb_get_insn(tb, i);
+        uint64_t pc = qemu_plugin_insn_vaddr(insn);
+        if (pc / 2 < SLOTS)
+            qemu_plugin_register_vcpu_insn_exec_cb(insn, executed, QEMU_PLUGIN_CB_NO_REGS,
+                                                   (void *)(uintptr_t)pc);
+    }
+}
+
+static void finished(qemu_plugin_id_t id, void *udata) {
+    (void)id;
+    (void)udata;
+    FILE *f = fopen(out_path, "w");
+    if (!f) return;
+    for (uint64_t i = 0; i < SLOTS; i++)
+        if (counts[i]) fprintf(f, "%llx %llu\n", (unsigned long long)(i * 2),
+                               (unsigned long long)counts[i]);
+    fclose(f);
+}
+
+static int marks(const char *env, uint64_t *at) {
+    const char *s = getenv(env);
+    int n = 0;
+    char buf[512];
+    if (!s) return 0;
+    strncpy(buf, s, sizeof buf - 1);
+    buf[sizeof buf - 1] = 0;
+    for (char *t = strtok(buf, ","); t && n < MAX_MARKS; t = strtok(NULL, ","))
+        at[n++] = strtoull(t, NULL, 16) & ~1ull; /* Thumb: the bit-0 of a symbol is not the pc */
+    return n;
+}
+
+__attribute__((visibility("default"))) int qemu_plugin_install(qemu_plugin_id_t id,
+                                                               const qemu_info_t *info,
+                                                               int argc, char **argv) {
+    (void)info;
+    (void)argc;
+    (void)argv;
+    counts = calloc(SLOTS, sizeof *counts);
+    if (!counts) return -1;
+    const char *o = getenv("PROF_OUT");
+    if (o) out_path = o;
+    n_on = marks("PROF_ON", on_at);
+    n_off = marks("PROF_OFF", off_at);
+    if (n_on == 0) on = 1; /* no marks: count everything */
+    qemu_plugin_register_vcpu_tb_trans_cb(id, translated);
+    qemu_plugin_register_atexit_cb(id, finished, NULL);
+    return 0;
+}
