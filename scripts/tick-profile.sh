@@ -60,7 +60,8 @@ esac
 
 mark() { # the address of TickMeter's Observer method $1
     # (llvm-nm leaves these legacy-mangled: `…TickMeter$u20$as$u20$…Observer$GT$::tick::h…`)
-    llvm-nm -C "$elf" | awk -v m="$1" '/TickMeter/ && /Observer/ && $0 ~ "::" m "(::h[0-9a-f]+)?$" {print $1; exit}'
+    # awk reads to the end (an early exit would make llvm-nm fail writing: exit 74).
+    llvm-nm -C "$elf" | awk -v m="$1" '!found && /TickMeter/ && /Observer/ && $0 ~ "::" m "(::h[0-9a-f]+)?$" {print $1; found = 1}'
 }
 on="$(mark tick),$(mark leave)"
 off="$(mark tick_start),$(mark enter)"

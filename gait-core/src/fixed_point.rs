@@ -52,7 +52,7 @@ fn mul_fx(a: Fx, b: Fx) -> Fx {
 
 /// 2³⁰/k for k = 1..=10: Horner steps multiply instead of divide (no 64-bit division, which
 /// is a library call on Cortex-M).
-const INV: [i64; 11] = [
+const INV: [i32; 11] = [
     0,
     1_073_741_824,
     536_870_912,
@@ -66,12 +66,20 @@ const INV: [i64; 11] = [
     107_374_182,
 ];
 /// 2³⁰/((2k)(2k+1)) and 2³⁰/((2k−1)(2k)) for k = 1..=4 (sine and cosine Taylor steps).
-const INV_SIN: [i64; 5] = [0, 178_956_971, 53_687_091, 25_565_282, 14_913_081];
-const INV_COS: [i64; 5] = [0, 536_870_912, 89_478_485, 35_791_394, 19_173_962];
+const INV_SIN: [i32; 5] = [0, 178_956_971, 53_687_091, 25_565_282, 14_913_081];
+const INV_COS: [i32; 5] = [0, 536_870_912, 89_478_485, 35_791_394, 19_173_962];
 
 /// (a·b) >> 30 for Fac-scaled values (|a|, |b| < 2³²: the product fits i64).
 fn mul30(a: i64, b: i64) -> i64 {
     (a * b) >> 30
+}
+
+/// (a·b) >> 30 of two `i32`: one 32×32 → 64-bit multiply (`smull`), where the `i64` form
+/// costs three multiplies on a 32-bit core; the same value as in `i64` whenever the result
+/// fits `i32` (|a·b| < 2⁶¹: every use below keeps both factors within 2³⁰ or so).
+#[inline(always)]
+pub(crate) fn mul30_32(a: i32, b: i32) -> i32 {
+    ((i64::from(a) * i64::from(b)) >> 30) as i32
 }
 
 /// e^{−x} for x ≥ 0 in Fx, as a Fac (bits, 2³⁰ = 1). Negative x counts as 0.
@@ -86,11 +94,15 @@ pub fn exp_neg(x: Fx) -> i64 {
     // r in 2^30 units, r ∈ [0, ln 2) up to the rounding of LN2_16 (harmless for the series).
     let r = ((x16 as i64) << 14) - n as i64 * LN2;
     // e^{−r} by its Taylor polynomial to r¹⁰ (Horner): truncation < ln2¹¹/11! ≈ 4e-10.
-    let mut acc = ONE_FAC;
-    for inv in INV.iter().skip(1).rev() {
-        acc = ONE_FAC - mul30(mul30(acc, r), *inv);
-    }
-    acc >> n
+    // In i32, the same values as in i64: |r| < 2³⁰, every Horner value in [0, 2³⁰], the
+    // factors 2³⁰/k ≤ 2³⁰; written out (no loop).
+    let r = r as i32;
+    const ONE: i32 = ONE_FAC as i32;
+    let [_, i1, i2, i3, i4, i5, i6, i7, i8, i9, i10] = INV;
+    let step = |acc: i32, inv: i32| ONE.wrapping_sub(mul30_32(mul30_32(acc, r), inv));
+    let acc = step(step(step(step(step(ONE, i10), i9), i8), i7), i6);
+    let acc = step(step(step(step(step(acc, i5), i4), i3), i2), i1);
+    i64::from(acc) >> n
 }
 
 /// sin and cos of `x` (rad, Fx) as Fac bits.
@@ -101,15 +113,18 @@ pub fn sin_cos(x: Fx) -> (i64, i64) {
     let x16 = x.to_bits();
     let q = x16.saturating_add(HALF_PI_16 / 2).div_euclid(HALF_PI_16);
     let r = ((x16 as i64) << 14) - q as i64 * HALF_PI;
-    let r2 = mul30(r, r);
-    // Taylor to r⁹ / r⁸: |r| ≤ π/4 → error < (π/4)^10/10! ≈ 2e-8.
-    let mut s = ONE_FAC;
-    let mut c = ONE_FAC;
-    for k in (1..=4).rev() {
-        s = ONE_FAC - mul30(mul30(s, r2), INV_SIN[k]);
-        c = ONE_FAC - mul30(mul30(c, r2), INV_COS[k]);
-    }
-    let s = mul30(s, r);
+    // Taylor to r⁹ / r⁸: |r| ≤ π/4 → error < (π/4)^10/10! ≈ 2e-8. In i32, the same values as
+    // in i64: |r| < π/4·2³⁰ + 10⁸ (q's 16-bit rounding of π/2 over the whole Fx range) < 2³⁰,
+    // r² and every Horner value in [0, 2³⁰], the factors below 2³⁰; written out (no loop).
+    let r = r as i32;
+    let r2 = mul30_32(r, r);
+    const ONE: i32 = ONE_FAC as i32;
+    let [_, s1, s2, s3, s4] = INV_SIN;
+    let [_, c1, c2, c3, c4] = INV_COS;
+    let step = |acc: i32, inv: i32| ONE.wrapping_sub(mul30_32(mul30_32(acc, r2), inv));
+    let s = step(step(step(step(ONE, s4), s3), s2), s1);
+    let c = step(step(step(step(ONE, c4), c3), c2), c1);
+    let (s, c) = (i64::from(mul30_32(s, r)), i64::from(c));
     match q.rem_euclid(4) {
         0 => (s, c),
         1 => (c, -s),
@@ -411,6 +426,73 @@ impl<const N: usize> FixedSampler<N> {
             y: lerp(from.y, to.y).saturating_add(mul_fac(b, cy)),
             z: fz,
             yaw,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `sin_cos` as it was, in `i64` throughout.
+    fn sin_cos_i64(x: Fx) -> (i64, i64) {
+        const HALF_PI_16: i32 = 102_944;
+        const HALF_PI: i64 = 1_686_629_713;
+        let x16 = x.to_bits();
+        let q = x16.saturating_add(HALF_PI_16 / 2).div_euclid(HALF_PI_16);
+        let r = ((x16 as i64) << 14) - q as i64 * HALF_PI;
+        let r2 = mul30(r, r);
+        let mut s = ONE_FAC;
+        let mut c = ONE_FAC;
+        for k in (1..=4).rev() {
+            s = ONE_FAC - mul30(mul30(s, r2), i64::from(INV_SIN[k]));
+            c = ONE_FAC - mul30(mul30(c, r2), i64::from(INV_COS[k]));
+        }
+        let s = mul30(s, r);
+        match q.rem_euclid(4) {
+            0 => (s, c),
+            1 => (c, -s),
+            2 => (-s, -c),
+            _ => (-c, s),
+        }
+    }
+
+    /// `exp_neg` as it was, in `i64` throughout.
+    fn exp_neg_i64(x: Fx) -> i64 {
+        let x16 = x.to_bits().max(0);
+        let n = x16 / 45_426;
+        if n >= 31 {
+            return 0;
+        }
+        let r = ((x16 as i64) << 14) - n as i64 * 744_261_118;
+        let mut acc = ONE_FAC;
+        for inv in INV.iter().skip(1).rev() {
+            acc = ONE_FAC - mul30(mul30(acc, r), i64::from(*inv));
+        }
+        acc >> n
+    }
+
+    #[test]
+    fn exp_neg_in_i32_is_the_i64_evaluation() {
+        // Every 2⁻¹⁶ up to 24 (where it underflows), a sweep of the rest, both ends.
+        let ends = [i32::MIN, -1, 0, i32::MAX];
+        for b in (0..24 << 16)
+            .chain((0..=i32::MAX).step_by(65_537))
+            .chain(ends)
+        {
+            let x = Fx::from_bits(b);
+            assert_eq!(exp_neg(x), exp_neg_i64(x), "x bits {b}");
+        }
+    }
+
+    #[test]
+    fn sin_cos_in_i32_is_the_i64_evaluation() {
+        // The whole Fx range in steps of 2⁻¹⁶·65,537 (odd: every residue class of the quadrant
+        // reduction), every 2⁻¹⁶ around 0 and the two ends, bit for bit.
+        let ends = (-70_000..70_000).chain([i32::MIN, i32::MIN + 1, i32::MAX - 1, i32::MAX]);
+        for b in (i32::MIN..=i32::MAX).step_by(65_537).chain(ends) {
+            let x = Fx::from_bits(b);
+            assert_eq!(sin_cos(x), sin_cos_i64(x), "x bits {b}");
         }
     }
 }
