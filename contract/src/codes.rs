@@ -328,12 +328,20 @@ pub enum FaultKind {
 }
 
 impl FaultKind {
-    /// A fault, not an event of the walk: false for [`FaultKind::CommandReceived`],
-    /// [`FaultKind::Footstep`] and [`FaultKind::ResetCause`] (logged at every boot).
+    /// A fault, not an event of the walk nor a notice: false for [`FaultKind::CommandReceived`],
+    /// [`FaultKind::Footstep`], [`FaultKind::ResetCause`] (logged at every boot) and the
+    /// start-up's plan adjustments [`FaultKind::TimingStretched`] and
+    /// [`FaultKind::SwingLowered`] (the servo-speed check made the plan fit; the default plan
+    /// is stretched on the reference robot, so the port's Fault Kind would read 7 from boot).
+    /// [`FaultKind::SpeedLimit`] stays a fault: the walk then asks more than the servos give.
     pub const fn is_fault(self) -> bool {
         !matches!(
             self,
-            Self::CommandReceived | Self::Footstep | Self::ResetCause
+            Self::CommandReceived
+                | Self::Footstep
+                | Self::ResetCause
+                | Self::TimingStretched
+                | Self::SwingLowered
         )
     }
 

@@ -1208,6 +1208,37 @@ mod tests {
     }
 
     #[test]
+    fn the_last_fault_skips_events_and_notices() {
+        struct Null;
+        impl LogSink for Null {
+            fn write_log(&mut self, _: &[u8]) {}
+        }
+        let fault = |kind| {
+            Record::Fault(FaultRecord {
+                seq: 0,
+                time_us: 0,
+                kind,
+                id: 0,
+                value: 0,
+            })
+        };
+        let mut w = LogWriter::new();
+        for (kind, last) in [
+            (FaultKind::ResetCause, 0),
+            (FaultKind::TimingStretched, 0),
+            (FaultKind::SwingLowered, 0),
+            (FaultKind::SpeedLimit, 9),
+            (FaultKind::Footstep, 9),
+            (FaultKind::DeviceHolding, 1),
+            (FaultKind::CommandReceived, 1),
+            (FaultKind::TimingStretched, 1),
+        ] {
+            w.write(&mut Null, fault(kind));
+            assert_eq!(w.last_fault(), last, "after {kind:?}");
+        }
+    }
+
+    #[test]
     fn writer_numbers_records() {
         let (got, st) = decode_all(&stream(300));
         assert_eq!(got.len(), 300);

@@ -1076,7 +1076,6 @@ fn python_constant(text: &str, name: &str) -> i64 {
 
 #[test]
 fn sdk_example_uses_the_contract_registers() {
-    use walker_contract::codes::FaultKind;
     use walker_contract::command_port::{self as port, Mode, PortState};
     // The example's register map (the SDK test imports it) and the test's own codes.
     let read = |p: &str| std::fs::read_to_string(workspace().join(p)).unwrap();
@@ -1136,10 +1135,6 @@ fn sdk_example_uses_the_contract_registers() {
     }
     assert_eq!(c("STATE_STANDING"), i64::from(PortState::Standing.code()));
     assert_eq!(c("STATE_WALKING"), i64::from(PortState::Walking.code()));
-    assert_eq!(
-        t("FAULT_TIMING_STRETCHED"),
-        i64::from(FaultKind::TimingStretched.code())
-    );
     for (name, e) in [
         ("ERR_DATA_RANGE", dxl::ErrorCode::DataRange),
         ("ERR_DATA_LENGTH", dxl::ErrorCode::DataLength),
