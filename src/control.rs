@@ -106,7 +106,7 @@ use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::balance::{FixedGyroFeedback, FootForceControl, FootForceState};
 use gait_core::compliance::{Compliance, LoadModel};
 use gait_core::fixed_point::{FixedFoot, Fx};
-use gait_core::gait::Arithmetic;
+use gait_core::gait::{Arithmetic, Sample};
 use gait_core::measured::{measured_zmp, FixedZmpMeter, ForceReading};
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
@@ -895,12 +895,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 // The walk's mode says what moves the legs ([`modes`]).
                 let q = match walk.tick(fixed_math, tau, tau_mnm) {
                     Motion::Ramp(q) => Some(Goal::Rad(q)),
-                    Motion::Gait {
-                        k,
-                        present: s,
-                        mut ahead,
-                        footstep,
-                    } => 'sample: {
+                    Motion::Gait { k, footstep } => 'sample: {
                         // The online walk's sample (no lead) or the plan's (`servo_lead` ahead).
                         if let Some(f) = footstep {
                             commanded::log_footstep(
@@ -912,13 +907,22 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 f.given,
                             );
                         }
-                        // The fault injection spoils the sample the IK takes (`ahead`, or
-                        // the present one: then only its check sees it).
+                        // The present sample and the one the IK takes, borrowed from the walk.
+                        let s = walk.present();
+                        // The fault injection spoils the sample the IK takes (a copy of
+                        // `ahead`, or the present one: then only its check sees it).
                         let nan_com = cfg.fault_nan_com_tick == Some(k);
-                        if let (true, Some(a)) = (nan_com, ahead.as_mut()) {
-                            a.f32.com[0] = f32::NAN;
-                        }
-                        let ahead_finite = match &ahead {
+                        let poisoned: Sample;
+                        let ahead = match walk.ahead() {
+                            Some(a) if nan_com => {
+                                let mut p = *a;
+                                p.f32.com[0] = f32::NAN;
+                                poisoned = p;
+                                Some(&poisoned)
+                            }
+                            a => a,
+                        };
+                        let ahead_finite = match ahead {
                             Some(a) => a.f32.is_finite(),
                             None => !nan_com,
                         };
@@ -956,7 +960,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         // (`math=fixed`; compliance and the force difference control are off
                         // there); the f32 path otherwise (and for the NaN fault injection).
                         let plan = walk.gait.plan();
-                        let fx_q = match (&ahead, plan) {
+                        let fx_q = match (ahead, plan) {
                             (Some(a), Some(p)) if cfg.fault_nan_tick != Some(k) => {
                                 p.engine().joints_fx(&targets, a, shift)
                             }
@@ -972,7 +976,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 Goal::Fx(q)
                             }
                             None => {
-                                let (mut q, loaded) = match (&ahead, plan) {
+                                let (mut q, loaded) = match (ahead, plan) {
                                     (Some(a), Some(p)) if foot_force_state.dz != 0.0 => {
                                         let mut lifted = *a;
                                         lifted.f32 = lift(a.f32);
@@ -981,7 +985,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                     (Some(a), Some(p)) => {
                                         (p.engine().joints(&targets, a, shift), &a.f32)
                                     }
-                                    _ => (targets.joints(&lift(s), shift).0, &s),
+                                    _ => (targets.joints(&lift(*s), shift).0, s),
                                 };
                                 load.apply(&compliance, &mut q, loaded, shift);
                                 cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
@@ -1004,8 +1008,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         // The present sample in fixed point (`math=fixed` without lead or
                         // shift: it is the one the IK took) goes to the log without float.
                         let present_fx = ahead
-                            .as_ref()
-                            .and_then(|a| a.fixed)
+                            .and_then(|a| a.fixed.as_ref())
                             .filter(|_| cfg.lead_ticks() == 0 && !cfg.stabilizer_on);
                         match present_fx {
                             Some(f) => {
@@ -1018,8 +1021,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 rec.set_com_m(cx + shift[0], cy + shift[1]);
                             }
                         }
-                        rec.phase = phase_of(&s);
-                        prev = s;
+                        rec.phase = phase_of(s);
+                        prev = *s;
                         Some(goal)
                     }
                 };

@@ -58,6 +58,8 @@ pub struct Plan {
     delay: heapless::Deque<GaitSample<f32>, { MAX_LEAD_TICKS + 1 }>,
     /// The sample `lead` ticks ahead of the delay line's front, not yet handed out.
     pending: Option<Sample>,
+    /// The sample the IK takes this tick (`lead` ticks ahead of the present one).
+    ahead: Sample,
     /// The first sample (the initial pose's reference).
     first: GaitSample<f32>,
 }
@@ -78,26 +80,39 @@ impl Plan {
             engine,
             delay,
             pending: Some(lead),
+            ahead: lead,
             first: first.f32,
         }
     }
 
-    /// The present sample and the one `lead` ticks ahead (which the IK takes), the sampler
-    /// fed the measured τ (N·m, or whole mN·m on the fixed-point path).
-    pub fn next(&mut self, fixed_math: bool, tau: f32, tau_mnm: i32) -> (GaitSample<f32>, Sample) {
-        let ahead = match self.pending.take() {
-            Some(p) => p,
+    /// One tick: the present sample into `present`, the one `lead` ticks ahead (which the IK
+    /// takes: [`Plan::ahead`]) kept here, the sampler fed the measured τ (N·m, or whole mN·m
+    /// on the fixed-point path). In place: the samples (≈ 100 B f32, ≈ 220 B with the
+    /// fixed-point copy) are not passed around by value (a `memcpy` each).
+    pub fn advance(
+        &mut self,
+        fixed_math: bool,
+        tau: f32,
+        tau_mnm: i32,
+        present: &mut GaitSample<f32>,
+    ) {
+        match self.pending.take() {
+            Some(p) => self.ahead = p,
             None => {
-                let a = if fixed_math {
+                self.ahead = if fixed_math {
                     self.engine.next_mnm(tau_mnm)
                 } else {
                     self.engine.next(tau)
                 };
-                let _ = self.delay.push_back(a.f32);
-                a
+                let _ = self.delay.push_back(self.ahead.f32);
             }
-        };
-        (self.delay.pop_front().unwrap_or(ahead.f32), ahead)
+        }
+        *present = self.delay.pop_front().unwrap_or(self.ahead.f32);
+    }
+
+    /// The sample the IK takes this tick (set by [`Plan::advance`]).
+    pub fn ahead(&self) -> &Sample {
+        &self.ahead
     }
 
     /// The sampler (its IK paths: [`Engine::joints`], [`Engine::joints_fx`]).
@@ -181,21 +196,15 @@ pub struct TakenStep {
 }
 
 /// What moves the legs this tick.
-// A value of one tick on the stack (no_std has no Box); the ramp's variant is the smaller.
-#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug)]
 pub enum Motion {
     /// The ramp's joint targets (rad).
     Ramp([f32; LEG_JOINTS]),
-    /// The gait's samples at walk tick `k`.
+    /// The gait at walk tick `k`: its samples are [`Walk::present`] and [`Walk::ahead`]
+    /// (borrowed, not copied).
     Gait {
         /// Walk tick (0 at the first tick after the ramp).
         k: u32,
-        /// The present sample (reference, log, stabilizer, support phase).
-        present: GaitSample<f32>,
-        /// The sample the IK takes (`servo_lead` ahead): the plan's only; the online walk's
-        /// IK takes the present one.
-        ahead: Option<Sample>,
         /// A footstep the online walk committed.
         footstep: Option<TakenStep>,
     },
@@ -216,15 +225,33 @@ pub struct Walk {
     mode: Mode,
     /// The gait the ramp hands over to.
     pub gait: Gait,
+    /// The gait's present sample (the last gait tick's; the gait's first before that).
+    present: GaitSample<f32>,
 }
 
 impl Walk {
     /// Starting on `ramp`, then `gait`.
     pub fn new(ramp: Ramp, gait: Gait) -> Self {
+        let present = match &gait {
+            Gait::Plan(p) => p.first,
+            Gait::Online(o) => o.clone().tick(),
+        };
         Walk {
             mode: Mode::Starting(Starting::new(ramp)),
             gait,
+            present,
         }
+    }
+
+    /// The present sample (reference, log, stabilizer, support phase) of the last gait tick.
+    pub fn present(&self) -> &GaitSample<f32> {
+        &self.present
+    }
+
+    /// The sample the IK takes (`servo_lead` ahead): the plan's only; the online walk's IK
+    /// takes the present one.
+    pub fn ahead(&self) -> Option<&Sample> {
+        self.gait.plan().map(Plan::ahead)
     }
 
     /// True while the ramp runs.
@@ -256,27 +283,17 @@ impl Walk {
                 *walk_tick = walk_tick.saturating_add(1);
                 match &mut self.gait {
                     Gait::Online(o) => {
-                        let present = o.tick();
+                        self.present = o.tick();
                         let footstep = o.take_footstep().map(|step| TakenStep {
                             step,
                             turn: o.last_turn(),
                             given: o.last_given(),
                         });
-                        Motion::Gait {
-                            k,
-                            present,
-                            ahead: None,
-                            footstep,
-                        }
+                        Motion::Gait { k, footstep }
                     }
                     Gait::Plan(p) => {
-                        let (present, ahead) = p.next(fixed_math, tau, tau_mnm);
-                        Motion::Gait {
-                            k,
-                            present,
-                            ahead: Some(ahead),
-                            footstep: None,
-                        }
+                        p.advance(fixed_math, tau, tau_mnm, &mut self.present);
+                        Motion::Gait { k, footstep: None }
                     }
                 }
             }
@@ -305,10 +322,12 @@ mod tests {
         let lead = 3;
         let (mut p, mut reference) = plan(lead);
         let all: Vec<_> = (0..40).map(|_| reference.next(0.0)).collect();
+        let mut present = all[0].f32;
+        present.com[0] = f32::NAN;
         for k in 0..(all.len() - lead) {
-            let (present, ahead) = p.next(false, 0.0, 0);
+            p.advance(false, 0.0, 0, &mut present);
             assert_eq!(present, all[k].f32, "tick {k}");
-            assert_eq!(ahead, all[k + lead], "tick {k}");
+            assert_eq!(*p.ahead(), all[k + lead], "tick {k}");
         }
     }
 
@@ -332,13 +351,12 @@ mod tests {
             match w.tick(false, 0.0, 0) {
                 Motion::Gait {
                     k: wk,
-                    present,
-                    ahead: Some(_),
                     footstep: None,
                 } => {
                     assert_eq!(wk, k);
+                    assert!(w.ahead().is_some());
                     if k == 0 {
-                        assert_eq!(present, first);
+                        assert_eq!(*w.present(), first);
                     }
                 }
                 m => panic!("walk tick {k}: {m:?}"),
@@ -361,10 +379,8 @@ mod tests {
         match w.tick(false, 0.0, 0) {
             Motion::Gait {
                 k: 0,
-                ahead: None,
                 footstep: None,
-                ..
-            } => {}
+            } => assert!(w.ahead().is_none()),
             m => panic!("{m:?}"),
         }
         assert!(!w.gait.plan_done());
