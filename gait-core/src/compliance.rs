@@ -37,9 +37,10 @@
 //! hold the hanging leg). Neglected: the links' accelerations, the upper body's rotation, the
 //! flywheel torque; the pelvis is taken from the sample (with whole-body compensation it stands
 //! a few millimetres away, which changes the levers by as much). Cost: two leg chains
-//! (12 sine/cosine pairs) and 12 cross products per tick.
+//! (12 sine/cosine pairs) and 6 cross products per tick (the moments grouped by joint origin:
+//! the hip, the knee, the ankle).
 
-use crate::kinematics::{LegKinematics, LegPoints};
+use crate::kinematics::LegKinematics;
 use crate::pipeline::pelvis_pose;
 use crate::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
 use crate::sampler::{GaitSample, SupportPhase};
@@ -140,6 +141,16 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// `a + b`.
+fn add(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+/// `k a`.
+fn scale(a: [f32; 3], k: f32) -> [f32; 3] {
+    [k * a[0], k * a[1], k * a[2]]
+}
+
 impl LoadModel {
     /// The load model of `robot`.
     pub fn new(robot: &Robot) -> Self {
@@ -199,48 +210,54 @@ impl LoadModel {
             split[0] * l.y + split[1] * r.y,
         ];
         let mut tau = [0.0f32; LEG_JOINTS];
-        for (i, side) in [Side::Left, Side::Right].into_iter().enumerate() {
-            let (Some(&share), Some(foot), Some(qi), Some(out)) = (
+        // Both legs' points and joint axes (the pelvis rotation once).
+        let legs = self.kin.legs_joint_axes(&pelvis, q);
+        for (i, (pts, axes)) in legs.into_iter().enumerate() {
+            let (Some(&share), Some(foot), Some(out)) = (
                 split.get(i),
                 s.feet.get(i),
-                q.get(i * JOINTS_PER_LEG..(i + 1) * JOINTS_PER_LEG),
                 tau.get_mut(i * JOINTS_PER_LEG..(i + 1) * JOINTS_PER_LEG),
             ) else {
                 continue;
             };
-            let mut leg = [0.0f32; JOINTS_PER_LEG];
-            leg.copy_from_slice(qi);
-            let (pts, axes) = self.kin.joint_axes(side, &pelvis, &leg);
             let cop = [
                 foot.x + s.zmp[0] - mix[0],
                 foot.y + s.zmp[1] - mix[1],
                 foot.z,
             ];
             let force = force_total.map(|v| v * share);
+            // (C2) by joint origin: the three hip joints share the hip centre and their distal
+            // links (thigh, calf, sole), the two ankle joints the ankle centre and the sole.
+            // The weights' moment about o is Σ (r_l − o) × (0, 0, −m_l g) = (S − M o) × (0, 0,
+            // −g) with S = Σ m_l r_l and M = Σ m_l over the links below: (−g v_y, g v_x, 0)
+            // for v = S − M o. Three moments a leg instead of six joints' sums of up to four
+            // cross products.
+            let [m_thigh, m_calf, m_sole] = self.links;
+            let below_ankle = (scale(pts.sole_mass, m_sole), m_sole);
+            let below_knee = (
+                add(below_ankle.0, scale(pts.calf_mass, m_calf)),
+                m_calf + m_sole,
+            );
+            let below_hip = (
+                add(below_knee.0, scale(pts.thigh_mass, m_thigh)),
+                m_thigh + m_calf + m_sole,
+            );
+            let moment_about = |origin: [f32; 3], (sum, mass): ([f32; 3], f32)| {
+                let c = cross(sub(cop, origin), force);
+                let v = sub(sum, scale(origin, mass));
+                [c[0] - g * v[1], c[1] + g * v[0], c[2]]
+            };
+            let moments = [
+                moment_about(pts.hip, below_hip),
+                moment_about(pts.knee, below_knee),
+                moment_about(pts.ankle, below_ankle),
+            ];
             for (j, (t, axis)) in out.iter_mut().zip(axes).enumerate() {
-                let origin = joint_origin(&pts, j);
-                let mut moment = cross(sub(cop, origin), force);
-                for (k, (point, m)) in self.link_points(&pts).into_iter().enumerate() {
-                    // Links distal to joint j: hip joints (0-2) carry the thigh, calf and sole;
-                    // the knee (3) the calf and sole; the ankle joints (4, 5) the sole.
-                    if k >= first_distal_link(j) {
-                        let w = cross(sub(point, origin), [0.0, 0.0, -m * g]);
-                        moment = [moment[0] + w[0], moment[1] + w[1], moment[2] + w[2]];
-                    }
-                }
+                let moment = moments.get(origin_of(j)).copied().unwrap_or([0.0; 3]);
                 *t = -dot(axis, moment);
             }
         }
         tau
-    }
-
-    /// The leg's mass points with their masses (thigh, calf, sole).
-    fn link_points(&self, pts: &LegPoints<f32>) -> [([f32; 3], f32); 3] {
-        [
-            (pts.thigh_mass, self.links[0]),
-            (pts.calf_mass, self.links[1]),
-            (pts.sole_mass, self.links[2]),
-        ]
     }
 
     /// Adds the feed-forward (C3) of `c` to the 12 joint targets `q` of sample `s` (pelvis shifted
@@ -277,17 +294,9 @@ impl LoadModel {
     }
 }
 
-/// The point joint `j` (joint order) turns about.
-fn joint_origin(pts: &LegPoints<f32>, j: usize) -> [f32; 3] {
-    match j {
-        0..=2 => pts.hip,
-        3 => pts.knee,
-        _ => pts.ankle,
-    }
-}
-
-/// Index (thigh 0, calf 1, sole 2) of the first link distal to joint `j`.
-fn first_distal_link(j: usize) -> usize {
+/// The point joint `j` (joint order) turns about: 0 the hip centre (hip yaw, roll, pitch), 1 the
+/// knee, 2 the ankle centre (ankle pitch, roll).
+fn origin_of(j: usize) -> usize {
     match j {
         0..=2 => 0,
         3 => 1,

@@ -432,10 +432,21 @@ impl<R: Real> LegKinematics<R> {
         pelvis: &Pose<R>,
         q: &LegAngles<R>,
     ) -> ([V3<R>; 4], Cols<R>, [V3<R>; JOINTS_PER_LEG]) {
-        let rp = rot_cols(pelvis);
+        self.chain_axes_in(side, pelvis, &rot_cols(pelvis), q)
+    }
+
+    /// [`Self::chain_axes`] with the pelvis rotation's columns `rp` given (both legs share it).
+    #[inline(always)]
+    fn chain_axes_in(
+        &self,
+        side: Side,
+        pelvis: &Pose<R>,
+        rp: &Cols<R>,
+        q: &LegAngles<R>,
+    ) -> ([V3<R>; 4], Cols<R>, [V3<R>; JOINTS_PER_LEG]) {
         let sigma = R::of(side.sign());
         let hip = axpy(&pelvis.position(), sigma * self.hip_offset_y, &rp[1]);
-        let r_yaw = post_rz(&rp, sin_cos_real(q[0]));
+        let r_yaw = post_rz(rp, sin_cos_real(q[0]));
         let r_roll = post_rx(&r_yaw, sin_cos_real(q[1]));
         let rt = post_ry(&r_roll, sin_cos_real(q[2]));
         let knee = axpy(&hip, -self.thigh, &rt[2]);
@@ -457,7 +468,32 @@ impl<R: Real> LegKinematics<R> {
         pelvis: &Pose<R>,
         q: &LegAngles<R>,
     ) -> (LegPoints<R>, [[R; 3]; JOINTS_PER_LEG]) {
-        let ([hip, knee, ankle, sole], rf, axes) = self.chain_axes(side, pelvis, q);
+        self.points_axes(self.chain_axes(side, pelvis, q))
+    }
+
+    /// [`Self::joint_axes`] of both legs (left, right) for the 12 joint angles `q` (joint
+    /// order), the pelvis rotation evaluated once.
+    pub fn legs_joint_axes(
+        &self,
+        pelvis: &Pose<R>,
+        q: &[R; LEG_JOINTS],
+    ) -> [(LegPoints<R>, [[R; 3]; JOINTS_PER_LEG]); 2] {
+        let rp = rot_cols(pelvis);
+        let leg = |i: usize| -> LegAngles<R> {
+            core::array::from_fn(|j| q.get(i * JOINTS_PER_LEG + j).copied().unwrap_or(R::zero()))
+        };
+        [
+            self.points_axes(self.chain_axes_in(Side::Left, pelvis, &rp, &leg(0))),
+            self.points_axes(self.chain_axes_in(Side::Right, pelvis, &rp, &leg(1))),
+        ]
+    }
+
+    /// The points and axes of a leg from its chain.
+    #[inline(always)]
+    fn points_axes(
+        &self,
+        ([hip, knee, ankle, sole], rf, axes): ([V3<R>; 4], Cols<R>, [V3<R>; JOINTS_PER_LEG]),
+    ) -> (LegPoints<R>, [[R; 3]; JOINTS_PER_LEG]) {
         let points = LegPoints {
             hip,
             knee,

@@ -595,3 +595,29 @@ fn workspace_is_mostly_reachable() {
     eprintln!("reachable: {reachable} / {n}");
     assert!(reachable * 2 > n, "only {reachable} of {n} reachable");
 }
+
+proptest! {
+    /// Both legs' points and axes at once (the pelvis rotation shared) are each leg's own.
+    #[test]
+    fn legs_joint_axes_is_joint_axes_of_each_leg(
+        p in proptest::array::uniform6(-0.5f64..0.5),
+        q in proptest::array::uniform12(-1.0f32..1.0),
+    ) {
+        let kin = LegKinematics::<f32>::new(&Robot::reference());
+        let pelvis = pose::<f32>(p);
+        let both = kin.legs_joint_axes(&pelvis, &q);
+        for (i, side) in [Side::Left, Side::Right].into_iter().enumerate() {
+            let leg: [f32; 6] = core::array::from_fn(|j| q[6 * i + j]);
+            let (pts, axes) = kin.joint_axes(side, &pelvis, &leg);
+            prop_assert_eq!(both[i].1, axes);
+            prop_assert_eq!(
+                [both[i].0.hip, both[i].0.knee, both[i].0.ankle, both[i].0.sole],
+                [pts.hip, pts.knee, pts.ankle, pts.sole]
+            );
+            prop_assert_eq!(
+                [both[i].0.thigh_mass, both[i].0.calf_mass, both[i].0.sole_mass],
+                [pts.thigh_mass, pts.calf_mass, pts.sole_mass]
+            );
+        }
+    }
+}
