@@ -13,9 +13,10 @@
 //!    [`crate::supervisor::SupervisorConfig::hold_ticks`] ticks in a row) / lost (stop); a
 //!    board without an accepted sample for longer than [`Config::sensor_stale_ms`] stops
 //!    (`SensorStale`, exit 19) whatever `hold_ticks`.
-//! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp`, feet placed where the previous
-//!    gait sample put them, feet under [`Config::min_load_n`] ignored); φ̈ from the gyro pitch
-//!    rate through [`PitchAccel`], τ = J·φ̈; tilt from the accelerometer (fall → stop).
+//! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp` by a `ZmpMeter`, feet placed
+//!    where the previous gait sample put them, feet under [`Config::min_load_n`] ignored); φ̈
+//!    from the gyro pitch rate through [`PitchAccel`], τ = J·φ̈; tilt from the accelerometer
+//!    (fall → stop).
 //! 5. One gait sample with τ, checked finite (CoM, ZMP, feet; then the stabilizer's shift) before
 //!    the IK: a non-finite one holds the last targets and stops (`NonFiniteSample`, exit 18); with `stab=on` the feedback stabilizer (gait-core
 //!    [`gait_core::stabilizer`]) turns the measured ZMP error and the gyro into a bounded shift
@@ -107,7 +108,7 @@ use gait_core::balance::{FixedGyroFeedback, FootForceControl, FootForceState};
 use gait_core::compliance::{Compliance, LoadModel};
 use gait_core::fixed_point::{FixedFoot, Fx};
 use gait_core::gait::{Arithmetic, Sample};
-use gait_core::measured::{measured_zmp, FixedZmpMeter, ForceReading};
+use gait_core::measured::{FixedZmpMeter, ForceReading, ZmpMeter};
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
 use gait_core::{GaitError, GaitSample, Robot, Side};
@@ -711,6 +712,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut pitch_fx = FixedPitchAccel::new(pitch_cfg);
     let mut attitude_fx = FixedAttitudeFilter::new(dt_f32);
     let zmp_meter = FixedZmpMeter::new(&robot, cfg.min_load_n);
+    let zmp_meter_f32 = ZmpMeter::new(&robot, cfg.min_load_n);
     let feedback_fx = FixedGyroFeedback::new(&cfg.gyro_feedback);
     let mut stab =
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
@@ -842,13 +844,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             meas_fx = zmp_meter.zmp((&fixed_foot(pl), forces(fl)), (&fixed_foot(pr), forces(fr)));
             meas_fx.map(|z| z.map(|v| v.to_num::<f32>()))
         } else {
-            measured_zmp(
-                &robot,
-                (pl, &reading(fl)),
-                (pr, &reading(fr)),
-                cfg.min_load_n,
-            )
-            .zmp
+            zmp_meter_f32
+                .zmp((pl, &reading(fl)), (pr, &reading(fr)))
+                .zmp
         };
         let foot_load = |f: &Option<FootForces>| {
             reading(f)

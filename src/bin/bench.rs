@@ -52,7 +52,7 @@ mod firmware {
     use gait_core::fixed_point::{FixedSample, FixedSampler, Fx};
     use gait_core::fourier::FourierCom;
     use gait_core::kinematics::LegKinematics;
-    use gait_core::measured::{measured_zmp, FixedZmpMeter, ForceReading, MeasuredZmp, SolePose};
+    use gait_core::measured::{FixedZmpMeter, ForceReading, MeasuredZmp, SolePose, ZmpMeter};
     use gait_core::pipeline::joint_targets;
     use gait_core::plan::SwingShape;
     use gait_core::stabilizer::{Stabilizer, StabilizerInput};
@@ -341,6 +341,8 @@ mod firmware {
         /// The fixed-point path's pitch filter, measured ZMP and joint map (`math=fixed`).
         pitch_fx: FixedPitchAccel,
         meter: FixedZmpMeter,
+        /// The f32 measured ZMP (sensor offsets converted once, as the firmware does).
+        meter_f32: ZmpMeter<f32>,
         map: JointMap,
         dec: Decoder<64>,
         sensors: Sensors,
@@ -363,6 +365,7 @@ mod firmware {
                 pitch: PitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
                 pitch_fx: FixedPitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
                 meter: FixedZmpMeter::new(&robot, MIN_LOAD_N),
+                meter_f32: ZmpMeter::new(&robot, MIN_LOAD_N),
                 map: JointMap::from_robot(&robot),
                 dec: Decoder::new(),
                 sensors: Sensors::default(),
@@ -395,7 +398,7 @@ mod firmware {
                 .sensors
                 .feet
                 .map(|f| ForceReading::new(f.forces_mn.map(|v| v as f32 * 1e-3)));
-            measured_zmp(&self.robot, (l, &f[0]), (r, &f[1]), MIN_LOAD_N)
+            self.meter_f32.zmp((l, &f[0]), (r, &f[1]))
         }
 
         /// End of a tick: 12 goal positions out, next BULK READ; bytes encoded.
@@ -850,15 +853,14 @@ mod firmware {
             );
             let lf = ForceReading::new([4.1f32, 3.9, 4.3, 3.7]);
             let rf = ForceReading::new([3.8f32, 4.2, 3.6, 4.4]);
+            let zmp_meter = ZmpMeter::new(&robot, MIN_LOAD_N);
             report(
                 name.set("mzmp.", m),
                 measure(samples.len() as u32, &mut |i| {
                     let smp = black_box(&samples[i as usize]);
-                    black_box(measured_zmp(
-                        &robot,
+                    black_box(zmp_meter.zmp(
                         (&smp.feet[0], black_box(&lf)),
                         (&smp.feet[1], black_box(&rf)),
-                        MIN_LOAD_N,
                     ));
                 }),
                 ovh,
