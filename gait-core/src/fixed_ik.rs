@@ -700,12 +700,8 @@ pub fn joint_targets(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fixed_point::mul30;
     extern crate std;
-
-    /// (a·b) >> 30; callers keep |a·b| < 2⁶³.
-    fn mul30(a: i64, b: i64) -> i64 {
-        (a * b) >> 30
-    }
 
     /// The `i64` Horner evaluation `atan_unit` was before it moved to `i32`.
     fn atan_unit_i64(t: i64) -> i64 {

@@ -70,7 +70,7 @@ const INV_SIN: [i32; 5] = [0, 178_956_971, 53_687_091, 25_565_282, 14_913_081];
 const INV_COS: [i32; 5] = [0, 536_870_912, 89_478_485, 35_791_394, 19_173_962];
 
 /// (a·b) >> 30 for Fac-scaled values (|a|, |b| < 2³²: the product fits i64).
-fn mul30(a: i64, b: i64) -> i64 {
+pub(crate) fn mul30(a: i64, b: i64) -> i64 {
     (a * b) >> 30
 }
 
