@@ -69,6 +69,9 @@ pub fn servo_timing(
 }
 
 /// [`servo_timing`] calling `feed` (the watchdog) every few hundred samples.
+// Out of line: its temporaries get a frame of their own, not the caller's (start-up
+// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+#[inline(never)]
 pub fn servo_timing_fed(
     cfg: &Config,
     robot: &Robot,

@@ -113,6 +113,9 @@ pub struct WalkConfig {
 
 /// The f32 sampler of `w` (model, walk, ZMP and swing shape, CoM method, dt) with room for
 /// `N` steps.
+// Out of line: its temporaries get a frame of their own, not the caller's (start-up
+// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+#[inline(never)]
 pub fn build_sampler<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
@@ -121,6 +124,9 @@ pub fn build_sampler<const N: usize>(
 }
 
 /// The f32 footstep plan of `w` with room for `N` steps.
+// Out of line: its temporaries get a frame of their own, not the caller's (start-up
+// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+#[inline(never)]
 pub fn build_plan<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
@@ -178,6 +184,9 @@ pub enum Engine<const N: usize> {
 
 impl<const N: usize> Engine<N> {
     /// The engine of `w` in `arithmetic`.
+    // Out of line: its temporaries get a frame of their own, not the caller's (start-up
+    // stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+    #[inline(never)]
     pub fn new(w: &WalkConfig, arithmetic: Arithmetic, robot: &Robot) -> Result<Self, GaitError> {
         let plan = build_plan::<N>(w, robot)?;
         Ok(match arithmetic {

@@ -28,6 +28,9 @@ use crate::Config;
 pub const RX_PER_TICK: usize = 64;
 
 /// The online walk of `cfg` (see the module docs).
+// Out of line: its temporaries get a frame of their own, not the caller's (start-up
+// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+#[inline(never)]
 pub fn online_walk(cfg: &Config, robot: &Robot) -> Result<OnlineWalk<f32>, GaitError> {
     let w = &cfg.walk;
     let swing = if cfg.swing_sinusoid {

@@ -67,6 +67,9 @@ pub struct Plan {
 impl Plan {
     /// The plan with its delay line primed: the first sample and `lead_ticks` more (the
     /// sampler's first `lead_ticks + 1` samples, τ = 0).
+    // Out of line: its temporaries get a frame of their own, not the caller's (start-up
+    // stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+    #[inline(never)]
     pub fn new(mut engine: Engine<MAX_STEPS>, lead_ticks: usize) -> Self {
         let mut delay = heapless::Deque::new();
         let first = engine.next(0.0);
@@ -231,6 +234,9 @@ pub struct Walk {
 
 impl Walk {
     /// Starting on `ramp`, then `gait`.
+    // Out of line: its temporaries get a frame of their own, not the caller's (start-up
+    // stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+    #[inline(never)]
     pub fn new(ramp: Ramp, gait: Gait) -> Self {
         let present = match &gait {
             Gait::Plan(p) => p.first,
