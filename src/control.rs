@@ -721,6 +721,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         Stabilizer::<f32>::new(&cfg.stabilizer, cfg.dt_s(), robot.masses.upper_body_height);
     let mut last_ticks = present.map(|t| t.clamp(map.tick_min, map.tick_max));
     let mut prev = first;
+    // The fixed-point feet of `prev` when the fixed-point sampler made it (`math=fixed`, no
+    // lead, no shift): the measured ZMP takes them as they are (no f32 → fixed conversions).
+    let mut prev_feet_fx: Option<[FixedFoot; 2]> = None;
     let mut support_cache = SupportCache::default();
     let mut clamped_seen = 0u16;
 
@@ -844,7 +847,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         let mut meas_fx = None;
         let meas_zmp = if fixed_math {
             let forces = |f: &Option<FootForces>| f.map(|f| f.forces_mn);
-            meas_fx = zmp_meter.zmp((&fixed_foot(pl), forces(fl)), (&fixed_foot(pr), forces(fr)));
+            let [fpl, fpr] = prev_feet_fx.unwrap_or_else(|| [fixed_foot(pl), fixed_foot(pr)]);
+            meas_fx = zmp_meter.zmp((&fpl, forces(fl)), (&fpr, forces(fr)));
             meas_fx.map(|z| z.map(|v| v.to_num::<f32>()))
         } else {
             zmp_meter_f32
@@ -1024,6 +1028,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         }
                         rec.phase = phase_of(s);
                         prev = *s;
+                        prev_feet_fx = present_fx.map(|f| f.feet);
                         Some(goal)
                     }
                 };

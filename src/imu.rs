@@ -170,8 +170,8 @@ impl PitchAccel {
         // 1 − (1 − α) z⁻¹.
         let b = 1.0 - self.alpha;
         let (lr, li) = (1.0 - b * c, b * s);
-        let num = libm::sqrtf(dr * dr + di * di);
-        let den = libm::sqrtf(lr * lr + li * li);
+        let num = sqrt(dr * dr + di * di);
+        let den = sqrt(lr * lr + li * li);
         let gain = self.alpha * num / (den * self.dt);
         let phase = libm::atan2f(di, dr) - libm::atan2f(li, lr);
         (gain, phase)
@@ -251,7 +251,7 @@ pub struct Tilt {
     pub tilt: f32,
 }
 
-use gait_core::fastmath::sin_cos;
+use gait_core::fastmath::{sin_cos, sqrt};
 
 /// Time constant of the attitude filter's accelerometer correction, s.
 pub const ATTITUDE_TAU_S: f32 = 0.5;
@@ -284,7 +284,7 @@ impl AttitudeFilter {
         if !self.started {
             if accel_ok {
                 self.roll = libm::atan2f(ay, az);
-                self.pitch = libm::atan2f(-ax, libm::sqrtf(ay * ay + az * az));
+                self.pitch = libm::atan2f(-ax, sqrt(ay * ay + az * az));
                 self.started = true;
             }
             return self.tilt();
@@ -307,7 +307,7 @@ impl AttitudeFilter {
         if quiet {
             let k = dt / (ATTITUDE_TAU_S + dt);
             let roll_a = libm::atan2f(ay, az);
-            let pitch_a = libm::atan2f(-ax, libm::sqrtf(ay * ay + az * az));
+            let pitch_a = libm::atan2f(-ax, sqrt(ay * ay + az * az));
             self.roll += k * wrap(roll_a - self.roll);
             self.pitch += k * (pitch_a - self.pitch);
         }
@@ -324,7 +324,7 @@ impl AttitudeFilter {
         Tilt {
             roll: self.roll,
             pitch: self.pitch,
-            tilt: libm::atan2f(libm::sqrtf(1.0 - c * c), c),
+            tilt: libm::atan2f(sqrt(1.0 - c * c), c),
         }
     }
 }
@@ -545,8 +545,8 @@ impl TiltEstimator {
         }
         let t = Tilt {
             roll: libm::atan2f(ay, az),
-            pitch: libm::atan2f(-ax, libm::sqrtf(ay * ay + az * az)),
-            tilt: libm::atan2f(libm::sqrtf(ax * ax + ay * ay), az),
+            pitch: libm::atan2f(-ax, sqrt(ay * ay + az * az)),
+            tilt: libm::atan2f(sqrt(ax * ax + ay * ay), az),
         };
         self.last = t;
         t

@@ -364,13 +364,16 @@ pub const VELOCITY_RANGE: [(i16, i16); 3] = [
     ),
 ];
 
-/// A float in SI units to the wire's milli-units, saturated; NaN → 0.
+/// A float in SI units to the wire's milli-units, rounded half away from zero and saturated;
+/// NaN and ±∞ → 0. Published every tick: the tests on the value's bits (±0, not finite), the
+/// saturating `as i32` and the integer clamp cost no float compare (a library call each on
+/// FPU-less cores).
 pub fn milli_i16(v: f32) -> i16 {
-    if !v.is_finite() {
+    let bits = v.to_bits();
+    if bits << 1 == 0 || !v.is_finite() {
         return 0;
     }
-    let m = libm::roundf(v * 1000.0);
-    libm::fmaxf(-32768.0, libm::fminf(32767.0, m)) as i16
+    (libm::roundf(v * 1000.0) as i32).clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
 }
 
 /// The control table's memory and its access rules (the device side of the port).

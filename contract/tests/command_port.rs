@@ -366,3 +366,48 @@ proptest! {
         prop_assert_eq!(got, want);
     }
 }
+
+/// `milli_i16` as it was written with float clamps (the reference).
+fn milli_reference(v: f32) -> i16 {
+    if !v.is_finite() {
+        return 0;
+    }
+    let m = libm::roundf(v * 1000.0);
+    libm::fmaxf(-32768.0, libm::fminf(32767.0, m)) as i16
+}
+
+#[test]
+fn milli_i16_rounds_half_away_saturates_and_zeroes_non_finite() {
+    assert_eq!(milli_i16(0.0125), 13);
+    assert_eq!(milli_i16(-0.0125), -13);
+    assert_eq!(milli_i16(0.0004999), 0);
+    assert_eq!(milli_i16(-0.047), -47);
+    assert_eq!(milli_i16(32.767), 32_767);
+    assert_eq!(milli_i16(40.0), i16::MAX);
+    assert_eq!(milli_i16(-40.0), i16::MIN);
+    assert_eq!(milli_i16(f32::MAX), i16::MAX);
+    assert_eq!(milli_i16(f32::MIN), i16::MIN);
+    for v in [
+        0.0,
+        -0.0,
+        f32::NAN,
+        -f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    ] {
+        assert_eq!(milli_i16(v), 0, "{v}");
+    }
+    // Every 4093rd bit pattern of f32 (≈ 1 M values: subnormals, the rounding edges, beyond
+    // the i16 range) as the float-clamp formula gives it.
+    for bits in (0..=u32::MAX).step_by(4093) {
+        let v = f32::from_bits(bits);
+        assert_eq!(milli_i16(v), milli_reference(v), "{v:e} ({bits:#x})");
+    }
+}
+
+proptest! {
+    #[test]
+    fn milli_i16_agrees_with_the_float_clamp_formula(v in -40.0f32..40.0) {
+        prop_assert_eq!(milli_i16(v), milli_reference(v));
+    }
+}

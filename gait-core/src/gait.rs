@@ -277,7 +277,14 @@ impl<const N: usize> Engine<N> {
     ) -> Option<[crate::fixed_point::Fx; LEG_JOINTS]> {
         #[cfg(feature = "fixed-engine")]
         if let (Engine::Fixed(_, ik), Some(f), Targets::Plain(_)) = (self, &s.fixed, targets) {
-            return Some(crate::fixed_ik::joint_targets(ik, &f.shifted(shift)).0);
+            // No shift (the stabilizer off): the sample as it is, without the two f32 → fixed
+            // conversions (library calls on FPU-less cores) and the copy.
+            let q = if shift.iter().all(|d| d.to_bits() << 1 == 0) {
+                crate::fixed_ik::joint_targets(ik, f)
+            } else {
+                crate::fixed_ik::joint_targets(ik, &f.shifted(shift))
+            };
+            return Some(q.0);
         }
         let _ = (targets, s, shift);
         None
