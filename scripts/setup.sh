@@ -8,6 +8,9 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 # rustup reads rust-toolchain.toml and installs the toolchain, components and targets.
 rustup show active-toolchain >/dev/null
 rustup target list --installed | grep -q thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf thumbv7m-none-eabi
+# llvm-objdump for scripts/stack-depth.py (listed in rust-toolchain.toml; added here too for a
+# toolchain that was installed before the list had it).
+rustup component list --installed | grep -q '^llvm-tools' || rustup component add llvm-tools
 
 if ! command -v qemu-system-arm >/dev/null 2>&1; then
     if [ "$(id -u)" = 0 ]; then

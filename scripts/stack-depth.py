@@ -10,14 +10,17 @@ body is added, so a frame that grows in two steps counts both). The call graph i
 bound). The worst case from the root (default: cortex-m-rt's `main`) is the deepest path
 through that graph, printed with each frame. Static RAM (`scripts/sizes.py`) comes on top.
 
-What it cannot see (printed): indirect calls (`blx rN`: trait objects, function pointers;
-the count per function on the worst path), recursion (a cycle is cut and named), and frames
+A function whose address the body loads from a literal pool counts as called (opt-level "z"
+calls a function used several times through a register). What it cannot see (printed): other
+indirect calls (`blx rN`: trait objects, function pointers; the count per function on the
+worst path), recursion (a cycle is cut and named), and frames
 sized at run time (`sub sp, rN`: flagged). The interrupt handlers' frames come on top of the
 deepest point when an interrupt arrives there.
 
 Why not a crate: `cargo-call-stack` needs a nightly compiler and `-Z emit-stack-sizes`; the
-project builds on stable (rust-toolchain.toml). Needs `llvm-objdump` on the PATH (Debian
-`llvm`, or rustup's `llvm-tools` component); not part of CI (scripts/sizes.py is).
+project builds on stable (rust-toolchain.toml). Uses rustup's `llvm-tools` component (listed
+in rust-toolchain.toml) or an `llvm-objdump` on the PATH. scripts/test.sh runs it on the
+OpenCM 9.04 build with `--ram 20`.
 
 With `--ram KIB`: exits 1 when the worst case plus static RAM exceeds the board's RAM.
 """
@@ -26,6 +29,7 @@ import argparse
 import os
 import re
 import shutil
+import struct
 import subprocess
 import sys
 
@@ -36,16 +40,17 @@ SHF_ALLOC = 0x2
 
 
 def objdump():
-    """llvm-objdump from the PATH or rustup's llvm-tools component."""
+    """llvm-objdump of rustup's llvm-tools component (the compiler's LLVM; rust-toolchain.toml
+    installs it), else the one on the PATH."""
+    run = lambda *a: subprocess.run(["rustc", *a], capture_output=True, text=True).stdout.strip()
+    cand = os.path.join(run("--print", "sysroot"), "lib", "rustlib", run("--print", "host-tuple"),
+                        "bin", "llvm-objdump")
+    if os.path.exists(cand):
+        return cand
     found = shutil.which("llvm-objdump")
     if found:
         return found
-    sysroot = subprocess.run(["rustc", "--print", "sysroot"], capture_output=True, text=True).stdout.strip()
-    host = subprocess.run(["rustc", "--print", "host-tuple"], capture_output=True, text=True).stdout.strip()
-    cand = os.path.join(sysroot, "lib", "rustlib", host, "bin", "llvm-objdump")
-    if os.path.exists(cand):
-        return cand
-    sys.exit("llvm-objdump not found (apt-get install llvm, or rustup component add llvm-tools)")
+    sys.exit("llvm-objdump not found (rustup component add llvm-tools, or apt-get install llvm)")
 
 
 def reg_bytes(regs):
@@ -62,10 +67,39 @@ def reg_bytes(regs):
     return n
 
 
+def words(elf):
+    """A function reading the 32-bit little-endian word at a virtual address of the ELF."""
+    with open(elf, "rb") as fh:
+        data = fh.read()
+    shoff, = struct.unpack_from("<I", data, 0x20)
+    shentsize, shnum = struct.unpack_from("<HH", data, 0x2E)
+    spans = []
+    for i in range(shnum):
+        (_n, typ, _f, addr, off, size) = struct.unpack_from("<IIIIII", data, shoff + i * shentsize)
+        if typ == 1 and addr:  # SHT_PROGBITS at an address
+            spans.append((addr, off, size))
+
+    def read(addr):
+        for (a, off, size) in spans:
+            if a <= addr and addr + 4 <= a + size:
+                return struct.unpack_from("<I", data, off + addr - a)[0]
+        return None
+
+    return read
+
+
 def graph(elf):
-    """(frame bytes, direct callees, indirect call count, dynamic frame) of each function."""
+    """(frame bytes, callees, indirect call count, dynamic frame) of each function. Callees are
+    the direct `bl`/`b` targets and every function whose address the body loads from a literal
+    pool (`ldr rN, [pc, #…]`: at opt-level "z" a repeated call goes through a register)."""
     dis = subprocess.run([objdump(), "-d", "--no-show-raw-insn", elf],
                          capture_output=True, text=True, check=True).stdout
+    starts = {}
+    for line in dis.splitlines():
+        m = re.match(r"^([0-9a-f]+) <(.*)>:", line)
+        if m and not m.group(2).startswith("$"):
+            starts[int(m.group(1), 16)] = m.group(2)
+    read = words(elf)
     frame, calls, indirect, dynamic = {}, {}, {}, set()
     fn = None
     for line in dis.splitlines():
@@ -76,6 +110,12 @@ def graph(elf):
             fn = m.group(1)
             frame[fn], calls[fn], indirect[fn] = 0, set(), 0
             continue
+        lit = re.search(r"\bldr(?:\.w)?\s+\w+,\s*\[pc.*@\s*0x([0-9a-f]+)", line)
+        if fn is not None and lit:
+            word = read(int(lit.group(1), 16))
+            target = starts.get(word & ~1) if word is not None and word & 1 else None
+            if target and target != fn:
+                calls[fn].add(target)
         parts = line.split("\t")
         if fn is None or len(parts) < 3:
             continue
@@ -152,7 +192,7 @@ def main():
         acc += frame.get(f, 0)
         notes = []
         if indirect.get(f):
-            notes.append(f"{indirect[f]} indirect call(s) not followed")
+            notes.append(f"{indirect[f]} call(s) through a register")
         if f in dynamic:
             notes.append("run-time sized frame")
         print(f"  {frame.get(f, 0):>7,} {acc:>8,}  {short(f)}" + (f"  ({'; '.join(notes)})" if notes else ""))

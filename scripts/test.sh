@@ -16,6 +16,8 @@ cargo clippy --target host-tuple --workspace --all-targets -- -D warnings
 step "clippy (thumbv7em-none-eabihf, no_std crates)"
 cargo clippy -p gait-core -p dxl -p walker-contract -- -D warnings
 cargo clippy -p gait-core --features fixed-engine -- -D warnings
+# As the OpenCM 9.04 build has it: without the Fourier CoM.
+cargo clippy -p gait-core --no-default-features --features fixed-engine -- -D warnings
 
 step "gait-core builds for the target"
 cargo build -p gait-core --target thumbv7em-none-eabihf
@@ -56,6 +58,15 @@ python3 scripts/sizes.py \
 # The limit check itself must be able to fail: the qemu ELF is far over 1 KiB of flash.
 if python3 scripts/sizes.py --limit 1:16 target/thumbv7em-none-eabihf/release/qemu >/dev/null; then
     echo "scripts/sizes.py did not flag an ELF over its limit" >&2
+    exit 1
+fi
+
+step "firmware RAM: the OpenCM 9.04's worst-case stack plus static RAM within its 20 KiB (call graph of the ELF)"
+python3 scripts/stack-depth.py --ram 20 --top 5 target/thumbv7m-none-eabi/release-m3/opencm
+python3 scripts/stack-depth.py --top 0 target/thumbv7em-none-eabihf/release/opencr | head -1
+# The check must be able to fail: no build fits 1 KiB.
+if python3 scripts/stack-depth.py --ram 1 --top 0 target/thumbv7m-none-eabi/release-m3/opencm >/dev/null; then
+    echo "scripts/stack-depth.py did not flag a build over its RAM" >&2
     exit 1
 fi
 

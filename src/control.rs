@@ -137,7 +137,7 @@ use walker_contract::command_port::{Mode, PortState, PortStatus};
 pub mod commanded;
 pub mod modes;
 
-use modes::{Gait, Motion, Plan, Walk};
+use modes::{Motion, Walk};
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
@@ -546,9 +546,14 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         return RunEnd::Stopped(reason);
     }
     let targets = Targets::new(&robot, cfg.compensation);
-    // The servo-speed check (a dry run) adjusts the walk before anything moves.
-    let timing = build_sampler(cfg, &robot)
-        .and_then(|_| startup::servo_timing_fed(cfg, &robot, &targets, &mut || board.feed()));
+    // The walk (≈ 10 KB) is built where it lives, never moved: its storage lends its engine to
+    // the servo-speed check (a dry run that adjusts the walk before anything moves), then
+    // holds the gait (BENCHMARKS.md "RAM").
+    let mut walk = Walk::idle();
+    let timing = match walk.scratch() {
+        Some(s) => startup::servo_timing_in(cfg, &robot, &targets, &mut || board.feed(), s),
+        None => Err(GaitError::NotBuiltIn),
+    };
     let walk_cfg = match &timing {
         Ok(t) => Config {
             walk: t.walk,
@@ -557,34 +562,25 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         Err(_) => *cfg,
     };
     let cfg = &walk_cfg;
-    let engine = timing.and_then(|_| {
-        gait_core::gait::Engine::<MAX_STEPS>::new(&cfg.walk_config(), cfg.arithmetic, &robot)
-    });
     // Without autostart the robot stands up and walks on command (the online walk).
-    let gait = engine.and_then(|e| {
-        if cfg.autostart {
-            Ok(Gait::Plan(Plan::new(e, cfg.lead_ticks())))
-        } else {
-            commanded::online_walk(cfg, &robot).map(Gait::Online)
-        }
-    });
-    let gait = match gait {
-        Ok(s) => s,
-        Err(e) => {
-            crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
-            let rec = startup_record(board, cfg, None);
-            log.write(board, rec);
-            boot.write(board, &mut log);
-            let rec = fault(
-                board.now_us(),
-                FaultKind::ConfigRejected,
-                PLAN_REJECTED_ID,
-                i32::from(e.code()),
-            );
-            log.write(board, rec);
-            return RunEnd::Config(e);
-        }
+    let built = match &timing {
+        Ok(_) => walk.build(cfg, &robot),
+        Err(e) => Err(*e),
     };
+    if let Err(e) = built {
+        crate::fw_log!(error, "walk rejected by gait-core: error {}", e.code());
+        let rec = startup_record(board, cfg, None);
+        log.write(board, rec);
+        boot.write(board, &mut log);
+        let rec = fault(
+            board.now_us(),
+            FaultKind::ConfigRejected,
+            PLAN_REJECTED_ID,
+            i32::from(e.code()),
+        );
+        log.write(board, rec);
+        return RunEnd::Config(e);
+    }
 
     let time = Cell::new(0);
     let mut bus = BoardMaster::new(board, &time, cfg);
@@ -652,7 +648,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     };
 
     // 5. The initial pose and the ramp to it (the plan's delay line of the servo-lag
-    // feed-forward was primed with it: [`Plan::new`]).
+    // feed-forward was primed with it: [`modes::Plan::prime`]).
     let map = JointMap::from_robot(&robot);
     // The servos' sag under the gait's loads, fed forward (`compliance_roll`/`_pitch`); f32
     // maths, so not with the fixed-point path (`math=fixed`: FPU-less cores).
@@ -668,10 +664,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     };
     let mut foot_force_state = FootForceState::default();
     // The initial pose: the plan's first sample, or the online walk's standing pose.
-    let (first, mut q0, loaded) = gait.initial_pose(&targets);
+    let (first, mut q0, loaded) = walk.gait.initial_pose(&targets);
     load.apply(&compliance, &mut q0, &loaded, [0.0; 2]);
     let mut link = commanded::CommandLink::new();
-    if gait.online().is_some() {
+    if walk.gait.online().is_some() {
         let now = bus.board().now_us();
         let rec = fault(
             now,
@@ -687,7 +683,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     }
     let ramp = Ramp::new(from, q0, cfg.ticks_for_us(cfg.ramp_us));
     let ramp_ticks = ramp.ticks();
-    let mut walk = Walk::new(ramp, gait);
+    walk.start(ramp);
     let final_hold = u16::try_from(cfg.ticks_for_us(cfg.final_hold_us)).unwrap_or(u16::MAX);
 
     let mut sensors = Sensors::new(&missing);

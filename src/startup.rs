@@ -40,6 +40,7 @@ use crate::bus::BoardMaster;
 use crate::control::{Targets, MAX_STEPS};
 use crate::record::MAX_MISSING;
 use crate::Config;
+use gait_core::fourier_walk::WalkSampler;
 use gait_core::kinematics::JointSpeedReport;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::{GaitError, Robot};
@@ -69,21 +70,34 @@ pub fn servo_timing(
 }
 
 /// [`servo_timing`] calling `feed` (the watchdog) every few hundred samples.
-// Out of line: its temporaries get a frame of their own, not the caller's (start-up
-// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
-#[inline(never)]
 pub fn servo_timing_fed(
     cfg: &Config,
     robot: &Robot,
     targets: &Targets,
     feed: &mut dyn FnMut(),
 ) -> Result<TimingCheck, GaitError> {
-    gait_core::gait::servo_timing_fed::<MAX_STEPS>(
+    servo_timing_in(cfg, robot, targets, feed, &mut WalkSampler::idle())
+}
+
+/// [`servo_timing_fed`] with the dry runs' sampler in `scratch` (the walk's engine storage,
+/// `control::modes::Walk::scratch`: no sampler of its own on the stack).
+// Out of line: its temporaries get a frame of their own, not the caller's (start-up
+// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+#[inline(never)]
+pub fn servo_timing_in(
+    cfg: &Config,
+    robot: &Robot,
+    targets: &Targets,
+    feed: &mut dyn FnMut(),
+    scratch: &mut WalkSampler<f32, MAX_STEPS>,
+) -> Result<TimingCheck, GaitError> {
+    gait_core::gait::servo_timing_in::<MAX_STEPS>(
         &cfg.walk_config(),
         cfg.feasibility,
         robot,
         targets,
         feed,
+        scratch,
     )
 }
 

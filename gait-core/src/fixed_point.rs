@@ -271,28 +271,70 @@ pub struct FixedSampler<const N: usize> {
 impl<const N: usize> FixedSampler<N> {
     /// A fixed-point sampler over an `f32` plan at servo period `dt` (s).
     pub fn new(plan: Plan<f32, N>, dt: f64) -> Result<Self, GaitError> {
-        let inner = Sampler::new(plan, dt)?;
-        let p = *inner.plan().params();
+        let mut s = FixedSampler {
+            inner: Sampler::new(plan, dt)?,
+            ..FixedSampler::idle()
+        };
+        s.load_params(dt)?;
+        Ok(s)
+    }
+
+    /// Storage for a fixed-point sampler ([`Sampler::idle`] inside, done);
+    /// [`FixedSampler::rebuild`] makes it one in place.
+    // Inline: the storage is then written where it lives, not built on the stack and copied.
+    #[inline(always)]
+    pub fn idle() -> Self {
+        FixedSampler {
+            inner: Sampler::idle(),
+            seg: FixedSegment::default(),
+            omega: Fx::ZERO,
+            z_c: Fx::ZERO,
+            tau_gain: Fx::ZERO,
+            decay_dt: 0,
+            tau_offset: Fx::ZERO,
+            swing_height: Fx::ZERO,
+            swing_width: Fx::ZERO,
+            cycloid: true,
+            feet: [FixedPlace::default(); 2],
+            step: None,
+        }
+    }
+
+    /// Makes this sampler, in place, the one [`FixedSampler::new`] would return for the plan
+    /// that `fill` writes (see [`Sampler::rebuild`]); done after an error.
+    pub fn rebuild(
+        &mut self,
+        fill: impl FnOnce(&mut Plan<f32, N>) -> Result<(), GaitError>,
+        dt: f64,
+    ) -> Result<(), GaitError> {
+        self.inner.rebuild(fill, dt)?;
+        let loaded = self.load_params(dt);
+        if loaded.is_err() {
+            self.inner.halt();
+        }
+        loaded
+    }
+
+    /// The fixed-point constants of the inner sampler's plan at `dt` and its first segment.
+    fn load_params(&mut self, dt: f64) -> Result<(), GaitError> {
+        let p = *self.inner.plan().params();
         let (h, w, cycloid) = match p.swing {
             SwingShape::Cycloid { height, width } => (height, width, true),
             SwingShape::Sinusoid { height } => (height, 0.0, false),
         };
-        let mut s = FixedSampler {
-            seg: FixedSegment::default(),
-            omega: fx(p.model.omega)?,
-            z_c: fx(p.model.z_c)?,
-            tau_gain: fx(p.model.tau_to_offset)?,
-            decay_dt: (libm::exp(-(p.model.omega as f64) * dt) * ONE_FAC as f64) as i64,
-            tau_offset: Fx::ZERO,
-            swing_height: fx(h)?,
-            swing_width: fx(w)?,
-            cycloid,
-            feet: [FixedPlace::default(); 2],
-            step: None,
-            inner,
-        };
-        s.load_segment();
-        Ok(s)
+        self.omega = fx(p.model.omega)?;
+        self.z_c = fx(p.model.z_c)?;
+        self.tau_gain = fx(p.model.tau_to_offset)?;
+        self.decay_dt = (libm::exp(-(p.model.omega as f64) * dt) * ONE_FAC as f64) as i64;
+        self.tau_offset = Fx::ZERO;
+        self.swing_height = fx(h)?;
+        self.swing_width = fx(w)?;
+        self.cycloid = cycloid;
+        self.feet = [FixedPlace::default(); 2];
+        self.step = None;
+        self.seg = FixedSegment::default();
+        self.load_segment();
+        Ok(())
     }
 
     /// The `f32` bookkeeping sampler (plan queue, stage).

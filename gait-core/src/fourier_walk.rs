@@ -52,7 +52,8 @@ pub enum ComMethod {
     /// Seed 000's exact piecewise solution from rest to rest ([`crate::com`]).
     Exact,
     /// Seed 001's Fourier series through the steady steps ([`crate::fourier`]), blended with
-    /// the exact solution at the start and the stop (this module).
+    /// the exact solution at the start and the stop (this module). Needs the crate feature
+    /// `fourier-com` (default; without it a sampler refuses it: `GaitError::NotBuiltIn`).
     Fourier {
         /// Terms per axis, 1 ..= [`MAX_FOURIER_TERMS`].
         terms: u8,
@@ -182,18 +183,61 @@ impl<R: Real, const N: usize> WalkSampler<R, N> {
         com: ComMethod,
         dt: f64,
     ) -> Result<Self, GaitError> {
-        let params = *plan.params();
-        let sampler = Sampler::new(plan, dt)?;
-        let fourier = match com {
+        let mut s = WalkSampler {
+            sampler: Sampler::new(plan, dt)?,
+            fourier: None,
+        };
+        s.load_fourier(walk, com)?;
+        Ok(s)
+    }
+
+    /// Storage for a walk sampler ([`Sampler::idle`], done); [`WalkSampler::rebuild`] makes it
+    /// one in place.
+    // Inline: the storage is then written where it lives, not built on the stack and copied.
+    #[inline(always)]
+    pub fn idle() -> Self {
+        WalkSampler {
+            sampler: Sampler::idle(),
+            fourier: None,
+        }
+    }
+
+    /// Makes this sampler, in place, the one [`WalkSampler::new`] would return for the plan
+    /// that `fill` writes (see [`Sampler::rebuild`]); done after an error.
+    pub fn rebuild(
+        &mut self,
+        fill: impl FnOnce(&mut Plan<R, N>) -> Result<(), GaitError>,
+        walk: &ForwardWalk,
+        com: ComMethod,
+        dt: f64,
+    ) -> Result<(), GaitError> {
+        self.fourier = None;
+        self.sampler.rebuild(fill, dt)?;
+        let loaded = self.load_fourier(walk, com);
+        if loaded.is_err() {
+            self.sampler.halt();
+        }
+        loaded
+    }
+
+    /// The Fourier blend of `com` over the sampler's plan (none for the exact solver).
+    fn load_fourier(&mut self, walk: &ForwardWalk, com: ComMethod) -> Result<(), GaitError> {
+        self.fourier = match com {
             ComMethod::Exact => None,
+            #[cfg(feature = "fourier-com")]
             ComMethod::Fourier { terms } => Some(FourierBlend::new(
                 walk,
-                &params,
+                self.sampler.plan().params(),
                 terms,
-                sampler.walk_start_ns(),
+                self.sampler.walk_start_ns(),
             )?),
+            #[cfg(not(feature = "fourier-com"))]
+            ComMethod::Fourier { .. } => {
+                let _ = walk;
+                return Err(GaitError::NotBuiltIn);
+            }
         };
-        Ok(WalkSampler { sampler, fourier })
+        Ok(())
     }
 
     /// The exact-solver sampler underneath (plan, stage, clock).

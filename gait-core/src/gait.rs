@@ -113,24 +113,45 @@ pub struct WalkConfig {
 
 /// The f32 sampler of `w` (model, walk, ZMP and swing shape, CoM method, dt) with room for
 /// `N` steps.
-// Out of line: its temporaries get a frame of their own, not the caller's (start-up
-// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
-#[inline(never)]
 pub fn build_sampler<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
 ) -> Result<WalkSampler<f32, N>, GaitError> {
-    WalkSampler::new(build_plan::<N>(w, robot)?, &w.walk, w.com, w.dt_s)
+    let mut s = WalkSampler::idle();
+    rebuild_sampler(w, robot, &mut s)?;
+    Ok(s)
+}
+
+/// [`build_sampler`] in place: `s` becomes the sampler of `w` (done after an error). The
+/// firmware builds its samplers this way, where they live: a sampler is ≈ 4.4 KB and its
+/// constructors' `Result`s would each put a copy on the stack.
+pub fn rebuild_sampler<const N: usize>(
+    w: &WalkConfig,
+    robot: &Robot,
+    s: &mut WalkSampler<f32, N>,
+) -> Result<(), GaitError> {
+    s.rebuild(|p| build_plan_into(w, robot, p), &w.walk, w.com, w.dt_s)
 }
 
 /// The f32 footstep plan of `w` with room for `N` steps.
-// Out of line: its temporaries get a frame of their own, not the caller's (start-up
-// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
-#[inline(never)]
 pub fn build_plan<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
 ) -> Result<crate::Plan<f32, N>, GaitError> {
+    w.walk.plan::<f32, N>(robot, walk_params(w, robot)?)
+}
+
+/// [`build_plan`] written into `plan` in place.
+pub fn build_plan_into<const N: usize>(
+    w: &WalkConfig,
+    robot: &Robot,
+    plan: &mut crate::Plan<f32, N>,
+) -> Result<(), GaitError> {
+    w.walk.plan_into(robot, walk_params(w, robot)?, plan)
+}
+
+/// The gait parameters of `w`'s plan: its model, ZMP shape and swing profile.
+fn walk_params(w: &WalkConfig, robot: &Robot) -> Result<crate::GaitParams<f32>, GaitError> {
     let fw = &w.walk;
     let model = Model::<f32>::new(w.model, robot, fw.z_c)?;
     let mut params = fw.params(model);
@@ -143,7 +164,7 @@ pub fn build_plan<const N: usize>(
             height: fw.h_z as f32,
         };
     }
-    fw.plan::<f32, N>(robot, params)
+    Ok(params)
 }
 
 /// The number type of the per-sample gait work (firmware token `math=`).
@@ -184,29 +205,76 @@ pub enum Engine<const N: usize> {
 
 impl<const N: usize> Engine<N> {
     /// The engine of `w` in `arithmetic`.
-    // Out of line: its temporaries get a frame of their own, not the caller's (start-up
-    // stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
-    #[inline(never)]
     pub fn new(w: &WalkConfig, arithmetic: Arithmetic, robot: &Robot) -> Result<Self, GaitError> {
-        let plan = build_plan::<N>(w, robot)?;
-        Ok(match arithmetic {
-            Arithmetic::F32 => Engine::F32(WalkSampler::new(plan, &w.walk, w.com, w.dt_s)?),
+        let mut e = Engine::idle();
+        e.rebuild(w, arithmetic, robot)?;
+        Ok(e)
+    }
+
+    /// Storage for an engine: an idle f32 sampler ([`WalkSampler::idle`], done).
+    /// [`Engine::rebuild`] makes it an engine in place.
+    // Inline: the storage is then written where it lives, not built on the stack and copied.
+    #[inline(always)]
+    pub fn idle() -> Self {
+        Engine::F32(WalkSampler::idle())
+    }
+
+    /// Makes this engine, in place, the one [`Engine::new`] would return (the same checks in
+    /// the same order); done after an error. The firmware's way: the engine is ≈ 4.4 KB, and
+    /// `Engine::new`'s `Result`s would put copies of it on the stack.
+    pub fn rebuild(
+        &mut self,
+        w: &WalkConfig,
+        arithmetic: Arithmetic,
+        robot: &Robot,
+    ) -> Result<(), GaitError> {
+        match arithmetic {
+            Arithmetic::F32 => match self.f32_storage() {
+                Some(s) => rebuild_sampler(w, robot, s),
+                None => Err(GaitError::NotBuiltIn),
+            },
             #[cfg(feature = "fixed-engine")]
             Arithmetic::Fixed => {
-                if w.com != ComMethod::Exact {
-                    return Err(GaitError::NotPeriodicWalk);
+                if !matches!(self, Engine::Fixed(..)) {
+                    *self = Engine::Fixed(FixedSampler::idle(), FixedLegKinematics::new(robot));
                 }
-                Engine::Fixed(
-                    FixedSampler::new(plan, w.dt_s)?,
-                    FixedLegKinematics::new(robot),
+                let Engine::Fixed(s, ik) = self else {
+                    return Err(GaitError::NotBuiltIn);
+                };
+                *ik = FixedLegKinematics::new(robot);
+                // The plan's own errors first, then the CoM method, then the sampler's.
+                s.rebuild(
+                    |p| {
+                        build_plan_into(w, robot, p)?;
+                        match w.com {
+                            ComMethod::Exact => Ok(()),
+                            _ => Err(GaitError::NotPeriodicWalk),
+                        }
+                    },
+                    w.dt_s,
                 )
             }
             #[cfg(not(feature = "fixed-engine"))]
             Arithmetic::Fixed => {
                 let _ = robot;
-                return Err(GaitError::NotBuiltIn);
+                Err(GaitError::NotBuiltIn)
             }
-        })
+        }
+    }
+
+    /// The engine's storage as an f32 walk sampler (made an idle one if it held the
+    /// fixed-point engine): the dry run's scratch ([`servo_timing_in`]) before
+    /// [`Engine::rebuild`]. Always `Some`.
+    pub fn f32_storage(&mut self) -> Option<&mut WalkSampler<f32, N>> {
+        #[cfg(feature = "fixed-engine")]
+        if matches!(self, Engine::Fixed(..)) {
+            *self = Engine::idle();
+        }
+        match self {
+            Engine::F32(s) => Some(s),
+            #[cfg(feature = "fixed-engine")]
+            Engine::Fixed(..) => None,
+        }
     }
 
     /// True once the lead-out is over.
@@ -482,23 +550,25 @@ pub fn dry_run<const N: usize>(
     targets: &Targets,
 ) -> Result<JointSpeedReport, GaitError> {
     let mut budget = MAX_DRY_RUN_WORK;
-    dry_run_within::<N>(w, robot, targets, &mut budget, &mut || {})
+    let mut scratch = WalkSampler::idle();
+    dry_run_within::<N>(w, robot, targets, &mut budget, &mut || {}, &mut scratch)
 }
 
-/// [`dry_run`] drawing on `budget` (units of [`MAX_DRY_RUN_WORK`]) and calling `feed` every
-/// [`DRY_RUN_FEED_EVERY`] samples.
+/// [`dry_run`] drawing on `budget` (units of [`MAX_DRY_RUN_WORK`]), calling `feed` every
+/// [`DRY_RUN_FEED_EVERY`] samples, its sampler rebuilt in `s`.
 fn dry_run_within<const N: usize>(
     w: &WalkConfig,
     robot: &Robot,
     targets: &Targets,
     budget: &mut u32,
     feed: &mut dyn FnMut(),
+    s: &mut WalkSampler<f32, N>,
 ) -> Result<JointSpeedReport, GaitError> {
     let cost = match targets {
         Targets::Plain(_) => 1,
         Targets::WholeBody(_) => WHOLEBODY_SAMPLE_COST,
     };
-    let mut s = build_sampler::<N>(w, robot)?;
+    rebuild_sampler(w, robot, s)?;
     let mut mon = JointSpeedMonitor::new(robot, w.dt_s)?;
     let mut n = 0u32;
     while !s.is_done() {
@@ -535,10 +605,24 @@ pub fn servo_timing_fed<const N: usize>(
     targets: &Targets,
     feed: &mut dyn FnMut(),
 ) -> Result<TimingCheck, GaitError> {
+    let mut scratch = WalkSampler::idle();
+    servo_timing_in::<N>(w, feasibility, robot, targets, feed, &mut scratch)
+}
+
+/// [`servo_timing_fed`] with the dry runs' sampler in `scratch`, rebuilt in place for each run
+/// (a firmware lends its engine's storage: [`Engine::f32_storage`]); `scratch` is left done.
+pub fn servo_timing_in<const N: usize>(
+    w: &WalkConfig,
+    feasibility: Feasibility,
+    robot: &Robot,
+    targets: &Targets,
+    feed: &mut dyn FnMut(),
+    scratch: &mut WalkSampler<f32, N>,
+) -> Result<TimingCheck, GaitError> {
     let base = w.walk;
     let mut run = *w;
     let mut budget = MAX_DRY_RUN_WORK;
-    let report = dry_run_within::<N>(&run, robot, targets, &mut budget, feed)?;
+    let report = dry_run_within::<N>(&run, robot, targets, &mut budget, feed, scratch)?;
     let mut out = TimingCheck {
         walk: base,
         factor_milli: 1000,
@@ -570,7 +654,7 @@ pub fn servo_timing_fed<const N: usize>(
         }
         out.rounds += 1;
         run.walk = out.walk;
-        out.report = dry_run_within::<N>(&run, robot, targets, &mut budget, feed)?;
+        out.report = dry_run_within::<N>(&run, robot, targets, &mut budget, feed, scratch)?;
         out.work = MAX_DRY_RUN_WORK - budget;
     }
     Ok(out)
@@ -663,5 +747,117 @@ mod tests {
         let targets = Targets::new(&robot, Compensation::WholeBody);
         let t = servo_timing::<N>(&table2(0.001), Feasibility::Stretch, &robot, &targets).unwrap();
         assert!(t.work <= MAX_DRY_RUN_WORK, "{t:?}");
+    }
+
+    /// A shorter, faster LIPM walk at 10 ms (another plan, model and dt than Table 2).
+    fn other_walk() -> WalkConfig {
+        let mut w = table2(0.01);
+        w.model = ModelKind::Lipm;
+        w.walk.steps = 6;
+        w.walk.step_length = 0.03;
+        w
+    }
+
+    /// Samples `e` and `fresh` to the end and asserts they are the same, sample for sample.
+    fn assert_same_walk(e: &mut Engine<N>, fresh: &mut Engine<N>) {
+        let mut n = 0u32;
+        while !fresh.is_done() {
+            assert!(!e.is_done(), "rebuilt engine done early at sample {n}");
+            assert_eq!(e.next(0.0), fresh.next(0.0), "sample {n}");
+            n += 1;
+        }
+        assert!(e.is_done());
+        assert!(n > 500, "{n}");
+    }
+
+    #[test]
+    fn engines_rebuilt_in_place_walk_as_new_ones() {
+        // One engine's storage reused across plans, models, sample times and number types
+        // walks exactly as a new engine: nothing of the previous walk (stage, segment, clock,
+        // τ response, queued steps) survives a rebuild.
+        let robot = Robot::reference();
+        let runs = [
+            (table2(0.005), Arithmetic::F32),
+            (other_walk(), Arithmetic::F32),
+            #[cfg(feature = "fixed-engine")]
+            (table2(0.005), Arithmetic::Fixed),
+            #[cfg(feature = "fixed-engine")]
+            (other_walk(), Arithmetic::Fixed),
+            (table2(0.005), Arithmetic::F32),
+        ];
+        let mut e = Engine::<N>::idle();
+        assert!(e.is_done(), "idle storage is never sampled");
+        for (i, (w, arithmetic)) in runs.iter().enumerate() {
+            e.rebuild(w, *arithmetic, &robot).unwrap();
+            let mut fresh = Engine::<N>::new(w, *arithmetic, &robot).unwrap();
+            if i % 2 == 0 {
+                assert_same_walk(&mut e, &mut fresh);
+            } else {
+                // Rebuilt mid-walk next time round.
+                for _ in 0..377 {
+                    assert_eq!(e.next(0.0), fresh.next(0.0));
+                }
+            }
+        }
+        // A rejected walk leaves the engine done; the next rebuild walks again.
+        let mut bad = table2(0.005);
+        bad.dt_s = 0.5;
+        assert_eq!(
+            e.rebuild(&bad, Arithmetic::F32, &robot),
+            Err(GaitError::BadSampleTime)
+        );
+        assert!(e.is_done());
+        bad = table2(0.005);
+        bad.walk.steps = N + 1;
+        assert_eq!(
+            e.rebuild(&bad, Arithmetic::F32, &robot),
+            Err(GaitError::CapacityExceeded)
+        );
+        assert!(e.is_done());
+        e.rebuild(&other_walk(), Arithmetic::F32, &robot).unwrap();
+        let mut fresh = Engine::<N>::new(&other_walk(), Arithmetic::F32, &robot).unwrap();
+        assert_same_walk(&mut e, &mut fresh);
+    }
+
+    #[cfg(feature = "fixed-engine")]
+    #[test]
+    fn the_fixed_engine_refuses_the_fourier_com_after_the_plan_checks() {
+        // The order of Engine::new's checks: the plan's errors, then the CoM method.
+        let robot = Robot::reference();
+        let mut w = table2(0.005);
+        w.com = ComMethod::Fourier { terms: 8 };
+        let mut e = Engine::<N>::idle();
+        assert_eq!(
+            e.rebuild(&w, Arithmetic::Fixed, &robot),
+            Err(GaitError::NotPeriodicWalk)
+        );
+        assert!(e.is_done());
+        w.walk.steps = 0;
+        assert_eq!(
+            e.rebuild(&w, Arithmetic::Fixed, &robot),
+            Err(GaitError::EmptyPlan)
+        );
+    }
+
+    #[test]
+    fn the_servo_check_in_lent_storage_is_the_servo_check() {
+        // servo_timing_in with an engine's storage as scratch: the same check as
+        // servo_timing_fed, and the storage is left done.
+        let robot = Robot::reference();
+        let targets = Targets::new(&robot, Compensation::None);
+        let w = table2(0.005);
+        let own =
+            servo_timing_fed::<N>(&w, Feasibility::Stretch, &robot, &targets, &mut || {}).unwrap();
+        let mut e = Engine::<N>::new(&other_walk(), Arithmetic::F32, &robot).unwrap();
+        let lent = match e.f32_storage() {
+            Some(s) => {
+                servo_timing_in::<N>(&w, Feasibility::Stretch, &robot, &targets, &mut || {}, s)
+                    .unwrap()
+            }
+            None => panic!("f32 storage"),
+        };
+        assert_eq!(own, lent);
+        assert!(own.rounds >= 1, "{own:?}");
+        assert!(e.is_done());
     }
 }

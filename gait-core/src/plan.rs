@@ -14,7 +14,7 @@
 //! robot ends standing with its feet together at x = (N−1)·S_L.
 
 use crate::error::GaitError;
-use crate::model::Model;
+use crate::model::{Model, ModelKind};
 use crate::real::Real;
 use crate::robot::{Robot, Side};
 use crate::zmp::ZmpShape;
@@ -281,6 +281,68 @@ impl<R: Real, const N: usize> Plan<R, N> {
         left: Place<R>,
         right: Place<R>,
     ) -> Result<Self, GaitError> {
+        let mut plan = Plan::idle();
+        plan.reset(robot, params, left, right)?;
+        Ok(plan)
+    }
+
+    /// Storage for a plan, not a plan: all-zero parameters that would not validate, no step.
+    /// [`Plan::reset`] (or [`ForwardWalk::plan_into`]) makes it one in place. `no_std` has no
+    /// `Box`: a firmware fills one plan where it lives instead of moving a plan of ≈ 56·N bytes
+    /// up the stack through `Result`s.
+    // Inline: the storage is then written where it lives, not built on the stack and copied.
+    #[inline(always)]
+    pub fn idle() -> Self {
+        let zero = R::zero();
+        Plan {
+            params: GaitParams {
+                model: Model {
+                    kind: ModelKind::Lipm,
+                    z_c: zero,
+                    t_tf: zero,
+                    omega: zero,
+                    inv_c_tau_sq: zero,
+                    tau_to_offset: zero,
+                    inertia: zero,
+                },
+                timing: Timing {
+                    t1: zero,
+                    t2: zero,
+                    period: zero,
+                },
+                zmp: ZmpShape::Natural {
+                    d1: zero,
+                    d2: zero,
+                    a: zero,
+                },
+                swing: SwingShape::Cycloid {
+                    height: zero,
+                    width: zero,
+                },
+                lead_in: zero,
+                lead_out: zero,
+            },
+            limits: StepLimits {
+                max_length: 0.0,
+                min_width: 0.0,
+                max_width: 0.0,
+                max_turn: 0.0,
+            },
+            start: [Place::default(); 2],
+            end: [Place::default(); 2],
+            steps: Deque::new(),
+        }
+    }
+
+    /// Makes this plan, in place, the empty plan [`Plan::new`] would return (standing on `left`
+    /// and `right`, no step queued). On an error it is left as it was.
+    pub fn reset(
+        &mut self,
+        robot: &Robot,
+        params: GaitParams<R>,
+        left: Place<R>,
+        right: Place<R>,
+    ) -> Result<(), GaitError> {
         params.validate(robot)?;
         let params = params.quantized();
         params.validate(robot)?;
@@ -289,13 +351,12 @@ impl<R: Real, const N: usize> Plan<R, N> {
         }
         let limits = StepLimits::for_robot(robot, params.model.z_c.to_f64());
         limits.check(Side::Left, &right, &left)?;
-        Ok(Plan {
-            params,
-            limits,
-            start: [left, right],
-            end: [left, right],
-            steps: Deque::new(),
-        })
+        self.params = params;
+        self.limits = limits;
+        self.start = [left, right];
+        self.end = [left, right];
+        self.steps.clear();
+        Ok(())
     }
 
     /// The gait parameters.
@@ -549,6 +610,19 @@ impl ForwardWalk {
         robot: &Robot,
         params: GaitParams<R>,
     ) -> Result<Plan<R, N>, GaitError> {
+        let mut plan = Plan::idle();
+        self.plan_into(robot, params, &mut plan)?;
+        Ok(plan)
+    }
+
+    /// [`ForwardWalk::plan`] written into `plan` in place (its previous content is replaced;
+    /// after an error it may hold part of the walk: rebuild it before use).
+    pub fn plan_into<R: Real, const N: usize>(
+        &self,
+        robot: &Robot,
+        params: GaitParams<R>,
+        plan: &mut Plan<R, N>,
+    ) -> Result<(), GaitError> {
         if self.steps == 0 {
             return Err(GaitError::EmptyPlan);
         }
@@ -559,7 +633,7 @@ impl ForwardWalk {
             return Err(GaitError::BadStartFoot);
         }
         let w = self.step_width;
-        let mut plan = Plan::new(
+        plan.reset(
             robot,
             params,
             Place::new(0.0, w, 0.0),
@@ -588,6 +662,6 @@ impl ForwardWalk {
                 place: Place::new(x, y, 0.0),
             })?;
         }
-        Ok(plan)
+        Ok(())
     }
 }

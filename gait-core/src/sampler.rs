@@ -56,6 +56,29 @@ pub struct GaitSample<R> {
 }
 
 impl<R: Real> GaitSample<R> {
+    /// A zero sample (time 0, everything at the origin, standing): storage that a real sample
+    /// overwrites before it is read.
+    #[inline]
+    pub fn zero() -> Self {
+        let zero = R::zero();
+        let foot = FootSample {
+            x: zero,
+            y: zero,
+            z: zero,
+            yaw: zero,
+        };
+        GaitSample {
+            time_ns: 0,
+            zmp: [zero; 2],
+            com: [zero; 3],
+            com_vel: [zero; 2],
+            feet: [foot; 2],
+            phase: SupportPhase::Standing,
+            support_foot: None,
+            steps_done: 0,
+        }
+    }
+
     /// True when every number of the sample is finite.
     pub fn is_finite(&self) -> bool {
         self.zmp
@@ -161,13 +184,63 @@ impl<R: Real, const N: usize> Sampler<R, N> {
     /// A sampler over `plan` at the servo period `dt` (1/1000 s ≤ dt ≤ 1/50 s, and no phase of
     /// the plan shorter than dt).
     pub fn new(plan: Plan<R, N>, dt: f64) -> Result<Self, GaitError> {
+        let mut s = Sampler {
+            plan,
+            ..Sampler::idle()
+        };
+        s.restart(dt)?;
+        Ok(s)
+    }
+
+    /// Storage for a sampler: an idle plan ([`Plan::idle`]), already done (never sampled).
+    /// [`Sampler::rebuild`] makes it a sampler in place.
+    // Inline: the storage is then written where it lives, not built on the stack and copied.
+    #[inline(always)]
+    pub fn idle() -> Self {
+        Sampler {
+            plan: Plan::idle(),
+            stage: Stage::Done,
+            seg: ComSegment::default(),
+            seg_start_ns: 0,
+            seg_len_ns: 0,
+            now_ns: 0,
+            dt_ns: 0,
+            decay_dt: R::zero(),
+            tau: TauResponse::default(),
+            feet: [Place::default(); 2],
+            steps_done: 0,
+            walk_start_ns: 0,
+        }
+    }
+
+    /// Makes this sampler, in place, the one [`Sampler::new`] would return for the plan that
+    /// `fill` writes into its plan storage, at servo period `dt`. After an error it is done
+    /// ([`Sampler::is_done`]) and must be rebuilt before use.
+    pub fn rebuild(
+        &mut self,
+        fill: impl FnOnce(&mut Plan<R, N>) -> Result<(), GaitError>,
+        dt: f64,
+    ) -> Result<(), GaitError> {
+        self.halt();
+        fill(&mut self.plan)?;
+        self.restart(dt)
+    }
+
+    /// Marks the walk over (an unusable sampler: a failed rebuild).
+    pub(crate) fn halt(&mut self) {
+        self.stage = Stage::Done;
+    }
+
+    /// Starts the walk of the present plan: the checks of [`Sampler::new`], then every field
+    /// from the plan (the sampler stays done on an error).
+    fn restart(&mut self, dt: f64) -> Result<(), GaitError> {
         if !dt.is_finite() {
             return Err(GaitError::NonFinite);
         }
         if !(1.0 / 1000.0 - 1e-12..=1.0 / 50.0 + 1e-12).contains(&dt) {
             return Err(GaitError::BadSampleTime);
         }
-        let p = *plan.params();
+        let p = *self.plan.params();
         let t = p.timing;
         let shortest =
             t.t1.min(t.t2 - t.t1)
@@ -178,23 +251,20 @@ impl<R: Real, const N: usize> Sampler<R, N> {
             return Err(GaitError::BadSampleTime);
         }
         let omega = p.model.omega;
-        let start = plan.start_zmp();
-        let mut s = Sampler {
-            feet: plan.start_feet(),
-            plan,
-            stage: Stage::LeadIn,
-            seg: ComSegment::default(),
-            seg_start_ns: 0,
-            seg_len_ns: 0,
-            now_ns: 0,
-            dt_ns: libm::round(dt * 1e9) as u64,
-            decay_dt: R::of(libm::exp(-omega.to_f64() * dt)),
-            tau: TauResponse::default(),
-            steps_done: 0,
-            walk_start_ns: secs_to_ns(p.lead_in),
-        };
-        s.enter(Stage::LeadIn, start);
-        Ok(s)
+        let start = self.plan.start_zmp();
+        self.feet = self.plan.start_feet();
+        self.stage = Stage::LeadIn;
+        self.seg = ComSegment::default();
+        self.seg_start_ns = 0;
+        self.seg_len_ns = 0;
+        self.now_ns = 0;
+        self.dt_ns = libm::round(dt * 1e9) as u64;
+        self.decay_dt = R::of(libm::exp(-omega.to_f64() * dt));
+        self.tau = TauResponse::default();
+        self.steps_done = 0;
+        self.walk_start_ns = secs_to_ns(p.lead_in);
+        self.enter(Stage::LeadIn, start);
+        Ok(())
     }
 
     /// The plan (its queue shrinks as steps are walked).

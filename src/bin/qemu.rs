@@ -34,6 +34,8 @@ mod firmware {
 
     #[entry]
     fn main() -> ! {
+        // The stack's unused words painted for the high-water mark logged at exit.
+        qemu_mps2::paint_stack();
         let mut cfg = Config::default();
         let mut cmd = [0u8; CMDLINE_MAX];
         // QEMU refuses a command line longer than the buffer: then nothing was read, and the

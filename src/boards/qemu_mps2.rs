@@ -230,6 +230,54 @@ pub fn semihosting_exit(code: i32) -> ! {
     }
 }
 
+/// Bytes below the stack pointer at boot that [`paint_stack`] fills with [`STACK_PAINT`]: far
+/// more than any QEMU build's worst case (`scripts/stack-depth.py`: ≈ 27 KB), far less than the
+/// board's 4 MiB of RAM.
+pub const STACK_PAINT_BYTES: usize = 128 * 1024;
+/// The pattern of the stack's unused words.
+pub const STACK_PAINT: u32 = 0xC0DE_57AC;
+
+/// The top of the stack (cortex-m-rt's `_stack_start`, the initial stack pointer).
+fn stack_top() -> usize {
+    extern "C" {
+        static _stack_start: u32;
+    }
+    // Only the symbol's address is taken (the linker script defines it); nothing is read
+    // through it.
+    core::ptr::addr_of!(_stack_start) as usize
+}
+
+/// Fills the [`STACK_PAINT_BYTES`] below the present stack pointer (less 64 bytes for this
+/// function's own frame) with [`STACK_PAINT`], so that [`stack_high_water`] can tell how deep
+/// the stack went. First thing in the QEMU binary's `main`.
+#[inline(never)]
+pub fn paint_stack() {
+    let sp = cortex_m::register::msp::read() as usize;
+    let from = stack_top().saturating_sub(STACK_PAINT_BYTES);
+    let to = sp.saturating_sub(64) & !3;
+    let mut a = from;
+    while a < to {
+        // SAFETY: [from, to) is RAM below the live stack (4 MiB at 0x2000_0000, the stack at
+        // its top; static RAM is tens of bytes at its bottom), not used by anything yet; word
+        // aligned writes, no call in this loop moves the stack pointer below `to`.
+        unsafe { write_volatile(a as *mut u32, STACK_PAINT) };
+        a += 4;
+    }
+}
+
+/// Stack bytes used since [`paint_stack`]: from the stack's top to the lowest word that no
+/// longer holds the pattern (the measured worst case; a value the program wrote equal to the
+/// pattern would hide at most that word).
+pub fn stack_high_water() -> u32 {
+    let top = stack_top();
+    let mut a = top.saturating_sub(STACK_PAINT_BYTES);
+    // SAFETY: reads of the painted region (RAM, word aligned) below the stack top.
+    while a < top && unsafe { read_volatile(a as *const u32) } == STACK_PAINT {
+        a += 4;
+    }
+    (top - a) as u32
+}
+
 /// Longest semihosting command line read, bytes (qemu refuses SYS_GET_CMDLINE when the line,
 /// kernel file name first, does not fit the buffer; the host checks it before QEMU starts).
 pub use walker_contract::params::CMDLINE_MAX;
@@ -601,6 +649,10 @@ impl Board for QemuBoard {
     }
 
     fn exit(&mut self, code: i32) -> ! {
+        defmt::info!(
+            "stack high-water mark {=u32} B (painted at boot, scripts/stack-depth.py bounds it)",
+            stack_high_water()
+        );
         semihosting_exit(code)
     }
 }

@@ -16,15 +16,17 @@
 //! standing / walking / stopping (the online walk's mode), walking (the plan), stopped (the
 //! supervisor stopped).
 
+use gait_core::fourier_walk::WalkSampler;
 use gait_core::gait::{Engine, Sample, Targets};
 use gait_core::online::OnlineWalk;
 use gait_core::plan::Footstep;
 use gait_core::robot::LEG_JOINTS;
-use gait_core::GaitSample;
+use gait_core::{GaitError, GaitSample, Robot};
 use walker_contract::command_port::PortState;
 
 use super::{commanded, MAX_LEAD_TICKS, MAX_STEPS};
 use crate::startup::Ramp;
+use crate::Config;
 
 /// Starting: the ramp from the servos' present pose to the gait's initial pose
 /// (State = starting).
@@ -49,13 +51,23 @@ impl Starting {
     }
 }
 
+/// Most ticks of servo lead the plan's delay line holds: [`MAX_LEAD_TICKS`], and 16 (80 ms at
+/// the 200 Hz default) on the OpenCM 9.04, whose 20 KiB of RAM do not hold 65 samples of 80 B
+/// beside the rest of the walk (BENCHMARKS.md "RAM"; that board runs its default
+/// configuration, no lead). A longer `servo_lead` is walked with this many ticks.
+pub const DELAY_TICKS: usize = if cfg!(feature = "board-opencm") {
+    16
+} else {
+    MAX_LEAD_TICKS
+};
+
 /// The plan walked at power-on (autostart; State = walking): the sampler and the delay line
 /// of the servo-lag feed-forward (`servo_lead`: the joint targets come from the sample
 /// `lead` ticks ahead, the reference and the log from the present one).
 #[derive(Clone, Debug)]
 pub struct Plan {
     engine: Engine<MAX_STEPS>,
-    delay: heapless::Deque<GaitSample<f32>, { MAX_LEAD_TICKS + 1 }>,
+    delay: heapless::Deque<GaitSample<f32>, { DELAY_TICKS + 1 }>,
     /// The sample `lead` ticks ahead of the delay line's front, not yet handed out.
     pending: Option<Sample>,
     /// The sample the IK takes this tick (`lead` ticks ahead of the present one).
@@ -67,25 +79,48 @@ pub struct Plan {
 impl Plan {
     /// The plan with its delay line primed: the first sample and `lead_ticks` more (the
     /// sampler's first `lead_ticks + 1` samples, τ = 0).
-    // Out of line: its temporaries get a frame of their own, not the caller's (start-up
-    // stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
-    #[inline(never)]
-    pub fn new(mut engine: Engine<MAX_STEPS>, lead_ticks: usize) -> Self {
-        let mut delay = heapless::Deque::new();
-        let first = engine.next(0.0);
-        let _ = delay.push_back(first.f32);
-        let mut lead = first;
-        for _ in 0..lead_ticks {
-            lead = engine.next(0.0);
-            let _ = delay.push_back(lead.f32);
-        }
-        Plan {
+    pub fn new(engine: Engine<MAX_STEPS>, lead_ticks: usize) -> Self {
+        let mut plan = Plan {
             engine,
-            delay,
-            pending: Some(lead),
-            ahead: lead,
-            first: first.f32,
+            ..Plan::idle()
+        };
+        plan.prime(lead_ticks);
+        plan
+    }
+
+    /// Storage for the plan (an idle engine, never sampled): [`Walk::build`] builds the engine
+    /// in place and primes it ([`Plan::prime`]).
+    // Inline: the storage is then written where it lives, not built on the stack and copied.
+    #[inline(always)]
+    pub fn idle() -> Self {
+        let zero = GaitSample::zero();
+        Plan {
+            engine: Engine::idle(),
+            delay: heapless::Deque::new(),
+            pending: None,
+            ahead: Sample {
+                f32: zero,
+                fixed: None,
+            },
+            first: zero,
         }
+    }
+
+    /// Primes the delay line from the (built) engine: the first sample and `lead_ticks` more
+    /// (at most [`DELAY_TICKS`]; τ = 0), the last of them pending as the first sample the IK
+    /// takes.
+    pub fn prime(&mut self, lead_ticks: usize) {
+        self.delay.clear();
+        let first = self.engine.next(0.0);
+        let _ = self.delay.push_back(first.f32);
+        let mut lead = first;
+        for _ in 0..lead_ticks.min(DELAY_TICKS) {
+            lead = self.engine.next(0.0);
+            let _ = self.delay.push_back(lead.f32);
+        }
+        self.pending = Some(lead);
+        self.ahead = lead;
+        self.first = first.f32;
     }
 
     /// One tick: the present sample into `present`, the one `lead` ticks ahead (which the IK
@@ -138,6 +173,9 @@ pub enum Gait {
 impl Gait {
     /// The initial pose: its reference sample, the 12 joint targets (before the compliance
     /// feed-forward) and the sample that feed-forward loads (the one the IK took).
+    // Out of line: its temporaries (online walks of ≈ 900 B) get a frame of their own, not
+    // the control loop's (stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+    #[inline(never)]
     pub fn initial_pose(
         &self,
         targets: &Targets,
@@ -234,18 +272,78 @@ pub struct Walk {
 
 impl Walk {
     /// Starting on `ramp`, then `gait`.
-    // Out of line: its temporaries get a frame of their own, not the caller's (start-up
-    // stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
-    #[inline(never)]
     pub fn new(ramp: Ramp, gait: Gait) -> Self {
-        let present = match &gait {
+        let mut walk = Walk {
+            mode: Mode::Gait(0),
+            gait,
+            present: GaitSample::zero(),
+        };
+        walk.present = walk.first_present();
+        walk.start(ramp);
+        walk
+    }
+
+    /// Storage for the walk: an idle plan ([`Plan::idle`]), never sampled. The firmware's way
+    /// to its ≈ 10 KB walk without copies on the stack: this storage lends its engine to the
+    /// servo-speed check ([`Walk::scratch`]), [`Walk::build`] builds the gait in it and
+    /// [`Walk::start`] sets the ramp.
+    // Inline: the storage is then written where it lives, not built on the stack and copied.
+    #[inline(always)]
+    pub fn idle() -> Self {
+        Walk {
+            mode: Mode::Gait(0),
+            gait: Gait::Plan(Plan::idle()),
+            present: GaitSample::zero(),
+        }
+    }
+
+    /// The plan's engine storage as an f32 walk sampler (the gait made an idle plan first if
+    /// it was the online walk): the dry runs' scratch
+    /// ([`gait_core::gait::servo_timing_in`]). Always `Some`.
+    pub fn scratch(&mut self) -> Option<&mut WalkSampler<f32, MAX_STEPS>> {
+        if !matches!(self.gait, Gait::Plan(_)) {
+            self.gait = Gait::Plan(Plan::idle());
+        }
+        match &mut self.gait {
+            Gait::Plan(p) => p.engine.f32_storage(),
+            Gait::Online(_) => None,
+        }
+    }
+
+    /// Builds the gait of `cfg` in place: with autostart the plan (its engine rebuilt where it
+    /// lives, [`Engine::rebuild`], and its delay line primed), otherwise the online walk. The
+    /// walk is not started ([`Walk::start`]).
+    // Out of line: its temporaries (online walks of ≈ 900 B) get a frame of their own, not
+    // the control loop's (stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
+    #[inline(never)]
+    pub fn build(&mut self, cfg: &Config, robot: &Robot) -> Result<(), GaitError> {
+        if cfg.autostart {
+            if !matches!(self.gait, Gait::Plan(_)) {
+                self.gait = Gait::Plan(Plan::idle());
+            }
+            let Gait::Plan(p) = &mut self.gait else {
+                return Err(GaitError::NotBuiltIn);
+            };
+            p.engine
+                .rebuild(&cfg.walk_config(), cfg.arithmetic, robot)?;
+            p.prime(cfg.lead_ticks());
+        } else {
+            self.gait = Gait::Online(commanded::online_walk(cfg, robot)?);
+        }
+        self.present = self.first_present();
+        Ok(())
+    }
+
+    /// Starting on `ramp`, then the gait (State = starting).
+    pub fn start(&mut self, ramp: Ramp) {
+        self.mode = Mode::Starting(Starting::new(ramp));
+    }
+
+    /// The gait's first present sample: the plan's first, the online walk's standing one.
+    fn first_present(&self) -> GaitSample<f32> {
+        match &self.gait {
             Gait::Plan(p) => p.first,
             Gait::Online(o) => o.clone().tick(),
-        };
-        Walk {
-            mode: Mode::Starting(Starting::new(ramp)),
-            gait,
-            present,
         }
     }
 
