@@ -185,6 +185,19 @@ def main():
         sys.exit(f"no function matches --root {a.root!r}")
     total, path = worst(frame, calls, roots[0])
     static = static_ram(a.elf)
+    budget = int(a.ram * 1024) if a.ram is not None else None
+    code = 0 if budget is None or total + static <= budget else 1
+    try:
+        report(a, total, path, static, budget, frame, indirect, dynamic)
+    except BrokenPipeError:
+        # The reader (`| head`) stopped early: the verdict stands, the rest goes nowhere.
+        sys.stdout = None
+    return code
+
+
+def report(a, total, path, static, budget, frame, indirect, dynamic):
+    """Prints the worst case, its path, the largest frames and the verdict against `budget`."""
+    roots = [path[0]] if path else ["?"]
     print(f"{a.elf}: worst-case stack {total:,} B from {short(roots[0])}; static RAM {static:,} B;"
           f" together {total + static:,} B")
     acc = 0
@@ -199,12 +212,9 @@ def main():
     print(f"largest frames:")
     for size, f in sorted(((v, k) for k, v in frame.items()), reverse=True)[:a.top]:
         print(f"  {size:>7,}  {short(f)}")
-    if a.ram is not None:
-        budget = int(a.ram * 1024)
+    if budget is not None:
         verdict = "fits" if total + static <= budget else "does NOT fit"
         print(f"RAM {budget:,} B: {verdict} ({budget - total - static:+,} B)")
-        return 0 if total + static <= budget else 1
-    return 0
 
 
 if __name__ == "__main__":

@@ -63,7 +63,7 @@ fi
 
 step "firmware RAM: the OpenCM 9.04's worst-case stack plus static RAM within its 20 KiB (call graph of the ELF)"
 python3 scripts/stack-depth.py --ram 20 --top 5 target/thumbv7m-none-eabi/release-m3/opencm
-python3 scripts/stack-depth.py --top 0 target/thumbv7em-none-eabihf/release/opencr | head -1
+python3 scripts/stack-depth.py --top 0 target/thumbv7em-none-eabihf/release/opencr
 # The check must be able to fail: no build fits 1 KiB.
 if python3 scripts/stack-depth.py --ram 1 --top 0 target/thumbv7m-none-eabi/release-m3/opencm >/dev/null; then
     echo "scripts/stack-depth.py did not flag a build over its RAM" >&2

@@ -311,8 +311,8 @@ impl Walk {
     }
 
     /// Builds the gait of `cfg` in place: with autostart the plan (its engine rebuilt where it
-    /// lives, [`Engine::rebuild`], and its delay line primed), otherwise the online walk. The
-    /// walk is not started ([`Walk::start`]).
+    /// lives, [`Engine::rebuild`], and its delay line primed), otherwise the online walk (after
+    /// the same engine checks). The walk is not started ([`Walk::start`]).
     // Out of line: its temporaries (online walks of ≈ 900 B) get a frame of their own, not
     // the control loop's (stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
     #[inline(never)]
@@ -328,6 +328,13 @@ impl Walk {
                 .rebuild(&cfg.walk_config(), cfg.arithmetic, robot)?;
             p.prime(cfg.lead_ticks());
         } else {
+            // The plan's engine checks first, as with autostart (`math=fixed` needs its build
+            // feature, the fixed-point engine refuses the Fourier CoM), in the storage the
+            // online walk then takes.
+            if let Gait::Plan(p) = &mut self.gait {
+                p.engine
+                    .rebuild(&cfg.walk_config(), cfg.arithmetic, robot)?;
+            }
             self.gait = Gait::Online(commanded::online_walk(cfg, robot)?);
         }
         self.present = self.first_present();

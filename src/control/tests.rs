@@ -516,6 +516,32 @@ fn startup_failure_and_rejected_plan() {
 }
 
 #[test]
+fn the_engine_checks_hold_without_autostart_too() {
+    // On command (the online walk) the plan's engine is checked as with autostart: the
+    // fixed-point engine (or, without its build feature, `math=fixed` itself) is refused
+    // before anything moves.
+    for autostart in [true, false] {
+        let cfg = Config {
+            autostart,
+            arithmetic: Arithmetic::Fixed,
+            com_fourier: true,
+            // Were the walk accepted, it would stop here instead of waiting for commands.
+            stop_at_tick: Some(50),
+            ..Config::default()
+        };
+        let mut b = board(&cfg);
+        let end = run(&mut b, &cfg);
+        let expected = if cfg!(feature = "fixed-gait") {
+            GaitError::NotPeriodicWalk
+        } else {
+            GaitError::NotBuiltIn
+        };
+        assert_eq!(end, RunEnd::Config(expected), "autostart {autostart}");
+        assert!(b.packets.is_empty(), "autostart {autostart}");
+    }
+}
+
+#[test]
 fn requested_stop_and_arg_error_report() {
     let mut cfg = autostart_config();
     cfg.stop_at_tick = Some(10);
