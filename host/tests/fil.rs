@@ -785,6 +785,48 @@ fn m3_fixed_point_walks_table2_and_agrees_with_the_m7_f32_walk() {
     // 10 µm log units: 5.4e-5 m + one unit of rounding on each side.
     assert!(com <= 7, "commanded CoM differs by {com} × 10 µm");
     assert!(zmp <= 7, "ZMP reference differs by {zmp} × 10 µm");
+    // The stack each walk used (painted at boot, logged at exit) stays within the worst case
+    // scripts/stack-depth.py computes from the ELF: the tool that CI trusts for the OpenCM
+    // 9.04's 20 KiB, checked against a run.
+    for (r, elf) in [(&r7, elf()), (&r3, m3_elf())] {
+        let used = stack_high_water(r);
+        let bound = stack_bound(&elf);
+        println!("{}: stack used {used} B, bound {bound} B", elf.display());
+        assert!(
+            used > 4_000 && used <= bound,
+            "used {used} B, bound {bound} B"
+        );
+    }
+}
+
+/// The stack high-water mark the QEMU firmware logs at exit, bytes.
+fn stack_high_water(r: &FilResult) -> u32 {
+    let fw = r.firmware_log.as_ref().expect("defmt output decoded");
+    fw.lines
+        .iter()
+        .find_map(|l| {
+            let rest = l.text.split("stack high-water mark ").nth(1)?;
+            rest.split(' ').next()?.parse().ok()
+        })
+        .unwrap_or_else(|| panic!("no stack high-water mark in\n{}", fw.text()))
+}
+
+/// The worst-case stack of `elf` by scripts/stack-depth.py, bytes.
+fn stack_bound(elf: &std::path::Path) -> u32 {
+    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let out = std::process::Command::new("python3")
+        .arg(root.join("scripts/stack-depth.py"))
+        .args(["--top", "0"])
+        .arg(elf)
+        .output()
+        .expect("python3 scripts/stack-depth.py");
+    assert!(out.status.success(), "{out:?}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    text.split("worst-case stack ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.replace(',', "").parse().ok())
+        .unwrap_or_else(|| panic!("no worst case in {text}"))
 }
 
 /// Issue 14's 1 kHz: the Table 2 walk at dt = 0.001 s with the bus at 4.5 Mbps on the MuJoCo
