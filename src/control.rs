@@ -228,9 +228,6 @@ impl Boot {
 }
 
 /// The gait sampler of `cfg` (model, walk, ZMP and swing shape, dt; gait-core decides).
-// Out of line: its temporaries get a frame of their own, not the caller's (start-up
-// stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
-#[inline(never)]
 pub fn build_sampler(cfg: &Config, robot: &Robot) -> Result<GaitSampler, GaitError> {
     gait_core::gait::build_sampler::<MAX_STEPS>(&cfg.walk_config(), robot)
 }

@@ -330,9 +330,7 @@ impl<const N: usize> FixedSampler<N> {
         self.swing_height = fx(h)?;
         self.swing_width = fx(w)?;
         self.cycloid = cycloid;
-        self.feet = [FixedPlace::default(); 2];
-        self.step = None;
-        self.seg = FixedSegment::default();
+        // The segment, the feet and the swing step from the inner sampler's first segment.
         self.load_segment();
         Ok(())
     }

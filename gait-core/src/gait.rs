@@ -235,13 +235,14 @@ impl<const N: usize> Engine<N> {
             },
             #[cfg(feature = "fixed-engine")]
             Arithmetic::Fixed => {
-                if !matches!(self, Engine::Fixed(..)) {
-                    *self = Engine::Fixed(FixedSampler::idle(), FixedLegKinematics::new(robot));
+                let ik = FixedLegKinematics::new(robot);
+                match self {
+                    Engine::Fixed(_, k) => *k = ik,
+                    _ => *self = Engine::Fixed(FixedSampler::idle(), ik),
                 }
-                let Engine::Fixed(s, ik) = self else {
+                let Engine::Fixed(s, _) = self else {
                     return Err(GaitError::NotBuiltIn);
                 };
-                *ik = FixedLegKinematics::new(robot);
                 // The plan's own errors first, then the CoM method, then the sampler's.
                 s.rebuild(
                     |p| {
@@ -837,6 +838,31 @@ mod tests {
             e.rebuild(&w, Arithmetic::Fixed, &robot),
             Err(GaitError::EmptyPlan)
         );
+    }
+
+    #[cfg(not(feature = "fourier-com"))]
+    #[test]
+    fn without_fourier_com_the_fourier_com_is_refused() {
+        // The OpenCM 9.04's gait-core: the Fourier CoM is refused after the plan's checks,
+        // the engine is left done; the exact CoM builds in the same storage.
+        let robot = Robot::reference();
+        let mut w = table2(0.005);
+        w.com = ComMethod::Fourier { terms: 8 };
+        let mut e = Engine::<N>::idle();
+        assert_eq!(
+            e.rebuild(&w, Arithmetic::F32, &robot),
+            Err(GaitError::NotBuiltIn)
+        );
+        assert!(e.is_done());
+        w.walk.steps = 0;
+        assert_eq!(
+            e.rebuild(&w, Arithmetic::F32, &robot),
+            Err(GaitError::EmptyPlan)
+        );
+        w = table2(0.005);
+        e.rebuild(&w, Arithmetic::F32, &robot).unwrap();
+        let mut fresh = Engine::<N>::new(&w, Arithmetic::F32, &robot).unwrap();
+        assert_same_walk(&mut e, &mut fresh);
     }
 
     #[test]

@@ -297,48 +297,43 @@ impl Walk {
         }
     }
 
-    /// The plan's engine storage as an f32 walk sampler (the gait made an idle plan first if
-    /// it was the online walk): the dry runs' scratch
+    /// The plan's engine storage as an f32 walk sampler: the dry runs' scratch
     /// ([`gait_core::gait::servo_timing_in`]). Always `Some`.
     pub fn scratch(&mut self) -> Option<&mut WalkSampler<f32, MAX_STEPS>> {
-        if !matches!(self.gait, Gait::Plan(_)) {
-            self.gait = Gait::Plan(Plan::idle());
-        }
-        match &mut self.gait {
-            Gait::Plan(p) => p.engine.f32_storage(),
-            Gait::Online(_) => None,
-        }
+        self.plan_storage()?.engine.f32_storage()
     }
 
-    /// Builds the gait of `cfg` in place: with autostart the plan (its engine rebuilt where it
-    /// lives, [`Engine::rebuild`], and its delay line primed), otherwise the online walk (after
-    /// the same engine checks). The walk is not started ([`Walk::start`]).
+    /// Builds the gait of `cfg` in place: the plan's engine where it lives
+    /// ([`Engine::rebuild`]); with autostart its delay line primed, otherwise (after the
+    /// engine's checks: `math=fixed` needs its build feature, the fixed-point engine refuses
+    /// the Fourier CoM) the online walk in its place. The walk is not started
+    /// ([`Walk::start`]).
     // Out of line: its temporaries (online walks of ≈ 900 B) get a frame of their own, not
     // the control loop's (stack: scripts/stack-depth.py, BENCHMARKS.md "RAM").
     #[inline(never)]
     pub fn build(&mut self, cfg: &Config, robot: &Robot) -> Result<(), GaitError> {
+        let p = self.plan_storage().ok_or(GaitError::NotBuiltIn)?;
+        p.engine
+            .rebuild(&cfg.walk_config(), cfg.arithmetic, robot)?;
         if cfg.autostart {
-            if !matches!(self.gait, Gait::Plan(_)) {
-                self.gait = Gait::Plan(Plan::idle());
-            }
-            let Gait::Plan(p) = &mut self.gait else {
-                return Err(GaitError::NotBuiltIn);
-            };
-            p.engine
-                .rebuild(&cfg.walk_config(), cfg.arithmetic, robot)?;
             p.prime(cfg.lead_ticks());
         } else {
-            // The plan's engine checks first, as with autostart (`math=fixed` needs its build
-            // feature, the fixed-point engine refuses the Fourier CoM), in the storage the
-            // online walk then takes.
-            if let Gait::Plan(p) = &mut self.gait {
-                p.engine
-                    .rebuild(&cfg.walk_config(), cfg.arithmetic, robot)?;
-            }
             self.gait = Gait::Online(commanded::online_walk(cfg, robot)?);
         }
         self.present = self.first_present();
         Ok(())
+    }
+
+    /// The plan the gait holds, made an idle one ([`Plan::idle`]) if it held the online walk.
+    /// Always `Some`.
+    fn plan_storage(&mut self) -> Option<&mut Plan> {
+        if let Gait::Online(_) = self.gait {
+            self.gait = Gait::Plan(Plan::idle());
+        }
+        match &mut self.gait {
+            Gait::Plan(p) => Some(p),
+            Gait::Online(_) => None,
+        }
     }
 
     /// Starting on `ramp`, then the gait (State = starting).
