@@ -2,7 +2,9 @@
 # Where the control tick's instructions go (issue 14): an exact per-instruction count of the
 # firmware's control loop on the bench's fake robot, in QEMU, attributed to the code.
 #
-# Usage: bash scripts/tick-profile.sh [m7|m3] [functions|lines|stack|calls] [N] [PATTERN]
+# Usage: [TICK=worst|N] bash scripts/tick-profile.sh [m7|m3] [functions|lines|stack|calls] [N] [PATTERN]
+#   TICK=worst: the profile of the tick with the most instructions (TICK=N: of tick N, from 0)
+#   instead of the average tick (per-tick totals: target/tick-profile/{m7,m3}-ticks.txt).
 #   m7 (default): the hard-float bench on mps2-an500, math=f32 (the default configuration);
 #   m3: the Cortex-M3 bench (profile release-m3, fixed-gait) on mps2-an385, math=fixed.
 #   functions (default) | lines | stack | calls: see scripts/tick-profile/attribute.py
@@ -70,10 +72,22 @@ case "$on,$off" in
 esac
 
 counts=$out/$core.txt
-PROF_ON=$on PROF_OFF=$off PROF_OUT=$counts \
-    qemu-system-arm -M "$machine" -nographic -monitor none \
-    -serial null -serial null -serial null -serial null \
-    -semihosting-config enable=on,target=native -icount shift=0 \
-    -kernel "$elf" -plugin "$out/libgate.so" | tee "$out/$core-bench.txt" | grep -E 'tick'
+per_tick=$out/$core-ticks.txt
+profile() { # the bench under the plugin; extra environment in "$@"
+    env PROF_ON="$on" PROF_OFF="$off" PROF_OUT="$counts" PROF_TICKS="$per_tick" "$@" \
+        qemu-system-arm -M "$machine" -nographic -monitor none \
+        -serial null -serial null -serial null -serial null \
+        -semihosting-config enable=on,target=native -icount shift=0 \
+        -kernel "$elf" -plugin "$out/libgate.so" | tee "$out/$core-bench.txt" | grep -E 'tick'
+}
+profile
 ticks=$(awk '/^control.*\.tick.*\.n /{print $2}' "$out/$core-bench.txt")
+if [ -n "${TICK:-}" ]; then
+    # One tick's profile: TICK=worst (the tick with the most instructions) or TICK=N.
+    only=$TICK
+    [ "$TICK" = worst ] && only=$(sort -k2,2n "$per_tick" | tail -1 | cut -d' ' -f1)
+    echo "tick $only: $(awk -v t="$only" '$1 == t {print $2}' "$per_tick") instructions"
+    profile PROF_ONLY_TICK="$only" >/dev/null
+    ticks=1
+fi
 python3 scripts/tick-profile/attribute.py "$elf" "$counts" "$ticks" "$mode" "$rows" "$pattern"

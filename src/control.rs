@@ -106,7 +106,7 @@ use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::balance::{FixedGyroFeedback, FootForceControl, FootForceState};
 use gait_core::compliance::{Compliance, LoadModel};
-use gait_core::fixed_point::{FixedFoot, Fx};
+use gait_core::fixed_point::{fx_sat, FixedFoot, Fx};
 use gait_core::gait::{Arithmetic, Sample};
 use gait_core::measured::{FixedZmpMeter, ForceReading, ZmpMeter};
 use gait_core::robot::LEG_JOINTS;
@@ -496,10 +496,10 @@ enum Goal {
 /// A foot sample in fixed point (exact for a sample the fixed-point sampler made).
 fn fixed_foot(f: &gait_core::swing::FootSample<f32>) -> FixedFoot {
     FixedFoot {
-        x: Fx::saturating_from_num(f.x),
-        y: Fx::saturating_from_num(f.y),
-        z: Fx::saturating_from_num(f.z),
-        yaw: Fx::saturating_from_num(f.yaw),
+        x: fx_sat(f.x),
+        y: fx_sat(f.y),
+        z: fx_sat(f.z),
+        yaw: fx_sat(f.yaw),
     }
 }
 
@@ -682,6 +682,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let ramp_ticks = ramp.ticks();
     walk.start(ramp);
     let final_hold = u16::try_from(cfg.ticks_for_us(cfg.final_hold_us)).unwrap_or(u16::MAX);
+    // Whether the IK takes the present sample (no servo lead; float maths, so once).
+    let no_lead = cfg.lead_ticks() == 0;
 
     let mut sensors = Sensors::new(&missing);
     let mut state = SensorState {
@@ -842,7 +844,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             let forces = |f: &Option<FootForces>| f.map(|f| f.forces_mn);
             let [fpl, fpr] = prev_feet_fx.unwrap_or_else(|| [fixed_foot(pl), fixed_foot(pr)]);
             meas_fx = zmp_meter.zmp((&fpl, forces(fl)), (&fpr, forces(fr)));
-            meas_fx.map(|z| z.map(|v| v.to_num::<f32>()))
+            meas_fx.map(|z| z.map(gait_core::fixed_point::fx_to_f32))
         } else {
             zmp_meter_f32
                 .zmp((pl, &reading(fl)), (pr, &reading(fr)))
@@ -1007,7 +1009,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         // shift: it is the one the IK took) goes to the log without float.
                         let present_fx = ahead
                             .and_then(|a| a.fixed.as_ref())
-                            .filter(|_| cfg.lead_ticks() == 0 && !cfg.stabilizer_on);
+                            .filter(|_| no_lead && !cfg.stabilizer_on);
                         match present_fx {
                             Some(f) => {
                                 rec.zmp_ref = f.zmp.map(pos_of_fx);

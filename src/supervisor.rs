@@ -279,7 +279,7 @@ impl JointMap {
             *hi = l.max as f32;
         }
         let ticks = TickMap::from_robot(robot);
-        let bits = |v: f32| gait_core::fixed_point::Fx::saturating_from_num(v).to_bits();
+        let bits = |v: f32| gait_core::fixed_point::fx_sat(v).to_bits();
         let mut limits_fx = [[0i32; 2]; LEG_JOINTS];
         for (l, (&lo, &hi)) in limits_fx.iter_mut().zip(min_rad.iter().zip(max_rad.iter())) {
             *l = [bits(lo), bits(hi)];

@@ -39,7 +39,24 @@ use crate::real::Real;
 
 /// One step of (C4): the DCM at a segment's start from the DCM at its end.
 pub fn dcm_back<R: Real>(omega: R, p0: [R; 2], p1: [R; 2], d: R, xi1: [R; 2]) -> [R; 2] {
-    let decay = (-(omega * d)).exp();
+    dcm_back_with(decay(omega, d), omega, p0, p1, d, xi1)
+}
+
+/// e^{−ω d}: the stable mode's decay over a segment of `d` seconds ((C4), (C5)).
+pub fn decay<R: Real>(omega: R, d: R) -> R {
+    (-(omega * d)).exp()
+}
+
+/// [`dcm_back`] with its decay e^{−ω d} given ([`decay`]; a sampler computes it once per
+/// phase duration, not at every segment change: `exp` is a long library call without an FPU).
+pub fn dcm_back_with<R: Real>(
+    decay: R,
+    omega: R,
+    p0: [R; 2],
+    p1: [R; 2],
+    d: R,
+    xi1: [R; 2],
+) -> [R; 2] {
     let mut out = [R::zero(); 2];
     for (i, o) in out.iter_mut().enumerate() {
         let k = if d > R::zero() {
@@ -66,16 +83,31 @@ pub struct ComSegment<R> {
     pub c: [R; 2],
     /// Duration D, s.
     pub duration: R,
+    /// e^{−ωD}, the stable mode's decay over the segment (C5), for [`ComSegment::end_position`].
+    pub decay: R,
 }
 
 impl<R: Real> ComSegment<R> {
     /// The segment from ZMP `p0` to `p1` over `d` seconds, ending at DCM `xi1`, starting with
     /// the CoM at `x0`.
     pub fn new(omega: R, p0: [R; 2], p1: [R; 2], d: R, xi1: [R; 2], x0: [R; 2]) -> Self {
-        let decay = (-(omega * d)).exp();
+        Self::with_decay(decay(omega, d), omega, p0, p1, d, xi1, x0)
+    }
+
+    /// [`ComSegment::new`] with e^{−ωD} given ([`decay`]: computed once per phase duration).
+    pub fn with_decay(
+        decay: R,
+        omega: R,
+        p0: [R; 2],
+        p1: [R; 2],
+        d: R,
+        xi1: [R; 2],
+        x0: [R; 2],
+    ) -> Self {
         let mut s = ComSegment {
             p0,
             duration: d,
+            decay,
             ..Default::default()
         };
         for i in 0..2 {
@@ -118,8 +150,11 @@ impl<R: Real> ComSegment<R> {
     }
 
     /// CoM position at the segment end (the next segment's x₀).
+    ///
+    /// (C1) at s = D with e^{−ω(D−s)} = e⁰ = 1 and e^{−ωs} = e^{−ωD}, the stored decay: the
+    /// value [`ComSegment::eval`] gives there, without its two `exp`.
     pub fn end_position(&self, omega: R) -> [R; 2] {
-        self.eval(omega, self.duration).0
+        self.eval_with(omega, self.duration, R::one(), self.decay).0
     }
 }
 

@@ -28,6 +28,10 @@
 //!   `q4 = −atan2(2ab, 4L2² + b² − a²) − atan2(r_x, w_z)` (atan2 ignores the common factor).
 //! - The reach clamp does not rescale `r`: every later use of `r` is a ratio (atan2), so only the
 //!   clamped distance D enters the knee.
+//! - The hip of level poses (the walk's: pelvis and soles without roll and pitch) in closed
+//!   form: R_P = Rz(ψ_P), R_F = Rz(ψ_F), so M = Rz(ψ_F − ψ_P)·Rx(−q5)·Ry(−(q3 + q4)) is already
+//!   the hip's Rz(q0)·Rx(q1)·Ry(q2): q0 = ψ_F − ψ_P, q1 = −q5, q2 = −(q3 + q4), inside
+//!   (−π, π) with |q5| < π/2 (`level_hip`; the general path's three atan2 give the same bits).
 //!
 //! Full poses are supported: pelvis and feet roll, pitch and yaw (the walk uses level poses).
 //!
@@ -60,8 +64,11 @@ const PI_30: i64 = 3_373_259_426;
 const HALF_PI_30: i64 = 1_686_629_713;
 /// 2π in 2⁻¹⁶ rad units (Fx bits).
 const TWO_PI_16: i64 = 411_775;
-/// π in 2⁻¹⁶ rad units (Fx bits).
+/// π in 2⁻¹⁶ rad units (Fx bits), rounded down: |a| ≤ PI_16 means |a| < π.
 const PI_16: i64 = 205_887;
+/// π/2 in 2⁻¹⁶ rad units (Fx bits), rounded down (π/2·2¹⁶ = 102,943.7): |a| ≤ HALF_PI_16 means
+/// |a| < π/2.
+const HALF_PI_16: i64 = 102_943;
 
 /// A pose in fixed point: position (m) and ZYX angles (rad), `R = Rz(yaw)·Ry(pitch)·Rx(roll)`
 /// (the convention of [`crate::kinematics::Pose`]).
@@ -185,12 +192,14 @@ fn isqrt_wide(n: u64) -> u64 {
     let lo = (r1 << 16) | (num as u32 & 0xFFFF);
     let q = (u64::from(q1) << 16) + u64::from(lo / d);
     let mut x = (r + q) >> 1;
-    // At most two corrections (step 3); the bound only makes the loop visibly finite.
+    // At most two corrections (step 3); the bound only makes the loop visibly finite. x² by
+    // one 32×32 → 64-bit multiply: x ≥ 2³² is above √n (n < 2⁶⁴) and is decreased anyway.
     for _ in 0..4 {
-        match x.checked_mul(x) {
-            Some(sq) if sq <= n => break,
-            _ => x -= 1,
+        let low = x as u32;
+        if u64::from(low) == x && u64::from(low) * u64::from(low) <= n {
+            break;
         }
+        x -= 1;
     }
     x
 }
@@ -378,6 +387,11 @@ fn post_rx(m: &Cols, (s, c): (i64, i64)) -> Cols {
 
 /// Columns of `Rz(yaw)·Ry(pitch)·Rx(roll)`.
 fn rot_cols(p: &FixedPose) -> Cols {
+    if p.roll == Fx::ZERO && p.pitch == Fx::ZERO {
+        // Rz(yaw) alone: the products below with sin = 0, cos = 2³⁰ (the same values).
+        let (sy, cy) = sc(p.yaw);
+        return [[cy, sy, 0], [-sy, cy, 0], [0, 0, ONE]];
+    }
     let (sr, cr) = sc(p.roll);
     let (sp, cp) = sc(p.pitch);
     let (sy, cy) = sc(p.yaw);
@@ -390,6 +404,36 @@ fn rot_cols(p: &FixedPose) -> Cols {
         [m(cysp, sr) - m(sy, cr), m(sysp, sr) + m(cy, cr), m(cp, sr)],
         [m(cysp, cr) + m(sy, sr), m(sysp, cr) - m(cy, sr), m(cp, cr)],
     ]
+}
+
+/// The hip angles (q0, q1, q2) of level poses in closed form, or `None` outside its domain.
+///
+/// With level pelvis and foot, R_P = Rz(ψ_P) and R_F = Rz(ψ_F), so the hip's matrix
+/// M = R_Pᵀ·R_F·Rx(−q5)·Ry(−(q3 + q4)) = Rz(ψ_F − ψ_P)·Rx(−q5)·Ry(−(q3 + q4)) is already in
+/// the hip's Rz(q0)·Rx(q1)·Ry(q2) form: q0 = ψ_F − ψ_P, q1 = −q5, q2 = −(q3 + q4) — what the
+/// general path's three atan2 return as long as every angle is inside (−π, π) and |q5| < π/2
+/// (cos q1 > 0: atan2(m21, √(m01² + m11²)) = −q5 needs it); otherwise `None` and the general
+/// path. The same bits: the general path recovers these Fx angles to ≈ 2e-8 rad, far from a
+/// rounding boundary of the 2⁻¹⁶ rad grid (test `level_hip_is_the_general_hip`). It saves
+/// per leg three atan2, a square root, two sines and cosines and the matrix products.
+#[inline(always)]
+fn level_hip(pelvis: &FixedPose, foot: &FixedPose, q5: Fx, q34: Fx) -> Option<(Fx, Fx, Fx)> {
+    let level = |p: &FixedPose| p.roll == Fx::ZERO && p.pitch == Fx::ZERO;
+    let yaw = i64::from(foot.yaw.to_bits()) - i64::from(pelvis.yaw.to_bits());
+    let inside = |a: i64, lim: i64| -lim <= a && a <= lim;
+    let ok = level(pelvis)
+        && level(foot)
+        && inside(yaw, PI_16)
+        && inside(i64::from(q5.to_bits()), HALF_PI_16)
+        && inside(i64::from(q34.to_bits()), PI_16);
+    // Inside those bounds every negation and the difference fit i32.
+    ok.then(|| {
+        (
+            Fx::from_bits(yaw as i32),
+            Fx::from_bits(-q5.to_bits()),
+            Fx::from_bits(-q34.to_bits()),
+        )
+    })
 }
 
 /// Positions clamped to ±[`MAX_POSITION`] (flagged); angles are used as they are.
@@ -562,8 +606,8 @@ impl FixedLegKinematics {
         let (left, bad_l) = sanitize(left);
         let (right, bad_r) = sanitize(right);
         let rp = rot_cols(&pelvis);
-        let l = self.leg(Side::Left, &pelvis, &rp, &left);
-        let r = self.leg(Side::Right, &pelvis, &rp, &right);
+        let l = self.leg(Side::Left, &pelvis, &rp, &left, true);
+        let r = self.leg(Side::Right, &pelvis, &rp, &right, true);
         let [a0, a1, a2, a3, a4, a5] = l.q;
         let [b0, b1, b2, b3, b4, b5] = r.q;
         let report = FixedIkReport {
@@ -574,8 +618,16 @@ impl FixedLegKinematics {
         ([a0, a1, a2, a3, a4, a5, b0, b1, b2, b3, b4, b5], report)
     }
 
-    /// One leg on sanitized inputs (|positions| ≤ 1000 m).
-    fn leg(&self, side: Side, pelvis: &FixedPose, rp: &Cols, foot: &FixedPose) -> LegOut {
+    /// One leg on sanitized inputs (|positions| ≤ 1000 m); `allow_level`: the hip of level
+    /// poses in closed form ([`level_hip`]; off only to test it against the general path).
+    fn leg(
+        &self,
+        side: Side,
+        pelvis: &FixedPose,
+        rp: &Cols,
+        foot: &FixedPose,
+        allow_level: bool,
+    ) -> LegOut {
         let lims = self.limits(side);
         let rf = rot_cols(foot);
         let hip = match side {
@@ -645,17 +697,25 @@ impl FixedLegKinematics {
         let q5 = limit(q5, lim5, 1 << 5, &mut flags);
 
         // 5. Hip: M = R_Pᵀ·R_F·Rx(−q5)·Ry(−(q3 + q4)).
-        let (s5, c5) = sc(q5);
-        let (s34, c34) = sc(q3.saturating_add(q4));
-        let n = post_ry(&post_rx(&rf, (-s5, c5)), (-s34, c34));
-        let m01 = dot(&rp[0], &n[1]);
-        let m11 = dot(&rp[1], &n[1]);
-        let m21 = dot(&rp[2], &n[1]);
-        let m20 = dot(&rp[2], &n[0]);
-        let m22 = dot(&rp[2], &n[2]);
-        let q0 = atan2(-m01, m11);
-        let q1 = atan2(m21, isqrt((m01 * m01 + m11 * m11) as u64) as i64);
-        let q2 = atan2(-m20, m22);
+        let q34 = q3.saturating_add(q4);
+        let (q0, q1, q2) = match level_hip(pelvis, foot, q5, q34) {
+            Some(q) if allow_level => q,
+            _ => {
+                let (s5, c5) = sc(q5);
+                let (s34, c34) = sc(q34);
+                let n = post_ry(&post_rx(&rf, (-s5, c5)), (-s34, c34));
+                let m01 = dot(&rp[0], &n[1]);
+                let m11 = dot(&rp[1], &n[1]);
+                let m21 = dot(&rp[2], &n[1]);
+                let m20 = dot(&rp[2], &n[0]);
+                let m22 = dot(&rp[2], &n[2]);
+                (
+                    atan2(-m01, m11),
+                    atan2(m21, isqrt((m01 * m01 + m11 * m11) as u64) as i64),
+                    atan2(-m20, m22),
+                )
+            }
+        };
         let q0 = limit(q0, lim0, 1, &mut flags);
         let q1 = limit(q1, lim1, 1 << 1, &mut flags);
         let q2 = limit(q2, lim2, 1 << 2, &mut flags);
@@ -805,5 +865,63 @@ mod tests {
         for t in (0..=ONE).step_by(1 << 14).chain(ends) {
             assert_eq!(atan_unit(t), atan_unit_i64(t), "t = {t}");
         }
+    }
+
+    /// The level poses' closed-form hip against the general path's three atan2, over level
+    /// targets: headings across ±π, heading differences up to ±3.6 rad (beyond π: the general
+    /// path), feet near, far (reach clamped)
+    /// and beside the hip, so joints are clamped too. The same angles and reports; and the
+    /// closed form is taken (not the general path) on most of them.
+    #[test]
+    fn level_hip_is_the_general_hip() {
+        let kin = FixedLegKinematics::new(&Robot::reference());
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |lo: f64, hi: f64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+        };
+        let fx = |v: f64| Fx::from_num(v);
+        let mut closed = 0usize;
+        let cases = 40_000;
+        for _ in 0..cases {
+            let pelvis_yaw = next(-3.3, 3.3);
+            let pelvis = FixedPose::level(
+                fx(next(-0.1, 0.1)),
+                fx(next(-0.1, 0.1)),
+                fx(next(0.1, 0.3)),
+                fx(pelvis_yaw),
+            );
+            let foot = FixedPose::level(
+                fx(next(-0.15, 0.15)),
+                fx(next(-0.15, 0.15)),
+                fx(next(-0.02, 0.05)),
+                fx(pelvis_yaw + next(-3.6, 3.6)),
+            );
+            let (pelvis, _) = sanitize(&pelvis);
+            let (foot, _) = sanitize(&foot);
+            let rp = rot_cols(&pelvis);
+            for side in [Side::Left, Side::Right] {
+                let a = kin.leg(side, &pelvis, &rp, &foot, true);
+                let b = kin.leg(side, &pelvis, &rp, &foot, false);
+                assert_eq!(a.q, b.q, "{side:?}");
+                assert_eq!(a.deficit, b.deficit);
+                assert_eq!(a.limited, b.limited, "{:?} vs {:?}", a.q, b.q);
+                let q34 = a.q[3].saturating_add(a.q[4]);
+                closed += usize::from(level_hip(&pelvis, &foot, a.q[5], q34).is_some());
+            }
+        }
+        std::println!("level hip: closed form on {closed} of {} legs", 2 * cases);
+        assert!(closed > cases, "closed form taken on {closed} legs only");
+        // Outside its domain (a tilted pose, a heading difference beyond π) it is not used.
+        let tilted = FixedPose::new(Fx::ZERO, Fx::ZERO, fx(0.2), fx(0.1), Fx::ZERO, Fx::ZERO);
+        let flat = FixedPose::level(Fx::ZERO, Fx::ZERO, Fx::ZERO, Fx::ZERO);
+        assert!(level_hip(&tilted, &flat, Fx::ZERO, Fx::ZERO).is_none());
+        let turned = FixedPose::level(Fx::ZERO, Fx::ZERO, Fx::ZERO, fx(3.2));
+        assert!(level_hip(&flat, &turned, Fx::ZERO, Fx::ZERO).is_none());
+        assert!(level_hip(&flat, &flat, fx(1.6), Fx::ZERO).is_none());
+        assert!(level_hip(&flat, &flat, Fx::ZERO, fx(-3.2)).is_none());
+        assert!(level_hip(&flat, &flat, fx(0.2), fx(-0.5)).is_some());
     }
 }

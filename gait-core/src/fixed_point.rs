@@ -167,14 +167,76 @@ pub struct FixedSample {
     pub steps_done: u32,
 }
 
+/// `v` (f32) as the nearest `Fx` (ties to even), saturating at the ends, NaN → 0: the value
+/// of `Fx::saturating_from_num(v)` but total (that one panics on NaN) and in 32-bit integer
+/// steps (≈ 20 instructions, ≈ 160 through the `fixed` crate on cores without an FPU).
+///
+/// v = ±m·2^(e − 150) with m the 24-bit significand (e the biased exponent), so the `Fx` bits
+/// are m·2^(e − 134): a left shift below 2³¹ for e − 134 ∈ [0, 7], a rounding right shift for
+/// e < 134 (0 when the shift passes 24: below half an Fx step), saturation above.
+pub fn fx_sat(v: f32) -> Fx {
+    let bits = v.to_bits();
+    let negative = bits >> 31 != 0;
+    let e = (bits >> 23) & 0xFF;
+    let frac = bits & 0x7F_FFFF;
+    if e == 0xFF && frac != 0 {
+        return Fx::ZERO; // NaN
+    }
+    // |v|·2¹⁶ rounded, or None above the range (∞ included).
+    let magnitude: Option<u32> = if e >= 134 + 8 {
+        None
+    } else if e >= 134 {
+        Some((frac | 0x80_0000) << (e - 134))
+    } else if e + 25 <= 134 {
+        Some(0) // |v| < 2⁻¹⁷: zero and subnormals too
+    } else {
+        let m = frac | 0x80_0000;
+        let r = 134 - e; // 1..=24
+        let (q, rem, half) = (m >> r, m & ((1 << r) - 1), 1 << (r - 1));
+        Some(q + u32::from(rem > half || (rem == half && q & 1 == 1)))
+    };
+    Fx::from_bits(match (magnitude, negative) {
+        (Some(m), false) => i32::try_from(m).unwrap_or(i32::MAX),
+        (Some(m), true) => 0i32.checked_sub_unsigned(m).unwrap_or(i32::MIN),
+        (None, false) => i32::MAX,
+        (None, true) => i32::MIN,
+    })
+}
+
+/// `x` as the nearest f32 (ties to even): the value of `x.to_num::<f32>()`, in 32-bit integer
+/// steps. On cores without an FPU `to_num` goes through the `fixed` crate's generic helper with
+/// 64-bit shifts (library calls, ≈ 50 instructions a value, 21 values a sample); this is ≈ 15.
+///
+/// |x|·2¹⁶ = m ∈ [2^t, 2^(t+1)): the 24-bit significand is m shifted to [2²³, 2²⁴), rounded
+/// to nearest even when t > 23 (it may round up to 2²⁴); the biased exponent is t − 16 + 127,
+/// and adding the significand with its hidden bit to (t + 110)·2²³ gives the exponent field
+/// and carries a round-up into it.
+pub fn fx_to_f32(x: Fx) -> f32 {
+    let b = x.to_bits();
+    if b == 0 {
+        return 0.0;
+    }
+    let sign = (b as u32) & 0x8000_0000;
+    let m = b.unsigned_abs(); // 1..=2³¹
+    let t = 31 - m.leading_zeros();
+    let significand = if t <= 23 {
+        m << (23 - t)
+    } else {
+        let s = t - 23; // 1..=8
+        let (q, rem, half) = (m >> s, m & ((1 << s) - 1), 1 << (s - 1));
+        q + u32::from(rem > half || (rem == half && q & 1 == 1))
+    };
+    f32::from_bits(sign | (((t + 110) << 23) + significand))
+}
+
 impl FixedFoot {
     /// The foot in f32.
     pub fn to_f32(&self) -> crate::swing::FootSample<f32> {
         crate::swing::FootSample {
-            x: self.x.to_num(),
-            y: self.y.to_num(),
-            z: self.z.to_num(),
-            yaw: self.yaw.to_num(),
+            x: fx_to_f32(self.x),
+            y: fx_to_f32(self.y),
+            z: fx_to_f32(self.z),
+            yaw: fx_to_f32(self.yaw),
         }
     }
 }
@@ -184,9 +246,9 @@ impl FixedSample {
     pub fn to_f32(&self) -> crate::GaitSample<f32> {
         crate::GaitSample {
             time_ns: self.time_ns,
-            zmp: self.zmp.map(|v| v.to_num()),
-            com: self.com.map(|v| v.to_num()),
-            com_vel: self.com_vel.map(|v| v.to_num()),
+            zmp: self.zmp.map(fx_to_f32),
+            com: self.com.map(fx_to_f32),
+            com_vel: self.com_vel.map(fx_to_f32),
             feet: [self.feet[0].to_f32(), self.feet[1].to_f32()],
             phase: self.phase,
             support_foot: self.support_foot,
@@ -198,7 +260,7 @@ impl FixedSample {
     pub fn shifted(&self, shift: [f32; 2]) -> FixedSample {
         let mut s = *self;
         for (c, d) in s.com.iter_mut().zip(shift) {
-            *c = c.saturating_add(Fx::saturating_from_num(d));
+            *c = c.saturating_add(fx_sat(d));
         }
         s
     }
@@ -225,9 +287,9 @@ struct FixedPlace {
 impl FixedPlace {
     fn of(p: &Place<f32>) -> Self {
         FixedPlace {
-            x: Fx::saturating_from_num(p.x),
-            y: Fx::saturating_from_num(p.y),
-            yaw: Fx::saturating_from_num(p.yaw),
+            x: fx_sat(p.x),
+            y: fx_sat(p.y),
+            yaw: fx_sat(p.yaw),
         }
     }
     fn foot(&self) -> FixedFoot {
@@ -346,15 +408,14 @@ impl<const N: usize> FixedSampler<N> {
 
     fn load_segment(&mut self) {
         let s = self.inner.segment();
-        let conv = |v: [f32; 2]| [Fx::saturating_from_num(v[0]), Fx::saturating_from_num(v[1])];
+        let conv = |v: [f32; 2]| v.map(fx_sat);
         self.seg = FixedSegment {
             p0: conv(s.p0),
             slope: conv(s.slope),
             a: conv(s.a),
             c: conv(s.c),
-            duration: Fx::saturating_from_num(s.duration),
-            inv_duration: (1i64 << 46)
-                / (Fx::saturating_from_num(s.duration).to_bits().max(1) as i64),
+            duration: fx_sat(s.duration),
+            inv_duration: (1i64 << 46) / (fx_sat(s.duration).to_bits().max(1) as i64),
         };
         let stance = self.inner.stance_feet();
         self.feet = [FixedPlace::of(&stance[0]), FixedPlace::of(&stance[1])];
@@ -534,5 +595,83 @@ mod tests {
             let x = Fx::from_bits(b);
             assert_eq!(sin_cos(x), sin_cos_i64(x), "x bits {b}");
         }
+    }
+
+    /// `fx_to_f32` is `to_num::<f32>` (the correctly rounded conversion): every value near
+    /// each power of two (where the rounding changes), every 2¹⁶-th bit pattern, the ends.
+    #[test]
+    fn fx_to_f32_is_to_num() {
+        let check = |b: i32| {
+            let x = Fx::from_bits(b);
+            let (got, want) = (fx_to_f32(x), x.to_num::<f32>());
+            assert_eq!(got.to_bits(), want.to_bits(), "bits {b}: {got} vs {want}");
+        };
+        for t in 0..31 {
+            for d in -600..=600 {
+                let b = (1i64 << t) + d;
+                for b in [b, -b] {
+                    if let Ok(b) = i32::try_from(b) {
+                        check(b);
+                    }
+                }
+            }
+        }
+        for b in (i32::MIN..=i32::MAX).step_by(65_521) {
+            check(b);
+        }
+        for b in [
+            0,
+            1,
+            -1,
+            i32::MAX,
+            i32::MIN,
+            i32::MAX - 1,
+            i32::MIN + 1,
+            0x0180_0000,
+        ] {
+            check(b);
+        }
+        // Ties to even: 2²⁴ + 1 and 2²⁴ + 3 (in units of 2⁻¹⁶) sit halfway between f32s.
+        assert_eq!(fx_to_f32(Fx::from_bits((1 << 24) + 1)), 256.0);
+        assert_eq!(
+            fx_to_f32(Fx::from_bits((1 << 24) + 3)),
+            256.0 + 4.0 / 65536.0
+        );
+    }
+
+    /// `fx_sat` is `Fx::saturating_from_num` wherever that is defined (not NaN): every
+    /// 4093rd f32 bit pattern, every value around each rounding tie and each power of two of
+    /// the Fx range, the range's ends and beyond; NaN → 0.
+    #[test]
+    fn fx_sat_is_saturating_from_num() {
+        let check = |v: f32| {
+            if !v.is_nan() {
+                let (got, want) = (fx_sat(v), Fx::saturating_from_num(v));
+                assert_eq!(got, want, "{v:e} ({:#010x})", v.to_bits());
+            }
+        };
+        for b in (0..=u32::MAX).step_by(4093) {
+            check(f32::from_bits(b));
+        }
+        for e in -20i32..=16 {
+            let p = libm::exp2f(e as f32);
+            for k in -300i32..=300 {
+                // Around 2^e and around ties k + ½ Fx steps.
+                let steps = (k as f32 + 0.5) / 65536.0;
+                for v in [p * (1.0 + k as f32 * f32::EPSILON), p + steps, steps] {
+                    check(v);
+                    check(-v);
+                }
+            }
+        }
+        for v in [
+            0.0, -0.0, 32767.99, 32768.0, -32768.0, -32768.01, 1e30, -1e30, 1e-40,
+        ] {
+            check(v);
+        }
+        check(f32::INFINITY);
+        check(f32::NEG_INFINITY);
+        assert_eq!(fx_sat(f32::NAN), Fx::ZERO);
+        assert_eq!(fx_sat(-f32::NAN), Fx::ZERO);
     }
 }

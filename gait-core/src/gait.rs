@@ -188,6 +188,17 @@ pub struct Sample {
     pub fixed: Option<FixedSample>,
 }
 
+impl Sample {
+    /// A zero f32 sample without a fixed-point one (storage, written by the engine).
+    #[inline(always)]
+    pub fn zero() -> Self {
+        Sample {
+            f32: GaitSample::zero(),
+            fixed: None,
+        }
+    }
+}
+
 /// The gait's per-sample engine: the f32 sampler, or the fixed-point sampler with the
 /// integer-only IK ([`Arithmetic`]; built with the feature `fixed-engine` only, so that a
 /// firmware without it keeps its flash: ≈ 17 KB for the fixed-point sampler and IK).
@@ -290,11 +301,27 @@ impl<const N: usize> Engine<N> {
     /// The next sample with the measured torque `tau` (N·m; the fixed-point sampler takes it
     /// in whole mN·m, as read from the bus).
     pub fn next(&mut self, tau: f32) -> Sample {
+        let mut out = Sample::zero();
+        self.next_into(tau, &mut out);
+        out
+    }
+
+    /// [`Engine::next`] with τ in whole mN·m (the fixed-point sampler's unit: no float on the
+    /// way there).
+    pub fn next_mnm(&mut self, tau_mnm: i32) -> Sample {
+        let mut out = Sample::zero();
+        self.next_mnm_into(tau_mnm, &mut out);
+        out
+    }
+
+    /// [`Engine::next`] written into `out`, where the sample lives (the control tick: the
+    /// ≈ 160 B of a returned sample are not copied).
+    pub fn next_into(&mut self, tau: f32, out: &mut Sample) {
         match self {
-            Engine::F32(s) => Sample {
-                f32: s.next(tau),
-                fixed: None,
-            },
+            Engine::F32(s) => {
+                out.f32 = s.next(tau);
+                out.fixed = None;
+            }
             #[cfg(feature = "fixed-engine")]
             Engine::Fixed(..) => {
                 let mnm = if tau.is_finite() {
@@ -302,26 +329,22 @@ impl<const N: usize> Engine<N> {
                 } else {
                     0
                 };
-                self.next_mnm(mnm)
+                self.next_mnm_into(mnm, out)
             }
         }
     }
 
-    /// [`Engine::next`] with τ in whole mN·m (the fixed-point sampler's unit: no float on the
-    /// way there).
-    pub fn next_mnm(&mut self, tau_mnm: i32) -> Sample {
+    /// [`Engine::next_mnm`] written into `out` (as [`Engine::next_into`]).
+    pub fn next_mnm_into(&mut self, tau_mnm: i32, out: &mut Sample) {
         match self {
-            Engine::F32(s) => Sample {
-                f32: s.next(tau_mnm as f32 * 1e-3),
-                fixed: None,
-            },
+            Engine::F32(s) => {
+                out.f32 = s.next(tau_mnm as f32 * 1e-3);
+                out.fixed = None;
+            }
             #[cfg(feature = "fixed-engine")]
             Engine::Fixed(s, _) => {
-                let f = s.next(tau_mnm);
-                Sample {
-                    f32: f.to_f32(),
-                    fixed: Some(f),
-                }
+                let f = out.fixed.insert(s.next(tau_mnm));
+                out.f32 = f.to_f32();
             }
         }
     }
@@ -330,7 +353,7 @@ impl<const N: usize> Engine<N> {
     /// a fixed-point sample with [`Targets::Plain`], `targets` otherwise.
     pub fn joints(&self, targets: &Targets, s: &Sample, shift: [f32; 2]) -> [f32; LEG_JOINTS] {
         if let Some(q) = self.joints_fx(targets, s, shift) {
-            return q.map(|a| a.to_num());
+            return q.map(crate::fixed_point::fx_to_f32);
         }
         targets.joints(&s.f32, shift).0
     }

@@ -42,10 +42,12 @@ impl<R: Real> Place<R> {
     }
     /// The point `along` metres forward along this foot's heading.
     pub fn ahead(&self, along: R) -> [R; 2] {
-        [
-            self.x + along * self.yaw.cos(),
-            self.y + along * self.yaw.sin(),
-        ]
+        self.ahead_with(along, self.yaw.sin_cos())
+    }
+    /// [`Place::ahead`] with the heading's (sin, cos) given (several points of one foot: one
+    /// sine and cosine, a long library call without an FPU).
+    pub fn ahead_with(&self, along: R, (sin, cos): (R, R)) -> [R; 2] {
+        [self.x + along * cos, self.y + along * sin]
     }
     /// The horizontal position.
     pub fn xy(&self) -> [R; 2] {
@@ -450,7 +452,13 @@ impl<R: Real, const N: usize> Plan<R, N> {
             None => self.end_zmp(),
         };
         let (a0, a1) = self.params.zmp.single_support_offsets();
-        Some([e.zmp_start, e.support.ahead(-a0), e.support.ahead(a1), end])
+        let sc = e.support.yaw.sin_cos();
+        Some([
+            e.zmp_start,
+            e.support.ahead_with(-a0, sc),
+            e.support.ahead_with(a1, sc),
+            end,
+        ])
     }
 
     /// Recomputes the divergent component of motion backward from the final rest state

@@ -38,6 +38,11 @@ pub trait Real:
     fn sin(self) -> Self;
     /// Cosine.
     fn cos(self) -> Self;
+    /// Sine and cosine, the values of [`Real::sin`] and [`Real::cos`] (one evaluation where
+    /// the implementation shares it).
+    fn sin_cos(self) -> (Self, Self) {
+        (self.sin(), self.cos())
+    }
     /// Arc tangent of `self / x` in (−π, π].
     fn atan2(self, x: Self) -> Self;
     /// Absolute value.
@@ -110,6 +115,10 @@ impl Real for f32 {
     #[inline]
     fn cos(self) -> Self {
         crate::fastmath::cos(self)
+    }
+    #[inline]
+    fn sin_cos(self) -> (Self, Self) {
+        crate::fastmath::sin_cos(self)
     }
     #[inline]
     fn atan2(self, x: Self) -> Self {

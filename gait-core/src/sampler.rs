@@ -11,7 +11,7 @@
 //! Per sample: two `exp` calls for the CoM (com.rs C1-C2), the swing-foot profile (swing.rs),
 //! and the τ response (com.rs C6). At each segment boundary: one or two DCM back-steps (C4).
 
-use crate::com::{dcm_back, ComSegment, TauResponse};
+use crate::com::{dcm_back_with, decay, ComSegment, TauResponse};
 use crate::error::GaitError;
 use crate::plan::{Footstep, Place, Plan};
 use crate::real::Real;
@@ -163,6 +163,12 @@ pub struct Sampler<R, const N: usize> {
     now_ns: u64,
     dt_ns: u64,
     decay_dt: R,
+    /// e^{−ωd} of the three phase durations (the DCM's back-propagation, C4) and of the
+    /// segments entered (lead-in, the three phases, lead-out; their durations rounded to the
+    /// sample clock, C5): computed once when the walk starts, so that a segment change costs
+    /// no `exp` (a long library call on cores without an FPU: the worst-case tick).
+    phase_decays: [R; 3],
+    stage_decays: [R; 5],
     tau: TauResponse<R>,
     feet: [Place<R>; 2],
     steps_done: u32,
@@ -178,6 +184,12 @@ fn secs_to_ns<R: Real>(s: R) -> u64 {
     } else {
         0
     }
+}
+
+/// A duration as the sampler walks it (s): rounded to the sample clock's whole µs
+/// ([`secs_to_ns`]), back in `R`.
+fn clocked<R: Real>(s: R) -> R {
+    R::from_u32(secs_to_ns(s) as u32) * R::of(1e-9)
 }
 
 impl<R: Real, const N: usize> Sampler<R, N> {
@@ -206,6 +218,8 @@ impl<R: Real, const N: usize> Sampler<R, N> {
             now_ns: 0,
             dt_ns: 0,
             decay_dt: R::zero(),
+            phase_decays: [R::zero(); 3],
+            stage_decays: [R::zero(); 5],
             tau: TauResponse::default(),
             feet: [Place::default(); 2],
             steps_done: 0,
@@ -260,6 +274,10 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         self.now_ns = 0;
         self.dt_ns = libm::round(dt * 1e9) as u64;
         self.decay_dt = R::of(libm::exp(-omega.to_f64() * dt));
+        let durs = self.phase_durations();
+        self.phase_decays = durs.map(|d| decay(omega, d));
+        let [d1, d2, d3] = durs;
+        self.stage_decays = [p.lead_in, d1, d2, d3, p.lead_out].map(|d| decay(omega, clocked(d)));
         self.tau = TauResponse::default();
         self.steps_done = 0;
         self.walk_start_ns = secs_to_ns(p.lead_in);
@@ -316,7 +334,8 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         let elapsed = self.now_ns.saturating_sub(self.seg_start_ns);
         self.seg_start_ns = self.now_ns;
         self.seg_len_ns = self.seg_len_ns.saturating_sub(elapsed);
-        let (p1, xi1) = self.segment_end(self.stage);
+        let knots = self.plan.knots(0);
+        let (p1, xi1) = self.segment_end(self.stage, knots);
         let d = R::from_u32(self.seg_len_ns as u32) * R::of(1e-9);
         self.seg = ComSegment::new(self.plan.params().model.omega, p_now, p1, d, xi1, x);
         Ok(())
@@ -336,19 +355,21 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         [t.t1, t.t2 - t.t1, t.period - t.t2]
     }
 
-    /// ZMP and DCM at the end of the segment of `stage`.
-    fn segment_end(&self, stage: Stage) -> ([R; 2], [R; 2]) {
+    /// ZMP and DCM at the end of the segment of `stage`; `knots`: the first queued step's
+    /// ([`Plan::knots`]`(0)`, computed once by the caller: each costs four sines and cosines).
+    fn segment_end(&self, stage: Stage, knots: Option<[[R; 2]; 4]>) -> ([R; 2], [R; 2]) {
         let end = self.plan.end_zmp();
         match stage {
             Stage::LeadIn => (self.plan.start_zmp(), self.plan.dcm_at_first_step()),
-            Stage::Step(ph) => match (self.plan.knots(0), self.plan.step(0)) {
+            Stage::Step(ph) => match (knots, self.plan.step(0)) {
                 (Some(k), Some(e)) => {
                     let durs = self.phase_durations();
                     let w = self.plan.params().model.omega;
                     let mut xi = e.dcm_end;
                     let mut j = 2usize;
                     while j > ph.index() {
-                        xi = dcm_back(w, k[j], k[j + 1], durs[j], xi);
+                        let decay = self.phase_decays[j];
+                        xi = dcm_back_with(decay, w, k[j], k[j + 1], durs[j], xi);
                         j -= 1;
                     }
                     (k[ph.index() + 1], xi)
@@ -362,18 +383,25 @@ impl<R: Real, const N: usize> Sampler<R, N> {
     /// Starts the segment of `stage` at the current segment end, CoM at `x0`.
     fn enter(&mut self, stage: Stage, x0: [R; 2]) {
         let p = *self.plan.params();
-        let (p0, dur) = match stage {
-            Stage::LeadIn => (self.plan.start_zmp(), p.lead_in),
-            Stage::Step(ph) => match self.plan.knots(0) {
-                Some(k) => (k[ph.index()], self.phase_durations()[ph.index()]),
-                None => (self.plan.end_zmp(), p.lead_out),
-            },
-            Stage::LeadOut | Stage::Done => (self.plan.end_zmp(), p.lead_out),
+        let knots = match stage {
+            Stage::Step(_) => self.plan.knots(0),
+            _ => None,
         };
-        let (p1, xi1) = self.segment_end(stage);
+        // The start ZMP, the duration and the index of its decay in `stage_decays`.
+        let (p0, dur, which) = match (stage, knots) {
+            (Stage::LeadIn, _) => (self.plan.start_zmp(), p.lead_in, 0),
+            (Stage::Step(ph), Some(k)) => (
+                k[ph.index()],
+                self.phase_durations()[ph.index()],
+                1 + ph.index(),
+            ),
+            _ => (self.plan.end_zmp(), p.lead_out, 4),
+        };
+        let (p1, xi1) = self.segment_end(stage, knots);
         self.seg_len_ns = secs_to_ns(dur);
-        let d = R::from_u32(self.seg_len_ns as u32) * R::of(1e-9);
-        self.seg = ComSegment::new(p.model.omega, p0, p1, d, xi1, x0);
+        let d = clocked(dur);
+        let decay = self.stage_decays.get(which).copied().unwrap_or(R::zero());
+        self.seg = ComSegment::with_decay(decay, p.model.omega, p0, p1, d, xi1, x0);
         self.stage = stage;
     }
 

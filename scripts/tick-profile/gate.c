@@ -7,6 +7,10 @@
  * TickMeter::leave, off at TickMeter::tick_start and TickMeter::enter: the instructions the
  * bench counts as the firmware's control tick.
  *
+ * A tick begins at each execution of the first PROF_ON address. With PROF_TICKS set, the
+ * instructions counted in each tick go to that file, one line a tick ("index count"); with
+ * PROF_ONLY_TICK=N only tick N (from 0) is counted by address (the worst tick's profile).
+ *
  * The few declarations of QEMU's plugin API used here are written out below (Debian's
  * qemu-system-arm ships plugin support but not <qemu-plugin.h>).
  */
@@ -43,6 +47,10 @@ static int on;
 static uint64_t on_at[MAX_MARKS], off_at[MAX_MARKS];
 static int n_on, n_off;
 static const char *out_path = "tick-profile.txt";
+static FILE *ticks_out;
+static long only_tick = -1;
+static long tick = -1;
+static uint64_t in_tick;
 
 static void executed(unsigned int vcpu, void *udata) {
     uint64_t pc = (uintptr_t)udata;
@@ -51,7 +59,15 @@ static void executed(unsigned int vcpu, void *udata) {
         if (pc == off_at[i]) on = 0;
     for (int i = 0; i < n_on; i++)
         if (pc == on_at[i]) on = 1;
-    if (on) counts[pc / 2]++;
+    if (n_on > 0 && pc == on_at[0]) {
+        if (ticks_out && tick >= 0) fprintf(ticks_out, "%ld %llu\n", tick, (unsigned long long)in_tick);
+        tick++;
+        in_tick = 0;
+    }
+    if (on) {
+        in_tick++;
+        if (only_tick < 0 || tick == only_tick) counts[pc / 2]++;
+    }
 }
 
 static void translated(qemu_plugin_id_t id, struct qemu_plugin_tb *tb) {
@@ -69,6 +85,10 @@ static void translated(qemu_plugin_id_t id, struct qemu_plugin_tb *tb) {
 static void finished(qemu_plugin_id_t id, void *udata) {
     (void)id;
     (void)udata;
+    if (ticks_out) {
+        if (tick >= 0) fprintf(ticks_out, "%ld %llu\n", tick, (unsigned long long)in_tick);
+        fclose(ticks_out);
+    }
     FILE *f = fopen(out_path, "w");
     if (!f) return;
     for (uint64_t i = 0; i < SLOTS; i++)
@@ -99,6 +119,10 @@ __attribute__((visibility("default"))) int qemu_plugin_install(qemu_plugin_id_t 
     if (!counts) return -1;
     const char *o = getenv("PROF_OUT");
     if (o) out_path = o;
+    const char *t = getenv("PROF_TICKS");
+    if (t) ticks_out = fopen(t, "w");
+    const char *only = getenv("PROF_ONLY_TICK");
+    if (only) only_tick = strtol(only, NULL, 10);
     n_on = marks("PROF_ON", on_at);
     n_off = marks("PROF_OFF", off_at);
     if (n_on == 0) on = 1; /* no marks: count everything */

@@ -93,16 +93,12 @@ impl Plan {
     // Inline: the storage is then written where it lives, not built on the stack and copied.
     #[inline(always)]
     pub fn idle() -> Self {
-        let zero = GaitSample::zero();
         Plan {
             engine: Engine::idle(),
             delay: heapless::Deque::new(),
             pending: None,
-            ahead: Sample {
-                f32: zero,
-                fixed: None,
-            },
-            first: zero,
+            ahead: Sample::zero(),
+            first: GaitSample::zero(),
         }
     }
 
@@ -137,11 +133,16 @@ impl Plan {
         match self.pending.take() {
             Some(p) => self.ahead = p,
             None => {
-                self.ahead = if fixed_math {
-                    self.engine.next_mnm(tau_mnm)
+                if fixed_math {
+                    self.engine.next_mnm_into(tau_mnm, &mut self.ahead);
                 } else {
-                    self.engine.next(tau)
-                };
+                    self.engine.next_into(tau, &mut self.ahead);
+                }
+                if self.delay.is_empty() {
+                    // No lead: the sample ahead is the present one (pushed and popped at once).
+                    *present = self.ahead.f32;
+                    return;
+                }
                 let _ = self.delay.push_back(self.ahead.f32);
             }
         }
