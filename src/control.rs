@@ -1060,7 +1060,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 };
                 write_goals(&mut bus, &ticks);
                 last_ticks = ticks;
-                if let Some(reason) = monitor.poll(&mut bus, &cfg.servo_limits) {
+                if let Some(reason) = monitor.poll(&mut bus, &cfg.servo_limits, cfg.tick_period_us)
+                {
                     crate::fw_log!(error, "servo fault: {}", reason);
                     sup.stop(reason);
                 }

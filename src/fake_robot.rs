@@ -458,13 +458,10 @@ impl<O: Observer> FakeRobot<O> {
             (Kind::Servo(_), 64, 1) => put(&[u8::from(d.torque)]),
             (Kind::Servo(_), 82, 2) => put(&d.i_gain.to_le_bytes()),
             (Kind::Servo(_), 70, 1) => put(&[d.hw_error]),
-            (Kind::Servo(_), 126, 21) => {
-                let mut b = [0u8; 21];
-                b[0..2].copy_from_slice(&d.current_raw.to_le_bytes());
-                b[6..10].copy_from_slice(&d.present.to_le_bytes());
-                b[18..20].copy_from_slice(&d.voltage_dv.to_le_bytes());
-                b[20] = d.temperature;
-                put(&b)
+            (Kind::Servo(_), 126, 2) => put(&d.current_raw.to_le_bytes()),
+            (Kind::Servo(_), 144, 3) => {
+                let [lo, hi] = d.voltage_dv.to_le_bytes();
+                put(&[lo, hi, d.temperature])
             }
             (Kind::Foot(s), 128, 18) => {
                 let b = self.foot_sample(s, d.id)?;
@@ -518,10 +515,16 @@ impl<O: Observer> FakeRobot<O> {
         self.devices.iter().position(|d| d.id == id && !d.dead)
     }
 
-    /// Queues device `id`'s status packet with `data`.
+    /// Queues device `id`'s status packet with `data`; its alert bit set while the device has
+    /// a hardware error latched (as X-series servos do).
     fn status(&mut self, id: u8, data: &[u8]) {
         let mut buf = [0u8; MAX_REPLY_DATA + 16];
-        if let Ok(n) = encode_status(&mut buf, id, StatusError::OK, data) {
+        let alert = self.devices.iter().any(|d| d.id == id && d.hw_error != 0);
+        let error = StatusError {
+            alert,
+            ..StatusError::OK
+        };
+        if let Ok(n) = encode_status(&mut buf, id, error, data) {
             for &b in buf.get(..n).unwrap_or(&[]) {
                 let _ = self.rx.push_back(b);
             }

@@ -1,14 +1,20 @@
-//! The servo monitor: while the robot walks, one leg servo per tick (round-robin over the 12,
-//! so each is read every 12 ticks, 60 ms at 5 ms) is asked for its health with two READs:
-//! Hardware Error Status (70, 1 byte) and the block 126 ..= 146 (21 bytes: Present Current at
-//! 126, Present Input Voltage at 144, Present Temperature at 146). Bus cost per tick: 14 + 12
-//! and 14 + 32 bytes, ≈ 0.72 ms at 1 Mbps.
+//! The servo monitor: while the robot walks, the leg servos' health, one servo after the other
+//! (round-robin over the 12), with two small READs a servo: Present Input Voltage and Present
+//! Temperature (144 ..= 146, 3 bytes: 14 + 14 bytes on the bus) and Present Current (126 ..= 127,
+//! 2 bytes: 14 + 13). A servo that has latched a hardware error sets the alert bit (bit 7 of
+//! the error byte) of every status packet it sends: a reply with it is followed by a READ of
+//! Hardware Error Status (70, 1 byte) for its value, so a healthy bus never pays for that one.
+//!
+//! The READs are spread in time, not in ticks: one every [`READ_EVERY_US`] (2.5 ms), so every
+//! servo is checked every 60 ms at any tick rate — two READs a tick at the 200 Hz default
+//! (≈ 0.55 ms of bus at 1 Mbps), at most one a tick at 1 kHz (≈ 62 µs at 4.5 Mbps: what lets
+//! the Cortex-M3's 1 kHz tick fit its period, BENCHMARKS.md issue 14).
 //!
 //! Checks ([`ServoCheck`], limits [`ServoLimits`] from the parameter table):
 //! Hardware Error Status ≠ 0; temperature > `servo_temp_max` °C; voltage (0.1 V units) outside
 //! [`servo_volt_min`, `servo_volt_max`]; |current| (2.69 mA units) > `servo_current_max`. Any
 //! of them stops the robot (`ServoFault`, exit 21). A READ that fails (lost reply) is only
-//! counted by the bus statistics: the check of that servo waits for its next turn.
+//! counted by the bus statistics: that check of that servo waits for its next turn.
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
@@ -20,94 +26,141 @@ use crate::board::{Clock, ServoBus};
 use crate::bus::BoardMaster;
 use crate::supervisor::StopReason;
 
-/// First address of the block read with the present values.
-pub const BLOCK_ADDR: u16 = x_series::PRESENT_CURRENT.addr;
-/// Length of the block: Present Current (126) through Present Temperature (146).
-pub const BLOCK_LEN: usize = (x_series::PRESENT_TEMPERATURE.addr - BLOCK_ADDR + 1) as usize;
+/// Time between two of the monitor's READs, µs: 24 READs (two for each of the 12 servos) make
+/// a 60 ms round.
+pub const READ_EVERY_US: u32 = 2_500;
+/// Most READs in one tick (a tick longer than 5 ms does not make the monitor's bus time grow).
+pub const MAX_READS_PER_TICK: u32 = 2;
 
-/// Round-robin state.
+/// First address of the voltage and temperature READ (Present Input Voltage).
+pub const SUPPLY_ADDR: u16 = x_series::PRESENT_INPUT_VOLTAGE.addr;
+/// Length of that READ: Present Input Voltage (144, 2 bytes) and Present Temperature (146).
+pub const SUPPLY_LEN: usize =
+    (x_series::PRESENT_TEMPERATURE.addr + x_series::PRESENT_TEMPERATURE.len - SUPPLY_ADDR) as usize;
+
+/// Round-robin state: the next READ (servo `next / 2`, voltage and temperature when `next` is
+/// even, current when odd) and the time owed to the READs, µs.
 #[derive(Clone, Debug, Default)]
 pub struct ServoMonitor {
     next: usize,
+    credit_us: u32,
 }
 
-/// What one servo answered (`None`: that READ failed).
+/// What one READ of a servo answered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ServoHealth {
-    /// Hardware Error Status.
-    pub hardware_error: Option<u8>,
-    /// The block 126 ..= 146.
-    pub block: Option<[u8; BLOCK_LEN]>,
+pub enum ServoHealth {
+    /// Hardware Error Status (read after a reply with the alert bit).
+    HardwareError(u8),
+    /// Present Input Voltage (0.1 V) and Present Temperature (°C).
+    Supply {
+        /// Present Input Voltage, 0.1 V units.
+        voltage_dv: u16,
+        /// Present Temperature, °C.
+        temperature_c: u8,
+    },
+    /// Present Current, raw (2.69 mA units).
+    Current(i16),
 }
 
-fn field(block: &[u8; BLOCK_LEN], f: dxl::table::Field) -> Option<&[u8]> {
-    let start = usize::from(f.addr.checked_sub(BLOCK_ADDR)?);
-    block.get(start..start + usize::from(f.len))
-}
-
-/// The first limit servo `id`'s health breaks, as a stop reason.
+/// The limit that servo `id`'s reading breaks, as a stop reason.
 pub fn check(id: u8, h: &ServoHealth, lim: &ServoLimits) -> Option<StopReason> {
     let fault = |check, reading: u16| Some(StopReason::ServoFault { id, check, reading });
-    if let Some(e) = h.hardware_error.filter(|&e| e != 0) {
-        return fault(ServoCheck::HardwareError, u16::from(e));
-    }
-    let b = h.block.as_ref()?;
-    if let Some(&[t]) = field(b, x_series::PRESENT_TEMPERATURE) {
-        if t > lim.temperature_max_c {
-            return fault(ServoCheck::Temperature, u16::from(t));
+    match *h {
+        ServoHealth::HardwareError(e) if e != 0 => fault(ServoCheck::HardwareError, u16::from(e)),
+        ServoHealth::HardwareError(_) => None,
+        ServoHealth::Supply {
+            voltage_dv,
+            temperature_c,
+        } => {
+            if temperature_c > lim.temperature_max_c {
+                return fault(ServoCheck::Temperature, u16::from(temperature_c));
+            }
+            let v = f32::from(voltage_dv) * 0.1;
+            if v < lim.voltage_min_v {
+                return fault(ServoCheck::VoltageLow, voltage_dv);
+            }
+            if v > lim.voltage_max_v {
+                return fault(ServoCheck::VoltageHigh, voltage_dv);
+            }
+            None
+        }
+        ServoHealth::Current(raw) => {
+            let ma = libm::fabsf(f32::from(raw) * x_series::CURRENT_UNIT_MA);
+            if ma > lim.current_max_a * 1000.0 {
+                return fault(ServoCheck::Current, libm::fminf(ma, 65_535.0) as u16);
+            }
+            None
         }
     }
-    if let Some(&[lo, hi]) = field(b, x_series::PRESENT_INPUT_VOLTAGE) {
-        let dv = u16::from_le_bytes([lo, hi]);
-        let v = f32::from(dv) * 0.1;
-        if v < lim.voltage_min_v {
-            return fault(ServoCheck::VoltageLow, dv);
-        }
-        if v > lim.voltage_max_v {
-            return fault(ServoCheck::VoltageHigh, dv);
-        }
-    }
-    if let Some(&[lo, hi]) = field(b, x_series::PRESENT_CURRENT) {
-        let ma = f32::from(i16::from_le_bytes([lo, hi])) * x_series::CURRENT_UNIT_MA;
-        let ma = libm::fabsf(ma);
-        if ma > lim.current_max_a * 1000.0 {
-            return fault(ServoCheck::Current, libm::fminf(ma, 65_535.0) as u16);
-        }
-    }
-    None
 }
 
 impl ServoMonitor {
     /// Starts with the first leg servo.
     pub const fn new() -> Self {
-        ServoMonitor { next: 0 }
+        ServoMonitor {
+            next: 0,
+            credit_us: 0,
+        }
     }
 
-    /// Reads the next servo's health (two READs) and checks it.
+    /// One tick of `period_us`: the READs that fell due (one every [`READ_EVERY_US`], at most
+    /// [`MAX_READS_PER_TICK`]), each checked; the first fault found.
     pub fn poll<B: ServoBus + Clock>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         lim: &ServoLimits,
+        period_us: u32,
     ) -> Option<StopReason> {
-        let j = self.next % LEG_JOINTS;
-        self.next = (j + 1) % LEG_JOINTS;
-        let id = *ids::LEGS.get(j)?;
-        let mut e = [0u8; 1];
-        let hardware_error = bus
-            .master()
-            .read(id, x_series::HARDWARE_ERROR_STATUS.addr, &mut e)
-            .ok()
-            .map(|()| e[0]);
-        let mut b = [0u8; BLOCK_LEN];
-        let block = bus.master().read(id, BLOCK_ADDR, &mut b).ok().map(|()| b);
-        check(
-            id,
-            &ServoHealth {
-                hardware_error,
-                block,
-            },
-            lim,
-        )
+        let cap = READ_EVERY_US * MAX_READS_PER_TICK;
+        self.credit_us = self.credit_us.saturating_add(period_us).min(cap);
+        while self.credit_us >= READ_EVERY_US {
+            self.credit_us -= READ_EVERY_US;
+            if let Some(fault) = self.read_next(bus, lim) {
+                return Some(fault);
+            }
+        }
+        None
+    }
+
+    /// The next READ of the round and its checks (and Hardware Error Status after an alert).
+    fn read_next<B: ServoBus + Clock>(
+        &mut self,
+        bus: &mut BoardMaster<'_, B>,
+        lim: &ServoLimits,
+    ) -> Option<StopReason> {
+        let k = self.next % (2 * LEG_JOINTS);
+        self.next = (k + 1) % (2 * LEG_JOINTS);
+        let id = *ids::LEGS.get(k / 2)?;
+        let alerts = bus.master().stats().hardware_alerts;
+        let health = if k.is_multiple_of(2) {
+            let mut b = [0u8; SUPPLY_LEN];
+            bus.master()
+                .read(id, SUPPLY_ADDR, &mut b)
+                .ok()
+                .map(|()| ServoHealth::Supply {
+                    voltage_dv: u16::from_le_bytes([b[0], b[1]]),
+                    temperature_c: b[2],
+                })
+        } else {
+            let mut b = [0u8; 2];
+            bus.master()
+                .read(id, x_series::PRESENT_CURRENT.addr, &mut b)
+                .ok()
+                .map(|()| ServoHealth::Current(i16::from_le_bytes(b)))
+        };
+        // The alert bit of this reply (counted by the master): the error's value.
+        if bus.master().stats().hardware_alerts != alerts {
+            let mut e = [0u8; 1];
+            let read = bus
+                .master()
+                .read(id, x_series::HARDWARE_ERROR_STATUS.addr, &mut e);
+            if read.is_ok() {
+                if let Some(fault) = check(id, &ServoHealth::HardwareError(e[0]), lim) {
+                    return Some(fault);
+                }
+            }
+        }
+        check(id, &health?, lim)
     }
 }
 
@@ -115,27 +168,14 @@ impl ServoMonitor {
 mod tests {
     use super::*;
 
-    fn block(current_raw: i16, dv: u16, t: u8) -> [u8; BLOCK_LEN] {
-        let mut b = [0u8; BLOCK_LEN];
-        b[0..2].copy_from_slice(&current_raw.to_le_bytes());
-        b[18..20].copy_from_slice(&dv.to_le_bytes());
-        b[20] = t;
-        b
-    }
-
-    fn h(e: u8, b: [u8; BLOCK_LEN]) -> ServoHealth {
-        ServoHealth {
-            hardware_error: Some(e),
-            block: Some(b),
-        }
-    }
-
     #[test]
     fn each_limit() {
         let lim = ServoLimits::xm430();
-        assert_eq!(BLOCK_LEN, 21);
-        let ok = block(500, 120, 40);
-        assert_eq!(check(3, &h(0, ok), &lim), None);
+        assert_eq!(SUPPLY_LEN, 3);
+        let supply = |voltage_dv, temperature_c| ServoHealth::Supply {
+            voltage_dv,
+            temperature_c,
+        };
         let f = |check, reading| {
             Some(StopReason::ServoFault {
                 id: 3,
@@ -143,36 +183,33 @@ mod tests {
                 reading,
             })
         };
+        assert_eq!(check(3, &supply(120, 40), &lim), None);
+        assert_eq!(check(3, &ServoHealth::Current(500), &lim), None);
+        assert_eq!(check(3, &ServoHealth::HardwareError(0), &lim), None);
         // Overload bit (5) of Hardware Error Status.
         assert_eq!(
-            check(3, &h(0x20, ok), &lim),
+            check(3, &ServoHealth::HardwareError(0x20), &lim),
             f(ServoCheck::HardwareError, 0x20)
         );
-        assert_eq!(check(3, &h(0, block(500, 120, 70)), &lim), None);
+        assert_eq!(check(3, &supply(120, 70), &lim), None);
         assert_eq!(
-            check(3, &h(0, block(500, 120, 71)), &lim),
+            check(3, &supply(120, 71), &lim),
             f(ServoCheck::Temperature, 71)
         );
-        assert_eq!(check(3, &h(0, block(0, 100, 40)), &lim), None);
+        assert_eq!(check(3, &supply(100, 40), &lim), None);
         assert_eq!(
-            check(3, &h(0, block(0, 99, 40)), &lim),
+            check(3, &supply(99, 40), &lim),
             f(ServoCheck::VoltageLow, 99)
         );
         assert_eq!(
-            check(3, &h(0, block(0, 149, 40)), &lim),
+            check(3, &supply(149, 40), &lim),
             f(ServoCheck::VoltageHigh, 149)
         );
         // 2.5 A = 929.4 units of 2.69 mA: 929 passes, −930 (2.5017 A) does not.
-        assert_eq!(check(3, &h(0, block(929, 120, 40)), &lim), None);
+        assert_eq!(check(3, &ServoHealth::Current(929), &lim), None);
         assert_eq!(
-            check(3, &h(0, block(-930, 120, 40)), &lim),
+            check(3, &ServoHealth::Current(-930), &lim),
             f(ServoCheck::Current, 2501)
         );
-        // A failed READ checks nothing.
-        let none = ServoHealth {
-            hardware_error: None,
-            block: None,
-        };
-        assert_eq!(check(3, &none, &lim), None);
     }
 }

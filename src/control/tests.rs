@@ -110,8 +110,9 @@ fn table2_walk_runs_to_plan_done() {
         let sync: Vec<_> = pk.iter().filter(|p| p.op == opcode::SYNC_WRITE).collect();
         assert_eq!(bulk.len(), 1, "tick {k}");
         // Walking ticks: bulk read, sync write, the servo monitor's two READs of servo
-        // 1 + k mod 12 (ramp and walk; not the held final pose). The last tick: bulk read,
-        // torque off, and its read-back from the 12 servos.
+        // 1 + k mod 12 (ramp and walk; not the held final pose): voltage and temperature
+        // (144, 3 bytes), current (126, 2 bytes) — one READ every 2.5 ms, two a 5 ms tick. The
+        // last tick: bulk read, torque off, and its read-back from the 12 servos.
         let monitored = k < ramp + walk;
         let expected = if k == last {
             14
@@ -125,7 +126,7 @@ fn table2_walk_runs_to_plan_done() {
             let id = 1 + (k % 12) as u8;
             assert_eq!(
                 (pk[2].id, pk[2].addr, pk[3].id, pk[3].addr),
-                (id, 70, id, 126)
+                (id, 144, id, 126)
             );
         }
         if k < last {
@@ -944,6 +945,35 @@ fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
     assert_eq!(readbacks, 12, "one read-back per servo");
     assert!(faults_of(&b.records(), FaultKind::TorqueOffUnconfirmed).is_empty());
     assert_eq!(b.power.len(), 1);
+}
+
+#[test]
+fn the_servo_monitor_reads_by_time_not_by_tick() {
+    // At 1 kHz one READ every 2.5 ticks (2.5 ms): never more than one a tick, the pattern
+    // 0, 0, 1, 0, 1 (the credit reaches 2.5 ms on the third and fifth of five ticks), and every
+    // servo's two READs once in 60 ticks (60 ms), as at 200 Hz.
+    let cfg = cfg_with("elf dt=0.001 baud=4500000 steps=2");
+    let mut b = board(&cfg);
+    b.set_baud(cfg.bus_baud).unwrap();
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(b.ticks.iter().filter(|t| t.tick.overrun).count(), 0);
+    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ticks = per_tick(&b);
+    let monitor = |pk: &[Pkt]| -> Vec<(u8, u16)> {
+        pk.iter()
+            .filter(|p| p.op == opcode::READ && (p.addr == 144 || p.addr == 126))
+            .map(|p| (p.id, p.addr))
+            .collect()
+    };
+    let reads: Vec<Vec<(u8, u16)>> = ticks.iter().take(ramp).map(|pk| monitor(pk)).collect();
+    assert_eq!(ramp, 1500);
+    for (k, r) in reads.iter().enumerate() {
+        let due = usize::from(k % 5 == 2 || k % 5 == 4);
+        assert_eq!(r.len(), due, "tick {k}: {r:?}");
+    }
+    let first_round: Vec<(u8, u16)> = reads.iter().take(60).flatten().copied().collect();
+    let want: Vec<(u8, u16)> = (1..=12u8).flat_map(|id| [(id, 144), (id, 126)]).collect();
+    assert_eq!(first_round, want);
 }
 
 #[test]
