@@ -8,6 +8,8 @@ pub mod opencm;
 pub mod opencr;
 #[cfg(feature = "board-qemu")]
 pub mod qemu_mps2;
+#[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
+mod stm32;
 #[cfg(feature = "board-qemu")]
 pub mod tick_cost;
 
