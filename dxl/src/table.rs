@@ -53,8 +53,11 @@ pub mod board_header {
 /// A sample block of our boards: `words` as little-endian i32, then the u16 `counter`.
 fn sample_bytes<const N: usize>(words: impl IntoIterator<Item = i32>, counter: u16) -> [u8; N] {
     let mut out = [0u8; N];
-    let bytes = words.into_iter().flat_map(i32::to_le_bytes);
-    for (o, b) in out.iter_mut().zip(bytes.chain(counter.to_le_bytes())) {
+    let (body, tail) = out.split_at_mut(N.saturating_sub(2));
+    for (chunk, v) in body.chunks_exact_mut(4).zip(words) {
+        chunk.copy_from_slice(&v.to_le_bytes());
+    }
+    for (o, b) in tail.iter_mut().zip(counter.to_le_bytes()) {
         *o = b;
     }
     out
