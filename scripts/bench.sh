@@ -176,6 +176,12 @@ cell() { # array key → "avg (max)"
     if [ -z "$avg" ]; then printf 'n/a'; return; fi
     printf '%s (%s)' "$(n "$avg")" "$(n "$max")"
 }
+core_row() { # key column... → "| column | … | key's cell on the M7 | on the M4 | on the M3 |"
+    local key=$1
+    shift
+    printf '| %s ' "$@"
+    echo "| $(cell M7 "$key") | $(cell M4 "$key") | $(cell M3 "$key") |"
+}
 
 # ---- 3. sizes ----
 elf_sizes() { # elf → "flash ram text rodata data bss" (bytes)
@@ -461,10 +467,8 @@ EOF
         "tick.f32:full tick, f32" \
         "tick.comp_stab:full tick, f32 + compensation + stabilizer" \
         "tick.fixed:full tick, fixed"; do
-        key=${st%%:*}
-        label=${st#*:}
         for m in lipm dlipm tlipfm; do
-            echo "| $label | $m | $(cell M7 "$key.$m") | $(cell M4 "$key.$m") | $(cell M3 "$key.$m") |"
+            core_row "${st%%:*}.$m" "${st#*:}" "$m"
         done
     done
     for st in "swing.cycloid:swing foot alone, cycloid (\`swing::swing_foot\`)" \
@@ -477,9 +481,7 @@ EOF
         "dxl.feed3:decode 3 status replies, block feeds (\`Decoder::feed\`), no parse" \
         "dxl.push3:decode 3 status replies byte by byte (\`Decoder::push\`), no parse" \
         "dxl.crc16_72:CRC-16 over 72 bytes (\`dxl::crc::crc16\`)"; do
-        key=${st%%:*}
-        label=${st#*:}
-        echo "| $label | all | $(cell M7 "$key") | $(cell M4 "$key") | $(cell M3 "$key") |"
+        core_row "${st%%:*}" "${st#*:}" all
     done
     cat <<EOF
 
@@ -499,9 +501,7 @@ EOF
         "prim.fdiv:f32 divide" "prim.fx_exp_neg:\`fixed_point::exp_neg\`" \
         "prim.fx_sin_cos:\`fixed_point::sin_cos\`" "prim.fx_sqrt:\`fixed_ik::sqrt\` (Fx)" \
         "prim.fx_atan2:\`fixed_ik::atan2\`"; do
-        key=${st%%:*}
-        label=${st#*:}
-        echo "| $label | $(cell M7 "$key") | $(cell M4 "$key") | $(cell M3 "$key") |"
+        core_row "${st%%:*}" "${st#*:}"
     done
     cat <<EOF
 

@@ -28,8 +28,8 @@
 //! code 10 is never used: its exit code would be start-up's 20.
 
 /// Declares a code table once: an enum whose every variant carries its explicit wire code
-/// (`Variant = code`), and from it the enum, `code()` and `TryFrom<u8>` (unknown values:
-/// [`UnknownCode`]). The codes are written out value by value in the generated matches, so
+/// (`Variant = code`), and from it the enum, `ALL` (every variant, in declaration order),
+/// `code()` and `TryFrom<u8>` (unknown values: [`UnknownCode`]). The codes are written out value by value in the generated matches, so
 /// reordering variants changes nothing on the wire.
 macro_rules! wire_codes {
     (
@@ -51,6 +51,9 @@ macro_rules! wire_codes {
         }
 
         impl $name {
+            /// Every variant, in declaration order.
+            pub const ALL: [$name; [$($name::$variant),+].len()] = [$($name::$variant),+];
+
             /// The wire code.
             pub const fn code(self) -> u8 {
                 match self {
@@ -109,21 +112,6 @@ wire_codes! {
 }
 
 impl StopCode {
-    /// Every stop code.
-    pub const ALL: [StopCode; 11] = [
-        StopCode::DeviceMissing,
-        StopCode::DeviceLost,
-        StopCode::Fall,
-        StopCode::OverrunBurst,
-        StopCode::NonFiniteTarget,
-        StopCode::PlanDone,
-        StopCode::Requested,
-        StopCode::NonFiniteSample,
-        StopCode::SensorStale,
-        StopCode::ServoFault,
-        StopCode::NotPowerOn,
-    ];
-
     /// The firmware's exit code for a run that stopped for this reason.
     pub const fn exit(self) -> ExitCode {
         match self {
@@ -410,16 +398,6 @@ wire_codes! {
     }
 }
 
-impl CommandField {
-    /// Every field, in code order.
-    pub const ALL: [CommandField; 4] = [
-        CommandField::Mode,
-        CommandField::VelocityX,
-        CommandField::VelocityY,
-        CommandField::YawRate,
-    ];
-}
-
 wire_codes! {
     /// Why a sensor reply was rejected (the `SensorRejected` fault record's `value`).
     pub enum SensorRejection {
@@ -527,37 +505,18 @@ wire_codes! {
         NonFiniteSample = 18,
         /// Sensor data stale.
         SensorStale = 19,
+        /// A start-up step failed after the probe.
+        StartupFailed = 20,
         /// Servo fault seen by the monitor.
         ServoFault = 21,
         /// Not walking after a reset other than power-on.
         NotPowerOn = 22,
-        /// A start-up step failed after the probe.
-        StartupFailed = 20,
         /// Panic.
         Panic = 101,
     }
 }
 
 impl ExitCode {
-    /// Every exit code.
-    pub const ALL: [ExitCode; 15] = [
-        ExitCode::PlanDone,
-        ExitCode::ConfigRejected,
-        ExitCode::Watchdog,
-        ExitCode::DeviceMissing,
-        ExitCode::DeviceLost,
-        ExitCode::Fall,
-        ExitCode::OverrunBurst,
-        ExitCode::NonFiniteTarget,
-        ExitCode::Requested,
-        ExitCode::NonFiniteSample,
-        ExitCode::SensorStale,
-        ExitCode::StartupFailed,
-        ExitCode::ServoFault,
-        ExitCode::NotPowerOn,
-        ExitCode::Panic,
-    ];
-
     /// The numeric exit code as the process status (`i32`, semihosting `exit`).
     pub const fn status(self) -> i32 {
         self.code() as i32
@@ -589,44 +548,31 @@ impl ExitCode {
 mod tests {
     use super::*;
 
+    /// Every variant of a code table (`all`) decodes from its code, and no other code decodes.
+    fn round_trips<T>(all: &[T], code: fn(T) -> u8)
+    where
+        T: Copy + PartialEq + core::fmt::Debug + TryFrom<u8, Error = UnknownCode>,
+    {
+        for &v in all {
+            assert_eq!(T::try_from(code(v)), Ok(v));
+        }
+        let decoded = (0..=255u8).filter(|&c| T::try_from(c).is_ok()).count();
+        assert_eq!(decoded, all.len(), "{all:?}");
+    }
+
     #[test]
     fn every_code_round_trips_and_is_unique() {
+        round_trips(&StopCode::ALL, StopCode::code);
+        round_trips(&ExitCode::ALL, ExitCode::code);
+        round_trips(&CommandField::ALL, CommandField::code);
+        round_trips(&StartupStep::ALL, StartupStep::code);
+        round_trips(&SensorRejection::ALL, SensorRejection::code);
+        round_trips(&ServoCheck::ALL, ServoCheck::code);
+        round_trips(&ResetCause::ALL, ResetCause::code);
+        round_trips(&CrashCode::ALL, CrashCode::code);
         for c in 0..=255u8 {
-            if let Ok(s) = StopCode::try_from(c) {
-                assert_eq!(s.code(), c);
-            }
-            if let Ok(e) = ExitCode::try_from(c) {
-                assert_eq!(e.code(), c);
-            }
             assert_eq!(FaultKind::from_code(c).code(), c);
-            if let Ok(s) = StartupStep::try_from(c) {
-                assert_eq!(s.code(), c);
-            }
-            if let Ok(s) = SensorRejection::try_from(c) {
-                assert_eq!(s.code(), c);
-            }
-            if let Ok(s) = ServoCheck::try_from(c) {
-                assert_eq!(s.code(), c);
-            }
-            if let Ok(s) = ResetCause::try_from(c) {
-                assert_eq!(s.code(), c);
-            }
-            if let Ok(s) = CrashCode::try_from(c) {
-                assert_eq!(s.code(), c);
-            }
         }
-        assert_eq!(
-            (0..=255u8)
-                .filter(|&c| StopCode::try_from(c).is_ok())
-                .count(),
-            StopCode::ALL.len()
-        );
-        assert_eq!(
-            (0..=255u8)
-                .filter(|&c| ExitCode::try_from(c).is_ok())
-                .count(),
-            ExitCode::ALL.len()
-        );
         assert_eq!(StopCode::try_from(0), Err(UnknownCode(0)));
     }
 

@@ -36,6 +36,33 @@ fn u16_at(b: &[u8], i: usize) -> Option<u16> {
     Some(u16::from_le_bytes([*b.get(i)?, *b.get(i.checked_add(1)?)?]))
 }
 
+/// The common header of our own boards' control tables ([`foot`], [`imu`]).
+pub mod board_header {
+    use super::{f, Field};
+
+    /// Model Number (u16).
+    pub const MODEL_NUMBER: Field = f(0, 2);
+    /// Firmware Version (u8).
+    pub const FIRMWARE_VERSION: Field = f(6, 1);
+    /// ID (u8).
+    pub const ID: Field = f(7, 1);
+    /// Return Delay Time (u8, ×2 µs).
+    pub const RETURN_DELAY_TIME: Field = f(9, 1);
+}
+
+/// A sample block of our boards: `words` as little-endian i32, then the u16 `counter`.
+fn sample_bytes<const N: usize>(words: impl IntoIterator<Item = i32>, counter: u16) -> [u8; N] {
+    let mut out = [0u8; N];
+    let (body, tail) = out.split_at_mut(N.saturating_sub(2));
+    for (chunk, v) in body.chunks_exact_mut(4).zip(words) {
+        chunk.copy_from_slice(&v.to_le_bytes());
+    }
+    for (o, b) in tail.iter_mut().zip(counter.to_le_bytes()) {
+        *o = b;
+    }
+    out
+}
+
 /// ROBOTIS X-series servo (XM430-W350 / XL430-W250), Protocol 2.0 control table.
 pub mod x_series {
     use super::{f, Field};
@@ -141,16 +168,9 @@ pub mod x_series {
 /// | 128 | 16 | force\[0..4\], i32 each, millinewtons, positive = load on the sole |
 /// | 144 | 2 | sample counter (u16, wraps) |
 pub mod foot {
-    use super::{f, i32_at, u16_at, Field};
+    pub use super::board_header::{FIRMWARE_VERSION, ID, MODEL_NUMBER, RETURN_DELAY_TIME};
+    use super::{f, i32_at, sample_bytes, u16_at, Field};
 
-    /// Model Number (u16).
-    pub const MODEL_NUMBER: Field = f(0, 2);
-    /// Firmware Version (u8).
-    pub const FIRMWARE_VERSION: Field = f(6, 1);
-    /// ID (u8).
-    pub const ID: Field = f(7, 1);
-    /// Return Delay Time (u8, ×2 µs).
-    pub const RETURN_DELAY_TIME: Field = f(9, 1);
     /// Whole sample block: four forces and the counter (one READ).
     pub const SAMPLE: Field = f(128, 18);
     /// The four forces (4 × i32 mN).
@@ -188,14 +208,7 @@ pub mod foot {
 
         /// Encodes the [`SAMPLE`] block.
         pub fn to_bytes(&self) -> [u8; 18] {
-            let mut out = [0u8; 18];
-            for (chunk, v) in out.chunks_exact_mut(4).zip(self.forces_mn) {
-                chunk.copy_from_slice(&v.to_le_bytes());
-            }
-            let [lo, hi] = self.counter.to_le_bytes();
-            out[16] = lo;
-            out[17] = hi;
-            out
+            sample_bytes(self.forces_mn, self.counter)
         }
 
         /// Total vertical force in newtons.
@@ -239,16 +252,9 @@ pub mod foot {
 /// | 140 | 12 | accel x, y, z (i32, µm/s², includes gravity: +9.81 on z when upright) |
 /// | 152 | 2 | sample counter (u16, wraps) |
 pub mod imu {
-    use super::{f, i32_at, u16_at, Field};
+    pub use super::board_header::{FIRMWARE_VERSION, ID, MODEL_NUMBER, RETURN_DELAY_TIME};
+    use super::{f, i32_at, sample_bytes, u16_at, Field};
 
-    /// Model Number (u16).
-    pub const MODEL_NUMBER: Field = f(0, 2);
-    /// Firmware Version (u8).
-    pub const FIRMWARE_VERSION: Field = f(6, 1);
-    /// ID (u8).
-    pub const ID: Field = f(7, 1);
-    /// Return Delay Time (u8, ×2 µs).
-    pub const RETURN_DELAY_TIME: Field = f(9, 1);
     /// Whole sample block: gyro, accel, counter (one READ).
     pub const SAMPLE: Field = f(128, 26);
     /// Gyroscope (3 × i32 µrad/s).
@@ -292,15 +298,8 @@ pub mod imu {
 
         /// Encodes the [`SAMPLE`] block.
         pub fn to_bytes(&self) -> [u8; 26] {
-            let mut out = [0u8; 26];
-            let values = self.gyro_urad_s.into_iter().chain(self.accel_um_s2);
-            for (chunk, v) in out.chunks_exact_mut(4).zip(values) {
-                chunk.copy_from_slice(&v.to_le_bytes());
-            }
-            let [lo, hi] = self.counter.to_le_bytes();
-            out[24] = lo;
-            out[25] = hi;
-            out
+            let words = self.gyro_urad_s.into_iter().chain(self.accel_um_s2);
+            sample_bytes(words, self.counter)
         }
 
         /// Angular rate in rad/s.

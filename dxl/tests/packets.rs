@@ -21,6 +21,19 @@ fn check(encoded: Result<usize, EncodeError>, buf: &[u8], expected: &str) {
     assert_eq!(&want[n - 2..], &crc, "CRC of the vector itself");
 }
 
+/// Checks the packet `encode` produced against our own vector `body` (everything before the
+/// CRC) and its CRC against `bitwise_crc`.
+fn check_body(encoded: Result<usize, EncodeError>, buf: &[u8], body: &str) {
+    let n = encoded.unwrap();
+    let want = hex(body);
+    assert_eq!(&buf[..n - 2], &want[..], "expected {body}");
+    assert_eq!(
+        bitwise_crc(&want).to_le_bytes(),
+        buf[n - 2..n],
+        "CRC of {body}"
+    );
+}
+
 fn decode_one(bytes: &[u8]) -> (u8, u8, Vec<u8>) {
     let mut out = [0u8; 512];
     let p = decode(bytes, &mut out).unwrap();
@@ -32,74 +45,89 @@ fn decode_one(bytes: &[u8]) -> (u8, u8, Vec<u8>) {
 // our own, with their CRC verified by `bitwise_crc`.
 
 #[test]
-fn ping() {
+fn instruction_vectors() {
+    let goal = 512i32.to_le_bytes();
+    let emanual = [
+        (Instruction::Ping, 1, "FF FF FD 00 01 03 00 01 19 4E"),
+        (
+            Instruction::Read { addr: 132, len: 4 },
+            1,
+            "FF FF FD 00 01 07 00 02 84 00 04 00 1D 15",
+        ),
+        (
+            Instruction::Write {
+                addr: 116,
+                data: &goal,
+            },
+            1,
+            "FF FF FD 00 01 09 00 03 74 00 00 02 00 00 CA 89",
+        ),
+        (Instruction::Reboot, 1, "FF FF FD 00 01 03 00 08 2F 4E"),
+        (
+            Instruction::SyncRead {
+                addr: 132,
+                len: 4,
+                ids: &[1, 2],
+            },
+            0xFE,
+            "FF FF FD 00 FE 09 00 82 84 00 04 00 01 02 CE FA",
+        ),
+    ];
     let mut b = [0u8; 64];
-    check(
-        Instruction::Ping.encode(&mut b, 1),
-        &b,
-        "FF FF FD 00 01 03 00 01 19 4E",
-    );
-    let r = encode_status(&mut b, 1, StatusError::OK, &[0x06, 0x04, 0x26]);
-    check(r, &b, "FF FF FD 00 01 07 00 55 00 06 04 26 65 5D");
-}
-
-#[test]
-fn read() {
-    let mut b = [0u8; 64];
-    let r = Instruction::Read { addr: 132, len: 4 }.encode(&mut b, 1);
-    check(r, &b, "FF FF FD 00 01 07 00 02 84 00 04 00 1D 15");
-    let r = encode_status(&mut b, 1, StatusError::OK, &[0xA6, 0, 0, 0]);
-    check(r, &b, "FF FF FD 00 01 08 00 55 00 A6 00 00 00 8C C0");
-}
-
-#[test]
-fn write() {
-    let mut b = [0u8; 64];
-    let r = Instruction::Write {
-        addr: 116,
-        data: &512i32.to_le_bytes(),
+    for (instruction, id, expected) in emanual {
+        check(instruction.encode(&mut b, id), &b, expected);
     }
-    .encode(&mut b, 1);
-    check(r, &b, "FF FF FD 00 01 09 00 03 74 00 00 02 00 00 CA 89");
-    let r = encode_status(&mut b, 1, StatusError::OK, &[]);
-    check(r, &b, "FF FF FD 00 01 04 00 55 00 A1 0C");
+    // Our own vectors (without their CRC, checked by `bitwise_crc`).
+    let own = [
+        (Instruction::Action, 0xFE, "FF FF FD 00 FE 03 00 05"),
+        (
+            Instruction::RegWrite {
+                addr: 104,
+                data: &[0xC8, 0, 0, 0],
+            },
+            1,
+            "FF FF FD 00 01 09 00 04 68 00 C8 00 00 00",
+        ),
+        (
+            Instruction::FastSyncRead {
+                addr: 132,
+                len: 4,
+                ids: &[1, 2],
+            },
+            0xFE,
+            "FF FF FD 00 FE 09 00 8A 84 00 04 00 01 02",
+        ),
+    ];
+    for (instruction, id, body) in own {
+        check_body(instruction.encode(&mut b, id), &b, body);
+    }
 }
 
 #[test]
-fn reboot_action_reg_write() {
+fn status_vectors() {
     let mut b = [0u8; 64];
-    check(
-        Instruction::Reboot.encode(&mut b, 1),
-        &b,
-        "FF FF FD 00 01 03 00 08 2F 4E",
-    );
-    let n = Instruction::Action.encode(&mut b, 0xFE).unwrap();
-    assert_eq!(&b[..8], &hex("FF FF FD 00 FE 03 00 05")[..]);
-    assert_eq!(bitwise_crc(&b[..8]).to_le_bytes(), [b[8], b[9]]);
-    assert_eq!(n, 10);
-    let n = Instruction::RegWrite {
-        addr: 104,
-        data: &[0xC8, 0, 0, 0],
+    for (data, expected) in [
+        (
+            &[0x06, 0x04, 0x26][..],
+            "FF FF FD 00 01 07 00 55 00 06 04 26 65 5D",
+        ),
+        (
+            &[0xA6, 0, 0, 0],
+            "FF FF FD 00 01 08 00 55 00 A6 00 00 00 8C C0",
+        ),
+        (&[], "FF FF FD 00 01 04 00 55 00 A1 0C"),
+    ] {
+        check(
+            encode_status(&mut b, 1, StatusError::OK, data),
+            &b,
+            expected,
+        );
     }
-    .encode(&mut b, 1)
-    .unwrap();
-    assert_eq!(
-        &b[..n - 2],
-        &hex("FF FF FD 00 01 09 00 04 68 00 C8 00 00 00")[..]
-    );
-    assert_eq!(bitwise_crc(&b[..n - 2]).to_le_bytes(), [b[n - 2], b[n - 1]]);
 }
 
 #[test]
-fn sync_read_and_write() {
+fn sync_write() {
     let mut b = [0u8; 64];
-    let r = Instruction::SyncRead {
-        addr: 132,
-        len: 4,
-        ids: &[1, 2],
-    }
-    .encode(&mut b, 0xFE);
-    check(r, &b, "FF FF FD 00 FE 09 00 82 84 00 04 00 01 02 CE FA");
     let d1 = 150i32.to_le_bytes();
     let d2 = 170i32.to_le_bytes();
     let r = encode_sync_write(&mut b, 116, 4, &[(1, &d1), (2, &d2)]);
@@ -112,18 +140,6 @@ fn sync_read_and_write() {
         encode_sync_write(&mut b, 116, 4, &[(1, &[1, 2, 3])]),
         Err(EncodeError::InvalidArgument)
     );
-    let r = Instruction::FastSyncRead {
-        addr: 132,
-        len: 4,
-        ids: &[1, 2],
-    }
-    .encode(&mut b, 0xFE);
-    let n = r.unwrap();
-    assert_eq!(
-        &b[..n - 2],
-        &hex("FF FF FD 00 FE 09 00 8A 84 00 04 00 01 02")[..]
-    );
-    assert_eq!(bitwise_crc(&b[..n - 2]).to_le_bytes(), [b[n - 2], b[n - 1]]);
 }
 
 #[test]
@@ -158,10 +174,12 @@ fn bulk_read_and_write() {
             data: &[0],
         },
     ];
-    let n = encode_bulk_write(&mut b, &entries).unwrap();
-    let want = hex("FF FF FD 00 FE 12 00 93 01 74 00 04 00 00 02 00 00 6F 09 00 01 00 00");
-    assert_eq!(&b[..n - 2], &want[..]);
-    assert_eq!(bitwise_crc(&want).to_le_bytes(), [b[n - 2], b[n - 1]]);
+    let r = encode_bulk_write(&mut b, &entries);
+    check_body(
+        r,
+        &b,
+        "FF FF FD 00 FE 12 00 93 01 74 00 04 00 00 02 00 00 6F 09 00 01 00 00",
+    );
 }
 
 #[test]
@@ -254,34 +272,23 @@ fn parse_rejects_bad_layouts() {
         instruction,
         params,
     };
-    assert_eq!(
-        Instruction::parse(&p(0x01, &[0])),
-        Err(ParseError::BadLength)
-    );
-    assert_eq!(
-        Instruction::parse(&p(0x02, &[0, 0, 4])),
-        Err(ParseError::BadLength)
-    );
-    assert_eq!(
-        Instruction::parse(&p(0x03, &[0])),
-        Err(ParseError::BadLength)
-    );
-    assert_eq!(
-        Instruction::parse(&p(0x82, &[0, 0, 4])),
-        Err(ParseError::BadLength)
-    );
-    assert_eq!(
-        Instruction::parse(&p(0x83, &[0, 0, 2, 0, 1, 2])),
-        Err(ParseError::BadLength)
-    );
-    assert_eq!(
-        Instruction::parse(&p(0x92, &[1, 2, 3, 4])),
-        Err(ParseError::BadLength)
-    );
-    assert_eq!(
-        Instruction::parse(&p(0x93, &[1, 0, 0, 5, 0, 1])),
-        Err(ParseError::BadLength)
-    );
+    let bad_lengths: [(u8, &'static [u8]); 7] = [
+        (0x01, &[0]),
+        (0x02, &[0, 0, 4]),
+        (0x03, &[0]),
+        (0x82, &[0, 0, 4]),
+        (0x83, &[0, 0, 2, 0, 1, 2]),
+        (0x92, &[1, 2, 3, 4]),
+        (0x93, &[1, 0, 0, 5, 0, 1]),
+    ];
+    for (instruction, params) in bad_lengths {
+        let r = Instruction::parse(&p(instruction, params));
+        assert_eq!(
+            r,
+            Err(ParseError::BadLength),
+            "instruction {instruction:#04X}"
+        );
+    }
     assert_eq!(
         Instruction::parse(&p(0x77, &[])),
         Err(ParseError::UnknownInstruction(0x77))
@@ -300,35 +307,32 @@ fn parse_rejects_bad_layouts() {
     assert_eq!(st.data, &[9]);
 }
 
+/// Checks that the WRITE parameters `params` go on the wire as `wire` (instruction byte and
+/// stuffed parameters) and decode back.
+fn check_stuffing(params: &str, wire: &str) {
+    let mut b = [0u8; 64];
+    let params = hex(params);
+    let n = encode(&mut b, 1, 0x03, &params).unwrap();
+    assert_eq!(&b[7..n - 2], &hex(wire)[..], "{wire}");
+    assert_eq!(decode_one(&b[..n]).2, params);
+}
+
 #[test]
 fn stuffing_cases() {
     let mut b = [0u8; 64];
-    // In the middle.
-    let n = encode(&mut b, 1, 0x03, &[0x10, 0xFF, 0xFF, 0xFD, 0x20]).unwrap();
-    assert_eq!(
-        &b[..n - 2],
-        &hex("FF FF FD 00 01 09 00 03 10 FF FF FD FD 20")[..]
-    );
-    // LEN counts the stuffed byte; CRC covers the stuffed stream.
-    assert_eq!(bitwise_crc(&b[..n - 2]).to_le_bytes(), [b[n - 2], b[n - 1]]);
-    assert_eq!(decode_one(&b[..n]).2, vec![0x10, 0xFF, 0xFF, 0xFD, 0x20]);
+    // In the middle; LEN counts the stuffed byte, CRC covers the stuffed stream.
+    let r = encode(&mut b, 1, 0x03, &[0x10, 0xFF, 0xFF, 0xFD, 0x20]);
+    check_body(r, &b, "FF FF FD 00 01 09 00 03 10 FF FF FD FD 20");
+    check_stuffing("10 FF FF FD 20", "03 10 FF FF FD FD 20");
     // At the end of the parameters.
-    let n = encode(&mut b, 1, 0x03, &[0xFF, 0xFF, 0xFD]).unwrap();
-    assert_eq!(&b[7..n - 2], &hex("03 FF FF FD FD")[..]);
-    assert_eq!(decode_one(&b[..n]).2, vec![0xFF, 0xFF, 0xFD]);
+    check_stuffing("FF FF FD", "03 FF FF FD FD");
     // Repeated, back to back.
-    let params = hex("FF FF FD FF FF FD FF FF FD");
-    let n = encode(&mut b, 1, 0x03, &params).unwrap();
-    assert_eq!(
-        &b[7..n - 2],
-        &hex("03 FF FF FD FD FF FF FD FD FF FF FD FD")[..]
+    check_stuffing(
+        "FF FF FD FF FF FD FF FF FD",
+        "03 FF FF FD FD FF FF FD FD FF FF FD FD",
     );
-    assert_eq!(decode_one(&b[..n]).2, params);
     // FD FD already in the data stays intact, and a lone FF FF FD followed by FD.
-    let params = hex("FF FF FD FD FD 00 FF FD");
-    let n = encode(&mut b, 1, 0x03, &params).unwrap();
-    assert_eq!(&b[7..n - 2], &hex("03 FF FF FD FD FD FD 00 FF FD")[..]);
-    assert_eq!(decode_one(&b[..n]).2, params);
+    check_stuffing("FF FF FD FD FD 00 FF FD", "03 FF FF FD FD FD FD 00 FF FD");
     // A header pattern in the data cannot leak onto the wire.
     let params = hex("FF FF FD 00 01 02");
     let n = encode(&mut b, 1, 0x03, &params).unwrap();
@@ -374,18 +378,13 @@ fn decoder_errors() {
     // A good packet right after.
     assert!(matches!(dec.feed(&b[..n]).1, Some(Ok(p)) if p.id == 1 && p.instruction == 2));
     // LEN too small / too large / bad ID.
-    assert_eq!(
-        dec.feed(&hex("FF FF FD 00 01 02 00")).1,
-        Some(Err(DecodeError::LenTooSmall))
-    );
-    assert_eq!(
-        dec.feed(&hex("FF FF FD 00 01 14 00")).1,
-        Some(Err(DecodeError::LenTooLarge))
-    );
-    assert_eq!(
-        dec.feed(&hex("FF FF FD 00 FF")).1,
-        Some(Err(DecodeError::BadId))
-    );
+    for (bytes, error) in [
+        ("FF FF FD 00 01 02 00", DecodeError::LenTooSmall),
+        ("FF FF FD 00 01 14 00", DecodeError::LenTooLarge),
+        ("FF FF FD 00 FF", DecodeError::BadId),
+    ] {
+        assert_eq!(dec.feed(&hex(bytes)).1, Some(Err(error)), "{bytes}");
+    }
     assert_eq!(dec.stats().framing_errors, 3);
     // A header that interrupts a packet body restarts decoding from that header.
     let mut s = hex("FF FF FD 00 01 0C 00 02 01");

@@ -262,11 +262,13 @@ fn id() -> impl Strategy<Value = u8> {
 }
 
 fn pkt() -> impl Strategy<Value = Pkt> {
-    (id(), byte(), prop::collection::vec(byte(), 0..40)).prop_map(|(id, inst, params)| Pkt {
-        id,
-        inst,
-        params,
-    })
+    pkt_of(byte(), 40)
+}
+
+/// A packet with its instruction from `inst` and fewer than `max_params` parameters.
+fn pkt_of(inst: impl Strategy<Value = u8>, max_params: usize) -> impl Strategy<Value = Pkt> {
+    let params = prop::collection::vec(byte(), 0..max_params);
+    (id(), inst, params).prop_map(|(id, inst, params)| Pkt { id, inst, params })
 }
 
 fn junk() -> impl Strategy<Value = Junk> {
@@ -349,24 +351,21 @@ proptest! {
 
     #[test]
     fn roundtrip_any_packet(
-        id in id(),
-        inst in any::<u8>(),
-        params in prop::collection::vec(byte(), 0..48),
+        pkt in pkt_of(any::<u8>(), 48),
         pre in prop::collection::vec(byte(), 0..24),
         post in prop::collection::vec(byte(), 0..8),
     ) {
-        let mut buf = [0u8; 2 * CAP + 16];
-        let n = encode(&mut buf, id, inst, &params).unwrap();
-        let mut stream = pre.clone();
-        stream.extend_from_slice(&buf[..n]);
-        stream.extend_from_slice(&post);
+        let packet = encode_pkt(&pkt);
+        let n = packet.len();
+        let stream = [&pre[..], &packet, &post].concat();
+        let original = (pkt.id, pkt.inst, &pkt.params[..]);
         // One-shot decode of the clean packet.
         let mut out = [0u8; 2 * CAP];
-        let p = decode(&buf[..n], &mut out).unwrap();
-        prop_assert_eq!((p.id, p.instruction, p.params), (id, inst, &params[..]));
+        let p = decode(&packet, &mut out).unwrap();
+        prop_assert_eq!((p.id, p.instruction, p.params), original);
         // Streaming decode after arbitrary garbage.
         let mut dec = Decoder::<CAP>::new();
-        check_case(&mut dec, &stream, pre.len(), pre.len() + n - 1, None, (id, inst, &params));
+        check_case(&mut dec, &stream, pre.len(), pre.len() + n - 1, None, original);
     }
 
     #[test]
@@ -385,21 +384,19 @@ proptest! {
 
     #[test]
     fn mutated_packets_are_rejected(
-        id in id(),
-        inst in any::<u8>(),
-        params in prop::collection::vec(byte(), 0..48),
+        pkt in pkt_of(any::<u8>(), 48),
         pre in prop::collection::vec(byte(), 0..8),
         pos in any::<prop::sample::Index>(),
         flip in 1u8..=255,
     ) {
-        let mut buf = [0u8; 2 * CAP + 16];
-        let n = encode(&mut buf, id, inst, &params).unwrap();
-        let mut stream = pre.clone();
-        stream.extend_from_slice(&buf[..n]);
+        let packet = encode_pkt(&pkt);
+        let n = packet.len();
+        let mut stream = [&pre[..], &packet].concat();
         let m = pos.index(stream.len());
         stream[m] ^= flip;
+        let original = (pkt.id, pkt.inst, &pkt.params[..]);
         let mut dec = Decoder::<CAP>::new();
-        check_case(&mut dec, &stream, pre.len(), pre.len() + n - 1, Some(m), (id, inst, &params));
+        check_case(&mut dec, &stream, pre.len(), pre.len() + n - 1, Some(m), original);
     }
 
     #[test]

@@ -17,44 +17,53 @@ fn sampler<R: Real>(kind: ModelKind) -> Sampler<R, CAP> {
     Sampler::new(plan, 0.005).expect("sampler")
 }
 
+/// Benches `next` on a copy of `fresh`, started again from `fresh` when `is_done`.
+fn bench_samples<S: Clone, T>(
+    c: &mut Criterion,
+    name: &str,
+    fresh: &S,
+    is_done: impl Fn(&S) -> bool,
+    mut next: impl FnMut(&mut S) -> T,
+) {
+    let mut s = fresh.clone();
+    c.bench_function(name, |b| {
+        b.iter(|| {
+            if is_done(&s) {
+                s = fresh.clone();
+            }
+            black_box(next(&mut s))
+        })
+    });
+}
+
+/// Benches the exact sampler of `kind` in `R` (named `label`).
+fn bench_sampler<R: Real>(c: &mut Criterion, kind: ModelKind, label: &str) {
+    bench_samples(
+        c,
+        &format!("sample/{}/{label}", kind.name()),
+        &sampler::<R>(kind),
+        Sampler::is_done,
+        |s| s.next(black_box(R::zero())),
+    );
+}
+
 fn bench(c: &mut Criterion) {
     for kind in ModelKind::ALL {
-        let fresh32 = sampler::<f32>(kind);
-        let mut s32 = fresh32.clone();
-        c.bench_function(&format!("sample/{}/f32", kind.name()), |b| {
-            b.iter(|| {
-                if s32.is_done() {
-                    s32 = fresh32.clone();
-                }
-                black_box(s32.next(black_box(0.0)))
-            })
-        });
-        let fresh64 = sampler::<f64>(kind);
-        let mut s64 = fresh64.clone();
-        c.bench_function(&format!("sample/{}/f64", kind.name()), |b| {
-            b.iter(|| {
-                if s64.is_done() {
-                    s64 = fresh64.clone();
-                }
-                black_box(s64.next(black_box(0.0)))
-            })
-        });
+        bench_sampler::<f32>(c, kind, "f32");
+        bench_sampler::<f64>(c, kind, "f64");
         let robot = Robot::reference();
         let walk = ForwardWalk::table2();
         let model = Model::<f32>::new(kind, &robot, walk.z_c).expect("model");
         let plan = walk
             .plan::<f32, CAP>(&robot, walk.params(model))
             .expect("plan");
-        let fresh_fx = FixedSampler::new(plan, 0.005).expect("fixed");
-        let mut fxs = fresh_fx.clone();
-        c.bench_function(&format!("sample/{}/fixed", kind.name()), |b| {
-            b.iter(|| {
-                if fxs.is_done() {
-                    fxs = fresh_fx.clone();
-                }
-                black_box(fxs.next(black_box(0)))
-            })
-        });
+        bench_samples(
+            c,
+            &format!("sample/{}/fixed", kind.name()),
+            &FixedSampler::new(plan, 0.005).expect("fixed"),
+            FixedSampler::is_done,
+            |s| s.next(black_box(0)),
+        );
         let params = walk.params(model);
         let fourier = FourierCom::<f32, 24>::from_params(
             &params,

@@ -87,92 +87,84 @@ pub trait Real:
     }
 }
 
-impl Real for f32 {
-    #[inline]
-    fn of(v: f64) -> Self {
-        v as f32
-    }
-    #[inline]
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-    #[inline]
-    fn from_u32(v: u32) -> Self {
-        v as f32
-    }
-    #[inline]
-    fn exp(self) -> Self {
-        libm::expf(self)
-    }
-    #[inline]
-    fn sqrt(self) -> Self {
-        crate::fastmath::sqrt(self)
-    }
-    #[inline]
-    fn sin(self) -> Self {
-        crate::fastmath::sin(self)
-    }
-    #[inline]
-    fn cos(self) -> Self {
-        crate::fastmath::cos(self)
-    }
-    #[inline]
-    fn sin_cos(self) -> (Self, Self) {
-        crate::fastmath::sin_cos(self)
-    }
-    #[inline]
-    fn atan2(self, x: Self) -> Self {
-        crate::fastmath::atan2(self, x)
-    }
-    #[inline]
-    fn abs(self) -> Self {
-        libm::fabsf(self)
-    }
-    #[inline]
-    fn is_finite(self) -> bool {
-        f32::is_finite(self)
-    }
+/// Implements [`Real`] for a float type from its conversion from `f64` and its maths
+/// functions: the one place that says which implementation each type uses.
+macro_rules! impl_real {
+    ($t:ident, of: |$v:ident| $of:expr, exp: $exp:path, sqrt: $sqrt:path, sin: $sin:path,
+     cos: $cos:path, sin_cos: $sin_cos:path, atan2: $atan2:path, abs: $abs:path) => {
+        impl Real for $t {
+            #[inline]
+            fn of($v: f64) -> Self {
+                $of
+            }
+            #[inline]
+            fn to_f64(self) -> f64 {
+                f64::from(self)
+            }
+            #[inline]
+            fn from_u32(v: u32) -> Self {
+                v as $t
+            }
+            #[inline]
+            fn exp(self) -> Self {
+                $exp(self)
+            }
+            #[inline]
+            fn sqrt(self) -> Self {
+                $sqrt(self)
+            }
+            #[inline]
+            fn sin(self) -> Self {
+                $sin(self)
+            }
+            #[inline]
+            fn cos(self) -> Self {
+                $cos(self)
+            }
+            #[inline]
+            fn sin_cos(self) -> (Self, Self) {
+                $sin_cos(self)
+            }
+            #[inline]
+            fn atan2(self, x: Self) -> Self {
+                $atan2(self, x)
+            }
+            #[inline]
+            fn abs(self) -> Self {
+                $abs(self)
+            }
+            #[inline]
+            fn is_finite(self) -> bool {
+                $t::is_finite(self)
+            }
+        }
+    };
 }
 
-impl Real for f64 {
-    #[inline]
-    fn of(v: f64) -> Self {
-        v
-    }
-    #[inline]
-    fn to_f64(self) -> f64 {
-        self
-    }
-    #[inline]
-    fn from_u32(v: u32) -> Self {
-        v as f64
-    }
-    #[inline]
-    fn exp(self) -> Self {
-        libm::exp(self)
-    }
-    #[inline]
-    fn sqrt(self) -> Self {
-        libm::sqrt(self)
-    }
-    #[inline]
-    fn sin(self) -> Self {
-        libm::sin(self)
-    }
-    #[inline]
-    fn cos(self) -> Self {
-        libm::cos(self)
-    }
-    #[inline]
-    fn atan2(self, x: Self) -> Self {
-        libm::atan2(self, x)
-    }
-    #[inline]
-    fn abs(self) -> Self {
-        libm::fabs(self)
-    }
-    #[inline]
-    fn is_finite(self) -> bool {
-        f64::is_finite(self)
-    }
+impl_real!(
+    f32,
+    of: |v| v as f32,
+    exp: libm::expf,
+    sqrt: crate::fastmath::sqrt,
+    sin: crate::fastmath::sin,
+    cos: crate::fastmath::cos,
+    sin_cos: crate::fastmath::sin_cos,
+    atan2: crate::fastmath::atan2,
+    abs: libm::fabsf
+);
+impl_real!(
+    f64,
+    of: |v| v,
+    exp: libm::exp,
+    sqrt: libm::sqrt,
+    sin: libm::sin,
+    cos: libm::cos,
+    sin_cos: sin_cos_f64,
+    atan2: libm::atan2,
+    abs: libm::fabs
+);
+
+/// libm's sine and cosine of an `f64` (its `sincos` may round differently from the two).
+fn sin_cos_f64(x: f64) -> (f64, f64) {
+    (libm::sin(x), libm::cos(x))
 }

@@ -353,22 +353,17 @@ fn steady_state_of_exact_solver_matches_series_within_bound() {
                 ez < 1e-12,
                 "the sampler's ZMP and the series' reference differ by {ez}"
             );
-            for ax in 0..2 {
-                // Transients of the start and the stop decay like e^{−ω·10T} < 1e-18 here.
-                assert!(
-                    ec[ax] <= bc[ax] + 1e-11,
-                    "{} N={n} axis {ax}: {} > {}",
-                    kind.name(),
-                    ec[ax],
-                    bc[ax]
-                );
-                assert!(
-                    ev[ax] <= bv[ax] + 1e-10,
-                    "{} N={n} axis {ax}: vel {} > {}",
-                    kind.name(),
-                    ev[ax],
-                    bv[ax]
-                );
+            // Transients of the start and the stop decay like e^{−ω·10T} < 1e-18 here.
+            for (what, e, bound, slack) in [("pos", ec, bc, 1e-11), ("vel", ev, bv, 1e-10)] {
+                for ax in 0..2 {
+                    assert!(
+                        e[ax] <= bound[ax] + slack,
+                        "{} N={n} axis {ax}: {what} {} > {}",
+                        kind.name(),
+                        e[ax],
+                        bound[ax]
+                    );
+                }
             }
         }
     }

@@ -3,7 +3,9 @@
 //! Reference robot: sole 0.100 × 0.060 m centred under the ankle (half sizes 0.05 × 0.03),
 //! force sensors at (±0.040, ±0.025) m, order front-left, front-right, rear-left, rear-right.
 
-use gait_core::measured::{measured_zmp, sensor_positions, Contact, ForceReading, ZmpErrorStats};
+use gait_core::measured::{
+    measured_zmp, sensor_positions, Contact, ForceReading, MeasuredZmp, SolePose, ZmpErrorStats,
+};
 use gait_core::support::{sole_corners, SupportPolygon, FAR_OUTSIDE, MAX_VERTICES};
 use gait_core::swing::FootSample;
 use gait_core::{GaitError, Place, Real, Robot};
@@ -18,6 +20,20 @@ fn place(x: f64, y: f64, yaw: f64) -> Place<f64> {
 
 fn reading(f: [f64; 4]) -> ForceReading<f64> {
     ForceReading::new(f)
+}
+
+/// The reference robot's measured ZMP from each foot's place and four sensor forces, N.
+fn zmp_of<L: SolePose<f64>, Q: SolePose<f64>>(
+    (left, lf): (&L, [f64; 4]),
+    (right, rf): (&Q, [f64; 4]),
+    min_load: f64,
+) -> MeasuredZmp<f64> {
+    measured_zmp(
+        &ROBOT,
+        (left, &reading(lf)),
+        (right, &reading(rf)),
+        min_load,
+    )
 }
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
@@ -217,12 +233,7 @@ fn equal_forces_put_the_zmp_at_the_ankle() {
     // whatever the yaw.
     let l = place(0.1, 0.2, 0.7);
     let r = place(0.1, 0.11, 0.0);
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([10.0; 4])),
-        (&r, &reading([0.0; 4])),
-        1.0,
-    );
+    let m = zmp_of((&l, [10.0; 4]), (&r, [0.0; 4]), 1.0);
     assert_xy(m.zmp, [0.1, 0.2], EPS);
     assert_eq!(m.contact, Contact::Left);
     assert!(
@@ -241,12 +252,7 @@ fn single_sensor_load_is_at_that_sensor_rotated_with_the_foot() {
     //     = −0.009295780
     let r = place(0.05, -0.045, 0.3);
     let l = place(0.0, 0.045, 0.0);
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([0.0; 4])),
-        (&r, &reading([25.0, 0.0, 0.0, 0.0])),
-        1.0,
-    );
+    let m = zmp_of((&l, [0.0; 4]), (&r, [25.0, 0.0, 0.0, 0.0]), 1.0);
     assert_xy(m.zmp, [0.080825454, -0.009295780], 1e-9);
     assert_eq!(m.contact, Contact::Right);
     // And it is exactly the world position of that sensor.
@@ -286,22 +292,12 @@ fn both_feet_loaded_equally_give_the_midpoint() {
     // ((0.02 − 0.02)/2, (0.045 − 0.045)/2) = (0, 0).
     let l = place(0.02, 0.045, 0.2);
     let r = place(-0.02, -0.045, -0.1);
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([7.0; 4])),
-        (&r, &reading([7.0; 4])),
-        1.0,
-    );
+    let m = zmp_of((&l, [7.0; 4]), (&r, [7.0; 4]), 1.0);
     assert_xy(m.zmp, [0.0, 0.0], EPS);
     assert_eq!(m.contact, Contact::Both);
     assert!(close(m.total_force, 56.0, EPS));
     // Unequal loads 30 N : 10 N → 0.75·(0.02, 0.045) + 0.25·(−0.02, −0.045) = (0.01, 0.0225).
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([7.5; 4])),
-        (&r, &reading([2.5; 4])),
-        1.0,
-    );
+    let m = zmp_of((&l, [7.5; 4]), (&r, [2.5; 4]), 1.0);
     assert_xy(m.zmp, [0.01, 0.0225], EPS);
     // Σ fᵢ rᵢ / Σ fᵢ over all 8 sensors gives the same point.
     let (sl, sr) = (
@@ -331,12 +327,7 @@ fn foot_sample_poses_are_accepted() {
         yaw: 0.0,
     };
     let r = place(0.0, -0.045, 0.0);
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([5.0; 4])),
-        (&r, &reading([5.0; 4])),
-        1.0,
-    );
+    let m = zmp_of((&l, [5.0; 4]), (&r, [5.0; 4]), 1.0);
     assert_xy(m.zmp, [0.0, 0.0], EPS);
 }
 
@@ -345,23 +336,13 @@ fn a_foot_below_min_load_is_ignored() {
     // Right foot: 2 N on one sensor < min_load 5 N → only the left ankle counts.
     let l = place(0.0, 0.045, 0.0);
     let r = place(0.0, -0.045, 0.0);
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([10.0; 4])),
-        (&r, &reading([2.0, 0.0, 0.0, 0.0])),
-        5.0,
-    );
+    let m = zmp_of((&l, [10.0; 4]), (&r, [2.0, 0.0, 0.0, 0.0]), 5.0);
     assert_xy(m.zmp, [0.0, 0.045], EPS);
     assert_eq!(m.contact, Contact::Left);
     // The load is still reported.
     assert!(close(m.right_load, 2.0, EPS) && close(m.total_force, 42.0, EPS));
     // Exactly at min_load counts.
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([0.0; 4])),
-        (&r, &reading([5.0, 0.0, 0.0, 0.0])),
-        5.0,
-    );
+    let m = zmp_of((&l, [0.0; 4]), (&r, [5.0, 0.0, 0.0, 0.0]), 5.0);
     assert_eq!(m.contact, Contact::Right);
 }
 
@@ -369,38 +350,18 @@ fn a_foot_below_min_load_is_ignored() {
 fn airborne_gives_no_zmp() {
     let l = place(0.0, 0.045, 0.0);
     let r = place(0.0, -0.045, 0.0);
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([0.0; 4])),
-        (&r, &reading([0.0; 4])),
-        1.0,
-    );
+    let m = zmp_of((&l, [0.0; 4]), (&r, [0.0; 4]), 1.0);
     assert_eq!(m.zmp, None);
     assert_eq!(m.contact, Contact::None);
     assert_eq!(m.total_force, 0.0);
     // Both below the threshold.
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([0.1; 4])),
-        (&r, &reading([0.2; 4])),
-        1.0,
-    );
+    let m = zmp_of((&l, [0.1; 4]), (&r, [0.2; 4]), 1.0);
     assert_eq!((m.zmp, m.contact), (None, Contact::None));
     // A zero load with a negative (or zero) threshold is still no contact, never 0/0.
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([0.0; 4])),
-        (&r, &reading([-3.0; 4])),
-        -1.0,
-    );
+    let m = zmp_of((&l, [0.0; 4]), (&r, [-3.0; 4]), -1.0);
     assert_eq!((m.zmp, m.contact), (None, Contact::None));
     // A NaN threshold loads no foot.
-    let m = measured_zmp(
-        &ROBOT,
-        (&l, &reading([9.0; 4])),
-        (&r, &reading([9.0; 4])),
-        f64::NAN,
-    );
+    let m = zmp_of((&l, [9.0; 4]), (&r, [9.0; 4]), f64::NAN);
     assert_eq!((m.zmp, m.contact), (None, Contact::None));
 }
 
@@ -409,12 +370,7 @@ fn negative_readings_are_clamped_to_zero() {
     // FL −5 → 0: CoP = 10·[(0.04, −0.025) + (−0.04, 0.025) + (−0.04, −0.025)] / 30
     //              = (−0.04/3, −0.025/3).
     let f = place(0.0, 0.0, 0.0);
-    let m = measured_zmp(
-        &ROBOT,
-        (&f, &reading([-5.0, 10.0, 10.0, 10.0])),
-        (&f, &reading([0.0; 4])),
-        1.0,
-    );
+    let m = zmp_of((&f, [-5.0, 10.0, 10.0, 10.0]), (&f, [0.0; 4]), 1.0);
     assert_xy(m.zmp, [-0.04 / 3.0, -0.025 / 3.0], EPS);
     assert!(close(m.left_load, 30.0, EPS));
 }
@@ -424,24 +380,14 @@ fn non_finite_readings_invalidate_that_foot_only() {
     let l = place(0.0, 0.045, 0.0);
     let r = place(0.0, -0.045, 0.0);
     for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
-        let m = measured_zmp(
-            &ROBOT,
-            (&l, &reading([10.0, bad, 10.0, 10.0])),
-            (&r, &reading([10.0; 4])),
-            1.0,
-        );
+        let m = zmp_of((&l, [10.0, bad, 10.0, 10.0]), (&r, [10.0; 4]), 1.0);
         assert_xy(m.zmp, [0.0, -0.045], EPS);
         assert!(!m.left_valid && m.right_valid);
         assert_eq!(m.left_load, 0.0);
         assert_eq!(m.contact, Contact::Right);
         assert!(close(m.total_force, 40.0, EPS));
         // Both bad → no ZMP, never NaN.
-        let m = measured_zmp(
-            &ROBOT,
-            (&l, &reading([bad; 4])),
-            (&r, &reading([1.0, 1.0, bad, 1.0])),
-            1.0,
-        );
+        let m = zmp_of((&l, [bad; 4]), (&r, [1.0, 1.0, bad, 1.0]), 1.0);
         assert_eq!((m.zmp, m.contact), (None, Contact::None));
         assert!(!m.left_valid && !m.right_valid && m.total_force == 0.0);
     }
@@ -489,7 +435,7 @@ proptest! {
         rf in forces_strategy(),
         min_load in 0.0..30.0f64,
     ) {
-        let m = measured_zmp(&ROBOT, (&lp, &reading(lf)), (&rp, &reading(rf)), min_load);
+        let m = zmp_of((&lp, lf), (&rp, rf), min_load);
         let (ll, rl): (f64, f64) = (lf.iter().sum(), rf.iter().sum());
         let l_on = ll > 0.0 && ll >= min_load;
         let r_on = rl > 0.0 && rl >= min_load;
@@ -547,7 +493,7 @@ proptest! {
     ) {
         let l = place(0.0, 0.045, 0.1);
         let r = place(0.0, -0.045, -0.1);
-        let m = measured_zmp(&ROBOT, (&l, &reading(lf)), (&r, &reading(rf)), min_load);
+        let m = zmp_of((&l, lf), (&r, rf), min_load);
         prop_assert!(m.total_force.is_finite() && m.left_load.is_finite() && m.right_load.is_finite());
         if let Some(z) = m.zmp {
             prop_assert!(z[0].is_finite() && z[1].is_finite());

@@ -468,25 +468,27 @@ pub fn read_truth(path: &Path) -> Result<TruthTable, String> {
     if header.iter().all(String::is_empty) {
         return Err(format!("{}: empty truth file", path.display()));
     }
-    let col = |names: &[&str]| header.iter().position(|h| names.contains(&h.as_str()));
-    let ct = col(&["t_s", "t", "time"])
-        .ok_or_else(|| format!("{}: no `t_s` column in {header:?}", path.display()))?;
-    let cx = col(&[
-        "zmp_x_m",
-        "zmp_x",
-        "zmp_true_x",
-        "true_zmp_x",
-        "zmp_truth_x",
-    ])
-    .ok_or_else(|| format!("{}: no `zmp_x_m` column in {header:?}", path.display()))?;
-    let cy = col(&[
-        "zmp_y_m",
-        "zmp_y",
-        "zmp_true_y",
-        "true_zmp_y",
-        "zmp_truth_y",
-    ])
-    .ok_or_else(|| format!("{}: no `zmp_y_m` column in {header:?}", path.display()))?;
+    // The first column named one of `names` (the error names the first of them).
+    let col = |names: &[&str]| {
+        let first = names.first().copied().unwrap_or_default();
+        header
+            .iter()
+            .position(|h| names.contains(&h.as_str()))
+            .ok_or_else(|| format!("{}: no `{first}` column in {header:?}", path.display()))
+    };
+    // The true ZMP on `axis` under each name the truth files give it.
+    let zmp_col = |axis: char| {
+        let names = [
+            format!("zmp_{axis}_m"),
+            format!("zmp_{axis}"),
+            format!("zmp_true_{axis}"),
+            format!("true_zmp_{axis}"),
+            format!("zmp_truth_{axis}"),
+        ];
+        col(&names.each_ref().map(String::as_str))
+    };
+    let ct = col(&["t_s", "t", "time"])?;
+    let (cx, cy) = (zmp_col('x')?, zmp_col('y')?);
     let mut out = TruthTable::default();
     let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
     for (n, rec) in rd.records().enumerate() {

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use walker_contract::record::Record;
 use walker_contract::StopReason;
-use walker_host::fil::{run, FilOptions, FilResult};
+use walker_host::fil::{run, FilOptions, FilResult, WalkFigures};
 use walker_host::planfile::WalkSpec;
 use walker_host::report::{decode_file, DecodedLog};
 use walker_host::sim::SimConfig;
@@ -110,24 +110,8 @@ fn compute_time_follows_the_core_clock() {
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn short_walk_completes_and_is_deterministic() {
     let spec = short_walk(4);
-    let (a, log_a) = fil(
-        "det-a",
-        spec.clone(),
-        SimConfig {
-            seed: 7,
-            ..SimConfig::default()
-        },
-        &[],
-    );
-    let (b, log_b) = fil(
-        "det-b",
-        spec.clone(),
-        SimConfig {
-            seed: 7,
-            ..SimConfig::default()
-        },
-        &[],
-    );
+    let (a, log_a) = fil("det-a", spec.clone(), seeded(7), &[]);
+    let (b, log_b) = fil("det-b", spec.clone(), seeded(7), &[]);
     assert_eq!(a.exit_code, Some(0));
     assert_eq!(stop_reason(&log_a), Some(StopReason::PlanDone));
     assert_eq!(log_a.bad(), 0, "a clean run has no bad log frames");
@@ -158,10 +142,7 @@ fn short_walk_completes_and_is_deterministic() {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn dropped_and_corrupted_replies_are_counted_and_survived() {
-    let mut sim = SimConfig {
-        seed: 11,
-        ..SimConfig::default()
-    };
+    let mut sim = seeded(11);
     sim.faults.p_drop = 0.05;
     sim.faults.p_corrupt = 0.02;
     let (r, log) = fil("faults", short_walk(4), sim, &[]);
@@ -246,6 +227,34 @@ fn a_fall_stops_the_walk_and_turns_torque_off() {
 // commanded CoM in the walk's area), not how well the robot walks. On the MuJoCo robot the
 // open-loop whole-body compensation + stabilizer of issue 7 falls within seconds (exit 13), as
 // the full-dynamics issue predicted; making it walk there is the closed-loop issue's work.
+
+/// The firmware's gyro balance feedback and roll compliance off (the paper's open-loop walk),
+/// the servo-speed check off.
+const OPEN_LOOP: &[&str] = &[
+    "feasibility=off",
+    "gyro_ankle=0",
+    "gyro_hip=0",
+    "compliance_roll=0",
+];
+
+/// The walk's figures, after checking that the run finished its plan (exit 0, `PlanDone`)
+/// without a fall, more than 90 % of the planned distance walked.
+fn walked_the_plan(r: &FilResult, log: &DecodedLog, spec: &WalkSpec) -> WalkFigures {
+    let w = walker_host::fil::walk_figures(&r.truth, spec).unwrap();
+    assert_eq!(r.exit_code, Some(0), "{}", w.line());
+    assert_eq!(stop_reason(log), Some(StopReason::PlanDone));
+    assert_eq!(w.fell_at, None, "{}", w.line());
+    assert!(w.walked > 0.9 * w.planned, "{}", w.line());
+    w
+}
+
+/// The default simulated robot with the simulator seed `seed`.
+fn seeded(seed: u64) -> SimConfig {
+    SimConfig {
+        seed,
+        ..SimConfig::default()
+    }
+}
 
 /// The idealised kinematic robot, for the bounded-feedback tests below.
 fn idealised(seed: u64) -> SimConfig {
@@ -431,22 +440,8 @@ fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
         ..SimConfig::default()
     };
     let spec = WalkSpec::default();
-    let (r, log) = fil(
-        "mujoco-table2",
-        spec.clone(),
-        sim,
-        &[
-            "feasibility=off",
-            "gyro_ankle=0",
-            "gyro_hip=0",
-            "compliance_roll=0",
-        ],
-    );
-    assert_eq!(r.exit_code, Some(0));
-    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
-    let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
-    assert_eq!(w.fell_at, None, "{}", w.line());
-    assert!(w.walked > 0.9 * w.planned, "{}", w.line());
+    let (r, log) = fil("mujoco-table2", spec.clone(), sim, OPEN_LOOP);
+    let w = walked_the_plan(&r, &log, &spec);
     assert!(w.heading_drift.abs() < 5f64.to_radians(), "{}", w.line());
     assert!(w.max_tilt < 0.35, "{}", w.line());
     let stats = walker_host::report::run(
@@ -478,19 +473,12 @@ fn table2_completes_with_twenty_percent_reply_loss() {
     // Issue 16: start-up retries per device (8 attempts), so 20 % lost replies no longer stop
     // the walk before it starts; seed 1 of `walker fil --p-drop 0.2` (seeds 2 and 3 complete
     // too, checked by hand).
-    let mut sim = SimConfig {
-        seed: 1,
-        ..SimConfig::default()
-    };
+    let mut sim = seeded(1);
     sim.faults.p_drop = 0.2;
     let spec = WalkSpec::default();
     let (r, log) = fil("drop20", spec.clone(), sim, &["feasibility=off"]);
     assert!(r.sim.bus.dropped > 500, "{:?}", r.sim.bus);
-    assert_eq!(r.exit_code, Some(0));
-    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
-    let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
-    assert_eq!(w.fell_at, None, "{}", w.line());
-    assert!(w.walked > 0.9 * w.planned, "{}", w.line());
+    walked_the_plan(&r, &log, &spec);
 }
 
 #[test]
@@ -512,11 +500,7 @@ fn closed_loop_walk_survives_a_sagittal_push() {
         sim.clone(),
         &["feasibility=off"],
     );
-    let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
-    assert_eq!(r.exit_code, Some(0), "{}", w.line());
-    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
-    assert_eq!(w.fell_at, None, "{}", w.line());
-    assert!(w.walked > 0.9 * w.planned, "{}", w.line());
+    walked_the_plan(&r, &log, &spec);
     // Bounds: no target clamped to a joint limit, none non-finite (that stops with exit 15).
     assert!(
         !log.events.iter().any(|e| matches!(e, Record::Fault(f)
@@ -525,17 +509,7 @@ fn closed_loop_walk_survives_a_sagittal_push() {
         log.events
     );
     // The same push open loop: the robot falls and the firmware says so.
-    let (r, log) = fil(
-        "open-loop-push",
-        spec.clone(),
-        sim,
-        &[
-            "feasibility=off",
-            "gyro_ankle=0",
-            "gyro_hip=0",
-            "compliance_roll=0",
-        ],
-    );
+    let (r, log) = fil("open-loop-push", spec.clone(), sim, OPEN_LOOP);
     assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
     assert!(r.sim.fall_started_us.is_some());
 }

@@ -503,6 +503,13 @@ mod firmware {
         let t = (ovh + 50) / 100;
         hprintln!("overhead.avg {}.{}", t / 10, t % 10);
         hprintln!("overhead.max {}", u64::from(empty.max) * INSN_PER_COUNT);
+        // One measurement: `$n` runs of `$body` (the loop index `$i`), reported as `$name`
+        // without the loop overhead.
+        macro_rules! bench {
+            ($name:expr, $n:expr, |$i:pat_param| $body:block) => {
+                report($name, measure($n, &mut |$i| $body), ovh)
+            };
+        }
 
         // ---- bus packets: sizes from the dxl encoders ----
         let mut replies = [0u8; 160];
@@ -521,147 +528,79 @@ mod firmware {
         // ---- primitives ----
         let xs: [f32; 16] = core::array::from_fn(|k| 0.05 + 0.37 * k as f32);
         let x = |i: u32| black_box(xs[(i % 16) as usize]);
-        report(
-            "prim.expf",
-            measure(K, &mut |i| {
-                black_box(libm::expf(-x(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.sqrtf",
-            measure(K, &mut |i| {
-                black_box(libm::sqrtf(x(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.atan2f",
-            measure(K, &mut |i| {
-                black_box(libm::atan2f(x(i) - 1.7, 0.9));
-            }),
-            ovh,
-        );
-        report(
-            "prim.sqrt_fast",
-            measure(K, &mut |i| {
-                black_box(gait_core::fastmath::sqrt(x(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.atan2_fast",
-            measure(K, &mut |i| {
-                black_box(gait_core::fastmath::atan2(x(i) - 1.7, 0.9));
-            }),
-            ovh,
-        );
-        report(
-            "prim.sin_cos_fast",
-            measure(K, &mut |i| {
-                black_box(gait_core::fastmath::sin_cos(x(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.sinf_libm",
-            measure(K, &mut |i| {
-                black_box(libm::sinf(x(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.fmul",
-            measure(K, &mut |i| {
-                black_box(x(i) * x(i + 1));
-            }),
-            ovh,
-        );
-        report(
-            "prim.fdiv",
-            measure(K, &mut |i| {
-                black_box(x(i) / x(i + 1));
-            }),
-            ovh,
-        );
+        bench!("prim.expf", K, |i| {
+            black_box(libm::expf(-x(i)));
+        });
+        bench!("prim.sqrtf", K, |i| {
+            black_box(libm::sqrtf(x(i)));
+        });
+        bench!("prim.atan2f", K, |i| {
+            black_box(libm::atan2f(x(i) - 1.7, 0.9));
+        });
+        bench!("prim.sqrt_fast", K, |i| {
+            black_box(gait_core::fastmath::sqrt(x(i)));
+        });
+        bench!("prim.atan2_fast", K, |i| {
+            black_box(gait_core::fastmath::atan2(x(i) - 1.7, 0.9));
+        });
+        bench!("prim.sin_cos_fast", K, |i| {
+            black_box(gait_core::fastmath::sin_cos(x(i)));
+        });
+        bench!("prim.sinf_libm", K, |i| {
+            black_box(libm::sinf(x(i)));
+        });
+        bench!("prim.fmul", K, |i| {
+            black_box(x(i) * x(i + 1));
+        });
+        bench!("prim.fdiv", K, |i| {
+            black_box(x(i) / x(i + 1));
+        });
 
         let fxs: [Fx; 16] = core::array::from_fn(|k| Fx::from_bits(3_000 + 9_001 * k as i32));
         let fxx = |i: u32| black_box(fxs[(i % 16) as usize]);
-        report(
-            "prim.fx_exp_neg",
-            measure(K, &mut |i| {
-                black_box(gait_core::fixed_point::exp_neg(fxx(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.fx_sin_cos",
-            measure(K, &mut |i| {
-                black_box(gait_core::fixed_point::sin_cos(fxx(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.fx_sqrt",
-            measure(K, &mut |i| {
-                black_box(fixed_ik::sqrt(fxx(i)));
-            }),
-            ovh,
-        );
-        report(
-            "prim.fx_atan2",
-            measure(K, &mut |i| {
-                let y = i64::from(fxx(i).to_bits()) << 14;
-                black_box(fixed_ik::atan2(
-                    black_box(y - (1 << 29)),
-                    black_box(1 << 29),
-                ));
-            }),
-            ovh,
-        );
+        bench!("prim.fx_exp_neg", K, |i| {
+            black_box(gait_core::fixed_point::exp_neg(fxx(i)));
+        });
+        bench!("prim.fx_sin_cos", K, |i| {
+            black_box(gait_core::fixed_point::sin_cos(fxx(i)));
+        });
+        bench!("prim.fx_sqrt", K, |i| {
+            black_box(fixed_ik::sqrt(fxx(i)));
+        });
+        bench!("prim.fx_atan2", K, |i| {
+            let y = i64::from(fxx(i).to_bits()) << 14;
+            black_box(fixed_ik::atan2(
+                black_box(y - (1 << 29)),
+                black_box(1 << 29),
+            ));
+        });
 
         // ---- codec ----
         let goal_sets: [[i32; 12]; 16] = core::array::from_fn(|k| {
             core::array::from_fn(|j| 1_500 + ((k * 37 + j * 101) % 1_000) as i32)
         });
-        report(
-            "dxl.sync_write12",
-            measure(K, &mut |i| {
-                black_box(encode_goals(
-                    &mut swb,
-                    black_box(&goal_sets[(i % 16) as usize]),
-                ));
-            }),
-            ovh,
-        );
-        report(
-            "dxl.bulk_read3",
-            measure(K, &mut |_| {
-                black_box(encode_bulk(black_box(&mut brb)));
-            }),
-            ovh,
-        );
+        bench!("dxl.sync_write12", K, |i| {
+            black_box(encode_goals(
+                &mut swb,
+                black_box(&goal_sets[(i % 16) as usize]),
+            ));
+        });
+        bench!("dxl.bulk_read3", K, |_| {
+            black_box(encode_bulk(black_box(&mut brb)));
+        });
         let mut dec = Decoder::<64>::new();
         let mut sensors = Sensors::default();
-        report(
-            "dxl.decode3",
-            measure(K, &mut |_| {
-                let got = decode_replies(&mut dec, black_box(replies), &mut sensors);
-                black_box(got);
-            }),
-            ovh,
-        );
+        bench!("dxl.decode3", K, |_| {
+            let got = decode_replies(&mut dec, black_box(replies), &mut sensors);
+            black_box(got);
+        });
         if decode_replies(&mut dec, replies, &mut sensors) != 3 {
             fail("decode");
         }
-        report(
-            "dxl.decode3_block",
-            measure(K, &mut |_| {
-                let got = decode_replies_block(&mut dec, black_box(replies), &mut sensors);
-                black_box(got);
-            }),
-            ovh,
-        );
+        bench!("dxl.decode3_block", K, |_| {
+            let got = decode_replies_block(&mut dec, black_box(replies), &mut sensors);
+            black_box(got);
+        });
         if decode_replies_block(&mut dec, replies, &mut sensors) != 3 {
             fail("decode_block");
         }
@@ -676,13 +615,9 @@ mod firmware {
             }
             got
         };
-        report(
-            "dxl.feed3",
-            measure(K, &mut |_| {
-                black_box(feed3(&mut dec, black_box(replies)));
-            }),
-            ovh,
-        );
+        bench!("dxl.feed3", K, |_| {
+            black_box(feed3(&mut dec, black_box(replies)));
+        });
         if feed3(&mut dec, replies) != 3 {
             fail("feed3");
         }
@@ -694,58 +629,38 @@ mod firmware {
             }
             got
         };
-        report(
-            "dxl.push3",
-            measure(K, &mut |_| {
-                black_box(push3(&mut dec, black_box(replies)));
-            }),
-            ovh,
-        );
+        bench!("dxl.push3", K, |_| {
+            black_box(push3(&mut dec, black_box(replies)));
+        });
         if push3(&mut dec, replies) != 3 {
             fail("push3");
         }
         let crc_in: [u8; 72] = core::array::from_fn(|k| (k as u8).wrapping_mul(29) ^ 0x5A);
-        report(
-            "dxl.crc16_72",
-            measure(K, &mut |_| {
-                black_box(dxl::crc::crc16(black_box(&crc_in[..])));
-            }),
-            ovh,
-        );
+        bench!("dxl.crc16_72", K, |_| {
+            black_box(dxl::crc::crc16(black_box(&crc_in[..])));
+        });
 
         // ---- IMU filter ----
         let mut pitch = PitchAccel::new(PitchAccelConfig::reference(DT_S as f32));
-        report(
-            "imu.pitch_accel",
-            measure(K, &mut |i| {
-                black_box(pitch.update(x(i)));
-                black_box(pitch.torque());
-            }),
-            ovh,
-        );
+        bench!("imu.pitch_accel", K, |i| {
+            black_box(pitch.update(x(i)));
+            black_box(pitch.torque());
+        });
         let mut pitch_fx = FixedPitchAccel::new(PitchAccelConfig::reference(DT_S as f32));
-        report(
-            "imu.pitch_accel_fixed",
-            measure(K, &mut |i| {
-                pitch_fx.update(Some((x(i) * 1.0e6) as i32));
-                black_box(pitch_fx.torque_mnm());
-            }),
-            ovh,
-        );
+        bench!("imu.pitch_accel_fixed", K, |i| {
+            pitch_fx.update(Some((x(i) * 1.0e6) as i32));
+            black_box(pitch_fx.torque_mnm());
+        });
 
         // ---- swing foot alone (cycloid, one single support) ----
         let (params, _) = walk_plan(ModelKind::Tlipfm);
         let from = Place::<f32>::new(0.0, 0.045, 0.0);
         let to = Place::<f32>::new(0.04, 0.045, 0.0);
         let shape: SwingShape<f32> = params.swing;
-        report(
-            "swing.cycloid",
-            measure(K, &mut |i| {
-                let u = black_box(i as f32 / K as f32);
-                black_box(swing_foot(&shape, &from, &to, u, 1.0));
-            }),
-            ovh,
-        );
+        bench!("swing.cycloid", K, |i| {
+            let u = black_box(i as f32 / K as f32);
+            black_box(swing_foot(&shape, &from, &to, u, 1.0));
+        });
 
         // ---- per model: samplers, Fourier, IK, measured ZMP, full ticks ----
         let robot = Robot::reference();
@@ -769,25 +684,17 @@ mod firmware {
 
             let mut s = fresh.clone();
             let mut name = Name::new();
-            report(
-                name.set("sample.f32.", m),
-                measure(n, &mut |_| {
-                    black_box(s.next(black_box(0.0)));
-                }),
-                ovh,
-            );
+            bench!(name.set("sample.f32.", m), n, |_| {
+                black_box(s.next(black_box(0.0)));
+            });
 
             let Ok(fresh_fx) = FixedSampler::<CAP>::new(plan.clone(), DT_S) else {
                 fail("fixed sampler")
             };
             let mut fs = fresh_fx.clone();
-            report(
-                name.set("sample.fixed.", m),
-                measure(n, &mut |_| {
-                    black_box(fs.next(black_box(0)));
-                }),
-                ovh,
-            );
+            bench!(name.set("sample.fixed.", m), n, |_| {
+                black_box(fs.next(black_box(0)));
+            });
 
             let Ok(fourier) = FourierCom::<f32, 24>::from_params(
                 &params,
@@ -797,148 +704,104 @@ mod firmware {
             ) else {
                 fail("fourier")
             };
-            report(
-                name.set("fourier24.", m),
-                measure(n, &mut |i| {
-                    black_box(fourier.sample(black_box(i as f32 * DT_S as f32)));
-                }),
-                ovh,
-            );
+            bench!(name.set("fourier24.", m), n, |i| {
+                black_box(fourier.sample(black_box(i as f32 * DT_S as f32)));
+            });
 
             // The IK and the measured ZMP on the f32 samples of the whole walk.
             let mut s = fresh.clone();
             let samples = record(buf, || (!s.is_done()).then(|| s.next(0.0)));
-            report(
-                name.set("ik.", m),
-                measure(samples.len() as u32, &mut |i| {
-                    black_box(joint_targets(&kin, black_box(&samples[i as usize])));
-                }),
-                ovh,
-            );
-            report(
-                name.set("wholebody.", m),
-                measure(samples.len() as u32, &mut |i| {
-                    black_box(wholebody.joint_targets(black_box(&samples[i as usize])));
-                }),
-                ovh,
-            );
-            report(
-                name.set("support.", m),
-                measure(samples.len() as u32, &mut |i| {
-                    black_box(support_of(&robot, black_box(&samples[i as usize])));
-                }),
-                ovh,
-            );
+            bench!(name.set("ik.", m), samples.len() as u32, |i| {
+                black_box(joint_targets(&kin, black_box(&samples[i as usize])));
+            });
+            bench!(name.set("wholebody.", m), samples.len() as u32, |i| {
+                black_box(wholebody.joint_targets(black_box(&samples[i as usize])));
+            });
+            bench!(name.set("support.", m), samples.len() as u32, |i| {
+                black_box(support_of(&robot, black_box(&samples[i as usize])));
+            });
             // The stabilizer on the walk: the measured ZMP off the reference by a
             // deterministic ±12 mm pattern (saturation, rate limit and the support-polygon
             // limit all take part), a constant gyro.
             let mut stab = new_stabilizer(&robot);
             let mut cache = SupportCache::default();
-            report(
-                name.set("stab.", m),
-                measure(samples.len() as u32, &mut |i| {
-                    let smp = black_box(&samples[i as usize]);
-                    let e = ((i % 64) as f32 - 31.5) * 4e-4;
-                    let meas = Some([smp.zmp[0] + e, smp.zmp[1] - 0.5 * e]);
-                    black_box(stab_step(
-                        &robot,
-                        &mut stab,
-                        &mut cache,
-                        smp,
-                        meas,
-                        black_box(Some([0.02, -0.01])),
-                    ));
-                }),
-                ovh,
-            );
+            bench!(name.set("stab.", m), samples.len() as u32, |i| {
+                let smp = black_box(&samples[i as usize]);
+                let e = ((i % 64) as f32 - 31.5) * 4e-4;
+                let meas = Some([smp.zmp[0] + e, smp.zmp[1] - 0.5 * e]);
+                black_box(stab_step(
+                    &robot,
+                    &mut stab,
+                    &mut cache,
+                    smp,
+                    meas,
+                    black_box(Some([0.02, -0.01])),
+                ));
+            });
             let lf = ForceReading::new([4.1f32, 3.9, 4.3, 3.7]);
             let rf = ForceReading::new([3.8f32, 4.2, 3.6, 4.4]);
             let zmp_meter = ZmpMeter::new(&robot, MIN_LOAD_N);
-            report(
-                name.set("mzmp.", m),
-                measure(samples.len() as u32, &mut |i| {
-                    let smp = black_box(&samples[i as usize]);
-                    black_box(zmp_meter.zmp(
-                        (&smp.feet[0], black_box(&lf)),
-                        (&smp.feet[1], black_box(&rf)),
-                    ));
-                }),
-                ovh,
-            );
+            bench!(name.set("mzmp.", m), samples.len() as u32, |i| {
+                let smp = black_box(&samples[i as usize]);
+                black_box(zmp_meter.zmp(
+                    (&smp.feet[0], black_box(&lf)),
+                    (&smp.feet[1], black_box(&rf)),
+                ));
+            });
 
             // Full tick, f32 path: decode → τ → exact f32 sample → measured ZMP → IK →
             // SYNC WRITE + BULK READ encode.
             let mut io = TickIo::new();
             let mut s = fresh.clone();
-            report(
-                name.set("tick.f32.", m),
-                measure(n, &mut |_| {
-                    let tau = io.sense(black_box(replies));
-                    let smp = s.next(tau);
-                    black_box(io.act(&smp));
-                }),
-                ovh,
-            );
+            bench!(name.set("tick.f32.", m), n, |_| {
+                let tau = io.sense(black_box(replies));
+                let smp = s.next(tau);
+                black_box(io.act(&smp));
+            });
 
             // Full tick, f32 with whole-body compensation and the stabilizer (the firmware's
             // `comp=wholebody stab=on`).
             let mut io = TickIo::new();
             let mut s = fresh.clone();
             let mut prev = s.clone().next(0.0);
-            report(
-                name.set("tick.comp_stab.", m),
-                measure(n, &mut |_| {
-                    let tau = io.sense(black_box(replies));
-                    let smp = s.next(tau);
-                    black_box(io.act_comp_stab(&smp, &prev));
-                    prev = smp;
-                }),
-                ovh,
-            );
+            bench!(name.set("tick.comp_stab.", m), n, |_| {
+                let tau = io.sense(black_box(replies));
+                let smp = s.next(tau);
+                black_box(io.act_comp_stab(&smp, &prev));
+                prev = smp;
+            });
 
             // The fixed-point IK alone on the fixed-point samples of the whole walk.
             let mut fs = fresh_fx.clone();
             let fx_samples = record(fx_buf, || (!fs.is_done()).then(|| fs.next(0)));
-            report(
-                name.set("ik.fixed.", m),
-                measure(fx_samples.len() as u32, &mut |i| {
-                    black_box(fixed_ik::joint_targets(
-                        &fkin,
-                        black_box(&fx_samples[i as usize]),
-                    ));
-                }),
-                ovh,
-            );
+            bench!(name.set("ik.fixed.", m), fx_samples.len() as u32, |i| {
+                black_box(fixed_ik::joint_targets(
+                    &fkin,
+                    black_box(&fx_samples[i as usize]),
+                ));
+            });
 
             // The measured ZMP in fixed point on the fixed-point samples' soles.
             let meter = FixedZmpMeter::new(&robot, MIN_LOAD_N);
             let (lf, rf) = ([4_100, 3_900, 4_300, 3_700], [3_800, 4_200, 3_600, 4_400]);
-            report(
-                name.set("mzmp.fixed.", m),
-                measure(fx_samples.len() as u32, &mut |i| {
-                    let smp = black_box(&fx_samples[i as usize]);
-                    black_box(meter.zmp(
-                        (&smp.feet[0], black_box(Some(lf))),
-                        (&smp.feet[1], black_box(Some(rf))),
-                    ));
-                }),
-                ovh,
-            );
+            bench!(name.set("mzmp.fixed.", m), fx_samples.len() as u32, |i| {
+                let smp = black_box(&fx_samples[i as usize]);
+                black_box(meter.zmp(
+                    (&smp.feet[0], black_box(Some(lf))),
+                    (&smp.feet[1], black_box(Some(rf))),
+                ));
+            });
 
             // Full tick, fixed path as `control::run` with `math=fixed`: the integer pitch
             // filter (τ in mN·m), the fixed-point sampler, the fixed-point measured ZMP, the
             // fixed-point IK and the integer limit and rad → tick conversion.
             let mut io = TickIo::new();
             let mut fs = fresh_fx.clone();
-            report(
-                name.set("tick.fixed.", m),
-                measure(n, &mut |_| {
-                    let tau = io.sense_fixed(black_box(replies));
-                    let smp = fs.next(tau);
-                    black_box(io.act_fixed(&smp));
-                }),
-                ovh,
-            );
+            bench!(name.set("tick.fixed.", m), n, |_| {
+                let tau = io.sense_fixed(black_box(replies));
+                let smp = fs.next(tau);
+                black_box(io.act_fixed(&smp));
+            });
         }
 
         control_loop();

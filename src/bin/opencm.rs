@@ -20,7 +20,7 @@ fn main() {
 mod firmware {
     use cortex_m_rt::entry;
     use walker_firmware::boards::opencm::{self, OpenCmBoard};
-    use walker_firmware::boards::run_then_idle;
+    use walker_firmware::boards::start;
     use walker_firmware::config::Arithmetic;
     use walker_firmware::Config;
 
@@ -31,12 +31,11 @@ mod firmware {
             arithmetic: Arithmetic::Fixed,
             ..Config::default()
         };
-        let Some(dp) = stm32f1::stm32f103::Peripherals::take() else {
-            cortex_m::peripheral::SCB::sys_reset();
-        };
-        // The board reads (and clears) the reset flags; `control::run` decides from them.
-        let mut board = OpenCmBoard::new(dp, &cfg);
-        run_then_idle(&mut board, &cfg)
+        start(
+            stm32f1::stm32f103::Peripherals::take(),
+            &cfg,
+            OpenCmBoard::new,
+        )
     }
 
     #[panic_handler]

@@ -25,18 +25,17 @@ mod firmware {
 
     use cortex_m_rt::entry;
     use walker_firmware::boards::opencr::{self, OpenCrBoard};
-    use walker_firmware::boards::run_then_idle;
+    use walker_firmware::boards::start;
     use walker_firmware::Config;
 
     #[entry]
     fn main() -> ! {
         let cfg = Config::default();
-        let Some(dp) = stm32f7xx_hal::pac::Peripherals::take() else {
-            cortex_m::peripheral::SCB::sys_reset();
-        };
-        // The board reads (and clears) the reset flags; `control::run` decides from them.
-        let mut board = OpenCrBoard::new(dp, &cfg);
-        run_then_idle(&mut board, &cfg)
+        start(
+            stm32f7xx_hal::pac::Peripherals::take(),
+            &cfg,
+            OpenCrBoard::new,
+        )
     }
 
     #[panic_handler]

@@ -8,8 +8,28 @@ pub mod opencm;
 pub mod opencr;
 #[cfg(feature = "board-qemu")]
 pub mod qemu_mps2;
+#[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
+mod stm32;
 #[cfg(feature = "board-qemu")]
 pub mod tick_cost;
+
+/// The main of a real robot controller: the board brought up by `bring_up` from its
+/// `peripherals` (a reset when they were taken already) and `cfg`, then [`run_then_idle`].
+#[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
+// Inline: the board is then brought up in the binary's main, as before this helper.
+#[inline(always)]
+pub fn start<P, B: crate::board::Board>(
+    peripherals: Option<P>,
+    cfg: &crate::Config,
+    bring_up: impl FnOnce(P, &crate::Config) -> B,
+) -> ! {
+    let Some(p) = peripherals else {
+        cortex_m::peripheral::SCB::sys_reset();
+    };
+    // The board reads (and clears) the reset flags; `control::run` decides from them.
+    let mut board = bring_up(p, cfg);
+    run_then_idle(&mut board, cfg)
+}
 
 /// The main of a real robot controller after its board is up: logs the start-up line, runs
 /// [`crate::control::run`] once with `cfg` (probe, torque on, ramp, walk, hold, torque off;

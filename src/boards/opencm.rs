@@ -10,7 +10,7 @@
 //! | Dynamixel TTL bus | **USART1 remapped**, PB6 TX / PB7 RX | `variant.cpp` pins 29 "DXL TXD" / 30 "DXL RXD"; `hw/driver/drv_uart.c`: USART1 in DXL mode uses `__HAL_AFIO_REMAP_USART1_ENABLE` on PB6/PB7; the Arduino `Serial1` (Dynamixel2Arduino README: OpenCM9.04 → `Serial1`, direction pin 28) |
 //! | bus direction (TX enable) | **PB5**, high = transmit | `variant.cpp` pin 28 "DXL DIR" |
 //! | log UART | **USART2**, PA2 TX / PA3 RX at 921 600 baud | `drv_uart.c` (USART2 on PA2/PA3), `variant.cpp` pins 4/5; the Arduino `Serial2` |
-//! | Dynamixel power switch | **none** the MCU can drive | the 3-pin TTL ports take the board's supply through its slide switch; [`Board::servo_power`] logs the request only |
+//! | Dynamixel power switch | **none** the MCU can drive | the 3-pin TTL ports take the board's supply through its slide switch; [`Board::servo_power`](crate::board::Board::servo_power) logs the request only |
 //! | application flash | 0x0800_3000, 114 KiB | `bsp/opencm/ldscript/opencm_flash.ld` (the first 12 KiB hold ROBOTIS' USB bootloader) |
 //! | RAM | 0x2000_0000, 20 KiB | same linker script |
 //! | tick and µs clock | TIM2 (16 bit, 1 MHz) clocking TIM3 (16 bit) = one 32-bit µs counter | extended to 64 bits in software |
@@ -28,25 +28,22 @@
 //! (4.5 Mbps is the F103's fastest). USART2 (APB1): 36 MHz ÷ 921 600 → BRR 39 (+0.16 %).
 //!
 //! # Timing
-//! [`TickTimer::wait_tick`] busy-waits on the µs counter until `k · period` (deadlines never
+//! [`TickTimer::wait_tick`](crate::board::TickTimer::wait_tick) busy-waits on the µs counter until `k · period` (deadlines never
 //! drift) and meanwhile drains the log ring buffer into USART2; a frame that does not fit the
 //! ring is dropped whole and counted ([`OpenCmBoard::log_dropped`]).
 //!
 //! # Exit and panic
-//! [`Board::exit`] and the panic handler send the broadcast torque-off packet and reset the
+//! [`Board::exit`](crate::board::Board::exit) and the panic handler send the broadcast torque-off packet and reset the
 //! MCU (after a reset but a power-on the firmware does not walk). There is no power switch to
 //! cut as a backup.
 
-use cortex_m::peripheral::SCB;
 // Link the runtime and the defmt global logger (RTT) into every binary using this board.
 use cortex_m_rt as _;
 use defmt_rtt as _;
 use stm32f1::stm32f103 as pac;
 
-use crate::board::{
-    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogRing, LogSink,
-    ResetCause, ServoBus, Tick, TickSchedule, TickTimer, Watchdog, WrapClock, TORQUE_OFF_PACKET,
-};
+use super::stm32::{self, stm32_board, Stm32State};
+use crate::board::{BusError, Clock, LogRing, ServoBus, Watchdog, TORQUE_OFF_PACKET};
 use crate::record::BoardId;
 use crate::Config;
 
@@ -158,26 +155,10 @@ pub fn panic_torque_off() {
     bus_dir(false);
 }
 
-/// The crash record in RAM that is not zeroed at start-up (`.uninit`, NOLOAD in cortex-m-rt's
-/// `link.x`), as on the OpenCR.
-#[link_section = ".uninit.WALKER_CRASH"]
-static mut CRASH: core::mem::MaybeUninit<CrashCell> = core::mem::MaybeUninit::uninit();
-
-/// The crash record (see [`CRASH`]).
-fn crash_cell() -> &'static mut CrashCell {
-    // SAFETY: single core; the board (one value, `Peripherals::take` makes it unique) and the
-    // panic path (after which nothing else runs) are its only users. Every field is a u32, any
-    // bit pattern is a value; `CrashCell` accesses them volatile.
-    unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashCell>() }
-}
-
 /// Panic path of the OpenCM binary: log, record the panic in no-init RAM, torque off, reset
 /// (the next boot logs the record and does not walk).
 pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
-    crash_cell().record(CrashCode::Panic);
-    panic_torque_off();
-    SCB::sys_reset()
+    stm32::panic_reset(info, panic_torque_off)
 }
 
 /// The OpenCM 9.04 board.
@@ -186,12 +167,8 @@ pub struct OpenCmBoard {
     tim_high: pac::TIM3,
     iwdg: pac::IWDG,
     baud: u32,
-    clock: WrapClock,
-    schedule: TickSchedule,
-    watchdog_running: bool,
+    state: Stm32State,
     ring: LogRing<LOG_RING>,
-    uart_errors: u32,
-    reset_csr: u32,
 }
 
 impl OpenCmBoard {
@@ -277,23 +254,9 @@ impl OpenCmBoard {
             tim_high: dp.TIM3,
             iwdg: dp.IWDG,
             baud,
-            clock: WrapClock::new(),
-            schedule: TickSchedule::new(cfg.tick_period_us),
-            watchdog_running: false,
+            state: Stm32State::new(cfg, reset_csr),
             ring: LogRing::new(),
-            uart_errors: 0,
-            reset_csr,
         }
-    }
-
-    /// Log frames dropped because the ring was full.
-    pub fn log_dropped(&self) -> u32 {
-        self.ring.dropped()
-    }
-
-    /// Overrun/framing/noise errors seen on the bus UART.
-    pub fn uart_errors(&self) -> u32 {
-        self.uart_errors
     }
 
     /// The 32-bit µs counter: TIM3 (high half) and TIM2 (low half), read high-low-high until
@@ -329,7 +292,7 @@ impl OpenCmBoard {
         let u = usart1();
         let sr = u.sr.read().bits();
         if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0 {
-            self.uart_errors = self.uart_errors.saturating_add(1);
+            self.state.count_uart_error();
         }
         if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE | USART_SR_RXNE) != 0 {
             let _ = u.dr.read().bits();
@@ -368,7 +331,7 @@ impl ServoBus for OpenCmBoard {
         while n < buf.len() {
             let sr = u.sr.read().bits();
             if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0 {
-                self.uart_errors = self.uart_errors.saturating_add(1);
+                self.state.count_uart_error();
             }
             if sr & USART_SR_RXNE != 0 {
                 // Reading DR also clears ORE/FE/NE after the SR read above.
@@ -405,43 +368,13 @@ impl ServoBus for OpenCmBoard {
 impl Clock for OpenCmBoard {
     fn now_us(&self) -> u64 {
         let cnt = self.counter_us();
-        self.clock.extend(cnt)
-    }
-}
-
-impl TickTimer for OpenCmBoard {
-    fn period_us(&self) -> u32 {
-        self.schedule.period_us()
-    }
-
-    fn wait_tick(&mut self) -> Tick {
-        let plan = self.schedule.plan(self.now_us());
-        if let Some(t) = plan.wait_until_us {
-            // Bounded by the tick period; fed once per wait.
-            self.feed();
-            while self.now_us() < t {
-                self.pump_log();
-            }
-        }
-        self.pump_log();
-        plan.tick
-    }
-
-    fn overruns(&self) -> u32 {
-        self.schedule.overruns()
-    }
-}
-
-impl LogSink for OpenCmBoard {
-    fn write_log(&mut self, bytes: &[u8]) {
-        self.ring.push(bytes);
-        self.pump_log();
+        self.state.clock.extend(cnt)
     }
 }
 
 impl Watchdog for OpenCmBoard {
     fn start(&mut self, timeout_ms: u32) {
-        if !self.watchdog_running {
+        if !self.state.watchdog_running {
             // Counts at 1.25 per ms; RLR is 12 bits (≤ 3.27 s).
             let reload = (timeout_ms.max(1).saturating_mul(5) / 4).clamp(1, 0x0FFF);
             // SAFETY: the IWDG key sequence of RM0008 §19.3 (unlock, PR, RLR, start); the
@@ -452,54 +385,34 @@ impl Watchdog for OpenCmBoard {
                 .write(|w| unsafe { w.bits(IWDG_PRESCALER_DIV32) });
             self.iwdg.rlr.write(|w| unsafe { w.bits(reload) });
             self.iwdg.kr.write(|w| unsafe { w.bits(IWDG_KEY_START) });
-            self.watchdog_running = true;
+            self.state.watchdog_running = true;
         }
     }
     fn feed(&mut self) {
-        if self.watchdog_running {
+        if self.state.watchdog_running {
             // SAFETY: the reload key.
             self.iwdg.kr.write(|w| unsafe { w.bits(IWDG_KEY_FEED) });
         }
     }
 }
 
-impl Board for OpenCmBoard {
-    const NAME: &'static str = "opencm-9.04";
-    const ID: BoardId = BoardId::OpenCm;
+stm32_board! {
+    impl<> for OpenCmBoard {
+        name: "opencm-9.04",
+        id: BoardId::OpenCm,
 
-    fn torque_off_best_effort(&mut self) {
-        let _ = self.send(&TORQUE_OFF_PACKET);
-    }
-
-    fn reset_cause(&self) -> (ResetCause, u32) {
-        // RCC_CSR of the F103 has the F7's flags at the same bits (PINRSTF 26, PORRSTF 27,
-        // SFTRSTF 28, IWDGRSTF 29, WWDGRSTF 30, LPWRRSTF 31) and no BORRSTF (a brown-out is
-        // a power-on reset there).
-        (stm32f7_reset_cause(self.reset_csr), self.reset_csr >> 24)
-    }
-
-    fn crash_cell(&mut self) -> &mut CrashCell {
-        crash_cell()
-    }
-
-    fn servo_power(&mut self, on: bool) {
-        // The OpenCM 9.04 feeds its Dynamixel ports from the board supply through a manual
-        // slide switch: there is no MCU-driven power switch (see the module table).
-        defmt::warn!(
-            "servo power {=bool} requested: the OpenCM 9.04 has no switch for it",
-            on
-        );
-    }
-
-    fn exit(&mut self, code: i32) -> ! {
-        defmt::warn!("exit({=i32}): torque off, reset", code);
-        self.torque_off_best_effort();
-        // Let the log drain (bounded: ≤ LOG_RING bytes at 921 600 baud ≈ 11 ms).
-        let start = self.now_us();
-        while !self.ring.is_empty() && self.now_us() < start + 20_000 {
-            self.pump_log();
+        fn servo_power(&mut self, on: bool) {
+            // The OpenCM 9.04 feeds its Dynamixel ports from the board supply through a manual
+            // slide switch: there is no MCU-driven power switch (see the module table).
+            defmt::warn!(
+                "servo power {=bool} requested: the OpenCM 9.04 has no switch for it",
+                on
+            );
         }
-        panic_torque_off();
-        SCB::sys_reset()
+
+        fn exit(&mut self, code: i32) -> ! {
+            defmt::warn!("exit({=i32}): torque off, reset", code);
+            self.shut_down(panic_torque_off)
+        }
     }
 }

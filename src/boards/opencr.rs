@@ -19,16 +19,15 @@
 //! 3 or 4.5 Mbps (BRR ≥ 16 needs ≤ 13.5 Mbps) and the log at 921 600 baud (−0.16 %).
 //!
 //! # Timing
-//! [`TickTimer::wait_tick`] busy-waits on TIM2 until `k · period` (deadlines never drift) and
+//! [`TickTimer::wait_tick`](crate::board::TickTimer::wait_tick) busy-waits on TIM2 until `k · period` (deadlines never drift) and
 //! meanwhile drains the log ring buffer into USART6 — the log never blocks the loop: a frame
 //! that does not fit the 1 KiB ring is dropped whole and counted ([`OpenCrBoard::log_dropped`]).
 //!
 //! # Exit and panic
-//! [`Board::exit`] and the panic handler send the broadcast torque-off packet, switch the
+//! [`Board::exit`](crate::board::Board::exit) and the panic handler send the broadcast torque-off packet, switch the
 //! Dynamixel power FET off as a backup, then reset the MCU (after a reset the firmware does
 //! not enable torque until it is told to walk).
 
-use cortex_m::peripheral::SCB;
 // Link the runtime and the defmt global logger (RTT) into every binary using this board.
 use cortex_m_rt as _;
 use defmt_rtt as _;
@@ -36,14 +35,12 @@ use embedded_hal::digital::{ErrorType, OutputPin};
 use stm32f7xx_hal::gpio::{Output, PushPull, PC9, PF15};
 use stm32f7xx_hal::pac;
 use stm32f7xx_hal::prelude::*;
-use stm32f7xx_hal::rcc::{HSEClock, HSEClockMode};
+use stm32f7xx_hal::rcc::{Clocks, HSEClock, HSEClockMode};
 use stm32f7xx_hal::serial::{self, Serial};
 use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
-use crate::board::{
-    stm32f7_reset_cause, Board, BusError, Clock, CrashCell, CrashCode, LogRing, LogSink,
-    ResetCause, ServoBus, Tick, TickSchedule, TickTimer, Watchdog, WrapClock, TORQUE_OFF_PACKET,
-};
+use super::stm32::{self, stm32_board, Stm32State};
+use crate::board::{BusError, Clock, LogRing, ServoBus, Watchdog, TORQUE_OFF_PACKET};
 use crate::record::BoardId;
 use crate::Config;
 
@@ -93,6 +90,18 @@ impl OutputPin for DxlDir {
         self.0.set_high();
         Ok(())
     }
+}
+
+/// Configures `usart` on `pins` at `baud` (clocked from SYSCLK) and leaves it configured for
+/// the register-level drivers of this board (no DMA requests).
+fn uart_up<U: serial::Instance, P: serial::Pins<U>>(usart: U, pins: P, clocks: &Clocks, baud: u32) {
+    let config = serial::Config {
+        baud_rate: baud.bps(),
+        sysclock: true,
+        ..Default::default()
+    };
+    let (u, _pins) = Serial::new(usart, pins, clocks, config).release();
+    u.cr3.write(|w| w.dmat().disabled().dmar().disabled());
 }
 
 fn usart3() -> &'static pac::usart1::RegisterBlock {
@@ -150,27 +159,10 @@ pub fn panic_torque_off() {
     gpiof.bsrr.write(|w| w.br15().set_bit());
 }
 
-/// The crash record in RAM that is not zeroed at start-up (`.uninit`, NOLOAD in cortex-m-rt's
-/// `link.x`): the loop notes its tick there, a panic records itself, and the next boot logs it
-/// ([`crate::control`]). After a power-on its content is random and ignored.
-#[link_section = ".uninit.WALKER_CRASH"]
-static mut CRASH: core::mem::MaybeUninit<CrashCell> = core::mem::MaybeUninit::uninit();
-
-/// The crash record (see [`CRASH`]).
-fn crash_cell() -> &'static mut CrashCell {
-    // SAFETY: single core; the board (one value, `Peripherals::take` makes it unique) and the
-    // panic path (after which nothing else runs) are its only users. Every field is a u32, any
-    // bit pattern is a value; `CrashCell` accesses them volatile.
-    unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashCell>() }
-}
-
 /// Panic path of the OpenCR binary: log, record the panic in no-init RAM, torque off and
 /// servo power off, reset (the next boot logs the record and does not walk).
 pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
-    crash_cell().record(CrashCode::Panic);
-    panic_torque_off();
-    SCB::sys_reset()
+    stm32::panic_reset(info, panic_torque_off)
 }
 
 /// The OpenCR board. `D` is the bus direction pin ([`DxlDir`] on the real board).
@@ -179,13 +171,9 @@ pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     dxl_power: PF15<Output<PushPull>>,
     baud: u32,
     tim: pac::TIM2,
-    clock: WrapClock,
-    schedule: TickSchedule,
     iwdg: IndependentWatchdog,
-    watchdog_running: bool,
+    state: Stm32State,
     ring: LogRing<LOG_RING>,
-    uart_errors: u32,
-    reset_csr: u32,
 }
 
 impl OpenCrBoard<DxlDir> {
@@ -211,61 +199,21 @@ impl OpenCrBoard<DxlDir> {
         let mut power = gpiof.pf15.into_push_pull_output();
         power.set_high();
 
-        let bus_cfg = serial::Config {
-            baud_rate: cfg.bus_baud.bps(),
-            sysclock: true,
-            ..Default::default()
-        };
-        let bus = Serial::new(
-            dp.USART3,
-            (
-                gpioc.pc10.into_alternate::<7>(),
-                gpioc.pc11.into_alternate::<7>(),
-            ),
-            &clocks,
-            bus_cfg,
+        let bus_pins = (
+            gpioc.pc10.into_alternate::<7>(),
+            gpioc.pc11.into_alternate::<7>(),
         );
-        let log_cfg = serial::Config {
-            baud_rate: LOG_BAUD.bps(),
-            sysclock: true,
-            ..Default::default()
-        };
-        let log = Serial::new(
-            dp.USART6,
-            (
-                gpioc.pc6.into_alternate::<8>(),
-                gpioc.pc7.into_alternate::<8>(),
-            ),
-            &clocks,
-            log_cfg,
+        uart_up(dp.USART3, bus_pins, &clocks, cfg.bus_baud);
+        let log_pins = (
+            gpioc.pc6.into_alternate::<8>(),
+            gpioc.pc7.into_alternate::<8>(),
         );
-        let cmd_cfg = serial::Config {
-            baud_rate: COMMAND_BAUD.bps(),
-            sysclock: true,
-            ..Default::default()
-        };
-        let cmd = Serial::new(
-            dp.USART2,
-            (
-                gpiod.pd5.into_alternate::<7>(),
-                gpiod.pd6.into_alternate::<7>(),
-            ),
-            &clocks,
-            cmd_cfg,
+        uart_up(dp.USART6, log_pins, &clocks, LOG_BAUD);
+        let cmd_pins = (
+            gpiod.pd5.into_alternate::<7>(),
+            gpiod.pd6.into_alternate::<7>(),
         );
-        // Keep all three configured; drive them at register level (no DMA requests).
-        let (_u3, _p3) = bus.release();
-        let (_u6, _p6) = log.release();
-        let (_u2, _p2) = cmd.release();
-        usart2()
-            .cr3
-            .write(|w| w.dmat().disabled().dmar().disabled());
-        usart3()
-            .cr3
-            .write(|w| w.dmat().disabled().dmar().disabled());
-        usart6()
-            .cr3
-            .write(|w| w.dmat().disabled().dmar().disabled());
+        uart_up(dp.USART2, cmd_pins, &clocks, COMMAND_BAUD);
 
         // TIM2: 32-bit free-running µs counter. APB1 timers run at 2 × PCLK1.
         // SAFETY: enabling the TIM2 clock in RCC.APB1ENR (read-modify-write, single core,
@@ -286,28 +234,14 @@ impl OpenCrBoard<DxlDir> {
             dxl_power: power,
             baud: cfg.bus_baud,
             tim,
-            clock: WrapClock::new(),
-            schedule: TickSchedule::new(cfg.tick_period_us),
             iwdg,
-            watchdog_running: false,
+            state: Stm32State::new(cfg, reset_csr),
             ring: LogRing::new(),
-            uart_errors: 0,
-            reset_csr,
         }
     }
 }
 
 impl<D: OutputPin> OpenCrBoard<D> {
-    /// Log frames dropped because the ring was full.
-    pub fn log_dropped(&self) -> u32 {
-        self.ring.dropped()
-    }
-
-    /// Overrun/framing/noise errors seen on the bus UART.
-    pub fn uart_errors(&self) -> u32 {
-        self.uart_errors
-    }
-
     /// Moves log bytes from the ring to USART6 while its data register is free.
     fn pump_log(&mut self) {
         let u = usart6();
@@ -324,7 +258,7 @@ impl<D: OutputPin> OpenCrBoard<D> {
         let u = usart3();
         let isr = u.isr.read();
         if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
-            self.uart_errors = self.uart_errors.saturating_add(1);
+            self.state.count_uart_error();
             u.icr
                 .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
         }
@@ -364,7 +298,7 @@ impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
         while n < buf.len() {
             let isr = u.isr.read();
             if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
-                self.uart_errors = self.uart_errors.saturating_add(1);
+                self.state.count_uart_error();
                 u.icr
                     .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
             }
@@ -400,127 +334,81 @@ impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
 impl<D: OutputPin> Clock for OpenCrBoard<D> {
     fn now_us(&self) -> u64 {
         let cnt = self.tim.cnt.read().bits();
-        self.clock.extend(cnt)
-    }
-}
-
-impl<D: OutputPin> TickTimer for OpenCrBoard<D> {
-    fn period_us(&self) -> u32 {
-        self.schedule.period_us()
-    }
-
-    fn wait_tick(&mut self) -> Tick {
-        let plan = self.schedule.plan(self.now_us());
-        if let Some(t) = plan.wait_until_us {
-            // Bounded by the tick period (TIM2); fed once per wait.
-            self.feed();
-            while self.now_us() < t {
-                self.pump_log();
-            }
-        }
-        self.pump_log();
-        plan.tick
-    }
-
-    fn overruns(&self) -> u32 {
-        self.schedule.overruns()
-    }
-}
-
-impl<D: OutputPin> LogSink for OpenCrBoard<D> {
-    fn write_log(&mut self, bytes: &[u8]) {
-        self.ring.push(bytes);
-        self.pump_log();
+        self.state.clock.extend(cnt)
     }
 }
 
 impl<D: OutputPin> Watchdog for OpenCrBoard<D> {
     fn start(&mut self, timeout_ms: u32) {
-        if !self.watchdog_running {
+        if !self.state.watchdog_running {
             self.iwdg.start(timeout_ms.max(1).millis());
-            self.watchdog_running = true;
+            self.state.watchdog_running = true;
         }
     }
     fn feed(&mut self) {
-        if self.watchdog_running {
+        if self.state.watchdog_running {
             self.iwdg.feed();
         }
     }
 }
 
-impl<D: OutputPin> Board for OpenCrBoard<D> {
-    const NAME: &'static str = "opencr-1.0";
-    const ID: BoardId = BoardId::OpenCr;
+stm32_board! {
+    impl<D: OutputPin> for OpenCrBoard<D> {
+        name: "opencr-1.0",
+        id: BoardId::OpenCr,
 
-    fn torque_off_best_effort(&mut self) {
-        let _ = self.send(&TORQUE_OFF_PACKET);
-    }
-
-    fn reset_cause(&self) -> (ResetCause, u32) {
-        (stm32f7_reset_cause(self.reset_csr), self.reset_csr >> 24)
-    }
-
-    fn crash_cell(&mut self) -> &mut CrashCell {
-        crash_cell()
-    }
-
-    fn servo_power(&mut self, on: bool) {
-        // The Dynamixel power enable is PF15 (`BDPIN_DXL_PWR_EN`, high = on) per the OpenCR 1.0
-        // documentation: ROBOTIS e-Manual "OpenCR 1.0" (schematic, OpenCR_REV1.0) and the
-        // OpenCR Arduino core's variant.h. Low switches the FET off: the servos lose power.
-        if on {
-            self.dxl_power.set_high();
-        } else {
-            self.dxl_power.set_low();
-        }
-        defmt::warn!("servo power {=bool} (PF15)", on);
-    }
-
-    fn command_rx(&mut self, buf: &mut [u8]) -> usize {
-        let u = usart2();
-        let isr = u.isr.read();
-        if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
-            u.icr
-                .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
-        }
-        let mut n = 0;
-        for slot in buf.iter_mut().take(COMMAND_RX_PER_TICK) {
-            if !u.isr.read().rxne().bit_is_set() {
-                break;
+        fn servo_power(&mut self, on: bool) {
+            // The Dynamixel power enable is PF15 (`BDPIN_DXL_PWR_EN`, high = on) per the OpenCR
+            // 1.0 documentation: ROBOTIS e-Manual "OpenCR 1.0" (schematic, OpenCR_REV1.0) and
+            // the OpenCR Arduino core's variant.h. Low switches the FET off: the servos lose
+            // power.
+            if on {
+                self.dxl_power.set_high();
+            } else {
+                self.dxl_power.set_low();
             }
-            *slot = (u.rdr.read().rdr().bits() & 0xFF) as u8;
-            n += 1;
+            defmt::warn!("servo power {=bool} (PF15)", on);
         }
-        n
-    }
 
-    fn command_tx(&mut self, bytes: &[u8]) {
-        // ≤ 312 bytes at 1 Mbps ≈ 3.1 ms, each wait bounded.
-        let u = usart2();
-        for &b in bytes {
-            let mut ok = false;
-            for _ in 0..UART_SPIN_LIMIT {
-                if u.isr.read().txe().bit_is_set() {
-                    ok = true;
+        fn command_rx(&mut self, buf: &mut [u8]) -> usize {
+            let u = usart2();
+            let isr = u.isr.read();
+            if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
+                u.icr
+                    .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
+            }
+            let mut n = 0;
+            for slot in buf.iter_mut().take(COMMAND_RX_PER_TICK) {
+                if !u.isr.read().rxne().bit_is_set() {
                     break;
                 }
+                *slot = (u.rdr.read().rdr().bits() & 0xFF) as u8;
+                n += 1;
             }
-            if !ok {
-                return;
-            }
-            u.tdr.write(|w| w.tdr().bits(u16::from(b)));
+            n
         }
-    }
 
-    fn exit(&mut self, code: i32) -> ! {
-        defmt::warn!("exit({=i32}): torque off, servo power off, reset", code);
-        self.torque_off_best_effort();
-        // Let the log drain (bounded: ≤ LOG_RING bytes at 921 600 baud ≈ 11 ms).
-        let start = self.now_us();
-        while !self.ring.is_empty() && self.now_us() < start + 20_000 {
-            self.pump_log();
+        fn command_tx(&mut self, bytes: &[u8]) {
+            // ≤ 312 bytes at 1 Mbps ≈ 3.1 ms, each wait bounded.
+            let u = usart2();
+            for &b in bytes {
+                let mut ok = false;
+                for _ in 0..UART_SPIN_LIMIT {
+                    if u.isr.read().txe().bit_is_set() {
+                        ok = true;
+                        break;
+                    }
+                }
+                if !ok {
+                    return;
+                }
+                u.tdr.write(|w| w.tdr().bits(u16::from(b)));
+            }
         }
-        panic_torque_off();
-        SCB::sys_reset()
+
+        fn exit(&mut self, code: i32) -> ! {
+            defmt::warn!("exit({=i32}): torque off, servo power off, reset", code);
+            self.shut_down(panic_torque_off)
+        }
     }
 }

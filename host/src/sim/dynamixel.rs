@@ -291,13 +291,17 @@ mod tests {
         assert_eq!(out.pwm, 0);
     }
 
+    /// An XM430-W350 at the centre tick with its torque on.
+    fn powered_at_centre() -> (XServoParams, XServo, XServoRegisters) {
+        let mut r = XServoRegisters::defaults(2048);
+        r.torque_on = true;
+        (XServoParams::XM430_W350, XServo::default(), r)
+    }
+
     #[test]
     fn stiffness_matches_the_gain_and_the_stall_torque() {
         // 10 ticks of error at rest: PWM = 800/128·10 = 62.5 → τ = 4.1·62.5/885.
-        let p = XServoParams::XM430_W350;
-        let mut s = XServo::default();
-        let mut r = XServoRegisters::defaults(2048);
-        r.torque_on = true;
+        let (p, mut s, mut r) = powered_at_centre();
         s.update(&p, &r, 0.0, 0.0, 1e-3);
         r.goal = 2058;
         let out = s.update(&p, &r, 0.0, 0.0, 1e-3);
@@ -311,10 +315,7 @@ mod tests {
 
     #[test]
     fn profile_reaches_the_goal_within_its_limits() {
-        let p = XServoParams::XM430_W350;
-        let mut s = XServo::default();
-        let mut r = XServoRegisters::defaults(2048);
-        r.torque_on = true;
+        let (p, mut s, mut r) = powered_at_centre();
         r.profile_velocity = 100; // 22.9 rpm
         r.profile_acceleration = 50;
         s.update(&p, &r, 0.0, 0.0, 1e-3);

@@ -215,6 +215,22 @@ def sync_read_state(port, ph):
     return out
 
 
+def check_written(c, port, ph, dev, addr, value, what):
+    """Writes the byte `value` at `addr` of device `dev` and reads it back: both succeed."""
+    r, err = ph.write1ByteTxRx(port, dev, addr, value)
+    got, r2, err2 = ph.read1ByteTxRx(port, dev, addr)
+    c.check(f"{what} {value}, read back {got}",
+            r == COMM_SUCCESS and err == 0 and r2 == COMM_SUCCESS and err2 == 0 and got == value,
+            f"write {ph.getTxRxResult(r)}/error {err}, read {ph.getTxRxResult(r2)}/error {err2}")
+
+
+def check_refused(c, port, ph, dev, write, addr, value, want, what):
+    """`write` of `value` at `addr` of device `dev`: answered with the error status `want`."""
+    r, err = write(port, dev, addr, value)
+    c.check(f"{what}", r == COMM_SUCCESS and err == want,
+            f"{ph.getTxRxResult(r)}, error {err} {ph.getRxPacketError(err) if err else ''}")
+
+
 def run(c, port, ph, sim):
     # --- PING -----------------------------------------------------------------------------
     for i in sorted(EXPECTED_MODEL):
@@ -256,25 +272,15 @@ def run(c, port, ph, sim):
 
     # Return Delay Time (the boards' only writable register besides ID).
     for k, i in enumerate(FOOT_IDS + [IMU_ID]):
-        value = 20 + k
-        r, err = ph.write1ByteTxRx(port, i, ADDR_RETURN_DELAY, value)
-        got, r2, err2 = ph.read1ByteTxRx(port, i, ADDR_RETURN_DELAY)
-        c.check(f"board {i}: write Return Delay Time {value}, read back {got}",
-                r == COMM_SUCCESS and err == 0 and r2 == COMM_SUCCESS and err2 == 0 and got == value,
-                f"write {ph.getTxRxResult(r)}/error {err}, read {ph.getTxRxResult(r2)}/error {err2}")
-    r, err = ph.write4ByteTxRx(port, 111, ADDR_SAMPLE, 1234)
-    c.check("board 111: WRITE to the read-only SAMPLE block -> Access error",
-            r == COMM_SUCCESS and err == ERR_ACCESS,
-            f"{ph.getTxRxResult(r)}, error {err} {ph.getRxPacketError(err) if err else ''}")
+        check_written(c, port, ph, i, ADDR_RETURN_DELAY, 20 + k,
+                      f"board {i}: write Return Delay Time")
+    check_refused(c, port, ph, 111, ph.write4ByteTxRx, ADDR_SAMPLE, 1234, ERR_ACCESS,
+                  "board 111: WRITE to the read-only SAMPLE block -> Access error")
 
     # --- servos -------------------------------------------------------------------------------
     for i in SERVOS:
-        value = 10 + i
-        r, err = ph.write1ByteTxRx(port, i, ADDR_RETURN_DELAY, value)
-        got, r2, err2 = ph.read1ByteTxRx(port, i, ADDR_RETURN_DELAY)
-        c.check(f"servo {i}: torque off, write Return Delay Time {value} (EEPROM), read back {got}",
-                r == COMM_SUCCESS and err == 0 and r2 == COMM_SUCCESS and err2 == 0 and got == value,
-                f"write {ph.getTxRxResult(r)}/error {err}")
+        check_written(c, port, ph, i, ADDR_RETURN_DELAY, 10 + i,
+                      f"servo {i}: torque off, write Return Delay Time (EEPROM)")
 
     start = sync_read_state(port, ph)
     if not c.check("SYNC READ of Present Current/Velocity/Position (126..135) of 12 servos",
@@ -292,19 +298,19 @@ def run(c, port, ph, sim):
         c.check(f"servo {i}: Torque Enable = 1", r == COMM_SUCCESS and err == 0 and got == 1,
                 f"{ph.getTxRxResult(r)}, error {err}, read back {got}")
 
-    r, err = ph.write1ByteTxRx(port, 1, ADDR_RETURN_DELAY, 5)
-    c.check("servo 1: EEPROM write with torque on -> Access error",
-            r == COMM_SUCCESS and err == ERR_ACCESS, f"{ph.getTxRxResult(r)}, error {err}")
-    r, err = ph.write4ByteTxRx(port, 1, ADDR_PRESENT_POSITION, 1000)
-    c.check("servo 1: WRITE to read-only Present Position -> Access error",
-            r == COMM_SUCCESS and err == ERR_ACCESS,
-            f"{ph.getTxRxResult(r)}, error {err} {ph.getRxPacketError(err) if err else ''}")
-    r, err = ph.write4ByteTxRx(port, 1, ADDR_GOAL_POSITION, 5000)
-    c.check("servo 1: Goal Position 5000 (beyond 0..4095) -> Data Limit error",
-            r == COMM_SUCCESS and err == ERR_DATA_LIMIT, f"{ph.getTxRxResult(r)}, error {err}")
-    r, err = ph.write1ByteTxRx(port, 1, ADDR_TORQUE_ENABLE, 2)
-    c.check("servo 1: Torque Enable = 2 -> Data Range error",
-            r == COMM_SUCCESS and err == ERR_DATA_RANGE, f"{ph.getTxRxResult(r)}, error {err}")
+    # Writes servo 1 refuses: (write, address, value, the error status it answers, what).
+    refused = [
+        (ph.write1ByteTxRx, ADDR_RETURN_DELAY, 5, ERR_ACCESS,
+         "EEPROM write with torque on -> Access error"),
+        (ph.write4ByteTxRx, ADDR_PRESENT_POSITION, 1000, ERR_ACCESS,
+         "WRITE to read-only Present Position -> Access error"),
+        (ph.write4ByteTxRx, ADDR_GOAL_POSITION, 5000, ERR_DATA_LIMIT,
+         "Goal Position 5000 (beyond 0..4095) -> Data Limit error"),
+        (ph.write1ByteTxRx, ADDR_TORQUE_ENABLE, 2, ERR_DATA_RANGE,
+         "Torque Enable = 2 -> Data Range error"),
+    ]
+    for write, addr, value, want, what in refused:
+        check_refused(c, port, ph, 1, write, addr, value, want, f"servo 1: {what}")
 
     # The goals are ramped in over RAMP_S by one SYNC WRITE per loop (as a controller would:
     # a goal step would make the servos jerk the body and push the ZMP out of the feet), while

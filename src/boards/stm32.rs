@@ -1,0 +1,174 @@
+//! What the two STM32 robot controllers ([`super::opencr`], [`super::opencm`]) share: the crash
+//! record in no-init RAM and the panic path, the board state besides the peripherals and the
+//! log ring ([`Stm32State`]: µs clock, tick schedule, watchdog flag, bus UART errors, reset
+//! flags) and the trait implementations built on them ([`stm32_board!`]).
+
+use core::mem::MaybeUninit;
+use cortex_m::peripheral::SCB;
+
+use crate::board::{
+    stm32f7_reset_cause, CrashCell, CrashCode, ResetCause, TickSchedule, WrapClock,
+};
+use crate::Config;
+
+/// The crash record in RAM that is not zeroed at start-up (`.uninit`, NOLOAD in cortex-m-rt's
+/// `link.x`): the loop notes its tick there, a panic records itself, and the next boot logs it
+/// ([`crate::control`]). After a power-on its content is random and ignored.
+#[link_section = ".uninit.WALKER_CRASH"]
+static mut CRASH: MaybeUninit<CrashCell> = MaybeUninit::uninit();
+
+/// The crash record (see [`CRASH`]).
+pub(crate) fn crash_cell() -> &'static mut CrashCell {
+    // SAFETY: single core; the board (one value, `Peripherals::take` makes it unique) and the
+    // panic path (after which nothing else runs) are its only users. Every field is a u32, any
+    // bit pattern is a value; `CrashCell` accesses them volatile.
+    unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashCell>() }
+}
+
+/// Panic path of an STM32 board: log, record the panic in no-init RAM, the board's
+/// `torque_off` (bounded, from anywhere), reset (the next boot logs the record and does not
+/// walk).
+// Inline: the board's panic handler is this (no call through a pointer for `torque_off`).
+#[inline(always)]
+pub(crate) fn panic_reset(info: &core::panic::PanicInfo, torque_off: impl FnOnce()) -> ! {
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    crash_cell().record(CrashCode::Panic);
+    torque_off();
+    SCB::sys_reset()
+}
+
+/// The state of an STM32 board besides its peripherals and its log ring (a field of the board
+/// itself, so that its kilobyte is cleared in place rather than built on the stack and copied).
+pub(crate) struct Stm32State {
+    /// The µs counter extended to 64 bits.
+    pub(crate) clock: WrapClock,
+    /// Tick deadlines and overruns.
+    pub(crate) schedule: TickSchedule,
+    /// The watchdog was started ([`crate::board::Watchdog::start`]).
+    pub(crate) watchdog_running: bool,
+    /// Overrun/framing/noise errors seen on the bus UART.
+    pub(crate) uart_errors: u32,
+    /// RCC_CSR as read at start-up (its reset flags).
+    pub(crate) reset_csr: u32,
+}
+
+impl Stm32State {
+    /// The state at start-up: ticks of `cfg.tick_period_us`, the watchdog not started, the
+    /// reset flags `reset_csr` (RCC_CSR).
+    pub(crate) fn new(cfg: &Config, reset_csr: u32) -> Self {
+        Stm32State {
+            clock: WrapClock::new(),
+            schedule: TickSchedule::new(cfg.tick_period_us),
+            watchdog_running: false,
+            uart_errors: 0,
+            reset_csr,
+        }
+    }
+
+    /// The reset cause and the raw flags: RCC_CSR of the F103 has the F7's flags at the same
+    /// bits (PINRSTF 26, PORRSTF 27, SFTRSTF 28, IWDGRSTF 29, WWDGRSTF 30, LPWRRSTF 31) and no
+    /// BORRSTF (a brown-out is a power-on reset there).
+    pub(crate) fn reset_cause(&self) -> (ResetCause, u32) {
+        (stm32f7_reset_cause(self.reset_csr), self.reset_csr >> 24)
+    }
+
+    /// Counts one error seen on the bus UART.
+    pub(crate) fn count_uart_error(&mut self) {
+        self.uart_errors = self.uart_errors.saturating_add(1);
+    }
+}
+
+/// The parts an STM32 board shares with the other one, for a board struct with the fields
+/// `state` ([`Stm32State`]) and `ring` ([`crate::board::LogRing`]) and the methods `pump_log`
+/// (moves log bytes from the ring to the log UART while it is free), `now_us`
+/// ([`crate::board::Clock`]), `feed` ([`crate::board::Watchdog`]) and `send`
+/// ([`crate::board::ServoBus`]): its [`crate::board::TickTimer`] (busy-waits for the tick,
+/// draining the log meanwhile), [`crate::board::LogSink`] (into the ring), the log and error
+/// counters, and its [`crate::board::Board`] with `name`, `id` and the board's own items
+/// (`servo_power`, `exit`, …; `exit` ends with `shut_down`).
+macro_rules! stm32_board {
+    (
+        impl<$($g:ident: $bound:path),*> for $board:ty {
+            name: $name:literal,
+            id: $id:expr,
+            $($own:tt)*
+        }
+    ) => {
+        impl<$($g: $bound),*> $board {
+            /// Log frames dropped because the ring was full.
+            pub fn log_dropped(&self) -> u32 {
+                self.ring.dropped()
+            }
+
+            /// Overrun/framing/noise errors seen on the bus UART.
+            pub fn uart_errors(&self) -> u32 {
+                self.state.uart_errors
+            }
+
+            /// Torque off, the log drained (bounded: ≤ 1 KiB of ring at 921 600 baud ≈ 11 ms,
+            /// 20 ms at most), the board's panic-path torque off, reset.
+            fn shut_down(&mut self, panic_torque_off: impl FnOnce()) -> ! {
+                use $crate::board::{Board, Clock};
+                self.torque_off_best_effort();
+                let start = self.now_us();
+                while !self.ring.is_empty() && self.now_us() < start + 20_000 {
+                    self.pump_log();
+                }
+                panic_torque_off();
+                cortex_m::peripheral::SCB::sys_reset()
+            }
+        }
+
+        impl<$($g: $bound),*> $crate::board::TickTimer for $board {
+            fn period_us(&self) -> u32 {
+                self.state.schedule.period_us()
+            }
+
+            fn wait_tick(&mut self) -> $crate::board::Tick {
+                use $crate::board::{Clock, Watchdog};
+                let plan = self.state.schedule.plan(self.now_us());
+                if let Some(t) = plan.wait_until_us {
+                    // Bounded by the tick period; fed once per wait.
+                    self.feed();
+                    while self.now_us() < t {
+                        self.pump_log();
+                    }
+                }
+                self.pump_log();
+                plan.tick
+            }
+
+            fn overruns(&self) -> u32 {
+                self.state.schedule.overruns()
+            }
+        }
+
+        impl<$($g: $bound),*> $crate::board::LogSink for $board {
+            fn write_log(&mut self, bytes: &[u8]) {
+                self.ring.push(bytes);
+                self.pump_log();
+            }
+        }
+
+        impl<$($g: $bound),*> $crate::board::Board for $board {
+            const NAME: &'static str = $name;
+            const ID: $crate::record::BoardId = $id;
+
+            fn torque_off_best_effort(&mut self) {
+                use $crate::board::ServoBus;
+                let _ = self.send(&$crate::board::TORQUE_OFF_PACKET);
+            }
+
+            fn reset_cause(&self) -> ($crate::board::ResetCause, u32) {
+                self.state.reset_cause()
+            }
+
+            fn crash_cell(&mut self) -> &mut $crate::board::CrashCell {
+                $crate::boards::stm32::crash_cell()
+            }
+
+            $($own)*
+        }
+    };
+}
+pub(crate) use stm32_board;
