@@ -39,7 +39,7 @@ use crate::real::Real;
 
 /// One step of (C4): the DCM at a segment's start from the DCM at its end.
 pub fn dcm_back<R: Real>(omega: R, p0: [R; 2], p1: [R; 2], d: R, xi1: [R; 2]) -> [R; 2] {
-    dcm_back_with(decay(omega, d), omega, p0, p1, d, xi1)
+    ZmpSpan::new(omega, p0, p1, d).dcm_back(omega, xi1)
 }
 
 /// e^{−ω d}: the stable mode's decay over a segment of `d` seconds ((C4), (C5)).
@@ -47,27 +47,50 @@ pub fn decay<R: Real>(omega: R, d: R) -> R {
     (-(omega * d)).exp()
 }
 
-/// [`dcm_back`] with its decay e^{−ω d} given ([`decay`]; a sampler computes it once per
-/// phase duration, not at every segment change: `exp` is a long library call without an FPU).
-pub fn dcm_back_with<R: Real>(
-    decay: R,
-    omega: R,
-    p0: [R; 2],
-    p1: [R; 2],
-    d: R,
-    xi1: [R; 2],
-) -> [R; 2] {
-    let mut out = [R::zero(); 2];
-    for (i, o) in out.iter_mut().enumerate() {
-        let k = if d > R::zero() {
-            (p1[i] - p0[i]) / d
+/// One linear piece of the ZMP: from `p0` to `p1` over `d` seconds, with its decay e^{−ωd}
+/// (given when it is known: a sampler computes the decay of each phase duration once, not at
+/// every segment change — `exp` is a long library call without an FPU).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ZmpSpan<R> {
+    /// ZMP at the start, m.
+    pub p0: [R; 2],
+    /// ZMP at the end, m.
+    pub p1: [R; 2],
+    /// Duration, s.
+    pub d: R,
+    /// e^{−ωd} ([`decay`]).
+    pub decay: R,
+}
+
+impl<R: Real> ZmpSpan<R> {
+    /// The span from `p0` to `p1` over `d` seconds, its decay computed for `omega`.
+    pub fn new(omega: R, p0: [R; 2], p1: [R; 2], d: R) -> Self {
+        ZmpSpan {
+            p0,
+            p1,
+            d,
+            decay: decay(omega, d),
+        }
+    }
+
+    /// The ZMP slope K = (p₁ − p₀)/d, m/s (0 for an empty span).
+    fn slope(&self, i: usize) -> R {
+        if self.d > R::zero() {
+            (self.p1[i] - self.p0[i]) / self.d
         } else {
             R::zero()
-        };
-        let kw = k / omega;
-        *o = p0[i] + kw + (xi1[i] - p1[i] - kw) * decay;
+        }
     }
-    out
+
+    /// (C4): the DCM at the span's start from the DCM `xi1` at its end.
+    pub fn dcm_back(&self, omega: R, xi1: [R; 2]) -> [R; 2] {
+        let mut out = [R::zero(); 2];
+        for (i, o) in out.iter_mut().enumerate() {
+            let kw = self.slope(i) / omega;
+            *o = self.p0[i] + kw + (xi1[i] - self.p1[i] - kw) * self.decay;
+        }
+        out
+    }
 }
 
 /// The coefficients (C1-C5) of one segment of the CoM solution, both axes.
@@ -91,34 +114,23 @@ impl<R: Real> ComSegment<R> {
     /// The segment from ZMP `p0` to `p1` over `d` seconds, ending at DCM `xi1`, starting with
     /// the CoM at `x0`.
     pub fn new(omega: R, p0: [R; 2], p1: [R; 2], d: R, xi1: [R; 2], x0: [R; 2]) -> Self {
-        Self::with_decay(decay(omega, d), omega, p0, p1, d, xi1, x0)
+        Self::over(omega, &ZmpSpan::new(omega, p0, p1, d), xi1, x0)
     }
 
-    /// [`ComSegment::new`] with e^{−ωD} given ([`decay`]: computed once per phase duration).
-    pub fn with_decay(
-        decay: R,
-        omega: R,
-        p0: [R; 2],
-        p1: [R; 2],
-        d: R,
-        xi1: [R; 2],
-        x0: [R; 2],
-    ) -> Self {
+    /// The segment over `span` (its decay given), ending at DCM `xi1`, starting with the CoM
+    /// at `x0`.
+    pub fn over(omega: R, span: &ZmpSpan<R>, xi1: [R; 2], x0: [R; 2]) -> Self {
         let mut s = ComSegment {
-            p0,
-            duration: d,
-            decay,
+            p0: span.p0,
+            duration: span.d,
+            decay: span.decay,
             ..Default::default()
         };
         for i in 0..2 {
-            let k = if d > R::zero() {
-                (p1[i] - p0[i]) / d
-            } else {
-                R::zero()
-            };
+            let k = span.slope(i);
             s.slope[i] = k;
-            s.a[i] = (xi1[i] - p1[i] - k / omega) * R::of(0.5);
-            s.c[i] = x0[i] - p0[i] - s.a[i] * decay;
+            s.a[i] = (xi1[i] - span.p1[i] - k / omega) * R::of(0.5);
+            s.c[i] = x0[i] - span.p0[i] - s.a[i] * span.decay;
         }
         s
     }

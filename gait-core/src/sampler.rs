@@ -11,7 +11,7 @@
 //! Per sample: two `exp` calls for the CoM (com.rs C1-C2), the swing-foot profile (swing.rs),
 //! and the τ response (com.rs C6). At each segment boundary: one or two DCM back-steps (C4).
 
-use crate::com::{dcm_back_with, decay, ComSegment, TauResponse};
+use crate::com::{decay, ComSegment, TauResponse, ZmpSpan};
 use crate::error::GaitError;
 use crate::plan::{Footstep, Place, Plan};
 use crate::real::Real;
@@ -163,12 +163,7 @@ pub struct Sampler<R, const N: usize> {
     now_ns: u64,
     dt_ns: u64,
     decay_dt: R,
-    /// e^{−ωd} of the three phase durations (the DCM's back-propagation, C4) and of the
-    /// segments entered (lead-in, the three phases, lead-out; their durations rounded to the
-    /// sample clock, C5): computed once when the walk starts, so that a segment change costs
-    /// no `exp` (a long library call on cores without an FPU: the worst-case tick).
-    phase_decays: [R; 3],
-    stage_decays: [R; 5],
+    decays: SegmentDecays<R>,
     tau: TauResponse<R>,
     feet: [Place<R>; 2],
     steps_done: u32,
@@ -183,6 +178,27 @@ fn secs_to_ns<R: Real>(s: R) -> u64 {
         libm::round(v) as u64 * 1000
     } else {
         0
+    }
+}
+
+/// e^{−ωd} of the three phase durations (the DCM's back-propagation, C4) and of the segments
+/// entered (lead-in, the three phases, lead-out; their durations rounded to the sample clock,
+/// C5): computed once when the walk starts, so that a segment change costs no `exp` (a long
+/// library call on cores without an FPU: it made the worst-case tick).
+#[derive(Clone, Copy, Debug)]
+struct SegmentDecays<R> {
+    phases: [R; 3],
+    stages: [R; 5],
+}
+
+impl<R: Real> SegmentDecays<R> {
+    /// The decays for `omega` of the phase durations `phases` and of the lead-in and lead-out.
+    fn of(omega: R, phases: [R; 3], lead_in: R, lead_out: R) -> Self {
+        let [d1, d2, d3] = phases;
+        SegmentDecays {
+            phases: phases.map(|d| decay(omega, d)),
+            stages: [lead_in, d1, d2, d3, lead_out].map(|d| decay(omega, clocked(d))),
+        }
     }
 }
 
@@ -218,8 +234,10 @@ impl<R: Real, const N: usize> Sampler<R, N> {
             now_ns: 0,
             dt_ns: 0,
             decay_dt: R::zero(),
-            phase_decays: [R::zero(); 3],
-            stage_decays: [R::zero(); 5],
+            decays: SegmentDecays {
+                phases: [R::zero(); 3],
+                stages: [R::zero(); 5],
+            },
             tau: TauResponse::default(),
             feet: [Place::default(); 2],
             steps_done: 0,
@@ -274,10 +292,7 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         self.now_ns = 0;
         self.dt_ns = libm::round(dt * 1e9) as u64;
         self.decay_dt = R::of(libm::exp(-omega.to_f64() * dt));
-        let durs = self.phase_durations();
-        self.phase_decays = durs.map(|d| decay(omega, d));
-        let [d1, d2, d3] = durs;
-        self.stage_decays = [p.lead_in, d1, d2, d3, p.lead_out].map(|d| decay(omega, clocked(d)));
+        self.decays = SegmentDecays::of(omega, self.phase_durations(), p.lead_in, p.lead_out);
         self.tau = TauResponse::default();
         self.steps_done = 0;
         self.walk_start_ns = secs_to_ns(p.lead_in);
@@ -368,8 +383,13 @@ impl<R: Real, const N: usize> Sampler<R, N> {
                     let mut xi = e.dcm_end;
                     let mut j = 2usize;
                     while j > ph.index() {
-                        let decay = self.phase_decays[j];
-                        xi = dcm_back_with(decay, w, k[j], k[j + 1], durs[j], xi);
+                        let span = ZmpSpan {
+                            p0: k[j],
+                            p1: k[j + 1],
+                            d: durs[j],
+                            decay: self.decays.phases[j],
+                        };
+                        xi = span.dcm_back(w, xi);
                         j -= 1;
                     }
                     (k[ph.index() + 1], xi)
@@ -387,7 +407,7 @@ impl<R: Real, const N: usize> Sampler<R, N> {
             Stage::Step(_) => self.plan.knots(0),
             _ => None,
         };
-        // The start ZMP, the duration and the index of its decay in `stage_decays`.
+        // The start ZMP, the duration and the index of its decay in `decays.stages`.
         let (p0, dur, which) = match (stage, knots) {
             (Stage::LeadIn, _) => (self.plan.start_zmp(), p.lead_in, 0),
             (Stage::Step(ph), Some(k)) => (
@@ -400,8 +420,13 @@ impl<R: Real, const N: usize> Sampler<R, N> {
         let (p1, xi1) = self.segment_end(stage, knots);
         self.seg_len_ns = secs_to_ns(dur);
         let d = clocked(dur);
-        let decay = self.stage_decays.get(which).copied().unwrap_or(R::zero());
-        self.seg = ComSegment::with_decay(decay, p.model.omega, p0, p1, d, xi1, x0);
+        let span = ZmpSpan {
+            p0,
+            p1,
+            d,
+            decay: self.decays.stages.get(which).copied().unwrap_or(R::zero()),
+        };
+        self.seg = ComSegment::over(p.model.omega, &span, xi1, x0);
         self.stage = stage;
     }
 
