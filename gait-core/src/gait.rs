@@ -843,23 +843,30 @@ mod tests {
         assert_same_walk(&mut e, &mut fresh);
     }
 
-    #[cfg(feature = "fixed-engine")]
-    #[test]
-    fn the_fixed_engine_refuses_the_fourier_com_after_the_plan_checks() {
-        // The order of Engine::new's checks: the plan's errors, then the CoM method.
+    /// The order of Engine::rebuild's checks with the Fourier CoM under `arithmetic`: the
+    /// plan's errors first, then `refusal` of the CoM method; the engine is left done.
+    #[cfg(any(feature = "fixed-engine", not(feature = "fourier-com")))]
+    fn refuses_the_fourier_com_after_the_plan_checks(
+        arithmetic: Arithmetic,
+        refusal: GaitError,
+    ) -> Engine<N> {
         let robot = Robot::reference();
         let mut w = table2(0.005);
         w.com = ComMethod::Fourier { terms: 8 };
         let mut e = Engine::<N>::idle();
-        assert_eq!(
-            e.rebuild(&w, Arithmetic::Fixed, &robot),
-            Err(GaitError::NotPeriodicWalk)
-        );
+        assert_eq!(e.rebuild(&w, arithmetic, &robot), Err(refusal));
         assert!(e.is_done());
         w.walk.steps = 0;
-        assert_eq!(
-            e.rebuild(&w, Arithmetic::Fixed, &robot),
-            Err(GaitError::EmptyPlan)
+        assert_eq!(e.rebuild(&w, arithmetic, &robot), Err(GaitError::EmptyPlan));
+        e
+    }
+
+    #[cfg(feature = "fixed-engine")]
+    #[test]
+    fn the_fixed_engine_refuses_the_fourier_com_after_the_plan_checks() {
+        refuses_the_fourier_com_after_the_plan_checks(
+            Arithmetic::Fixed,
+            GaitError::NotPeriodicWalk,
         );
     }
 
@@ -868,21 +875,10 @@ mod tests {
     fn without_fourier_com_the_fourier_com_is_refused() {
         // The OpenCM 9.04's gait-core: the Fourier CoM is refused after the plan's checks,
         // the engine is left done; the exact CoM builds in the same storage.
+        let mut e =
+            refuses_the_fourier_com_after_the_plan_checks(Arithmetic::F32, GaitError::NotBuiltIn);
         let robot = Robot::reference();
-        let mut w = table2(0.005);
-        w.com = ComMethod::Fourier { terms: 8 };
-        let mut e = Engine::<N>::idle();
-        assert_eq!(
-            e.rebuild(&w, Arithmetic::F32, &robot),
-            Err(GaitError::NotBuiltIn)
-        );
-        assert!(e.is_done());
-        w.walk.steps = 0;
-        assert_eq!(
-            e.rebuild(&w, Arithmetic::F32, &robot),
-            Err(GaitError::EmptyPlan)
-        );
-        w = table2(0.005);
+        let w = table2(0.005);
         e.rebuild(&w, Arithmetic::F32, &robot).unwrap();
         let mut fresh = Engine::<N>::new(&w, Arithmetic::F32, &robot).unwrap();
         assert_same_walk(&mut e, &mut fresh);
