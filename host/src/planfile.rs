@@ -942,7 +942,11 @@ mod tests {
         for e in std::fs::read_dir(dir).unwrap() {
             let path = e.unwrap().path();
             if path.extension().and_then(|x| x.to_str()) == Some("toml")
-                && !path.ends_with("run-example.toml")
+                // Run configurations (`walker fil --config`) are read by `crate::runconfig`.
+                && !path
+                    .file_name()
+                    .and_then(|f| f.to_str())
+                    .is_some_and(|f| f.starts_with("run-"))
                 // Command scripts (`walker fil --commands`) are read by `crate::commands`.
                 && !path
                     .file_name()

@@ -170,6 +170,25 @@ mod tests {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
     }
 
+    /// The Cortex-M3 1 kHz run loads as its comment says: Table 2 at dt = 0.001 s, 4.5 Mbps, the
+    /// fixed-point path at 72 MHz, the M3 ELF on `mps2-an385`.
+    #[test]
+    fn the_m3_1khz_run_loads() {
+        let rc = load(&workspace().join("plans/run-m3-1khz.toml")).unwrap();
+        assert_eq!(rc.spec.dt, 0.001);
+        assert_eq!(rc.spec.steps, 14);
+        let fw = rc.spec.firmware_config().unwrap();
+        assert_eq!(fw.tick_period_us, 1000);
+        assert_eq!(fw.bus_baud, 4_500_000);
+        assert_eq!(fw.core_mhz, 72);
+        assert_eq!(fw.arithmetic, walker_contract::config::Arithmetic::Fixed);
+        assert_eq!(rc.machine.as_deref(), Some("mps2-an385"));
+        assert_eq!(
+            rc.elf.as_deref(),
+            Some(Path::new("target/thumbv7m-none-eabi/release-m3/qemu"))
+        );
+    }
+
     /// The example loads, and every value reaches the walk, the firmware configuration and the
     /// simulator as written there.
     #[test]
