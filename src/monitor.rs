@@ -136,13 +136,13 @@ impl ServoMonitor {
         let alerts = bus.master().stats().hardware_alerts;
         let health = if k.is_multiple_of(2) {
             let mut b = [0u8; SUPPLY_LEN];
-            bus.master()
-                .read(id, SUPPLY_ADDR, &mut b)
-                .ok()
-                .map(|()| ServoHealth::Supply {
-                    voltage_dv: u16::from_le_bytes([b[0], b[1]]),
-                    temperature_c: b[2],
-                })
+            bus.master().read(id, SUPPLY_ADDR, &mut b).ok().map(|()| {
+                let [lo, hi, temperature_c] = b;
+                ServoHealth::Supply {
+                    voltage_dv: u16::from_le_bytes([lo, hi]),
+                    temperature_c,
+                }
+            })
         } else {
             let mut b = [0u8; 2];
             bus.master()

@@ -409,13 +409,14 @@ impl<const N: usize> FixedSampler<N> {
     fn load_segment(&mut self) {
         let s = self.inner.segment();
         let conv = |v: [f32; 2]| v.map(fx_sat);
+        let duration = fx_sat(s.duration);
         self.seg = FixedSegment {
             p0: conv(s.p0),
             slope: conv(s.slope),
             a: conv(s.a),
             c: conv(s.c),
-            duration: fx_sat(s.duration),
-            inv_duration: (1i64 << 46) / (fx_sat(s.duration).to_bits().max(1) as i64),
+            duration,
+            inv_duration: (1i64 << 46) / (duration.to_bits().max(1) as i64),
         };
         let stance = self.inner.stance_feet();
         self.feet = [FixedPlace::of(&stance[0]), FixedPlace::of(&stance[1])];
