@@ -30,6 +30,12 @@
 //!    the start-up ramp's end pose; f32 only: off with `math=fixed`); the gyro damping; [`safe_targets`] to the servo ticks (a non-finite target holds
 //!    the previous tick and stops); ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes
 //!    each).
+//!    The catching step (`catch_gain`, default on; gait-core [`gait_core::catching`], f32
+//!    only) runs before the stabilizer: the attitude and the gyro give the capture-point
+//!    error; beyond the ankles' deadband it moves the swing foot's landing place, and the
+//!    feet's and the body's offsets from the plan are added to copies of the samples (the IK's,
+//!    the log's reference and the next tick's measured-ZMP feet); each catch is logged as two
+//!    `CatchStep` records when its single support ends.
 //!    With `servo_lead = Δ` (default 0) the targets come from the gait sample Δ ahead
 //!    (a delay line of [`MAX_LEAD_TICKS`] samples) while the reference, the log, the stabilizer
 //!    and the gyro feedback's support phase stay at the present sample: a feed-forward of the
@@ -105,6 +111,7 @@ use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::balance::{FixedGyroFeedback, FootForceControl, FootForceState};
+use gait_core::catching::{StepAdaptation, StepAdapter};
 use gait_core::compliance::{Compliance, LoadModel};
 use gait_core::fixed_point::{fx_sat, FixedFoot, Fx};
 use gait_core::gait::{Arithmetic, Sample};
@@ -271,6 +278,51 @@ fn fault(time_us: u64, kind: FaultKind, id: u8, value: i32) -> Record {
         id,
         value,
     })
+}
+
+/// The catching step's log: the largest landing move asked during one single support, written
+/// as two `CatchStep` records when that single support ends.
+#[derive(Default)]
+struct CatchLog {
+    /// The swing foot of the single support being noted.
+    swing: Option<Side>,
+    /// Its largest move asked (forward, leftward; trunk frame), m.
+    largest: [f32; 2],
+}
+
+impl CatchLog {
+    /// Notes this tick's move `asked` in `phase`; logs the swing's largest when it ends.
+    fn note<B: Board>(
+        &mut self,
+        board: &mut B,
+        log: &mut LogWriter,
+        phase: gait_core::SupportPhase,
+        asked: [f32; 2],
+    ) {
+        let swing = match phase {
+            gait_core::SupportPhase::Single(stance) => Some(stance.other()),
+            _ => None,
+        };
+        if swing != self.swing {
+            if let Some(side) = self.swing.filter(|_| self.largest != [0.0; 2]) {
+                let now = board.now_us();
+                let side_code: u8 = if side == Side::Left { 1 } else { 2 };
+                for (component, v) in (0u8..).zip(self.largest) {
+                    // |v| ≤ the limits (< 0.1 m): the µm fit an i32.
+                    let um = libm::roundf(v * 1e6) as i32;
+                    let rec = fault(now, FaultKind::CatchStep, side_code * 16 + component, um);
+                    log.write(board, rec);
+                }
+            }
+            self.swing = swing;
+            self.largest = [0.0; 2];
+        }
+        for (l, a) in self.largest.iter_mut().zip(asked) {
+            if a.abs() > l.abs() {
+                *l = a;
+            }
+        }
+    }
 }
 
 fn is_foot(id: u8) -> bool {
@@ -707,6 +759,17 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let fixed_math = cfg!(feature = "board-opencm")
         || (cfg!(feature = "fixed-gait") && cfg.arithmetic == Arithmetic::Fixed);
     let dt_f32 = cfg.dt_s() as f32;
+    // The catching step (`catch_gain`, gait-core `catching`): f32 only, like the compliance
+    // feed-forward; its largest move asked in the present swing, for the log.
+    let mut catching = StepAdapter::new(
+        &match fixed_math {
+            false => cfg.step_adaptation,
+            true => StepAdaptation::OFF,
+        },
+        first.com[2],
+        (robot.masses.total() * robot.gravity) as f32,
+    );
+    let mut catch_asked = CatchLog::default();
     let mut pitch_fx = FixedPitchAccel::new(pitch_cfg);
     let mut attitude_fx = FixedAttitudeFilter::new(dt_f32);
     let zmp_meter = FixedZmpMeter::new(&robot, cfg.min_load_n);
@@ -791,6 +854,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             }
         }
         // A non-finite or missing gyro sample never reaches the stabilizer.
+        let mut roll_pitch = None;
         let (gyro, tilt) = match imu_fresh {
             Some(s) => {
                 let g = s.gyro_rad_s();
@@ -807,6 +871,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                         let still = matches!(o.mode(), gait_core::online::WalkMode::Standing(_));
                         o.set_heading(heading.update(g, &att, dt_f32, still));
                     }
+                    roll_pitch = Some([att.roll, att.pitch]);
                     att.tilt
                 };
                 let g = Some([roll_rate, rate]).filter(|g| g.iter().all(|v| v.is_finite()));
@@ -934,6 +999,45 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                             sup.stop(StopReason::NonFiniteSample { tick: k });
                             break 'sample None;
                         }
+                        // The catching step (gait-core `catching` A1-A7): the feet's and
+                        // the body's offsets from the plan, on copies of the samples.
+                        // (`fixed_math` first: a constant on the OpenCM, whose build then
+                        // leaves this f32 path out.)
+                        if !fixed_math && catching.is_on() {
+                            // The loads only matter for a swing foot.
+                            let loads = match s.phase {
+                                gait_core::SupportPhase::Single(_) => {
+                                    [foot_load(fl), foot_load(fr)]
+                                }
+                                _ => [f32::NAN; 2],
+                            };
+                            let asked = catching.update(s, roll_pitch, gyro, loads, dt_f32);
+                            catch_asked.note(bus.board(), &mut log, s.phase, asked);
+                        }
+                        let caught: GaitSample<f32>;
+                        let caught_ahead: Sample;
+                        let (s, ahead) = match !fixed_math && catching.is_shifting() {
+                            false => (s, ahead),
+                            true => {
+                                let mut c = *s;
+                                catching.apply(&mut c);
+                                caught = c;
+                                let a = ahead.map(|a| {
+                                    let mut c = *a;
+                                    catching.apply(&mut c.f32);
+                                    // The fixed-point IK would not see the offsets.
+                                    c.fixed = None;
+                                    c
+                                });
+                                match a {
+                                    Some(a) => {
+                                        caught_ahead = a;
+                                        (&caught, Some(&caught_ahead))
+                                    }
+                                    None => (&caught, None),
+                                }
+                            }
+                        };
                         let shift = if cfg.stabilizer_on {
                             // The measurement answers the previous command: compare with it.
                             stab.update(&StabilizerInput {

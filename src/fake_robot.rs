@@ -130,6 +130,15 @@ pub enum ImuMotion {
         /// Amplitude, rad/s.
         amp: f32,
     },
+    /// A push: `rate` rad/s from `from_us` until `until_us` (robot clock), 0 otherwise.
+    Tip {
+        /// Pitch rate while tipping, rad/s.
+        rate: f32,
+        /// Start, µs.
+        from_us: u64,
+        /// End, µs.
+        until_us: u64,
+    },
     /// `even` on reads with an even sample counter, `odd` on the others, rad/s.
     Alternating {
         /// Rate at even counters, rad/s.
@@ -399,6 +408,17 @@ impl<O: Observer> FakeRobot<O> {
             ImuMotion::Sinusoid { amp } => {
                 let t = self.now_ns as f32 * 1e-9;
                 amp * libm::sinf(core::f32::consts::TAU * 1.5 * t)
+            }
+            ImuMotion::Tip {
+                rate,
+                from_us,
+                until_us,
+            } => {
+                if (from_us..until_us).contains(&self.now_us) {
+                    rate
+                } else {
+                    0.0
+                }
             }
             ImuMotion::Alternating { even, odd } => {
                 if self.imu_counter.is_multiple_of(2) {

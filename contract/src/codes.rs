@@ -311,13 +311,18 @@ pub enum FaultKind {
     /// an explicit step's travel, mm, mm, mrad); once at start `id` = 0: the online walk's step
     /// period, µs.
     Footstep,
+    /// 16: the catching step moved the landing place of a swing foot (two records at the end
+    /// of that single support: `id` = side (1 left, 2 right) · 16 + component (0 forward, 1
+    /// leftward, trunk frame), `value` = the largest move asked in that swing, µm; gait-core
+    /// `catching` A3–A4). An event of the walk, not a fault.
+    CatchStep,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
 
 impl FaultKind {
     /// A fault, not an event of the walk nor a notice: false for [`FaultKind::CommandReceived`],
-    /// [`FaultKind::Footstep`], [`FaultKind::ResetCause`] (logged at every boot) and the
+    /// [`FaultKind::Footstep`], [`FaultKind::CatchStep`], [`FaultKind::ResetCause`] (logged at every boot) and the
     /// start-up's plan adjustments [`FaultKind::TimingStretched`] and
     /// [`FaultKind::SwingLowered`] (the servo-speed check made the plan fit; the default plan
     /// is stretched on the reference robot, so the port's Fault Kind would read 7 from boot).
@@ -327,6 +332,7 @@ impl FaultKind {
             self,
             Self::CommandReceived
                 | Self::Footstep
+                | Self::CatchStep
                 | Self::ResetCause
                 | Self::TimingStretched
                 | Self::SwingLowered
@@ -351,6 +357,7 @@ impl FaultKind {
             Self::CrashRecord => 13,
             Self::CommandReceived => 14,
             Self::Footstep => 15,
+            Self::CatchStep => 16,
             Self::Other(c) => c,
         }
     }
@@ -372,6 +379,7 @@ impl FaultKind {
             13 => Self::CrashRecord,
             14 => Self::CommandReceived,
             15 => Self::Footstep,
+            16 => Self::CatchStep,
             c => Self::Other(c),
         }
     }

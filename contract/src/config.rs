@@ -154,6 +154,9 @@ pub struct Config {
     pub compliance: gait_core::compliance::Compliance,
     /// Foot force difference control in double support ([`gait_core::balance`]).
     pub foot_force: gait_core::balance::FootForceControl,
+    /// The catching step: the swing foot's landing place moved by the capture-point error
+    /// beyond the ankles' reach ([`gait_core::catching`]).
+    pub step_adaptation: gait_core::catching::StepAdaptation,
     /// The online walk's heading hold: share of the gyro-measured heading error each walking
     /// step turns back ([`gait_core::online`] H1–H2; 0 = off).
     pub heading_gain: f32,
@@ -233,6 +236,7 @@ impl Config {
             gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
             compliance: gait_core::compliance::Compliance::DEFAULT,
             foot_force: gait_core::balance::FootForceControl::OFF,
+            step_adaptation: gait_core::catching::StepAdaptation::DEFAULT,
             heading_gain: DEFAULT_HEADING_GAIN,
             feasibility: Feasibility::Stretch,
             arithmetic: Arithmetic::F32,

@@ -1229,6 +1229,7 @@ mod tests {
             (FaultKind::SwingLowered, 0),
             (FaultKind::SpeedLimit, 9),
             (FaultKind::Footstep, 9),
+            (FaultKind::CatchStep, 9),
             (FaultKind::DeviceHolding, 1),
             (FaultKind::CommandReceived, 1),
             (FaultKind::TimingStretched, 1),

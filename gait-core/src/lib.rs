@@ -31,6 +31,7 @@ pub use model::{Model, ModelKind};
 pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
 pub use sampler::{CurrentStep, GaitSample, Sampler, StepPhase, SupportPhase};
 pub mod balance;
+pub mod catching;
 pub mod compliance;
 pub mod fixed_ik;
 pub mod fixed_point;

@@ -87,16 +87,22 @@ pub fn variants() -> [Variant; 6] {
     ]
 }
 
-/// The firmware's feedback switched off: no gyro damping, no compliance feed-forward (the
-/// paper's open loop, as in `plans/table2-paper.toml` but at the plan's timing).
-pub const OPEN_LOOP: &[&str] = &["gyro_ankle=0", "gyro_hip=0", "compliance_roll=0"];
+/// The firmware's feedback switched off: no gyro damping, no compliance feed-forward, no
+/// catching step (the paper's open loop, as in `plans/table2-paper.toml` but at the plan's
+/// timing).
+pub const OPEN_LOOP: &[&str] = &[
+    "gyro_ankle=0",
+    "gyro_hip=0",
+    "compliance_roll=0",
+    "catch_gain=0",
+];
 
 /// The ablation of the closed-loop issue (item 4), in table order: the paper's three models
 /// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
 /// the ankles, at the hips (the gains are the firmware's defaults), the servo compliance
-/// feed-forward (this run is the firmware's default), whole-body compensation of the swing
-/// leg, the DCM/ZMP stabilizer.
-pub fn ablation() -> [Variant; 8] {
+/// feed-forward, the catching step (this run is the firmware's default), whole-body
+/// compensation of the swing leg, the DCM/ZMP stabilizer.
+pub fn ablation() -> [Variant; 9] {
     let v = |name, model, compensation, stabilizer, tokens| Variant {
         name,
         model,
@@ -116,10 +122,17 @@ pub fn ablation() -> [Variant; 8] {
             Tlipfm,
             Plain,
             false,
-            &["gyro_hip=0", "compliance_roll=0"],
+            &["gyro_hip=0", "compliance_roll=0", "catch_gain=0"],
         ),
-        v("+gyro-hip", Tlipfm, Plain, false, &["compliance_roll=0"]),
-        v("+compliance (default)", Tlipfm, Plain, false, &[]),
+        v(
+            "+gyro-hip",
+            Tlipfm,
+            Plain,
+            false,
+            &["compliance_roll=0", "catch_gain=0"],
+        ),
+        v("+compliance", Tlipfm, Plain, false, &["catch_gain=0"]),
+        v("+catching step (default)", Tlipfm, Plain, false, &[]),
         v("+wholebody", Tlipfm, Wholebody, false, &[]),
         v("+stabilizer", Tlipfm, Wholebody, true, &[]),
     ]
@@ -870,18 +883,19 @@ pub(crate) mod tests {
                 c.gyro_feedback.ankle > 0.0,
                 c.gyro_feedback.hip > 0.0,
                 c.compliance.roll > 0.0,
+                c.step_adaptation.is_on(),
                 c.compensation == walker_contract::config::Compensation::WholeBody,
                 c.stabilizer_on,
             ]
         };
         for c in &cfgs[..3] {
-            assert_eq!(parts(c), [false; 5]);
+            assert_eq!(parts(c), [false; 6]);
         }
         for w in cfgs[2..].windows(2) {
             let (a, b) = (parts(&w[0]), parts(&w[1]));
-            let added: Vec<usize> = (0..5).filter(|&i| b[i] && !a[i]).collect();
+            let added: Vec<usize> = (0..6).filter(|&i| b[i] && !a[i]).collect();
             assert_eq!(added.len(), 1, "{a:?} -> {b:?}");
-            assert!((0..5).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
+            assert!((0..6).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
         }
         let default_run = ablation()
             .iter()
@@ -889,7 +903,7 @@ pub(crate) mod tests {
             .unwrap();
         let base = firmware_config(&fil::firmware_tokens(&spec).unwrap()).unwrap();
         assert_eq!(parts(&cfgs[default_run]), parts(&base));
-        assert_eq!(parts(&base), [true, true, true, false, false]);
+        assert_eq!(parts(&base), [true, true, true, true, false, false]);
     }
 
     #[test]

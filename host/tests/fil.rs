@@ -228,13 +228,14 @@ fn a_fall_stops_the_walk_and_turns_torque_off() {
 // open-loop whole-body compensation + stabilizer of issue 7 falls within seconds (exit 13), as
 // the full-dynamics issue predicted; making it walk there is the closed-loop issue's work.
 
-/// The firmware's gyro balance feedback and roll compliance off (the paper's open-loop walk),
-/// the servo-speed check off.
+/// The firmware's gyro balance feedback, roll compliance and catching step off (the paper's
+/// open-loop walk), the servo-speed check off.
 const OPEN_LOOP: &[&str] = &[
     "feasibility=off",
     "gyro_ankle=0",
     "gyro_hip=0",
     "compliance_roll=0",
+    "catch_gain=0",
 ];
 
 /// The walk's figures, after checking that the run finished its plan (exit 0, `PlanDone`)
@@ -274,6 +275,7 @@ const STAB: &[&str] = &[
     "gyro_ankle=0",
     "gyro_hip=0",
     "compliance_roll=0",
+    "catch_gain=0",
 ];
 
 /// The walk with the stabilizer stayed bounded: plan done (exit 0), no fall in the simulator,
@@ -510,6 +512,53 @@ fn closed_loop_walk_survives_a_sagittal_push() {
     );
     // The same push open loop: the robot falls and the firmware says so.
     let (r, log) = fil("open-loop-push", spec.clone(), sim, OPEN_LOOP);
+    assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
+    assert!(r.sim.fall_started_us.is_some());
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() {
+    // The closed-loop issue's step adaptation (gait-core `catching`, on by default): Table 2
+    // at the firmware's default timing, a 1.5 N·s backward push on the torso at 5.9 s, early
+    // in the single support on the left foot. The right foot's landing moves back by the
+    // capture-point error beyond the ankles' deadband (logged as `CatchStep` records) and the
+    // walk completes; with `catch_gain=0` the same push makes the robot fall (exit 13).
+    use walker_contract::record::FaultKind;
+    let sim = SimConfig {
+        pushes: vec![walker_host::sim::Push::parse("5.9:1.5:180").unwrap()],
+        ..SimConfig::default()
+    };
+    let spec = WalkSpec::default();
+    let (r, log) = fil("catch-push", spec.clone(), sim.clone(), &[]);
+    // The plan completes without a fall; the push costs distance (0.233 of 0.260 m).
+    let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
+    assert_eq!(r.exit_code, Some(0), "{}", w.line());
+    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
+    assert_eq!(w.fell_at, None, "{}", w.line());
+    assert!(w.walked > 0.8 * w.planned, "{}", w.line());
+    let catches: Vec<(u8, i32)> = log
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Record::Fault(f) if f.kind == FaultKind::CatchStep => Some((f.id, f.value)),
+            _ => None,
+        })
+        .collect();
+    // The right foot (side 2, component 0): backward, within the default reach of 5 cm.
+    assert!(
+        catches
+            .iter()
+            .any(|&(id, v)| id == 2 * 16 && (-50_000..=-10_000).contains(&v)),
+        "{catches:?}"
+    );
+    assert!(
+        !log.events.iter().any(|e| matches!(e, Record::Fault(f)
+            if f.kind == FaultKind::TargetClamped)),
+        "{:?}",
+        log.events
+    );
+    let (r, log) = fil("catch-push-off", spec, sim, &["catch_gain=0"]);
     assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
     assert!(r.sim.fall_started_us.is_some());
 }

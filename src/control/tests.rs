@@ -68,6 +68,18 @@ fn startup_of(recs: &[Record]) -> StartupRecord {
         .unwrap()
 }
 
+/// The sole of `side` (pose in the frame of a level pelvis at the origin) that the goal ticks
+/// `g` command, through the leg FK.
+fn sole_of_goals(g: &[i32; 12], side: gait_core::Side) -> gait_core::kinematics::Pose<f64> {
+    let robot = Robot::reference();
+    let map = JointMap::from_robot(&robot);
+    let leg = side.index();
+    let pelvis = gait_core::kinematics::Pose::level(0.0f64, 0.0, 0.0, 0.0);
+    let q: [f64; 6] =
+        core::array::from_fn(|j| f64::from(map.rad_of_tick(6 * leg + j, g[6 * leg + j])));
+    gait_core::kinematics::leg_fk(&robot, side, &pelvis, &q)
+}
+
 fn assert_goals_in_limits(b: &FakeBoard) {
     let map = JointMap::from_robot(&Robot::reference());
     for g in &b.goals {
@@ -1663,7 +1675,6 @@ fn fixed_point_loop_detects_a_fall() {
 /// not move.
 #[test]
 fn foot_force_difference_raises_the_overloaded_sole_within_its_bound() {
-    use gait_core::kinematics::{leg_fk, Pose};
     use gait_core::Side;
     let off = cfg_with("gyro_ankle=0 gyro_hip=0 fdc_gain=0");
     let on = cfg_with("gyro_ankle=0 gyro_hip=0 fdc_gain=0.002 fdc_max=0.01");
@@ -1677,20 +1688,13 @@ fn foot_force_difference_raises_the_overloaded_sole_within_its_bound() {
     assert_eq!(run(&mut a, &off), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(run(&mut b, &on), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(a.goals.len(), b.goals.len());
-    let robot = Robot::reference();
-    let map = JointMap::from_robot(&robot);
-    let pelvis = Pose::level(0.0f64, 0.0, 0.0, 0.0);
-    let sole_z = |g: &[i32; 12], leg: usize, side: Side| {
-        let q: [f64; 6] =
-            core::array::from_fn(|j| f64::from(map.rad_of_tick(6 * leg + j, g[6 * leg + j])));
-        leg_fk(&robot, side, &pelvis, &q).z
-    };
+    let sole_z = |g: &[i32; 12], side: Side| sole_of_goals(g, side).z;
     // One goal tick is 1.5 mrad: ≈ 0.3 mm of sole height through a 0.2 m leg.
     let tol = 6e-4;
     let (mut raised, mut moved_off) = (0.0f64, 0usize);
     for (ga, gb) in a.goals.iter().zip(&b.goals) {
-        let dl = sole_z(gb, 0, Side::Left) - sole_z(ga, 0, Side::Left);
-        let dr = sole_z(gb, 1, Side::Right) - sole_z(ga, 1, Side::Right);
+        let dl = sole_z(gb, Side::Left) - sole_z(ga, Side::Left);
+        let dr = sole_z(gb, Side::Right) - sole_z(ga, Side::Right);
         assert!(dl >= -tol && dl <= 0.005 + tol, "left {dl}");
         assert!(dr <= tol && dr >= -0.005 - tol, "right {dr}");
         assert!((dl + dr).abs() <= 2.0 * tol, "{dl} {dr}");
@@ -1848,4 +1852,97 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
     );
     assert!(torque_off_sent(&b.inner));
     assert_goals_in_limits(&b.inner);
+}
+
+/// The catching step (`catch_gain`, gait-core `catching` A1–A7): the IMU reports the trunk
+/// tipping backward (−1.5 rad/s for 60 ms) early in a left swing. Against the same run with
+/// `catch_gain=0` (its τ = J·φ̈ sees the tip too): the goals are the same bits until the tip; then the left sole moves back
+/// relative to the right one (FK of the goal ticks, pelvis frame) by at most `catch_max_x`,
+/// never forward, at most `catch_speed`·dt a tick; the swing logs its largest move as two
+/// `CatchStep` records (id 1·16 + 0: backward, within the reach; id 17: sideways 0, the lateral
+/// catch is off by default); the walk completes within the joint limits.
+#[test]
+fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
+    use crate::fake_robot::ImuMotion;
+    use gait_core::Side;
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0");
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let sa = on.step_adaptation;
+    assert!(sa.gain > 0.0, "the catching step is on by default");
+    // The 4th right single support (the left foot swings), 20 ms in.
+    let mut plain = board(&off).with_imu_rate(0.0);
+    assert_eq!(run(&mut plain, &off), RunEnd::Stopped(StopReason::PlanDone));
+    let tr = ticks_of(&plain.records());
+    let starts: Vec<u64> = tr
+        .windows(2)
+        .filter(|w| {
+            w[0].phase != LoggedPhase::SingleRight && w[1].phase == LoggedPhase::SingleRight
+        })
+        .map(|w| u64::from(w[1].time_us))
+        .collect();
+    assert!(starts.len() >= 5, "{} right single supports", starts.len());
+    let from_us = starts[3] + 20_000;
+    let tip = ImuMotion::Tip {
+        rate: -1.5,
+        from_us,
+        until_us: from_us + 60_000,
+    };
+    let mut a = board(&off).with_imu_rate(0.0);
+    a.imu_motion = tip;
+    let mut b = board(&on).with_imu_rate(0.0);
+    b.imu_motion = tip;
+    assert_eq!(run(&mut a, &off), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(run(&mut b, &on), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(a.goals.len(), b.goals.len());
+    let stride = |g: &[i32; 12]| sole_of_goals(g, Side::Left).x - sole_of_goals(g, Side::Right).x;
+    // One goal tick is 1.5 mrad: ≈ 0.3 mm of sole through a 0.2 m leg, for each sole.
+    let tol = 1.2e-3;
+    let dt = on.dt_s();
+    let (mut first, mut back, mut prev) = (None, 0.0f64, 0.0f64);
+    for (k, (ga, gb)) in a.goals.iter().zip(&b.goals).enumerate() {
+        let d = stride(gb) - stride(ga);
+        if ga != gb && first.is_none() {
+            first = Some(k);
+        }
+        assert!(
+            d <= tol && d >= -f64::from(sa.max_x_m) - tol,
+            "goal {k}: {d} m"
+        );
+        assert!(
+            (d - prev).abs() <= f64::from(sa.speed_m_s) * dt + tol,
+            "goal {k}: {prev} -> {d}"
+        );
+        back = back.min(d);
+        prev = d;
+    }
+    assert!(back < -0.01, "the landing moved back by {back} m only");
+    // Nothing moved before the tip.
+    let first = first.expect("the catch changed the goals");
+    let tip_goal = a.goals.len()
+        - tr.iter()
+            .filter(|t| u64::from(t.time_us) >= from_us)
+            .count();
+    assert!(
+        first + 2 >= tip_goal,
+        "goal {first} changed before the tip ({tip_goal})"
+    );
+    // The log: the swing's largest move.
+    let catches: Vec<(u8, i32)> = b
+        .records()
+        .iter()
+        .filter_map(|r| match r {
+            Record::Fault(f) if f.kind == FaultKind::CatchStep => Some((f.id, f.value)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(catches.len(), 2, "{catches:?}");
+    let max_um = (sa.max_x_m * 1e6).round() as i32;
+    assert_eq!(catches[0].0, 16);
+    assert!((-max_um..=-10_000).contains(&catches[0].1), "{catches:?}");
+    assert_eq!(catches[1], (17, 0));
+    assert!(plain
+        .records()
+        .iter()
+        .all(|r| !matches!(r, Record::Fault(f) if f.kind == FaultKind::CatchStep)));
+    assert_goals_in_limits(&b);
 }

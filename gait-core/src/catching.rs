@@ -1,0 +1,321 @@
+//! Step adaptation: the catching step. When the capture point leaves what the ankles can hold,
+//! the swing foot lands where the pushed body needs it, and the rest of the walk follows.
+//!
+//! # Capture-point error from the trunk's attitude
+//! A push rotates the whole robot about its stance sole (stiff position servos hold the legs'
+//! shape); the CoM at height z_c then moves by z_c times the trunk's rotation. With the
+//! attitude filter's roll φ and pitch θ (rad), their baselines φ̄, θ̄ (the walk's own lean,
+//! learnt slowly while no catch is needed), the gyro's rates φ̇, θ̇ (rad/s) and ω = √(g/z_c), the
+//! DCM (capture point) error ξ − ξ_ref = (c − c_ref) + (ċ − ċ_ref)/ω in the trunk's frame is
+//!
+//! ```text
+//!   e_x =  z_c·((θ − θ̄) + θ̇/ω)     e_y = −z_c·((φ − φ̄) + φ̇/ω)                        (A1)
+//!   θ̄ ← θ̄ + dt/(T_b + dt)·(θ − θ̄),  φ̄ likewise, only while |e_x| ≤ m_x and |e_y| ≤ m_y   (A2)
+//! ```
+//!
+//! # The catching step
+//! The ankles hold a capture-point error up to m (the deadband, per axis: the part of the sole
+//! the ZMP can still move to). Beyond it, in single support on the stance foot s with the
+//! heading ψ_s, the swing foot's landing place moves by the excess:
+//!
+//! ```text
+//!   Δ_b = k·dz(e, m)           dz(v, m) = sign(v)·max(|v| − m, 0), per axis           (A3)
+//!   |Δ_b,x| ≤ Δx_max,   −Δy_in ≤ σ·Δ_b,y ≤ Δy_out     σ = +1 left swing, −1 right        (A4)
+//!   d*_swing = d_s + R(ψ_s)·Δ_b                                                      (A5)
+//! ```
+//!
+//! (A4) is the leg's reach forward/backward and outward, and the feet's self-collision inward:
+//! with Δy_in = 0 (the default) the swing foot never moves toward the stance foot, so the step
+//! never narrows below the plan's width; a push toward the stance side is caught by the next
+//! step, when the other foot swings outward.
+//!
+//! # Offsets, not a new plan
+//! The plan stays as it is; each foot carries an offset d_L, d_R (plan frame, m) and the body a
+//! frame offset d_c. The sample the IK takes becomes
+//!
+//! ```text
+//!   foot_i += d_i,   com += d_c,   zmp_ref += d_c                                   (A6)
+//!   d_c* = d_s in single support on s;  α·d_L + (1 − α)·d_R in double support /
+//!   standing, α = sat₀¹((p_ref − p_R)·(p_L − p_R)/|p_L − p_R|²) (the left foot's share) (A7)
+//! ```
+//!
+//! Only the swing foot's offset moves (toward (A5)); feet on the ground keep theirs, so the
+//! next step lands at the plan's place relative to the caught foot: the walk continues from
+//! where the catching step put it (the remaining plan shifted by Δ). In the double support
+//! after the catch the body offset moves to the new stance foot's, so the body is carried Δ
+//! further, which is what absorbs the push. Every offset moves toward its target at most
+//! v_max·dt per axis per tick (continuous joint targets), and |d| ≤ [`MAX_OFFSET_M`].
+//!
+//! The step's timing is the plan's: a catching step changes where the foot lands, not when
+//! (a shorter swing would need the CoM re-planned, which the precomputed TLIPFM segments
+//! cannot do mid-step). A missing or non-finite attitude or gyro sample gives e = 0 (no catch,
+//! offsets hold); non-finite state resets nothing: inputs are filtered before they reach it.
+//! Cost: ≈ 60 flops and no libm call a tick.
+
+use crate::robot::Side;
+use crate::sampler::{GaitSample, SupportPhase};
+
+/// Largest offset of a foot or of the body from the plan, m (the offsets are clamped to it).
+pub const MAX_OFFSET_M: f32 = 2.0;
+
+/// Gravity used for ω, m/s².
+const G: f32 = 9.81;
+
+/// Gains and limits of the catching step (SI units; module docs (A1)–(A7)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepAdaptation {
+    /// Gain k of the capture-point excess on the landing place (A3); 0 turns the step
+    /// adaptation off.
+    pub gain: f32,
+    /// Deadband m per axis (x, y), m: the capture-point error the ankles hold (A3).
+    pub deadband_m: [f32; 2],
+    /// Largest forward/backward move of the landing place, m (A4).
+    pub max_x_m: f32,
+    /// Largest outward move of the landing place, m (A4).
+    pub max_out_m: f32,
+    /// Largest inward move (toward the stance foot), m (A4; self-collision).
+    pub max_in_m: f32,
+    /// Largest speed of the swing foot's offset, m/s.
+    pub speed_m_s: f32,
+    /// Largest speed of the body's offset, m/s.
+    pub body_speed_m_s: f32,
+    /// Time constant T_b of the attitude baseline (A2), s.
+    pub baseline_s: f32,
+    /// Load on the swing foot, as a share of the robot's weight, from which it counts as
+    /// landed: its offset stops moving (an early touchdown).
+    pub touchdown_share: f32,
+}
+
+impl StepAdaptation {
+    /// Off (gain 0), with the default limits.
+    pub const OFF: StepAdaptation = StepAdaptation {
+        gain: 0.0,
+        ..StepAdaptation::DEFAULT
+    };
+
+    /// The firmware's default (see `docs/beyond.md`, "The catching step"): k = 1, deadband
+    /// 2 cm, up to 5 cm forward/backward, the lateral catch off (`max_out_m` = 0: on the
+    /// MuJoCo robot a 1.5 N·s push to the right during left single support walked without it
+    /// and fell with 4 cm), 0.5 m/s, a 2 s baseline, touchdown at a fifth of the weight.
+    pub const DEFAULT: StepAdaptation = StepAdaptation {
+        gain: 1.0,
+        deadband_m: [0.02, 0.02],
+        max_x_m: 0.05,
+        max_out_m: 0.0,
+        max_in_m: 0.0,
+        speed_m_s: 0.5,
+        body_speed_m_s: 0.5,
+        baseline_s: 2.0,
+        touchdown_share: 0.2,
+    };
+
+    /// Whether the step adaptation runs (finite positive gain).
+    pub fn is_on(&self) -> bool {
+        self.gain.is_finite() && self.gain > 0.0
+    }
+}
+
+/// The catching step's state: the attitude baseline and the offsets of the feet and the body.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepAdapter {
+    cfg: StepAdaptation,
+    z_c: f32,
+    touchdown_n: f32,
+    inv_omega: f32,
+    /// Attitude baseline (roll, pitch), rad; `None` until the first attitude.
+    baseline: Option<[f32; 2]>,
+    /// Capture-point error of the last update, trunk frame, m.
+    error: [f32; 2],
+    /// Offsets of the left and right foot, plan frame, m.
+    feet: [[f32; 2]; 2],
+    /// Offset of the body (CoM and ZMP reference), plan frame, m.
+    body: [f32; 2],
+}
+
+impl StepAdapter {
+    /// A catching step for a CoM height `z_c` (m; a non-positive or non-finite height turns it
+    /// off) and a robot of weight `weight_n` (N).
+    pub fn new(cfg: &StepAdaptation, z_c: f32, weight_n: f32) -> Self {
+        let ok = z_c.is_finite() && z_c > 0.0;
+        // Every limit finite and ≥ 0 (a clamp with crossed or NaN bounds would panic): any
+        // other value counts as 0.
+        let limit = |v: f32| if v.is_finite() && v >= 0.0 { v } else { 0.0 };
+        let mut cfg = StepAdaptation {
+            deadband_m: cfg.deadband_m.map(limit),
+            max_x_m: limit(cfg.max_x_m),
+            max_out_m: limit(cfg.max_out_m),
+            max_in_m: limit(cfg.max_in_m),
+            speed_m_s: limit(cfg.speed_m_s),
+            body_speed_m_s: limit(cfg.body_speed_m_s),
+            baseline_s: limit(cfg.baseline_s),
+            ..*cfg
+        };
+        if !ok {
+            cfg.gain = 0.0;
+        }
+        StepAdapter {
+            cfg,
+            z_c: if ok { z_c } else { 0.0 },
+            touchdown_n: cfg.touchdown_share * weight_n,
+            inv_omega: if ok {
+                crate::fastmath::sqrt(z_c / G)
+            } else {
+                0.0
+            },
+            baseline: None,
+            error: [0.0; 2],
+            feet: [[0.0; 2]; 2],
+            body: [0.0; 2],
+        }
+    }
+
+    /// Whether it runs.
+    pub fn is_on(&self) -> bool {
+        self.cfg.is_on()
+    }
+
+    /// The capture-point error of the last update (A1), trunk frame (x forward, y left), m.
+    pub fn error(&self) -> [f32; 2] {
+        self.error
+    }
+
+    /// The offsets of the left and right foot, plan frame, m.
+    pub fn foot_offsets(&self) -> [[f32; 2]; 2] {
+        self.feet
+    }
+
+    /// The body's offset (CoM and ZMP reference), plan frame, m.
+    pub fn body_offset(&self) -> [f32; 2] {
+        self.body
+    }
+
+    /// Whether any offset is non-zero (the sample needs (A6)).
+    pub fn is_shifting(&self) -> bool {
+        self.feet
+            .iter()
+            .chain([&self.body])
+            .any(|d| d[0] != 0.0 || d[1] != 0.0)
+    }
+
+    /// One tick: the attitude `roll_pitch` (rad) and the gyro's `rates` (roll, pitch rate,
+    /// rad/s), both `None` when missing, the feet's measured loads `loads_n` (left, right; N,
+    /// NaN when not measured), with the present (unshifted) gait `sample`; moves the offsets
+    /// (A1)–(A5), (A7). Returns the landing move Δ_b (trunk frame) asked this tick, 0 when no
+    /// catch is needed or outside single support. A swing foot that already carries
+    /// `touchdown_share` of the weight has landed early: its offset holds.
+    pub fn update(
+        &mut self,
+        sample: &GaitSample<f32>,
+        roll_pitch: Option<[f32; 2]>,
+        rates: Option<[f32; 2]>,
+        loads_n: [f32; 2],
+        dt_s: f32,
+    ) -> [f32; 2] {
+        if !(self.is_on() && dt_s.is_finite() && dt_s > 0.0) {
+            return [0.0; 2];
+        }
+        let finite = |v: &[f32; 2]| v[0].is_finite() && v[1].is_finite();
+        let m = self.cfg.deadband_m;
+        // (A1), (A2)
+        self.error = match (roll_pitch.filter(finite), rates.filter(finite)) {
+            (Some([roll, pitch]), Some([roll_rate, pitch_rate])) => {
+                let [b_roll, b_pitch] = *self.baseline.get_or_insert([roll, pitch]);
+                let e = [
+                    self.z_c * ((pitch - b_pitch) + pitch_rate * self.inv_omega),
+                    -self.z_c * ((roll - b_roll) + roll_rate * self.inv_omega),
+                ];
+                if e[0].abs() <= m[0] && e[1].abs() <= m[1] {
+                    let k = dt_s / (self.cfg.baseline_s + dt_s);
+                    self.baseline = Some([
+                        b_roll + k * (roll - b_roll),
+                        b_pitch + k * (pitch - b_pitch),
+                    ]);
+                }
+                if finite(&e) {
+                    e
+                } else {
+                    [0.0; 2]
+                }
+            }
+            _ => [0.0; 2],
+        };
+        // Inside the deadband with every offset at 0 nothing moves: the common tick ends here.
+        if self.error[0].abs() <= m[0] && self.error[1].abs() <= m[1] && !self.is_shifting() {
+            return [0.0; 2];
+        }
+        let mut asked = [0.0; 2];
+        let mut targets = self.feet;
+        let body_target = match (sample.phase, sample.support_foot) {
+            (SupportPhase::Single(stance), _) => {
+                let swing = stance.other();
+                // (A3), (A4)
+                let dz = |v: f32, m: f32| v.signum() * (v.abs() - m).max(0.0);
+                let k = self.cfg.gain;
+                let sigma = if swing == Side::Left { 1.0 } else { -1.0 };
+                let dx = (k * dz(self.error[0], m[0])).clamp(-self.cfg.max_x_m, self.cfg.max_x_m);
+                let dy = sigma
+                    * (sigma * k * dz(self.error[1], m[1]))
+                        .clamp(-self.cfg.max_in_m, self.cfg.max_out_m);
+                asked = [dx, dy];
+                let ds = self.feet[stance.index()];
+                let landed = loads_n
+                    .get(swing.index())
+                    .is_some_and(|&f| f > self.touchdown_n);
+                if !landed {
+                    // (A5): the stance foot's heading turns the trunk frame into the plan's
+                    // (no sine and cosine while there is nothing to turn).
+                    let [px, py] = if asked == [0.0; 2] {
+                        [0.0; 2]
+                    } else {
+                        let yaw = sample.feet[stance.index()].yaw;
+                        let (s, c) = crate::fastmath::sin_cos(yaw);
+                        [c * dx - s * dy, s * dx + c * dy]
+                    };
+                    targets[swing.index()] = [ds[0] + px, ds[1] + py];
+                }
+                ds
+            }
+            _ => {
+                // (A7): the reference ZMP's place between the feet.
+                let [l, r] = &sample.feet;
+                let (ax, ay) = (l.x - r.x, l.y - r.y);
+                let n2 = ax * ax + ay * ay;
+                let alpha = if n2 > 1e-8 {
+                    (((sample.zmp[0] - r.x) * ax + (sample.zmp[1] - r.y) * ay) / n2).clamp(0.0, 1.0)
+                } else {
+                    0.5
+                };
+                let [dl, dr] = self.feet;
+                let a = if alpha.is_finite() { alpha } else { 0.5 };
+                [a * dl[0] + (1.0 - a) * dr[0], a * dl[1] + (1.0 - a) * dr[1]]
+            }
+        };
+        let toward = |d: [f32; 2], t: [f32; 2], speed: f32| {
+            let step = speed * dt_s;
+            [0, 1].map(|i| {
+                (d[i] + (t[i] - d[i]).clamp(-step, step)).clamp(-MAX_OFFSET_M, MAX_OFFSET_M)
+            })
+        };
+        for (d, t) in self.feet.iter_mut().zip(targets) {
+            if finite(&t) {
+                *d = toward(*d, t, self.cfg.speed_m_s);
+            }
+        }
+        if finite(&body_target) {
+            self.body = toward(self.body, body_target, self.cfg.body_speed_m_s);
+        }
+        asked
+    }
+
+    /// (A6) on a sample: the feet by their offsets, the CoM and the ZMP reference by the body's.
+    pub fn apply(&self, sample: &mut GaitSample<f32>) {
+        for (f, d) in sample.feet.iter_mut().zip(self.feet) {
+            f.x += d[0];
+            f.y += d[1];
+        }
+        for i in 0..2 {
+            sample.com[i] += self.body[i];
+            sample.zmp[i] += self.body[i];
+        }
+    }
+}

@@ -1,0 +1,288 @@
+//! The catching step (`gait_core::catching`, A1–A7): the capture-point error from the trunk's
+//! attitude, the landing move beyond the deadband within reach and never inward, the rate
+//! limit, the early touchdown, the body's offset, and the offsets on a sample.
+
+use gait_core::catching::{StepAdaptation, StepAdapter, MAX_OFFSET_M};
+use gait_core::swing::FootSample;
+use gait_core::{GaitSample, Side, SupportPhase};
+use proptest::prelude::*;
+
+const Z_C: f32 = 0.23;
+const WEIGHT_N: f32 = 30.0;
+const DT: f32 = 0.005;
+const NO_LOAD: [f32; 2] = [0.0, 0.0];
+
+/// A sample in `phase` with the feet at y = ±0.05 and the ZMP reference at `zmp`.
+fn sample(phase: SupportPhase, support: Option<Side>, zmp: [f32; 2]) -> GaitSample<f32> {
+    let mut s = GaitSample::zero();
+    s.phase = phase;
+    s.support_foot = support;
+    s.zmp = zmp;
+    s.com = [zmp[0], zmp[1], Z_C];
+    s.feet = [
+        FootSample {
+            x: 0.0,
+            y: 0.05,
+            z: 0.0,
+            yaw: 0.0,
+        },
+        FootSample {
+            x: 0.0,
+            y: -0.05,
+            z: 0.0,
+            yaw: 0.0,
+        },
+    ];
+    s
+}
+
+fn single_left() -> GaitSample<f32> {
+    sample(
+        SupportPhase::Single(Side::Left),
+        Some(Side::Left),
+        [0.0, 0.05],
+    )
+}
+
+/// The independent (A1): the capture-point error of a trunk at `pitch`, `pitch_rate` from an
+/// upright baseline.
+fn cp_error_x(pitch: f32, pitch_rate: f32) -> f32 {
+    let omega = (9.81f32 / Z_C).sqrt();
+    Z_C * (pitch + pitch_rate / omega)
+}
+
+/// One tick in left single support with the attitude `roll_pitch` and the rates `rates`, the
+/// swing foot unloaded.
+fn tilted(a: &mut StepAdapter, roll_pitch: [f32; 2], rates: [f32; 2]) -> [f32; 2] {
+    a.update(&single_left(), Some(roll_pitch), Some(rates), NO_LOAD, DT)
+}
+
+fn adapter(cfg: StepAdaptation) -> StepAdapter {
+    let mut a = StepAdapter::new(&cfg, Z_C, WEIGHT_N);
+    // The baseline: upright.
+    tilted(&mut a, [0.0, 0.0], [0.0, 0.0]);
+    a
+}
+
+#[test]
+fn off_moves_nothing() {
+    let mut a = adapter(StepAdaptation::OFF);
+    for _ in 0..100 {
+        let asked = tilted(&mut a, [0.0, -0.3], [0.0, -2.0]);
+        assert_eq!(asked, [0.0; 2]);
+    }
+    assert!(!a.is_shifting());
+    let mut s = single_left();
+    let before = s;
+    a.apply(&mut s);
+    assert_eq!(s, before);
+}
+
+#[test]
+fn inside_the_deadband_there_is_no_catch() {
+    let cfg = StepAdaptation::DEFAULT;
+    let mut a = adapter(cfg);
+    // A pitch rate whose capture-point error is 90 % of the deadband.
+    let rate = 0.9 * cfg.deadband_m[0] / cp_error_x(0.0, 1.0);
+    for _ in 0..50 {
+        let asked = tilted(&mut a, [0.0, 0.0], [0.0, rate]);
+        assert_eq!(asked, [0.0; 2]);
+    }
+    assert!(!a.is_shifting());
+}
+
+#[test]
+fn a_backward_tip_moves_the_swing_foot_back_by_the_excess_at_the_rate_limit() {
+    let cfg = StepAdaptation::DEFAULT;
+    let mut a = adapter(cfg);
+    let (pitch, rate) = (-0.05f32, -0.4f32);
+    let e = cp_error_x(pitch, rate);
+    let want = cfg.gain * (e + cfg.deadband_m[0]);
+    assert!(
+        want < 0.0 && want > -cfg.max_x_m,
+        "the case must sit inside the reach: {want}"
+    );
+    let step = cfg.speed_m_s * DT;
+    let mut last = 0.0f32;
+    for k in 0..200 {
+        let asked = tilted(&mut a, [0.0, pitch], [0.0, rate]);
+        assert!(
+            (asked[0] - want).abs() < 1e-5,
+            "tick {k}: asked {asked:?}, want {want}"
+        );
+        assert_eq!(asked[1], 0.0);
+        let [_, right] = a.foot_offsets();
+        assert!(
+            (right[0] - last).abs() <= step * 1.0001,
+            "rate limit at tick {k}"
+        );
+        last = right[0];
+        // The stance foot and the body stay where the stance foot is.
+        assert_eq!(a.foot_offsets()[0], [0.0; 2]);
+        assert_eq!(a.body_offset(), [0.0; 2]);
+    }
+    assert!((last - want).abs() < 1e-5, "reached {last}, want {want}");
+    assert!((a.error()[0] - e).abs() < 1e-5);
+}
+
+#[test]
+fn the_landing_move_stays_within_reach_and_never_inward() {
+    // The lateral catch on (the default has it off).
+    let cfg = StepAdaptation {
+        max_out_m: 0.04,
+        ..StepAdaptation::DEFAULT
+    };
+    let mut a = adapter(cfg);
+    // Tipping hard forward and to the right (towards the right, swinging, foot: inward for
+    // nothing, outward for the right foot is −y).
+    for _ in 0..400 {
+        let asked = tilted(&mut a, [0.5, 0.5], [3.0, 3.0]);
+        assert!((asked[0] - cfg.max_x_m).abs() < 1e-6, "{asked:?}");
+        assert!((asked[1] + cfg.max_out_m).abs() < 1e-6, "{asked:?}");
+    }
+    let mut a = adapter(cfg);
+    // Tipping to the left while the right foot swings: the move would be inward.
+    for _ in 0..400 {
+        let asked = tilted(&mut a, [-0.5, 0.0], [-3.0, 0.0]);
+        assert_eq!(asked[1], 0.0, "{asked:?}");
+    }
+    assert_eq!(a.foot_offsets()[1][1], 0.0);
+}
+
+#[test]
+fn an_early_touchdown_holds_the_swing_foot() {
+    let cfg = StepAdaptation::DEFAULT;
+    let mut a = adapter(cfg);
+    for _ in 0..10 {
+        tilted(&mut a, [0.0, -0.1], [0.0, -1.0]);
+    }
+    let held = a.foot_offsets()[1];
+    assert!(held[0] < 0.0);
+    let loaded = [0.0, cfg.touchdown_share * WEIGHT_N * 1.5];
+    for _ in 0..10 {
+        a.update(
+            &single_left(),
+            Some([0.0, -0.1]),
+            Some([0.0, -1.0]),
+            loaded,
+            DT,
+        );
+    }
+    assert_eq!(a.foot_offsets()[1], held);
+}
+
+#[test]
+fn the_body_follows_the_reference_zmp_between_the_caught_feet() {
+    let cfg = StepAdaptation {
+        body_speed_m_s: 100.0,
+        ..StepAdaptation::DEFAULT
+    };
+    let mut a = adapter(cfg);
+    for _ in 0..100 {
+        tilted(&mut a, [0.0, -0.1], [0.0, -1.0]);
+    }
+    let right = a.foot_offsets()[1];
+    // Double support, the reference ZMP a quarter of the way from the right foot to the left.
+    let ds = sample(SupportPhase::Double, Some(Side::Left), [0.0, -0.025]);
+    a.update(&ds, Some([0.0, 0.0]), Some([0.0, 0.0]), [15.0, 15.0], DT);
+    let body = a.body_offset();
+    assert!(
+        (body[0] - 0.75 * right[0]).abs() < 1e-6,
+        "{body:?} {right:?}"
+    );
+    // The offsets on a sample: feet by theirs, CoM and ZMP by the body's.
+    let mut s = ds;
+    a.apply(&mut s);
+    assert_eq!(s.feet[1].x, ds.feet[1].x + right[0]);
+    assert_eq!(s.feet[0].x, ds.feet[0].x);
+    assert_eq!(s.com[0], ds.com[0] + body[0]);
+    assert_eq!(s.zmp[0], ds.zmp[0] + body[0]);
+    assert_eq!(s.com[2], ds.com[2]);
+}
+
+#[test]
+fn the_catch_turns_with_the_stance_foot() {
+    let cfg = StepAdaptation::DEFAULT;
+    let mut a = adapter(cfg);
+    let mut s = single_left();
+    let yaw = core::f32::consts::FRAC_PI_2;
+    s.feet[0].yaw = yaw;
+    for _ in 0..200 {
+        a.update(&s, Some([0.0, -0.1]), Some([0.0, -1.0]), NO_LOAD, DT);
+    }
+    // Backwards in a trunk facing +y is −y in the plan.
+    let [dx, dy] = a.foot_offsets()[1];
+    assert!(dx.abs() < 1e-6 && dy < -0.01, "{dx} {dy}");
+}
+
+proptest! {
+    /// Any input, finite or not: the offsets stay finite, bounded and rate-limited.
+    #[test]
+    fn offsets_stay_finite_bounded_and_rate_limited(
+        inputs in prop::collection::vec(
+            (prop::array::uniform4(prop_oneof![-10.0f32..10.0, Just(f32::NAN), Just(f32::INFINITY)]),
+             0u8..4, -0.2f32..0.2),
+            1..200),
+    ) {
+        let cfg = StepAdaptation {
+            max_out_m: 0.04,
+            ..StepAdaptation::DEFAULT
+        };
+        let mut a = adapter(cfg);
+        let lim = cfg.speed_m_s.max(cfg.body_speed_m_s) * DT * 1.0001;
+        for ([r, p, rr, pr], phase, zy) in inputs {
+            let s = match phase {
+                0 => single_left(),
+                1 => sample(SupportPhase::Single(Side::Right), Some(Side::Right), [0.0, -0.05]),
+                2 => sample(SupportPhase::Double, Some(Side::Left), [0.0, zy]),
+                _ => sample(SupportPhase::Standing, None, [0.0, zy]),
+            };
+            let before = (a.foot_offsets(), a.body_offset());
+            let asked = a.update(&s, Some([r, p]), Some([rr, pr]), [f32::NAN, 3.0], DT);
+            prop_assert!(asked.iter().all(|v| v.is_finite()));
+            prop_assert!(asked[0].abs() <= cfg.max_x_m + 1e-6);
+            let after = (a.foot_offsets(), a.body_offset());
+            for (b, n) in before.0.iter().chain([&before.1]).zip(after.0.iter().chain([&after.1])) {
+                for i in 0..2 {
+                    prop_assert!(n[i].is_finite() && n[i].abs() <= MAX_OFFSET_M);
+                    prop_assert!((n[i] - b[i]).abs() <= lim);
+                }
+            }
+        }
+    }
+}
+
+proptest! {
+    /// Any configuration (negative, NaN, infinite limits) and any step: no panic, finite
+    /// offsets.
+    #[test]
+    fn any_configuration_is_total(
+        vals in prop::array::uniform9(prop_oneof![
+            -1.0f32..1.0, Just(f32::NAN), Just(f32::INFINITY), Just(f32::NEG_INFINITY)
+        ]),
+        dt in prop_oneof![0.0f32..0.1, Just(f32::NAN), Just(-1.0f32)],
+        z_c in prop_oneof![-1.0f32..1.0, Just(f32::NAN)],
+    ) {
+        let cfg = StepAdaptation {
+            gain: vals[0],
+            deadband_m: [vals[1], vals[2]],
+            max_x_m: vals[3],
+            max_out_m: vals[4],
+            max_in_m: vals[5],
+            speed_m_s: vals[6],
+            body_speed_m_s: vals[7],
+            baseline_s: vals[8],
+            touchdown_share: vals[0],
+        };
+        let mut a = StepAdapter::new(&cfg, z_c, WEIGHT_N);
+        for s in [single_left(), sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.01])] {
+            for _ in 0..5 {
+                let asked = a.update(&s, Some([0.3, -0.4]), Some([2.0, -3.0]), NO_LOAD, dt);
+                prop_assert!(asked.iter().all(|v| v.is_finite()));
+            }
+        }
+        for d in a.foot_offsets().iter().chain([&a.body_offset()]) {
+            prop_assert!(d.iter().all(|v| v.is_finite() && v.abs() <= MAX_OFFSET_M));
+        }
+    }
+}
