@@ -257,21 +257,24 @@ impl StepAdapter {
                     * (sigma * k * dz(self.error[1], m[1]))
                         .clamp(-self.cfg.max_in_m, self.cfg.max_out_m);
                 asked = [dx, dy];
-                let ds = self.feet[stance.index()];
-                let landed = loads_n
-                    .get(swing.index())
-                    .is_some_and(|&f| f > self.touchdown_n);
+                // Constant indices (the left foot first): checked at compile time.
+                let (ds, swing_load, stance_yaw) = match stance {
+                    Side::Left => (self.feet[0], loads_n[1], sample.feet[0].yaw),
+                    Side::Right => (self.feet[1], loads_n[0], sample.feet[1].yaw),
+                };
+                let landed = swing_load > self.touchdown_n;
                 if !landed {
                     // (A5): the stance foot's heading turns the trunk frame into the plan's
                     // (no sine and cosine while there is nothing to turn).
                     let [px, py] = if asked == [0.0; 2] {
                         [0.0; 2]
                     } else {
-                        let yaw = sample.feet[stance.index()].yaw;
-                        let (s, c) = crate::fastmath::sin_cos(yaw);
+                        let (s, c) = crate::fastmath::sin_cos(stance_yaw);
                         [c * dx - s * dy, s * dx + c * dy]
                     };
-                    targets[swing.index()] = [ds[0] + px, ds[1] + py];
+                    let [tl, tr] = &mut targets;
+                    let t = if swing == Side::Left { tl } else { tr };
+                    *t = [ds[0] + px, ds[1] + py];
                 }
                 ds
             }
