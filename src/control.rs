@@ -766,8 +766,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             false => cfg.step_adaptation,
             true => StepAdaptation::OFF,
         },
+        &robot,
         first.com[2],
-        (robot.masses.total() * robot.gravity) as f32,
+        dt_f32,
     );
     let mut catch_asked = CatchLog::default();
     let mut pitch_fx = FixedPitchAccel::new(pitch_cfg);
@@ -1011,7 +1012,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 }
                                 _ => [f32::NAN; 2],
                             };
-                            let asked = catching.update(s, roll_pitch, gyro, loads, dt_f32);
+                            let asked = catching.update(s, roll_pitch, gyro, loads);
                             catch_asked.note(bus.board(), &mut log, s.phase, asked);
                         }
                         let caught: GaitSample<f32>;

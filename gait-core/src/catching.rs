@@ -49,17 +49,17 @@
 //! The step's timing is the plan's: a catching step changes where the foot lands, not when
 //! (a shorter swing would need the CoM re-planned, which the precomputed TLIPFM segments
 //! cannot do mid-step). A missing or non-finite attitude or gyro sample gives e = 0 (no catch,
-//! offsets hold); non-finite state resets nothing: inputs are filtered before they reach it.
-//! Cost: ≈ 60 flops and no libm call a tick.
+//! offsets hold; non-finite inputs never reach the state). g, the weight and every per-tick
+//! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
+//! and the tick period once, in [`StepAdapter::new`]. Cost without a push: the error (A1), the
+//! baseline (A2) and the deadband test, then an early return (measured on the M7 control tick:
+//! +436 instructions on average, BENCHMARKS.md).
 
-use crate::robot::Side;
+use crate::robot::{Robot, Side};
 use crate::sampler::{GaitSample, SupportPhase};
 
 /// Largest offset of a foot or of the body from the plan, m (the offsets are clamped to it).
 pub const MAX_OFFSET_M: f32 = 2.0;
-
-/// Gravity used for ω, m/s².
-const G: f32 = 9.81;
 
 /// Gains and limits of the catching step (SI units; module docs (A1)–(A7)).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,6 +122,10 @@ pub struct StepAdapter {
     z_c: f32,
     touchdown_n: f32,
     inv_omega: f32,
+    /// The baseline's filter factor dt/(T_b + dt) (A2).
+    baseline_k: f32,
+    /// Largest move of the swing foot's and of the body's offset in one tick, m.
+    steps: [f32; 2],
     /// Attitude baseline (roll, pitch), rad; `None` until the first attitude.
     baseline: Option<[f32; 2]>,
     /// Capture-point error of the last update, trunk frame, m.
@@ -133,10 +137,12 @@ pub struct StepAdapter {
 }
 
 impl StepAdapter {
-    /// A catching step for a CoM height `z_c` (m; a non-positive or non-finite height turns it
-    /// off) and a robot of weight `weight_n` (N).
-    pub fn new(cfg: &StepAdaptation, z_c: f32, weight_n: f32) -> Self {
-        let ok = z_c.is_finite() && z_c > 0.0;
+    /// A catching step for `robot` (its gravity and weight) walking at the CoM height `z_c`
+    /// (m) with ticks of `dt_s` seconds; a non-positive or non-finite height or tick turns it
+    /// off.
+    pub fn new(cfg: &StepAdaptation, robot: &Robot, z_c: f32, dt_s: f32) -> Self {
+        let g = robot.gravity as f32;
+        let ok = z_c.is_finite() && z_c > 0.0 && dt_s.is_finite() && dt_s > 0.0 && g > 0.0;
         // Every limit finite and ≥ 0 (a clamp with crossed or NaN bounds would panic): any
         // other value counts as 0.
         let limit = |v: f32| if v.is_finite() && v >= 0.0 { v } else { 0.0 };
@@ -156,11 +162,21 @@ impl StepAdapter {
         StepAdapter {
             cfg,
             z_c: if ok { z_c } else { 0.0 },
-            touchdown_n: cfg.touchdown_share * weight_n,
+            touchdown_n: cfg.touchdown_share * (robot.masses.total() * robot.gravity) as f32,
             inv_omega: if ok {
-                crate::fastmath::sqrt(z_c / G)
+                crate::fastmath::sqrt(z_c / g)
             } else {
                 0.0
+            },
+            baseline_k: if ok {
+                dt_s / (cfg.baseline_s + dt_s)
+            } else {
+                0.0
+            },
+            steps: if ok {
+                [cfg.speed_m_s * dt_s, cfg.body_speed_m_s * dt_s]
+            } else {
+                [0.0; 2]
             },
             baseline: None,
             error: [0.0; 2],
@@ -197,9 +213,10 @@ impl StepAdapter {
             .any(|d| d[0] != 0.0 || d[1] != 0.0)
     }
 
-    /// One tick: the attitude `roll_pitch` (rad) and the gyro's `rates` (roll, pitch rate,
-    /// rad/s), both `None` when missing, the feet's measured loads `loads_n` (left, right; N,
-    /// NaN when not measured), with the present (unshifted) gait `sample`; moves the offsets
+    /// One tick (of the period given to [`StepAdapter::new`]): the attitude `roll_pitch` (rad)
+    /// and the gyro's `rates` (roll, pitch rate, rad/s), both `None` when missing, the feet's
+    /// measured loads `loads_n` (left, right; N, NaN when not measured), with the present
+    /// (unshifted) gait `sample`; moves the offsets
     /// (A1)–(A5), (A7). Returns the landing move Δ_b (trunk frame) asked this tick, 0 when no
     /// catch is needed or outside single support. A swing foot that already carries
     /// `touchdown_share` of the weight has landed early: its offset holds.
@@ -209,9 +226,8 @@ impl StepAdapter {
         roll_pitch: Option<[f32; 2]>,
         rates: Option<[f32; 2]>,
         loads_n: [f32; 2],
-        dt_s: f32,
     ) -> [f32; 2] {
-        if !(self.is_on() && dt_s.is_finite() && dt_s > 0.0) {
+        if !self.is_on() {
             return [0.0; 2];
         }
         let finite = |v: &[f32; 2]| v[0].is_finite() && v[1].is_finite();
@@ -225,7 +241,7 @@ impl StepAdapter {
                     -self.z_c * ((roll - b_roll) + roll_rate * self.inv_omega),
                 ];
                 if e[0].abs() <= m[0] && e[1].abs() <= m[1] {
-                    let k = dt_s / (self.cfg.baseline_s + dt_s);
+                    let k = self.baseline_k;
                     self.baseline = Some([
                         b_roll + k * (roll - b_roll),
                         b_pitch + k * (pitch - b_pitch),
@@ -293,19 +309,18 @@ impl StepAdapter {
                 [a * dl[0] + (1.0 - a) * dr[0], a * dl[1] + (1.0 - a) * dr[1]]
             }
         };
-        let toward = |d: [f32; 2], t: [f32; 2], speed: f32| {
-            let step = speed * dt_s;
+        let toward = |d: [f32; 2], t: [f32; 2], step: f32| {
             [0, 1].map(|i| {
                 (d[i] + (t[i] - d[i]).clamp(-step, step)).clamp(-MAX_OFFSET_M, MAX_OFFSET_M)
             })
         };
         for (d, t) in self.feet.iter_mut().zip(targets) {
             if finite(&t) {
-                *d = toward(*d, t, self.cfg.speed_m_s);
+                *d = toward(*d, t, self.steps[0]);
             }
         }
         if finite(&body_target) {
-            self.body = toward(self.body, body_target, self.cfg.body_speed_m_s);
+            self.body = toward(self.body, body_target, self.steps[1]);
         }
         asked
     }

@@ -4,11 +4,10 @@
 
 use gait_core::catching::{StepAdaptation, StepAdapter, MAX_OFFSET_M};
 use gait_core::swing::FootSample;
-use gait_core::{GaitSample, Side, SupportPhase};
+use gait_core::{GaitSample, Robot, Side, SupportPhase};
 use proptest::prelude::*;
 
 const Z_C: f32 = 0.23;
-const WEIGHT_N: f32 = 30.0;
 const DT: f32 = 0.005;
 const NO_LOAD: [f32; 2] = [0.0, 0.0];
 
@@ -36,6 +35,12 @@ fn sample(phase: SupportPhase, support: Option<Side>, zmp: [f32; 2]) -> GaitSamp
     s
 }
 
+/// The reference robot's weight, N.
+fn weight_n() -> f32 {
+    let r = Robot::reference();
+    (r.masses.total() * r.gravity) as f32
+}
+
 fn single_left() -> GaitSample<f32> {
     sample(
         SupportPhase::Single(Side::Left),
@@ -54,11 +59,11 @@ fn cp_error_x(pitch: f32, pitch_rate: f32) -> f32 {
 /// One tick in left single support with the attitude `roll_pitch` and the rates `rates`, the
 /// swing foot unloaded.
 fn tilted(a: &mut StepAdapter, roll_pitch: [f32; 2], rates: [f32; 2]) -> [f32; 2] {
-    a.update(&single_left(), Some(roll_pitch), Some(rates), NO_LOAD, DT)
+    a.update(&single_left(), Some(roll_pitch), Some(rates), NO_LOAD)
 }
 
 fn adapter(cfg: StepAdaptation) -> StepAdapter {
-    let mut a = StepAdapter::new(&cfg, Z_C, WEIGHT_N);
+    let mut a = StepAdapter::new(&cfg, &Robot::reference(), Z_C, DT);
     // The baseline: upright.
     tilted(&mut a, [0.0, 0.0], [0.0, 0.0]);
     a
@@ -158,15 +163,9 @@ fn an_early_touchdown_holds_the_swing_foot() {
     }
     let held = a.foot_offsets()[1];
     assert!(held[0] < 0.0);
-    let loaded = [0.0, cfg.touchdown_share * WEIGHT_N * 1.5];
+    let loaded = [0.0, cfg.touchdown_share * weight_n() * 1.5];
     for _ in 0..10 {
-        a.update(
-            &single_left(),
-            Some([0.0, -0.1]),
-            Some([0.0, -1.0]),
-            loaded,
-            DT,
-        );
+        a.update(&single_left(), Some([0.0, -0.1]), Some([0.0, -1.0]), loaded);
     }
     assert_eq!(a.foot_offsets()[1], held);
 }
@@ -184,7 +183,7 @@ fn the_body_follows_the_reference_zmp_between_the_caught_feet() {
     let right = a.foot_offsets()[1];
     // Double support, the reference ZMP a quarter of the way from the right foot to the left.
     let ds = sample(SupportPhase::Double, Some(Side::Left), [0.0, -0.025]);
-    a.update(&ds, Some([0.0, 0.0]), Some([0.0, 0.0]), [15.0, 15.0], DT);
+    a.update(&ds, Some([0.0, 0.0]), Some([0.0, 0.0]), [15.0, 15.0]);
     let body = a.body_offset();
     assert!(
         (body[0] - 0.75 * right[0]).abs() < 1e-6,
@@ -208,7 +207,7 @@ fn the_catch_turns_with_the_stance_foot() {
     let yaw = core::f32::consts::FRAC_PI_2;
     s.feet[0].yaw = yaw;
     for _ in 0..200 {
-        a.update(&s, Some([0.0, -0.1]), Some([0.0, -1.0]), NO_LOAD, DT);
+        a.update(&s, Some([0.0, -0.1]), Some([0.0, -1.0]), NO_LOAD);
     }
     // Backwards in a trunk facing +y is −y in the plan.
     let [dx, dy] = a.foot_offsets()[1];
@@ -238,7 +237,7 @@ proptest! {
                 _ => sample(SupportPhase::Standing, None, [0.0, zy]),
             };
             let before = (a.foot_offsets(), a.body_offset());
-            let asked = a.update(&s, Some([r, p]), Some([rr, pr]), [f32::NAN, 3.0], DT);
+            let asked = a.update(&s, Some([r, p]), Some([rr, pr]), [f32::NAN, 3.0]);
             prop_assert!(asked.iter().all(|v| v.is_finite()));
             prop_assert!(asked[0].abs() <= cfg.max_x_m + 1e-6);
             let after = (a.foot_offsets(), a.body_offset());
@@ -274,10 +273,10 @@ proptest! {
             baseline_s: vals[8],
             touchdown_share: vals[0],
         };
-        let mut a = StepAdapter::new(&cfg, z_c, WEIGHT_N);
+        let mut a = StepAdapter::new(&cfg, &Robot::reference(), z_c, dt);
         for s in [single_left(), sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.01])] {
             for _ in 0..5 {
-                let asked = a.update(&s, Some([0.3, -0.4]), Some([2.0, -3.0]), NO_LOAD, dt);
+                let asked = a.update(&s, Some([0.3, -0.4]), Some([2.0, -3.0]), NO_LOAD);
                 prop_assert!(asked.iter().all(|v| v.is_finite()));
             }
         }
