@@ -405,6 +405,114 @@ fn write_goals<B: Board>(bus: &mut BoardMaster<'_, B>, ticks: &[i32; LEG_JOINTS]
     let _ = bus.master().sync_write(f.addr, f.len, &entries);
 }
 
+/// The servo deflection feedback's firmware side ([`gait_core::deflection`], `deflection_ki`):
+/// the masked joints' Present Position in one BULK READ a tick, the targets of the last
+/// walking tick before the correction (D1) and the feedback. Only built while it acts (f32
+/// path); the OpenCM build has a zero-sized stand-in (`NoDeflection`: its RAM is short).
+#[cfg(not(feature = "board-opencm"))]
+struct Deflection {
+    feedback: gait_core::deflection::DeflectionFeedback,
+    reqs: heapless::Vec<BulkReadRequest, LEG_JOINTS>,
+    /// Per request: the joint index.
+    joints: heapless::Vec<usize, LEG_JOINTS>,
+    buf: [u8; 4 * LEG_JOINTS],
+    results: [DeviceResult; LEG_JOINTS],
+    /// This tick's Present Positions, rad (NaN where not read).
+    present: [f32; LEG_JOINTS],
+    /// The targets q* of the last walking tick before the correction, and that tick.
+    sent: Option<(u32, [f32; LEG_JOINTS])>,
+}
+
+#[cfg(not(feature = "board-opencm"))]
+impl Deflection {
+    /// The feedback of `cfg` at tick period `dt_s`, `None` while it does not act.
+    fn new(cfg: &gait_core::deflection::DeflectionConfig, dt_s: f32) -> Option<Self> {
+        let feedback = gait_core::deflection::DeflectionFeedback::new(cfg, dt_s);
+        if !feedback.is_on() {
+            return None;
+        }
+        let mut d = Deflection {
+            feedback,
+            reqs: heapless::Vec::new(),
+            joints: heapless::Vec::new(),
+            buf: [0; 4 * LEG_JOINTS],
+            results: [Ok(()); LEG_JOINTS],
+            present: [f32::NAN; LEG_JOINTS],
+            sent: None,
+        };
+        let f = x_series::PRESENT_POSITION;
+        for j in (0..LEG_JOINTS).filter(|&j| cfg.joints.contains(j)) {
+            if let Some(id) = ids::servo_id(j) {
+                // At most LEG_JOINTS entries: cannot fail.
+                let _ = d.reqs.push(BulkReadRequest {
+                    id,
+                    addr: f.addr,
+                    len: f.len,
+                });
+                let _ = d.joints.push(j);
+            }
+        }
+        Some(d)
+    }
+
+    /// ONE BULK READ of the joints' Present Position (rad; NaN for a reply that failed).
+    fn read<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>, map: &JointMap) {
+        self.present = [f32::NAN; LEG_JOINTS];
+        let n = self.reqs.len();
+        let (Some(results), Some(buf)) = (self.results.get_mut(..n), self.buf.get_mut(..4 * n))
+        else {
+            return;
+        };
+        if n == 0 || bus.master().bulk_read(&self.reqs, buf, results).is_err() {
+            return;
+        }
+        for ((&j, r), b) in self
+            .joints
+            .iter()
+            .zip(results.iter())
+            .zip(buf.chunks_exact(4))
+        {
+            if let (Ok(()), Some(v), [b0, b1, b2, b3]) = (r, self.present.get_mut(j), b) {
+                *v = map
+                    .ticks
+                    .rad_f32(j, i32::from_le_bytes([*b0, *b1, *b2, *b3]));
+            }
+        }
+    }
+
+    /// Walking tick `k` of phase `phase` with the targets `q` (rad, before the correction):
+    /// (D1)-(D4) against the last tick's targets if that was tick k − 1, then (D5) on `q`.
+    fn apply(&mut self, k: u32, phase: gait_core::SupportPhase, q: &mut [f32; LEG_JOINTS]) {
+        if let Some((_, sent)) = self.sent.filter(|(at, _)| at.wrapping_add(1) == k) {
+            self.feedback.update(phase, &sent, &self.present);
+        }
+        self.sent = Some((k, *q));
+        self.feedback.apply(q);
+    }
+}
+
+/// The OpenCM's stand-in for [`Deflection`]: never built (f32 only), no RAM.
+#[cfg(feature = "board-opencm")]
+struct NoDeflection;
+
+#[cfg(feature = "board-opencm")]
+impl NoDeflection {
+    fn new(_: &gait_core::deflection::DeflectionConfig, _: f32) -> Option<Self> {
+        None
+    }
+
+    fn read<B: Board>(&mut self, _: &mut BoardMaster<'_, B>, _: &JointMap) {}
+
+    fn apply(&mut self, _: u32, _: gait_core::SupportPhase, _: &mut [f32; LEG_JOINTS]) {}
+}
+
+/// The deflection feedback of this build.
+#[cfg(not(feature = "board-opencm"))]
+type DeflectionLoop = Deflection;
+/// The deflection feedback of this build.
+#[cfg(feature = "board-opencm")]
+type DeflectionLoop = NoDeflection;
+
 /// The sensor devices read each tick and where their data lands in the bulk-read buffer.
 struct Sensors {
     reqs: heapless::Vec<BulkReadRequest, 3>,
@@ -771,6 +879,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         dt_f32,
     );
     let mut catch_asked = CatchLog::default();
+    // The servo deflection feedback (`deflection_ki`, gait-core `deflection`): f32 only; the
+    // masked joints' Present Position is read only while it acts.
+    let mut deflection = match fixed_math {
+        false => DeflectionLoop::new(&cfg.deflection, dt_f32),
+        true => None,
+    };
     let mut pitch_fx = FixedPitchAccel::new(pitch_cfg);
     let mut attitude_fx = FixedAttitudeFilter::new(dt_f32);
     let zmp_meter = FixedZmpMeter::new(&robot, cfg.min_load_n);
@@ -801,6 +915,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 
         // Sensors.
         sensors.read(&mut bus);
+        if let Some(d) = deflection.as_mut() {
+            d.read(&mut bus, &map);
+        }
         let now = bus.board().now_us();
         let checked = sensors.check(&mut plausible, now);
         let mut imu_fresh = None;
@@ -1094,6 +1211,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 };
                                 load.apply(&compliance, &mut q, loaded, shift);
                                 cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
+                                if let Some(d) = deflection.as_mut() {
+                                    d.apply(k, s.phase, &mut q);
+                                }
                                 Goal::Rad(q)
                             }
                         };

@@ -89,6 +89,8 @@ pub struct FakeDevice {
     pub voltage_dv: u16,
     /// Present Current, units of 2.69 mA.
     pub current_raw: i16,
+    /// Deflection under load, ticks: with torque on the servo stands at goal − `sag`.
+    pub sag: i32,
 }
 
 impl FakeDevice {
@@ -109,6 +111,7 @@ impl FakeDevice {
             temperature: 40,
             voltage_dv: 120,
             current_raw: 300,
+            sag: 0,
         }
     }
 }
@@ -523,7 +526,7 @@ impl<O: Observer> FakeRobot<O> {
             (Kind::Servo(_), 116, [a, b, c, e]) => {
                 d.goal = i32::from_le_bytes([*a, *b, *c, *e]);
                 if d.torque {
-                    d.present = d.goal;
+                    d.present = d.goal.saturating_sub(d.sag);
                 }
                 true
             }

@@ -157,6 +157,9 @@ pub struct Config {
     /// The catching step: the swing foot's landing place moved by the capture-point error
     /// beyond the ankles' reach ([`gait_core::catching`]).
     pub step_adaptation: gait_core::catching::StepAdaptation,
+    /// The stance leg's joints driven to their targets from the servos' Present Position
+    /// ([`gait_core::deflection`]).
+    pub deflection: gait_core::deflection::DeflectionConfig,
     /// The online walk's heading hold: share of the gyro-measured heading error each walking
     /// step turns back ([`gait_core::online`] H1–H2; 0 = off).
     pub heading_gain: f32,
@@ -237,6 +240,7 @@ impl Config {
             compliance: gait_core::compliance::Compliance::DEFAULT,
             foot_force: gait_core::balance::FootForceControl::OFF,
             step_adaptation: gait_core::catching::StepAdaptation::DEFAULT,
+            deflection: gait_core::deflection::DeflectionConfig::OFF,
             heading_gain: DEFAULT_HEADING_GAIN,
             feasibility: Feasibility::Stretch,
             arithmetic: Arithmetic::F32,

@@ -127,7 +127,7 @@ pub enum Command {
     ///
     /// One run per level through the firmware's command port (host/src/speed.rs): sustained =
     /// no fall, the run ends by the commanded torque off and the pelvis's mean over the 10 s
-    /// hold reaches 90 % of the level; writes OUT/speed.md and one folder per run.
+    /// hold is within 10 % of the level; writes OUT/speed.md and one folder per run.
     Speed(SpeedArgs),
     /// Keyboard teleoperation of the walk on the firmware's command port (arrows/WASD, space =
     /// stop, t = torque off, Esc = quit), with a live status line.
@@ -1560,9 +1560,9 @@ fn run_speed(a: SpeedArgs) -> Result<(), CliError> {
     eprintln!("walker speed: {plan_name}");
     let rows = speed::run(&opts, |line| eprintln!("  {line} …")).map_err(CliError::failed)?;
     let mut md = format!(
-        "# Fastest sustained walk on command: {plan_name}\n\nThe firmware's defaults on the MuJoCo robot, through the command port: the level held {:.0} s after the acceleration ramp; sustained = no fall, the run ends by the commanded torque off and the pelvis's mean over the hold ≥ {:.0} % of the level. \"Delivered\" is what the step generator steps for the level after the leg's reach (host/src/speed.rs). Resolution {:.3} m/s and {:.3} rad/s, up to the command limits.\n\n",
+        "# Fastest sustained walk on command: {plan_name}\n\nThe firmware's defaults on the MuJoCo robot, through the command port: the level held {:.0} s after the acceleration ramp; sustained = no fall, the run ends by the commanded torque off and the pelvis's mean over the hold within ± {:.0} % of the level. \"Delivered\" is what the step generator steps for the level after the leg's reach (host/src/speed.rs). Resolution {:.3} m/s and {:.3} rad/s, up to the command limits.\n\n",
         speed::HOLD_S,
-        100.0 * speed::SUSTAIN_SHARE,
+        100.0 * speed::SUSTAIN_TOLERANCE,
         a.step_v,
         a.step_w
     );

@@ -1946,3 +1946,72 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
         .all(|r| !matches!(r, Record::Fault(f) if f.kind == FaultKind::CatchStep)));
     assert_goals_in_limits(&b);
 }
+
+#[test]
+fn the_deflection_feedback_drives_sagging_stance_knees_to_their_targets() {
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 deflection_ki=10");
+    assert_eq!(off.deflection.ki, 0.0, "off by default");
+    // Both knees (IDs 4 and 10) stand 30 ticks (≈ 0.046 rad) short of their goals.
+    let sag = 30;
+    let sagging = |cfg: &Config| {
+        let mut b = board(cfg);
+        for d in b.devices.iter_mut().filter(|d| d.id == 4 || d.id == 10) {
+            d.sag = sag;
+        }
+        b
+    };
+    let mut plain = board(&off);
+    let mut a = sagging(&off);
+    let mut b = sagging(&on);
+    for (x, cfg) in [(&mut plain, &off), (&mut a, &off), (&mut b, &on)] {
+        assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
+    }
+    // Off: no Present Position read (one more BULK READ a tick when on), the same goals as
+    // without the sag.
+    assert_eq!(a.goals, plain.goals);
+    let reads = |x: &FakeBoard| x.count(opcode::BULK_READ);
+    assert_eq!(reads(&a), reads(&plain));
+    assert!(
+        reads(&b) > reads(&a) + 1000,
+        "{} BULK READs against {}",
+        reads(&b),
+        reads(&a)
+    );
+    assert_eq!(a.goals.len(), b.goals.len());
+    // On: each knee's goal rises by its correction c (D2: toward the 30 ticks of sag, at most
+    // k_i·Δt·30 = 1.5 ticks a tick plus rounding, never beyond them), decays while that leg
+    // swings (D3).
+    let max_step = (10.0 * on.dt_s() * f64::from(sag)).ceil() as i32 + 1;
+    for knee in [3usize, 9] {
+        let d: Vec<i32> = a
+            .goals
+            .iter()
+            .zip(&b.goals)
+            .map(|(ga, gb)| gb[knee] - ga[knee])
+            .collect();
+        assert!(
+            d.iter().all(|&v| (0..=sag + 1).contains(&v)),
+            "knee {knee}: {:?}",
+            (d.iter().min(), d.iter().max())
+        );
+        for (k, w) in d.windows(2).enumerate() {
+            assert!(
+                (w[1] - w[0]).abs() <= max_step,
+                "knee {knee} goal {k}: {w:?}"
+            );
+        }
+        let top = d.iter().position(|&v| v >= sag - 3);
+        let top = top.unwrap_or_else(|| panic!("knee {knee} never reached its sag: {d:?}"));
+        assert!(
+            d[top..].iter().any(|&v| v <= 5),
+            "knee {knee}: no decay in the swing after goal {top}"
+        );
+        // The other joints are the same (the mask is the pitch joints; those stand at their goals).
+        for (ga, gb) in a.goals.iter().zip(&b.goals) {
+            for j in [0usize, 1, 5, 6, 7, 11] {
+                assert_eq!(ga[j], gb[j], "joint {j}");
+            }
+        }
+    }
+}

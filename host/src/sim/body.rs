@@ -200,6 +200,9 @@ pub struct TruthSample {
     pub sole_wrench: [[f64; 6]; 2],
     /// A robot part other than a sole touches the ground.
     pub other_contact: bool,
+    /// Each sole's point on the ground and heading in the world (left, right): x, y (m), yaw
+    /// (rad) — where the feet really are, in the air or on the ground.
+    pub soles: [[f64; 3]; 2],
 }
 
 /// One joint's torque line for a physics step: `τ = rest + m_kk·q̈` with the other joints'
@@ -585,6 +588,7 @@ impl Physics {
             sole_contact: c.contact,
             sole_wrench: [[0.0; 6]; 2],
             other_contact: false,
+            soles: c.feet.map(|f| [f.xy[0], f.xy[1], f.yaw]),
         }
     }
 

@@ -542,6 +542,7 @@ impl MjBody {
             sole_contact: contact,
             sole_wrench: wrench,
             other_contact,
+            soles: places.map(|p| [p.x, p.y, p.yaw]),
         }
     }
 }

@@ -14,7 +14,8 @@
 //! that motor is at its torque bound), `l_contact, r_contact` (each sole touches the ground,
 //! 0/1), `l_f{x,y,z}_n, l_m{x,y,z}_nm, r_f{x,y,z}_n, r_m{x,y,z}_nm` (each sole's contact wrench
 //! in the world frame about its sole point; 0 in the kinematic model), `other_contact` (a robot
-//! part other than a sole touches the ground, 0/1). With the MuJoCo robot `zmp_x_m, zmp_y_m` is
+//! part other than a sole touches the ground, 0/1), `l_x_m, l_y_m, l_yaw_rad, r_x_m, r_y_m,
+//! r_yaw_rad` (each sole point's place on the ground and heading, world frame). With the MuJoCo robot `zmp_x_m, zmp_y_m` is
 //! the true centre of pressure of the contact forces and `fz_n` their vertical sum.
 //! [`crate::report::read_truth`] is the one reader.
 
@@ -31,7 +32,8 @@ l_f0_n,l_f1_n,l_f2_n,l_f3_n,r_f0_n,r_f1_n,r_f2_n,r_f3_n,\
 gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,acc_x_m_s2,acc_y_m_s2,acc_z_m_s2,tau_nm,falling,fall_angle_rad,\
 qd_1_rad_s,qd_2_rad_s,qd_3_rad_s,qd_4_rad_s,qd_5_rad_s,qd_6_rad_s,qd_7_rad_s,qd_8_rad_s,qd_9_rad_s,qd_10_rad_s,qd_11_rad_s,qd_12_rad_s,\
 tq_1_nm,tq_2_nm,tq_3_nm,tq_4_nm,tq_5_nm,tq_6_nm,tq_7_nm,tq_8_nm,tq_9_nm,tq_10_nm,tq_11_nm,tq_12_nm,tq_limited,\
-l_contact,r_contact,l_fx_n,l_fy_n,l_fz_n,l_mx_nm,l_my_nm,l_mz_nm,r_fx_n,r_fy_n,r_fz_n,r_mx_nm,r_my_nm,r_mz_nm,other_contact";
+l_contact,r_contact,l_fx_n,l_fy_n,l_fz_n,l_mx_nm,l_my_nm,l_mz_nm,r_fx_n,r_fy_n,r_fz_n,r_mx_nm,r_my_nm,r_mz_nm,other_contact,\
+l_x_m,l_y_m,l_yaw_rad,r_x_m,r_y_m,r_yaw_rad";
 
 /// The truth column of joint `id`'s speed (rad/s).
 pub fn joint_speed_column(id: usize) -> String {
@@ -96,6 +98,9 @@ impl TruthLog {
             put(&mut s, *v, 4);
         }
         s.push_str(&format!(",{}", u8::from(t.other_contact)));
+        for v in t.soles.iter().flatten() {
+            put(&mut s, *v, 6);
+        }
         writeln!(self.out, "{s}")?;
         self.rows += 1;
         Ok(())
