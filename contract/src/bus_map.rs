@@ -110,7 +110,9 @@ impl TickMap {
 
     /// The tick of joint `j` at `rad` (f32; `rad` finite, the caller clamps the result).
     pub fn tick_f32(&self, j: usize, rad: f32) -> i32 {
-        self.zero_tick + libm::roundf(self.sign_of(j) * rad * self.ticks_per_rad_f32()) as i32
+        let t = self.sign_of(j) * rad * self.ticks_per_rad_f32();
+        self.zero_tick
+            .saturating_add(gait_core::fastmath::round_i32(t))
     }
 
     /// The joint angle (rad, f32) of joint `j` at `tick`.

@@ -293,14 +293,8 @@ pub fn tau_from_nm(t: f32) -> i16 {
     if !t.is_finite() {
         return TAU_NA;
     }
-    let v = libm::roundf(t * 1000.0);
-    if v >= 32767.0 {
-        32767
-    } else if v <= -32767.0 {
-        -32767
-    } else {
-        v as i16
-    }
+    // In range after the clamp: the cast keeps the value.
+    gait_core::fastmath::round_i32(t * 1000.0).clamp(-32_767, 32_767) as i16
 }
 
 /// mN·m → N·m; [`TAU_NA`] → NaN.

@@ -1,4 +1,9 @@
-//! Fast single-precision sine, cosine, square root and arc tangent for the servo loop.
+//! Fast single-precision sine, cosine, square root, arc tangent and rounding for the servo loop.
+//!
+//! **Rounding to an integer** ([`round_i32`]): `libm::roundf` is a software function
+//! (≈ 20 instructions with its `truncf` and `copysignf` on the M7, whose FPv4/FPv5-SP subset
+//! as targeted has no `VRINTA`); the FPU's truncating conversion `VCVT` and one comparison of
+//! the remainder give the same integer for every f32.
 //!
 //! On the Cortex-M7F `libm::sinf` / `libm::cosf` compute in software doubles (≈1,260
 //! instructions each); the functions here use only f32 arithmetic (≈34 instructions).
@@ -117,6 +122,42 @@ pub fn sqrt(x: f32) -> f32 {
     #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
     {
         libm::sqrtf(x)
+    }
+}
+
+/// `libm::roundf(x) as i32` — nearest, half away from zero, saturating at the `i32` range,
+/// NaN → 0. On hard-float ARM without the library call: `t = x as i32` (truncation) and the
+/// remainder `x − t`, exact in f32 wherever x has a fraction (|x| < 2²³), decides ±1 — the
+/// same integer for every f32 (test `round_i32_is_roundf_as_i32`); elsewhere `libm::roundf`.
+#[inline]
+pub fn round_i32(x: f32) -> i32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        round_i32_by_truncation(x)
+    }
+    // In soft float (the FPU-less Cortex-M3) the conversions and the subtraction are library
+    // calls too: `libm::roundf` is the cheaper one there.
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::roundf(x) as i32
+    }
+}
+
+/// [`round_i32`] on an FPU: truncation, then the remainder decides (tested on every target).
+#[inline]
+#[cfg_attr(
+    not(any(test, all(target_arch = "arm", target_abi = "eabihf"))),
+    allow(dead_code)
+)]
+fn round_i32_by_truncation(x: f32) -> i32 {
+    let t = x as i32;
+    let frac = x - t as f32;
+    if frac >= 0.5 {
+        t.saturating_add(1)
+    } else if frac <= -0.5 {
+        t.saturating_sub(1)
+    } else {
+        t
     }
 }
 
@@ -273,6 +314,67 @@ pub fn sin_cos_real<R: Real>(x: R) -> (R, R) {
 mod tests {
     use super::*;
     extern crate std;
+
+    #[test]
+    fn round_i32_is_roundf_as_i32() {
+        let check = |x: f32| {
+            let want = libm::roundf(x) as i32;
+            assert_eq!(
+                round_i32_by_truncation(x),
+                want,
+                "{x:e} ({:#010x})",
+                x.to_bits()
+            );
+            assert_eq!(round_i32(x), want);
+        };
+        // Every 997th bit pattern (both signs, NaNs and infinities included) …
+        let mut b = 0u32;
+        loop {
+            check(f32::from_bits(b));
+            match b.checked_add(997) {
+                Some(n) => b = n,
+                None => break,
+            }
+        }
+        // … and every f32 within 64 ulps of each half-integer and integer up to ±2²⁴ in steps
+        // of 1/4 near 0 and the servo range, plus the i32 limits.
+        for k in -40_000i32..=40_000 {
+            for base in [k as f32 * 0.25, k as f32 * 0.25 + 4096.0, k as f32 * 409.6] {
+                let mut x = base;
+                for _ in 0..64 {
+                    check(x);
+                    check(-x);
+                    x = f32::from_bits(x.to_bits().wrapping_add(1));
+                }
+                let mut x = base;
+                for _ in 0..64 {
+                    check(x);
+                    x = f32::from_bits(x.to_bits().wrapping_sub(1));
+                }
+            }
+        }
+        for x in [
+            0.5,
+            -0.5,
+            0.499_999_97,
+            -0.499_999_97,
+            8_388_607.5,
+            -8_388_607.5,
+            2_147_483_520.0,
+            2_147_483_648.0,
+            -2_147_483_648.0,
+            -2_147_483_904.0,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -0.0,
+            f32::MIN_POSITIVE,
+        ] {
+            check(x);
+        }
+    }
 
     #[test]
     fn sqrt_is_correctly_rounded() {

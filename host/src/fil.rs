@@ -316,6 +316,24 @@ fn run_inner(
                 .take()
                 .map(|d| d.join().unwrap_or_else(|_| Err("driver panicked".into())));
             if let Some(Err(e)) = &outcome {
+                // The firmware may have ended first (a fall stops it) and closed the port under
+                // the driver: then its exit ends the run, and the script counts as aborted.
+                let until = Instant::now() + Duration::from_secs(2);
+                let ended = loop {
+                    match child.try_wait() {
+                        Ok(Some(status)) => break Some(status.code()),
+                        Ok(None) if Instant::now() < until => {
+                            std::thread::sleep(Duration::from_millis(50));
+                        }
+                        _ => break None,
+                    }
+                };
+                if let Some(code) = ended {
+                    drove = Some(Err(format!(
+                        "aborted: the firmware ended (exit code {code:?}) under the script ({e})"
+                    )));
+                    break code;
+                }
                 let _ = child.kill();
                 let _ = child.wait();
                 handle.stop();
