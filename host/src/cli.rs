@@ -1385,6 +1385,13 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
     if let Ok(w) = crate::fil::walk_figures(&r.truth, &spec) {
         println!("\nin the physics: {}", w.line());
     }
+    let soles = crate::report::read_truth(&r.truth).ok().and_then(|t| {
+        let planned = crate::fil::planned_feet_travel(&spec).ok()?;
+        crate::fil::sole_figures(&t, planned)
+    });
+    if let Some(f) = soles {
+        println!("  {}", f.line());
+    }
     println!("\nreport: {}", out.join("report").display());
     if let Some(v) = &video {
         eprintln!("  rendering {} …", v.display());

@@ -627,9 +627,131 @@ pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String
     })
 }
 
+/// Where the soles really went (the truth's sole columns): how far each travelled against the
+/// plan, and how far a loaded sole slid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SoleFigures {
+    /// Each sole's travel along x from the first to the last truth row (left, right), m.
+    pub travel: [f64; 2],
+    /// The plan's travel of each foot along x (left, right), m.
+    pub planned: [f64; 2],
+    /// The largest horizontal displacement of a sole within one stretch of rows where it
+    /// carries at least [`LOADED_SHARE`] of the feet's vertical force, m.
+    pub max_slip: f64,
+}
+
+/// Share of the feet's vertical force from which a sole counts as loaded (for the slip).
+pub const LOADED_SHARE: f64 = 0.2;
+
+impl SoleFigures {
+    /// One line for the terminal.
+    pub fn line(&self) -> String {
+        let pct = |a: f64, p: f64| {
+            if p.abs() > 1e-9 {
+                format!("{:+.0} %", 100.0 * (a - p) / p)
+            } else {
+                "n/a".into()
+            }
+        };
+        format!(
+            "soles travelled {:.3} m (left) and {:.3} m (right) for {:.3} / {:.3} m planned ({}, {}); a loaded sole slid at most {:.1} mm",
+            self.travel[0],
+            self.travel[1],
+            self.planned[0],
+            self.planned[1],
+            pct(self.travel[0], self.planned[0]),
+            pct(self.travel[1], self.planned[1]),
+            1e3 * self.max_slip
+        )
+    }
+}
+
+/// The soles' figures of a truth table (`None` when it has no sole columns: an older file) and
+/// the plan's feet's travel `planned` (left, right; m).
+pub fn sole_figures(table: &crate::report::TruthTable, planned: [f64; 2]) -> Option<SoleFigures> {
+    let col = |n: &str| table.column(n);
+    let (lx, ly, rx, ry) = (col("l_x_m")?, col("l_y_m")?, col("r_x_m")?, col("r_y_m")?);
+    let (lf, rf) = (col("l_fz_n")?, col("r_fz_n")?);
+    let travel = |x: &[f64]| match (x.first(), x.last()) {
+        (Some(a), Some(b)) => b - a,
+        _ => 0.0,
+    };
+    let mut max_slip = 0.0f64;
+    for (x, y, f, g) in [(lx, ly, lf, rf), (rx, ry, rf, lf)] {
+        let mut start: Option<(f64, f64)> = None;
+        for i in 0..x.len().min(y.len()).min(f.len()).min(g.len()) {
+            let total = f[i] + g[i];
+            let loaded = total > 0.0 && f[i] >= LOADED_SHARE * total;
+            match (loaded, start) {
+                (true, None) => start = Some((x[i], y[i])),
+                (true, Some((x0, y0))) => {
+                    let d = (x[i] - x0).hypot(y[i] - y0);
+                    if d.is_finite() {
+                        max_slip = max_slip.max(d);
+                    }
+                }
+                (false, _) => start = None,
+            }
+        }
+    }
+    Some(SoleFigures {
+        travel: [travel(lx), travel(rx)],
+        planned,
+        max_slip,
+    })
+}
+
+/// The plan's travel of each foot along x (left, right), m.
+pub fn planned_feet_travel(spec: &WalkSpec) -> Result<[f64; 2], String> {
+    let robot = gait_core::Robot::reference();
+    let mut s = spec.sampler(&robot, spec.dt).map_err(|e| e.to_string())?;
+    let first = s.next(0.0).feet;
+    let mut last = first;
+    while !s.is_done() {
+        last = s.next(0.0).feet;
+    }
+    Ok([last[0].x - first[0].x, last[1].x - first[1].x])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sole_figures_measure_the_travel_and_the_slip_of_a_loaded_sole() {
+        use std::collections::BTreeMap;
+        // The left sole stands loaded and slides 3 mm along y, then lifts (unloaded), moves
+        // 5 cm and lands loaded again; the right sole stands loaded at 0.01 m all along.
+        let n = 10;
+        let mut c: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        let lx: Vec<f64> = (0..n).map(|i| if i < 5 { 0.0 } else { 0.05 }).collect();
+        let ly: Vec<f64> = (0..n)
+            .map(|i| if i < 4 { 0.001 * i as f64 } else { 0.003 })
+            .collect();
+        let lf: Vec<f64> = (0..n)
+            .map(|i| if i == 4 || i == 5 { 1.0 } else { 20.0 })
+            .collect();
+        c.insert("l_x_m".into(), lx);
+        c.insert("l_y_m".into(), ly);
+        c.insert("l_fz_n".into(), lf);
+        c.insert("r_x_m".into(), vec![0.01; n]);
+        c.insert("r_y_m".into(), vec![-0.09; n]);
+        c.insert("r_fz_n".into(), vec![20.0; n]);
+        let t = crate::report::TruthTable {
+            t: (0..n).map(|i| i as f64 * 0.01).collect(),
+            zmp: vec![[0.0; 2]; n],
+            columns: c,
+        };
+        let f = sole_figures(&t, [0.04, 0.0]).unwrap();
+        assert!((f.travel[0] - 0.05).abs() < 1e-12 && f.travel[1] == 0.0);
+        // The 3 mm slide counts, the 5 cm swing (unloaded: 1 N of 21) does not.
+        assert!((f.max_slip - 0.003).abs() < 1e-12, "{}", f.max_slip);
+        assert!(f.line().contains("+25 %"), "{}", f.line());
+        // An older truth file without the sole columns: no figures.
+        let mut old = t.clone();
+        old.columns.remove("l_x_m");
+        assert_eq!(sole_figures(&old, [0.04, 0.0]), None);
+    }
 
     #[test]
     fn command_figures_measure_the_end_pose_against_the_commanded_one() {
