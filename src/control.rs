@@ -27,7 +27,10 @@
 //!    CoM is on the model's CoM + δ, gait-core [`gait_core::wholebody`]); the IK clamps to
 //!    reach and joint limits; with `compliance_roll`/`compliance_pitch` = k the servos' predicted static sag under
 //!    the gait's loads is added (k·τ/K per joint, gait-core [`gait_core::compliance`], also on
-//!    the start-up ramp's end pose; f32 only: off with `math=fixed`); the gyro damping; [`safe_targets`] to the servo ticks (a non-finite target holds
+//!    the start-up ramp's end pose; f32 only: off with `math=fixed`); the gyro damping; with
+//!    `deflection_ki` > 0 the servo deflection feedback (gait-core [`gait_core::deflection`],
+//!    f32 only: the pitch servos' Present Position, read in one more BULK READ right after the
+//!    sensors', drives the stance leg's joints to their targets); [`safe_targets`] to the servo ticks (a non-finite target holds
 //!    the previous tick and stops); ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes
 //!    each).
 //!    The catching step (`catch_gain`, default on; gait-core [`gait_core::catching`], f32
