@@ -1294,23 +1294,35 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
             script.command.len(),
             opts.machine
         );
-        let (r, d) = crate::fil::run_commands(&opts, &script, |t, _| {
+        let (r, d) = crate::fil::run_commands_to_the_end(&opts, &script, |t, _| {
             eprint!("\r  simulated time {t:6.2} s");
         })?;
         eprintln!();
         eprintln!("  {}", crate::fil::summary_line(&r.sim));
-        eprintln!(
-            "  stood ready at {:.2} s; commands sent at {:?} s",
-            d.ready_us as f64 * 1e-6,
-            d.sent_us
-                .iter()
-                .map(|t| (*t as f64 * 1e-6 * 100.0).round() / 100.0)
-                .collect::<Vec<_>>()
-        );
+        match &d {
+            Ok(d) => eprintln!(
+                "  stood ready at {:.2} s; commands sent at {:?} s",
+                d.ready_us as f64 * 1e-6,
+                d.sent_us
+                    .iter()
+                    .map(|t| (*t as f64 * 1e-6 * 100.0).round() / 100.0)
+                    .collect::<Vec<_>>()
+            ),
+            Err(e) => eprintln!("  the script did not finish: {e}"),
+        }
         let f = crate::fil::command_figures(&r, &spec, &opts.extra_tokens)?;
         println!("{}", f.line());
         println!("log: {}, truth: {}", r.log.display(), r.truth.display());
-        return Ok(());
+        return match d {
+            Ok(_) => Ok(()),
+            Err(_) => Err(CliError {
+                message: format!(
+                    "the firmware ended (exit code {:?}) before the command script did",
+                    r.exit_code
+                ),
+                code: 3,
+            }),
+        };
     }
     if let Some(port) = a.command_port {
         return run_fil_command_port(&opts, &spec, &plan_name, port);

@@ -172,11 +172,25 @@ pub fn run_commands(
     script: &crate::commands::CommandScript,
     progress: impl Fn(f64, u64),
 ) -> Result<(FilResult, crate::commands::DriveReport), String> {
+    let (r, d) = run_commands_to_the_end(opts, script, progress)?;
+    Ok((r, d?))
+}
+
+/// [`run_commands`], but a script the firmware ended before it finished (a fall: the driver's
+/// error says "aborted") still gives the run, with the driver's error beside it.
+pub fn run_commands_to_the_end(
+    opts: &FilOptions,
+    script: &crate::commands::CommandScript,
+    progress: impl Fn(f64, u64),
+) -> Result<(FilResult, Result<crate::commands::DriveReport, String>), String> {
     let mut o = opts.clone();
     o.extra_tokens.push("autostart=0".into());
     let (r, d) = run_inner(&o, PortDriver::Script(script), progress)?;
-    let d = d.ok_or("command driver: no report")??;
-    Ok((r, d))
+    match d {
+        Some(Err(e)) if !e.contains("aborted") => Err(e),
+        Some(d) => Ok((r, d)),
+        None => Err("command driver: no report".into()),
+    }
 }
 
 /// Runs the firmware without autostart with its command port (QEMU's UART3) listening on
