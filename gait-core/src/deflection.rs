@@ -144,9 +144,9 @@ impl DeflectionFeedback {
         if !self.is_on() {
             return;
         }
-        let stance = match phase {
-            SupportPhase::Single(Side::Left) => [true, false],
-            SupportPhase::Single(Side::Right) => [false, true],
+        let left_stance = match phase {
+            SupportPhase::Single(Side::Left) => true,
+            SupportPhase::Single(Side::Right) => false,
             // (D4)
             _ => return,
         };
@@ -161,7 +161,8 @@ impl DeflectionFeedback {
             if !self.joints.contains(j) {
                 continue;
             }
-            if stance[j / PER_LEG] {
+            // Joints 0..6 are the left leg's (no indexing: nothing to panic on).
+            if (j < PER_LEG) == left_stance {
                 // (D1), (D2)
                 let e = s - p;
                 if e.is_finite() {
