@@ -27,8 +27,10 @@
 //! joints' sag has its feed-forward). A missing or non-finite Present Position or target leaves
 //! that joint's correction as it is; gains and limits are sanitised once in
 //! [`DeflectionFeedback::new`], so any configuration is total: every c_j is finite and
-//! |c_j| ≤ c_max ≤ [`MAX_CORRECTION_RAD`]. Cost: twelve multiply-adds a tick; the firmware reads
-//! the masked joints' Present Position in one BULK READ only while k_i > 0.
+//! |c_j| ≤ c_max ≤ [`MAX_CORRECTION_RAD`]. Cost: one pass over the twelve joints a tick (not
+//! in the bench, whose configuration has it off); the firmware reads the masked joints' Present
+//! Position in one BULK READ only while k_i > 0 (130 bytes for the six pitch servos,
+//! BENCHMARKS.md's bus budget).
 
 use crate::robot::Side;
 use crate::sampler::SupportPhase;
