@@ -312,7 +312,7 @@ impl CatchLog {
                 let side_code: u8 = if side == Side::Left { 1 } else { 2 };
                 for (component, v) in (0u8..).zip(self.largest) {
                     // |v| ≤ the limits (< 0.1 m): the µm fit an i32.
-                    let um = libm::roundf(v * 1e6) as i32;
+                    let um = gait_core::fastmath::round_i32(v * 1e6);
                     let rec = fault(now, FaultKind::CatchStep, side_code * 16 + component, um);
                     log.write(board, rec);
                 }

@@ -373,7 +373,8 @@ pub fn milli_i16(v: f32) -> i16 {
     if bits << 1 == 0 || !v.is_finite() {
         return 0;
     }
-    (libm::roundf(v * 1000.0) as i32).clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
+    gait_core::fastmath::round_i32(v * 1000.0).clamp(i32::from(i16::MIN), i32::from(i16::MAX))
+        as i16
 }
 
 /// The control table's memory and its access rules (the device side of the port).

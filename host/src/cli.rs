@@ -1394,15 +1394,15 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         println!("\nmeasured − true (simulator) ZMP:\n");
         print!("{}", report::stats_table(ts));
     }
-    if let Ok(w) = crate::fil::walk_figures(&r.truth, &spec) {
-        println!("\nin the physics: {}", w.line());
-    }
-    let soles = crate::report::read_truth(&r.truth).ok().and_then(|t| {
-        let planned = crate::fil::planned_feet_travel(&spec).ok()?;
-        crate::fil::sole_figures(&t, planned)
-    });
-    if let Some(f) = soles {
-        println!("  {}", f.line());
+    // The truth file read once for both figures.
+    if let Ok(t) = crate::report::read_truth(&r.truth) {
+        if let Ok(w) = crate::fil::walk_figures_of(&t, &r.truth, &spec) {
+            println!("\nin the physics: {}", w.line());
+        }
+        let planned = crate::fil::planned_feet_travel(&spec).ok();
+        if let Some(f) = planned.and_then(|p| crate::fil::sole_figures(&t, p)) {
+            println!("  {}", f.line());
+        }
     }
     println!("\nreport: {}", out.join("report").display());
     if let Some(v) = &video {

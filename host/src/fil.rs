@@ -599,7 +599,15 @@ impl WalkFigures {
 
 /// Reads the walk's figures off the simulator's truth CSV and the plan.
 pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String> {
-    let table = crate::report::read_truth(truth)?;
+    walk_figures_of(&crate::report::read_truth(truth)?, truth, spec)
+}
+
+/// [`walk_figures`] of a truth table already read from `truth` (named in errors).
+pub fn walk_figures_of(
+    table: &crate::report::TruthTable,
+    truth: &Path,
+    spec: &WalkSpec,
+) -> Result<WalkFigures, String> {
     let col = |n: &str| {
         table
             .column(n)
