@@ -14,7 +14,11 @@
 //!    board without an accepted sample for longer than [`Config::sensor_stale_ms`] stops
 //!    (`SensorStale`, exit 19) whatever `hold_ticks`.
 //! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp` by a `ZmpMeter`, feet placed
-//!    where the previous gait sample put them, feet under [`Config::min_load_n`] ignored); φ̈
+//!    where the previous gait sample put them moved by the leg odometry's corrections
+//!    (`sole_poses=measured`, the default, f32 path: gait-core [`gait_core::odometry`]; each
+//!    landing surveyed once in its double support from the Present Position of the stance leg's
+//!    six servos, then the new leg's on the next tick, in one more BULK READ each), feet under
+//!    [`Config::min_load_n`] ignored); φ̈
 //!    from the gyro pitch rate through [`PitchAccel`], τ = J·φ̈; tilt from the accelerometer
 //!    (fall → stop).
 //! 5. One gait sample with τ, checked finite (CoM, ZMP, feet; then the stabilizer's shift) before
@@ -118,7 +122,8 @@ use gait_core::catching::{StepAdaptation, StepAdapter};
 use gait_core::compliance::{Compliance, LoadModel};
 use gait_core::fixed_point::{fx_sat, FixedFoot, Fx};
 use gait_core::gait::{Arithmetic, Sample};
-use gait_core::measured::{FixedZmpMeter, ForceReading, ZmpMeter};
+use gait_core::measured::{FixedZmpMeter, ForceReading, SolePose, ZmpMeter};
+use gait_core::odometry::SurveyedSole;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::stabilizer::{Stabilizer, StabilizerInput};
 use gait_core::{GaitError, GaitSample, Robot, Side};
@@ -408,13 +413,18 @@ fn write_goals<B: Board>(bus: &mut BoardMaster<'_, B>, ticks: &[i32; LEG_JOINTS]
     let _ = bus.master().sync_write(f.addr, f.len, &entries);
 }
 
-/// The servo deflection feedback's firmware side ([`gait_core::deflection`], `deflection_ki`):
-/// the masked joints' Present Position in one BULK READ a tick, the targets of the last
-/// walking tick before the correction (D1) and the feedback. Only built while it acts (f32
-/// path); the OpenCM build has a zero-sized stand-in (`NoDeflection`: its RAM is short).
+/// The servos' Present Position and what the firmware makes of it (f32 path only): the servo
+/// deflection feedback ([`gait_core::deflection`], `deflection_ki`: its joints read in one BULK
+/// READ every tick, the targets of the last walking tick before the correction (D1)) and the leg
+/// odometry ([`gait_core::odometry`], `sole_poses=measured`: all twelve read on the tick after a
+/// survey falls due, once a step). Built only while one of them acts; the OpenCM build has a
+/// zero-sized stand-in (`NoServoSense`: its RAM is short).
 #[cfg(not(feature = "board-opencm"))]
-struct Deflection {
-    feedback: gait_core::deflection::DeflectionFeedback,
+struct ServoSense {
+    deflection: Option<gait_core::deflection::DeflectionFeedback>,
+    /// The deflection feedback's joints.
+    mask: gait_core::deflection::JointSet,
+    odometry: Option<Odometry>,
     reqs: heapless::Vec<BulkReadRequest, LEG_JOINTS>,
     /// Per request: the joint index.
     joints: heapless::Vec<usize, LEG_JOINTS>,
@@ -426,95 +436,250 @@ struct Deflection {
     sent: Option<(u32, [f32; LEG_JOINTS])>,
 }
 
+/// The leg odometry's firmware side: its state, the legs' FK and the survey's two reads.
 #[cfg(not(feature = "board-opencm"))]
-impl Deflection {
-    /// The feedback of `cfg` at tick period `dt_s`, `None` while it does not act.
-    fn new(cfg: &gait_core::deflection::DeflectionConfig, dt_s: f32) -> Option<Self> {
+struct Odometry {
+    legs: gait_core::odometry::LegOdometry<f32>,
+    kin: gait_core::kinematics::LegKinematics<f32>,
+    stage: Survey,
+    /// The IK's joint targets of the last walking tick (before the feed-forwards and the
+    /// feedback: the gait's planned motion, which the loaded leg follows), rad.
+    ik: [f32; LEG_JOINTS],
+}
+
+/// Where the survey's reads stand (odometry O3′: the stance leg on one tick, the new leg on the
+/// next).
+#[cfg(not(feature = "board-opencm"))]
+#[derive(Clone, Copy)]
+enum Survey {
+    /// None due.
+    Idle,
+    /// Due since last tick: this tick reads the stance leg.
+    Stance(Side),
+    /// This tick reads the new leg and takes the survey, with the stance leg's read and the
+    /// IK's targets sent before it.
+    New {
+        stance: Side,
+        first: [f32; LEG_JOINTS],
+        ik: [f32; LEG_JOINTS],
+    },
+}
+
+#[cfg(not(feature = "board-opencm"))]
+impl ServoSense {
+    /// The deflection feedback of `cfg` at tick period `dt_s` and the odometry when `odometry`;
+    /// `None` while neither acts.
+    fn new(
+        cfg: &gait_core::deflection::DeflectionConfig,
+        odometry: bool,
+        robot: &Robot,
+        dt_s: f32,
+    ) -> Option<Self> {
         let feedback = gait_core::deflection::DeflectionFeedback::new(cfg, dt_s);
-        if !feedback.is_on() {
+        let deflection = feedback.is_on().then_some(feedback);
+        let odometry = odometry.then(|| Odometry {
+            legs: gait_core::odometry::LegOdometry::new(
+                &gait_core::odometry::OdometryLimits::DEFAULT,
+            ),
+            kin: gait_core::kinematics::LegKinematics::new(robot),
+            stage: Survey::Idle,
+            ik: [f32::NAN; LEG_JOINTS],
+        });
+        if deflection.is_none() && odometry.is_none() {
             return None;
         }
-        let mut d = Deflection {
-            feedback,
+        Some(ServoSense {
+            deflection,
+            mask: cfg.joints,
+            odometry,
             reqs: heapless::Vec::new(),
             joints: heapless::Vec::new(),
             buf: [0; 4 * LEG_JOINTS],
             results: [Ok(()); LEG_JOINTS],
             present: [f32::NAN; LEG_JOINTS],
             sent: None,
+        })
+    }
+
+    /// ONE BULK READ of the Present Positions this tick needs (rad; NaN for a reply that
+    /// failed) — the deflection feedback's joints, and a survey's leg (odometry O3′: the stance
+    /// leg, then the new one on the next tick, which takes the survey against the plan's places
+    /// of the feet `planned`).
+    fn read<B: Board>(
+        &mut self,
+        bus: &mut BoardMaster<'_, B>,
+        map: &JointMap,
+        planned: &[gait_core::Place<f32>; 2],
+    ) {
+        self.present = [f32::NAN; LEG_JOINTS];
+        let leg = match self.odometry.as_ref().map(|o| o.stage) {
+            Some(Survey::Stance(s)) => Some(s),
+            Some(Survey::New { stance, .. }) => Some(stance.other()),
+            _ => None,
         };
+        let deflection = self.deflection.is_some();
+        if leg.is_none() && !deflection {
+            return;
+        }
+        let in_leg = |j: usize| leg.is_some_and(|s| (j < LEG_JOINTS / 2) == (s == Side::Left));
+        self.reqs.clear();
+        self.joints.clear();
         let f = x_series::PRESENT_POSITION;
-        for j in (0..LEG_JOINTS).filter(|&j| cfg.joints.contains(j)) {
+        for j in (0..LEG_JOINTS).filter(|&j| in_leg(j) || (deflection && self.mask.contains(j))) {
             if let Some(id) = ids::servo_id(j) {
                 // At most LEG_JOINTS entries: cannot fail.
-                let _ = d.reqs.push(BulkReadRequest {
+                let _ = self.reqs.push(BulkReadRequest {
                     id,
                     addr: f.addr,
                     len: f.len,
                 });
-                let _ = d.joints.push(j);
+                let _ = self.joints.push(j);
             }
         }
-        Some(d)
-    }
-
-    /// ONE BULK READ of the joints' Present Position (rad; NaN for a reply that failed).
-    fn read<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>, map: &JointMap) {
-        self.present = [f32::NAN; LEG_JOINTS];
         let n = self.reqs.len();
-        let (Some(results), Some(buf)) = (self.results.get_mut(..n), self.buf.get_mut(..4 * n))
-        else {
+        if let (Some(results), Some(buf)) = (self.results.get_mut(..n), self.buf.get_mut(..4 * n)) {
+            if n > 0 && bus.master().bulk_read(&self.reqs, buf, results).is_ok() {
+                for ((&j, r), b) in self
+                    .joints
+                    .iter()
+                    .zip(results.iter())
+                    .zip(buf.chunks_exact(4))
+                {
+                    if let (Ok(()), Some(v), [b0, b1, b2, b3]) = (r, self.present.get_mut(j), b) {
+                        *v = map
+                            .ticks
+                            .rad_f32(j, i32::from_le_bytes([*b0, *b1, *b2, *b3]));
+                    }
+                }
+            }
+        }
+        let Some(o) = self.odometry.as_mut() else {
             return;
         };
-        if n == 0 || bus.master().bulk_read(&self.reqs, buf, results).is_err() {
-            return;
-        }
-        for ((&j, r), b) in self
-            .joints
-            .iter()
-            .zip(results.iter())
-            .zip(buf.chunks_exact(4))
-        {
-            if let (Ok(()), Some(v), [b0, b1, b2, b3]) = (r, self.present.get_mut(j), b) {
-                *v = map
-                    .ticks
-                    .rad_f32(j, i32::from_le_bytes([*b0, *b1, *b2, *b3]));
+        o.stage = match o.stage {
+            Survey::Idle => Survey::Idle,
+            Survey::Stance(stance) => Survey::New {
+                stance,
+                first: self.present,
+                ik: o.ik,
+            },
+            Survey::New { stance, first, ik } => {
+                let q = gait_core::odometry::legs_at_first_read(
+                    stance,
+                    &first,
+                    &self.present,
+                    &ik,
+                    &o.ik,
+                );
+                // A refused survey (a failed read: NaN) keeps the landing where the plan puts it.
+                let _ = o.legs.survey(&o.kin, &q, planned);
+                Survey::Idle
             }
+        };
+    }
+
+    /// The IK's joint targets of this walking tick (rad), for the odometry's next survey (O3′).
+    fn note_ik(&mut self, q: &[f32; LEG_JOINTS]) {
+        if let Some(o) = self.odometry.as_mut() {
+            o.ik = *q;
         }
     }
 
     /// Walking tick `k` of phase `phase` with the targets `q` (rad, before the correction):
     /// (D1)-(D4) against the last tick's targets if that was tick k − 1, then (D5) on `q`.
     fn apply(&mut self, k: u32, phase: gait_core::SupportPhase, q: &mut [f32; LEG_JOINTS]) {
+        let Some(feedback) = self.deflection.as_mut() else {
+            return;
+        };
         if let Some((_, sent)) = self.sent.filter(|(at, _)| at.wrapping_add(1) == k) {
-            self.feedback.update(phase, &sent, &self.present);
+            feedback.update(phase, &sent, &self.present);
         }
         self.sent = Some((k, *q));
-        self.feedback.apply(q);
+        feedback.apply(q);
+    }
+
+    /// The soles' places for the measured ZMP when the plan puts the feet at `planned`
+    /// (odometry O2; the plan's own with `sole_poses=planned`).
+    fn feet(&self, planned: [gait_core::Place<f32>; 2]) -> [SurveyedSole<f32>; 2] {
+        let [l, r] = planned;
+        match &self.odometry {
+            Some(o) => [o.legs.sole(Side::Left, &l), o.legs.sole(Side::Right, &r)],
+            None => [plain_sole(l), plain_sole(r)],
+        }
+    }
+
+    /// Follows the support phase of the sample the servos execute and the feet's loads (N,
+    /// left and right): a survey due reads all twelve servos next tick (odometry O6 and the
+    /// due rule).
+    fn follow(&mut self, phase: gait_core::SupportPhase, loads: [f32; 2]) {
+        if let Some(o) = self.odometry.as_mut() {
+            o.legs.phase(phase);
+            if let (Survey::Idle, Some((stance, _))) = (o.stage, o.legs.survey_due(loads)) {
+                o.stage = Survey::Stance(stance);
+            }
+        }
+    }
+
+    /// Odometry surveys taken and refused.
+    fn surveys(&self) -> (u16, u16) {
+        self.odometry.as_ref().map_or((0, 0), |o| o.legs.counts())
     }
 }
 
-/// The OpenCM's stand-in for [`Deflection`]: never built (f32 only), no RAM.
+/// The OpenCM's stand-in for [`ServoSense`]: never built (f32 only), no RAM.
 #[cfg(feature = "board-opencm")]
-struct NoDeflection;
+struct NoServoSense;
 
 #[cfg(feature = "board-opencm")]
-impl NoDeflection {
-    fn new(_: &gait_core::deflection::DeflectionConfig, _: f32) -> Option<Self> {
+impl NoServoSense {
+    fn new(
+        _: &gait_core::deflection::DeflectionConfig,
+        _: bool,
+        _: &Robot,
+        _: f32,
+    ) -> Option<Self> {
         None
     }
 
-    fn read<B: Board>(&mut self, _: &mut BoardMaster<'_, B>, _: &JointMap) {}
+    fn read<B: Board>(
+        &mut self,
+        _: &mut BoardMaster<'_, B>,
+        _: &JointMap,
+        _: &[gait_core::Place<f32>; 2],
+    ) {
+    }
+
+    fn note_ik(&mut self, _: &[f32; LEG_JOINTS]) {}
 
     fn apply(&mut self, _: u32, _: gait_core::SupportPhase, _: &mut [f32; LEG_JOINTS]) {}
+
+    fn feet(&self, planned: [gait_core::Place<f32>; 2]) -> [SurveyedSole<f32>; 2] {
+        planned.map(plain_sole)
+    }
+
+    fn follow(&mut self, _: gait_core::SupportPhase, _: [f32; 2]) {}
+
+    fn surveys(&self) -> (u16, u16) {
+        (0, 0)
+    }
 }
 
-/// The deflection feedback of this build.
+/// A plan's place as a sole for the measured ZMP (its heading's sine and cosine computed there).
+fn plain_sole(place: gait_core::Place<f32>) -> SurveyedSole<f32> {
+    let (sin, cos) = if place.yaw == 0.0 {
+        (0.0, 1.0)
+    } else {
+        gait_core::fastmath::sin_cos(place.yaw)
+    };
+    SurveyedSole { place, sin, cos }
+}
+
+/// The Present Position feedback of this build.
 #[cfg(not(feature = "board-opencm"))]
-type DeflectionLoop = Deflection;
-/// The deflection feedback of this build.
+type ServoSenseLoop = ServoSense;
+/// The Present Position feedback of this build.
 #[cfg(feature = "board-opencm")]
-type DeflectionLoop = NoDeflection;
+type ServoSenseLoop = NoServoSense;
 
 /// The sensor devices read each tick and where their data lands in the bulk-read buffer.
 struct Sensors {
@@ -882,10 +1047,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         dt_f32,
     );
     let mut catch_asked = CatchLog::default();
-    // The servo deflection feedback (`deflection_ki`, gait-core `deflection`): f32 only; the
-    // masked joints' Present Position is read only while it acts.
-    let mut deflection = match fixed_math {
-        false => DeflectionLoop::new(&cfg.deflection, dt_f32),
+    // The servo deflection feedback (`deflection_ki`, gait-core `deflection`) and the leg
+    // odometry (`sole_poses=measured`, gait-core `odometry`): f32 only; Present Positions are
+    // read only while one of them acts.
+    let mut servo_sense = match fixed_math {
+        false => ServoSenseLoop::new(&cfg.deflection, cfg.sole_poses_measured, &robot, dt_f32),
         true => None,
     };
     let mut pitch_fx = FixedPitchAccel::new(pitch_cfg);
@@ -918,8 +1084,9 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 
         // Sensors.
         sensors.read(&mut bus);
-        if let Some(d) = deflection.as_mut() {
-            d.read(&mut bus, &map);
+        if let Some(d) = servo_sense.as_mut() {
+            let [l, r] = &prev.feet;
+            d.read(&mut bus, &map, &[l.sole_place(), r.sole_place()]);
         }
         let now = bus.board().now_us();
         let checked = sensors.check(&mut plausible, now);
@@ -1032,15 +1199,28 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             meas_fx = zmp_meter.zmp((&fpl, forces(fl)), (&fpr, forces(fr)));
             meas_fx.map(|z| z.map(gait_core::fixed_point::fx_to_f32))
         } else {
-            zmp_meter_f32
-                .zmp((pl, &reading(fl)), (pr, &reading(fr)))
-                .zmp
+            match servo_sense.as_mut() {
+                Some(d) => {
+                    let [l, r] = d.feet([pl.sole_place(), pr.sole_place()]);
+                    zmp_meter_f32
+                        .zmp((&l, &reading(fl)), (&r, &reading(fr)))
+                        .zmp
+                }
+                None => {
+                    zmp_meter_f32
+                        .zmp((pl, &reading(fl)), (pr, &reading(fr)))
+                        .zmp
+                }
+            }
         };
         let foot_load = |f: &Option<FootForces>| {
             reading(f)
                 .compression()
                 .map_or(f32::NAN, |c| c.iter().sum::<f32>())
         };
+        if let Some(d) = servo_sense.as_mut() {
+            d.follow(prev.phase, [foot_load(fl), foot_load(fr)]);
+        }
         // Not on the start-up ramp (its targets do not take the offsets: no jump at its end);
         // off with `math=fixed` (f32 only: its state stays 0, so it is not run there).
         let sole_dz = match walk.is_starting() {
@@ -1212,9 +1392,12 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                     }
                                     _ => (targets.joints(&lift(*s), shift).0, s),
                                 };
+                                if let Some(d) = servo_sense.as_mut() {
+                                    d.note_ik(&q);
+                                }
                                 load.apply(&compliance, &mut q, loaded, shift);
                                 cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
-                                if let Some(d) = deflection.as_mut() {
+                                if let Some(d) = servo_sense.as_mut() {
                                     d.apply(k, s.phase, &mut q);
                                 }
                                 Goal::Rad(q)
@@ -1351,6 +1534,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             let reason = sup.stop_reason().unwrap_or(StopReason::Requested);
             write_stop(&mut bus, &mut log, reason);
             crate::fw_log!(info, "stopped: {}", reason);
+            if let Some(d) = servo_sense.as_ref() {
+                let (taken, refused) = d.surveys();
+                crate::fw_log!(info, "odometry: {} surveys, {} refused", taken, refused);
+            }
             return RunEnd::Stopped(reason);
         }
     }

@@ -160,6 +160,9 @@ pub struct Config {
     /// The stance leg's joints driven to their targets from the servos' Present Position
     /// ([`gait_core::deflection`]).
     pub deflection: gait_core::deflection::DeflectionConfig,
+    /// Where the measured ZMP places the feet: the plan's places, or each landing surveyed by
+    /// forward kinematics of the servos' Present Position ([`gait_core::odometry`]).
+    pub sole_poses_measured: bool,
     /// The online walk's heading hold: share of the gyro-measured heading error each walking
     /// step turns back ([`gait_core::online`] H1–H2; 0 = off).
     pub heading_gain: f32,
@@ -241,6 +244,7 @@ impl Config {
             foot_force: gait_core::balance::FootForceControl::OFF,
             step_adaptation: gait_core::catching::StepAdaptation::DEFAULT,
             deflection: gait_core::deflection::DeflectionConfig::OFF,
+            sole_poses_measured: true,
             heading_gain: DEFAULT_HEADING_GAIN,
             feasibility: Feasibility::Stretch,
             arithmetic: Arithmetic::F32,

@@ -514,6 +514,18 @@ impl<R: Real> LegKinematics<R> {
         Pose::from_cols(sole, &rf)
     }
 
+    /// Forward kinematics: the sole point S and the foot frame's rotation as its three columns
+    /// (the foot's x, y and z axes in the world frame) — [`Self::fk`] without the ZYX angles.
+    pub fn sole_frame(
+        &self,
+        side: Side,
+        pelvis: &Pose<R>,
+        q: &LegAngles<R>,
+    ) -> ([R; 3], [[R; 3]; 3]) {
+        let ([_, _, _, sole], rf) = self.chain(side, pelvis, q);
+        (sole, rf)
+    }
+
     /// Forward kinematics: world positions of the joints, sole point and mass points.
     pub fn points(&self, side: Side, pelvis: &Pose<R>, q: &LegAngles<R>) -> LegPoints<R> {
         self.joint_axes(side, pelvis, q).0

@@ -37,6 +37,7 @@ pub mod deflection;
 pub mod fixed_ik;
 pub mod fixed_point;
 pub mod gait;
+pub mod odometry;
 pub mod pipeline;
 pub mod stabilizer;
 pub mod wholebody;

@@ -77,6 +77,12 @@ impl<R: Real> ForceReading<R> {
 pub trait SolePose<R> {
     /// The ground projection of the sole point and the heading.
     fn sole_place(&self) -> Place<R>;
+
+    /// The heading's (sin, cos) when the pose already has them (the ZMP then needs no sine and
+    /// cosine of its own); `None`: computed from the heading (none at a heading of exactly 0).
+    fn heading_sin_cos(&self) -> Option<(R, R)> {
+        None
+    }
 }
 
 impl<R: Real> SolePose<R> for Place<R> {
@@ -183,7 +189,14 @@ fn foot_pressure<R: Real, P: SolePose<R>>(
     if !is_positive(load) {
         return Some((R::zero(), None));
     }
-    let c = to_world(&place, [moment[0] / load, moment[1] / load]);
+    let l = [moment[0] / load, moment[1] / load];
+    let c = match pose.heading_sin_cos() {
+        Some((sin, cos)) => [
+            place.x + cos * l[0] - sin * l[1],
+            place.y + sin * l[0] + cos * l[1],
+        ],
+        None => to_world(&place, l),
+    };
     if c[0].is_finite() && c[1].is_finite() {
         Some((load, Some(c)))
     } else {

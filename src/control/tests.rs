@@ -102,7 +102,14 @@ fn torque_off_sent(b: &FakeBoard) -> bool {
 
 #[test]
 fn table2_walk_runs_to_plan_done() {
-    let cfg = autostart_config();
+    // The fake robot has no servo sag, so it stands at the compliance feed-forward's offsets
+    // (a hip roll's 0.1 rad moves a sole ≈ 2 cm) and the leg odometry would measure them: off,
+    // the survey finds every landing where the plan puts it and the measured ZMP stays under
+    // the support foot (checked below).
+    let cfg = Config {
+        compliance: Compliance::OFF,
+        ..autostart_config()
+    };
     let mut b = board(&cfg);
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::PlanDone));
@@ -115,7 +122,27 @@ fn table2_walk_runs_to_plan_done() {
     assert!(walk > 2000, "{walk}");
     let ticks = per_tick(&b);
     assert_eq!(ticks.len(), ramp + walk + hold + 1);
-    // Exactly one BULK READ and one SYNC WRITE per tick; torque off on the last one.
+    // The leg odometry's survey (`sole_poses=measured`, the default): one more BULK READ of one
+    // leg's six Present Positions (10 + 6 × 5 bytes out, 6 × 15 in) on two consecutive ticks of
+    // each landing's double support — 14 landings.
+    let surveying = |p: &Pkt| p.op == opcode::BULK_READ && p.tx_bytes == 40;
+    let survey_ticks: Vec<usize> = (0..ticks.len())
+        .filter(|&k| ticks[k].iter().any(surveying))
+        .collect();
+    assert_eq!(survey_ticks.len(), 2 * 14, "{survey_ticks:?}");
+    for pair in survey_ticks.chunks(2) {
+        assert_eq!(pair[1], pair[0] + 1, "{survey_ticks:?}");
+    }
+    assert!(b
+        .packets
+        .iter()
+        .filter(|p| surveying(p))
+        .all(|p| p.rx_bytes == 90));
+    let ticks: Vec<Vec<&Pkt>> = ticks
+        .iter()
+        .map(|pk| pk.iter().filter(|p| !surveying(p)).collect())
+        .collect();
+    // Otherwise exactly one BULK READ and one SYNC WRITE per tick; torque off on the last one.
     let last = ticks.len() - 1;
     for (k, pk) in ticks.iter().enumerate() {
         let bulk: Vec<_> = pk.iter().filter(|p| p.op == opcode::BULK_READ).collect();
@@ -335,11 +362,12 @@ fn missing_foot_board_required_or_optional() {
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     let recs = b.records();
     assert_eq!(&startup_of(&recs).missing[..], &[112]);
-    // The bulk read asks only 111 and 200: 10 + 2 × 5 bytes.
+    // The bulk read asks only 111 and 200: 10 + 2 × 5 bytes (besides the odometry's survey:
+    // 10 + 6 × 5).
     let bulk: Vec<_> = b
         .packets
         .iter()
-        .filter(|p| p.op == opcode::BULK_READ)
+        .filter(|p| p.op == opcode::BULK_READ && p.tx_bytes != 40)
         .collect();
     assert!(bulk
         .iter()
@@ -1609,10 +1637,12 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
 #[test]
 fn fixed_point_loop_agrees_with_the_f32_loop() {
     let walk = |arithmetic| {
-        // The compliance feed-forward is f32 only (off with `math=fixed`): off in both.
+        // The compliance feed-forward and the leg odometry are f32 only (off with
+        // `math=fixed`): off in both.
         let cfg = Config {
             arithmetic,
             compliance: Compliance::OFF,
+            sole_poses_measured: false,
             ..autostart_config()
         };
         let mut b = board(&cfg);
@@ -2014,4 +2044,134 @@ fn the_deflection_feedback_drives_sagging_stance_knees_to_their_targets() {
             }
         }
     }
+}
+
+/// The leg odometry (`sole_poses=measured`, gait-core `odometry`) on a fake robot whose left
+/// hip pitch stands 20 ticks short of its goal and whose left ankle pitch 20 ticks beyond it (the
+/// sole stays level, so the fake's feet stay a consistent world): each left landing's survey
+/// puts the left sole where the sagging joints put it — the left foot's displacement v by the legs' FK of the
+/// goals with and without the sag, computed here in f64 — and the right one back where the plan
+/// puts it, so the logged measured ZMP is the planned-feet one moved by v in left single support
+/// and unmoved in right single support; the goals are the same (the odometry only measures).
+#[test]
+fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
+    // No feed-forwards and no feedback: the fake's attitude follows its joints, so the gyro
+    // feedback would move the goals apart from the IK's (the survey carries the new leg back
+    // by the IK's change over a tick, O3′).
+    let on = cfg_with("compliance_roll=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    assert!(on.sole_poses_measured, "on by default");
+    let off = Config {
+        sole_poses_measured: false,
+        ..on
+    };
+    let sag = 20;
+    let sagging = |cfg: &Config| {
+        let mut b = board(cfg);
+        // ID 3: the left hip pitch, ID 5: the left ankle pitch.
+        for d in b.devices.iter_mut() {
+            match d.id {
+                3 => d.sag = sag,
+                5 => d.sag = -sag,
+                _ => {}
+            }
+        }
+        b
+    };
+    let (mut a, mut b) = (sagging(&off), sagging(&on));
+    for (x, cfg) in [(&mut a, &off), (&mut b, &on)] {
+        assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
+    }
+    assert_eq!(a.goals, b.goals, "the odometry does not move the targets");
+    // The survey ticks (the second BULK READ of one leg's six Present Positions).
+    let surveying = |p: &Pkt| p.op == opcode::BULK_READ && p.tx_bytes == 40;
+    let ticks = per_tick(&b);
+    assert!(!per_tick(&a).iter().any(|pk| pk.iter().any(surveying)));
+    let second_reads: Vec<usize> = (1..ticks.len())
+        .filter(|&k| ticks[k].iter().any(surveying) && ticks[k - 1].iter().any(surveying))
+        .collect();
+    assert_eq!(second_reads.len(), 14, "{second_reads:?}");
+    // Start-up's one SYNC WRITE (goal = present), then every tick but the last sends its
+    // goals: goals[k + 1] are tick k's.
+    assert_eq!(b.goals.len(), ticks.len());
+    let robot = Robot::reference();
+    let map = JointMap::from_robot(&robot);
+    let left_sole = |g: &[i32; 12], sag: i32| {
+        let q: [f64; 6] = core::array::from_fn(|j| {
+            let t = g[j]
+                - match j {
+                    2 => sag,
+                    4 => -sag,
+                    _ => 0,
+                };
+            f64::from(map.ticks.rad_f32(j, t))
+        });
+        let p = gait_core::kinematics::leg_fk(
+            &robot,
+            Side::Left,
+            &gait_core::kinematics::Pose::default(),
+            &q,
+        );
+        [p.x, p.y]
+    };
+    // v at the left landings' surveys (the goals sent before the stance leg's read).
+    let v: Vec<[f64; 2]> = second_reads
+        .iter()
+        .map(|&k| {
+            let g = &b.goals[k - 1];
+            let (with, without) = (left_sole(g, sag), left_sole(g, 0));
+            [with[0] - without[0], with[1] - without[1]]
+        })
+        .collect();
+    let vx = v.iter().map(|d| d[0]).fold(0.0, f64::max);
+    assert!(
+        vx > 0.004 && vx < 0.008,
+        "a 20-tick sag moves the sole {vx} m"
+    );
+    // In the logged records: the difference of the measured ZMP, on − off. The fake loads
+    // every foot within 2 mm of the lowest, so near lift-off and touch-down both feet share
+    // the load and the difference is v times the left foot's share s ∈ [0, 1]: along v always,
+    // all of v (s = 1) in most left single-support ticks, none (s = 0) in most right ones.
+    let vm = v
+        .iter()
+        .fold([0.0f64; 2], |m, d| [m[0] + d[0], m[1] + d[1]]);
+    let vm = vm.map(|c| c / v.len() as f64);
+    let (ra, rb) = (ticks_of(&a.records()), ticks_of(&b.records()));
+    assert_eq!(ra.len(), rb.len());
+    let (mut left, mut left_full, mut right, mut right_none) = (0, 0, 0, 0);
+    let mut first_left_landing_seen = false;
+    for (x, y) in ra.iter().zip(&rb) {
+        if !(x.zmp_valid && y.zmp_valid) {
+            continue;
+        }
+        let d = [
+            crate::record::pos_to_m(y.zmp_meas[0]) - crate::record::pos_to_m(x.zmp_meas[0]),
+            crate::record::pos_to_m(y.zmp_meas[1]) - crate::record::pos_to_m(x.zmp_meas[1]),
+        ]
+        .map(f64::from);
+        // s from the projection on v; what is across v, and s's slack, are the log's rounding
+        // (10 µm), v's spread between landings and the servo ticks' quantization carried from
+        // landing to landing (0.088° ≈ 0.3 mm at the sole per joint: the chain drifts ≤ 0.6 mm).
+        let s = (d[0] * vm[0] + d[1] * vm[1]) / (vm[0] * vm[0] + vm[1] * vm[1]);
+        let across = [d[0] - s * vm[0], d[1] - s * vm[1]];
+        assert!(
+            across[0].abs() < 6e-4 && across[1].abs() < 6e-4 && (-0.12..=1.12).contains(&s),
+            "{:?}: {d:?} against v = {vm:?}",
+            x.phase
+        );
+        first_left_landing_seen |= s > 0.5;
+        match x.phase {
+            LoggedPhase::SingleLeft if first_left_landing_seen => {
+                left += 1;
+                left_full += usize::from((s - 1.0).abs() < 0.12);
+            }
+            LoggedPhase::SingleRight => {
+                right += 1;
+                right_none += usize::from(s.abs() < 0.12);
+            }
+            _ => {}
+        }
+    }
+    assert!(left_full * 4 >= left * 3, "{left_full} of {left}");
+    assert!(right_none * 4 >= right * 3, "{right_none} of {right}");
+    assert!(left > 300 && right > 300, "{left} {right}");
 }
