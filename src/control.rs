@@ -504,13 +504,14 @@ impl ServoSense {
     /// ONE BULK READ of the Present Positions this tick needs (rad; NaN for a reply that
     /// failed) — the deflection feedback's joints, and a survey's leg (odometry O3′: the stance
     /// leg, then the new one on the next tick, which takes the survey against the plan's places
-    /// of the feet `planned`).
+    /// of the feet `planned`). Returns a survey taken: the new foot and its surveyed place minus
+    /// the planned one (m, x and y; for the online walk's position hold).
     fn read<B: Board>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         map: &JointMap,
         planned: &[gait_core::Place<f32>; 2],
-    ) {
+    ) -> Option<(Side, [f32; 2])> {
         self.present = [f32::NAN; LEG_JOINTS];
         let leg = match self.odometry.as_ref().map(|o| o.stage) {
             Some(Survey::Stance(s)) => Some(s),
@@ -519,7 +520,7 @@ impl ServoSense {
         };
         let deflection = self.deflection.is_some();
         if leg.is_none() && !deflection {
-            return;
+            return None;
         }
         let in_leg = |j: usize| leg.is_some_and(|s| (j < LEG_JOINTS / 2) == (s == Side::Left));
         self.reqs.clear();
@@ -553,9 +554,8 @@ impl ServoSense {
                 }
             }
         }
-        let Some(o) = self.odometry.as_mut() else {
-            return;
-        };
+        let o = self.odometry.as_mut()?;
+        let mut taken = None;
         o.stage = match o.stage {
             Survey::Idle => Survey::Idle,
             Survey::Stance(stance) => Survey::New {
@@ -572,10 +572,16 @@ impl ServoSense {
                     &o.ik,
                 );
                 // A refused survey (a failed read: NaN) keeps the landing where the plan puts it.
-                let _ = o.legs.survey(&o.kin, &q, planned);
+                let new = stance.other();
+                if let Ok(p) = o.legs.survey(&o.kin, &q, planned) {
+                    let [l, r] = planned;
+                    let plan = if new == Side::Left { l } else { r };
+                    taken = Some((new, [p.x - plan.x, p.y - plan.y]));
+                }
                 Survey::Idle
             }
         };
+        taken
     }
 
     /// The IK's joint targets of this walking tick (rad), for the odometry's next survey (O3′).
@@ -646,7 +652,8 @@ impl NoServoSense {
         _: &mut BoardMaster<'_, B>,
         _: &JointMap,
         _: &[gait_core::Place<f32>; 2],
-    ) {
+    ) -> Option<(Side, [f32; 2])> {
+        None
     }
 
     fn note_ik(&mut self, _: &[f32; LEG_JOINTS]) {}
@@ -1086,7 +1093,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         sensors.read(&mut bus);
         if let Some(d) = servo_sense.as_mut() {
             let [l, r] = &prev.feet;
-            d.read(&mut bus, &map, &[l.sole_place(), r.sole_place()]);
+            let landed = d.read(&mut bus, &map, &[l.sole_place(), r.sole_place()]);
+            // The online walk's position hold (P1): where the new foot landed off its plan.
+            if let (Some((side, offset)), Some(o)) = (landed, walk.gait.online_mut()) {
+                o.set_landing_offset(side, offset);
+            }
         }
         let now = bus.board().now_us();
         let checked = sensors.check(&mut plausible, now);
@@ -1270,6 +1281,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 f.step.side,
                                 &f.step.place,
                                 f.turn,
+                                f.shift,
                                 f.given,
                             );
                         }

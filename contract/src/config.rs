@@ -166,6 +166,9 @@ pub struct Config {
     /// The online walk's heading hold: share of the gyro-measured heading error each walking
     /// step turns back ([`gait_core::online`] H1–H2; 0 = off).
     pub heading_gain: f32,
+    /// The online walk's position hold: share of the surveyed feet's distance from the commanded
+    /// track each walking step corrects ([`gait_core::online`] P1–P2; 0 = off).
+    pub position_gain: f32,
     /// What start-up does when the plan needs joints faster than the servos.
     pub feasibility: Feasibility,
     /// The number type of the per-sample gait work (f32, or the fixed-point sampler and IK).
@@ -246,6 +249,7 @@ impl Config {
             deflection: gait_core::deflection::DeflectionConfig::OFF,
             sole_poses_measured: true,
             heading_gain: DEFAULT_HEADING_GAIN,
+            position_gain: 0.5,
             feasibility: Feasibility::Stretch,
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,

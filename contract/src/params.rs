@@ -947,6 +947,15 @@ params! {
         get: |c| { Some(Value::Num32(c.heading_gain)) },
     },
     {
+        key: "position_gain",
+        plan_key: None,
+        unit: "1/step",
+        domain: range(0.0, 1.0),
+        doc: "online walk: position hold, share of the surveyed feet's distance from the commanded track each walking step corrects (gait-core online P2, needs sole_poses=measured; 0 = off)",
+        set: |c, v| { c.position_gain = v as f32 },
+        get: |c| { Some(Value::Num32(c.position_gain)) },
+    },
+    {
         key: "fault_nan",
         plan_key: None,
         unit: "tick",

@@ -29,6 +29,14 @@
 //!   θ = θ_S + d_ω + δ                                                                   (S3)
 //! ```
 //!
+//! A position correction c = (c_x, c_y) (m, in the support foot's frame,
+//! [`StepGenerator::next_step_held`]) is added to the step's travel the same way, d_x ← d_x + c_x,
+//! d_y ← d_y + c_y, outside the velocity state:
+//!
+//! ```text
+//!   (x, y) = (x_S, y_S) + R(θ_S + d_ω/2)·(d_x + c_x, s·2w + d_y + c_y)                   (S4)
+//! ```
+//!
 //! **Limits.** Each footprint must pass the plan's reach check ([`StepLimits::check`]: forward
 //! distance, lateral distance ≥ sole width + 1 cm, heading change) and the sole-corner check: all
 //! four corners of the swing sole lie at least [`SOLE_GAP`] beyond the support sole's inner edge
@@ -284,7 +292,22 @@ impl<R: Real> StepGenerator<R> {
     /// Returns the footstep and the correction stepped (λ·δ: less when the limits scaled the
     /// step back).
     pub fn next_step_turned(&mut self, cmd: &WalkCommand<R>, turn: R) -> (Footstep<R>, R) {
+        let (step, turned, _) = self.next_step_held(cmd, turn, [R::zero(); 2]);
+        (step, turned)
+    }
+
+    /// [`Self::next_step_turned`] with a position correction `shift` (m, support-foot frame) of
+    /// the swing foot's travel (S4): the position hold's. Like the turn it is not integrated into
+    /// the velocity and the limits apply to the whole step. Returns the footstep and the turn
+    /// and shift stepped (λ·δ, λ·c). A non-finite correction counts as 0.
+    pub fn next_step_held(
+        &mut self,
+        cmd: &WalkCommand<R>,
+        turn: R,
+        shift: [R; 2],
+    ) -> (Footstep<R>, R, [R; 2]) {
         let turn = if turn.is_finite() { turn } else { R::zero() };
+        let shift = shift.map(|v| if v.is_finite() { v } else { R::zero() });
         let l = &self.limits;
         let target = [
             clamp_r(cmd.vx, R::of(-l.vx_backward), R::of(l.vx_forward)),
@@ -298,9 +321,9 @@ impl<R: Real> StepGenerator<R> {
             *vi = *vi + clamp_r(ti - *vi, -di, di);
         }
         let [fx, fy, fw] = v.map(|vi| vi * t);
-        let (step, scale) = self.step_by([fx, fy, fw + turn]);
+        let (step, scale) = self.step_by([fx + shift[0], fy + shift[1], fw + turn]);
         self.velocity = v.map(|vi| vi * scale);
-        (step, turn * scale)
+        (step, turn * scale, shift.map(|c| c * scale))
     }
 
     /// An explicit step (a footstep list's entry): the next swing foot at the per-step travel

@@ -88,6 +88,29 @@
 //! limits, the stepped λ·δ is what Σδ adds). Not in the start phase nor while stopping: a stop
 //! ends with the feet parallel as commanded.
 //!
+//! **Position hold.** The feet land where the servos put them, not where the plan does (a
+//! stance leg that yields under the robot's weight lands every step long, more so the faster
+//! the walk): the walk drifts ahead of its commands. With the leg odometry's survey of each
+//! landing ([`crate::odometry`]; [`OnlineWalk::set_landing_offset`]: the surveyed place minus
+//! the planned one, o, world frame) and Σc the position corrections stepped so far (world
+//! frame), the support foot's distance from the commanded track when a walking step begins is
+//!
+//! ```text
+//!   e = o_S + Σc                                                                         (P1)
+//! ```
+//!
+//! (each correction moves every later footprint with it, so the planned feet are Σc off the
+//! commanded track), and the step's travel is corrected by
+//!
+//! ```text
+//!   c = R(−θ_S)·clamp(−k_p·e, ±c_max)   (k_p = `position_gain`, c_max = MAX_POSITION_SHIFT)     (P2)
+//! ```
+//!
+//! ((S4) of [`crate::command`], support-foot frame; the stepped λ·c, back in the world frame,
+//! is what Σc adds). A landing error Δ that repeats every step leaves e = Δ/k_p: the feet keep
+//! the commanded velocity, a fixed distance ahead. Only for a support foot surveyed since it
+//! landed; not in the start phase, while stopping or for listed steps, like the heading hold.
+//!
 //! **Swing.** The swing foot follows [`crate::swing::swing_foot`] between lift-off t1 and
 //! touch-down t2 of the walk's timing; both feet are on the ground outside it.
 
@@ -124,6 +147,9 @@ pub struct ListedStep<R> {
 /// Largest heading correction of one step (H2), rad (≈ 2.9°).
 pub const MAX_HEADING_TURN: f64 = 0.05;
 
+/// Largest position correction of one step per axis (P2), m.
+pub const MAX_POSITION_SHIFT: f64 = 0.02;
+
 /// Timing and shape of the online steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OnlineParams {
@@ -148,6 +174,9 @@ pub struct OnlineParams {
     /// Heading hold (H1–H2): the share of the measured heading error each walking step turns
     /// back (0 = off, 1 = all of it), within ±[`MAX_HEADING_TURN`].
     pub heading_gain: f64,
+    /// Position hold (P1–P2): the share of the surveyed feet's distance from the commanded
+    /// track each walking step corrects (0 = off), within ±[`MAX_POSITION_SHIFT`].
+    pub position_gain: f64,
 }
 
 /// Standing on both feet, CoM held on the feet's midpoint.
@@ -240,6 +269,12 @@ pub struct OnlineWalk<R> {
     stepped_turn: R,
     /// The correction δ requested for the last committed step (the generator's input), rad.
     requested_turn: R,
+    /// Each foot's surveyed place minus its planned one since it landed (o of P1), m.
+    landed: [Option<[R; 2]>; 2],
+    /// The position corrections stepped so far (Σc of P1, world frame), m.
+    shifted: [R; 2],
+    /// The correction c requested for the last committed step (support frame), m.
+    requested_shift: [R; 2],
     /// Explicit steps waiting (a footstep list), walked before the command's steps.
     queue: Deque<ListedStep<R>, STEP_QUEUE_LEN>,
     /// The travel of the last committed step if it was an explicit one (for the log).
@@ -286,6 +321,9 @@ impl<R: Real> OnlineWalk<R> {
             turned: R::zero(),
             stepped_turn: R::zero(),
             requested_turn: R::zero(),
+            landed: [None; 2],
+            shifted: [R::zero(); 2],
+            requested_shift: [R::zero(); 2],
             queue: Deque::new(),
             given: None,
         })
@@ -371,20 +409,67 @@ impl<R: Real> OnlineWalk<R> {
         g: &mut StepGenerator<R>,
         listed: Option<&ListedStep<R>>,
         turn: R,
-    ) -> (Footstep<R>, R, Option<[R; 3]>, bool) {
+        shift: [R; 2],
+    ) -> (Footstep<R>, R, [R; 2], Option<[R; 3]>, bool) {
+        let none = [R::zero(); 2];
         match listed {
             Some(l) if l.side == g.next_swing() => {
-                (g.next_step_given(l.d), R::zero(), Some(l.d), true)
+                (g.next_step_given(l.d), R::zero(), none, Some(l.d), true)
             }
             Some(_) => {
                 let z = [R::zero(); 3];
-                (g.next_step_given(z), R::zero(), Some(z), false)
+                (g.next_step_given(z), R::zero(), none, Some(z), false)
             }
             None => {
-                let (f, t) = g.next_step_turned(&self.cmd, turn);
-                (f, t, None, false)
+                let (f, t, c) = g.next_step_held(&self.cmd, turn, shift);
+                (f, t, c, None, false)
             }
         }
+    }
+
+    /// The leg odometry's survey of foot `side`'s landing: its surveyed place minus the planned
+    /// one (m, world frame; o of P1), for the position hold. Non-finite values are ignored.
+    pub fn set_landing_offset(&mut self, side: Side, offset: [R; 2]) {
+        if offset.iter().all(|v| v.is_finite()) {
+            let [l, r] = &mut self.landed;
+            *match side {
+                Side::Left => l,
+                Side::Right => r,
+            } = Some(offset);
+        }
+    }
+
+    /// The position correction c requested for the last committed step (P2, the input of
+    /// [`StepGenerator::next_step_held`], support frame, whole µm), m: 0 unless the position
+    /// hold moved it.
+    pub fn last_shift(&self) -> [R; 2] {
+        self.requested_shift
+    }
+
+    /// The position hold's correction for a step from support foot `support` (P1–P2): 0 when
+    /// off, without a survey of that foot since it landed, or when not walking.
+    fn position_shift(&self, side: Side, support: &Place<R>) -> [R; 2] {
+        let k = self.p.position_gain;
+        let [l, r] = self.landed;
+        let landed = match side {
+            Side::Left => l,
+            Side::Right => r,
+        };
+        let (Some(o), WalkMode::Walking(_)) = (landed, &self.mode) else {
+            return [R::zero(); 2];
+        };
+        if !(k > 0.0 && k.is_finite()) {
+            return [R::zero(); 2];
+        }
+        let m = R::of(MAX_POSITION_SHIFT);
+        let c = [0, 1].map(|i| {
+            let e = o[i] + self.shifted[i];
+            (-(e * R::of(k))).clamp_to(-m, m)
+        });
+        let (s, k) = support.yaw.sin_cos();
+        // R(−θ_S)·c, a whole number of µm, as logged: the host replays the footsteps bit for bit.
+        let local = [k * c[0] + s * c[1], k * c[1] - s * c[0]];
+        local.map(|v| R::of(libm::round(v.to_f64() * 1e6) * 1e-6))
     }
 
     /// The measured heading ψ (rad, the feet's yaw origin: the gyro's yaw integrated since the
@@ -495,7 +580,7 @@ impl<R: Real> OnlineWalk<R> {
                 Side::Left => (r, l),
                 Side::Right => (l, r),
             };
-            let (fs, _, _, used) = self.next_of(&mut g, listed, R::zero());
+            let (fs, _, _, _, used) = self.next_of(&mut g, listed, R::zero(), [R::zero(); 2]);
             if used {
                 next += 1;
             }
@@ -587,7 +672,8 @@ impl<R: Real> OnlineWalk<R> {
             Side::Left => (r, l),
             Side::Right => (l, r),
         };
-        let (fs, _, _, used) = self.next_of(&mut g, self.queue.front(), R::zero());
+        let (fs, _, _, _, used) =
+            self.next_of(&mut g, self.queue.front(), R::zero(), [R::zero(); 2]);
         let first = Step {
             t: R::zero(),
             support,
@@ -629,12 +715,16 @@ impl<R: Real> OnlineWalk<R> {
             Side::Right => (l, r),
         };
         let listed = self.queue.front().copied();
-        let turn = match listed {
-            Some(_) => R::zero(),
-            None => self.heading_turn(),
+        let support_side = side.other();
+        let (turn, shift) = match listed {
+            Some(_) => (R::zero(), [R::zero(); 2]),
+            None => (
+                self.heading_turn(),
+                self.position_shift(support_side, &support),
+            ),
         };
         let mut g = self.gen;
-        let (fs, stepped, given, used) = self.next_of(&mut g, listed.as_ref(), turn);
+        let (fs, stepped, moved, given, used) = self.next_of(&mut g, listed.as_ref(), turn, shift);
         self.gen = g;
         if used {
             self.queue.pop_front();
@@ -643,6 +733,16 @@ impl<R: Real> OnlineWalk<R> {
         self.requested_turn = turn;
         self.stepped_turn = stepped;
         self.turned += stepped;
+        self.requested_shift = shift;
+        // Σc += R(θ_S)·λc (P1, world frame); the swing foot has not been surveyed where it lands.
+        let (s, k) = support.yaw.sin_cos();
+        self.shifted[0] += k * moved[0] - s * moved[1];
+        self.shifted[1] += s * moved[0] + k * moved[1];
+        let [l, r] = &mut self.landed;
+        *match side {
+            Side::Left => l,
+            Side::Right => r,
+        } = None;
         self.committed = Some(fs);
         let step = Step {
             t: R::zero(),

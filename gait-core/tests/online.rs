@@ -6,7 +6,7 @@ use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::kinematics::LegKinematics;
 use gait_core::online::{
     ListedStep, OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, MAX_HEADING_TURN,
-    STEP_QUEUE_LEN, ZMP_MARGIN,
+    MAX_POSITION_SHIFT, STEP_QUEUE_LEN, ZMP_MARGIN,
 };
 use gait_core::pipeline::joint_targets;
 use gait_core::plan::SwingShape;
@@ -33,6 +33,7 @@ fn params() -> OnlineParams {
         dt: DT,
         zmp_inset: DEFAULT_ZMP_INSET,
         heading_gain: 0.0,
+        position_gain: 0.0,
     }
 }
 
@@ -311,6 +312,77 @@ fn heading_hold_turns_a_slip_back_within_its_bound() {
         off.tick();
         on_plain.tick();
         assert_eq!(off.take_footstep(), on_plain.take_footstep(), "tick {k}");
+    }
+}
+
+/// The position hold (P1–P2) against a world where every landing lands 1 cm further forward
+/// and 2 mm further left than the plan puts it from the support foot (a stance leg that yields):
+/// the surveyed place minus the planned one is fed after each landing. Without the hold the
+/// feet drift from the commanded track by 1 cm a step; with k = 0.5 the drift settles at
+/// Δ/k = 2 cm × (1, 0.2) and the feet keep the commanded velocity; every correction is within
+/// ±c_max and a whole number of µm (as logged; the firmware's test replays the logged shifts
+/// through the generator). With k = 0 the feet are the generator's exactly.
+#[test]
+fn position_hold_keeps_the_surveyed_feet_on_the_commanded_track() {
+    let delta = [0.010, 0.002];
+    let run = |k: f64| {
+        let mut p = params();
+        p.position_gain = k;
+        let mut w = OnlineWalk::new(&Robot::reference(), p, feet()).unwrap();
+        let mut nominal = walk();
+        // The world: where each foot really is (planned + offset), and the last support.
+        let mut real = feet();
+        let mut planned = feet();
+        let mut drift = Vec::new();
+        for t in 0..3000 {
+            if t == 10 {
+                w.set_command(cmd(0.05, 0.0, 0.0));
+                nominal.set_command(cmd(0.05, 0.0, 0.0));
+            }
+            w.tick();
+            nominal.tick();
+            let n = nominal.take_footstep();
+            if let Some(f) = w.take_footstep() {
+                let (i, j) = (f.side.index(), f.side.other().index());
+                // The landing relative to the support foot as planned, then Δ off (support
+                // frame; the walk is straight).
+                let rel = [f.place.x - planned[j].x, f.place.y - planned[j].y];
+                real[i] = Place {
+                    x: real[j].x + rel[0] + delta[0],
+                    y: real[j].y + rel[1] + delta[1],
+                    yaw: f.place.yaw,
+                };
+                planned[i] = f.place;
+                w.set_landing_offset(f.side, [real[i].x - f.place.x, real[i].y - f.place.y]);
+                let c = w.last_shift();
+                for v in c {
+                    assert!(v.abs() <= MAX_POSITION_SHIFT + 1e-12, "{c:?}");
+                    assert_eq!((v * 1e6).round() * 1e-6, v, "whole µm: {c:?}");
+                }
+                let nf = n.expect("the nominal walk steps in step");
+                assert_eq!(nf.side, f.side);
+                drift.push([real[i].x - nf.place.x, real[i].y - nf.place.y]);
+            } else {
+                assert!(n.is_none());
+            }
+        }
+        drift
+    };
+    let off = run(0.0);
+    let on = run(0.5);
+    assert!(on.len() > 15 && on.len() == off.len(), "{} steps", on.len());
+    // Off: the drift grows by Δ a step (the first, start-phase step too).
+    let last_off = off.last().unwrap();
+    assert!(
+        last_off[0] > 0.01 * (off.len() as f64 - 3.0),
+        "{last_off:?}"
+    );
+    // On: it settles at Δ/k.
+    for d in &on[on.len() - 5..] {
+        assert!(
+            (d[0] - 0.02).abs() < 1e-3 && (d[1] - 0.004).abs() < 1e-3,
+            "{on:?}"
+        );
     }
 }
 

@@ -486,8 +486,9 @@ pub fn standing_feet(half_width: f32) -> [Place<f32>; 2] {
 }
 
 /// Replays a log's `CommandReceived` and `Footstep` records through [`StepGenerator`] (f32,
-/// the firmware's arithmetic; a footstep's logged heading-hold correction, id s·16 + 3, is
-/// passed to [`StepGenerator::next_step_turned`]) for a walk of CoM height `z_c` and half width `half_width`, with
+/// the firmware's arithmetic; a footstep's logged heading-hold correction, id s·16 + 3, and
+/// position-hold correction, ids s·16 + 7, 8, are passed to [`StepGenerator::next_step_held`])
+/// for a walk of CoM height `z_c` and half width `half_width`, with
 /// the step period the firmware logged (`Footstep` id 0): a new generator at each start from
 /// standing, first swing = the logged step's side.
 pub fn replay_footsteps(
@@ -552,9 +553,10 @@ pub fn replay_footsteps(
         // The firmware's conversion of the port's units (f32 · 0.001).
         let listed = logged.given.map(|d| d.map(|v| v as f32 * 0.001));
         let turn = (f64::from(logged.turn) * 1e-6) as f32;
+        let shift = logged.shift.map(|v| (f64::from(v) * 1e-6) as f32);
         let s = match listed {
             Some(d) => g.next_step_given(d),
-            None => g.next_step_turned(&c, turn).0,
+            None => g.next_step_held(&c, turn, shift).0,
         };
         out.turned += f64::from(turn);
         feet = g.feet();

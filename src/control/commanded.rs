@@ -52,6 +52,7 @@ pub fn online_walk(cfg: &Config, robot: &Robot) -> Result<OnlineWalk<f32>, GaitE
         dt: cfg.dt_s(),
         zmp_inset: DEFAULT_ZMP_INSET,
         heading_gain: f64::from(cfg.heading_gain),
+        position_gain: f64::from(cfg.position_gain),
     };
     let y = w.step_width as f32;
     let feet = [
@@ -184,14 +185,16 @@ pub fn support_code(p: SupportPhase) -> u8 {
 }
 
 /// Logs a committed footstep as `Footstep` records (the contract's
-/// [`walker_contract::footstep_log`]: the heading hold's correction δ if any, µrad; an explicit
-/// step's travel if it was one, mm, mm, mrad; the footprint x, y in µm and yaw in µrad).
+/// [`walker_contract::footstep_log`]: the heading hold's correction δ if any, µrad; the
+/// position hold's correction c if any, µm; an explicit step's travel if it was one, mm, mm,
+/// mrad; the footprint x, y in µm and yaw in µrad).
 pub fn log_footstep<B: Board>(
     board: &mut B,
     log: &mut LogWriter,
     side: Side,
     place: &Place<f32>,
     turn: f32,
+    shift: [f32; 2],
     given: Option<[f32; 3]>,
 ) {
     let now = board.now_us();
@@ -208,6 +211,7 @@ pub fn log_footstep<B: Board>(
         footstep_log::foot_code(side == Side::Left),
         [micro(place.x), micro(place.y), micro(place.yaw)],
         micro(turn),
+        shift.map(micro),
         given.map(|d| d.map(|v| scaled(v, 1000.0))),
         |id, value| log.write(board, super::fault(now, FaultKind::Footstep, id, value)),
     );

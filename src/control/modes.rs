@@ -233,6 +233,8 @@ pub struct TakenStep {
     pub step: Footstep<f32>,
     /// The heading hold's correction (rad).
     pub turn: f32,
+    /// The position hold's correction (m, support-foot frame).
+    pub shift: [f32; 2],
     /// An explicit step's travel (m, m, rad), if the step came from the step list.
     pub given: Option<[f32; 3]>,
 }
@@ -394,6 +396,7 @@ impl Walk {
                         let footstep = o.take_footstep().map(|step| TakenStep {
                             step,
                             turn: o.last_turn(),
+                            shift: o.last_shift(),
                             given: o.last_given(),
                         });
                         Motion::Gait { k, footstep }

@@ -1573,6 +1573,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
     let mut log = walker_contract::footstep_log::FootstepLog::new();
     let mut steps = 0;
     let mut turns = 0;
+    let mut shifts = 0;
     for r in &recs {
         let Record::Fault(f) = r else { continue };
         let Some(logged) = log.push(f.kind, f.id, f.value) else {
@@ -1582,6 +1583,11 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
         // turn with the commanded turn, so the hold turns the feet back.
         if logged.turn != 0 {
             turns += 1;
+        }
+        // The position hold's (P2): the fake robot stands at the compliance feed-forward's
+        // offsets, so the odometry finds the landings off their plan and the hold moves feet.
+        if logged.shift != [0, 0] {
+            shifts += 1;
         }
         assert_eq!(logged.given, None, "no step list in this walk");
         let side = if logged.foot == 1 {
@@ -1603,7 +1609,8 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
         } else {
             gait_core::command::WalkCommand::zero()
         };
-        let (s, _) = g.next_step_turned(&c, (f64::from(logged.turn) * 1e-6) as f32);
+        let shift = logged.shift.map(|v| (f64::from(v) * 1e-6) as f32);
+        let (s, _, _) = g.next_step_held(&c, (f64::from(logged.turn) * 1e-6) as f32, shift);
         feet = g.feet();
         assert_eq!(s.side, side, "step {steps}");
         let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
@@ -1612,6 +1619,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
     }
     assert!(gen.unwrap().is_standing(), "ends standing");
     assert!(turns > 0, "the heading hold turned steps");
+    assert!(shifts > 0, "the position hold moved steps");
     // 1050 ticks (5.25 s) of walk command at 0.05 m/s with a 0.1 rad/s turn, less one period
     // of start, then the stop steps (the stretched period is longer than Table 2's 0.64 s).
     assert!(steps >= 6, "{steps} steps");
