@@ -412,32 +412,10 @@ impl Record {
 // ---------------------------------------------------------------- CRC-16/CCITT-FALSE
 
 /// `CRC_TABLE[x]`: the CRC register after shifting the byte `x` (in bits 15..8) through eight
-/// rounds of the polynomial. One lookup per byte (512 bytes of flash; the nibble table of 32
-/// bytes took two lookups and cost the control tick ≈ 180–450 instructions more for its ≈ 40
-/// log bytes, M7 / M3).
-// Evaluated at compile time only (an out-of-range index would be a build error).
-#[allow(clippy::indexing_slicing)]
-const fn crc_table() -> [u16; 256] {
-    let mut t = [0u16; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = (i as u16) << 8;
-        let mut b = 0;
-        while b < 8 {
-            c = if c & 0x8000 != 0 {
-                (c << 1) ^ 0x1021
-            } else {
-                c << 1
-            };
-            b += 1;
-        }
-        t[i] = c;
-        i += 1;
-    }
-    t
-}
-
-static CRC_TABLE: [u16; 256] = crc_table();
+/// rounds of the polynomial ([`dxl::crc::msb_first_table`]). One lookup per byte (512 bytes of
+/// flash; the nibble table of 32 bytes took two lookups and cost the control tick ≈ 180–450
+/// instructions more for its ≈ 40 log bytes, M7 / M3).
+static CRC_TABLE: [u16; 256] = dxl::crc::msb_first_table(0x1021);
 
 /// CRC-16/CCITT-FALSE of `data` (poly 0x1021, init 0xFFFF).
 pub fn crc16_ccitt(data: &[u8]) -> u16 {
