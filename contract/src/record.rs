@@ -60,6 +60,7 @@
 //! The firmware writes with [`LogWriter`] into its board's [`LogSink`]; host tools decode with
 //! [`RecordDecoder`] (log records; `dxl::Decoder` is the bus packets' decoder).
 
+use crate::codes::wire_codes;
 pub use crate::codes::{FaultKind, StopReason};
 use gait_core::gait::TimingNote;
 
@@ -90,73 +91,37 @@ pub mod record_type {
     pub const FAULT: u8 = 0x04;
 }
 
-/// Support phase of the gait (3 bits in the status byte).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum LoggedPhase {
-    /// Both feet on the ground, walking.
-    Double = 0,
-    /// Left foot supporting, right foot swinging.
-    SingleLeft = 1,
-    /// Right foot supporting, left foot swinging.
-    SingleRight = 2,
-    /// Standing still (before the first or after the last step).
-    Standing = 3,
-    /// Stopped by the supervisor.
-    Stopped = 4,
-}
-
-impl LoggedPhase {
-    /// The 3-bit wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Double => 0,
-            Self::SingleLeft => 1,
-            Self::SingleRight => 2,
-            Self::Standing => 3,
-            Self::Stopped => 4,
-        }
+wire_codes! {
+    /// Support phase of the gait (3 bits in the status byte).
+    pub enum LoggedPhase {
+        /// Both feet on the ground, walking.
+        Double = 0,
+        /// Left foot supporting, right foot swinging.
+        SingleLeft = 1,
+        /// Right foot supporting, left foot swinging.
+        SingleRight = 2,
+        /// Standing still (before the first or after the last step).
+        Standing = 3,
+        /// Stopped by the supervisor.
+        Stopped = 4,
     }
 }
 
-impl TryFrom<u8> for LoggedPhase {
-    type Error = crate::codes::UnknownCode;
-    fn try_from(b: u8) -> Result<Self, Self::Error> {
-        Ok(match b {
-            0 => Self::Double,
-            1 => Self::SingleLeft,
-            2 => Self::SingleRight,
-            3 => Self::Standing,
-            4 => Self::Stopped,
-            other => return Err(crate::codes::UnknownCode(other)),
-        })
+wire_codes! {
+    /// Supervisor state as logged (2 bits in the status byte).
+    pub enum FaultState {
+        /// Everything fresh.
+        Ok = 0,
+        /// At least one device is on last-good hold.
+        Holding = 1,
+        /// Stopping: holding the pose before torque off.
+        Stopping = 2,
+        /// Torque is off.
+        TorqueOff = 3,
     }
-}
-
-/// Supervisor state as logged (2 bits in the status byte).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum FaultState {
-    /// Everything fresh.
-    Ok = 0,
-    /// At least one device is on last-good hold.
-    Holding = 1,
-    /// Stopping: holding the pose before torque off.
-    Stopping = 2,
-    /// Torque is off.
-    TorqueOff = 3,
 }
 
 impl FaultState {
-    /// The 2-bit wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Ok => 0,
-            Self::Holding => 1,
-            Self::Stopping => 2,
-            Self::TorqueOff => 3,
-        }
-    }
     /// From the 2 bits of the status byte (every value decodes).
     pub const fn from_bits(b: u8) -> Self {
         match b & 3 {
@@ -168,30 +133,21 @@ impl FaultState {
     }
 }
 
-/// Which board wrote the log.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum BoardId {
-    /// Unknown / host.
-    Unknown = 0,
-    /// QEMU mps2 (firmware-in-the-loop).
-    QemuMps2 = 1,
-    /// ROBOTIS OpenCR 1.0.
-    OpenCr = 2,
-    /// ROBOTIS OpenCM 9.04.
-    OpenCm = 3,
+wire_codes! {
+    /// Which board wrote the log.
+    pub enum BoardId {
+        /// Unknown / host.
+        Unknown = 0,
+        /// QEMU mps2 (firmware-in-the-loop).
+        QemuMps2 = 1,
+        /// ROBOTIS OpenCR 1.0.
+        OpenCr = 2,
+        /// ROBOTIS OpenCM 9.04.
+        OpenCm = 3,
+    }
 }
 
 impl BoardId {
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Unknown => 0,
-            Self::QemuMps2 => 1,
-            Self::OpenCr => 2,
-            Self::OpenCm => 3,
-        }
-    }
     /// From the wire code (unknown codes decode as [`BoardId::Unknown`]).
     pub const fn from_code(b: u8) -> Self {
         match b {
