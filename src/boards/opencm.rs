@@ -118,8 +118,7 @@ fn gpiob() -> &'static pac::gpioa::RegisterBlock {
 
 /// The bus UART's BRR for `baud` (72 MHz ÷ baud, oversampling 16), if it is in 16..=0xFFFF.
 pub fn bus_brr(baud: u32) -> Option<u32> {
-    let div = SYSCLK_HZ.checked_div(baud)?;
-    (16..=0xFFFF).contains(&div).then_some(div)
+    stm32::brr(SYSCLK_HZ, baud)
 }
 
 /// Bus direction: transmit (PB5 high) or receive (low).

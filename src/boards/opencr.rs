@@ -109,15 +109,6 @@ fn usart2() -> &'static pac::usart1::RegisterBlock {
     unsafe { &*pac::USART2::ptr() }
 }
 
-fn brr(baud: u32) -> Option<u32> {
-    let div = SYSCLK_HZ.checked_div(baud)?;
-    if (16..=0xFFFF).contains(&div) {
-        Some(div)
-    } else {
-        None
-    }
-}
-
 /// Best-effort torque off from anywhere (panic handler): direction pin high, the broadcast
 /// Torque Enable = 0 packet on USART3 with bounded spins, direction low, then the servo power
 /// FET off. Harmless if the board was never initialised (writes then go nowhere).
@@ -317,7 +308,7 @@ impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
     }
 
     fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
-        let div = brr(baud).ok_or(BusError::UnsupportedBaud)?;
+        let div = stm32::brr(SYSCLK_HZ, baud).ok_or(BusError::UnsupportedBaud)?;
         let u = usart3();
         stm32::spin(UART_SPIN_LIMIT, || u.isr.read().tc().bit_is_set())?;
         u.cr1.modify(|_, w| w.ue().clear_bit());

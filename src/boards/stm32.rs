@@ -91,6 +91,13 @@ pub(crate) fn spin(limit: u32, ready: impl Fn() -> bool) -> Result<(), BusError>
     Err(BusError::Timeout)
 }
 
+/// A USART's BRR for `baud` from its kernel clock `clock_hz` (oversampling 16), if it is in
+/// 16..=0xFFFF.
+pub(crate) fn brr(clock_hz: u32, baud: u32) -> Option<u32> {
+    let div = clock_hz.checked_div(baud)?;
+    (16..=0xFFFF).contains(&div).then_some(div)
+}
+
 /// A board's bus UART as [`Stm32Bus`] drives it: the F103's USART and the F746's differ in
 /// their registers' names and in how error flags clear, not in what the bus code does.
 pub(crate) trait BusUart {
