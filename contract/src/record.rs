@@ -123,13 +123,8 @@ wire_codes! {
 
 impl FaultState {
     /// From the 2 bits of the status byte (every value decodes).
-    pub const fn from_bits(b: u8) -> Self {
-        match b & 3 {
-            0 => Self::Ok,
-            1 => Self::Holding,
-            2 => Self::Stopping,
-            _ => Self::TorqueOff,
-        }
+    pub fn from_bits(b: u8) -> Self {
+        Self::try_from(b & 3).unwrap_or(Self::TorqueOff)
     }
 }
 
@@ -149,13 +144,8 @@ wire_codes! {
 
 impl BoardId {
     /// From the wire code (unknown codes decode as [`BoardId::Unknown`]).
-    pub const fn from_code(b: u8) -> Self {
-        match b {
-            1 => Self::QemuMps2,
-            2 => Self::OpenCr,
-            3 => Self::OpenCm,
-            _ => Self::Unknown,
-        }
+    pub fn from_code(b: u8) -> Self {
+        Self::try_from(b).unwrap_or(Self::Unknown)
     }
 }
 
