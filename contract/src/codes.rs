@@ -63,16 +63,17 @@ macro_rules! wire_codes {
         }
 
         impl TryFrom<u8> for $name {
-            type Error = UnknownCode;
-            fn try_from(c: u8) -> Result<Self, UnknownCode> {
+            type Error = $crate::codes::UnknownCode;
+            fn try_from(c: u8) -> Result<Self, $crate::codes::UnknownCode> {
                 Ok(match c {
                     $($code => $name::$variant,)+
-                    other => return Err(UnknownCode(other)),
+                    other => return Err($crate::codes::UnknownCode(other)),
                 })
             }
         }
     };
 }
+pub(crate) use wire_codes;
 
 /// An unknown code (the value that could not be decoded).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -435,10 +435,7 @@ impl CommandTable {
 
     /// READ access: `len` bytes at `addr` (Data Range beyond the table).
     pub fn read(&self, addr: u16, len: u16) -> Result<&[u8], ErrorCode> {
-        let start = usize::from(addr);
-        self.mem
-            .get(start..start + usize::from(len))
-            .ok_or(ErrorCode::DataRange)
+        dxl::table::read(&self.mem, addr, len)
     }
 
     /// WRITE access with the checks of the module docs; all or nothing.

@@ -60,6 +60,7 @@
 //! The firmware writes with [`LogWriter`] into its board's [`LogSink`]; host tools decode with
 //! [`RecordDecoder`] (log records; `dxl::Decoder` is the bus packets' decoder).
 
+use crate::codes::wire_codes;
 pub use crate::codes::{FaultKind, StopReason};
 use gait_core::gait::TimingNote;
 
@@ -90,116 +91,61 @@ pub mod record_type {
     pub const FAULT: u8 = 0x04;
 }
 
-/// Support phase of the gait (3 bits in the status byte).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum LoggedPhase {
-    /// Both feet on the ground, walking.
-    Double = 0,
-    /// Left foot supporting, right foot swinging.
-    SingleLeft = 1,
-    /// Right foot supporting, left foot swinging.
-    SingleRight = 2,
-    /// Standing still (before the first or after the last step).
-    Standing = 3,
-    /// Stopped by the supervisor.
-    Stopped = 4,
-}
-
-impl LoggedPhase {
-    /// The 3-bit wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Double => 0,
-            Self::SingleLeft => 1,
-            Self::SingleRight => 2,
-            Self::Standing => 3,
-            Self::Stopped => 4,
-        }
+wire_codes! {
+    /// Support phase of the gait (3 bits in the status byte).
+    pub enum LoggedPhase {
+        /// Both feet on the ground, walking.
+        Double = 0,
+        /// Left foot supporting, right foot swinging.
+        SingleLeft = 1,
+        /// Right foot supporting, left foot swinging.
+        SingleRight = 2,
+        /// Standing still (before the first or after the last step).
+        Standing = 3,
+        /// Stopped by the supervisor.
+        Stopped = 4,
     }
 }
 
-impl TryFrom<u8> for LoggedPhase {
-    type Error = crate::codes::UnknownCode;
-    fn try_from(b: u8) -> Result<Self, Self::Error> {
-        Ok(match b {
-            0 => Self::Double,
-            1 => Self::SingleLeft,
-            2 => Self::SingleRight,
-            3 => Self::Standing,
-            4 => Self::Stopped,
-            other => return Err(crate::codes::UnknownCode(other)),
-        })
+wire_codes! {
+    /// Supervisor state as logged (2 bits in the status byte).
+    pub enum FaultState {
+        /// Everything fresh.
+        Ok = 0,
+        /// At least one device is on last-good hold.
+        Holding = 1,
+        /// Stopping: holding the pose before torque off.
+        Stopping = 2,
+        /// Torque is off.
+        TorqueOff = 3,
     }
-}
-
-/// Supervisor state as logged (2 bits in the status byte).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum FaultState {
-    /// Everything fresh.
-    Ok = 0,
-    /// At least one device is on last-good hold.
-    Holding = 1,
-    /// Stopping: holding the pose before torque off.
-    Stopping = 2,
-    /// Torque is off.
-    TorqueOff = 3,
 }
 
 impl FaultState {
-    /// The 2-bit wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Ok => 0,
-            Self::Holding => 1,
-            Self::Stopping => 2,
-            Self::TorqueOff => 3,
-        }
-    }
     /// From the 2 bits of the status byte (every value decodes).
-    pub const fn from_bits(b: u8) -> Self {
-        match b & 3 {
-            0 => Self::Ok,
-            1 => Self::Holding,
-            2 => Self::Stopping,
-            _ => Self::TorqueOff,
-        }
+    pub fn from_bits(b: u8) -> Self {
+        Self::try_from(b & 3).unwrap_or(Self::TorqueOff)
     }
 }
 
-/// Which board wrote the log.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
-pub enum BoardId {
-    /// Unknown / host.
-    Unknown = 0,
-    /// QEMU mps2 (firmware-in-the-loop).
-    QemuMps2 = 1,
-    /// ROBOTIS OpenCR 1.0.
-    OpenCr = 2,
-    /// ROBOTIS OpenCM 9.04.
-    OpenCm = 3,
+wire_codes! {
+    /// Which board wrote the log.
+    pub enum BoardId {
+        /// Unknown / host.
+        Unknown = 0,
+        /// QEMU mps2 (firmware-in-the-loop).
+        QemuMps2 = 1,
+        /// ROBOTIS OpenCR 1.0.
+        OpenCr = 2,
+        /// ROBOTIS OpenCM 9.04.
+        OpenCm = 3,
+    }
 }
 
 impl BoardId {
-    /// The wire code.
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Unknown => 0,
-            Self::QemuMps2 => 1,
-            Self::OpenCr => 2,
-            Self::OpenCm => 3,
-        }
-    }
     /// From the wire code (unknown codes decode as [`BoardId::Unknown`]).
-    pub const fn from_code(b: u8) -> Self {
-        match b {
-            1 => Self::QemuMps2,
-            2 => Self::OpenCr,
-            3 => Self::OpenCm,
-            _ => Self::Unknown,
-        }
+    pub fn from_code(b: u8) -> Self {
+        Self::try_from(b).unwrap_or(Self::Unknown)
     }
 }
 
@@ -412,32 +358,10 @@ impl Record {
 // ---------------------------------------------------------------- CRC-16/CCITT-FALSE
 
 /// `CRC_TABLE[x]`: the CRC register after shifting the byte `x` (in bits 15..8) through eight
-/// rounds of the polynomial. One lookup per byte (512 bytes of flash; the nibble table of 32
-/// bytes took two lookups and cost the control tick ≈ 180–450 instructions more for its ≈ 40
-/// log bytes, M7 / M3).
-// Evaluated at compile time only (an out-of-range index would be a build error).
-#[allow(clippy::indexing_slicing)]
-const fn crc_table() -> [u16; 256] {
-    let mut t = [0u16; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = (i as u16) << 8;
-        let mut b = 0;
-        while b < 8 {
-            c = if c & 0x8000 != 0 {
-                (c << 1) ^ 0x1021
-            } else {
-                c << 1
-            };
-            b += 1;
-        }
-        t[i] = c;
-        i += 1;
-    }
-    t
-}
-
-static CRC_TABLE: [u16; 256] = crc_table();
+/// rounds of the polynomial ([`dxl::crc::msb_first_table`]). One lookup per byte (512 bytes of
+/// flash; the nibble table of 32 bytes took two lookups and cost the control tick ≈ 180–450
+/// instructions more for its ≈ 40 log bytes, M7 / M3).
+static CRC_TABLE: [u16; 256] = dxl::crc::msb_first_table(0x1021);
 
 /// CRC-16/CCITT-FALSE of `data` (poly 0x1021, init 0xFFFF).
 pub fn crc16_ccitt(data: &[u8]) -> u16 {

@@ -17,7 +17,7 @@
 pub const POLY: u16 = 0x8005;
 
 /// `T1`: byte-wise lookup table, built at compile time.
-pub const TABLE: [u16; 256] = make_table();
+pub const TABLE: [u16; 256] = msb_first_table(POLY);
 /// `T2`: a byte followed by one zero byte (slicing by 4), built at compile time.
 pub const TABLE2: [u16; 256] = shifted(&TABLE);
 /// `T3`: a byte followed by two zero bytes.
@@ -25,9 +25,12 @@ pub const TABLE3: [u16; 256] = shifted(&TABLE2);
 /// `T4`: a byte followed by three zero bytes.
 pub const TABLE4: [u16; 256] = shifted(&TABLE3);
 
+/// The byte-wise lookup table of any non-reflected CRC-16 with polynomial `poly`: entry `x`
+/// is the register after shifting the byte `x` (in bits 15..8) through eight rounds (also the
+/// log's CRC-16/CCITT-FALSE in `walker-contract`).
 // Evaluated only at compile time: an out-of-range index here would be a build error.
 #[allow(clippy::indexing_slicing)]
-const fn make_table() -> [u16; 256] {
+pub const fn msb_first_table(poly: u16) -> [u16; 256] {
     let mut table = [0u16; 256];
     let mut i = 0;
     while i < 256 {
@@ -35,7 +38,7 @@ const fn make_table() -> [u16; 256] {
         let mut bit = 0;
         while bit < 8 {
             crc = if crc & 0x8000 != 0 {
-                (crc << 1) ^ POLY
+                (crc << 1) ^ poly
             } else {
                 crc << 1
             };

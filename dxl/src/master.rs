@@ -227,6 +227,17 @@ pub struct Master<T, P, C, const N: usize = 256> {
     stats: BusStats,
 }
 
+/// The outcome of a group read: its devices that timed out counted in `stats`, the number
+/// that answered correctly returned.
+fn tally(results: &[DeviceResult], stats: &mut BusStats) -> usize {
+    let missing = results
+        .iter()
+        .filter(|r| **r == Err(Error::Timeout))
+        .count();
+    stats.timeouts = stats.timeouts.wrapping_add(missing as u32);
+    results.iter().filter(|r| r.is_ok()).count()
+}
+
 /// Checks the devices of a group read/write: 1 to 253 of them, one result slot each, every id a
 /// device id (not broadcast).
 fn check_targets(
@@ -530,12 +541,7 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
             next = idx + 1;
             deadline = self.deadline();
         }
-        let missing = results
-            .iter()
-            .filter(|r| **r == Err(Error::Timeout))
-            .count();
-        self.stats.timeouts = self.stats.timeouts.wrapping_add(missing as u32);
-        Ok(results.iter().filter(|r| r.is_ok()).count())
+        Ok(tally(results, &mut self.stats))
     }
 
     /// Checks a SYNC READ / FAST SYNC READ request; returns the per-device length.
@@ -677,11 +683,6 @@ impl<T: Transport, P: OutputPin, C: Clock, const N: usize> Master<T, P, C, N> {
                 *slot = r;
             }
         }
-        let missing = results
-            .iter()
-            .filter(|r| **r == Err(Error::Timeout))
-            .count();
-        self.stats.timeouts = self.stats.timeouts.wrapping_add(missing as u32);
-        Ok(results.iter().filter(|r| r.is_ok()).count())
+        Ok(tally(results, &mut self.stats))
     }
 }

@@ -22,6 +22,15 @@ const fn f(addr: u16, len: u16) -> Field {
     Field { addr, len }
 }
 
+/// A device's answer to a READ of `len` bytes at `addr` from its control table `mem`: those
+/// bytes, or Data Range where they run past the table's end (both bus ends' devices).
+#[inline]
+pub fn read(mem: &[u8], addr: u16, len: u16) -> Result<&[u8], crate::ErrorCode> {
+    let start = usize::from(addr);
+    mem.get(start..start + usize::from(len))
+        .ok_or(crate::ErrorCode::DataRange)
+}
+
 fn i32_at(b: &[u8], i: usize) -> Option<i32> {
     let s = b.get(i..i.checked_add(4)?)?;
     Some(i32::from_le_bytes([

@@ -42,7 +42,7 @@ use cortex_m_rt as _;
 use defmt_rtt as _;
 use stm32f1::stm32f103 as pac;
 
-use super::stm32::{self, stm32_board, Stm32State};
+use super::stm32::{self, stm32_board, BusUart, Stm32Bus, Stm32State};
 use crate::board::{BusError, Clock, LogRing, ServoBus, Watchdog, TORQUE_OFF_PACKET};
 use crate::record::BoardId;
 use crate::Config;
@@ -94,14 +94,9 @@ const IWDG_KEY_FEED: u32 = 0xAAAA;
 /// IWDG clock: LSI ≈ 40 kHz ÷ 32 = 1.25 counts per ms.
 const IWDG_PRESCALER_DIV32: u32 = 3;
 
-/// Waits (bounded) until `ready` holds; `Err(Timeout)` otherwise.
+/// Waits (bounded, [`UART_SPIN_LIMIT`]) until `ready` holds; `Err(Timeout)` otherwise.
 fn spin(ready: impl Fn() -> bool) -> Result<(), BusError> {
-    for _ in 0..UART_SPIN_LIMIT {
-        if ready() {
-            return Ok(());
-        }
-    }
-    Err(BusError::Timeout)
+    stm32::spin(UART_SPIN_LIMIT, ready)
 }
 
 fn usart1() -> &'static pac::usart1::RegisterBlock {
@@ -123,8 +118,7 @@ fn gpiob() -> &'static pac::gpioa::RegisterBlock {
 
 /// The bus UART's BRR for `baud` (72 MHz ÷ baud, oversampling 16), if it is in 16..=0xFFFF.
 pub fn bus_brr(baud: u32) -> Option<u32> {
-    let div = SYSCLK_HZ.checked_div(baud)?;
-    (16..=0xFFFF).contains(&div).then_some(div)
+    stm32::brr(SYSCLK_HZ, baud)
 }
 
 /// Bus direction: transmit (PB5 high) or receive (low).
@@ -285,65 +279,64 @@ impl OpenCmBoard {
             u.dr.write(|w| unsafe { w.bits(u32::from(b)) });
         }
     }
+}
 
-    /// Counts and clears the bus UART's error flags (SR then DR read, RM0008 §27.6.1) and
-    /// drops any pending byte.
-    fn discard_input(&mut self) {
-        let u = usart1();
-        let sr = u.sr.read().bits();
-        if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0 {
-            self.state.count_uart_error();
-        }
+/// The bus UART, USART1, for the shared bus code.
+pub(crate) struct BusUsart1(&'static pac::usart1::RegisterBlock);
+
+impl BusUart for BusUsart1 {
+    const SPIN_LIMIT: u32 = UART_SPIN_LIMIT;
+    fn tx_empty(&self) -> bool {
+        self.0.sr.read().bits() & USART_SR_TXE != 0
+    }
+    fn tx_complete(&self) -> bool {
+        self.0.sr.read().bits() & USART_SR_TC != 0
+    }
+    fn write(&self, b: u8) {
+        // SAFETY: DR takes any 9-bit value.
+        self.0.dr.write(|w| unsafe { w.bits(u32::from(b)) });
+    }
+    fn status(&self) -> (bool, bool) {
+        let sr = self.0.sr.read().bits();
+        (
+            sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0,
+            sr & USART_SR_RXNE != 0,
+        )
+    }
+    fn read(&self) -> u8 {
+        // Reading DR also clears ORE/FE/NE after the SR read of `status`.
+        (self.0.dr.read().bits() & 0xFF) as u8
+    }
+    /// SR then DR read (RM0008 §27.6.1): the flags cleared, the pending byte dropped.
+    fn discard(&self) -> bool {
+        let sr = self.0.sr.read().bits();
         if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE | USART_SR_RXNE) != 0 {
-            let _ = u.dr.read().bits();
+            let _ = self.0.dr.read().bits();
         }
+        sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0
+    }
+}
+
+impl Stm32Bus for OpenCmBoard {
+    type Uart = BusUsart1;
+    fn bus_uart(&self) -> BusUsart1 {
+        BusUsart1(usart1())
+    }
+    fn bus_direction(&mut self, transmit: bool) {
+        bus_dir(transmit);
+    }
+    fn stm32_state(&mut self) -> &mut Stm32State {
+        &mut self.state
     }
 }
 
 impl ServoBus for OpenCmBoard {
     fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
-        self.feed();
-        self.discard_input();
-        let u = usart1();
-        bus_dir(true);
-        let mut sent = Ok(());
-        for &b in packet {
-            sent = spin(|| u.sr.read().bits() & USART_SR_TXE != 0);
-            if sent.is_err() {
-                break;
-            }
-            // SAFETY: DR takes any 9-bit value.
-            u.dr.write(|w| unsafe { w.bits(u32::from(b)) });
-        }
-        let done = sent.and_then(|()| spin(|| u.sr.read().bits() & USART_SR_TC != 0));
-        bus_dir(false);
-        // Whatever the transceiver echoed while we were driving the line is not a reply.
-        self.discard_input();
-        done
+        self.bus_send(packet)
     }
 
     fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
-        // Bounded by `timeout_us` (the µs counter); the watchdog is fed once per wait.
-        self.feed();
-        let u = usart1();
-        let deadline = self.now_us() + u64::from(timeout_us);
-        let mut n = 0;
-        while n < buf.len() {
-            let sr = u.sr.read().bits();
-            if sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0 {
-                self.state.count_uart_error();
-            }
-            if sr & USART_SR_RXNE != 0 {
-                // Reading DR also clears ORE/FE/NE after the SR read above.
-                if let Some(slot) = buf.get_mut(n) {
-                    *slot = (u.dr.read().bits() & 0xFF) as u8;
-                }
-                n += 1;
-            } else if self.now_us() >= deadline {
-                break;
-            }
-        }
-        Ok(n)
+        self.bus_recv(buf, timeout_us)
     }
 
     fn baud(&self) -> u32 {

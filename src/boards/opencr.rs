@@ -39,7 +39,7 @@ use stm32f7xx_hal::rcc::{Clocks, HSEClock, HSEClockMode};
 use stm32f7xx_hal::serial::{self, Serial};
 use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
-use super::stm32::{self, stm32_board, Stm32State};
+use super::stm32::{self, stm32_board, BusUart, Stm32Bus, Stm32State};
 use crate::board::{BusError, Clock, LogRing, ServoBus, Watchdog, TORQUE_OFF_PACKET};
 use crate::record::BoardId;
 use crate::Config;
@@ -61,17 +61,6 @@ pub const LOG_RING: usize = 1024;
 /// a byte at the slowest rate (9600 baud: 1.04 ms). Beyond it the bus is hung:
 /// [`BusError::Timeout`].
 pub const UART_SPIN_LIMIT: u32 = 1_000_000;
-
-/// Waits (bounded, [`UART_SPIN_LIMIT`]) until `ready` holds for the bus UART.
-fn wait_bus(ready: impl Fn(&pac::usart1::RegisterBlock) -> bool) -> Result<(), BusError> {
-    let u = usart3();
-    for _ in 0..UART_SPIN_LIMIT {
-        if ready(u) {
-            return Ok(());
-        }
-    }
-    Err(BusError::Timeout)
-}
 
 /// The Dynamixel direction pin as an `embedded-hal` 1.0 output (stm32f7xx-hal 0.8 pins only
 /// implement embedded-hal 0.2): PC9, high = transmit.
@@ -118,15 +107,6 @@ fn usart6() -> &'static pac::usart1::RegisterBlock {
 fn usart2() -> &'static pac::usart1::RegisterBlock {
     // SAFETY: as for `usart3`, for the command port USART2 (owned by the board after `new`).
     unsafe { &*pac::USART2::ptr() }
-}
-
-fn brr(baud: u32) -> Option<u32> {
-    let div = SYSCLK_HZ.checked_div(baud)?;
-    if (16..=0xFFFF).contains(&div) {
-        Some(div)
-    } else {
-        None
-    }
 }
 
 /// Best-effort torque off from anywhere (panic handler): direction pin high, the broadcast
@@ -252,66 +232,75 @@ impl<D: OutputPin> OpenCrBoard<D> {
             u.tdr.write(|w| w.tdr().bits(u16::from(b)));
         }
     }
+}
 
-    /// Clears the bus UART's error flags (counting them) and drops any pending byte.
-    fn discard_input(&mut self) {
-        let u = usart3();
-        let isr = u.isr.read();
-        if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
-            self.state.count_uart_error();
-            u.icr
+/// A USART of the F746 (the bus UART USART3 for the shared bus code, the command port USART2).
+pub(crate) struct Usart(&'static pac::usart1::RegisterBlock);
+
+impl Usart {
+    /// Clears the error flags (ICR) if any is set; whether one was.
+    fn clear_errors(&self, isr: &pac::usart1::isr::R) -> bool {
+        let error = isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set();
+        if error {
+            self.0
+                .icr
                 .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
         }
-        while u.isr.read().rxne().bit_is_set() {
-            let _ = u.rdr.read().bits();
+        error
+    }
+}
+
+impl BusUart for Usart {
+    const SPIN_LIMIT: u32 = UART_SPIN_LIMIT;
+    fn tx_empty(&self) -> bool {
+        self.0.isr.read().txe().bit_is_set()
+    }
+    fn tx_complete(&self) -> bool {
+        self.0.isr.read().tc().bit_is_set()
+    }
+    fn write(&self, b: u8) {
+        self.0.tdr.write(|w| w.tdr().bits(u16::from(b)));
+    }
+    fn status(&self) -> (bool, bool) {
+        let isr = self.0.isr.read();
+        (self.clear_errors(&isr), isr.rxne().bit_is_set())
+    }
+    fn read(&self) -> u8 {
+        (self.0.rdr.read().bits() & 0xFF) as u8
+    }
+    fn discard(&self) -> bool {
+        let error = self.clear_errors(&self.0.isr.read());
+        while self.0.isr.read().rxne().bit_is_set() {
+            let _ = self.0.rdr.read().bits();
         }
+        error
+    }
+}
+
+impl<D: OutputPin> Stm32Bus for OpenCrBoard<D> {
+    type Uart = Usart;
+    fn bus_uart(&self) -> Usart {
+        Usart(usart3())
+    }
+    fn bus_direction(&mut self, transmit: bool) {
+        let _ = if transmit {
+            self.dir.set_high()
+        } else {
+            self.dir.set_low()
+        };
+    }
+    fn stm32_state(&mut self) -> &mut Stm32State {
+        &mut self.state
     }
 }
 
 impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
     fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
-        self.feed();
-        self.discard_input();
-        let u = usart3();
-        let _ = self.dir.set_high();
-        let mut sent = Ok(());
-        for &b in packet {
-            sent = wait_bus(|u| u.isr.read().txe().bit_is_set());
-            if sent.is_err() {
-                break;
-            }
-            u.tdr.write(|w| w.tdr().bits(u16::from(b)));
-        }
-        let done = sent.and_then(|()| wait_bus(|u| u.isr.read().tc().bit_is_set()));
-        let _ = self.dir.set_low();
-        // Whatever the transceiver echoed while we were driving the line is not a reply.
-        self.discard_input();
-        done
+        self.bus_send(packet)
     }
 
     fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
-        // Bounded by `timeout_us` (TIM2); the watchdog is fed once per wait.
-        self.feed();
-        let u = usart3();
-        let deadline = self.now_us() + u64::from(timeout_us);
-        let mut n = 0;
-        while n < buf.len() {
-            let isr = u.isr.read();
-            if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
-                self.state.count_uart_error();
-                u.icr
-                    .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
-            }
-            if isr.rxne().bit_is_set() {
-                if let Some(slot) = buf.get_mut(n) {
-                    *slot = (u.rdr.read().bits() & 0xFF) as u8;
-                }
-                n += 1;
-            } else if self.now_us() >= deadline {
-                break;
-            }
-        }
-        Ok(n)
+        self.bus_recv(buf, timeout_us)
     }
 
     fn baud(&self) -> u32 {
@@ -319,9 +308,9 @@ impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
     }
 
     fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
-        let div = brr(baud).ok_or(BusError::UnsupportedBaud)?;
+        let div = stm32::brr(SYSCLK_HZ, baud).ok_or(BusError::UnsupportedBaud)?;
         let u = usart3();
-        wait_bus(|u| u.isr.read().tc().bit_is_set())?;
+        stm32::spin(UART_SPIN_LIMIT, || u.isr.read().tc().bit_is_set())?;
         u.cr1.modify(|_, w| w.ue().clear_bit());
         // SAFETY: any 16-bit value is a valid BRR; `div` is in 16..=0xFFFF.
         u.brr.write(|w| unsafe { w.bits(div) });
@@ -372,11 +361,7 @@ stm32_board! {
 
         fn command_rx(&mut self, buf: &mut [u8]) -> usize {
             let u = usart2();
-            let isr = u.isr.read();
-            if isr.ore().bit_is_set() || isr.fe().bit_is_set() || isr.nf().bit_is_set() {
-                u.icr
-                    .write(|w| w.orecf().set_bit().fecf().set_bit().ncf().set_bit());
-            }
+            let _ = Usart(u).clear_errors(&u.isr.read());
             let mut n = 0;
             for slot in buf.iter_mut().take(COMMAND_RX_PER_TICK) {
                 if !u.isr.read().rxne().bit_is_set() {
@@ -392,14 +377,7 @@ stm32_board! {
             // ≤ 312 bytes at 1 Mbps ≈ 3.1 ms, each wait bounded.
             let u = usart2();
             for &b in bytes {
-                let mut ok = false;
-                for _ in 0..UART_SPIN_LIMIT {
-                    if u.isr.read().txe().bit_is_set() {
-                        ok = true;
-                        break;
-                    }
-                }
-                if !ok {
+                if stm32::spin(UART_SPIN_LIMIT, || u.isr.read().txe().bit_is_set()).is_err() {
                     return;
                 }
                 u.tdr.write(|w| w.tdr().bits(u16::from(b)));

@@ -1,13 +1,15 @@
 //! What the two STM32 robot controllers ([`super::opencr`], [`super::opencm`]) share: the crash
 //! record in no-init RAM and the panic path, the board state besides the peripherals and the
 //! log ring ([`Stm32State`]: µs clock, tick schedule, watchdog flag, bus UART errors, reset
-//! flags) and the trait implementations built on them ([`stm32_board!`]).
+//! flags), the bus UART's send and receive ([`Stm32Bus`] over each board's [`BusUart`]) and the
+//! trait implementations built on them ([`stm32_board!`]).
 
 use core::mem::MaybeUninit;
 use cortex_m::peripheral::SCB;
 
 use crate::board::{
-    stm32f7_reset_cause, CrashCell, CrashCode, ResetCause, TickSchedule, WrapClock,
+    stm32f7_reset_cause, BusError, Clock, CrashCell, CrashCode, ResetCause, TickSchedule, Watchdog,
+    WrapClock,
 };
 use crate::Config;
 
@@ -75,6 +77,112 @@ impl Stm32State {
     /// Counts one error seen on the bus UART.
     pub(crate) fn count_uart_error(&mut self) {
         self.uart_errors = self.uart_errors.saturating_add(1);
+    }
+}
+
+/// Waits (bounded: `limit` loop iterations) until `ready` holds; `Err(Timeout)` otherwise (the
+/// peripheral is hung).
+pub(crate) fn spin(limit: u32, ready: impl Fn() -> bool) -> Result<(), BusError> {
+    for _ in 0..limit {
+        if ready() {
+            return Ok(());
+        }
+    }
+    Err(BusError::Timeout)
+}
+
+/// A USART's BRR for `baud` from its kernel clock `clock_hz` (oversampling 16), if it is in
+/// 16..=0xFFFF.
+pub(crate) fn brr(clock_hz: u32, baud: u32) -> Option<u32> {
+    let div = clock_hz.checked_div(baud)?;
+    (16..=0xFFFF).contains(&div).then_some(div)
+}
+
+/// A board's bus UART as [`Stm32Bus`] drives it: the F103's USART and the F746's differ in
+/// their registers' names and in how error flags clear, not in what the bus code does.
+pub(crate) trait BusUart {
+    /// Longest busy-wait on a flag (TXE, TC), loop iterations.
+    const SPIN_LIMIT: u32;
+    /// TXE: the transmit data register is free.
+    fn tx_empty(&self) -> bool;
+    /// TC: the last byte has left the line.
+    fn tx_complete(&self) -> bool;
+    /// Puts `b` in the transmit data register.
+    fn write(&self, b: u8);
+    /// One status read: (an overrun, framing or noise error is flagged, a received byte waits);
+    /// a UART whose flags clear by a write clears them here.
+    fn status(&self) -> (bool, bool);
+    /// The received byte (after [`BusUart::status`]: on the F103 this read clears the flags).
+    fn read(&self) -> u8;
+    /// Clears the error flags and drops any pending input; whether an error was flagged.
+    fn discard(&self) -> bool;
+}
+
+/// The servo bus of an STM32 board on its [`BusUart`]: `send` and `recv` of
+/// [`crate::board::ServoBus`], the watchdog fed once per call.
+pub(crate) trait Stm32Bus: Clock + Watchdog {
+    /// The bus UART.
+    type Uart: BusUart;
+    /// The bus UART's registers.
+    fn bus_uart(&self) -> Self::Uart;
+    /// Drives the bus direction pin: transmit (`true`) or receive.
+    fn bus_direction(&mut self, transmit: bool);
+    /// The board's state (its UART error counter).
+    fn stm32_state(&mut self) -> &mut Stm32State;
+
+    /// Clears the bus UART's error flags (counting them) and drops any pending input.
+    fn discard_input(&mut self) {
+        if self.bus_uart().discard() {
+            self.stm32_state().count_uart_error();
+        }
+    }
+
+    /// [`crate::board::ServoBus::send`]: the packet out with the line driven, each byte when
+    /// TXE, then TC (bounded waits: [`BusError::Timeout`]); input before and the transceiver's
+    /// echo after are dropped.
+    fn bus_send(&mut self, packet: &[u8]) -> Result<(), BusError> {
+        self.feed();
+        self.discard_input();
+        let u = self.bus_uart();
+        self.bus_direction(true);
+        let mut sent = Ok(());
+        for &b in packet {
+            sent = spin(Self::Uart::SPIN_LIMIT, || u.tx_empty());
+            if sent.is_err() {
+                break;
+            }
+            u.write(b);
+        }
+        let done = sent.and_then(|()| spin(Self::Uart::SPIN_LIMIT, || u.tx_complete()));
+        self.bus_direction(false);
+        // Whatever the transceiver echoed while we were driving the line is not a reply.
+        self.discard_input();
+        done
+    }
+
+    /// [`crate::board::ServoBus::recv`]: bytes until `buf` is full or `timeout_us` has passed
+    /// on the board's µs clock, UART errors counted.
+    fn bus_recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
+        // Bounded by `timeout_us`; the watchdog is fed once per wait.
+        self.feed();
+        let u = self.bus_uart();
+        let deadline = self.now_us() + u64::from(timeout_us);
+        let mut n = 0;
+        while n < buf.len() {
+            let (error, ready) = u.status();
+            if error {
+                self.stm32_state().count_uart_error();
+            }
+            if ready {
+                if let Some(slot) = buf.get_mut(n) {
+                    *slot = u.read();
+                }
+                n += 1;
+            } else if self.now_us() >= deadline {
+                break;
+            }
+        }
+        Ok(n)
     }
 }
 

@@ -178,10 +178,7 @@ impl Device {
 
     /// READ access: the bytes `addr..addr+len`.
     pub fn read(&self, addr: u16, len: u16) -> Result<&[u8], ErrorCode> {
-        let start = usize::from(addr);
-        self.mem
-            .get(start..start + usize::from(len))
-            .ok_or(ErrorCode::DataRange)
+        dxl::table::read(&self.mem, addr, len)
     }
 
     fn writable(&self, a: usize) -> bool {
