@@ -416,8 +416,8 @@ fn write_goals<B: Board>(bus: &mut BoardMaster<'_, B>, ticks: &[i32; LEG_JOINTS]
 /// The servos' Present Position and what the firmware makes of it (f32 path only): the servo
 /// deflection feedback ([`gait_core::deflection`], `deflection_ki`: its joints read in one BULK
 /// READ every tick, the targets of the last walking tick before the correction (D1)) and the leg
-/// odometry ([`gait_core::odometry`], `sole_poses=measured`: all twelve read on the tick after a
-/// survey falls due, once a step). Built only while one of them acts; the OpenCM build has a
+/// odometry ([`gait_core::odometry`], `sole_poses=measured`: once a step, the stance leg's six
+/// on the tick after a survey falls due, the new leg's six on the next, O3′). Built only while one of them acts; the OpenCM build has a
 /// zero-sized stand-in (`NoServoSense`: its RAM is short).
 #[cfg(not(feature = "board-opencm"))]
 struct ServoSense {
@@ -615,8 +615,8 @@ impl ServoSense {
     }
 
     /// Follows the support phase of the sample the servos execute and the feet's loads (N,
-    /// left and right): a survey due reads all twelve servos next tick (odometry O6 and the
-    /// due rule).
+    /// left and right): a survey due reads the stance leg next tick, the new leg the tick after
+    /// (odometry O6, the due rule and O3′).
     fn follow(&mut self, phase: gait_core::SupportPhase, loads: [f32; 2]) {
         if let Some(o) = self.odometry.as_mut() {
             o.legs.phase(phase);

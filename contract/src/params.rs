@@ -933,7 +933,7 @@ params! {
         plan_key: None,
         unit: "",
         domain: Domain::Word(&["planned", "measured"]),
-        doc: "where the measured ZMP places the load cells: the plan's feet, or each landing surveyed in its double support by forward kinematics of the 12 servos' Present Position (gait-core odometry; six servos read on two ticks a step)",
+        doc: "where the measured ZMP places the load cells: the plan's feet, or each landing surveyed in its double support by forward kinematics of the 12 servos' Present Position (gait-core odometry; one leg's six servos read on each of two ticks a step)",
         set: |c, v| { c.sole_poses_measured = v as usize == 1 },
         get: |c| { Some(Value::Word(usize::from(c.sole_poses_measured))) },
     },

@@ -6,8 +6,8 @@
 //! swing foot elsewhere (on the MuJoCo robot every Table 2 step lands ≈ 1.6 mm long, the faster
 //! gait's ≈ 1.1 cm). A landed sole does not move until it lifts again (the soles slide < 1 mm
 //! under load), so one survey per landing is enough: in the double support after a single
-//! support on foot s, with both feet loaded, the firmware reads the twelve Present Positions q̂
-//! once and this module measures the new foot n from the stance foot s.
+//! support on foot s, once the new foot n carries load, the firmware reads the twelve Present
+//! Positions q̂ (over two ticks, (O3′) below) and this module measures n from the stance foot s.
 //!
 //! A place `p = (x, y, ψ)` is a rigid motion of the floor; `⊕` composes two and `p⁻¹` inverts one:
 //!
