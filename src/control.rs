@@ -584,9 +584,14 @@ impl ServoSense {
         taken
     }
 
-    /// The IK's joint targets of this walking tick (rad), for the odometry's next survey (O3′).
+    /// The IK's joint targets of this walking tick (rad), for the survey's reads (O3′): kept
+    /// only while a survey is under way (the next tick reads a leg).
     fn note_ik(&mut self, q: &[f32; LEG_JOINTS]) {
-        if let Some(o) = self.odometry.as_mut() {
+        if let Some(o) = self
+            .odometry
+            .as_mut()
+            .filter(|o| !matches!(o.stage, Survey::Idle))
+        {
             o.ik = *q;
         }
     }
@@ -610,7 +615,7 @@ impl ServoSense {
         let [l, r] = planned;
         match &self.odometry {
             Some(o) => [o.legs.sole(Side::Left, &l), o.legs.sole(Side::Right, &r)],
-            None => [plain_sole(l), plain_sole(r)],
+            None => [SurveyedSole::planned(l), SurveyedSole::planned(r)],
         }
     }
 
@@ -661,7 +666,7 @@ impl NoServoSense {
     fn apply(&mut self, _: u32, _: gait_core::SupportPhase, _: &mut [f32; LEG_JOINTS]) {}
 
     fn feet(&self, planned: [gait_core::Place<f32>; 2]) -> [SurveyedSole<f32>; 2] {
-        planned.map(plain_sole)
+        planned.map(SurveyedSole::planned)
     }
 
     fn follow(&mut self, _: gait_core::SupportPhase, _: [f32; 2]) {}
@@ -669,16 +674,6 @@ impl NoServoSense {
     fn surveys(&self) -> (u16, u16) {
         (0, 0)
     }
-}
-
-/// A plan's place as a sole for the measured ZMP (its heading's sine and cosine computed there).
-fn plain_sole(place: gait_core::Place<f32>) -> SurveyedSole<f32> {
-    let (sin, cos) = if place.yaw == 0.0 {
-        (0.0, 1.0)
-    } else {
-        gait_core::fastmath::sin_cos(place.yaw)
-    };
-    SurveyedSole { place, sin, cos }
 }
 
 /// The Present Position feedback of this build.

@@ -76,6 +76,8 @@ use crate::plan::Place;
 use crate::real::Real;
 use crate::robot::{Side, JOINTS_PER_LEG, LEG_JOINTS};
 use crate::sampler::SupportPhase;
+use crate::support::heading_sin_cos;
+use crate::swing::wrap_pi;
 
 /// Limits of a survey (SI units; module docs (O5) and the due rule).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -136,18 +138,17 @@ impl<R: Real> Correction<R> {
 
     /// `C ⊕ p` (O1) with the stored sine and cosine.
     fn apply(&self, p: &Place<R>) -> Place<R> {
-        let c = &self.place;
-        Place {
-            x: c.x + self.cos * p.x - self.sin * p.y,
-            y: c.y + self.sin * p.x + self.cos * p.y,
-            yaw: c.yaw + p.yaw,
-        }
+        compose_with(&self.place, (self.sin, self.cos), p)
     }
 }
 
 /// `a ⊕ b`, module docs (O1).
 pub fn compose<R: Real>(a: &Place<R>, b: &Place<R>) -> Place<R> {
-    let (s, c) = a.yaw.sin_cos();
+    compose_with(a, a.yaw.sin_cos(), b)
+}
+
+/// `a ⊕ b` with `a`'s heading's (sin, cos) given.
+fn compose_with<R: Real>(a: &Place<R>, (s, c): (R, R), b: &Place<R>) -> Place<R> {
     Place {
         x: a.x + c * b.x - s * b.y,
         y: a.y + s * b.x + c * b.y,
@@ -230,6 +231,14 @@ pub struct SurveyedSole<R> {
     pub cos: R,
 }
 
+impl<R: Real> SurveyedSole<R> {
+    /// The plan's place `p` as it is (no correction).
+    pub fn planned(place: Place<R>) -> Self {
+        let (sin, cos) = heading_sin_cos(place.yaw);
+        SurveyedSole { place, sin, cos }
+    }
+}
+
 impl<R: Real> SolePose<R> for SurveyedSole<R> {
     fn sole_place(&self) -> Place<R> {
         self.place
@@ -288,8 +297,8 @@ impl<R: Real> LegOdometry<R> {
         match phase {
             SupportPhase::Single(s) => {
                 if self.last_stance != Some(s) || self.in_double {
-                    let c = *side(&self.corr, s);
-                    *side_mut(&mut self.corr, s.other()) = c;
+                    let c = *s.of(&self.corr);
+                    *s.other().of_mut(&mut self.corr) = c;
                 }
                 self.last_stance = Some(s);
                 self.surveyed = false;
@@ -357,10 +366,10 @@ impl<R: Real> LegOdometry<R> {
         if !q.iter().all(|v| v.is_finite()) {
             return Err(SurveyError::NonFinite);
         }
-        let (ps, pn) = (*side(planned, s), *side(planned, n));
+        let (ps, pn) = (*s.of(planned), *n.of(planned));
         let r = relative_place(kin, q, s, n);
         let r_plan = compose(&inverse(&ps), &pn);
-        let dyaw = wrap(r.yaw - r_plan.yaw);
+        let dyaw = wrap_pi(r.yaw - r_plan.yaw);
         let within = |v: R, lim: R| v.is_finite() && v.abs() <= lim;
         if !(within(r.x - r_plan.x, self.max_offset)
             && within(r.y - r_plan.y, self.max_offset)
@@ -368,26 +377,26 @@ impl<R: Real> LegOdometry<R> {
         {
             return Err(SurveyError::Implausible);
         }
-        let measured_s = side(&self.corr, s).apply(&ps);
+        let measured_s = s.of(&self.corr).apply(&ps);
         let measured_n = compose(&measured_s, &r);
         let c = compose(&measured_n, &inverse(&pn));
         if !(c.x.is_finite() && c.y.is_finite() && c.yaw.is_finite()) {
             return Err(SurveyError::NonFinite);
         }
-        *side_mut(&mut self.corr, n) = Correction::of(c);
+        *n.of_mut(&mut self.corr) = Correction::of(c);
         Ok(measured_n)
     }
 
     /// Where foot `side` stands when the plan puts it at `planned`: `C ⊕ p`, module docs (O2).
     pub fn place(&self, foot: Side, planned: &Place<R>) -> Place<R> {
-        side(&self.corr, foot).apply(planned)
+        foot.of(&self.corr).apply(planned)
     }
 
     /// [`Self::place`] with its heading's sine and cosine, for the measured ZMP: from the
     /// correction's kept ones, without a sine or cosine of its own when the plan's heading is 0
     /// (a straight walk; otherwise one, as the plan's place needs).
     pub fn sole(&self, foot: Side, planned: &Place<R>) -> SurveyedSole<R> {
-        let c = side(&self.corr, foot);
+        let c = foot.of(&self.corr);
         let (sin, cos) = if planned.yaw == R::zero() {
             (c.sin, c.cos)
         } else {
@@ -403,42 +412,11 @@ impl<R: Real> LegOdometry<R> {
 
     /// The correction C of foot `side` (module docs (O2)).
     pub fn correction(&self, foot: Side) -> Place<R> {
-        side(&self.corr, foot).place
+        foot.of(&self.corr).place
     }
 
     /// Surveys taken and refused since the start.
     pub fn counts(&self) -> (u16, u16) {
         (self.taken, self.refused)
-    }
-}
-
-/// The element of a (left, right) pair that belongs to `foot`.
-fn side<T>(pair: &[T; 2], foot: Side) -> &T {
-    let [l, r] = pair;
-    match foot {
-        Side::Left => l,
-        Side::Right => r,
-    }
-}
-
-/// [`side`], mutable.
-fn side_mut<T>(pair: &mut [T; 2], foot: Side) -> &mut T {
-    let [l, r] = pair;
-    match foot {
-        Side::Left => l,
-        Side::Right => r,
-    }
-}
-
-/// An angle wrapped to (−π, π] (a heading difference; |v| ≤ 3π in use, one step of 2π each way).
-fn wrap<R: Real>(v: R) -> R {
-    let pi = R::of(core::f64::consts::PI);
-    let two_pi = pi + pi;
-    if v > pi {
-        v - two_pi
-    } else if v < -pi {
-        v + two_pi
-    } else {
-        v
     }
 }

@@ -431,11 +431,7 @@ impl<R: Real> OnlineWalk<R> {
     /// one (m, world frame; o of P1), for the position hold. Non-finite values are ignored.
     pub fn set_landing_offset(&mut self, side: Side, offset: [R; 2]) {
         if offset.iter().all(|v| v.is_finite()) {
-            let [l, r] = &mut self.landed;
-            *match side {
-                Side::Left => l,
-                Side::Right => r,
-            } = Some(offset);
+            *side.of_mut(&mut self.landed) = Some(offset);
         }
     }
 
@@ -450,12 +446,7 @@ impl<R: Real> OnlineWalk<R> {
     /// off, without a survey of that foot since it landed, or when not walking.
     fn position_shift(&self, side: Side, support: &Place<R>) -> [R; 2] {
         let k = self.p.position_gain;
-        let [l, r] = self.landed;
-        let landed = match side {
-            Side::Left => l,
-            Side::Right => r,
-        };
-        let (Some(o), WalkMode::Walking(_)) = (landed, &self.mode) else {
+        let (Some(o), WalkMode::Walking(_)) = (*side.of(&self.landed), &self.mode) else {
             return [R::zero(); 2];
         };
         if !(k > 0.0 && k.is_finite()) {
@@ -738,11 +729,7 @@ impl<R: Real> OnlineWalk<R> {
         let (s, k) = support.yaw.sin_cos();
         self.shifted[0] += k * moved[0] - s * moved[1];
         self.shifted[1] += s * moved[0] + k * moved[1];
-        let [l, r] = &mut self.landed;
-        *match side {
-            Side::Left => l,
-            Side::Right => r,
-        } = None;
+        *side.of_mut(&mut self.landed) = None;
         self.committed = Some(fs);
         let step = Step {
             t: R::zero(),

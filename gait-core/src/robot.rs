@@ -57,6 +57,22 @@ impl Side {
             Side::Right => -1.0,
         }
     }
+    /// This leg's element of a (left, right) pair (no indexing).
+    pub fn of<T>(self, pair: &[T; 2]) -> &T {
+        let [l, r] = pair;
+        match self {
+            Side::Left => l,
+            Side::Right => r,
+        }
+    }
+    /// [`Side::of`], mutable.
+    pub fn of_mut<T>(self, pair: &mut [T; 2]) -> &mut T {
+        let [l, r] = pair;
+        match self {
+            Side::Left => l,
+            Side::Right => r,
+        }
+    }
     /// Index of the leg in left-then-right arrays (0 left, 1 right).
     pub fn index(self) -> usize {
         match self {

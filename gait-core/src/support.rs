@@ -64,15 +64,19 @@ pub fn sole_corners<R: Real>(place: &Place<R>, robot: &Robot) -> Result<[[R; 2];
 
 /// The point `l` of the foot frame (x forward along the heading) in the world frame.
 pub(crate) fn to_world<R: Real>(place: &Place<R>, l: [R; 2]) -> [R; 2] {
-    // Both from one evaluation (the f32 `sin` and `cos` are each a whole `sin_cos`: two on the
-    // per-tick measured ZMP path cost ≈ 3,600 instructions per foot on a soft-float M3); a
-    // yaw of exactly 0, every sole of a straight walk, needs none.
-    let (s, c) = if place.yaw == R::zero() {
+    let (s, c) = heading_sin_cos(place.yaw);
+    [place.x + c * l[0] - s * l[1], place.y + s * l[0] + c * l[1]]
+}
+
+/// A sole's heading's (sin, cos): both from one evaluation (the f32 `sin` and `cos` are each a
+/// whole `sin_cos`: two on the per-tick measured ZMP path cost ≈ 3,600 instructions per foot on a
+/// soft-float M3); a yaw of exactly 0, every sole of a straight walk, needs none.
+pub(crate) fn heading_sin_cos<R: Real>(yaw: R) -> (R, R) {
+    if yaw == R::zero() {
         (R::zero(), R::one())
     } else {
-        crate::fastmath::sin_cos_real(place.yaw)
-    };
-    [place.x + c * l[0] - s * l[1], place.y + s * l[0] + c * l[1]]
+        crate::fastmath::sin_cos_real(yaw)
+    }
 }
 
 /// A convex support polygon of at most [`MAX_VERTICES`] vertices, counter-clockwise.

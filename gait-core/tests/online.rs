@@ -361,6 +361,9 @@ fn position_hold_keeps_the_surveyed_feet_on_the_commanded_track() {
                 }
                 let nf = n.expect("the nominal walk steps in step");
                 assert_eq!(nf.side, f.side);
+                if k == 0.0 {
+                    assert_eq!(nf.place, f.place, "off: the generator's footprints");
+                }
                 drift.push([real[i].x - nf.place.x, real[i].y - nf.place.y]);
             } else {
                 assert!(n.is_none());
