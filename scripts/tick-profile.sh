@@ -2,12 +2,12 @@
 # Where the control tick's instructions go (issue 14): an exact per-instruction count of the
 # firmware's control loop on the bench's fake robot, in QEMU, attributed to the code.
 #
-# Usage: [TICK=worst|N] bash scripts/tick-profile.sh [m7|m3] [functions|lines|stack|calls] [N] [PATTERN]
+# Usage: [TICK=worst|N] bash scripts/tick-profile.sh [m7|m3] [functions|lines|stack|calls|crates] [N] [PATTERN]
 #   TICK=worst: the profile of the tick with the most instructions (TICK=N: of tick N, from 0)
 #   instead of the average tick (per-tick totals: target/tick-profile/{m7,m3}-ticks.txt).
 #   m7 (default): the hard-float bench on mps2-an500, math=f32 (the default configuration);
 #   m3: the Cortex-M3 bench (profile release-m3, fixed-gait) on mps2-an385, math=fixed.
-#   functions (default) | lines | stack | calls: see scripts/tick-profile/attribute.py
+#   functions (default) | lines | stack | calls | crates: see scripts/tick-profile/attribute.py
 #   (calls: who calls the functions matching PATTERN, default 'memcpy|memclr|memset|memmove').
 #
 # How: the bench is built control-only (BENCH_CONTROL_ONLY) with the feature `tick-profile`
@@ -55,7 +55,7 @@ case "$core" in
         machine=mps2-an385
         ;;
     *)
-        echo "usage: $0 [m7|m3] [functions|lines|stack|calls] [N] [PATTERN]" >&2
+        echo "usage: $0 [m7|m3] [functions|lines|stack|calls|crates] [N] [PATTERN]" >&2
         exit 2
         ;;
 esac
@@ -73,8 +73,14 @@ esac
 
 counts=$out/$core.txt
 per_tick=$out/$core-ticks.txt
+helpers=
+if [ "$mode" = crates ]; then
+    # The runtime helpers' instructions are counted at their call site (gate.c's PROF_HELPERS).
+    helpers=$(python3 scripts/tick-profile/attribute.py "$elf" - 1 helpers)
+fi
 profile() { # the bench under the plugin; extra environment in "$@"
-    env PROF_ON="$on" PROF_OFF="$off" PROF_OUT="$counts" PROF_TICKS="$per_tick" "$@" \
+    env PROF_ON="$on" PROF_OFF="$off" PROF_OUT="$counts" PROF_TICKS="$per_tick" \
+        PROF_HELPERS="$helpers" "$@" \
         qemu-system-arm -M "$machine" -nographic -monitor none \
         -serial null -serial null -serial null -serial null \
         -semihosting-config enable=on,target=native -icount shift=0 \

@@ -1238,7 +1238,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                 [[pl.x, pl.y], [pr.x, pr.y]],
                 [foot_load(fl), foot_load(fr)],
                 prev.phase,
-                cfg.dt_s() as f32,
+                dt_f32,
             ),
         };
 

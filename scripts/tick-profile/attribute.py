@@ -7,6 +7,15 @@ Usage: attribute.py ELF COUNTS TICKS MODE [N] [PATTERN]
        stack      by the innermost four inline frames (file:line < file:line < …)
        calls      calls per tick of the functions matching the regex PATTERN, by call site
                   (e.g. 'memcpy|memclr' — who copies; llvm-objdump)
+       crates     instructions per tick by the crate whose code runs: the innermost inline
+                  frame in one of the project's crates or a maths crate (core's inlined code
+                  counts for its caller); the runtime helpers (memcpy, soft-float, …; the
+                  COUNTS file's "H" lines, gate.c's PROF_HELPERS) for their call site's crate.
+                  Sums the library calls (gait-core, dxl, libm, micromath, fixed) and the loop
+                  (the firmware, the contract crate, the bench's tick meter, anything else),
+                  and the loop with the dxl master's own code (dxl/src/master.rs, beside the
+                  codec it calls: the master's transaction logic)
+       helpers    prints the runtime helpers' address ranges for PROF_HELPERS
   N: rows to print (default 40). Figures are divided by TICKS (the bench's measured ticks).
 """
 import collections
@@ -20,9 +29,50 @@ def run(cmd, stdin=None):
     return subprocess.run(cmd, input=stdin, capture_output=True, text=True, check=True).stdout
 
 
-def load(path):
+def load(path, helpers=False):
+    """(address, count) pairs: the instructions counted at their own address, or (helpers)
+    those of the runtime helpers counted at their call site ("H" lines)."""
+    rows = []
     with open(path) as f:
-        return [(int(a, 16), int(c)) for a, c in (line.split() for line in f)]
+        for line in f:
+            p = line.split()
+            if (len(p) == 3) == helpers:
+                rows.append((int(p[0], 16), int(p[1])))
+    return rows
+
+
+HELPERS = re.compile(r"compiler_builtins|__aeabi_|^mem(cpy|set|move|cmp)$|^__(mul|div|add|sub|cmp|fix|float|extend|trunc)")
+LIBRARY = ("gait-core", "dxl", "libm", "micromath", "fixed")
+
+
+def crate_of_symbol(name):
+    """The crate of a function by its (demangled) path: for code whose inline frames are all
+    core's (the outermost frame is the function it was compiled into)."""
+    for prefix, crate in (("gait_core", "gait-core"), ("dxl", "dxl"), ("walker_contract", "contract"),
+                          ("walker_firmware", "firmware"), ("bench", "bench tick meter"),
+                          ("libm", "libm"), ("micromath", "micromath"), ("fixed", "fixed")):
+        if re.match(r"(_\$LT\$)?%s(::|\.\.)" % prefix, name):
+            return crate
+    return "other"
+
+
+def crate_of(file_name, root):
+    """The project crate or maths crate a source file belongs to, or None (core, alloc,
+    compiler_builtins, heapless…: their inlined code counts for the frame that called it)."""
+    if file_name.startswith(root + "/"):
+        rel = file_name[len(root) + 1:]
+        for crate in ("gait-core", "dxl", "contract", "host"):
+            if rel.startswith(crate + "/"):
+                return crate
+        if rel == "src/bin/bench.rs":
+            return "bench tick meter"
+        if rel.startswith("src/"):
+            return "firmware"
+        return None
+    for crate in ("libm", "micromath", "fixed"):
+        if re.search(r"/%s-[0-9][^/]*/" % crate, file_name):
+            return crate
+    return None
 
 
 def symbols(elf):
@@ -50,10 +100,36 @@ def main():
         sys.exit(__doc__)
     elf, counts_path, ticks, mode = sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4]
     top = int(sys.argv[5]) if len(sys.argv) > 5 else 40
+    if mode == "helpers":
+        print(",".join("%x-%x" % (a, a + n) for a, n, name in symbols(elf)
+                       if n > 0 and HELPERS.search(name)))
+        return
     counts = load(counts_path)
     total = sum(c for _, c in counts)
     agg = collections.Counter()
-    if mode == "functions":
+    if mode == "crates":
+        import os
+        root = os.getcwd()
+        helper_counts = load(counts_path, helpers=True)
+        total += sum(c for _, c in helper_counts)
+        rows = counts + helper_counts
+        for (a, c), fr in zip(rows, frames(elf, [a for a, _ in rows])):
+            home = next((f for f in fr if crate_of(f["FileName"], root)), None)
+            owner = crate_of(home["FileName"], root) if home else None
+            owner = owner or crate_of_symbol(fr[-1]["FunctionName"] if fr else "")
+            if owner == "dxl":
+                # The master driver's transaction logic apart from the codec it calls.
+                master = home is not None and home["FileName"].endswith("/dxl/src/master.rs")
+                owner = "dxl master" if master else "dxl codec"
+            agg[owner] += c
+        library = sum(c for k, c in agg.items() if k in LIBRARY or k.startswith("dxl "))
+        master = agg["dxl master"]
+        print("library calls (gait-core, dxl, libm, micromath, fixed): %.1f per tick" % (library / ticks))
+        print("the loop (firmware, contract, bench tick meter, other): %.1f per tick"
+              % ((total - library) / ticks))
+        print("the loop with the dxl master's transactions: %.1f per tick"
+              % ((total - library + master) / ticks))
+    elif mode == "functions":
         import bisect
         syms = symbols(elf)
         starts = [s[0] for s in syms]

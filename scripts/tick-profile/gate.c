@@ -11,6 +11,12 @@
  * instructions counted in each tick go to that file, one line a tick ("index count"); with
  * PROF_ONLY_TICK=N only tick N (from 0) is counted by address (the worst tick's profile).
  *
+ * With PROF_HELPERS (comma-separated "start-end" hex ranges: the runtime's out-of-line helpers,
+ * memcpy and the like) an instruction inside a helper is not counted at its own address but at
+ * the last address executed outside the helpers: the call site (helpers are leaves, or call
+ * only helpers). Those counts go to PROF_OUT as "address count H" lines, so the caller's crate
+ * owns what its copies cost (attribute.py's `crates` mode).
+ *
  * The few declarations of QEMU's plugin API used here are written out below (Debian's
  * qemu-system-arm ships plugin support but not <qemu-plugin.h>).
  */
@@ -51,6 +57,17 @@ static FILE *ticks_out;
 static long only_tick = -1;
 static long tick = -1;
 static uint64_t in_tick;
+#define MAX_HELPERS 64
+static uint64_t helper_lo[MAX_HELPERS], helper_hi[MAX_HELPERS];
+static int n_helpers;
+static uint64_t *helper_counts;
+static uint64_t last_own_pc;
+
+static int in_helper(uint64_t pc) {
+    for (int i = 0; i < n_helpers; i++)
+        if (pc >= helper_lo[i] && pc < helper_hi[i]) return 1;
+    return 0;
+}
 
 static void executed(unsigned int vcpu, void *udata) {
     uint64_t pc = (uintptr_t)udata;
@@ -64,10 +81,17 @@ static void executed(unsigned int vcpu, void *udata) {
         tick++;
         in_tick = 0;
     }
+    int helper = n_helpers > 0 && in_helper(pc);
     if (on) {
         in_tick++;
-        if (only_tick < 0 || tick == only_tick) counts[pc / 2]++;
+        if (only_tick < 0 || tick == only_tick) {
+            if (helper)
+                helper_counts[last_own_pc / 2]++;
+            else
+                counts[pc / 2]++;
+        }
     }
+    if (!helper) last_own_pc = pc;
 }
 
 static void translated(qemu_plugin_id_t id, struct qemu_plugin_tb *tb) {
@@ -94,6 +118,10 @@ static void finished(qemu_plugin_id_t id, void *udata) {
     for (uint64_t i = 0; i < SLOTS; i++)
         if (counts[i]) fprintf(f, "%llx %llu\n", (unsigned long long)(i * 2),
                                (unsigned long long)counts[i]);
+    for (uint64_t i = 0; i < SLOTS; i++)
+        if (helper_counts && helper_counts[i])
+            fprintf(f, "%llx %llu H\n", (unsigned long long)(i * 2),
+                    (unsigned long long)helper_counts[i]);
     fclose(f);
 }
 
@@ -125,6 +153,21 @@ __attribute__((visibility("default"))) int qemu_plugin_install(qemu_plugin_id_t 
     if (only) only_tick = strtol(only, NULL, 10);
     n_on = marks("PROF_ON", on_at);
     n_off = marks("PROF_OFF", off_at);
+    const char *h = getenv("PROF_HELPERS");
+    if (h && *h) {
+        char hb[4096];
+        strncpy(hb, h, sizeof hb - 1);
+        hb[sizeof hb - 1] = 0;
+        for (char *t = strtok(hb, ","); t && n_helpers < MAX_HELPERS; t = strtok(NULL, ",")) {
+            char *dash = strchr(t, '-');
+            if (!dash) continue;
+            helper_lo[n_helpers] = strtoull(t, NULL, 16) & ~1ull;
+            helper_hi[n_helpers] = strtoull(dash + 1, NULL, 16) & ~1ull;
+            n_helpers++;
+        }
+        helper_counts = calloc(SLOTS, sizeof *helper_counts);
+        if (!helper_counts) return -1;
+    }
     if (n_on == 0) on = 1; /* no marks: count everything */
     qemu_plugin_register_vcpu_tb_trans_cb(id, translated);
     qemu_plugin_register_atexit_cb(id, finished, NULL);

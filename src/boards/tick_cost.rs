@@ -10,13 +10,13 @@
 /// Worst-case instructions per control tick, hard-float build (Cortex-M7/M4F, mps2-an500).
 pub const TICK_INSTRUCTIONS_MAX_FPU: u32 = 28480;
 /// Average instructions per control tick, hard-float build (for reference).
-pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = 19805;
+pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = 19672;
 /// Worst-case instructions per control tick, soft-float build (Cortex-M3, mps2-an385).
-pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = 231520;
+pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = 231440;
 /// Average instructions per control tick, soft-float build (for reference).
-pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = 166397;
+pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = 166264;
 /// Worst-case instructions per control tick, Cortex-M3 build with the fixed-point path
 /// (`fixed-gait`, `math=fixed`; mps2-an385).
 pub const TICK_INSTRUCTIONS_MAX_FIXED_SOFT: u32 = 33920;
 /// Average instructions per control tick, Cortex-M3 fixed-point path (for reference).
-pub const TICK_INSTRUCTIONS_AVG_FIXED_SOFT: u32 = 23793;
+pub const TICK_INSTRUCTIONS_AVG_FIXED_SOFT: u32 = 23791;
