@@ -457,9 +457,9 @@ impl<R: Real> OnlineWalk<R> {
             let e = o[i] + self.shifted[i];
             (-(e * R::of(k))).clamp_to(-m, m)
         });
-        let (s, k) = support.yaw.sin_cos();
+        let (sin, cos) = support.yaw.sin_cos();
         // R(−θ_S)·c, a whole number of µm, as logged: the host replays the footsteps bit for bit.
-        let local = [k * c[0] + s * c[1], k * c[1] - s * c[0]];
+        let local = [cos * c[0] + sin * c[1], cos * c[1] - sin * c[0]];
         local.map(|v| R::of(libm::round(v.to_f64() * 1e6) * 1e-6))
     }
 
