@@ -32,7 +32,7 @@ pub fn start<P, B: crate::board::Board>(
 }
 
 /// The `main` and panic handler of a real robot controller's firmware binary (the STM32 boards):
-/// [`start`] with the `peripherals` taken, the configuration `config` and the board's `board`
+/// [`crate::boards::start`] with the `peripherals` taken, the configuration `config` and the board's `board`
 /// bring-up; a panic goes to the board's `panic` path (torque off, then a reset).
 #[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
 #[macro_export]

@@ -1,8 +1,9 @@
 //! What the two STM32 robot controllers ([`super::opencr`], [`super::opencm`]) share: the crash
 //! record in no-init RAM and the panic path, the board state besides the peripherals and the
 //! log ring ([`Stm32State`]: µs clock, tick schedule, watchdog flag, bus UART errors, reset
-//! flags), the bus UART's send and receive ([`Stm32Bus`] over each board's [`BusUart`]) and the
-//! trait implementations built on them ([`stm32_board!`]).
+//! flags), the bus UART's send, receive and rate ([`Stm32Bus`] over each board's [`BusUart`]),
+//! the trait implementations built on them ([`stm32_board!`]) and the register-block accessors
+//! ([`register_blocks!`]).
 
 use core::mem::MaybeUninit;
 use cortex_m::peripheral::SCB;
