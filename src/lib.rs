@@ -49,6 +49,19 @@ macro_rules! fw_log {
     }};
 }
 
+/// A firmware binary's `main` on the host (workspace-wide `cargo test`/`clippy --all-targets`):
+/// a stub that prints `msg` (where the firmware runs). Nothing on the robot's target.
+#[macro_export]
+macro_rules! host_stub {
+    ($msg:literal) => {
+        /// On the host (workspace-wide `cargo test`/`clippy --all-targets`) this binary is a stub.
+        #[cfg(not(all(target_arch = "arm", target_os = "none")))]
+        fn main() {
+            eprintln!($msg);
+        }
+    };
+}
+
 pub mod board;
 pub mod bus;
 pub mod control;

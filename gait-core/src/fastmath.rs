@@ -259,18 +259,6 @@ pub fn sin(x: f32) -> f32 {
     s
 }
 
-/// Retained for reference: sin by its own quadrant table.
-#[cfg(test)]
-fn sin_direct(x: f32) -> f32 {
-    let (r, q) = reduce(x);
-    match q {
-        0 => sin_poly(r),
-        1 => cos_poly(r),
-        2 => -sin_poly(r),
-        _ => -cos_poly(r),
-    }
-}
-
 /// Cosine of `x`, f32.
 #[inline]
 pub fn cos(x: f32) -> f32 {
@@ -278,15 +266,16 @@ pub fn cos(x: f32) -> f32 {
     c
 }
 
-/// Retained for reference: cos by its own quadrant table.
+/// Retained for reference: sin of `x` plus `quarters` quarter turns by its own quadrant table
+/// (independent of [`sin_cos`]'s): `quarters` 0 is sin x, 1 is cos x = sin(x + π/2).
 #[cfg(test)]
-fn cos_direct(x: f32) -> f32 {
+fn sin_direct(x: f32, quarters: u32) -> f32 {
     let (r, q) = reduce(x);
-    match q {
-        0 => cos_poly(r),
-        1 => -sin_poly(r),
-        2 => -cos_poly(r),
-        _ => sin_poly(r),
+    match (q + quarters) % 4 {
+        0 => sin_poly(r),
+        1 => cos_poly(r),
+        2 => -sin_poly(r),
+        _ => -cos_poly(r),
     }
 }
 
@@ -451,8 +440,8 @@ mod tests {
         assert!(sin(f32::NAN).is_nan() && cos(f32::INFINITY).is_nan());
         assert!((sin(1.0e6) as f64 - libm::sin(1.0e6)).abs() < 1e6 * 1.8e-7 + 1e-6);
         for x in [0.3f32, 2.0, -4.0, 100.0] {
-            assert_eq!(sin(x), sin_direct(x));
-            assert_eq!(cos(x), cos_direct(x));
+            assert_eq!(sin(x), sin_direct(x, 0));
+            assert_eq!(cos(x), sin_direct(x, 1));
         }
         assert!(is_single_precision::<f32>() && !is_single_precision::<f64>());
     }

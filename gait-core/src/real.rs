@@ -88,10 +88,11 @@ pub trait Real:
 }
 
 /// Implements [`Real`] for a float type from its conversion from `f64` and its maths
-/// functions: the one place that says which implementation each type uses.
+/// functions (each one-argument one, `name: function`, delegates alike): the one place that
+/// says which implementation each type uses.
 macro_rules! impl_real {
-    ($t:ident, of: |$v:ident| $of:expr, exp: $exp:path, sqrt: $sqrt:path, sin: $sin:path,
-     cos: $cos:path, sin_cos: $sin_cos:path, atan2: $atan2:path, abs: $abs:path) => {
+    ($t:ident, of: |$v:ident| $of:expr, sin_cos: $sin_cos:path, atan2: $atan2:path,
+     $($unary:ident: $f:path),+ $(,)?) => {
         impl Real for $t {
             #[inline]
             fn of($v: f64) -> Self {
@@ -105,22 +106,12 @@ macro_rules! impl_real {
             fn from_u32(v: u32) -> Self {
                 v as $t
             }
-            #[inline]
-            fn exp(self) -> Self {
-                $exp(self)
-            }
-            #[inline]
-            fn sqrt(self) -> Self {
-                $sqrt(self)
-            }
-            #[inline]
-            fn sin(self) -> Self {
-                $sin(self)
-            }
-            #[inline]
-            fn cos(self) -> Self {
-                $cos(self)
-            }
+            $(
+                #[inline]
+                fn $unary(self) -> Self {
+                    $f(self)
+                }
+            )+
             #[inline]
             fn sin_cos(self) -> (Self, Self) {
                 $sin_cos(self)
@@ -128,10 +119,6 @@ macro_rules! impl_real {
             #[inline]
             fn atan2(self, x: Self) -> Self {
                 $atan2(self, x)
-            }
-            #[inline]
-            fn abs(self) -> Self {
-                $abs(self)
             }
             #[inline]
             fn is_finite(self) -> bool {
@@ -144,23 +131,23 @@ macro_rules! impl_real {
 impl_real!(
     f32,
     of: |v| v as f32,
+    sin_cos: crate::fastmath::sin_cos,
+    atan2: crate::fastmath::atan2,
     exp: libm::expf,
     sqrt: crate::fastmath::sqrt,
     sin: crate::fastmath::sin,
     cos: crate::fastmath::cos,
-    sin_cos: crate::fastmath::sin_cos,
-    atan2: crate::fastmath::atan2,
     abs: libm::fabsf
 );
 impl_real!(
     f64,
     of: |v| v,
+    sin_cos: sin_cos_f64,
+    atan2: libm::atan2,
     exp: libm::exp,
     sqrt: libm::sqrt,
     sin: libm::sin,
     cos: libm::cos,
-    sin_cos: sin_cos_f64,
-    atan2: libm::atan2,
     abs: libm::fabs
 );
 

@@ -78,6 +78,31 @@ fn stop_reason(log: &DecodedLog) -> Option<StopReason> {
     })
 }
 
+/// The default simulation with one push on the torso (`Push::parse` syntax: `t:impulse:dir`).
+fn pushed(push: &str) -> SimConfig {
+    SimConfig {
+        pushes: vec![walker_host::sim::Push::parse(push).unwrap()],
+        ..SimConfig::default()
+    }
+}
+
+/// The log's `TargetClamped` fault records (a target clamped to a joint limit).
+fn clamped_targets(log: &DecodedLog) -> Vec<&Record> {
+    log.events
+        .iter()
+        .filter(|e| {
+            matches!(e, Record::Fault(f)
+                if f.kind == walker_contract::record::FaultKind::TargetClamped)
+        })
+        .collect()
+}
+
+/// The run ended in a fall: exit 13, and the simulator saw the robot fall.
+fn assert_fell(r: &FilResult, log: &DecodedLog) {
+    assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
+    assert!(r.sim.fall_started_us.is_some());
+}
+
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn compute_time_follows_the_core_clock() {
@@ -290,14 +315,7 @@ fn assert_bounded(name: &str, r: &FilResult, log: &DecodedLog) {
         r.sim.fall_started_us, None,
         "{name}: the simulator saw a fall"
     );
-    let clamped: Vec<_> = log
-        .events
-        .iter()
-        .filter(|e| {
-            matches!(e, Record::Fault(f)
-                if f.kind == walker_contract::record::FaultKind::TargetClamped)
-        })
-        .collect();
+    let clamped = clamped_targets(log);
     assert!(clamped.is_empty(), "{name}: targets clamped: {clamped:?}");
     assert!(
         r.sim.max_zmp_outside_m < 0.02,
@@ -491,10 +509,7 @@ fn closed_loop_walk_survives_a_sagittal_push() {
     // walk at the paper's timing with a 1.5 N·s forward push on the torso at 6 s (single
     // support on the left foot). Open loop (`gyro_ankle=0 gyro_hip=0`) the same push makes the
     // robot fall.
-    let sim = SimConfig {
-        pushes: vec![walker_host::sim::Push::parse("6:1.5:0").unwrap()],
-        ..SimConfig::default()
-    };
+    let sim = pushed("6:1.5:0");
     let spec = WalkSpec::default();
     let (r, log) = fil(
         "closed-loop-push",
@@ -504,16 +519,10 @@ fn closed_loop_walk_survives_a_sagittal_push() {
     );
     walked_the_plan(&r, &log, &spec);
     // Bounds: no target clamped to a joint limit, none non-finite (that stops with exit 15).
-    assert!(
-        !log.events.iter().any(|e| matches!(e, Record::Fault(f)
-            if f.kind == walker_contract::record::FaultKind::TargetClamped)),
-        "{:?}",
-        log.events
-    );
+    assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
     // The same push open loop: the robot falls and the firmware says so.
     let (r, log) = fil("open-loop-push", spec.clone(), sim, OPEN_LOOP);
-    assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
-    assert!(r.sim.fall_started_us.is_some());
+    assert_fell(&r, &log);
 }
 
 #[test]
@@ -525,10 +534,7 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
     // capture-point error beyond the ankles' deadband (logged as `CatchStep` records) and the
     // walk completes; with `catch_gain=0` the same push makes the robot fall (exit 13).
     use walker_contract::record::FaultKind;
-    let sim = SimConfig {
-        pushes: vec![walker_host::sim::Push::parse("5.9:1.5:180").unwrap()],
-        ..SimConfig::default()
-    };
+    let sim = pushed("5.9:1.5:180");
     let spec = WalkSpec::default();
     let (r, log) = fil("catch-push", spec.clone(), sim.clone(), &[]);
     // The plan completes without a fall; the push costs distance (0.233 of 0.260 m).
@@ -552,15 +558,9 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
             .any(|&(id, v)| id == 2 * 16 && (-50_000..=-10_000).contains(&v)),
         "{catches:?}"
     );
-    assert!(
-        !log.events.iter().any(|e| matches!(e, Record::Fault(f)
-            if f.kind == FaultKind::TargetClamped)),
-        "{:?}",
-        log.events
-    );
+    assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
     let (r, log) = fil("catch-push-off", spec, sim, &["catch_gain=0"]);
-    assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
-    assert!(r.sim.fall_started_us.is_some());
+    assert_fell(&r, &log);
 }
 
 /// The firmware ELF built with `--features fixed-gait` (scripts/test.sh builds it and sets

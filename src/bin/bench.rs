@@ -26,14 +26,10 @@
 //! silent in this binary), then `done 1` and exit code 0.
 #![cfg_attr(all(target_arch = "arm", target_os = "none"), no_std, no_main)]
 
-/// On the host (workspace-wide `cargo test`/`clippy --all-targets`) this binary is a stub.
-#[cfg(not(all(target_arch = "arm", target_os = "none")))]
-fn main() {
-    eprintln!(
-        "the bench runs in QEMU only: bash scripts/bench.sh \
+walker_firmware::host_stub!(
+    "the bench runs in QEMU only: bash scripts/bench.sh \
          (thumbv7em-none-eabihf on mps2-an500/an386, thumbv7m-none-eabi on mps2-an385)"
-    );
-}
+);
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod firmware {

@@ -10,36 +10,22 @@
 //! places it at 0x0800_3000, after the bootloader, as ROBOTIS' own linker script does.
 #![cfg_attr(all(target_arch = "arm", target_os = "none"), no_std, no_main)]
 
-/// On the host (workspace-wide `cargo test`/`clippy --all-targets`) this binary is a stub.
-#[cfg(not(all(target_arch = "arm", target_os = "none")))]
-fn main() {
-    eprintln!("this firmware runs on the OpenCM 9.04 (thumbv7m-none-eabi) only");
-}
+walker_firmware::host_stub!("this firmware runs on the OpenCM 9.04 (thumbv7m-none-eabi) only");
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod firmware {
-    use cortex_m_rt::entry;
-    use walker_firmware::boards::opencm::{self, OpenCmBoard};
-    use walker_firmware::boards::start;
+    use walker_firmware::boards::opencm::{panic_reset, OpenCmBoard};
     use walker_firmware::config::Arithmetic;
     use walker_firmware::Config;
 
-    #[entry]
-    fn main() -> ! {
+    walker_firmware::stm32_firmware! {
+        peripherals: stm32f1::stm32f103::Peripherals::take(),
         // No FPU: the board selects the fixed-point path.
-        let cfg = Config {
+        config: Config {
             arithmetic: Arithmetic::Fixed,
             ..Config::default()
-        };
-        start(
-            stm32f1::stm32f103::Peripherals::take(),
-            &cfg,
-            OpenCmBoard::new,
-        )
-    }
-
-    #[panic_handler]
-    fn panic(info: &core::panic::PanicInfo) -> ! {
-        opencm::panic_reset(info)
+        },
+        board: OpenCmBoard::new,
+        panic: panic_reset,
     }
 }

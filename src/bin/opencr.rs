@@ -14,32 +14,19 @@
 //! Flash and run (needs probe-rs and a probe on the SWD header): `cargo run --release --bin opencr`
 #![cfg_attr(all(target_arch = "arm", target_os = "none"), no_std, no_main)]
 
-/// On the host (workspace-wide `cargo test`/`clippy --all-targets`) this binary is a stub.
-#[cfg(not(all(target_arch = "arm", target_os = "none")))]
-fn main() {
-    eprintln!("this firmware runs on the robot's controller (thumbv7em-none-eabihf) only");
-}
+walker_firmware::host_stub!(
+    "this firmware runs on the robot's controller (thumbv7em-none-eabihf) only"
+);
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod firmware {
-
-    use cortex_m_rt::entry;
-    use walker_firmware::boards::opencr::{self, OpenCrBoard};
-    use walker_firmware::boards::start;
+    use walker_firmware::boards::opencr::{panic_reset, OpenCrBoard};
     use walker_firmware::Config;
 
-    #[entry]
-    fn main() -> ! {
-        let cfg = Config::default();
-        start(
-            stm32f7xx_hal::pac::Peripherals::take(),
-            &cfg,
-            OpenCrBoard::new,
-        )
-    }
-
-    #[panic_handler]
-    fn panic(info: &core::panic::PanicInfo) -> ! {
-        opencr::panic_reset(info)
+    walker_firmware::stm32_firmware! {
+        peripherals: stm32f7xx_hal::pac::Peripherals::take(),
+        config: Config::default(),
+        board: OpenCrBoard::new,
+        panic: panic_reset,
     }
 }

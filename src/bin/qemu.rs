@@ -16,11 +16,9 @@
 //! ```
 #![cfg_attr(all(target_arch = "arm", target_os = "none"), no_std, no_main)]
 
-/// On the host (workspace-wide `cargo test`/`clippy --all-targets`) this binary is a stub.
-#[cfg(not(all(target_arch = "arm", target_os = "none")))]
-fn main() {
-    eprintln!("this firmware runs on the robot's controller (thumbv7em-none-eabihf) only");
-}
+walker_firmware::host_stub!(
+    "this firmware runs on the robot's controller (thumbv7em-none-eabihf) only"
+);
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod firmware {

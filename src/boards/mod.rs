@@ -31,6 +31,26 @@ pub fn start<P, B: crate::board::Board>(
     run_then_idle(&mut board, cfg)
 }
 
+/// The `main` and panic handler of a real robot controller's firmware binary (the STM32 boards):
+/// [`crate::boards::start`] with the `peripherals` taken, the configuration `config` and the board's `board`
+/// bring-up; a panic goes to the board's `panic` path (torque off, then a reset).
+#[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
+#[macro_export]
+macro_rules! stm32_firmware {
+    (peripherals: $take:expr, config: $cfg:expr, board: $new:path, panic: $panic:path $(,)?) => {
+        #[cortex_m_rt::entry]
+        fn main() -> ! {
+            let cfg = $cfg;
+            $crate::boards::start($take, &cfg, $new)
+        }
+
+        #[panic_handler]
+        fn panic(info: &core::panic::PanicInfo) -> ! {
+            $panic(info)
+        }
+    };
+}
+
 /// The main of a real robot controller after its board is up: logs the start-up line, runs
 /// [`crate::control::run`] once with `cfg` (probe, torque on, ramp, walk, hold, torque off;
 /// after any reset but a power-on it does not walk), then idles: torque stays off, the tick

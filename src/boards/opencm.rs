@@ -42,8 +42,8 @@ use cortex_m_rt as _;
 use defmt_rtt as _;
 use stm32f1::stm32f103 as pac;
 
-use super::stm32::{self, stm32_board, BusUart, Stm32Bus, Stm32State};
-use crate::board::{BusError, Clock, LogRing, ServoBus, Watchdog, TORQUE_OFF_PACKET};
+use super::stm32::{self, register_blocks, stm32_board, BusUart, Stm32Bus, Stm32State};
+use crate::board::{BusError, Clock, LogRing, Watchdog, TORQUE_OFF_PACKET};
 use crate::record::BoardId;
 use crate::Config;
 
@@ -99,21 +99,13 @@ fn spin(ready: impl Fn() -> bool) -> Result<(), BusError> {
     stm32::spin(UART_SPIN_LIMIT, ready)
 }
 
-fn usart1() -> &'static pac::usart1::RegisterBlock {
-    // SAFETY: the USART1 register block is always mapped; the board owns USART1 after `new`
-    // (the panic path uses it on purpose, after which nothing else runs).
-    unsafe { &*pac::USART1::ptr() }
-}
-
-fn usart2() -> &'static pac::usart1::RegisterBlock {
-    // SAFETY: as for `usart1`, for the log UART USART2.
-    unsafe { &*pac::USART2::ptr() }
-}
-
-fn gpiob() -> &'static pac::gpioa::RegisterBlock {
-    // SAFETY: GPIOB is always mapped; only BSRR (atomic single-pin set/reset) is written
-    // after `new`.
-    unsafe { &*pac::GPIOB::ptr() }
+register_blocks! {
+    /// The bus UART USART1 (owned by the board after `new`).
+    fn usart1() -> pac::usart1::RegisterBlock = pac::USART1;
+    /// The log UART USART2 (owned by the board after `new`).
+    fn usart2() -> pac::usart1::RegisterBlock = pac::USART2;
+    /// GPIOB: only BSRR (atomic single-pin set/reset) is written after `new`.
+    fn gpiob() -> pac::gpioa::RegisterBlock = pac::GPIOB;
 }
 
 /// The bus UART's BRR for `baud` (72 MHz ÷ baud, oversampling 16), if it is in 16..=0xFFFF.
@@ -286,6 +278,7 @@ pub(crate) struct BusUsart1(&'static pac::usart1::RegisterBlock);
 
 impl BusUart for BusUsart1 {
     const SPIN_LIMIT: u32 = UART_SPIN_LIMIT;
+    const CLOCK_HZ: u32 = SYSCLK_HZ;
     fn tx_empty(&self) -> bool {
         self.0.sr.read().bits() & USART_SR_TXE != 0
     }
@@ -315,6 +308,15 @@ impl BusUart for BusUsart1 {
         }
         sr & (USART_SR_ORE | USART_SR_FE | USART_SR_NE) != 0
     }
+    fn set_divider(&self, div: u32) {
+        // SAFETY: CR1 without UE, then BRR (any 16-bit value; `div` is in 16..=0xFFFF), then
+        // CR1 with UE again.
+        self.0
+            .cr1
+            .write(|w| unsafe { w.bits(USART_CR1_ON & !USART_CR1_UE) });
+        self.0.brr.write(|w| unsafe { w.bits(div) });
+        self.0.cr1.write(|w| unsafe { w.bits(USART_CR1_ON) });
+    }
 }
 
 impl Stm32Bus for OpenCmBoard {
@@ -327,34 +329,6 @@ impl Stm32Bus for OpenCmBoard {
     }
     fn stm32_state(&mut self) -> &mut Stm32State {
         &mut self.state
-    }
-}
-
-impl ServoBus for OpenCmBoard {
-    fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
-        self.bus_send(packet)
-    }
-
-    fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
-        self.bus_recv(buf, timeout_us)
-    }
-
-    fn baud(&self) -> u32 {
-        self.baud
-    }
-
-    fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
-        let div = bus_brr(baud).ok_or(BusError::UnsupportedBaud)?;
-        let u = usart1();
-        spin(|| u.sr.read().bits() & USART_SR_TC != 0)?;
-        // SAFETY: CR1 without UE, then BRR (any 16-bit value; `div` is in 16..=0xFFFF), then
-        // CR1 with UE again.
-        u.cr1
-            .write(|w| unsafe { w.bits(USART_CR1_ON & !USART_CR1_UE) });
-        u.brr.write(|w| unsafe { w.bits(div) });
-        u.cr1.write(|w| unsafe { w.bits(USART_CR1_ON) });
-        self.baud = baud;
-        Ok(())
     }
 }
 

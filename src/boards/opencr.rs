@@ -39,8 +39,8 @@ use stm32f7xx_hal::rcc::{Clocks, HSEClock, HSEClockMode};
 use stm32f7xx_hal::serial::{self, Serial};
 use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
-use super::stm32::{self, stm32_board, BusUart, Stm32Bus, Stm32State};
-use crate::board::{BusError, Clock, LogRing, ServoBus, Watchdog, TORQUE_OFF_PACKET};
+use super::stm32::{self, register_blocks, stm32_board, BusUart, Stm32Bus, Stm32State};
+use crate::board::{Clock, LogRing, Watchdog, TORQUE_OFF_PACKET};
 use crate::record::BoardId;
 use crate::Config;
 
@@ -93,20 +93,13 @@ fn uart_up<U: serial::Instance, P: serial::Pins<U>>(usart: U, pins: P, clocks: &
     u.cr3.write(|w| w.dmat().disabled().dmar().disabled());
 }
 
-fn usart3() -> &'static pac::usart1::RegisterBlock {
-    // SAFETY: the USART3 register block is always mapped; the board owns USART3 after `new`
-    // (the panic path steals it on purpose, after which nothing else runs).
-    unsafe { &*pac::USART3::ptr() }
-}
-
-fn usart6() -> &'static pac::usart1::RegisterBlock {
-    // SAFETY: as for `usart3`, for the log UART USART6.
-    unsafe { &*pac::USART6::ptr() }
-}
-
-fn usart2() -> &'static pac::usart1::RegisterBlock {
-    // SAFETY: as for `usart3`, for the command port USART2 (owned by the board after `new`).
-    unsafe { &*pac::USART2::ptr() }
+register_blocks! {
+    /// The bus UART USART3 (owned by the board after `new`).
+    fn usart3() -> pac::usart1::RegisterBlock = pac::USART3;
+    /// The log UART USART6 (owned by the board after `new`).
+    fn usart6() -> pac::usart1::RegisterBlock = pac::USART6;
+    /// The command port USART2 (owned by the board after `new`).
+    fn usart2() -> pac::usart1::RegisterBlock = pac::USART2;
 }
 
 /// Best-effort torque off from anywhere (panic handler): direction pin high, the broadcast
@@ -252,6 +245,7 @@ impl Usart {
 
 impl BusUart for Usart {
     const SPIN_LIMIT: u32 = UART_SPIN_LIMIT;
+    const CLOCK_HZ: u32 = SYSCLK_HZ;
     fn tx_empty(&self) -> bool {
         self.0.isr.read().txe().bit_is_set()
     }
@@ -275,6 +269,12 @@ impl BusUart for Usart {
         }
         error
     }
+    fn set_divider(&self, div: u32) {
+        self.0.cr1.modify(|_, w| w.ue().clear_bit());
+        // SAFETY: any 16-bit value is a valid BRR; `div` is in 16..=0xFFFF.
+        self.0.brr.write(|w| unsafe { w.bits(div) });
+        self.0.cr1.modify(|_, w| w.ue().set_bit());
+    }
 }
 
 impl<D: OutputPin> Stm32Bus for OpenCrBoard<D> {
@@ -291,32 +291,6 @@ impl<D: OutputPin> Stm32Bus for OpenCrBoard<D> {
     }
     fn stm32_state(&mut self) -> &mut Stm32State {
         &mut self.state
-    }
-}
-
-impl<D: OutputPin> ServoBus for OpenCrBoard<D> {
-    fn send(&mut self, packet: &[u8]) -> Result<(), BusError> {
-        self.bus_send(packet)
-    }
-
-    fn recv(&mut self, buf: &mut [u8], timeout_us: u32) -> Result<usize, BusError> {
-        self.bus_recv(buf, timeout_us)
-    }
-
-    fn baud(&self) -> u32 {
-        self.baud
-    }
-
-    fn set_baud(&mut self, baud: u32) -> Result<(), BusError> {
-        let div = stm32::brr(SYSCLK_HZ, baud).ok_or(BusError::UnsupportedBaud)?;
-        let u = usart3();
-        stm32::spin(UART_SPIN_LIMIT, || u.isr.read().tc().bit_is_set())?;
-        u.cr1.modify(|_, w| w.ue().clear_bit());
-        // SAFETY: any 16-bit value is a valid BRR; `div` is in 16..=0xFFFF.
-        u.brr.write(|w| unsafe { w.bits(div) });
-        u.cr1.modify(|_, w| w.ue().set_bit());
-        self.baud = baud;
-        Ok(())
     }
 }
 

@@ -1,8 +1,9 @@
 //! What the two STM32 robot controllers ([`super::opencr`], [`super::opencm`]) share: the crash
 //! record in no-init RAM and the panic path, the board state besides the peripherals and the
 //! log ring ([`Stm32State`]: µs clock, tick schedule, watchdog flag, bus UART errors, reset
-//! flags), the bus UART's send and receive ([`Stm32Bus`] over each board's [`BusUart`]) and the
-//! trait implementations built on them ([`stm32_board!`]).
+//! flags), the bus UART's send, receive and rate ([`Stm32Bus`] over each board's [`BusUart`]),
+//! the trait implementations built on them ([`stm32_board!`]) and the register-block accessors
+//! ([`register_blocks!`]).
 
 use core::mem::MaybeUninit;
 use cortex_m::peripheral::SCB;
@@ -26,6 +27,24 @@ pub(crate) fn crash_cell() -> &'static mut CrashCell {
     // bit pattern is a value; `CrashCell` accesses them volatile.
     unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashCell>() }
 }
+
+/// Declares each `fn name() -> &'static Block` accessor of a peripheral's register block
+/// (`fn name() -> Block = Peripheral;`), with who owns it after the board's `new` in the
+/// accessor's own docs.
+macro_rules! register_blocks {
+    ($($(#[$meta:meta])* fn $name:ident() -> $block:ty = $periph:ty;)+) => {
+        $(
+            $(#[$meta])*
+            fn $name() -> &'static $block {
+                // SAFETY: a peripheral's register block is always mapped at its fixed address;
+                // the accessor's docs say who writes it after the board's `new` (the panic path
+                // uses it on purpose, after which nothing else runs).
+                unsafe { &*<$periph>::ptr() }
+            }
+        )+
+    };
+}
+pub(crate) use register_blocks;
 
 /// Panic path of an STM32 board: log, record the panic in no-init RAM, the board's
 /// `torque_off` (bounded, from anywhere), reset (the next boot logs the record and does not
@@ -103,6 +122,8 @@ pub(crate) fn brr(clock_hz: u32, baud: u32) -> Option<u32> {
 pub(crate) trait BusUart {
     /// Longest busy-wait on a flag (TXE, TC), loop iterations.
     const SPIN_LIMIT: u32;
+    /// The UART's kernel clock, Hz (its BRR divides it).
+    const CLOCK_HZ: u32;
     /// TXE: the transmit data register is free.
     fn tx_empty(&self) -> bool;
     /// TC: the last byte has left the line.
@@ -116,6 +137,8 @@ pub(crate) trait BusUart {
     fn read(&self) -> u8;
     /// Clears the error flags and drops any pending input; whether an error was flagged.
     fn discard(&self) -> bool;
+    /// The UART disabled (UE clear), BRR = `div` (in 16..=0xFFFF), enabled again.
+    fn set_divider(&self, div: u32);
 }
 
 /// The servo bus of an STM32 board on its [`BusUart`]: `send` and `recv` of
@@ -184,16 +207,28 @@ pub(crate) trait Stm32Bus: Clock + Watchdog {
         }
         Ok(n)
     }
+
+    /// The rate part of [`crate::board::ServoBus::set_baud`]: the bus UART's divider for
+    /// `baud` ([`BusError::UnsupportedBaud`] out of 16..=0xFFFF), set once the last byte has
+    /// left the line (bounded wait: [`BusError::Timeout`]).
+    fn bus_set_baud(&mut self, baud: u32) -> Result<(), BusError> {
+        let div = brr(Self::Uart::CLOCK_HZ, baud).ok_or(BusError::UnsupportedBaud)?;
+        let u = self.bus_uart();
+        spin(Self::Uart::SPIN_LIMIT, || u.tx_complete())?;
+        u.set_divider(div);
+        Ok(())
+    }
 }
 
 /// The parts an STM32 board shares with the other one, for a board struct with the fields
-/// `state` ([`Stm32State`]) and `ring` ([`crate::board::LogRing`]) and the methods `pump_log`
-/// (moves log bytes from the ring to the log UART while it is free), `now_us`
-/// ([`crate::board::Clock`]), `feed` ([`crate::board::Watchdog`]) and `send`
-/// ([`crate::board::ServoBus`]): its [`crate::board::TickTimer`] (busy-waits for the tick,
-/// draining the log meanwhile), [`crate::board::LogSink`] (into the ring), the log and error
-/// counters, and its [`crate::board::Board`] with `name`, `id` and the board's own items
-/// (`servo_power`, `exit`, …; `exit` ends with `shut_down`).
+/// `state` ([`Stm32State`]), `ring` ([`crate::board::LogRing`]) and `baud` (the bus rate), the
+/// methods `pump_log` (moves log bytes from the ring to the log UART while it is free),
+/// `now_us` ([`crate::board::Clock`]) and `feed` ([`crate::board::Watchdog`]), and
+/// [`Stm32Bus`]: its [`crate::board::ServoBus`] (on [`Stm32Bus`]), its
+/// [`crate::board::TickTimer`] (busy-waits for the tick, draining the log meanwhile),
+/// [`crate::board::LogSink`] (into the ring), the log and error counters, and its
+/// [`crate::board::Board`] with `name`, `id` and the board's own items (`servo_power`, `exit`,
+/// …; `exit` ends with `shut_down`).
 macro_rules! stm32_board {
     (
         impl<$($g:ident: $bound:path),*> for $board:ty {
@@ -224,6 +259,30 @@ macro_rules! stm32_board {
                 }
                 panic_torque_off();
                 cortex_m::peripheral::SCB::sys_reset()
+            }
+        }
+
+        impl<$($g: $bound),*> $crate::board::ServoBus for $board {
+            fn send(&mut self, packet: &[u8]) -> Result<(), $crate::board::BusError> {
+                self.bus_send(packet)
+            }
+
+            fn recv(
+                &mut self,
+                buf: &mut [u8],
+                timeout_us: u32,
+            ) -> Result<usize, $crate::board::BusError> {
+                self.bus_recv(buf, timeout_us)
+            }
+
+            fn baud(&self) -> u32 {
+                self.baud
+            }
+
+            fn set_baud(&mut self, baud: u32) -> Result<(), $crate::board::BusError> {
+                self.bus_set_baud(baud)?;
+                self.baud = baud;
+                Ok(())
             }
         }
 

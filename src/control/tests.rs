@@ -26,6 +26,18 @@ fn per_tick(b: &FakeBoard) -> Vec<&[Pkt]> {
         .collect()
 }
 
+/// Ticks of the start-up ramp (`ramp_us`) of `cfg`.
+fn ramp_ticks(cfg: &Config) -> usize {
+    cfg.ticks_for_us(cfg.ramp_us) as usize
+}
+
+/// The index of walk tick `k`'s SYNC WRITE, the count the fake board's scripts (`kill_at`,
+/// `fall_at`, `slow`, …) and its `goals` go by: the start-up one, the ramp's, then `k` walk
+/// ticks.
+fn walk_write(cfg: &Config, k: usize) -> usize {
+    1 + ramp_ticks(cfg) + k
+}
+
 /// Walk ticks of `cfg` after the start-up servo-speed check.
 fn expected_walk_ticks(cfg: &Config) -> usize {
     let robot = Robot::reference();
@@ -115,7 +127,7 @@ fn table2_walk_runs_to_plan_done() {
     assert_eq!(end, RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(end.exit_code(), 0);
 
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     let walk = expected_walk_ticks(&cfg);
     let hold = cfg.ticks_for_us(cfg.final_hold_us) as usize;
     assert_eq!((ramp, hold), (300, 200));
@@ -381,10 +393,10 @@ fn missing_foot_board_required_or_optional() {
 #[test]
 fn dead_foot_board_is_held_then_stops() {
     let cfg = autostart_config();
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     let mut b = board(&cfg);
     // Dies after the start-up SYNC WRITE, the ramp and 50 walk ticks.
-    b.kill_at = Some((111, 1 + ramp + 50));
+    b.kill_at = Some((111, walk_write(&cfg, 50)));
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::DeviceLost { id: 111 }));
     assert_eq!(end.exit_code(), 12);
@@ -418,11 +430,10 @@ fn dead_foot_board_is_held_then_stops() {
 fn a_short_dropout_recovers() {
     let mut cfg = autostart_config();
     cfg.walk.steps = 2;
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
-    b.kill_at = Some((200, 1 + ramp + 10));
+    b.kill_at = Some((200, walk_write(&cfg, 10)));
     // Revive it after 5 ticks: run in two stages is not possible, so use a custom revive.
-    b.revive_at = Some((200, 1 + ramp + 15));
+    b.revive_at = Some((200, walk_write(&cfg, 15)));
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     let recs = b.records();
     assert!(recs.iter().any(|r| matches!(r,
@@ -444,9 +455,9 @@ fn fall_stops_with(arithmetic: Arithmetic) {
         arithmetic,
         ..autostart_config()
     };
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     let mut b = board(&cfg);
-    b.fall_at = Some(1 + ramp + 100);
+    b.fall_at = Some(walk_write(&cfg, 100));
     let end = run(&mut b, &cfg);
     let RunEnd::Stopped(StopReason::Fall { tilt_mrad }) = end else {
         panic!("{end:?}");
@@ -480,16 +491,15 @@ fn fall_stops_with(arithmetic: Arithmetic) {
 
 /// Runs `cfg` whose fault injection fires at walk tick 40; checks the stop, its exit code,
 /// that every goal stayed in the limits and torque went off. Returns the board and the index
-/// of walk tick 40's SYNC WRITE (1 + ramp + 40: the start-up one, the ramp, 40 walk ticks).
+/// of walk tick 40's SYNC WRITE ([`walk_write`]).
 fn run_fault_at_tick_40(cfg: &Config, stop: StopReason, exit: i32) -> (FakeBoard, usize) {
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(cfg);
     let end = run(&mut b, cfg);
     assert_eq!(end, RunEnd::Stopped(stop));
     assert_eq!(end.exit_code(), exit);
     assert_goals_in_limits(&b);
     assert!(torque_off_sent(&b));
-    (b, 1 + ramp + 40)
+    (b, walk_write(cfg, 40))
 }
 
 #[test]
@@ -506,11 +516,12 @@ fn nan_target_never_reaches_the_servos() {
 fn overruns_are_counted_and_a_burst_stops() {
     let mut cfg = autostart_config();
     cfg.walk.steps = 2;
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
     let mut b = board(&cfg);
     // Two isolated slow ticks (work 2.09 ms + 3 ms, and + 8 ms: one whole tick missed):
     // counted, the walk goes on.
-    b.slow = heapless::Vec::from_slice(&[(1 + ramp + 20, 3_000), (1 + ramp + 60, 8_000)]).unwrap();
+    b.slow =
+        heapless::Vec::from_slice(&[(walk_write(&cfg, 20), 3_000), (walk_write(&cfg, 60), 8_000)])
+            .unwrap();
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     let tr = ticks_of(&b.records());
     assert_eq!(tr.iter().filter(|t| t.overrun).count(), 2);
@@ -524,7 +535,7 @@ fn overruns_are_counted_and_a_burst_stops() {
     assert_eq!(missed, vec![0, 1]);
     // A burst of overrun_burst slow ticks stops.
     let mut b = board(&cfg);
-    b.slow = (0..5).map(|i| (1 + ramp + 20 + i, 6_000)).collect();
+    b.slow = (0..5).map(|i| (walk_write(&cfg, 20 + i), 6_000)).collect();
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::OverrunBurst { count: 5 }));
     assert_eq!(end.exit_code(), 14);
@@ -819,7 +830,7 @@ fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
     // angles (the targets' check never fires): the sample check must stop with its own code.
     let mut cfg = cfg_with("elf fault_nan_com=40");
     cfg.walk.steps = 3;
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     let stop = StopReason::NonFiniteSample { tick: 40 };
     let (b, k) = run_fault_at_tick_40(&cfg, stop, 18);
     // Every joint kept its previous target, then the pose is held until torque off.
@@ -846,11 +857,11 @@ fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
 fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
     use walker_contract::codes::SensorRejection;
     let cfg = autostart_config();
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     // The IMU keeps answering (CRC fine) but repeats its sample from walk tick 50 on: every
     // reply is rejected as frozen, held for hold_ticks, then the device is lost.
     let mut b = board(&cfg);
-    b.freeze_at = Some((200, 1 + ramp + 50));
+    b.freeze_at = Some((200, walk_write(&cfg, 50)));
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::DeviceLost { id: 200 }));
     let recs = b.records();
@@ -874,7 +885,7 @@ fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
     let mut cfg = autostart_config();
     cfg.supervisor.hold_ticks = 65_535;
     let mut b = board(&cfg);
-    b.freeze_at = Some((111, 1 + ramp + 50));
+    b.freeze_at = Some((111, walk_write(&cfg, 50)));
     let end = run(&mut b, &cfg);
     assert_eq!(
         end,
@@ -911,11 +922,11 @@ fn an_out_of_range_reply_is_rejected_and_held() {
     use walker_contract::codes::SensorRejection;
     let mut cfg = autostart_config();
     cfg.walk.steps = 2;
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     for id in [111u8, 200] {
         let mut b = board(&cfg);
         // One byte-shifted reply (load cell ×256 + 1000 N; gyro 1073 rad/s).
-        b.spike_at = Some((id, 1 + ramp + 30));
+        b.spike_at = Some((id, walk_write(&cfg, 30)));
         assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
         let recs = b.records();
         let rej = faults_of(&recs, FaultKind::SensorRejected);
@@ -997,7 +1008,7 @@ fn the_servo_monitor_reads_by_time_not_by_tick() {
     b.set_baud(cfg.bus_baud).unwrap();
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(b.ticks.iter().filter(|t| t.tick.overrun).count(), 0);
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     let ticks = per_tick(&b);
     let monitor = |pk: &[Pkt]| -> Vec<(u8, u16)> {
         pk.iter()
@@ -1235,7 +1246,6 @@ fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_referen
     );
     assert_eq!(run(&mut a, &base), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(run(&mut b, &lead), RunEnd::Stopped(StopReason::PlanDone));
-    let ramp = base.ticks_for_us(base.ramp_us) as usize;
     let walk = expected_walk_ticks(&base);
     let (ta, tb) = (ticks_of(&a.records()), ticks_of(&b.records()));
     let first_walk = |t: &[TickRecord]| {
@@ -1247,8 +1257,8 @@ fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_referen
     let mut compared = 0;
     for k in 0..walk - 20 {
         assert_eq!(
-            b.goals[1 + ramp + k],
-            a.goals[1 + ramp + k + 20],
+            b.goals[walk_write(&base, k)],
+            a.goals[walk_write(&base, k + 20)],
             "walk tick {k}"
         );
         let (ra, rb) = (&ta[fa + k], &tb[fb + k]);
@@ -1512,7 +1522,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
     use walker_contract::command_port::{STATE, VELOCITY_X};
     let cfg = Config::default();
     assert!(!cfg.autostart);
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     let read_state = || {
         port_packet(dxl::Instruction::Read {
             addr: STATE.addr,
@@ -1759,7 +1769,7 @@ fn foot_force_difference_raises_the_overloaded_sole_within_its_bound() {
 fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
     use walker_contract::command_port::{StepEntry, FAULT_KIND, STATE, STEP_ENTRY, STEP_LIST};
     let cfg = Config::default();
-    let ramp = cfg.ticks_for_us(cfg.ramp_us) as usize;
+    let ramp = ramp_ticks(&cfg);
     let read = |r: walker_contract::command_port::Reg| {
         port_packet(dxl::Instruction::Read {
             addr: r.addr,
