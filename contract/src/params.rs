@@ -737,6 +737,15 @@ params! {
         get: |c| { Some(Value::Num(c.stabilizer.cutoff_hz)) },
     },
     {
+        key: "stab_lateral",
+        plan_key: None,
+        unit: "1",
+        domain: range(0.0, 1.0),
+        doc: "stabilizer: weight w_y of the lateral axis (gait-core stabilizer S3′; 0 = sagittal only)",
+        set: |c, v| { c.stabilizer.lateral = v },
+        get: |c| { Some(Value::Num(c.stabilizer.lateral)) },
+    },
+    {
         key: "feasibility",
         plan_key: None,
         unit: "",

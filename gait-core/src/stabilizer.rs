@@ -16,11 +16,15 @@
 //! ```text
 //!   e   = LPF_fc(p_meas − p_ref)                       (S2)  first order, cutoff f_c
 //!   ê_ξ = e/(1 + k) + k_g·l_u·(φ̇_pitch, −φ̇_roll)       (S3)  k_g in s (≈ 1/ω for the full term)
+//!   ê_ξ,y ← w_y·ê_ξ,y                                  (S3′) lateral weight w_y ∈ [0, 1]
 //!   I  ← clamp(I + dt·(k_i·ê_ξ − λ·I), ±s_max)          (S4)  leaky integral, anti-windup
 //!   δ* = −(k_p·ê_ξ + I),  |δ*| ≤ s_max                  (S5)  proportional + integral, saturated
 //!   p_ref + δ* ∈ support polygon shrunk by m             (S7)  ZMP command limit (δ* scaled down)
 //!   δ  ← δ_prev + (δ* − δ_prev)·min(1, v_max·dt/‖δ* − δ_prev‖∞)   (S6)  rate limit
 //! ```
+//!
+//! (S3′) weighs the lateral axis: w_y = 1 is the law as written, w_y = 0 a sagittal-only
+//! stabilizer (its lateral δ stays 0: the lateral error then feeds neither (S4) nor (S5)).
 //!
 //! δ is added to the commanded CoM (the pelvis point of the plain pipeline, the target of the
 //! whole-body CoM with [`crate::wholebody`]). Quasi-statically a CoM shift δ moves the ZMP by δ
@@ -67,11 +71,14 @@ pub struct StabilizerConfig {
     pub margin: f64,
     /// Cutoff f_c of the ZMP error filter (S2), Hz.
     pub cutoff_hz: f64,
+    /// Weight w_y of the lateral axis (S3′), 0 ..= 1 (0: sagittal only).
+    pub lateral: f64,
 }
 
 impl StabilizerConfig {
     /// The defaults tuned in the firmware-in-the-loop walk (`walker beyond`): k_p 0, k_i 2 /s,
-    /// λ 0.1 /s, k_g 0.15 s (≈ 1/ω), k 1, s_max 2 cm, v_max 5 cm/s, m 5 mm, f_c 0.25 Hz.
+    /// λ 0.1 /s, k_g 0.15 s (≈ 1/ω), k 1, s_max 2 cm, v_max 5 cm/s, m 5 mm, f_c 0.25 Hz, both
+    /// axes (w_y 1).
     pub const fn default_gains() -> Self {
         StabilizerConfig {
             kp: 0.0,
@@ -83,11 +90,12 @@ impl StabilizerConfig {
             max_rate: 0.05,
             margin: 0.005,
             cutoff_hz: 0.25,
+            lateral: 1.0,
         }
     }
 
     /// True when every number is finite and in range (gains ≥ 0, 0 ≤ s_max ≤ 2 cm, rate,
-    /// cutoff > 0).
+    /// cutoff > 0, 0 ≤ w_y ≤ 1).
     pub fn is_valid(&self) -> bool {
         let nn = |v: f64| v.is_finite() && v >= 0.0;
         nn(self.kp)
@@ -102,6 +110,7 @@ impl StabilizerConfig {
             && self.max_rate > 0.0
             && self.cutoff_hz.is_finite()
             && self.cutoff_hz > 0.0
+            && (0.0..=1.0).contains(&self.lateral)
     }
 }
 
@@ -133,10 +142,10 @@ pub struct Stabilizer<R> {
     ki: R,
     /// Leak of the integral, 1/s.
     leak: R,
-    /// Gyro gain times the trunk height, k_g·l_u, m·s.
-    gyro_gain: R,
-    /// 1/(1 + k) of the DCM error estimate.
-    inv_one_plus_k: R,
+    /// 1/(1 + k) of the DCM error estimate, per axis: × w_y on the lateral one (S3′).
+    inv_one_plus_k: [R; 2],
+    /// k_g·l_u per axis: × w_y on the lateral one (S3′).
+    gyro_gain_axis: [R; 2],
     /// Largest |δ| per axis, m.
     max_shift: R,
     /// Largest change of δ per update, m.
@@ -181,8 +190,8 @@ impl<R: Real> Stabilizer<R> {
             kp: R::of(c.kp),
             ki: R::of(c.ki),
             leak: R::of(c.leak),
-            gyro_gain: R::of(c.kg * upper_body_height),
-            inv_one_plus_k: R::of(1.0 / (1.0 + c.dcm_k)),
+            inv_one_plus_k: [1.0, c.lateral].map(|w| R::of(w / (1.0 + c.dcm_k))),
+            gyro_gain_axis: [1.0, c.lateral].map(|w| R::of(w * c.kg * upper_body_height)),
             max_shift: R::of(c.max_shift),
             max_step: R::of(c.max_rate * dt),
             margin: R::of(c.margin),
@@ -229,8 +238,8 @@ impl<R: Real> Stabilizer<R> {
         for k in 0..2 {
             // (S2)
             self.err[k] += self.alpha * (raw[k] - self.err[k]);
-            // (S3)
-            let e_xi = self.err[k] * self.inv_one_plus_k + self.gyro_gain * gyro[k];
+            // (S3), (S3′)
+            let e_xi = self.err[k] * self.inv_one_plus_k[k] + self.gyro_gain_axis[k] * gyro[k];
             // (S4): frozen while the measurement is missing.
             if meas.is_some() {
                 let i =
@@ -326,6 +335,46 @@ mod tests {
         let d = s.shift();
         assert!(d[0] < 0.0 && d[1] > 0.0, "{d:?}");
         assert!((d[0] * d[0] + d[1] * d[1]).sqrt() <= 0.02 + 1e-12);
+    }
+
+    #[test]
+    fn the_lateral_weight_scales_the_lateral_axis_only() {
+        // The same errors and gyro into w_y = 1, 0.5 and 0: the sagittal shift is the same
+        // in all three, the lateral one scales with w_y (a linear law until a limit acts:
+        // errors small enough that neither the norm, the rate nor the integral's clamp does).
+        let run = |w: f64| {
+            let mut s = stab(StabilizerConfig {
+                kp: 0.3,
+                lateral: w,
+                ..StabilizerConfig::default()
+            });
+            let mut d = [0.0; 2];
+            for i in 0..200 {
+                let mut inp = input([0.0, 0.0], Some([0.002, -0.003]));
+                inp.gyro = Some([0.05 * f64::from(i % 3), -0.02]);
+                d = s.update(&inp);
+            }
+            d
+        };
+        let (full, half, none) = (run(1.0), run(0.5), run(0.0));
+        assert!(full[0] < -1e-4 && full[1] > 1e-4, "both axes act: {full:?}");
+        assert_eq!(half[0], full[0]);
+        assert_eq!(none[0], full[0]);
+        assert!(
+            (half[1] - 0.5 * full[1]).abs() <= 1e-12 * full[1].abs().max(1.0),
+            "{half:?}"
+        );
+        assert_eq!(none[1], 0.0);
+        assert!(!StabilizerConfig {
+            lateral: 1.5,
+            ..StabilizerConfig::default()
+        }
+        .is_valid());
+        assert!(!StabilizerConfig {
+            lateral: f64::NAN,
+            ..StabilizerConfig::default()
+        }
+        .is_valid());
     }
 
     #[test]
