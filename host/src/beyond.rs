@@ -87,20 +87,26 @@ pub fn variants() -> [Variant; 6] {
     ]
 }
 
-/// The firmware's feedback switched off: no gyro damping, no compliance feed-forward, no
-/// catching step (the paper's open loop, as in `plans/table2-paper.toml` but at the plan's
-/// timing).
+/// The firmware's feedback switched off: no gyro damping, no compliance feed-forward and the
+/// servos' factory Position I Gain, no catching step (the paper's open loop, as in
+/// `plans/table2-paper.toml` but at the plan's timing).
 pub const OPEN_LOOP: &[&str] = &[
     "gyro_ankle=0",
     "gyro_hip=0",
     "compliance_roll=0",
+    "compliance_pitch=0",
+    "servo_i_roll=0",
     "catch_gain=0",
 ];
 
+/// The servos' compliance handling off: no feed-forward of their sag, the factory Position I
+/// Gain (the ablation's runs before "+compliance").
+const NO_COMPLIANCE: [&str; 3] = ["compliance_roll=0", "compliance_pitch=0", "servo_i_roll=0"];
+
 /// The ablation of the closed-loop issue (item 4), in table order: the paper's three models
 /// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
-/// the ankles, at the hips (the gains are the firmware's defaults), the servo compliance
-/// feed-forward, the catching step (this run is the firmware's default), whole-body
+/// the ankles, at the hips (the gains are the firmware's defaults), the servos' compliance
+/// (the feed-forward of their sag and the roll servos' Position I Gain), the catching step (this run is the firmware's default), whole-body
 /// compensation of the swing leg, the DCM/ZMP stabilizer.
 pub fn ablation() -> [Variant; 9] {
     let v = |name, model, compensation, stabilizer, tokens| Variant {
@@ -122,14 +128,25 @@ pub fn ablation() -> [Variant; 9] {
             Tlipfm,
             Plain,
             false,
-            &["gyro_hip=0", "compliance_roll=0", "catch_gain=0"],
+            &[
+                "gyro_hip=0",
+                NO_COMPLIANCE[0],
+                NO_COMPLIANCE[1],
+                NO_COMPLIANCE[2],
+                "catch_gain=0",
+            ],
         ),
         v(
             "+gyro-hip",
             Tlipfm,
             Plain,
             false,
-            &["compliance_roll=0", "catch_gain=0"],
+            &[
+                NO_COMPLIANCE[0],
+                NO_COMPLIANCE[1],
+                NO_COMPLIANCE[2],
+                "catch_gain=0",
+            ],
         ),
         v("+compliance", Tlipfm, Plain, false, &["catch_gain=0"]),
         v("+catching step (default)", Tlipfm, Plain, false, &[]),

@@ -1312,8 +1312,10 @@ fn position_i_gains_are_written_before_torque_on() {
 /// way) by the saturation (the model asks ≈ 0.1 rad there).
 #[test]
 fn compliance_moves_only_the_roll_targets_within_its_bound() {
-    let off = cfg_with("gyro_ankle=0 gyro_hip=0 compliance_roll=0");
-    let on = cfg_with("gyro_ankle=0 gyro_hip=0 compliance_roll=1 compliance_max=0.05");
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 compliance_roll=0 compliance_pitch=0");
+    let on = cfg_with(
+        "gyro_ankle=0 gyro_hip=0 compliance_roll=1 compliance_pitch=0 compliance_max=0.05",
+    );
     let (mut a, mut b) = (
         board(&off).with_imu_rate(0.0),
         board(&on).with_imu_rate(0.0),
@@ -2076,7 +2078,7 @@ fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
     // No feed-forwards and no feedback: the fake's attitude follows its joints, so the gyro
     // feedback would move the goals apart from the IK's (the survey carries the new leg back
     // by the IK's change over a tick, O3′).
-    let on = cfg_with("compliance_roll=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with("compliance_roll=0 compliance_pitch=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
     assert!(on.sole_poses_measured, "on by default");
     let off = Config {
         sole_poses_measured: false,
