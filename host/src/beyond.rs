@@ -106,8 +106,9 @@ const NO_COMPLIANCE: [&str; 3] = ["compliance_roll=0", "compliance_pitch=0", "se
 /// The ablation of the closed-loop issue (item 4), in table order: the paper's three models
 /// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
 /// the ankles, at the hips (the gains are the firmware's defaults), the servos' compliance
-/// (the feed-forward of their sag and the roll servos' Position I Gain), the catching step (this run is the firmware's default), whole-body
-/// compensation of the swing leg, the DCM/ZMP stabilizer.
+/// handling (the feed-forward of their sag and the roll servos' Position I Gain), the catching
+/// step (this run is the firmware's default), whole-body compensation of the swing leg, the
+/// DCM/ZMP stabilizer.
 pub fn ablation() -> [Variant; 9] {
     let v = |name, model, compensation, stabilizer, tokens| Variant {
         name,

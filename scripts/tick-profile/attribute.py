@@ -61,7 +61,7 @@ def crate_of(file_name, root):
     compiler_builtins, heapless…: their inlined code counts for the frame that called it)."""
     if file_name.startswith(root + "/"):
         rel = file_name[len(root) + 1:]
-        for crate in ("gait-core", "dxl", "contract", "host"):
+        for crate in ("gait-core", "dxl", "contract"):
             if rel.startswith(crate + "/"):
                 return crate
         if rel == "src/bin/bench.rs":

@@ -158,9 +158,18 @@ __attribute__((visibility("default"))) int qemu_plugin_install(qemu_plugin_id_t 
         char hb[4096];
         strncpy(hb, h, sizeof hb - 1);
         hb[sizeof hb - 1] = 0;
-        for (char *t = strtok(hb, ","); t && n_helpers < MAX_HELPERS; t = strtok(NULL, ",")) {
+        if (strlen(h) >= sizeof hb)
+            fprintf(stderr, "gate: PROF_HELPERS longer than %zu bytes: the rest ignored\n",
+                    sizeof hb - 1);
+        for (char *t = strtok(hb, ","); t; t = strtok(NULL, ",")) {
             char *dash = strchr(t, '-');
             if (!dash) continue;
+            if (n_helpers == MAX_HELPERS) {
+                /* The rest count at their own address (attribute.py: "other", the loop). */
+                fprintf(stderr, "gate: more than %d helper ranges: the rest not attributed\n",
+                        MAX_HELPERS);
+                break;
+            }
             helper_lo[n_helpers] = strtoull(t, NULL, 16) & ~1ull;
             helper_hi[n_helpers] = strtoull(dash + 1, NULL, 16) & ~1ull;
             n_helpers++;
