@@ -118,6 +118,8 @@ pub struct Config {
     /// Position I Gain written at start-up to the hip-roll and ankle-roll servos (register
     /// units; the servo's integral action removes their load sag).
     pub servo_i_roll: u16,
+    /// Position I Gain of the hip-roll servos when not [`Config::servo_i_roll`]'s.
+    pub servo_i_hip_roll: Option<u16>,
     /// Position I Gain written at start-up to the hip-pitch, knee and ankle-pitch servos.
     pub servo_i_pitch: u16,
     /// Reply timeout of the Dynamixel master, µs (per expected status packet).
@@ -229,6 +231,7 @@ impl Config {
             fourier_terms: gait_core::fourier_walk::DEFAULT_FOURIER_TERMS,
             servo_lead_s: 0.0,
             servo_i_roll: DEFAULT_SERVO_I_ROLL,
+            servo_i_hip_roll: None,
             servo_i_pitch: 0,
             reply_timeout_us: 1_000,
             read_poll_us: DEFAULT_READ_POLL_US,

@@ -24,7 +24,8 @@
 //! double support the two legs close a chain through the floor, where the joints cannot all reach
 //! their targets and two integrators would push against each other, so they hold. Only the
 //! joints in the mask act ([`JointSet::PITCH`] by default: hip pitch, knee, ankle pitch; the roll
-//! joints' sag has its feed-forward). A missing or non-finite Present Position or target leaves
+//! joints' sag has its feed-forward; [`JointSet::ROLL`] and [`JointSet::PITCH_AND_ROLL`] by the
+//! firmware's `deflection_joints`). A missing or non-finite Present Position or target leaves
 //! that joint's correction as it is; gains and limits are sanitised once in
 //! [`DeflectionFeedback::new`], so any configuration is total: every c_j is finite and
 //! |c_j| ≤ c_max ≤ [`MAX_CORRECTION_RAD`]. Cost: one pass over the twelve joints a tick (not
@@ -48,6 +49,12 @@ pub struct JointSet(pub [bool; PER_LEG]);
 impl JointSet {
     /// Hip pitch, knee and ankle pitch.
     pub const PITCH: JointSet = JointSet([false, false, true, true, true, false]);
+    /// Hip roll and ankle roll.
+    pub const ROLL: JointSet = JointSet([false, true, false, false, false, true]);
+    /// Hip roll, hip pitch, knee, ankle pitch and ankle roll.
+    pub const PITCH_AND_ROLL: JointSet = JointSet([false, true, true, true, true, true]);
+    /// The sets by the index of the firmware parameter `deflection_joints` (pitch, roll, both).
+    pub const BY_INDEX: [JointSet; 3] = [Self::PITCH, Self::ROLL, Self::PITCH_AND_ROLL];
 
     /// Whether joint `j` of the 12 (left leg then right leg) is in the set.
     pub fn contains(&self, j: usize) -> bool {

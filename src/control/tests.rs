@@ -1304,6 +1304,29 @@ fn position_i_gains_are_written_before_torque_on() {
     let mut b = board(&cfg);
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(b.servos().filter(|d| d.i_gain > 0).count(), 10);
+    // `servo_i_hip_roll` replaces the hip rolls' gain only; 0 leaves theirs alone.
+    for (hip, writes) in [(300u16, 4usize), (0, 2)] {
+        let cfg = cfg_with(&format!("servo_i_roll=4000 servo_i_hip_roll={hip}"));
+        let mut b = board(&cfg);
+        assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+        for d in b.servos() {
+            let Kind::Servo(j) = d.kind else {
+                unreachable!()
+            };
+            let want = match j % 6 {
+                1 => hip,
+                5 => 4000,
+                _ => 0,
+            };
+            assert_eq!(d.i_gain, want, "joint {j}, hip roll {hip}");
+        }
+        let n = b
+            .packets
+            .iter()
+            .filter(|p| p.op == opcode::WRITE && p.addr == 82)
+            .count();
+        assert_eq!(n, writes, "hip roll {hip}");
+    }
 }
 
 /// The compliance feed-forward (`compliance_roll`): it changes only the hip-roll and ankle-roll
@@ -2062,6 +2085,52 @@ fn the_deflection_feedback_drives_sagging_stance_knees_to_their_targets() {
             for j in [0usize, 1, 5, 6, 7, 11] {
                 assert_eq!(ga[j], gb[j], "joint {j}");
             }
+        }
+    }
+}
+
+/// `deflection_joints=roll`: the feedback drives the stance leg's hip-roll and ankle-roll
+/// joints instead of the pitch joints. Fake robot with hip rolls (IDs 2 and 8) that stand 30
+/// ticks short: their goals rise by the sag and no further (D2); the pitch joints and the hip
+/// yaws keep the goals they have with the feedback off.
+#[test]
+fn the_deflection_feedback_on_the_roll_joints_drives_only_them() {
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on =
+        cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 deflection_ki=10 deflection_joints=roll");
+    let sag = 30;
+    let sagging = |cfg: &Config| {
+        let mut b = board(cfg);
+        for d in b.devices.iter_mut().filter(|d| d.id == 2 || d.id == 8) {
+            d.sag = sag;
+        }
+        b
+    };
+    let (mut a, mut b) = (sagging(&off), sagging(&on));
+    for (x, cfg) in [(&mut a, &off), (&mut b, &on)] {
+        assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
+    }
+    assert_eq!(a.goals.len(), b.goals.len());
+    for hip in [1usize, 7] {
+        let d: Vec<i32> = a
+            .goals
+            .iter()
+            .zip(&b.goals)
+            .map(|(ga, gb)| gb[hip] - ga[hip])
+            .collect();
+        assert!(
+            d.iter().all(|&v| (0..=sag + 1).contains(&v)),
+            "hip roll {hip}: {:?}",
+            (d.iter().min(), d.iter().max())
+        );
+        assert!(
+            d.iter().any(|&v| v >= sag - 3),
+            "hip roll {hip} never reached its sag"
+        );
+    }
+    for (ga, gb) in a.goals.iter().zip(&b.goals) {
+        for j in [0usize, 2, 3, 4, 6, 8, 9, 10] {
+            assert_eq!(ga[j], gb[j], "joint {j}");
         }
     }
 }
