@@ -253,18 +253,14 @@ fn a_fall_stops_the_walk_and_turns_torque_off() {
 // open-loop whole-body compensation + stabilizer of issue 7 falls within seconds (exit 13), as
 // the full-dynamics issue predicted; making it walk there is the closed-loop issue's work.
 
-/// The firmware's gyro balance feedback, servo compliance handling (feed-forward, the roll
-/// servos' Position I Gain) and catching step off (the paper's open-loop walk), the
-/// servo-speed check off.
-const OPEN_LOOP: &[&str] = &[
-    "feasibility=off",
-    "gyro_ankle=0",
-    "gyro_hip=0",
-    "compliance_roll=0",
-    "compliance_pitch=0",
-    "servo_i_roll=0",
-    "catch_gain=0",
-];
+/// The firmware's feedback off as `walker beyond` has it ([`walker_host::beyond::OPEN_LOOP`]:
+/// gyro balance feedback, servo compliance handling and catching step off, the paper's
+/// open-loop walk), with the servo-speed check off too.
+fn open_loop() -> Vec<&'static str> {
+    let mut tokens = vec!["feasibility=off"];
+    tokens.extend_from_slice(walker_host::beyond::OPEN_LOOP);
+    tokens
+}
 
 /// The walk's figures, after checking that the run finished its plan (exit 0, `PlanDone`)
 /// without a fall, more than 90 % of the planned distance walked.
@@ -464,7 +460,7 @@ fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
         ..SimConfig::default()
     };
     let spec = WalkSpec::default();
-    let (r, log) = fil("mujoco-table2", spec.clone(), sim, OPEN_LOOP);
+    let (r, log) = fil("mujoco-table2", spec.clone(), sim, &open_loop());
     let w = walked_the_plan(&r, &log, &spec);
     assert!(w.heading_drift.abs() < 5f64.to_radians(), "{}", w.line());
     assert!(w.max_tilt < 0.35, "{}", w.line());
@@ -525,7 +521,7 @@ fn closed_loop_walk_survives_a_sagittal_push() {
     // Bounds: no target clamped to a joint limit, none non-finite (that stops with exit 15).
     assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
     // The same push open loop: the robot falls and the firmware says so.
-    let (r, log) = fil("open-loop-push", spec.clone(), sim, OPEN_LOOP);
+    let (r, log) = fil("open-loop-push", spec.clone(), sim, &open_loop());
     assert_fell(&r, &log);
 }
 

@@ -390,26 +390,35 @@ fn missing_foot_board_required_or_optional() {
     assert!(tr.iter().all(|t| !t.zmp_valid || t.zmp_meas[1] > 0));
 }
 
-#[test]
-fn dead_foot_board_is_held_then_stops() {
+/// Runs the default autostart walk with device `id` failing from walk tick 50 on (`fail` sets
+/// the fake board's script, e.g. `kill_at`, to that SYNC WRITE) and checks the supervisor's
+/// answer: the device is held for `hold_ticks` from that very tick, then lost (exit 12).
+/// Returns the configuration, the board, its records and their tick records.
+fn held_from_walk_tick_50_then_lost(
+    id: u8,
+    fail: fn(&mut FakeBoard, (u8, usize)),
+) -> (Config, FakeBoard, Vec<Record>, Vec<TickRecord>) {
     let cfg = autostart_config();
-    let ramp = ramp_ticks(&cfg);
     let mut b = board(&cfg);
-    // Dies after the start-up SYNC WRITE, the ramp and 50 walk ticks.
-    b.kill_at = Some((111, walk_write(&cfg, 50)));
+    fail(&mut b, (id, walk_write(&cfg, 50)));
     let end = run(&mut b, &cfg);
-    assert_eq!(end, RunEnd::Stopped(StopReason::DeviceLost { id: 111 }));
+    assert_eq!(end, RunEnd::Stopped(StopReason::DeviceLost { id }));
     assert_eq!(end.exit_code(), 12);
     let recs = b.records();
     let tr = ticks_of(&recs);
     let holding = tr.iter().filter(|t| t.fault == FaultState::Holding).count();
     assert_eq!(holding, usize::from(cfg.supervisor.hold_ticks));
-    // Held ticks come right after the death, then the stop sequence.
-    let first_hold = tr
-        .iter()
-        .position(|t| t.fault == FaultState::Holding)
-        .unwrap();
-    assert_eq!(first_hold, ramp + 50);
+    let first_hold = tr.iter().position(|t| t.fault == FaultState::Holding);
+    assert_eq!(first_hold, Some(ramp_ticks(&cfg) + 50));
+    (cfg, b, recs, tr)
+}
+
+#[test]
+fn dead_foot_board_is_held_then_stops() {
+    // Dies after the start-up SYNC WRITE, the ramp and 50 walk ticks; held ticks come right
+    // after the death, then the stop sequence.
+    let (cfg, b, recs, tr) = held_from_walk_tick_50_then_lost(111, |b, at| b.kill_at = Some(at));
+    let first_hold = ramp_ticks(&cfg) + 50;
     let stopping = tr
         .iter()
         .filter(|t| t.fault == FaultState::Stopping)
@@ -856,25 +865,14 @@ fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
 #[test]
 fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
     use walker_contract::codes::SensorRejection;
-    let cfg = autostart_config();
-    let ramp = ramp_ticks(&cfg);
     // The IMU keeps answering (CRC fine) but repeats its sample from walk tick 50 on: every
     // reply is rejected as frozen, held for hold_ticks, then the device is lost.
-    let mut b = board(&cfg);
-    b.freeze_at = Some((200, walk_write(&cfg, 50)));
-    let end = run(&mut b, &cfg);
-    assert_eq!(end, RunEnd::Stopped(StopReason::DeviceLost { id: 200 }));
-    let recs = b.records();
+    let (_, _, recs, tr) = held_from_walk_tick_50_then_lost(200, |b, at| b.freeze_at = Some(at));
     let rej = faults_of(&recs, FaultKind::SensorRejected);
     assert_eq!(rej.len(), 1, "one record per run of rejections: {rej:?}");
     assert_eq!(
         (rej[0].id, rej[0].value),
         (200, i32::from(SensorRejection::FrozenCounter.code()))
-    );
-    let tr = ticks_of(&recs);
-    assert_eq!(
-        tr.iter().filter(|t| t.fault == FaultState::Holding).count(),
-        usize::from(cfg.supervisor.hold_ticks)
     );
     // No bus error at all: the replies were intact, only implausible.
     assert!(tr.iter().all(|t| t.bus.timeouts == 0 && t.bus.crc == 0));
@@ -884,6 +882,7 @@ fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
     // is exactly 100 ms old), which starts the stop sequence in the same tick.
     let mut cfg = autostart_config();
     cfg.supervisor.hold_ticks = 65_535;
+    let ramp = ramp_ticks(&cfg);
     let mut b = board(&cfg);
     b.freeze_at = Some((111, walk_write(&cfg, 50)));
     let end = run(&mut b, &cfg);
