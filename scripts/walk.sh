@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Main job: the firmware, built for the emulated board (QEMU mps2-an500, Cortex-M7), walks the
 # seed's Table 2 plan (14 steps) against the simulated robot in lock-step, once per model (LIPM,
-# DLIPM, TLIPFM) open loop as the paper (gyro feedback off, factory servo gains), then TLIPFM with the firmware's
-# default closed loop (gyro balance feedback, src/balance.rs); each run writes its captured log, the simulator's ground truth and the
+# DLIPM, TLIPFM) open loop as the paper (feedback and feed-forward off, factory servo gains), then TLIPFM
+# with the firmware's default closed loop (gyro balance feedback, compliance handling, catching step); each run writes its captured log, the simulator's ground truth and the
 # ZMP-response report (CSV, SVG/PNG plots like seed 000 Figs. 14-16, Table 3 statistics) to
 # out/fil-MODEL/ (out/fil-tlipfm-closed/), and the four runs are compared in out/compare.md.
 # The paper's timing is walked as published (feasibility=off): Table 2's swing asks the swing
@@ -19,6 +19,10 @@ source scripts/setup.sh
 plan=${PLAN:-plans/table2.toml}
 models=${MODELS:-"lipm dlipm tlipfm"}
 feasibility=${FEASIBILITY:-off}
+# The firmware's feedback off, as plans/table2-paper.toml and the ablation's open loop
+# (host/src/beyond.rs OPEN_LOOP): no gyro damping, no compliance feed-forward, the servos'
+# factory Position I Gain, no catching step.
+open_loop="gyro_ankle=0 gyro_hip=0 compliance_roll=0 compliance_pitch=0 servo_i_roll=0 servo_i_hip_roll=0 catch_gain=0"
 
 video=${VIDEO:-1}
 if [ "$video" = 1 ]; then
@@ -38,7 +42,7 @@ for model in $models; do
     video_args=()
     [ "$video" = 1 ] && video_args=(--video "out/fil-$model/walk.mp4")
     "$walker" fil --plan "$plan" --model "$model" --out "out/fil-$model" \
-        --firmware-args "feasibility=$feasibility gyro_ankle=0 gyro_hip=0 servo_i_roll=0" "${video_args[@]}"
+        --firmware-args "feasibility=$feasibility $open_loop" "${video_args[@]}"
     runs+=("$model=out/fil-$model/walk.log")
 done
 

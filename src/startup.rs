@@ -193,13 +193,13 @@ fn write_verified<B: ServoBus + Clock, const L: usize>(
     Ok(())
 }
 
-/// The Position I Gain of leg joint `j` from `cfg`: [`Config::servo_i_roll`] for the
-/// ankle-roll joints (5 of each leg) and the hip-roll joints (1) unless
-/// [`Config::servo_i_hip_roll`] is set, [`Config::servo_i_pitch`] for hip pitch, knee and ankle
-/// pitch (2, 3, 4), none for the hip yaw (0).
+/// The Position I Gain of leg joint `j` from `cfg`: [`Config::servo_i_hip_roll`] for the
+/// hip-roll joints (1 of each leg), [`Config::servo_i_roll`] for the ankle-roll joints (5),
+/// [`Config::servo_i_pitch`] for hip pitch, knee and ankle pitch (2, 3, 4), none for the hip
+/// yaw (0).
 pub fn position_i_gain(cfg: &Config, j: usize) -> Option<u16> {
     match j % 6 {
-        1 => Some(cfg.servo_i_hip_roll.unwrap_or(cfg.servo_i_roll)),
+        1 => Some(cfg.servo_i_hip_roll),
         5 => Some(cfg.servo_i_roll),
         2..=4 => Some(cfg.servo_i_pitch),
         _ => None,

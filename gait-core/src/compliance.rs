@@ -64,14 +64,17 @@ pub struct Compliance {
 pub const XM430_STIFFNESS: f32 = 18.875;
 
 impl Compliance {
-    /// The firmware's default: the full model on the roll joints, none on the pitch joints,
-    /// ±0.15 rad. Chosen on the MuJoCo robot (Table 2, TLIPFM, with the default gyro damping;
-    /// `docs/beyond.md`): the roll feed-forward took the true centre of pressure's lateral mean
-    /// error from 34.5 to ≈ 24 mm at both timings and let the ±5 mm floor be walked; on the
-    /// pitch joints it straightened the torso but halved the distance walked.
+    /// The firmware's default: 0.75 of the model on the roll joints, 0.15 on the pitch joints,
+    /// ±0.15 rad, beside the roll servos' own integral (the firmware's `servo_i_roll` 1250,
+    /// `servo_i_hip_roll` 800), which removes the sag the model misses. Chosen on the MuJoCo
+    /// robot (Table 2, TLIPFM, with the default gyro damping; `docs/beyond.md`): the full model
+    /// on the roll joints alone took the true centre of pressure's lateral mean error from 34.5
+    /// to ≈ 24 mm at both timings; with the integral and less feed-forward it is 10.6 mm at the
+    /// default timing; a little on the pitch joints (the knee's sag) straightens the sagittal
+    /// plane (more halves the distance walked).
     pub const DEFAULT: Compliance = Compliance {
-        roll: 1.0,
-        pitch: 0.0,
+        roll: 0.75,
+        pitch: 0.15,
         stiffness: XM430_STIFFNESS,
         max_rad: 0.15,
     };

@@ -96,12 +96,18 @@ pub const OPEN_LOOP: &[&str] = &[
     "compliance_roll=0",
     "compliance_pitch=0",
     "servo_i_roll=0",
+    "servo_i_hip_roll=0",
     "catch_gain=0",
 ];
 
 /// The servos' compliance handling off: no feed-forward of their sag, the factory Position I
 /// Gain (the ablation's runs before "+compliance").
-const NO_COMPLIANCE: [&str; 3] = ["compliance_roll=0", "compliance_pitch=0", "servo_i_roll=0"];
+const NO_COMPLIANCE: [&str; 4] = [
+    "compliance_roll=0",
+    "compliance_pitch=0",
+    "servo_i_roll=0",
+    "servo_i_hip_roll=0",
+];
 
 /// The ablation of the closed-loop issue (item 4), in table order: the paper's three models
 /// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
@@ -134,6 +140,7 @@ pub fn ablation() -> [Variant; 9] {
                 NO_COMPLIANCE[0],
                 NO_COMPLIANCE[1],
                 NO_COMPLIANCE[2],
+                NO_COMPLIANCE[3],
                 "catch_gain=0",
             ],
         ),
@@ -146,6 +153,7 @@ pub fn ablation() -> [Variant; 9] {
                 NO_COMPLIANCE[0],
                 NO_COMPLIANCE[1],
                 NO_COMPLIANCE[2],
+                NO_COMPLIANCE[3],
                 "catch_gain=0",
             ],
         ),

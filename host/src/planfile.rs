@@ -976,6 +976,7 @@ mod tests {
         );
         assert!(!paper.stabilizer_on && !paper.com_fourier);
         assert_eq!((paper.servo_i_roll, paper.servo_i_pitch), (0, 0));
+        assert_eq!(paper.servo_i_hip_roll, 0);
         assert!(!paper.step_adaptation.is_on() && paper.compliance.roll == 0.0);
         assert!(d.step_adaptation.is_on());
         assert_eq!(

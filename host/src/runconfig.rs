@@ -207,7 +207,7 @@ mod tests {
         );
         assert!(tokens.contains(&"gyro_hip=0.1".to_string()), "{tokens:?}");
         assert!(
-            tokens.contains(&"compliance_roll=1".to_string()),
+            tokens.contains(&"compliance_roll=0.75".to_string()),
             "{tokens:?}"
         );
         assert!(tokens.contains(&"baud=1000000".to_string()), "{tokens:?}");

@@ -1278,7 +1278,7 @@ fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_referen
 /// roll and the pitch servos before torque goes on; 0 leaves a servo's gain alone.
 #[test]
 fn position_i_gains_are_written_before_torque_on() {
-    let cfg = cfg_with("servo_i_roll=4000 servo_i_pitch=0");
+    let cfg = cfg_with("servo_i_roll=4000 servo_i_hip_roll=4000 servo_i_pitch=0");
     let mut b = board(&cfg);
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     for d in b.servos() {
@@ -1303,6 +1303,17 @@ fn position_i_gains_are_written_before_torque_on() {
     let mut b = board(&cfg);
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(b.servos().filter(|d| d.i_gain > 0).count(), 10);
+    // The defaults: 1250 on the ankle rolls, 800 on the hip rolls, none on the pitch joints.
+    let cfg = cfg_with("");
+    let mut b = board(&cfg);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    for d in b.servos() {
+        let Kind::Servo(j) = d.kind else {
+            unreachable!()
+        };
+        let want = [0, 800, 0, 0, 0, 1250][j % 6];
+        assert_eq!(d.i_gain, want, "joint {j}, defaults");
+    }
     // `servo_i_hip_roll` replaces the hip rolls' gain only; 0 leaves theirs alone.
     for (hip, writes) in [(300u16, 4usize), (0, 2)] {
         let cfg = cfg_with(&format!("servo_i_roll=4000 servo_i_hip_roll={hip}"));
