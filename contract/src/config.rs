@@ -120,10 +120,10 @@ pub struct Config {
     pub fourier_terms: u8,
     /// Servo-lag feed-forward: the joint targets are the gait's this far ahead, s.
     pub servo_lead_s: f32,
-    /// Position I Gain written at start-up to the hip-roll and ankle-roll servos (register
-    /// units; the servo's integral action removes their load sag).
+    /// Position I Gain written at start-up to the ankle-roll servos (register units; the
+    /// servo's integral action removes their load sag).
     pub servo_i_roll: u16,
-    /// Position I Gain of the hip-roll servos.
+    /// Position I Gain written at start-up to the hip-roll servos (register units).
     pub servo_i_hip_roll: u16,
     /// Position I Gain written at start-up to the hip-pitch, knee and ankle-pitch servos.
     pub servo_i_pitch: u16,

@@ -1274,20 +1274,33 @@ fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_referen
     assert_goals_in_limits(&b);
 }
 
-/// `servo_i_roll` / `servo_i_pitch`: the Position I Gains are written (and read back) to the
-/// roll and the pitch servos before torque goes on; 0 leaves a servo's gain alone.
-#[test]
-fn position_i_gains_are_written_before_torque_on() {
-    let cfg = cfg_with("servo_i_roll=4000 servo_i_hip_roll=4000 servo_i_pitch=0");
+/// The walk of `tokens` on the fake robot (it must complete): the board, and each leg joint's
+/// Position I Gain per leg position (hip yaw … ankle roll; the left and right legs must agree).
+fn position_i_gains_of(tokens: &str) -> (FakeBoard, [u16; 6]) {
+    let cfg = cfg_with(tokens);
     let mut b = board(&cfg);
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    let mut gains = [None; 6];
     for d in b.servos() {
         let Kind::Servo(j) = d.kind else {
             unreachable!()
         };
-        let want = if matches!(j % 6, 1 | 5) { 4000 } else { 0 };
-        assert_eq!(d.i_gain, want, "joint {j}");
+        let g = gains[j % 6].get_or_insert(d.i_gain);
+        assert_eq!(
+            *g, d.i_gain,
+            "joint {j} differs from its other leg's ({tokens})"
+        );
     }
+    (b, gains.map(|g| g.expect("twelve leg servos")))
+}
+
+/// `servo_i_roll` / `servo_i_hip_roll` / `servo_i_pitch`: the Position I Gains are written
+/// (and read back) to the ankle-roll, hip-roll and pitch servos before torque goes on; 0 leaves
+/// a servo's gain alone.
+#[test]
+fn position_i_gains_are_written_before_torque_on() {
+    let (b, gains) = position_i_gains_of("servo_i_roll=4000 servo_i_hip_roll=4000 servo_i_pitch=0");
+    assert_eq!(gains, [0, 4000, 0, 0, 0, 4000]);
     let gain_writes: Vec<usize> = (0..b.packets.len())
         .filter(|&i| b.packets[i].op == opcode::WRITE && b.packets[i].addr == 82)
         .collect();
@@ -1298,38 +1311,15 @@ fn position_i_gains_are_written_before_torque_on() {
         .unwrap();
     assert_eq!(gain_writes.len(), 4);
     assert!(gain_writes.iter().all(|&i| i < torque_on));
-    // Both gains: ten servos (the hip yaws keep theirs).
-    let cfg = cfg_with("servo_i_roll=10 servo_i_pitch=20");
-    let mut b = board(&cfg);
-    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    // All three: ten servos (the hip yaws keep theirs).
+    let (b, _) = position_i_gains_of("servo_i_roll=10 servo_i_pitch=20");
     assert_eq!(b.servos().filter(|d| d.i_gain > 0).count(), 10);
     // The defaults: 1250 on the ankle rolls, 800 on the hip rolls, none on the pitch joints.
-    let cfg = cfg_with("");
-    let mut b = board(&cfg);
-    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
-    for d in b.servos() {
-        let Kind::Servo(j) = d.kind else {
-            unreachable!()
-        };
-        let want = [0, 800, 0, 0, 0, 1250][j % 6];
-        assert_eq!(d.i_gain, want, "joint {j}, defaults");
-    }
-    // `servo_i_hip_roll` replaces the hip rolls' gain only; 0 leaves theirs alone.
+    assert_eq!(position_i_gains_of("").1, [0, 800, 0, 0, 0, 1250]);
+    // `servo_i_hip_roll` sets the hip rolls' gain only; 0 leaves theirs alone.
     for (hip, writes) in [(300u16, 4usize), (0, 2)] {
-        let cfg = cfg_with(&format!("servo_i_roll=4000 servo_i_hip_roll={hip}"));
-        let mut b = board(&cfg);
-        assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
-        for d in b.servos() {
-            let Kind::Servo(j) = d.kind else {
-                unreachable!()
-            };
-            let want = match j % 6 {
-                1 => hip,
-                5 => 4000,
-                _ => 0,
-            };
-            assert_eq!(d.i_gain, want, "joint {j}, hip roll {hip}");
-        }
+        let (b, gains) = position_i_gains_of(&format!("servo_i_roll=4000 servo_i_hip_roll={hip}"));
+        assert_eq!(gains, [0, hip, 0, 0, 0, 4000], "hip roll {hip}");
         let n = b
             .packets
             .iter()
@@ -2067,12 +2057,7 @@ fn the_deflection_feedback_drives_sagging_stance_knees_to_their_targets() {
     // swings (D3).
     let max_step = (10.0 * on.dt_s() * f64::from(sag)).ceil() as i32 + 1;
     for knee in [3usize, 9] {
-        let d: Vec<i32> = a
-            .goals
-            .iter()
-            .zip(&b.goals)
-            .map(|(ga, gb)| gb[knee] - ga[knee])
-            .collect();
+        let d = goal_deltas(&a, &b, knee);
         assert!(
             d.iter().all(|&v| (0..=sag + 1).contains(&v)),
             "knee {knee}: {:?}",
@@ -2099,6 +2084,15 @@ fn the_deflection_feedback_drives_sagging_stance_knees_to_their_targets() {
     }
 }
 
+/// Joint `j`'s goal in run `b` minus its goal in run `a`, tick by tick (ticks).
+fn goal_deltas(a: &FakeBoard, b: &FakeBoard, j: usize) -> Vec<i32> {
+    a.goals
+        .iter()
+        .zip(&b.goals)
+        .map(|(ga, gb)| gb[j] - ga[j])
+        .collect()
+}
+
 /// `deflection_joints=roll`: the feedback drives the stance leg's hip-roll and ankle-roll
 /// joints instead of the pitch joints. Fake robot with hip rolls (IDs 2 and 8) that stand 30
 /// ticks short: their goals rise by the sag and no further (D2); the pitch joints and the hip
@@ -2122,12 +2116,7 @@ fn the_deflection_feedback_on_the_roll_joints_drives_only_them() {
     }
     assert_eq!(a.goals.len(), b.goals.len());
     for hip in [1usize, 7] {
-        let d: Vec<i32> = a
-            .goals
-            .iter()
-            .zip(&b.goals)
-            .map(|(ga, gb)| gb[hip] - ga[hip])
-            .collect();
+        let d = goal_deltas(&a, &b, hip);
         assert!(
             d.iter().all(|&v| (0..=sag + 1).contains(&v)),
             "hip roll {hip}: {:?}",
