@@ -22,7 +22,7 @@ feasibility=${FEASIBILITY:-off}
 # The firmware's feedback off, as plans/table2-paper.toml and the ablation's open loop
 # (host/src/beyond.rs OPEN_LOOP): no gyro damping, no compliance feed-forward, the servos'
 # factory Position I Gain, no catching step.
-open_loop="gyro_ankle=0 gyro_hip=0 compliance_roll=0 compliance_pitch=0 servo_i_roll=0 servo_i_hip_roll=0 catch_gain=0"
+open_loop="gyro_ankle=0 gyro_hip=0 compliance_roll=0 compliance_pitch=0 servo_i_roll=0 servo_i_hip_roll=0 catch_gain=0 catch_level_pitch=0 catch_level_roll=0"
 
 video=${VIDEO:-1}
 if [ "$video" = 1 ]; then

@@ -42,7 +42,10 @@
 //!    error; beyond the ankles' deadband it moves the swing foot's landing place, and the
 //!    feet's and the body's offsets from the plan are added to copies of the samples (the IK's,
 //!    the log's reference and the next tick's measured-ZMP feet); each catch is logged as two
-//!    `CatchStep` records when its single support ends.
+//!    `CatchStep` records when its single support ends. The same state keeps the swing sole
+//!    level (`catch_level_pitch`, `catch_level_roll`, default on; `catching` A10): the swing
+//!    leg's ankle pitch and roll targets turn back by the trunk's deviation from its baseline,
+//!    added after the compliance feed-forward and the gyro damping.
 //!    With `servo_lead = Δ` (default 0) the targets come from the gait sample Δ ahead
 //!    (a delay line of [`MAX_LEAD_TICKS`] samples) while the reference, the log, the stabilizer
 //!    and the gyro feedback's support phase stay at the present sample: a feed-forward of the
@@ -1404,6 +1407,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                                 }
                                 load.apply(&compliance, &mut q, loaded, shift);
                                 cfg.gyro_feedback.apply(&mut q, s.phase, gyro);
+                                // The swing sole kept level (gait-core `catching` A10).
+                                catching.apply_level(&mut q);
                                 if let Some(d) = servo_sense.as_mut() {
                                     d.apply(k, s.phase, &mut q);
                                 }

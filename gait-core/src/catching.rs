@@ -46,20 +46,45 @@
 //! further, which is what absorbs the push. Every offset moves toward its target at most
 //! v_max·dt per axis per tick (continuous joint targets), and |d| ≤ [`MAX_OFFSET_M`].
 //!
+//! # The swing sole kept level
+//! The IK puts both soles parallel to the pelvis (level for an upright trunk). A trunk turned
+//! off its baseline by (φ − φ̄, θ − θ̄) turns the swing sole with it: pushed back, the robot
+//! lands its swing foot heel first, the heel pins the rotation before the foot is where the
+//! catch wants it, and the robot rolls back over both heels. The swing leg's ankle targets
+//! turn the sole back by the trunk's deviation:
+//!
+//! ```text
+//!   Δq_ankle_pitch = −k_θ·w·(θ − θ̄),   Δq_ankle_roll = −k_φ·w·(φ − φ̄),
+//!   |Δq| ≤ Δq_max ([`MAX_LEVEL_RAD`])                                                 (A10)
+//!   w ← w ± dt/T_r toward 1 on the swing leg, toward 0 on a leg on the ground
+//! ```
+//!
+//! The three pitch joints are parallel, so the sole's pitch in the world is θ + q_hp + q_k +
+//! q_ap and k_θ = 1 levels it exactly; the ankle roll turns the sole about the same axis as the
+//! trunk's roll up to the hip's pitch in between (small in a swing), so k_φ = 1 levels it to
+//! first order. w ramps the correction in over T_r after lift-off and out over T_r after
+//! touchdown (continuous joint targets; a foot on the ground keeps the plan's ankle). A
+//! missing attitude holds the last deviation while w ramps. The levelling runs with the
+//! catching step off (`gain` = 0) too, on the same baseline (A2).
+//!
 //! The step's timing is the plan's: a catching step changes where the foot lands, not when
 //! (a shorter swing would need the CoM re-planned, which the precomputed TLIPFM segments
 //! cannot do mid-step). A missing or non-finite attitude or gyro sample gives e = 0 (no catch,
 //! offsets hold; non-finite inputs never reach the state). g, the weight and every per-tick
 //! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
 //! and the tick period once, in [`StepAdapter::new`]. Cost without a push: the error (A1), the
-//! baseline (A2) and the deadband test, then an early return (measured on the M7 control tick:
-//! +436 instructions on average, BENCHMARKS.md).
+//! baseline (A2), the levelling (A10) and the deadband test, then an early return (measured on
+//! the M7 control tick: +436 instructions on average for the catching step, BENCHMARKS.md;
+//! the levelling added 167 more, 19,657 → 19,824).
 
-use crate::robot::{Robot, Side};
+use crate::robot::{Robot, Side, ANKLE_PITCH, ANKLE_ROLL, JOINTS_PER_LEG, LEG_JOINTS};
 use crate::sampler::{GaitSample, SupportPhase};
 
 /// Largest offset of a foot or of the body from the plan, m (the offsets are clamped to it).
 pub const MAX_OFFSET_M: f32 = 2.0;
+
+/// Largest correction of an ankle joint by the swing sole's levelling (A10), rad.
+pub const MAX_LEVEL_RAD: f32 = 0.3;
 
 /// Gains and limits of the catching step (SI units; module docs (A1)–(A7)).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -84,19 +109,32 @@ pub struct StepAdaptation {
     /// Load on the swing foot, as a share of the robot's weight, from which it counts as
     /// landed: its offset stops moving (an early touchdown).
     pub touchdown_share: f32,
+    /// Gain k_θ of the swing sole's levelling on the trunk's pitch off its baseline (A10;
+    /// 0 = off, 1 = level).
+    pub level_pitch: f32,
+    /// Gain k_φ of the swing sole's levelling on the trunk's roll off its baseline (A10;
+    /// 0 = off, 1 = level).
+    pub level_roll: f32,
+    /// Time T_r over which the levelling ramps in after lift-off and out after touchdown, s
+    /// (A10).
+    pub level_ramp_s: f32,
 }
 
 impl StepAdaptation {
-    /// Off (gain 0), with the default limits.
+    /// Off (gain 0, no levelling), with the default limits.
     pub const OFF: StepAdaptation = StepAdaptation {
         gain: 0.0,
+        level_pitch: 0.0,
+        level_roll: 0.0,
         ..StepAdaptation::DEFAULT
     };
 
     /// The firmware's default (see `docs/beyond.md`, "The catching step"): k = 1, deadband
     /// 2 cm, up to 5 cm forward/backward, the lateral catch off (`max_out_m` = 0: on the
     /// MuJoCo robot a 1.5 N·s push to the right during left single support walked without it
-    /// and fell with 4 cm), 0.5 m/s, a 2 s baseline, touchdown at a fifth of the weight.
+    /// and fell with 4 cm), 0.5 m/s, a 2 s baseline, touchdown at a fifth of the weight; the
+    /// swing sole kept level in pitch and roll, ramped over 0.1 s (`docs/beyond.md`, "The
+    /// swing sole kept level").
     pub const DEFAULT: StepAdaptation = StepAdaptation {
         gain: 1.0,
         deadband_m: [0.02, 0.02],
@@ -107,11 +145,21 @@ impl StepAdaptation {
         body_speed_m_s: 0.5,
         baseline_s: 2.0,
         touchdown_share: 0.2,
+        level_pitch: 1.0,
+        level_roll: 1.0,
+        level_ramp_s: 0.1,
     };
 
     /// Whether the step adaptation runs (finite positive gain).
     pub fn is_on(&self) -> bool {
         self.gain.is_finite() && self.gain > 0.0
+    }
+
+    /// Whether the swing sole's levelling runs (a finite positive gain on pitch or roll).
+    pub fn is_levelling(&self) -> bool {
+        [self.level_pitch, self.level_roll]
+            .iter()
+            .any(|k| k.is_finite() && *k > 0.0)
     }
 }
 
@@ -134,6 +182,14 @@ pub struct StepAdapter {
     feet: [[f32; 2]; 2],
     /// Offset of the body (CoM and ZMP reference), plan frame, m.
     body: [f32; 2],
+    /// The levelling's weight w per leg (left, right), 0..1 (A10).
+    level_w: [f32; 2],
+    /// The levelling's per-tick weight step dt/T_r (A10).
+    level_step: f32,
+    /// The trunk's last deviation from its baseline (pitch, roll), rad (A10).
+    level_dev: [f32; 2],
+    /// The levelling's ankle corrections per leg (left, right): (pitch, roll), rad (A10).
+    level: [[f32; 2]; 2],
 }
 
 impl StepAdapter {
@@ -154,10 +210,16 @@ impl StepAdapter {
             speed_m_s: limit(cfg.speed_m_s),
             body_speed_m_s: limit(cfg.body_speed_m_s),
             baseline_s: limit(cfg.baseline_s),
+            gain: limit(cfg.gain),
+            level_pitch: limit(cfg.level_pitch),
+            level_roll: limit(cfg.level_roll),
+            level_ramp_s: limit(cfg.level_ramp_s),
             ..*cfg
         };
         if !ok {
             cfg.gain = 0.0;
+            cfg.level_pitch = 0.0;
+            cfg.level_roll = 0.0;
         }
         StepAdapter {
             cfg,
@@ -182,12 +244,40 @@ impl StepAdapter {
             error: [0.0; 2],
             feet: [[0.0; 2]; 2],
             body: [0.0; 2],
+            level_w: [0.0; 2],
+            // A ramp shorter than a tick: w jumps (at most one tick's step of 1).
+            level_step: if ok && cfg.level_ramp_s > dt_s {
+                dt_s / cfg.level_ramp_s
+            } else {
+                1.0
+            },
+            level_dev: [0.0; 2],
+            level: [[0.0; 2]; 2],
         }
     }
 
-    /// Whether it runs.
+    /// The swing sole's levelling (A10): the ankle corrections (pitch, roll) of the left and
+    /// the right leg, rad, each within ±[`MAX_LEVEL_RAD`].
+    pub fn sole_level(&self) -> [[f32; 2]; 2] {
+        self.level
+    }
+
+    /// Adds the levelling (A10) to the joint targets `q` (left leg then right leg, rad).
+    pub fn apply_level(&self, q: &mut [f32; LEG_JOINTS]) {
+        for (leg, [pitch, roll]) in self.level.into_iter().enumerate() {
+            let base = leg * JOINTS_PER_LEG;
+            if let Some(v) = q.get_mut(base + ANKLE_PITCH) {
+                *v += pitch;
+            }
+            if let Some(v) = q.get_mut(base + ANKLE_ROLL) {
+                *v += roll;
+            }
+        }
+    }
+
+    /// Whether it runs (the catching step or the levelling).
     pub fn is_on(&self) -> bool {
-        self.cfg.is_on()
+        self.cfg.is_on() || self.cfg.is_levelling()
     }
 
     /// The capture-point error of the last update (A1), trunk frame (x forward, y left), m.
@@ -247,6 +337,7 @@ impl StepAdapter {
                         b_pitch + k * (pitch - b_pitch),
                     ]);
                 }
+                self.level_dev = [pitch - b_pitch, roll - b_roll];
                 if finite(&e) {
                     e
                 } else {
@@ -255,6 +346,7 @@ impl StepAdapter {
             }
             _ => [0.0; 2],
         };
+        self.level_sole(sample.phase);
         // Inside the deadband with every offset at 0 nothing moves: the common tick ends here.
         if self.error[0].abs() <= m[0] && self.error[1].abs() <= m[1] && !self.is_shifting() {
             return [0.0; 2];
@@ -323,6 +415,33 @@ impl StepAdapter {
             self.body = toward(self.body, body_target, self.steps[1]);
         }
         asked
+    }
+
+    /// (A10): the weights one tick toward the legs' phase, then the corrections from the
+    /// last deviation.
+    fn level_sole(&mut self, phase: SupportPhase) {
+        let swing = match phase {
+            SupportPhase::Single(stance) => Some(stance.other()),
+            _ => None,
+        };
+        let [dev_pitch, dev_roll] = self.level_dev;
+        let (k_pitch, k_roll) = (self.cfg.level_pitch, self.cfg.level_roll);
+        let step = self.level_step;
+        for ((w, c), side) in self
+            .level_w
+            .iter_mut()
+            .zip(self.level.iter_mut())
+            .zip([Side::Left, Side::Right])
+        {
+            let target = if swing == Some(side) { 1.0 } else { 0.0 };
+            *w += (target - *w).clamp(-step, step);
+            let v = [-k_pitch * *w * dev_pitch, -k_roll * *w * dev_roll];
+            *c = if v.iter().all(|x| x.is_finite()) {
+                v.map(|x| x.clamp(-MAX_LEVEL_RAD, MAX_LEVEL_RAD))
+            } else {
+                [0.0; 2]
+            };
+        }
     }
 
     /// (A6) on a sample: the feet by their offsets, the CoM and the ZMP reference by the body's.

@@ -15,6 +15,10 @@ use crate::error::GaitError;
 pub const JOINTS_PER_LEG: usize = 6;
 /// Number of leg joints of the robot (left leg then right leg).
 pub const LEG_JOINTS: usize = 2 * JOINTS_PER_LEG;
+/// Index of `ankle_pitch` within a leg's joints.
+pub const ANKLE_PITCH: usize = 4;
+/// Index of `ankle_roll` within a leg's joints.
+pub const ANKLE_ROLL: usize = 5;
 
 /// Joint names as used in logs and CSV files (left leg, then right leg).
 pub const JOINT_NAMES: [&str; LEG_JOINTS] = [

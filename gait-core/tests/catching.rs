@@ -1,8 +1,9 @@
 //! The catching step (`gait_core::catching`, A1–A7): the capture-point error from the trunk's
 //! attitude, the landing move beyond the deadband within reach and never inward, the rate
-//! limit, the early touchdown, the body's offset, and the offsets on a sample.
+//! limit, the early touchdown, the body's offset, and the offsets on a sample; the swing
+//! sole kept level (A10): its ramps, its bound and the joints it turns.
 
-use gait_core::catching::{StepAdaptation, StepAdapter, MAX_OFFSET_M};
+use gait_core::catching::{StepAdaptation, StepAdapter, MAX_LEVEL_RAD, MAX_OFFSET_M};
 use gait_core::swing::FootSample;
 use gait_core::{GaitSample, Robot, Side, SupportPhase};
 use proptest::prelude::*;
@@ -256,7 +257,7 @@ proptest! {
     /// offsets.
     #[test]
     fn any_configuration_is_total(
-        vals in prop::array::uniform9(prop_oneof![
+        vals in prop::array::uniform12(prop_oneof![
             -1.0f32..1.0, Just(f32::NAN), Just(f32::INFINITY), Just(f32::NEG_INFINITY)
         ]),
         dt in prop_oneof![0.0f32..0.1, Just(f32::NAN), Just(-1.0f32)],
@@ -272,6 +273,9 @@ proptest! {
             body_speed_m_s: vals[7],
             baseline_s: vals[8],
             touchdown_share: vals[0],
+            level_pitch: vals[9],
+            level_roll: vals[10],
+            level_ramp_s: vals[11],
         };
         let mut a = StepAdapter::new(&cfg, &Robot::reference(), z_c, dt);
         for s in [single_left(), sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.01])] {
@@ -282,6 +286,148 @@ proptest! {
         }
         for d in a.foot_offsets().iter().chain([&a.body_offset()]) {
             prop_assert!(d.iter().all(|v| v.is_finite() && v.abs() <= MAX_OFFSET_M));
+        }
+        for c in a.sole_level() {
+            prop_assert!(c.iter().all(|v| v.is_finite() && v.abs() <= MAX_LEVEL_RAD));
+        }
+    }
+}
+
+/// The levelling alone (the catching step's gain 0), gains k_θ, k_φ.
+fn levelling(k_pitch: f32, k_roll: f32) -> StepAdaptation {
+    StepAdaptation {
+        gain: 0.0,
+        level_pitch: k_pitch,
+        level_roll: k_roll,
+        ..StepAdaptation::DEFAULT
+    }
+}
+
+fn close(a: [f32; 2], b: [f32; 2]) -> bool {
+    (a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6
+}
+
+#[test]
+fn the_swing_sole_turns_back_by_the_trunks_deviation_ramped_in_and_out() {
+    let cfg = levelling(1.0, 0.5);
+    // The adapter's first tick (upright, left single support) is the ramp's first.
+    let mut a = adapter(cfg);
+    let ramp_ticks = (cfg.level_ramp_s / DT).round() as usize;
+    assert_eq!(ramp_ticks, 20);
+    let (pitch, roll) = (-0.15f32, 0.08f32);
+    // The baseline stays upright: the tip's capture-point error is beyond the deadband.
+    assert!(cp_error_x(pitch, 0.0).abs() > cfg.deadband_m[0]);
+    for i in 2..=30 {
+        tilted(&mut a, [roll, pitch], [0.0, 0.0]);
+        let w = (i as f32 / ramp_ticks as f32).min(1.0);
+        let [left, right] = a.sole_level();
+        // The right leg swings: Δq = −k·w·(deviation); the stance leg keeps the plan's ankle.
+        assert!(
+            close(right, [-w * pitch, -0.5 * w * roll]),
+            "{i}: {right:?}"
+        );
+        assert_eq!(left, [0.0; 2]);
+    }
+    // Touchdown (double support): the correction ramps out over the same time.
+    let ds = sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.0]);
+    for j in 1..=25 {
+        a.update(&ds, Some([roll, pitch]), Some([0.0; 2]), NO_LOAD);
+        let w = (1.0 - j as f32 / ramp_ticks as f32).max(0.0);
+        assert!(
+            close(a.sole_level()[1], [-w * pitch, -0.5 * w * roll]),
+            "{j}"
+        );
+    }
+    assert_eq!(a.sole_level(), [[0.0; 2]; 2]);
+    // The catching step is off: nothing else moved.
+    assert!(!a.is_shifting());
+}
+
+#[test]
+fn the_levelling_turns_only_the_ankles_and_is_bounded() {
+    let mut a = adapter(levelling(1.0, 1.0));
+    // A trunk 0.5 rad back, 0.4 rad rolled: beyond the bound.
+    for _ in 0..40 {
+        tilted(&mut a, [0.4, -0.5], [0.0, 0.0]);
+    }
+    assert_eq!(a.sole_level()[1], [MAX_LEVEL_RAD, -MAX_LEVEL_RAD]);
+    let mut q = [0.1f32; 12];
+    a.apply_level(&mut q);
+    for (j, v) in q.iter().enumerate() {
+        let expected = match j {
+            10 => 0.1 + MAX_LEVEL_RAD,
+            11 => 0.1 - MAX_LEVEL_RAD,
+            _ => 0.1,
+        };
+        assert!((v - expected).abs() < 1e-6, "joint {j}: {v}");
+    }
+}
+
+#[test]
+fn a_lost_attitude_holds_the_last_deviation_while_the_weight_ramps() {
+    let mut a = adapter(levelling(1.0, 1.0));
+    for _ in 0..40 {
+        tilted(&mut a, [0.0, -0.1], [0.0, 0.0]);
+    }
+    let held = a.sole_level()[1];
+    assert!(close(held, [0.1, 0.0]), "{held:?}");
+    // The attitude is lost in the swing: the correction holds.
+    a.update(&single_left(), None, None, NO_LOAD);
+    assert_eq!(a.sole_level()[1], held);
+    // Lost through the touchdown: it ramps out on the held deviation (one tick's step).
+    let ds = sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.0]);
+    a.update(&ds, None, None, NO_LOAD);
+    assert!(close(a.sole_level()[1], [0.1 * 19.0 / 20.0, 0.0]));
+    // A non-finite attitude counts as lost.
+    a.update(&ds, Some([f32::NAN, 0.3]), Some([0.0; 2]), NO_LOAD);
+    assert!(close(a.sole_level()[1], [0.1 * 18.0 / 20.0, 0.0]));
+}
+
+#[test]
+fn off_or_zero_gains_never_level() {
+    for cfg in [StepAdaptation::OFF, levelling(0.0, 0.0)] {
+        let mut a = adapter(cfg);
+        for _ in 0..40 {
+            tilted(&mut a, [0.2, -0.2], [1.0, -1.0]);
+        }
+        assert_eq!(a.sole_level(), [[0.0; 2]; 2]);
+        let mut q = [0.2f32; 12];
+        a.apply_level(&mut q);
+        assert_eq!(q, [0.2f32; 12]);
+    }
+}
+
+proptest! {
+    /// Any attitude sequence, finite or not, in any phase: the corrections stay finite, within
+    /// the bound, and only the leg that swings (or has just landed) is turned.
+    #[test]
+    fn the_levelling_is_finite_and_bounded(
+        inputs in prop::collection::vec(
+            (prop::array::uniform2(prop_oneof![-2.0f32..2.0, Just(f32::NAN), Just(f32::INFINITY)]),
+             0u8..4),
+            1..200),
+    ) {
+        let mut a = adapter(StepAdaptation::DEFAULT);
+        let step = DT / StepAdaptation::DEFAULT.level_ramp_s;
+        let mut w = [0.0f32, step];
+        for ([r, p], phase) in inputs {
+            let (s, swing) = match phase {
+                0 => (single_left(), Some(1)),
+                1 => (sample(SupportPhase::Single(Side::Right), Some(Side::Right), [0.0, -0.05]), Some(0)),
+                2 => (sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.0]), None),
+                _ => (sample(SupportPhase::Standing, None, [0.0, 0.0]), None),
+            };
+            a.update(&s, Some([r, p]), Some([0.0, 0.0]), NO_LOAD);
+            for (i, wi) in w.iter_mut().enumerate() {
+                let target = if swing == Some(i) { 1.0 } else { 0.0 };
+                *wi += (target - *wi).clamp(-step, step);
+            }
+            for (c, wi) in a.sole_level().iter().zip(w) {
+                prop_assert!(c.iter().all(|v| v.is_finite() && v.abs() <= MAX_LEVEL_RAD));
+                if wi < 1e-6 {
+                    prop_assert_eq!(*c, [0.0; 2]);
+                }
+            }
         }
     }
 }

@@ -88,8 +88,8 @@ pub fn variants() -> [Variant; 6] {
 }
 
 /// The firmware's feedback switched off: no gyro damping, no compliance feed-forward and the
-/// servos' factory Position I Gain, no catching step (the paper's open loop, as in
-/// `plans/table2-paper.toml` but at the plan's timing).
+/// servos' factory Position I Gain, no catching step, no swing sole levelling (the paper's open
+/// loop, as in `plans/table2-paper.toml` but at the plan's timing).
 pub const OPEN_LOOP: &[&str] = &[
     "gyro_ankle=0",
     "gyro_hip=0",
@@ -98,7 +98,12 @@ pub const OPEN_LOOP: &[&str] = &[
     "servo_i_roll=0",
     "servo_i_hip_roll=0",
     "catch_gain=0",
+    NO_LEVELLING[0],
+    NO_LEVELLING[1],
 ];
+
+/// The swing sole's levelling off (the ablation's runs before "+sole levelling").
+const NO_LEVELLING: [&str; 2] = ["catch_level_pitch=0", "catch_level_roll=0"];
 
 /// The servos' compliance handling off: no feed-forward of their sag, the factory Position I
 /// Gain (the ablation's runs before "+compliance").
@@ -113,9 +118,9 @@ const NO_COMPLIANCE: [&str; 4] = [
 /// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
 /// the ankles, at the hips (the gains are the firmware's defaults), the servos' compliance
 /// handling (the feed-forward of their sag and the roll servos' Position I Gain), the catching
-/// step (this run is the firmware's default), whole-body compensation of the swing leg, the
-/// DCM/ZMP stabilizer.
-pub fn ablation() -> [Variant; 9] {
+/// step, the swing sole kept level (this run is the firmware's default), whole-body
+/// compensation of the swing leg, the DCM/ZMP stabilizer.
+pub fn ablation() -> [Variant; 10] {
     let v = |name, model, compensation, stabilizer, tokens| Variant {
         name,
         model,
@@ -142,6 +147,8 @@ pub fn ablation() -> [Variant; 9] {
                 NO_COMPLIANCE[2],
                 NO_COMPLIANCE[3],
                 "catch_gain=0",
+                NO_LEVELLING[0],
+                NO_LEVELLING[1],
             ],
         ),
         v(
@@ -155,10 +162,19 @@ pub fn ablation() -> [Variant; 9] {
                 NO_COMPLIANCE[2],
                 NO_COMPLIANCE[3],
                 "catch_gain=0",
+                NO_LEVELLING[0],
+                NO_LEVELLING[1],
             ],
         ),
-        v("+compliance", Tlipfm, Plain, false, &["catch_gain=0"]),
-        v("+catching step (default)", Tlipfm, Plain, false, &[]),
+        v(
+            "+compliance",
+            Tlipfm,
+            Plain,
+            false,
+            &["catch_gain=0", NO_LEVELLING[0], NO_LEVELLING[1]],
+        ),
+        v("+catching step", Tlipfm, Plain, false, &NO_LEVELLING),
+        v("+sole levelling (default)", Tlipfm, Plain, false, &[]),
         v("+wholebody", Tlipfm, Wholebody, false, &[]),
         v("+stabilizer", Tlipfm, Wholebody, true, &[]),
     ]
@@ -910,18 +926,19 @@ pub(crate) mod tests {
                 c.gyro_feedback.hip > 0.0,
                 c.compliance.roll > 0.0,
                 c.step_adaptation.is_on(),
+                c.step_adaptation.is_levelling(),
                 c.compensation == walker_contract::config::Compensation::WholeBody,
                 c.stabilizer_on,
             ]
         };
         for c in &cfgs[..3] {
-            assert_eq!(parts(c), [false; 6]);
+            assert_eq!(parts(c), [false; 7]);
         }
         for w in cfgs[2..].windows(2) {
             let (a, b) = (parts(&w[0]), parts(&w[1]));
-            let added: Vec<usize> = (0..6).filter(|&i| b[i] && !a[i]).collect();
+            let added: Vec<usize> = (0..7).filter(|&i| b[i] && !a[i]).collect();
             assert_eq!(added.len(), 1, "{a:?} -> {b:?}");
-            assert!((0..6).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
+            assert!((0..7).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
         }
         let default_run = ablation()
             .iter()
@@ -929,7 +946,7 @@ pub(crate) mod tests {
             .unwrap();
         let base = firmware_config(&fil::firmware_tokens(&spec).unwrap()).unwrap();
         assert_eq!(parts(&cfgs[default_run]), parts(&base));
-        assert_eq!(parts(&base), [true, true, true, true, false, false]);
+        assert_eq!(parts(&base), [true, true, true, true, true, false, false]);
     }
 
     #[test]

@@ -301,6 +301,8 @@ const STAB: &[&str] = &[
     "compliance_roll=0",
     "compliance_pitch=0",
     "catch_gain=0",
+    "catch_level_pitch=0",
+    "catch_level_roll=0",
 ];
 
 /// The walk with the stabilizer stayed bounded: plan done (exit 0), no fall in the simulator,
@@ -398,12 +400,21 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_m
         let cfg = firmware_config(&tokens).unwrap();
         // The idealised robot's servos hold their targets under any load (no sag), so the
         // firmware's compliance feed-forward (a predicted sag added to the roll targets) would
-        // only tilt it: off here, as on any robot without servo compliance.
+        // only tilt it: off here, as on any robot without servo compliance. So is the swing
+        // sole's levelling: this body never tilts (0.0°), so what it would level against is the
+        // attitude filter's error under the walk's accelerations, and the bolted-down landing
+        // sole keeps the tilt it was given (with it on: pelvis pitch up to 0.017 rad, the ZMP
+        // outside the soles in 41 ticks, 98.2 % inside).
         let (r, log) = fil(
             &format!("goal-{}", v.name),
             spec,
             sim.clone(),
-            &["compliance_roll=0", "compliance_pitch=0"],
+            &[
+                "compliance_roll=0",
+                "compliance_pitch=0",
+                "catch_level_pitch=0",
+                "catch_level_roll=0",
+            ],
         );
         assert_eq!(r.exit_code, Some(0), "{}", v.name);
         assert_eq!(stop_reason(&log), Some(StopReason::PlanDone), "{}", v.name);
@@ -532,19 +543,21 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
     // at the firmware's default timing, a 1.6 N·s backward push on the torso at 5.9 s, early
     // in the single support on the left foot. The right foot's landing moves back by the
     // capture-point error beyond the ankles' deadband (logged as `CatchStep` records) and the
-    // walk completes; with `catch_gain=0` the same push makes the robot fall (exit 13). (With
-    // the roll servos' integral of the defaults since 2026-11-26 the robot survives 1.5 N·s
-    // there without the catching step; 1.75 N·s fells it with or without.)
+    // walk completes; with `catch_gain=0` the same push makes the robot fall (exit 13), the
+    // swing sole's levelling (on in both runs) does not save it alone. (With the roll servos'
+    // integral of the defaults since 2026-11-26 the robot survives 1.5 N·s there without the
+    // catching step; 1.75 N·s fells it with or without.)
     use walker_contract::record::FaultKind;
     let sim = pushed("5.9:1.6:180");
     let spec = WalkSpec::default();
     let (r, log) = fil("catch-push", spec.clone(), sim.clone(), &[]);
-    // The plan completes without a fall; the push costs distance (0.221 of 0.260 m).
+    // The plan completes without a fall; the push costs distance (0.208 of 0.260 m; 0.221
+    // before the swing sole's levelling, which turns the caught foot's sole back as it lands).
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
     assert_eq!(r.exit_code, Some(0), "{}", w.line());
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
     assert_eq!(w.fell_at, None, "{}", w.line());
-    assert!(w.walked > 0.8 * w.planned, "{}", w.line());
+    assert!(w.walked > 0.75 * w.planned, "{}", w.line());
     let catches: Vec<(u8, i32)> = log
         .events
         .iter()
@@ -562,6 +575,35 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
     );
     assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
     let (r, log) = fil("catch-push-off", spec, sim, &["catch_gain=0"]);
+    assert_fell(&r, &log);
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn the_level_swing_sole_survives_the_backward_push_that_fells_the_robot_without_it() {
+    // The closed-loop issue's sagittal push goal: 1.5 N·s backward on the torso at 6 s, late
+    // in the single support on the left foot (the swing foot lands ≈ 0.2 s later). With the
+    // defaults the swing sole is kept level (gait-core `catching` A10) and the catching step
+    // moves its landing back: the walk completes. With the levelling off the swing foot, its
+    // sole pitched back with the trunk, lands heel first short of the catch and the robot
+    // rolls back over both heels and falls (exit 13); with the catching step off it falls too
+    // (docs/beyond.md, "The swing sole kept level").
+    let sim = pushed("6:1.5:180");
+    let spec = WalkSpec::default();
+    let (r, log) = fil("level-push", spec.clone(), sim.clone(), &[]);
+    // The push costs distance (0.226 of 0.260 m).
+    let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
+    assert_eq!(r.exit_code, Some(0), "{}", w.line());
+    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
+    assert_eq!(w.fell_at, None, "{}", w.line());
+    assert!(w.walked > 0.8 * w.planned, "{}", w.line());
+    assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
+    let (r, log) = fil(
+        "level-push-off",
+        spec,
+        sim,
+        &["catch_level_pitch=0", "catch_level_roll=0"],
+    );
     assert_fell(&r, &log);
 }
 

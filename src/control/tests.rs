@@ -1927,26 +1927,20 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
     assert_goals_in_limits(&b.inner);
 }
 
-/// The catching step (`catch_gain`, gait-core `catching` A1–A7): the IMU reports the trunk
-/// tipping backward (−1.5 rad/s for 60 ms) early in a left swing. Against the same run with
-/// `catch_gain=0` (its τ = J·φ̈ sees the tip too): the goals are the same bits until the tip; then the left sole moves back
-/// relative to the right one (FK of the goal ticks, pelvis frame) by at most `catch_max_x`,
-/// never forward, at most `catch_speed`·dt a tick; the swing logs its largest move as two
-/// `CatchStep` records (id 1·16 + 0: backward, within the reach; id 17: sideways 0, the lateral
-/// catch is off by default); the walk completes within the joint limits.
-#[test]
-fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
+/// The trunk's backward tip of the push tests: pitch rate, rad/s, and duration, µs.
+const TIP_RATE: f32 = -1.5;
+const TIP_US: u64 = 60_000;
+
+/// Two walks of the same plan with the IMU reporting a backward tip ([`TIP_RATE`] for
+/// [`TIP_US`]) 20 ms into the 4th right single support (the left foot swings): with `off`
+/// and with `on`, both completed. Also the records of `off` walked untipped and the tip's
+/// start, µs.
+fn tipped_in_a_left_swing(off: &Config, on: &Config) -> (FakeBoard, FakeBoard, Vec<Record>, u64) {
     use crate::fake_robot::ImuMotion;
-    use gait_core::Side;
-    let on = cfg_with("gyro_ankle=0 gyro_hip=0");
-    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
-    let sa = on.step_adaptation;
-    assert!(sa.gain > 0.0, "the catching step is on by default");
-    // The 4th right single support (the left foot swings), 20 ms in.
-    let mut plain = board(&off).with_imu_rate(0.0);
-    assert_eq!(run(&mut plain, &off), RunEnd::Stopped(StopReason::PlanDone));
-    let tr = ticks_of(&plain.records());
-    let starts: Vec<u64> = tr
+    let mut plain = board(off).with_imu_rate(0.0);
+    assert_eq!(run(&mut plain, off), RunEnd::Stopped(StopReason::PlanDone));
+    let records = plain.records();
+    let starts: Vec<u64> = ticks_of(&records)
         .windows(2)
         .filter(|w| {
             w[0].phase != LoggedPhase::SingleRight && w[1].phase == LoggedPhase::SingleRight
@@ -1956,17 +1950,36 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
     assert!(starts.len() >= 5, "{} right single supports", starts.len());
     let from_us = starts[3] + 20_000;
     let tip = ImuMotion::Tip {
-        rate: -1.5,
+        rate: TIP_RATE,
         from_us,
-        until_us: from_us + 60_000,
+        until_us: from_us + TIP_US,
     };
-    let mut a = board(&off).with_imu_rate(0.0);
+    let mut a = board(off).with_imu_rate(0.0);
     a.imu_motion = tip;
-    let mut b = board(&on).with_imu_rate(0.0);
+    let mut b = board(on).with_imu_rate(0.0);
     b.imu_motion = tip;
-    assert_eq!(run(&mut a, &off), RunEnd::Stopped(StopReason::PlanDone));
-    assert_eq!(run(&mut b, &on), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(run(&mut a, off), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(run(&mut b, on), RunEnd::Stopped(StopReason::PlanDone));
     assert_eq!(a.goals.len(), b.goals.len());
+    (a, b, records, from_us)
+}
+
+/// The catching step (`catch_gain`, gait-core `catching` A1–A7): the IMU reports the trunk
+/// tipping backward (−1.5 rad/s for 60 ms) early in a left swing. Against the same run with
+/// `catch_gain=0` (its τ = J·φ̈ sees the tip too): the goals are the same bits until the tip; then the left sole moves back
+/// relative to the right one (FK of the goal ticks, pelvis frame) by at most `catch_max_x`,
+/// never forward, at most `catch_speed`·dt a tick; the swing logs its largest move as two
+/// `CatchStep` records (id 1·16 + 0: backward, within the reach; id 17: sideways 0, the lateral
+/// catch is off by default); the walk completes within the joint limits.
+#[test]
+fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
+    use gait_core::Side;
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0");
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let sa = on.step_adaptation;
+    assert!(sa.gain > 0.0, "the catching step is on by default");
+    let (a, b, plain_records, from_us) = tipped_in_a_left_swing(&off, &on);
+    let tr = ticks_of(&plain_records);
     let stride = |g: &[i32; 12]| sole_of_goals(g, Side::Left).x - sole_of_goals(g, Side::Right).x;
     // One goal tick is 1.5 mrad: ≈ 0.3 mm of sole through a 0.2 m leg, for each sole.
     let tol = 1.2e-3;
@@ -2013,10 +2026,98 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
     assert_eq!(catches[0].0, 16);
     assert!((-max_um..=-10_000).contains(&catches[0].1), "{catches:?}");
     assert_eq!(catches[1], (17, 0));
-    assert!(plain
-        .records()
+    assert!(plain_records
         .iter()
         .all(|r| !matches!(r, Record::Fault(f) if f.kind == FaultKind::CatchStep)));
+    assert_goals_in_limits(&b);
+}
+
+/// The swing sole kept level (`catch_level_pitch`, `catch_level_roll`, gait-core `catching`
+/// A10), the catching step off: the IMU reports the trunk tipping backward (−1.5 rad/s for
+/// 60 ms, ≈ 0.09 rad) early in a left swing. Against the same run without the levelling: the
+/// goals are the same bits until the tip, then only the ankle joints differ; the swinging left
+/// ankle pitches the toe down (Δq = −(θ − θ̄) > 0) by up to the tip's angle, ramped in no faster
+/// than the tip plus the ramp allows, never beyond the bound; the walk completes within the
+/// joint limits.
+#[test]
+fn a_backward_tip_in_a_swing_turns_only_the_swing_ankle_back_to_level() {
+    use gait_core::catching::MAX_LEVEL_RAD;
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let off =
+        cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_level_pitch=0 catch_level_roll=0");
+    let sa = on.step_adaptation;
+    assert!(
+        sa.level_pitch == 1.0 && sa.level_roll == 1.0,
+        "the levelling is on by default"
+    );
+    let (a, b, plain_records, from_us) = tipped_in_a_left_swing(&off, &on);
+    let tr = ticks_of(&plain_records);
+    let map = JointMap::from_robot(&Robot::reference());
+    let rad = |g: &[i32; 12], j: usize| f64::from(map.rad_of_tick(j, g[j]));
+    let tipped = f64::from(-TIP_RATE) * TIP_US as f64 * 1e-6;
+    let dt = on.dt_s();
+    // A goal tick is 1.5 mrad.
+    let tol = 2e-3;
+    // Goal k answers the logged tick k − offset; the tipped swing ends at `landing_us`.
+    let offset = a.goals.len() - tr.len();
+    let landing_us = tr
+        .iter()
+        .find(|t| u64::from(t.time_us) > from_us && t.phase != LoggedPhase::SingleRight)
+        .map(|t| u64::from(t.time_us))
+        .expect("the tipped swing ends");
+    let ramp_us = (sa.level_ramp_s * 1e6) as u64;
+    let mut first = None;
+    let (mut peak, mut prev) = (0.0f64, 0.0f64);
+    for (k, (ga, gb)) in a.goals.iter().zip(&b.goals).enumerate() {
+        for j in 0..12 {
+            if !matches!(j, 4 | 5 | 10 | 11) {
+                assert_eq!(ga[j], gb[j], "goal {k}: joint {j} moved");
+            }
+        }
+        if ga != gb && first.is_none() {
+            first = Some(k);
+        }
+        // The left ankle pitch: toe down through the tipped swing and its ramp-out, up to the
+        // tip's angle and the bound. (Later the baseline, which learnt part of the tip while
+        // the attitude filter brought the trunk back, may ask a little of the other sign.)
+        let d = rad(gb, 4) - rad(ga, 4);
+        let t_us = k
+            .checked_sub(offset)
+            .and_then(|i| tr.get(i))
+            .map_or(0, |t| u64::from(t.time_us));
+        assert!(
+            d.abs() <= tipped.min(f64::from(MAX_LEVEL_RAD)) + tol,
+            "goal {k}: {d} rad"
+        );
+        if t_us < landing_us + ramp_us {
+            assert!(d >= -tol, "goal {k}: {d} rad in the tipped swing");
+        }
+        // Per tick: at most the tip's rate plus the ramp's step of the whole angle.
+        let step = f64::from(-TIP_RATE) * dt + tipped * dt / f64::from(sa.level_ramp_s);
+        assert!((d - prev).abs() <= step + tol, "goal {k}: {prev} -> {d}");
+        peak = peak.max(d);
+        prev = d;
+        // The ankle rolls: the tip has no roll.
+        for j in [5, 11] {
+            assert!(
+                (rad(gb, j) - rad(ga, j)).abs() <= tol,
+                "goal {k}: joint {j}"
+            );
+        }
+    }
+    assert!(
+        peak > 0.6 * tipped,
+        "the swing ankle turned {peak} rad only"
+    );
+    let first = first.expect("the levelling changed the goals");
+    let tip_goal = a.goals.len()
+        - tr.iter()
+            .filter(|t| u64::from(t.time_us) >= from_us)
+            .count();
+    assert!(
+        first + 2 >= tip_goal,
+        "goal {first} changed before the tip ({tip_goal})"
+    );
     assert_goals_in_limits(&b);
 }
 
@@ -2146,7 +2247,10 @@ fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
     // No feed-forwards and no feedback: the fake's attitude follows its joints, so the gyro
     // feedback would move the goals apart from the IK's (the survey carries the new leg back
     // by the IK's change over a tick, O3′).
-    let on = cfg_with("compliance_roll=0 compliance_pitch=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with(
+        "compliance_roll=0 compliance_pitch=0 gyro_ankle=0 gyro_hip=0 catch_gain=0 \
+         catch_level_pitch=0 catch_level_roll=0",
+    );
     assert!(on.sole_poses_measured, "on by default");
     let off = Config {
         sole_poses_measured: false,
