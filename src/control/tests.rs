@@ -1680,12 +1680,13 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
 #[test]
 fn fixed_point_loop_agrees_with_the_f32_loop() {
     let walk = |arithmetic| {
-        // The compliance feed-forward and the leg odometry are f32 only (off with
-        // `math=fixed`): off in both.
+        // The compliance feed-forward, the leg odometry and the catching step with the swing
+        // sole's levelling are f32 only (off with `math=fixed`): off in both.
         let cfg = Config {
             arithmetic,
             compliance: Compliance::OFF,
             sole_poses_measured: false,
+            step_adaptation: gait_core::catching::StepAdaptation::OFF,
             ..autostart_config()
         };
         let mut b = board(&cfg);
