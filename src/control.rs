@@ -45,7 +45,9 @@
 //!    `CatchStep` records when its single support ends. The same state keeps the swing sole
 //!    level (`catch_level_pitch`, `catch_level_roll`, default on; `catching` A10): the swing
 //!    leg's ankle pitch and roll targets turn back by the trunk's deviation from its baseline,
-//!    added after the compliance feed-forward and the gyro damping.
+//!    added after the compliance feed-forward and the gyro damping. With `catch_hold_max` > 0
+//!    (opt-in, `catching` A11) the walk's clock stands still for a tick (the same samples
+//!    again) while a caught swing foot is still on its way to its landing place.
 //!    With `servo_lead = Δ` (default 0) the targets come from the gait sample Δ ahead
 //!    (a delay line of [`MAX_LEAD_TICKS`] samples) while the reference, the log, the stabilizer
 //!    and the gyro feedback's support phase stay at the present sample: a feed-forward of the
@@ -1268,7 +1270,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
         match action {
             Action::Run => {
                 // The walk's mode says what moves the legs ([`modes`]).
-                let q = match walk.tick(fixed_math, tau, tau_mnm) {
+                let hold = !fixed_math && catching.wants_hold();
+                let q = match walk.tick(fixed_math, tau, tau_mnm, hold) {
                     Motion::Ramp(q) => Some(Goal::Rad(q)),
                     Motion::Gait { k, footstep } => 'sample: {
                         // The online walk's sample (no lead) or the plan's (`servo_lead` ahead).

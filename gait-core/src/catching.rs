@@ -67,15 +67,27 @@
 //! missing attitude holds the last deviation while w ramps. The levelling runs with the
 //! catching step off (`gain` = 0) too, on the same baseline (A2).
 //!
-//! The step's timing is the plan's: a catching step changes where the foot lands, not when
-//! (a shorter swing would need the CoM re-planned, which the precomputed TLIPFM segments
-//! cannot do mid-step). A missing or non-finite attitude or gyro sample gives e = 0 (no catch,
+//! # The landing waits for the caught foot (opt-in)
+//! The servos lag ≈ 0.1 s, so a catch asked late in a swing is not where the plan sets the
+//! foot down. With a hold budget H > 0 the plan's clock stands still (the firmware takes the
+//! same sample again) for the next tick while
+//!
+//! ```text
+//!   z_swing < z_h  and  ( |d*_swing − d_swing|∞ > ε  or  0 < t_arrived < T_s )  and  held < H  (A11)
+//! ```
+//!
+//! (the planned swing sole below z_h = [`HOLD_HEIGHT_M`] and not rising — no hold at lift-off —,
+//! the swing foot's offset more than ε = [`HOLD_GAP_M`] from (A5) or, having moved in this
+//! single support, arrived less than the settling time T_s ago); the budget is per single
+//! support and refills outside single support. A swing that carries the touchdown load
+//! never holds. The clock only stands still: a shorter swing would need the CoM re-planned,
+//! which the precomputed TLIPFM segments cannot do mid-step. A missing or non-finite attitude or gyro sample gives e = 0 (no catch,
 //! offsets hold; non-finite inputs never reach the state). g, the weight and every per-tick
 //! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
 //! and the tick period once, in [`StepAdapter::new`]. Cost without a push: the error (A1), the
 //! baseline (A2), the levelling (A10) and the deadband test, then an early return (measured on
 //! the M7 control tick: +436 instructions on average for the catching step, BENCHMARKS.md;
-//! the levelling added 167 more, 19,657 → 19,824).
+//! the levelling added 167 more, 19,657 → 19,824; the clock hold's checks 10 more, 19,834).
 
 use crate::robot::{Robot, Side, ANKLE_PITCH, ANKLE_ROLL, JOINTS_PER_LEG, LEG_JOINTS};
 use crate::sampler::{GaitSample, SupportPhase};
@@ -85,6 +97,27 @@ pub const MAX_OFFSET_M: f32 = 2.0;
 
 /// Largest correction of an ankle joint by the swing sole's levelling (A10), rad.
 pub const MAX_LEVEL_RAD: f32 = 0.3;
+
+/// Planned swing sole height below which the clock holds for a foot still on its way (A11), m.
+pub const HOLD_HEIGHT_M: f32 = 0.01;
+
+/// Distance of the swing foot's offset from its target beyond which it is still on its way
+/// (A11, ε), m.
+pub const HOLD_GAP_M: f32 = 1e-4;
+
+/// Whole ticks of `s` seconds at `dt_s` (0 when not `ok` or not finite).
+fn ticks_of(s: f32, dt_s: f32, ok: bool) -> u32 {
+    if !ok {
+        return 0;
+    }
+    let n = s / dt_s;
+    if n.is_finite() && n > 0.0 {
+        // Saturating float-to-int cast (`as` saturates; no panic).
+        (n + 0.5) as u32
+    } else {
+        0
+    }
+}
 
 /// Gains and limits of the catching step (SI units; module docs (A1)–(A7)).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -118,6 +151,12 @@ pub struct StepAdaptation {
     /// Time T_r over which the levelling ramps in after lift-off and out after touchdown, s
     /// (A10).
     pub level_ramp_s: f32,
+    /// Longest hold of the plan's clock in one single support while the caught swing foot is
+    /// still on its way, s (A11; 0 = off).
+    pub hold_max_s: f32,
+    /// Time the held clock waits after the swing foot's offset arrived (the servos' lag), s
+    /// (A11).
+    pub hold_settle_s: f32,
 }
 
 impl StepAdaptation {
@@ -134,7 +173,8 @@ impl StepAdaptation {
     /// MuJoCo robot a 1.5 N·s push to the right during left single support walked without it
     /// and fell with 4 cm), 0.5 m/s, a 2 s baseline, touchdown at a fifth of the weight; the
     /// swing sole kept level in pitch and roll, ramped over 0.1 s (`docs/beyond.md`, "The
-    /// swing sole kept level").
+    /// swing sole kept level"); the clock hold off (A11: on the MuJoCo robot it walked two
+    /// more of ten backward pushes but fell a 1.75 N·s push to the right the default walks).
     pub const DEFAULT: StepAdaptation = StepAdaptation {
         gain: 1.0,
         deadband_m: [0.02, 0.02],
@@ -148,6 +188,8 @@ impl StepAdaptation {
         level_pitch: 1.0,
         level_roll: 1.0,
         level_ramp_s: 0.1,
+        hold_max_s: 0.0,
+        hold_settle_s: 0.1,
     };
 
     /// Whether the step adaptation runs (finite positive gain).
@@ -190,6 +232,20 @@ pub struct StepAdapter {
     level_dev: [f32; 2],
     /// The levelling's ankle corrections per leg (left, right): (pitch, roll), rad (A10).
     level: [[f32; 2]; 2],
+    /// Ticks the clock may still be held in this single support (A11).
+    hold_left: u32,
+    /// Largest hold per single support, ticks (A11).
+    hold_max_ticks: u32,
+    /// Settling time after the offset arrived, ticks (A11).
+    settle_ticks: u32,
+    /// Ticks since the swing foot's offset arrived at its target (A11).
+    settled: u32,
+    /// Whether the next tick holds the plan's clock (A11).
+    hold: bool,
+    /// Whether the swing foot's offset moved in this single support (A11).
+    moving: bool,
+    /// The swing sole's planned height at the last update, m (NaN outside single support).
+    swing_z: f32,
 }
 
 impl StepAdapter {
@@ -214,6 +270,8 @@ impl StepAdapter {
             level_pitch: limit(cfg.level_pitch),
             level_roll: limit(cfg.level_roll),
             level_ramp_s: limit(cfg.level_ramp_s),
+            hold_max_s: limit(cfg.hold_max_s),
+            hold_settle_s: limit(cfg.hold_settle_s),
             ..*cfg
         };
         if !ok {
@@ -253,7 +311,20 @@ impl StepAdapter {
             },
             level_dev: [0.0; 2],
             level: [[0.0; 2]; 2],
+            hold_left: ticks_of(cfg.hold_max_s, dt_s, ok),
+            hold_max_ticks: ticks_of(cfg.hold_max_s, dt_s, ok),
+            settle_ticks: ticks_of(cfg.hold_settle_s, dt_s, ok),
+            settled: 0,
+            hold: false,
+            moving: false,
+            swing_z: f32::NAN,
         }
+    }
+
+    /// Whether the plan's clock should stand still for the next tick (A11): the caught swing
+    /// foot is still on its way (or settling) as the plan would set it down.
+    pub fn wants_hold(&self) -> bool {
+        self.hold
     }
 
     /// The swing sole's levelling (A10): the ankle corrections (pitch, roll) of the left and
@@ -347,12 +418,21 @@ impl StepAdapter {
             _ => [0.0; 2],
         };
         self.level_sole(sample.phase);
+        self.hold = false;
+        if !matches!(sample.phase, SupportPhase::Single(_)) {
+            self.hold_left = self.hold_max_ticks;
+            self.settled = 0;
+            self.moving = false;
+            self.swing_z = f32::NAN;
+        }
         // Inside the deadband with every offset at 0 nothing moves: the common tick ends here.
         if self.error[0].abs() <= m[0] && self.error[1].abs() <= m[1] && !self.is_shifting() {
             return [0.0; 2];
         }
         let mut asked = [0.0; 2];
         let mut targets = self.feet;
+        // (A11): the swing side and its planned sole height, while it has not landed.
+        let mut swing_hold: Option<(Side, f32)> = None;
         let body_target = match (sample.phase, sample.support_foot) {
             (SupportPhase::Single(stance), _) => {
                 let swing = stance.other();
@@ -371,6 +451,11 @@ impl StepAdapter {
                     Side::Right => (self.feet[1], loads_n[0], sample.feet[1].yaw),
                 };
                 let landed = swing_load > self.touchdown_n;
+                let swing_z = match swing {
+                    Side::Left => sample.feet[0].z,
+                    Side::Right => sample.feet[1].z,
+                };
+                swing_hold = (!landed).then_some((swing, swing_z));
                 if !landed {
                     // (A5): the stance foot's heading turns the trunk frame into the plan's
                     // (no sine and cosine while there is nothing to turn).
@@ -413,6 +498,28 @@ impl StepAdapter {
         }
         if finite(&body_target) {
             self.body = toward(self.body, body_target, self.steps[1]);
+        }
+        // (A11)
+        if let Some((swing, z)) = swing_hold {
+            let gap = match (swing, self.feet, targets) {
+                (Side::Left, [d, _], [t, _]) | (Side::Right, [_, d], [_, t]) => {
+                    (t[0] - d[0]).abs().max((t[1] - d[1]).abs())
+                }
+            };
+            if gap > HOLD_GAP_M {
+                self.moving = true;
+                self.settled = 0;
+            } else {
+                self.settled = self.settled.saturating_add(1);
+            }
+            let waiting = gap > HOLD_GAP_M || (self.moving && self.settled < self.settle_ticks);
+            // Descending or held (not rising: no hold at lift-off); NaN compares false.
+            let landing = z < HOLD_HEIGHT_M && z <= self.swing_z;
+            self.swing_z = z;
+            if waiting && landing && self.hold_left > 0 {
+                self.hold = true;
+                self.hold_left -= 1;
+            }
         }
         asked
     }

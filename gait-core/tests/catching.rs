@@ -1,9 +1,11 @@
 //! The catching step (`gait_core::catching`, A1–A7): the capture-point error from the trunk's
 //! attitude, the landing move beyond the deadband within reach and never inward, the rate
 //! limit, the early touchdown, the body's offset, and the offsets on a sample; the swing
-//! sole kept level (A10): its ramps, its bound and the joints it turns.
+//! sole kept level (A10): its ramps, its bound and the joints it turns; the clock hold (A11).
 
-use gait_core::catching::{StepAdaptation, StepAdapter, MAX_LEVEL_RAD, MAX_OFFSET_M};
+use gait_core::catching::{
+    StepAdaptation, StepAdapter, HOLD_HEIGHT_M, MAX_LEVEL_RAD, MAX_OFFSET_M,
+};
 use gait_core::swing::FootSample;
 use gait_core::{GaitSample, Robot, Side, SupportPhase};
 use proptest::prelude::*;
@@ -276,6 +278,8 @@ proptest! {
             level_pitch: vals[9],
             level_roll: vals[10],
             level_ramp_s: vals[11],
+            hold_max_s: vals[3],
+            hold_settle_s: vals[6],
         };
         let mut a = StepAdapter::new(&cfg, &Robot::reference(), z_c, dt);
         for s in [single_left(), sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.01])] {
@@ -430,4 +434,94 @@ proptest! {
             }
         }
     }
+}
+
+/// Left single support with the right (swing) sole planned at `z`.
+fn swing_at(z: f32) -> GaitSample<f32> {
+    let mut s = single_left();
+    s.feet[1].z = z;
+    s
+}
+
+#[test]
+fn the_clock_holds_while_a_late_caught_foot_travels_then_settles_within_the_budget() {
+    let cfg = StepAdaptation {
+        hold_max_s: 0.5,
+        hold_settle_s: 0.05,
+        ..StepAdaptation::DEFAULT
+    };
+    let mut a = adapter(cfg);
+    let tip = ([0.0, -0.3], [0.0, -2.0]);
+    // High in the swing: the foot moves but the clock runs.
+    a.update(&swing_at(0.03), Some(tip.0), Some(tip.1), NO_LOAD);
+    assert!(a.is_shifting());
+    assert!(!a.wants_hold());
+    // Descending below z_h while the offset still moves (5 cm at 0.5 m/s: 20 ticks): held.
+    let low = swing_at(0.5 * HOLD_HEIGHT_M);
+    let (mut held, mut ticks) = (0, 0);
+    while ticks < 200 {
+        a.update(&low, Some(tip.0), Some(tip.1), NO_LOAD);
+        ticks += 1;
+        if !a.wants_hold() {
+            break;
+        }
+        held += 1;
+    }
+    // Travel (≤ 0.05 m at 0.5 m/s·dt a tick) plus the 0.05 s settling, within the budget.
+    let travel = (cfg.max_x_m / (cfg.speed_m_s * DT)).ceil() as i32;
+    let settle = (cfg.hold_settle_s / DT).round() as i32;
+    assert!(
+        held >= settle && held <= travel + settle + 1,
+        "held {held} ticks"
+    );
+    // The budget: 0.02 s lets it hold 4 ticks at most.
+    let mut b = adapter(StepAdaptation {
+        hold_max_s: 0.02,
+        ..cfg
+    });
+    b.update(&swing_at(0.03), Some(tip.0), Some(tip.1), NO_LOAD);
+    let holds = (0..50)
+        .filter(|_| {
+            b.update(&low, Some(tip.0), Some(tip.1), NO_LOAD);
+            b.wants_hold()
+        })
+        .count();
+    assert_eq!(holds, 4);
+}
+
+#[test]
+fn the_clock_never_holds_at_lift_off_off_by_default_or_after_touchdown() {
+    let tip = ([0.0, -0.3], [0.0, -2.0]);
+    // Off by default.
+    let mut a = adapter(StepAdaptation::DEFAULT);
+    assert_eq!(StepAdaptation::DEFAULT.hold_max_s, 0.0);
+    for z in [0.03, 0.005, 0.004] {
+        a.update(&swing_at(z), Some(tip.0), Some(tip.1), NO_LOAD);
+        assert!(!a.wants_hold());
+    }
+    let cfg = StepAdaptation {
+        hold_max_s: 0.5,
+        ..StepAdaptation::DEFAULT
+    };
+    // Rising from the ground (lift-off): no hold, though the foot travels.
+    let mut b = adapter(cfg);
+    for i in 0..10 {
+        b.update(
+            &swing_at(0.001 * i as f32),
+            Some(tip.0),
+            Some(tip.1),
+            NO_LOAD,
+        );
+        assert!(!b.wants_hold(), "tick {i}");
+    }
+    // A swing foot that carries a fifth of the weight has landed: no hold.
+    let mut c = adapter(cfg);
+    c.update(&swing_at(0.03), Some(tip.0), Some(tip.1), NO_LOAD);
+    let loaded = [0.0, 0.5 * weight_n()];
+    c.update(&swing_at(0.002), Some(tip.0), Some(tip.1), loaded);
+    assert!(!c.wants_hold());
+    // Double support: no hold, and the budget refills.
+    let ds = sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.0]);
+    c.update(&ds, Some(tip.0), Some(tip.1), NO_LOAD);
+    assert!(!c.wants_hold());
 }

@@ -378,7 +378,7 @@ impl Walk {
     }
 
     /// This tick's motion; the ramp's last tick hands over to the gait (Starting → Gait).
-    pub fn tick(&mut self, fixed_math: bool, tau: f32, tau_mnm: i32) -> Motion {
+    pub fn tick(&mut self, fixed_math: bool, tau: f32, tau_mnm: i32, hold: bool) -> Motion {
         match &mut self.mode {
             Mode::Starting(s) => {
                 let (q, done) = s.step();
@@ -390,6 +390,10 @@ impl Walk {
             Mode::Gait(walk_tick) => {
                 let k = *walk_tick;
                 *walk_tick = walk_tick.saturating_add(1);
+                if hold {
+                    // The plan's clock stands still: the same samples again.
+                    return Motion::Gait { k, footstep: None };
+                }
                 match &mut self.gait {
                     Gait::Online(o) => {
                         self.present = o.tick();
@@ -450,7 +454,7 @@ mod tests {
         assert_eq!(w.port_state(), PortState::Starting);
         for k in 0..ramp.ticks() {
             assert!(w.is_starting());
-            match w.tick(false, 0.0, 0) {
+            match w.tick(false, 0.0, 0, false) {
                 Motion::Ramp(q) => assert_eq!(q, ramp.at(k)),
                 m => panic!("tick {k}: {m:?}"),
             }
@@ -458,7 +462,7 @@ mod tests {
         assert!(!w.is_starting());
         assert_eq!(w.port_state(), PortState::Walking);
         for k in 0..3 {
-            match w.tick(false, 0.0, 0) {
+            match w.tick(false, 0.0, 0, false) {
                 Motion::Gait {
                     k: wk,
                     footstep: None,
@@ -474,6 +478,23 @@ mod tests {
         }
         assert!(!w.gait.plan_done());
         assert!(w.gait.online().is_none());
+        // A held tick (the catching step's clock hold) counts as a walk tick but hands out the
+        // same samples again; the next one goes on from there.
+        let (present, ahead) = (*w.present(), w.ahead().map(|a| a.f32));
+        match w.tick(false, 0.0, 0, true) {
+            Motion::Gait {
+                k: 3,
+                footstep: None,
+            } => {}
+            m => panic!("held tick: {m:?}"),
+        }
+        assert_eq!(*w.present(), present);
+        assert_eq!(w.ahead().map(|a| a.f32), ahead);
+        assert!(matches!(
+            w.tick(false, 0.0, 0, false),
+            Motion::Gait { k: 4, .. }
+        ));
+        assert_ne!(*w.present(), present);
     }
 
     #[test]
@@ -484,9 +505,9 @@ mod tests {
             Ramp::new([0.0; LEG_JOINTS], [0.0; LEG_JOINTS], 1),
             Gait::Online(o),
         );
-        assert!(matches!(w.tick(false, 0.0, 0), Motion::Ramp(_)));
+        assert!(matches!(w.tick(false, 0.0, 0, false), Motion::Ramp(_)));
         assert_eq!(w.port_state(), PortState::Standing);
-        match w.tick(false, 0.0, 0) {
+        match w.tick(false, 0.0, 0, false) {
             Motion::Gait {
                 k: 0,
                 footstep: None,
