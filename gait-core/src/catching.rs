@@ -81,8 +81,10 @@
 //! single support, arrived less than the settling time T_s ago); the budget is per single
 //! support and refills outside single support. A swing that carries the touchdown load
 //! never holds. The clock only stands still: a shorter swing would need the CoM re-planned,
-//! which the precomputed TLIPFM segments cannot do mid-step. A missing or non-finite attitude or gyro sample gives e = 0 (no catch,
-//! offsets hold; non-finite inputs never reach the state). g, the weight and every per-tick
+//! which the precomputed TLIPFM segments cannot do mid-step.
+//!
+//! A missing or non-finite attitude or gyro sample gives e = 0 (no catch, offsets hold;
+//! non-finite inputs never reach the state). g, the weight and every per-tick
 //! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
 //! and the tick period once, in [`StepAdapter::new`]. Cost without a push: the error (A1), the
 //! baseline (A2), the levelling (A10) and the deadband test, then an early return (measured on
@@ -173,8 +175,8 @@ impl StepAdaptation {
     /// MuJoCo robot a 1.5 N·s push to the right during left single support walked without it
     /// and fell with 4 cm), 0.5 m/s, a 2 s baseline, touchdown at a fifth of the weight; the
     /// swing sole kept level in pitch and roll, ramped over 0.1 s (`docs/beyond.md`, "The
-    /// swing sole kept level"); the clock hold off (A11: on the MuJoCo robot it walked two
-    /// more of ten backward pushes but fell a 1.75 N·s push to the right the default walks).
+    /// swing sole kept level"); the clock hold off (A11, opt-in: on the MuJoCo robot 0.15 s
+    /// walked one more of ten backward pushes; the full push table is not walked with it).
     pub const DEFAULT: StepAdaptation = StepAdaptation {
         gain: 1.0,
         deadband_m: [0.02, 0.02],
