@@ -377,7 +377,8 @@ impl Walk {
         }
     }
 
-    /// This tick's motion; the ramp's last tick hands over to the gait (Starting → Gait).
+    /// This tick's motion; the ramp's last tick hands over to the gait (Starting → Gait). With
+    /// `hold` a gait tick hands out the same samples again (gait-core `catching` A11).
     pub fn tick(&mut self, fixed_math: bool, tau: f32, tau_mnm: i32, hold: bool) -> Motion {
         match &mut self.mode {
             Mode::Starting(s) => {

@@ -1965,6 +1965,24 @@ fn tipped_in_a_left_swing(off: &Config, on: &Config) -> (FakeBoard, FakeBoard, V
     (a, b, records, from_us)
 }
 
+/// The first goal (of `goals` sent) that differs between the tipped runs, `first`, is not before
+/// the tip at `from_us` (the goals answer the logged ticks `tr`; 2 goals of slack).
+fn assert_nothing_moved_before_the_tip(
+    first: usize,
+    goals: usize,
+    tr: &[TickRecord],
+    from_us: u64,
+) {
+    let tip_goal = goals
+        - tr.iter()
+            .filter(|t| u64::from(t.time_us) >= from_us)
+            .count();
+    assert!(
+        first + 2 >= tip_goal,
+        "goal {first} changed before the tip ({tip_goal})"
+    );
+}
+
 /// The catching step (`catch_gain`, gait-core `catching` A1–A7): the IMU reports the trunk
 /// tipping backward (−1.5 rad/s for 60 ms) early in a left swing. Against the same run with
 /// `catch_gain=0` (its τ = J·φ̈ sees the tip too): the goals are the same bits until the tip; then the left sole moves back
@@ -2005,14 +2023,7 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
     assert!(back < -0.01, "the landing moved back by {back} m only");
     // Nothing moved before the tip.
     let first = first.expect("the catch changed the goals");
-    let tip_goal = a.goals.len()
-        - tr.iter()
-            .filter(|t| u64::from(t.time_us) >= from_us)
-            .count();
-    assert!(
-        first + 2 >= tip_goal,
-        "goal {first} changed before the tip ({tip_goal})"
-    );
+    assert_nothing_moved_before_the_tip(first, a.goals.len(), &tr, from_us);
     // The log: the swing's largest move.
     let catches: Vec<(u8, i32)> = b
         .records()
@@ -2111,14 +2122,7 @@ fn a_backward_tip_in_a_swing_turns_only_the_swing_ankle_back_to_level() {
         "the swing ankle turned {peak} rad only"
     );
     let first = first.expect("the levelling changed the goals");
-    let tip_goal = a.goals.len()
-        - tr.iter()
-            .filter(|t| u64::from(t.time_us) >= from_us)
-            .count();
-    assert!(
-        first + 2 >= tip_goal,
-        "goal {first} changed before the tip ({tip_goal})"
-    );
+    assert_nothing_moved_before_the_tip(first, a.goals.len(), &tr, from_us);
     assert_goals_in_limits(&b);
 }
 
