@@ -19,10 +19,6 @@ source scripts/setup.sh
 plan=${PLAN:-plans/table2.toml}
 models=${MODELS:-"lipm dlipm tlipfm"}
 feasibility=${FEASIBILITY:-off}
-# The firmware's feedback off, as plans/table2-paper.toml and the ablation's open loop
-# (host/src/beyond.rs OPEN_LOOP): no gyro damping, no compliance feed-forward, the servos'
-# factory Position I Gain, no catching step.
-open_loop="gyro_ankle=0 gyro_hip=0 compliance_roll=0 compliance_pitch=0 servo_i_roll=0 servo_i_hip_roll=0 catch_gain=0 catch_level_pitch=0 catch_level_roll=0"
 
 video=${VIDEO:-1}
 if [ "$video" = 1 ]; then
@@ -38,11 +34,14 @@ walker=target/$(rustc -vV | sed -n 's/^host: //p')/release/walker
 runs=()
 for model in $models; do
     echo
+    # `--open-loop`: the firmware's feedback off, as plans/table2-paper.toml and the ablation's
+    # open loop (host/src/beyond.rs OPEN_LOOP): no gyro damping, no compliance feed-forward,
+    # the servos' factory Position I Gain, no catching step, no swing sole levelling.
     echo "== $plan with $model, open loop as the paper: firmware in QEMU against the simulated robot"
     video_args=()
     [ "$video" = 1 ] && video_args=(--video "out/fil-$model/walk.mp4")
     "$walker" fil --plan "$plan" --model "$model" --out "out/fil-$model" \
-        --firmware-args "feasibility=$feasibility $open_loop" "${video_args[@]}"
+        --open-loop --firmware-args "feasibility=$feasibility" "${video_args[@]}"
     runs+=("$model=out/fil-$model/walk.log")
 done
 

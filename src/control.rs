@@ -46,7 +46,7 @@
 //!    level (`catch_level_pitch`, `catch_level_roll`, default on; `catching` A10): the swing
 //!    leg's ankle pitch and roll targets turn back by the trunk's deviation from its baseline,
 //!    added after the compliance feed-forward and the gyro damping. With `catch_hold_max` > 0
-//!    (opt-in, `catching` A11) the walk's clock stands still for a tick (the same samples
+//!    (default 0.15 s, `catching` A11) the walk's clock stands still for a tick (the same samples
 //!    again) while a caught swing foot is still on its way to its landing place.
 //!    With `servo_lead = Δ` (default 0) the targets come from the gait sample Δ ahead
 //!    (a delay line of [`MAX_LEAD_TICKS`] samples) while the reference, the log, the stabilizer

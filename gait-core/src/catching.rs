@@ -67,7 +67,7 @@
 //! missing attitude holds the last deviation while w ramps. The levelling runs with the
 //! catching step off (`gain` = 0) too, on the same baseline (A2).
 //!
-//! # The landing waits for the caught foot (opt-in)
+//! # The landing waits for the caught foot
 //! The servos lag ≈ 0.1 s, so a catch asked late in a swing is not where the plan sets the
 //! foot down. With a hold budget H > 0 the plan's clock stands still (the firmware takes the
 //! same sample again) for the next tick while
@@ -175,8 +175,9 @@ impl StepAdaptation {
     /// MuJoCo robot a 1.5 N·s push to the right during left single support walked without it
     /// and fell with 4 cm), 0.5 m/s, a 2 s baseline, touchdown at a fifth of the weight; the
     /// swing sole kept level in pitch and roll, ramped over 0.1 s (`docs/beyond.md`, "The
-    /// swing sole kept level"); the clock hold off (A11, opt-in: on the MuJoCo robot 0.15 s
-    /// walked one more of ten backward pushes; the full push table is not walked with it).
+    /// swing sole kept level"); the clock held up to 0.15 s per single support while a caught
+    /// foot is on its way (A11; on the MuJoCo robot one more of ten backward pushes walked,
+    /// the push table and every unpushed figure the same as without it).
     pub const DEFAULT: StepAdaptation = StepAdaptation {
         gain: 1.0,
         deadband_m: [0.02, 0.02],
@@ -190,7 +191,7 @@ impl StepAdaptation {
         level_pitch: 1.0,
         level_roll: 1.0,
         level_ramp_s: 0.1,
-        hold_max_s: 0.0,
+        hold_max_s: 0.15,
         hold_settle_s: 0.1,
     };
 

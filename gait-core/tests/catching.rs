@@ -490,14 +490,22 @@ fn the_clock_holds_while_a_late_caught_foot_travels_then_settles_within_the_budg
 }
 
 #[test]
-fn the_clock_never_holds_at_lift_off_off_by_default_or_after_touchdown() {
+fn the_clock_never_holds_at_lift_off_without_a_budget_or_after_touchdown() {
     let tip = ([0.0, -0.3], [0.0, -2.0]);
-    // Off by default.
-    let mut a = adapter(StepAdaptation::DEFAULT);
-    assert_eq!(StepAdaptation::DEFAULT.hold_max_s, 0.0);
-    for z in [0.03, 0.005, 0.004] {
-        a.update(&swing_at(z), Some(tip.0), Some(tip.1), NO_LOAD);
-        assert!(!a.wants_hold());
+    // Off with no budget; the default's 0.15 s holds the same caught foot on its way down.
+    let off = StepAdaptation {
+        hold_max_s: 0.0,
+        ..StepAdaptation::DEFAULT
+    };
+    assert_eq!(StepAdaptation::DEFAULT.hold_max_s, 0.15);
+    for (cfg, holds) in [(off, false), (StepAdaptation::DEFAULT, true)] {
+        let mut a = adapter(cfg);
+        let mut wants = Vec::new();
+        for z in [0.03, 0.005, 0.004] {
+            a.update(&swing_at(z), Some(tip.0), Some(tip.1), NO_LOAD);
+            wants.push(a.wants_hold());
+        }
+        assert_eq!(wants, [false, holds, holds], "{cfg:?}");
     }
     let cfg = StepAdaptation {
         hold_max_s: 0.5,

@@ -89,7 +89,9 @@ pub fn variants() -> [Variant; 6] {
 
 /// The firmware's feedback switched off: no gyro damping, no compliance feed-forward and the
 /// servos' factory Position I Gain, no catching step, no swing sole levelling (the paper's open
-/// loop, as in `plans/table2-paper.toml` but at the plan's timing).
+/// loop, as in `plans/table2-paper.toml` but at the plan's timing; `walker fil --open-loop`).
+/// In the ablation's order: each part's switches after those of the part added before it, so
+/// that the ablation's runs are its tails ([`still_off_from`]).
 pub const OPEN_LOOP: &[&str] = &[
     "gyro_ankle=0",
     "gyro_hip=0",
@@ -98,21 +100,19 @@ pub const OPEN_LOOP: &[&str] = &[
     "servo_i_roll=0",
     "servo_i_hip_roll=0",
     "catch_gain=0",
-    NO_LEVELLING[0],
-    NO_LEVELLING[1],
+    "catch_level_pitch=0",
+    "catch_level_roll=0",
 ];
 
-/// The swing sole's levelling off (the ablation's runs before "+sole levelling").
-const NO_LEVELLING: [&str; 2] = ["catch_level_pitch=0", "catch_level_roll=0"];
-
-/// The servos' compliance handling off: no feed-forward of their sag, the factory Position I
-/// Gain (the ablation's runs before "+compliance").
-const NO_COMPLIANCE: [&str; 4] = [
-    "compliance_roll=0",
-    "compliance_pitch=0",
-    "servo_i_roll=0",
-    "servo_i_hip_roll=0",
-];
+/// The tail of [`OPEN_LOOP`] from the switch `first` on: the parts not added yet when the
+/// ablation has added every part before it (empty if `first` is not a switch of it).
+fn still_off_from(first: &str) -> &'static [&'static str] {
+    let at = OPEN_LOOP
+        .iter()
+        .position(|t| *t == first)
+        .unwrap_or(OPEN_LOOP.len());
+    OPEN_LOOP.split_at(at).1
+}
 
 /// The ablation of the closed-loop issue (item 4), in table order: the paper's three models
 /// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
@@ -140,40 +140,29 @@ pub fn ablation() -> [Variant; 10] {
             Tlipfm,
             Plain,
             false,
-            &[
-                "gyro_hip=0",
-                NO_COMPLIANCE[0],
-                NO_COMPLIANCE[1],
-                NO_COMPLIANCE[2],
-                NO_COMPLIANCE[3],
-                "catch_gain=0",
-                NO_LEVELLING[0],
-                NO_LEVELLING[1],
-            ],
+            still_off_from("gyro_hip=0"),
         ),
         v(
             "+gyro-hip",
             Tlipfm,
             Plain,
             false,
-            &[
-                NO_COMPLIANCE[0],
-                NO_COMPLIANCE[1],
-                NO_COMPLIANCE[2],
-                NO_COMPLIANCE[3],
-                "catch_gain=0",
-                NO_LEVELLING[0],
-                NO_LEVELLING[1],
-            ],
+            still_off_from("compliance_roll=0"),
         ),
         v(
             "+compliance",
             Tlipfm,
             Plain,
             false,
-            &["catch_gain=0", NO_LEVELLING[0], NO_LEVELLING[1]],
+            still_off_from("catch_gain=0"),
         ),
-        v("+catching step", Tlipfm, Plain, false, &NO_LEVELLING),
+        v(
+            "+catching step",
+            Tlipfm,
+            Plain,
+            false,
+            still_off_from("catch_level_pitch=0"),
+        ),
         v("+sole levelling (default)", Tlipfm, Plain, false, &[]),
         v("+wholebody", Tlipfm, Wholebody, false, &[]),
         v("+stabilizer", Tlipfm, Wholebody, true, &[]),

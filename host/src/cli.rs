@@ -389,6 +389,12 @@ pub struct FilArgs {
     /// `socket://127.0.0.1:PORT`). Writing Mode = 0 (torque off) ends the run.
     #[arg(long, value_name = "PORT", conflicts_with = "commands")]
     pub command_port: Option<u16>,
+    /// The firmware's feedback off, as the paper walked (the tokens of `walker beyond`'s open
+    /// loop, host/src/beyond.rs `OPEN_LOOP`: no gyro damping, no compliance feed-forward, the
+    /// servos' factory Position I Gain, no catching step, no swing sole levelling), before the
+    /// tokens of --firmware-args.
+    #[arg(long)]
+    pub open_loop: bool,
     /// The run.
     #[command(flatten)]
     pub run: RunArgs,
@@ -404,8 +410,9 @@ pub struct BeyondArgs {
     #[arg(long, value_name = "'K=V …'")]
     pub feedback_args: Option<String>,
     /// The closed-loop ablation instead of the six methods: LIPM, DLIPM, TLIPFM open loop,
-    /// then TLIPFM + gyro at the ankles, + at the hips, + servo compliance feed-forward (the
-    /// default), + whole-body compensation, + stabilizer (eight walks, OUT/beyond.md).
+    /// then TLIPFM with one part added at a time: gyro at the ankles, at the hips, the servos'
+    /// compliance handling, the catching step, the swing sole's levelling (the default),
+    /// whole-body compensation, the stabilizer (ten walks, OUT/beyond.md).
     #[arg(long)]
     pub ablation: bool,
     /// The runs.
@@ -1259,6 +1266,12 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         timeout,
         extra_tokens,
     } = RunSetup::new("fil", a.run)?;
+    let extra_tokens = if a.open_loop {
+        let open = crate::beyond::OPEN_LOOP.iter().map(|t| t.to_string());
+        open.chain(extra_tokens).collect()
+    } else {
+        extra_tokens
+    };
     if let Some(m) = a.model {
         spec.model = m;
     }

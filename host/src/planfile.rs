@@ -58,7 +58,7 @@ use gait_core::zmp::ZmpShape;
 use gait_core::{
     Footstep, ForwardWalk, GaitError, GaitParams, Model, ModelKind, Place, Plan, Robot, Side,
 };
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
 use walker_contract::params::{self as fw_params, ArgErrorKind, PARAMS};
@@ -118,7 +118,7 @@ impl fmt::Display for PlanError {
 impl std::error::Error for PlanError {}
 
 /// The ZMP reference shape of a plan file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum ZmpKind {
     /// Seed 000: natural ZMP (d1, d2, a).
@@ -129,7 +129,7 @@ pub enum ZmpKind {
 }
 
 /// The swing-foot profile of a plan file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum SwingKind {
     /// Seed 000 cycloid (h_z, w_y).
@@ -140,7 +140,7 @@ pub enum SwingKind {
 }
 
 /// How the pelvis is placed (plan-file spelling; the firmware's `comp=` token).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum CompensationName {
     /// The paper's pipeline: the pelvis point on the model's CoM.
@@ -151,7 +151,7 @@ pub enum CompensationName {
 }
 
 /// The CoM solver of a plan file (the firmware's `com=` token).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum ComName {
     /// Seed 000's exact bounded solution.
@@ -162,7 +162,7 @@ pub enum ComName {
 }
 
 /// The model name of a plan file (and of the command line's `--model`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, Default, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum ModelName {
     /// LIPM.
@@ -185,7 +185,7 @@ impl From<ModelName> for ModelKind {
 }
 
 /// Which foot (plan-file spelling).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SideName {
     /// Left foot.
@@ -204,7 +204,7 @@ impl From<SideName> for Side {
 }
 
 /// One explicit footstep.
-#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct FootstepSpec {
     /// The foot that swings.
@@ -219,7 +219,7 @@ pub struct FootstepSpec {
 }
 
 /// A walk as described by a plan file (defaults = Table 2).
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct WalkSpec {
     /// Pendulum model.
@@ -485,54 +485,6 @@ impl WalkSpec {
         self.sampler(robot, self.dt).map(|_| ())
     }
 
-    /// The value of a top-level plan key as firmware token text (`None`: unset).
-    fn plan_value(&self, plan_key: &str) -> Option<String> {
-        let word = |w: &str| Some(w.to_string());
-        match plan_key {
-            "model" => word(match self.model {
-                ModelName::Lipm => "lipm",
-                ModelName::Dlipm => "dlipm",
-                ModelName::Tlipfm => "tlipfm",
-            }),
-            "dt" => Some(self.dt.to_string()),
-            "step_length" => Some(self.step_length.to_string()),
-            "step_width" => Some(self.step_width.to_string()),
-            "s_first" => Some(self.s_first.to_string()),
-            "steps" => Some(self.steps.to_string()),
-            "d1" => Some(self.d1.to_string()),
-            "d2" => Some(self.d2.to_string()),
-            "a" => Some(self.a.to_string()),
-            "b" => self.b.map(|b| b.to_string()),
-            "zmp" => word(match self.zmp {
-                ZmpKind::Natural => "natural",
-                ZmpKind::Continuous => "continuous",
-            }),
-            "z_c" => Some(self.z_c.to_string()),
-            "w_y" => Some(self.w_y.to_string()),
-            "h_z" => Some(self.h_z.to_string()),
-            "swing" => word(match self.swing {
-                SwingKind::Cycloid => "cycloid",
-                SwingKind::Sinusoid => "sinusoid",
-            }),
-            "t1" => Some(self.t1.to_string()),
-            "t2" => Some(self.t2.to_string()),
-            "period" => Some(self.period.to_string()),
-            "lead_in" => Some(self.lead_in.to_string()),
-            "lead_out" => Some(self.lead_out.to_string()),
-            "com" => word(match self.com {
-                ComName::Exact => "exact",
-                ComName::Fourier => "fourier",
-            }),
-            "fourier_terms" => self.fourier_terms.map(|n| n.to_string()),
-            "compensation" => word(match self.compensation {
-                CompensationName::None => "none",
-                CompensationName::Wholebody => "wholebody",
-            }),
-            "stabilizer" => word(if self.stabilizer { "on" } else { "off" }),
-            _ => None,
-        }
-    }
-
     /// The firmware's `key=value` tokens of this plan, in the order of the parameter table,
     /// with the plan field each came from (`d2`, `firmware.baud`). Errors: a `[firmware]` key
     /// that is not a firmware parameter, or one that has its own top-level plan key.
@@ -563,11 +515,17 @@ impl WalkSpec {
                 }
             }
         }
+        // The plan's top-level keys as the plan file names them (serde), unset ones absent.
+        let plan = match toml::Value::try_from(self) {
+            Ok(toml::Value::Table(t)) => t,
+            Ok(_) => toml::Table::new(),
+            Err(e) => return Err(PlanError::new("plan", e.to_string())),
+        };
         let mut out = Vec::new();
         for p in PARAMS.iter() {
             let (field, text) = match p.plan_key {
-                Some(pk) => match self.plan_value(pk) {
-                    Some(t) => (pk.to_string(), t),
+                Some(pk) => match plan.get(pk) {
+                    Some(v) => (pk.to_string(), toml_text(v)),
                     None => continue,
                 },
                 None => match self.firmware.get(p.key) {
@@ -963,10 +921,23 @@ mod tests {
             d.gyro_feedback.ankle > 0.0
                 && d.feasibility != walker_contract::config::Feasibility::Off
         );
-        let paper = load(&std::path::Path::new(dir).join("table2-paper.toml"))
-            .unwrap()
-            .firmware_config()
-            .unwrap();
+        let paper_spec = load(&std::path::Path::new(dir).join("table2-paper.toml")).unwrap();
+        let paper = paper_spec.firmware_config().unwrap();
+        // The plan file's `[firmware]` table is the open loop of `walker beyond` and `walker fil
+        // --open-loop` at the paper's timing, no more and no less.
+        let plain = WalkSpec {
+            firmware: toml::Table::new(),
+            ..paper_spec.clone()
+        };
+        let mut open: Vec<String> = crate::beyond::OPEN_LOOP
+            .iter()
+            .map(|t| t.to_string())
+            .collect();
+        open.push("feasibility=off".into());
+        let run =
+            |spec: &WalkSpec, extra: &[String]| crate::fil::check_tokens(spec, extra).unwrap().1;
+        assert_eq!(run(&plain, &open), run(&paper_spec, &[]));
+        assert_ne!(run(&plain, &[]), run(&paper_spec, &[]));
         assert_eq!(paper.model, ModelKind::Tlipfm);
         assert_eq!(paper.walk, ForwardWalk::table2());
         assert_eq!(paper.feasibility, walker_contract::config::Feasibility::Off);

@@ -587,16 +587,17 @@ fn the_level_swing_sole_survives_the_backward_push_that_fells_the_robot_without_
     // moves its landing back: the walk completes. With the levelling off the swing foot, its
     // sole pitched back with the trunk, lands heel first short of the catch and the robot
     // rolls back over both heels and falls (exit 13); with the catching step off it falls too
-    // (docs/beyond.md, "The swing sole kept level").
+    // (docs/beyond.md, "The swing sole kept level"). The clock hold (A11) is on in both runs.
     let sim = pushed("6:1.5:180");
     let spec = WalkSpec::default();
     let (r, log) = fil("level-push", spec.clone(), sim.clone(), &[]);
-    // The push costs distance (0.226 of 0.260 m).
+    // The push costs distance (0.214 of 0.260 m; 0.226 before the clock hold became the
+    // default: the held clock waits for the caught foot).
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
     assert_eq!(r.exit_code, Some(0), "{}", w.line());
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
     assert_eq!(w.fell_at, None, "{}", w.line());
-    assert!(w.walked > 0.8 * w.planned, "{}", w.line());
+    assert!(w.walked > 0.75 * w.planned, "{}", w.line());
     assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
     let (r, log) = fil(
         "level-push-off",
