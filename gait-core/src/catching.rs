@@ -282,6 +282,7 @@ impl StepAdapter {
             cfg.level_pitch = 0.0;
             cfg.level_roll = 0.0;
         }
+        let hold_max_ticks = ticks_of(cfg.hold_max_s, dt_s, ok);
         StepAdapter {
             cfg,
             z_c: if ok { z_c } else { 0.0 },
@@ -314,8 +315,8 @@ impl StepAdapter {
             },
             level_dev: [0.0; 2],
             level: [[0.0; 2]; 2],
-            hold_left: ticks_of(cfg.hold_max_s, dt_s, ok),
-            hold_max_ticks: ticks_of(cfg.hold_max_s, dt_s, ok),
+            hold_left: hold_max_ticks,
+            hold_max_ticks,
             settle_ticks: ticks_of(cfg.hold_settle_s, dt_s, ok),
             settled: 0,
             hold: false,
