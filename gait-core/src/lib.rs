@@ -33,6 +33,7 @@ pub use sampler::{CurrentStep, GaitSample, Sampler, StepPhase, SupportPhase};
 pub mod balance;
 pub mod catching;
 pub mod compliance;
+pub mod correction;
 pub mod deflection;
 pub mod fixed_ik;
 pub mod fixed_point;

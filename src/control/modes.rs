@@ -1,7 +1,7 @@
 //! The control loop's motion as walk modes: one type per mode, explicit transitions (the style
-//! of HULKs' walking engine). [`run`](super::run) keeps the tick's plumbing — sensors, command
-//! port, supervisor, the IK and the servo writes, the log — and asks a [`Walk`] what moves the
-//! legs this tick ([`Walk::tick`]):
+//! of HULKs' walking engine). The `Controller` keeps the
+//! tick's plumbing — sensors, command port, supervisor, the IK and the servo writes, the log —
+//! and asks a [`Walk`] what moves the legs this tick ([`Walk::tick`]):
 //!
 //! ```text
 //!  Starting ──ramp done──▶ Gait::Online  (without autostart: gait-core's OnlineWalk, whose own
@@ -27,6 +27,16 @@ use walker_contract::command_port::PortState;
 use super::{commanded, MAX_LEAD_TICKS, MAX_STEPS};
 use crate::startup::Ramp;
 use crate::Config;
+
+/// The measured flywheel torque τ = J·φ̈ fed to the sampler: N·m on the f32 path, whole mN·m
+/// on the fixed-point path (no float).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Tau {
+    /// N·m.
+    Nm(f32),
+    /// Whole mN·m.
+    MilliNm(i32),
+}
 
 /// Starting: the ramp from the servos' present pose to the gait's initial pose
 /// (State = starting).
@@ -120,23 +130,15 @@ impl Plan {
     }
 
     /// One tick: the present sample into `present`, the one `lead` ticks ahead (which the IK
-    /// takes: [`Plan::ahead`]) kept here, the sampler fed the measured τ (N·m, or whole mN·m
-    /// on the fixed-point path). In place: the samples (≈ 100 B f32, ≈ 220 B with the
+    /// takes: [`Plan::ahead`]) kept here, the sampler fed the measured τ. In place: the samples (≈ 100 B f32, ≈ 220 B with the
     /// fixed-point copy) are not passed around by value (a `memcpy` each).
-    pub fn advance(
-        &mut self,
-        fixed_math: bool,
-        tau: f32,
-        tau_mnm: i32,
-        present: &mut GaitSample<f32>,
-    ) {
+    pub fn advance(&mut self, tau: Tau, present: &mut GaitSample<f32>) {
         match self.pending.take() {
             Some(p) => self.ahead = p,
             None => {
-                if fixed_math {
-                    self.engine.next_mnm_into(tau_mnm, &mut self.ahead);
-                } else {
-                    self.engine.next_into(tau, &mut self.ahead);
+                match tau {
+                    Tau::MilliNm(t) => self.engine.next_mnm_into(t, &mut self.ahead),
+                    Tau::Nm(t) => self.engine.next_into(t, &mut self.ahead),
                 }
                 if self.delay.is_empty() {
                     // No lead: the sample ahead is the present one (pushed and popped at once).
@@ -379,7 +381,7 @@ impl Walk {
 
     /// This tick's motion; the ramp's last tick hands over to the gait (Starting → Gait). With
     /// `hold` a gait tick hands out the same samples again (gait-core `catching` A11).
-    pub fn tick(&mut self, fixed_math: bool, tau: f32, tau_mnm: i32, hold: bool) -> Motion {
+    pub fn tick(&mut self, tau: Tau, hold: bool) -> Motion {
         match &mut self.mode {
             Mode::Starting(s) => {
                 let (q, done) = s.step();
@@ -407,7 +409,7 @@ impl Walk {
                         Motion::Gait { k, footstep }
                     }
                     Gait::Plan(p) => {
-                        p.advance(fixed_math, tau, tau_mnm, &mut self.present);
+                        p.advance(tau, &mut self.present);
                         Motion::Gait { k, footstep: None }
                     }
                 }
@@ -440,7 +442,7 @@ mod tests {
         let mut present = all[0].f32;
         present.com[0] = f32::NAN;
         for k in 0..(all.len() - lead) {
-            p.advance(false, 0.0, 0, &mut present);
+            p.advance(Tau::Nm(0.0), &mut present);
             assert_eq!(present, all[k].f32, "tick {k}");
             assert_eq!(*p.ahead(), all[k + lead], "tick {k}");
         }
@@ -455,7 +457,7 @@ mod tests {
         assert_eq!(w.port_state(), PortState::Starting);
         for k in 0..ramp.ticks() {
             assert!(w.is_starting());
-            match w.tick(false, 0.0, 0, false) {
+            match w.tick(Tau::Nm(0.0), false) {
                 Motion::Ramp(q) => assert_eq!(q, ramp.at(k)),
                 m => panic!("tick {k}: {m:?}"),
             }
@@ -463,7 +465,7 @@ mod tests {
         assert!(!w.is_starting());
         assert_eq!(w.port_state(), PortState::Walking);
         for k in 0..3 {
-            match w.tick(false, 0.0, 0, false) {
+            match w.tick(Tau::Nm(0.0), false) {
                 Motion::Gait {
                     k: wk,
                     footstep: None,
@@ -482,7 +484,7 @@ mod tests {
         // A held tick (the catching step's clock hold) counts as a walk tick but hands out the
         // same samples again; the next one goes on from there.
         let (present, ahead) = (*w.present(), w.ahead().map(|a| a.f32));
-        match w.tick(false, 0.0, 0, true) {
+        match w.tick(Tau::Nm(0.0), true) {
             Motion::Gait {
                 k: 3,
                 footstep: None,
@@ -492,7 +494,7 @@ mod tests {
         assert_eq!(*w.present(), present);
         assert_eq!(w.ahead().map(|a| a.f32), ahead);
         assert!(matches!(
-            w.tick(false, 0.0, 0, false),
+            w.tick(Tau::Nm(0.0), false),
             Motion::Gait { k: 4, .. }
         ));
         assert_ne!(*w.present(), present);
@@ -506,9 +508,9 @@ mod tests {
             Ramp::new([0.0; LEG_JOINTS], [0.0; LEG_JOINTS], 1),
             Gait::Online(o),
         );
-        assert!(matches!(w.tick(false, 0.0, 0, false), Motion::Ramp(_)));
+        assert!(matches!(w.tick(Tau::Nm(0.0), false), Motion::Ramp(_)));
         assert_eq!(w.port_state(), PortState::Standing);
-        match w.tick(false, 0.0, 0, false) {
+        match w.tick(Tau::Nm(0.0), false) {
             Motion::Gait {
                 k: 0,
                 footstep: None,

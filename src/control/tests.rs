@@ -6,10 +6,16 @@ use super::*;
 use crate::board::{Clock, ServoBus};
 use crate::fake_robot::trace::{FakeBoard, Pkt};
 use crate::fake_robot::Kind;
+use crate::record::{FaultRecord, LoggedPhase, Record, TickRecord};
 use crate::record::{FaultState, StartupRecord};
+use crate::supervisor::safe_targets;
 use dxl::opcode;
+use gait_core::compliance::Compliance;
+use gait_core::gait::{Arithmetic, Targets};
 use gait_core::support::SupportPolygon;
+use gait_core::{Robot, Side};
 use std::vec::Vec;
+use walker_contract::command_port::PortState;
 
 fn board(cfg: &Config) -> FakeBoard {
     FakeBoard::robot().with_period(cfg.tick_period_us)

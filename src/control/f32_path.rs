@@ -1,0 +1,295 @@
+//! The f32 path: every feedback (the first implementation of [`TickPath`]).
+
+use dxl::table::foot::FootForces;
+use dxl::table::imu::ImuSample;
+use gait_core::balance::GyroFeedback;
+use gait_core::catching::StepAdapter;
+use gait_core::compliance::LoadModel;
+use gait_core::correction::{
+    FootForceCorrection, IkCommand, JointCorrection, JointInput, Measured, SagFeedForward,
+    SampleCorrection, StabilizerCorrection,
+};
+use gait_core::fixed_point::FixedFoot;
+use gait_core::gait::Targets;
+use gait_core::measured::{ForceReading, SolePose, ZmpMeter};
+use gait_core::robot::LEG_JOINTS;
+use gait_core::{GaitSample, Robot, Side};
+
+use crate::board::Board;
+use crate::bus::BoardMaster;
+use crate::imu::{AttitudeFilter, Heading, PitchAccel};
+use crate::record::{FaultKind, LogWriter};
+use crate::supervisor::JointMap;
+use crate::Config;
+
+use super::act::fault;
+use super::modes::{Tau, Walk};
+use super::path::{
+    finite_rates, ik_f32, pitch_config, raw_rates, stabilizer, Goal, IkRequest, MeasuredZmp,
+    TickPath, Trunk,
+};
+use super::servo_sense::ServoSense;
+
+/// The force reading of a foot sample (N; NaN when missing).
+fn reading(f: &Option<FootForces>) -> ForceReading<f32> {
+    ForceReading::new(f.map_or([f32::NAN; 4], |f| f.forces_mn.map(|v| v as f32 * 1e-3)))
+}
+
+/// The catching step (gait-core `catching` A1–A7) as the first sample correction, with its
+/// log: the largest landing move asked during one single support, written as two `CatchStep`
+/// records when that single support ends. Its state also keeps the swing sole level (A10:
+/// a joint correction) and holds the walk's clock (A11).
+pub(super) struct Catching {
+    adapter: StepAdapter,
+    /// The swing foot of the single support being noted.
+    swing: Option<Side>,
+    /// Its largest move asked (forward, leftward; trunk frame), m.
+    largest: [f32; 2],
+}
+
+impl Catching {
+    fn new(adapter: StepAdapter) -> Self {
+        Catching {
+            adapter,
+            swing: None,
+            largest: [0.0; 2],
+        }
+    }
+
+    /// Notes this tick's move `asked` in `phase`; logs the swing's largest when it ends.
+    fn note<B: Board>(
+        &mut self,
+        board: &mut B,
+        log: &mut LogWriter,
+        phase: gait_core::SupportPhase,
+        asked: [f32; 2],
+    ) {
+        let swing = match phase {
+            gait_core::SupportPhase::Single(stance) => Some(stance.other()),
+            _ => None,
+        };
+        if swing != self.swing {
+            if let Some(side) = self.swing.filter(|_| self.largest != [0.0; 2]) {
+                let now = board.now_us();
+                let side_code: u8 = if side == Side::Left { 1 } else { 2 };
+                for (component, v) in (0u8..).zip(self.largest) {
+                    // |v| ≤ the limits (< 0.1 m): the µm fit an i32.
+                    let um = gait_core::fastmath::round_i32(v * 1e6);
+                    let rec = fault(now, FaultKind::CatchStep, side_code * 16 + component, um);
+                    log.write(board, rec);
+                }
+            }
+            self.swing = swing;
+            self.largest = [0.0; 2];
+        }
+        for (l, a) in self.largest.iter_mut().zip(asked) {
+            if a.abs() > l.abs() {
+                *l = a;
+            }
+        }
+    }
+
+    /// (A1)–(A7) on `cmd`'s samples; the move asked is noted for the log.
+    fn correct<B: Board>(
+        &mut self,
+        board: &mut B,
+        log: &mut LogWriter,
+        m: &Measured<'_>,
+        cmd: &mut IkCommand<'_>,
+    ) {
+        if !self.adapter.is_on() {
+            return;
+        }
+        let asked = self
+            .adapter
+            .update(cmd.present, m.attitude, m.gyro, m.loads);
+        self.note(board, log, cmd.present.phase, asked);
+        if self.adapter.is_shifting() {
+            self.adapter.apply(cmd.present);
+            if let Some(a) = cmd.ahead.as_deref_mut() {
+                self.adapter.apply(a);
+            }
+        }
+    }
+}
+
+/// The swing sole's levelling (A10) as a joint correction.
+impl JointCorrection for Catching {
+    fn correct_joints(&mut self, _: &Measured<'_>, _: &JointInput<'_>, q: &mut [f32; LEG_JOINTS]) {
+        self.adapter.apply_level(q);
+    }
+}
+
+/// The f32 path: every feedback.
+pub(super) struct F32Path<'r> {
+    dt_s: f32,
+    pitch: PitchAccel,
+    attitude: AttitudeFilter,
+    heading: Heading,
+    zmp_meter: ZmpMeter<f32>,
+    catching: Catching,
+    stabilizer: StabilizerCorrection<'r>,
+    foot_force: FootForceCorrection,
+    sag: SagFeedForward,
+    gyro: GyroFeedback,
+    /// The servos' Present Position: the deflection feedback and the leg odometry.
+    servo_sense: Option<ServoSense>,
+    map: &'r JointMap,
+}
+
+impl<'r> F32Path<'r> {
+    /// The path of `cfg` for `robot` walking at the CoM height `z_c` (m).
+    pub(super) fn new(cfg: &Config, robot: &'r Robot, map: &'r JointMap, z_c: f32) -> Self {
+        let dt_s = cfg.dt_s() as f32;
+        F32Path {
+            dt_s,
+            pitch: PitchAccel::new(pitch_config(cfg, robot)),
+            attitude: AttitudeFilter::new(),
+            heading: Heading::new(),
+            zmp_meter: ZmpMeter::new(robot, cfg.min_load_n),
+            catching: Catching::new(StepAdapter::new(&cfg.step_adaptation, robot, z_c, dt_s)),
+            stabilizer: stabilizer(cfg, robot),
+            foot_force: FootForceCorrection::new(cfg.foot_force, dt_s),
+            sag: SagFeedForward {
+                load: LoadModel::new(robot),
+                compliance: cfg.compliance,
+            },
+            gyro: cfg.gyro_feedback,
+            servo_sense: ServoSense::new(&cfg.deflection, cfg.sole_poses_measured, robot, dt_s),
+            map,
+        }
+    }
+}
+
+impl TickPath for F32Path<'_> {
+    fn read_servos<B: Board>(
+        &mut self,
+        bus: &mut BoardMaster<'_, B>,
+        previous: &GaitSample<f32>,
+        walk: &mut Walk,
+    ) {
+        if let Some(d) = self.servo_sense.as_mut() {
+            let [l, r] = &previous.feet;
+            let landed = d.read(bus, self.map, &[l.sole_place(), r.sole_place()]);
+            // The online walk's position hold (P1): where the new foot landed off its plan.
+            if let (Some((side, offset)), Some(o)) = (landed, walk.gait.online_mut()) {
+                o.set_landing_offset(side, offset);
+            }
+        }
+    }
+
+    fn ramp_end(&mut self, q: &mut [f32; LEG_JOINTS], loaded: &GaitSample<f32>) {
+        self.sag
+            .load
+            .apply(&self.sag.compliance, q, loaded, [0.0; 2]);
+    }
+
+    fn trunk(&mut self, imu: Option<ImuSample>, walk: &mut Walk) -> Trunk {
+        let Some(s) = imu else {
+            self.pitch.update(f32::NAN);
+            return Trunk {
+                gyro: None,
+                gyro_raw: None,
+                attitude: None,
+                tilt: self.attitude.tilt().tilt,
+            };
+        };
+        let g = s.gyro_rad_s();
+        self.pitch.update(g[1]);
+        let att = self.attitude.update(g, s.accel_m_s2(), self.dt_s);
+        // The online walk's heading hold: the gyro's yaw, the bias learnt while it stands.
+        if let Some(o) = walk.gait.online_mut() {
+            let still = matches!(o.mode(), gait_core::online::WalkMode::Standing(_));
+            o.set_heading(self.heading.update(g, &att, self.dt_s, still));
+        }
+        let gyro = finite_rates(g);
+        Trunk {
+            gyro,
+            gyro_raw: raw_rates(imu, gyro),
+            attitude: Some([att.roll, att.pitch]),
+            tilt: att.tilt,
+        }
+    }
+
+    fn tau(&self) -> Tau {
+        Tau::Nm(self.pitch.torque())
+    }
+
+    fn loads(&self, feet: &[Option<FootForces>; 2]) -> [f32; 2] {
+        feet.each_ref().map(|f| {
+            reading(f)
+                .compression()
+                .map_or(f32::NAN, |c| c.iter().sum::<f32>())
+        })
+    }
+
+    fn zmp(
+        &self,
+        feet: &[Option<FootForces>; 2],
+        previous: &GaitSample<f32>,
+        _: Option<[FixedFoot; 2]>,
+    ) -> MeasuredZmp {
+        let [fl, fr] = feet;
+        let [pl, pr] = &previous.feet;
+        let m = match self.servo_sense.as_ref() {
+            Some(d) => {
+                let [l, r] = d.feet([pl.sole_place(), pr.sole_place()]);
+                self.zmp_meter
+                    .zmp((&l, &reading(fl)), (&r, &reading(fr)))
+                    .zmp
+            }
+            None => {
+                self.zmp_meter
+                    .zmp((pl, &reading(fl)), (pr, &reading(fr)))
+                    .zmp
+            }
+        };
+        MeasuredZmp { m, fx: None }
+    }
+
+    fn follow(&mut self, phase: gait_core::SupportPhase, loads: [f32; 2]) {
+        if let Some(d) = self.servo_sense.as_mut() {
+            d.follow(phase, loads);
+        }
+    }
+
+    fn wants_hold(&self) -> bool {
+        self.catching.adapter.wants_hold()
+    }
+
+    fn correct_sample<B: Board>(
+        &mut self,
+        board: &mut B,
+        log: &mut LogWriter,
+        m: &Measured<'_>,
+        cmd: &mut IkCommand<'_>,
+    ) {
+        self.catching.correct(board, log, m, cmd);
+        self.stabilizer.correct_sample(m, cmd);
+        self.foot_force.correct_sample(m, cmd);
+    }
+
+    fn joints(&mut self, targets: &Targets, m: &Measured<'_>, ik: &IkRequest<'_>) -> Goal {
+        let (mut q, loaded) = ik_f32(targets, ik);
+        let input = JointInput {
+            phase: ik.present.phase,
+            loaded,
+            com_shift: ik.com_shift,
+            walk_tick: ik.walk_tick,
+        };
+        if let Some(d) = self.servo_sense.as_mut() {
+            d.note_ik(&q);
+        }
+        self.sag.correct_joints(m, &input, &mut q);
+        self.gyro.correct_joints(m, &input, &mut q);
+        self.catching.correct_joints(m, &input, &mut q);
+        if let Some(d) = self.servo_sense.as_mut() {
+            d.correct_joints(m, &input, &mut q);
+        }
+        Goal::Rad(q)
+    }
+
+    fn surveys(&self) -> Option<(u16, u16)> {
+        self.servo_sense.as_ref().map(ServoSense::surveys)
+    }
+}
