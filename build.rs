@@ -7,7 +7,7 @@
 //!   (FLASH 0x0000_0000 4 MiB, RAM 0x2000_0000 4 MiB). Writing that to OUT_DIR and putting
 //!   OUT_DIR first on the search path does NOT work: rust-lld resolves cortex-m-rt's
 //!   `INCLUDE memory.x` in its working directory (the workspace root, where the top-level
-//!   `memory.x` is) before any `-L` path — measured: the QEMU ELF came out linked at
+//!   `memory.x` is) before any `-L` path — tried: the QEMU ELF came out linked at
 //!   0x0800_0000 and locked up. So the top-level `memory.x` selects the layout with
 //!   `DEFINED(_walker_qemu_mps2)`, and this script passes `--defsym=_walker_qemu_mps2=1` for
 //!   `board-qemu`; likewise `--defsym=_walker_opencm=1` selects the ROBOTIS OpenCM 9.04's

@@ -3,7 +3,7 @@
 # loop) walks the Table 2 plan in QEMU against the MuJoCo robot, nominal and with servo torque
 # and gains ±20 %, link masses ±10 %, floor friction 0.5 / 0.75, +5 ms sensor latency and 5 %
 # dropped status packets (`walker sweep`, host/src/sweep.rs). Writes out/sweep/sweep.md (the
-# table docs/beyond.md quotes) and one folder per case. ≈ 11 walks, 5-10 min on 2 cores.
+# robustness sweep of docs/results.md; `bash scripts/results.sh` regenerates it) and one folder per case. ≈ 11 walks, 5-10 min on 2 cores.
 # Options: PLAN=plans/other.toml, SEED=N, and any `walker sweep` options after the script name.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."

@@ -103,8 +103,7 @@ impl<'b, B: ServoBus + Clock> Link<'b, B> {
 impl<B: ServoBus + Clock> dxl::Transport for Link<'_, B> {
     fn write_all(&mut self, bytes: &[u8]) -> Result<(), ErrorKind> {
         self.draining = false;
-        // One block copy (heapless' `extend_from_slice` clones byte by byte: ≈ 10
-        // instructions a byte on the M7).
+        // One block copy (heapless' `extend_from_slice` clones byte by byte).
         let end = self.tx_len + bytes.len();
         match self.tx.get_mut(self.tx_len..end) {
             Some(dst) => {

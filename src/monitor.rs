@@ -8,7 +8,7 @@
 //! The READs are spread in time, not in ticks: one every [`READ_EVERY_US`] (2.5 ms), so every
 //! servo is checked every 60 ms at any tick period up to 5 ms — two READs a tick at the 200 Hz
 //! default (≈ 0.55 ms of bus at 1 Mbps), at most one a tick at 1 kHz (≈ 62 µs at 4.5 Mbps: what
-//! lets the Cortex-M3's 1 kHz tick fit its period, BENCHMARKS.md issue 14). Longer ticks read
+//! lets the Cortex-M3's 1 kHz tick fit its period, BENCHMARKS.md "The Cortex-M3 board at 1 kHz"). Longer ticks read
 //! [`MAX_READS_PER_TICK`] a tick (every servo every 12 ticks), so the monitor never takes more
 //! of a tick's bus time than at 200 Hz.
 //!

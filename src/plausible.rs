@@ -15,8 +15,8 @@
 //! * **weight**: one foot's total in [−0.1·W, f·W], and both feet's total ≤ f·W when both
 //!   replied this tick, where W = m·g is the robot's weight (reference robot: m·g from
 //!   `Robot::masses.total()` and `gravity`, 48.5 N) and f = [`Config::force_factor`] (default
-//!   6: the feet carry W standing and up to 3.4·W at touch-down in the MuJoCo robot's Table 2
-//!   walk; a shifted byte is off by a factor 2⁸ or more).
+//!   6: the feet carry W standing and a few times W at touch-down; a shifted byte is off by a
+//!   factor 2⁸ or more).
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::{self, ImuSample};

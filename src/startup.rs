@@ -24,7 +24,7 @@
 //! f = ⌈1000·(v/v_max)·1.05⌉/1000 (joint speeds scale as 1/f for the same path), with
 //! `feasibility=lower` the swing height becomes ⌊h_z·v_max/(1.05·v)⌋ (µm), and the plan is
 //! checked again, at most [`MAX_TIMING_ROUNDS`] adjustments. All rounds together spend at most
-//! [`MAX_DRY_RUN_WORK`] (≈ 10⁹ M7 instructions; a longer plan is refused with
+//! [`MAX_DRY_RUN_WORK`] (a few seconds on the M7; a longer plan is refused with
 //! `GaitError::DryRunTooLong`, exit 2), feeding the watchdog every 256 samples
 //! ([`servo_timing_fed`]). Fault records (log kinds 7, 8, 9)
 //! carry the factor / new height and a remaining excess.

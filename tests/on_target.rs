@@ -70,7 +70,7 @@ mod tests {
     #[test]
     fn vsqrt_matches_libm_bit_for_bit() {
         // `fastmath::sqrt` is VSQRT.F32 on this target; both it and libm's software sqrtf are
-        // correctly rounded, so they must agree exactly (issue 14).
+        // correctly rounded, so they must agree exactly.
         let mut bits = 0x0080_0000u32;
         for _ in 0..4_000 {
             let x = black_box(f32::from_bits(bits));

@@ -6,13 +6,12 @@
 pub const MAX_STEPS: usize = 64;
 /// Default Position I Gain of the ankle-roll servos (register units; the factory value is 0).
 /// With [`DEFAULT_SERVO_I_HIP_ROLL`] and the compliance feed-forward at 0.75 roll / 0.15 pitch
-/// ([`gait_core::compliance::Compliance::DEFAULT`]) it met the closed-loop issue's ZMP goals on
-/// the MuJoCo robot at the default timing (true CoP − reference 9.8 / 24.7 → 6.7 / 10.6 mm) and
-/// in all 11 cases of the robustness sweep laterally (docs/beyond.md).
+/// ([`gait_core::compliance::Compliance::DEFAULT`]) it removes the stance leg's steady roll sag
+/// the feed-forward's model misses (docs/beyond.md, "Servo compliance").
 pub const DEFAULT_SERVO_I_ROLL: u16 = 1250;
 /// Default Position I Gain of the hip-roll servos: less than the ankle rolls', because the hip's
 /// integral, built up under the stance leg's load, unwinds through the swing and carries the
-/// swing foot outward (1250: ≈ 10 mm a landing, a footstep list walked 9–12 % off; 800: 6.6 %).
+/// swing foot outward (docs/beyond.md, "The roll servos' integral beside less feed-forward").
 pub const DEFAULT_SERVO_I_HIP_ROLL: u16 = 800;
 /// Longest servo-lag feed-forward, s.
 pub const MAX_SERVO_LEAD_S: f64 = 0.3;

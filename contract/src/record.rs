@@ -359,8 +359,8 @@ impl Record {
 
 /// `CRC_TABLE[x]`: the CRC register after shifting the byte `x` (in bits 15..8) through eight
 /// rounds of the polynomial ([`dxl::crc::msb_first_table`]). One lookup per byte (512 bytes of
-/// flash; the nibble table of 32 bytes took two lookups and cost the control tick ≈ 180–450
-/// instructions more for its ≈ 40 log bytes, M7 / M3).
+/// flash; a nibble table of 32 bytes would take two lookups a byte on the control tick's
+/// ≈ 40 log bytes).
 static CRC_TABLE: [u16; 256] = dxl::crc::msb_first_table(0x1021);
 
 /// CRC-16/CCITT-FALSE of `data` (poly 0x1021, init 0xFFFF).
@@ -398,8 +398,8 @@ impl<'a> Cursor<'a> {
         }
     }
     /// [`put`](Self::put) of a fixed number of bytes: an array store, N byte stores once
-    /// inlined (a tick record has 16 fields; a `memcpy` call each cost ≈ 100 instructions on
-    /// the M3).
+    /// inlined (a tick record has 16 fields; a `memcpy` call each would be a library call on
+    /// the M3's tick).
     fn put_n<const N: usize>(&mut self, bytes: [u8; N]) {
         let dst = self.buf.get_mut(self.pos..self.pos + N);
         match dst.and_then(|d| <&mut [u8; N]>::try_from(d).ok()) {

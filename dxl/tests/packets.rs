@@ -421,7 +421,7 @@ fn events<const N: usize>(dec: &mut Decoder<N>, stream: &[u8]) -> Vec<Event> {
 
 #[test]
 fn decoder_finds_header_ending_in_crc_of_broken_packet() {
-    // Issue 16: ID 1's packet is 5 bytes short, so ID 2's header ends on its first CRC byte
+    // ID 1's packet is 5 bytes short, so ID 2's header ends on its first CRC byte
     // and ID 2's ID is its second CRC byte.
     let stream = hex("FF FF FD 00 01 06 00 55 FF FF FD 00 02 04 00 55 00 29 0C");
     let mut dec = Decoder::<32>::new();

@@ -285,7 +285,7 @@ fn junk() -> impl Strategy<Value = Junk> {
     ]
 }
 
-/// Junk before a packet; half the time it ends with a truncated packet (the issue 16 family).
+/// Junk before a packet; half the time it ends with a truncated packet (a LEN that swallows the next packet).
 fn junk_before() -> impl Strategy<Value = Vec<Junk>> {
     (
         prop::collection::vec(junk(), 0..3),
@@ -548,7 +548,7 @@ fn fuzz_streams() {
             1..=4 => {} // one packet between random bytes, below
             _ => {
                 // Intact packets with junk between them; before a packet, half the time a
-                // truncated one (issue 16: its LEN swallows the intact packet's first bytes).
+                // truncated one (its LEN swallows the intact packet's first bytes).
                 let parts: Vec<_> = (0..1 + rng.below(3))
                     .map(|_| {
                         let mut junk: Vec<_> = (0..rng.below(3)).map(|_| rng.junk()).collect();

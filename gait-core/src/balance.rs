@@ -23,9 +23,9 @@
 //! # Foot force difference control ([`FootForceControl`])
 //! In double support the two legs close a chain through the floor: how the weight splits
 //! between the feet is set by millimetres of leg length that stiff position servos do not
-//! hold, and the plan's ZMP transfer from one foot to the other is not followed (on the MuJoCo
-//! robot the new foot takes 50–70 % of the weight as it lands and then unloads again: ≈ 40 mm
-//! of lateral ZMP error in double support against ≈ 12 mm in single support). The control of
+//! hold, and the plan's ZMP transfer from one foot to the other is not followed (the new foot
+//! takes much of the weight as it lands and then unloads again, so the lateral ZMP error is
+//! largest in double support). The control of
 //! Kajita et al. (IROS 2010, "Biped walking stabilization based on linear inverted pendulum
 //! tracking", foot force difference control) drives the difference of the feet's normal
 //! forces to the one the ZMP reference asks for by the difference of the feet's heights:
@@ -58,12 +58,9 @@ pub struct GyroFeedback {
 }
 
 impl GyroFeedback {
-    /// The firmware's default: k_a = 0.1 s, k_h = 0.1 s, ±0.1 rad, chosen on the MuJoCo robot
-    /// (Table 2, TLIPFM; `docs/beyond.md`): with k_h = 0.05 s the true centre of pressure's mean
-    /// error went from 23.7 / 46.4 mm open loop to 13.0 / 34.5 mm and 1.5 N·s pushes forward and
-    /// to the left were survived (open loop: 1.0 N·s); with the compliance feed-forward of the
-    /// roll joints ([`crate::compliance`]) k_h = 0.1 s tracks better at both timings (stretched
-    /// 15.4 → 9.8 mm sagittal).
+    /// The firmware's default: k_a = 0.1 s, k_h = 0.1 s, ±0.1 rad (with the compliance
+    /// feed-forward of [`crate::compliance`] the hips' 0.1 s tracks better than 0.05 s; how it was
+    /// chosen: `docs/beyond.md`, "Gyro damping").
     pub const DEFAULT: GyroFeedback = GyroFeedback {
         ankle: 0.1,
         hip: 0.1,
@@ -209,7 +206,7 @@ pub struct FootForceControl {
 }
 
 impl FootForceControl {
-    /// Off: the firmware's default until it is shown to help on the MuJoCo robot.
+    /// Off: the firmware's default (`docs/beyond.md`, "Foot force difference control").
     pub const OFF: FootForceControl = FootForceControl {
         gain: 0.0,
         leak_s: 0.5,

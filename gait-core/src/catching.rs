@@ -87,9 +87,8 @@
 //! non-finite inputs never reach the state). g, the weight and every per-tick
 //! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
 //! and the tick period once, in [`StepAdapter::new`]. Cost without a push: the error (A1), the
-//! baseline (A2), the levelling (A10) and the deadband test, then an early return (measured on
-//! the M7 control tick: +436 instructions on average for the catching step, BENCHMARKS.md;
-//! the levelling added 167 more, 19,657 → 19,824; the clock hold's checks 10 more, 19,834).
+//! baseline (A2), the levelling (A10) and the deadband test, then an early return (the control
+//! tick's cost is in BENCHMARKS.md).
 
 use crate::robot::{Robot, Side, ANKLE_PITCH, ANKLE_ROLL, JOINTS_PER_LEG, LEG_JOINTS};
 use crate::sampler::{GaitSample, SupportPhase};
@@ -171,13 +170,12 @@ impl StepAdaptation {
     };
 
     /// The firmware's default (see `docs/beyond.md`, "The catching step"): k = 1, deadband
-    /// 2 cm, up to 5 cm forward/backward, the lateral catch off (`max_out_m` = 0: on the
-    /// MuJoCo robot a 1.5 N·s push to the right during left single support walked without it
-    /// and fell with 4 cm), 0.5 m/s, a 2 s baseline, touchdown at a fifth of the weight; the
-    /// swing sole kept level in pitch and roll, ramped over 0.1 s (`docs/beyond.md`, "The
-    /// swing sole kept level"); the clock held up to 0.15 s per single support while a caught
-    /// foot is on its way (A11; on the MuJoCo robot one more of ten backward pushes walked,
-    /// the push table and every unpushed figure the same as without it).
+    /// 2 cm, up to 5 cm forward/backward, the lateral catch off (`max_out_m` = 0: an outward
+    /// catch can turn a sideways push the ankles hold into a fall), 0.5 m/s, a 2 s baseline,
+    /// touchdown at a fifth of the weight; the swing sole kept level in pitch and roll, ramped
+    /// over 0.1 s (`docs/beyond.md`, "The swing sole kept level"); the clock held up to 0.15 s
+    /// per single support while a caught foot is on its way (A11; `docs/beyond.md`, "The
+    /// landing waits for the caught foot").
     pub const DEFAULT: StepAdaptation = StepAdaptation {
         gain: 1.0,
         deadband_m: [0.02, 0.02],

@@ -6,8 +6,8 @@
 //! factory gain 800: 18.9 N·m/rad; the simulated servo of the host is exactly this). A joint
 //! that must deliver a torque τ therefore stands `τ/K` short of its goal. On the reference robot
 //! in single support the stance leg's roll joints carry the body's weight a few centimetres off
-//! their axes, so the pelvis sags towards the swing side by ≈ 1 cm — the robot shifts its weight
-//! only half-way (`docs/beyond.md`, "where the lateral error comes from").
+//! their axes, so the pelvis sags towards the swing side — the robot shifts its weight only part
+//! of the way (`docs/beyond.md`, "Where the lateral error comes from").
 //!
 //! # Model (quasi-static, per tick, from the planned sample)
 //! The ground reaction of the model's CoM motion passes through the ZMP reference `p` towards
@@ -66,12 +66,10 @@ pub const XM430_STIFFNESS: f32 = 18.875;
 impl Compliance {
     /// The firmware's default: 0.75 of the model on the roll joints, 0.15 on the pitch joints,
     /// ±0.15 rad, beside the roll servos' own integral (the firmware's `servo_i_roll` 1250,
-    /// `servo_i_hip_roll` 800), which removes the sag the model misses. Chosen on the MuJoCo
-    /// robot (Table 2, TLIPFM, with the default gyro damping; `docs/beyond.md`): the full model
-    /// on the roll joints alone took the true centre of pressure's lateral mean error from 34.5
-    /// to ≈ 24 mm at both timings; with the integral and less feed-forward it is 10.6 mm at the
-    /// default timing; a little on the pitch joints (the knee's sag) straightens the sagittal
-    /// plane (more halves the distance walked).
+    /// `servo_i_hip_roll` 800), which removes the sag the model misses, so the model needs less
+    /// than its full gain; a little on the pitch joints (the knee's sag) straightens the sagittal
+    /// plane (much more shortens the steps). How it was chosen: `docs/beyond.md`, "Servo
+    /// compliance".
     pub const DEFAULT: Compliance = Compliance {
         roll: 0.75,
         pitch: 0.15,

@@ -5,8 +5,8 @@
 //! XM430-W350 at the factory P gain): a stance leg under the robot's weight stands a few degrees
 //! away from its targets. [`crate::compliance`] predicts that sag from the planned load and adds
 //! it to the targets (feed-forward); its pitch-joint share depends on the real centre of pressure,
-//! which the plan does not know (on the MuJoCo robot the stance ankle yields under a CoM ahead of
-//! it and every step lands long, more so the faster the walk). This feedback measures the
+//! which the plan does not know (a stance ankle yields under a CoM ahead of it and every step
+//! lands long, more so the faster the walk). This feedback measures the
 //! deflection instead. With the target q*_j the gait sent for joint j (the IK plus the
 //! feed-forwards and the gyro feedback, before this correction), the servo's Present Position
 //! q̂_j read one tick later and the tick Δt:

@@ -1,18 +1,18 @@
 //! Fast single-precision sine, cosine, square root, arc tangent and rounding for the servo loop.
 //!
 //! **Rounding to an integer** ([`round_i32`]): `libm::roundf` is a software function
-//! (≈ 20 instructions with its `truncf` and `copysignf` on the M7, whose FPv4/FPv5-SP subset
-//! as targeted has no `VRINTA`); the FPU's truncating conversion `VCVT` and one comparison of
+//! (with its `truncf` and `copysignf` on the M7, whose FPv4/FPv5-SP subset as targeted has no
+//! `VRINTA`); the FPU's truncating conversion `VCVT` and one comparison of
 //! the remainder give the same integer for every f32.
 //!
-//! On the Cortex-M7F `libm::sinf` / `libm::cosf` compute in software doubles (≈1,260
-//! instructions each); the functions here use only f32 arithmetic (≈34 instructions).
+//! On the Cortex-M7F `libm::sinf` / `libm::cosf` compute in software doubles; the
+//! functions here use only f32 arithmetic (a short polynomial each).
 //!
 //! **Square root** ([`sqrt`]): on hard-float ARM targets (`target_abi = "eabihf"`: the
 //! Cortex-M4F's FPv4-SP and the M7's FPv5 both have it) the FPU's `VSQRT.F32`, through the
 //! one `unsafe` block of gait-core (module `vfp`); it is IEEE 754 correctly rounded, as
 //! `libm::sqrtf` is, so the results are bit-identical — `libm::sqrtf` is a software square
-//! root (≈ 130 instructions on the M7), `VSQRT` one instruction plus two register moves.
+//! root, `VSQRT` one instruction plus two register moves.
 //! Elsewhere (the FPU-less Cortex-M3, the host) `libm::sqrtf`.
 //!
 //! **Arc tangent** ([`atan2`], Cephes `atanf`): with `t = min(|y|, |x|) / max(|y|, |x|)` in

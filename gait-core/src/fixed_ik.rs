@@ -274,8 +274,8 @@ fn shr_to_u32(x: u64, s: u32) -> u32 {
 fn atan_unit(t: i64) -> i64 {
     let t = t.clamp(0, ONE) as i32;
     let u = mul30_32(t, t);
-    // Horner written out (no loop: ≈ 6 instructions a step on the M3, where the loop's
-    // bookkeeping cost as much again); `wrapping_add` never wraps (the bound above).
+    // Horner written out (no loop: on the M3 the loop's bookkeeping costs as much as a step);
+    // `wrapping_add` never wraps (the bound above).
     let [c0, c1, c2, c3, c4, c5, c6, c7, c8] = ATAN_COEF;
     let step = |acc: i32, c: i32| c.wrapping_add(mul30_32(acc, u));
     let acc = step(

@@ -169,7 +169,7 @@ pub struct FixedSample {
 
 /// `v` (f32) as the nearest `Fx` (ties to even), saturating at the ends, NaN → 0: the value
 /// of `Fx::saturating_from_num(v)` but total (that one panics on NaN) and in 32-bit integer
-/// steps (≈ 20 instructions, ≈ 160 through the `fixed` crate on cores without an FPU).
+/// steps (the `fixed` crate's conversion is several times longer on cores without an FPU).
 ///
 /// v = ±m·2^(e − 150) with m the 24-bit significand (e the biased exponent), so the `Fx` bits
 /// are m·2^(e − 134): a left shift below 2³¹ for e − 134 ∈ [0, 7], a rounding right shift for
@@ -205,7 +205,7 @@ pub fn fx_sat(v: f32) -> Fx {
 
 /// `x` as the nearest f32 (ties to even): the value of `x.to_num::<f32>()`, in 32-bit integer
 /// steps. On cores without an FPU `to_num` goes through the `fixed` crate's generic helper with
-/// 64-bit shifts (library calls, ≈ 50 instructions a value, 21 values a sample); this is ≈ 15.
+/// 64-bit shifts (library calls, 21 values a sample); this uses 32-bit steps only.
 ///
 /// |x|·2¹⁶ = m ∈ [2^t, 2^(t+1)): the 24-bit significand is m shifted to [2²³, 2²⁴), rounded
 /// to nearest even when t > 23 (it may round up to 2²⁴); the biased exponent is t − 16 + 127,

@@ -32,7 +32,8 @@
 //! f = ⌈1000·(v/v_max)·1.05⌉/1000 (joint speeds scale as 1/f for the same path,
 //! [`stretched`]), with [`Feasibility::Lower`] the swing height becomes ⌊h_z·v_max/(1.05·v)⌋
 //! (µm), and the plan is checked again, at most [`MAX_TIMING_ROUNDS`] adjustments. All rounds
-//! together spend at most [`MAX_DRY_RUN_WORK`] (≈ 10⁹ M7 instructions); a longer plan is refused.
+//! together spend at most [`MAX_DRY_RUN_WORK`] (a bound of a few seconds on the M7); a longer plan is
+//! refused.
 
 #[cfg(feature = "fixed-engine")]
 use crate::fixed_ik::FixedLegKinematics;
@@ -58,13 +59,11 @@ pub const MAX_TIMING_ROUNDS: u8 = 4;
 /// Safety factor on the needed slow-down.
 pub const TIMING_MARGIN: f64 = 1.05;
 /// Work budget of the whole servo-speed check (every round together), in units of one plain
-/// dry-run sample (sampler + two-leg IK + speed monitor, ≈ 5.1·10³ M7 instructions by
-/// BENCHMARKS.md: 907 + 4,160 + the monitor); a whole-body sample costs
-/// [`WHOLEBODY_SAMPLE_COST`] units (24,353 + 907 ≈ 5 × as much). 200,000 units ≈ 1.0·10⁹
-/// instructions, ≈ 4.7 s on the 216 MHz M7: the bound on the start-up check whatever the
-/// parameters (without it a 64-step plan of 4 s steps at dt = 1 ms with whole-body compensation
-/// and 4 stretch rounds needed ≈ 3·10¹⁰). A plan beyond it is refused
-/// ([`GaitError::DryRunTooLong`]) rather than checked in part.
+/// dry-run sample (sampler + two-leg IK + speed monitor); a whole-body sample costs
+/// [`WHOLEBODY_SAMPLE_COST`] units (the stages' costs per call are in BENCHMARKS.md). 200,000
+/// units keep the start-up check within a few seconds on the 216 MHz M7 whatever the
+/// parameters (the parameter table's longest plan would need some thirty times more). A plan
+/// beyond it is refused ([`GaitError::DryRunTooLong`]) rather than checked in part.
 pub const MAX_DRY_RUN_WORK: u32 = 200_000;
 /// Cost of one whole-body dry-run sample in [`MAX_DRY_RUN_WORK`] units.
 pub const WHOLEBODY_SAMPLE_COST: u32 = 5;
@@ -737,9 +736,8 @@ mod tests {
     #[test]
     fn the_longest_plan_is_refused_within_the_work_budget() {
         // The parameter table's worst case: 64 steps of 4 s, 4 s lead-in and lead-out, dt = 1 ms,
-        // whole-body compensation: 264,000 samples per run (5 runs with stretching, ≈ 3·10¹⁰
-        // M7 instructions). Refused after at most MAX_DRY_RUN_WORK units (40,000 whole-body
-        // samples, ≈ 1.0·10⁹ instructions).
+        // whole-body compensation: 264,000 samples per run (5 runs with stretching). Refused
+        // after at most MAX_DRY_RUN_WORK units (40,000 whole-body samples).
         let robot = Robot::reference();
         let mut w = table2(0.001);
         w.walk.steps = 64;

@@ -436,8 +436,8 @@ impl<R: Real> LegKinematics<R> {
     }
 
     /// [`Self::chain_axes`] with the pelvis rotation's columns `rp` given (both legs share it).
-    /// Forced inline only on the FPU targets (≈ 280 instructions a tick on the M7); elsewhere one
-    /// copy serves every caller (inlined three times it cost the OpenCM ≈ 1.8 KB of flash).
+    /// Forced inline only on the FPU targets (it is on the control tick's path); elsewhere one
+    /// copy serves every caller (inlined at every call it would not fit the OpenCM's flash).
     #[cfg_attr(target_abi = "eabihf", inline(always))]
     fn chain_axes_in(
         &self,

@@ -217,8 +217,7 @@ pub fn measured_zmp<R: Real, L: SolePose<R>, Q: SolePose<R>>(
 }
 
 /// [`measured_zmp`] with the robot's sensor offsets converted to `R` once (on an FPU without
-/// double precision each `f64 → f32` is a library call: 16 a tick, ≈ 300 instructions on the
-/// Cortex-M7).
+/// double precision each `f64 → f32` is a library call, and there are 16 a tick).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ZmpMeter<R> {
     /// Sensor offsets in the foot frame, m.

@@ -1,11 +1,10 @@
 //! Leg odometry: where each landing foot really stands, from forward kinematics of the servos'
-//! Present Position (the closed-loop issue, item 0), and the soles' places the measured ZMP uses.
+//! Present Position, and the soles' places the measured ZMP uses.
 //!
 //! The measured ZMP ([`crate::measured`]) places each foot's load cells at a sole place. The
 //! plan's places are where the feet should be; a position servo that yields under load lands the
-//! swing foot elsewhere (on the MuJoCo robot every Table 2 step lands ≈ 1.6 mm long, the faster
-//! gait's ≈ 1.1 cm). A landed sole does not move until it lifts again (the soles slide < 1 mm
-//! under load), so one survey per landing is enough: in the double support after a single
+//! swing foot elsewhere (every step a little long, more so the faster the gait). A landed sole
+//! does not move until it lifts again (a loaded sole barely slides), so one survey per landing is enough: in the double support after a single
 //! support on foot s, once the new foot n carries load, the firmware reads the twelve Present
 //! Positions q̂ (over two ticks, (O3′) below) and this module measures n from the stance foot s.
 //!
@@ -61,8 +60,7 @@
 //! The survey is due once per double support that follows a single support, on the first tick
 //! the new foot carries at least the share `σ_min` of the feet's summed load: the new foot is then
 //! down and stays (it takes the weight), while the old one often lifts for a few tens of
-//! milliseconds in the landing's bounce and comes down a little elsewhere (on the MuJoCo robot
-//! ≈ 0.6–1 mm forward) — measured later, the survey would chain that move into every landing
+//! milliseconds in the landing's bounce and comes down a little elsewhere — measured later, the survey would chain that move into every landing
 //! after it. A double support where the new foot never takes that share keeps (O6). The corrections accumulate the landings'
 //! errors (odometry drift, as a real robot's): the measured ZMP is in the world the firmware
 //! estimates, as the physics' centre of pressure is in the true one. Every output is finite: a

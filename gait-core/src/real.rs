@@ -9,7 +9,7 @@ use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 ///
 /// For `f32`, `sin`/`cos`/`atan2` are the short polynomials of [`crate::fastmath`] (|error|
 /// < 1e-7 for sin/cos, ≤ [`crate::fastmath::ATAN2_MAX_ERR`] for atan2; libm's `sinf` computes
-/// in software doubles, ≈ 1,260 instructions on a Cortex-M7) and `sqrt` is the FPU's
+/// in software doubles, far slower on a single-precision FPU) and `sqrt` is the FPU's
 /// `VSQRT.F32` on hard-float ARM ([`crate::fastmath::sqrt`]).
 pub trait Real:
     Copy

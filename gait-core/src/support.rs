@@ -69,8 +69,8 @@ pub(crate) fn to_world<R: Real>(place: &Place<R>, l: [R; 2]) -> [R; 2] {
 }
 
 /// A sole's heading's (sin, cos): both from one evaluation (the f32 `sin` and `cos` are each a
-/// whole `sin_cos`: two on the per-tick measured ZMP path cost ≈ 3,600 instructions per foot on a
-/// soft-float M3); a yaw of exactly 0, every sole of a straight walk, needs none.
+/// whole `sin_cos`, and on a soft-float M3 the per-tick measured ZMP path would pay for two per
+/// foot); a yaw of exactly 0, every sole of a straight walk, needs none.
 pub(crate) fn heading_sin_cos<R: Real>(yaw: R) -> (R, R) {
     if yaw == R::zero() {
         (R::zero(), R::one())

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Drive the walking firmware with the official ROBOTIS Dynamixel SDK through its command port.
 
-The firmware is a Dynamixel Protocol 2.0 device on its command port (ID 150; README "Walking on
-command" has the control table). Any Dynamixel master drives it; this is the Python SDK
+The firmware is a Dynamixel Protocol 2.0 device on its command port (ID 150;
+docs/command-port.md has the control table). Any Dynamixel master drives it; this is the Python SDK
 (`pip install dynamixel-sdk==4.1.0 pyserial==3.5`):
 
     # the firmware in QEMU against the MuJoCo robot, its command port on TCP 5770:

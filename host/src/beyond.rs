@@ -1,5 +1,5 @@
-//! `walker beyond`: the paper's open-loop methods and the two additions of issue 7 walked side
-//! by side in the firmware-in-the-loop setup, scored against the simulator's ground truth.
+//! `walker beyond`: the paper's open-loop methods and the two additions beyond it (whole-body
+//! compensation, the feedback stabilizer) walked side by side in the firmware-in-the-loop setup, scored against the simulator's ground truth.
 //!
 //! Six runs of the same plan: LIPM, DLIPM, TLIPFM (the paper's pipeline, seed 000's exact CoM),
 //! TLIPFM with seed 001's Fourier CoM (`com=fourier`, `gait_core::fourier_walk`), TLIPFM +
@@ -727,7 +727,7 @@ pub fn goal_section(runs: &[RunMetrics]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Goal (issue 7): true ZMP mean |e| < {:.0} mm sagittal and < {:.0} mm lateral (the paper's TLIPFM on its real robot).",
+        "Goal: true ZMP mean |e| < {:.0} mm sagittal and < {:.0} mm lateral (the paper's TLIPFM on its real robot).",
         GOAL_MEAN_M[0] * 1e3,
         GOAL_MEAN_M[1] * 1e3
     );

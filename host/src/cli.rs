@@ -170,7 +170,7 @@ pub struct ReportArgs {
     /// The model the firmware ran (report title); default: the plan's.
     #[arg(long, value_enum)]
     pub model: Option<ModelName>,
-    /// Also write the run as MCAP for Foxglove / PlotJuggler (README: "Opening a run in Foxglove").
+    /// Also write the run as MCAP for Foxglove / PlotJuggler (docs/simulation.md: "Opening a run in Foxglove").
     #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
 }

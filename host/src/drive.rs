@@ -2,7 +2,7 @@
 //!
 //! The keys change the commanded velocity in steps; each change is sent at once as one WRITE of
 //! the three velocity registers (Velocity X, Y, Yaw Rate: mm/s, mm/s, mrad/s) and Mode = walk
-//! (README "Walking on command"):
+//! (docs/command-port.md):
 //!
 //! | key | does |
 //! |---|---|

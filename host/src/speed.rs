@@ -1,5 +1,5 @@
 //! `walker speed`: the fastest forward velocity and the fastest turn rate the firmware sustains
-//! for [`HOLD_S`] s on the MuJoCo robot, walking on command (issue 17, "Speed").
+//! for [`HOLD_S`] s on the MuJoCo robot, walking on command (docs/command-port.md, "Speed").
 //!
 //! One run per level: the firmware (no autostart) stands ready; 1 s later the command port gets
 //! the level (forward: vx = v; turn: yaw rate ω in place), held until [`HOLD_S`] s after the

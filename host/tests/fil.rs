@@ -106,10 +106,10 @@ fn assert_fell(r: &FilResult, log: &DecodedLog) {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn compute_time_follows_the_core_clock() {
-    // The QEMU board charges the bench's worst-case instructions per tick at `core_mhz`
-    // (issue 14). At the OpenCR's 216 MHz a tick's compute (≈ 16,000 instructions) is ≈ 74 µs
-    // of the 5 ms period: no overrun. At 3 MHz it is ≈ 5.3 ms > 5 ms: every tick overruns and
-    // the supervisor stops the walk for an overrun burst.
+    // The QEMU board charges the bench's worst-case instructions per tick at `core_mhz`. At the
+    // OpenCR's 216 MHz a tick's compute is a small part of the 5 ms period: no overrun. At 3 MHz
+    // it is longer than the period: every tick overruns and the supervisor stops the walk for an
+    // overrun burst.
     let (fast, log_fast) = fil("clock-216", short_walk(1), SimConfig::default(), &[]);
     assert_eq!(fast.exit_code, Some(0));
     assert_eq!(log_fast.ticks.last().map(|t| t.overruns), Some(0));
@@ -245,13 +245,13 @@ fn a_fall_stops_the_walk_and_turns_torque_off() {
     );
 }
 
-// ---- The feedback stabilizer under disturbances (issue 7) ----
+// ---- The feedback stabilizer under disturbances ----
 //
 // These run on the idealised kinematic robot (stance sole bolted down): they check that the
 // firmware's compensation and feedback paths stay bounded (no clamped or non-finite target, the
 // commanded CoM in the walk's area), not how well the robot walks. On the MuJoCo robot the
-// open-loop whole-body compensation + stabilizer of issue 7 falls within seconds (exit 13), as
-// the full-dynamics issue predicted; making it walk there is the closed-loop issue's work.
+// open-loop whole-body compensation + stabilizer falls within seconds (exit 13); there it needs
+// the rest of the closed loop (docs/beyond.md).
 
 /// The firmware's feedback off as `walker beyond` has it ([`walker_host::beyond::OPEN_LOOP`]:
 /// gyro balance feedback, servo compliance handling and catching step off, the paper's
@@ -378,8 +378,8 @@ fn stabilizer_survives_five_percent_dropped_packets() {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_model() {
-    // Issue 7's "done when": the Table 2 walk (14 steps, the firmware's default timing) in the
-    // simulator with XM430-class speed and torque limits; TLIPFM + whole-body compensation +
+    // The goal of compensation + feedback: the Table 2 walk (14 steps, the firmware's default
+    // timing) in the simulator with XM430-class speed and torque limits; TLIPFM + whole-body compensation +
     // feedback tracks the reference with a true mean |e| below 11 mm sagittal and 14 mm lateral,
     // and laterally better than TLIPFM alone on the same setup.
     // Idealised kinematic robot: see the note above the stabilizer tests.
@@ -403,8 +403,8 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_m
         // only tilt it: off here, as on any robot without servo compliance. So is the swing
         // sole's levelling: this body never tilts (0.0°), so what it would level against is the
         // attitude filter's error under the walk's accelerations, and the bolted-down landing
-        // sole keeps the tilt it was given (with it on: pelvis pitch up to 0.017 rad, the ZMP
-        // outside the soles in 41 ticks, 98.2 % inside).
+        // sole keeps the tilt it was given (with it on the pelvis pitches and the ZMP leaves the
+        // soles on some ticks).
         let (r, log) = fil(
             &format!("goal-{}", v.name),
             spec,
@@ -459,11 +459,9 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_m
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
     // The paper's open-loop TLIPFM walk (the firmware's gyro feedback off), 14 steps at the
-    // paper's timing, on the MuJoCo robot
-    // with XM430-W350 servo models. Figures when this test was written (seed 0): no fall,
-    // walked 0.255 of 0.260 m, heading drift −2.9°, torso tilt ≤ 9.1°, measured − reference
-    // mean |e| 10.3 mm sagittal / 28.2 mm lateral. The bounds leave room for tuning, not for
-    // a fall or a walk that goes nowhere.
+    // paper's timing, on the MuJoCo robot with XM430-W350 servo models (its current figures:
+    // docs/results.md). The bounds leave room for tuning, not for a fall or a walk that goes
+    // nowhere.
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mujoco-table2");
     let sim = SimConfig {
         model_out: Some(out.join("model.xml")),
@@ -501,8 +499,8 @@ fn table2_tlipfm_walks_the_mujoco_robot_with_its_video() {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn table2_completes_with_twenty_percent_reply_loss() {
-    // Issue 16: start-up retries per device (8 attempts), so 20 % lost replies no longer stop
-    // the walk before it starts; seed 1 of `walker fil --p-drop 0.2` (seeds 2 and 3 complete
+    // Start-up retries per device (8 attempts), so 20 % lost replies do not stop the walk
+    // before it starts; seed 1 of `walker fil --p-drop 0.2` (seeds 2 and 3 complete
     // too, checked by hand).
     let mut sim = seeded(1);
     sim.faults.p_drop = 0.2;
@@ -545,14 +543,13 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
     // capture-point error beyond the ankles' deadband (logged as `CatchStep` records) and the
     // walk completes; with `catch_gain=0` the same push makes the robot fall (exit 13), the
     // swing sole's levelling (on in both runs) does not save it alone. (With the roll servos'
-    // integral of the defaults since 2026-11-26 the robot survives 1.5 N·s there without the
-    // catching step; 1.75 N·s fells it with or without.)
+    // integral of the defaults a 1.5 N·s push there is survived without the catching step,
+    // hence the 1.6 N·s here.)
     use walker_contract::record::FaultKind;
     let sim = pushed("5.9:1.6:180");
     let spec = WalkSpec::default();
     let (r, log) = fil("catch-push", spec.clone(), sim.clone(), &[]);
-    // The plan completes without a fall; the push costs distance (0.208 of 0.260 m; 0.221
-    // before the swing sole's levelling, which turns the caught foot's sole back as it lands).
+    // The plan completes without a fall; the push costs distance.
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
     assert_eq!(r.exit_code, Some(0), "{}", w.line());
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
@@ -591,8 +588,7 @@ fn the_level_swing_sole_survives_the_backward_push_that_fells_the_robot_without_
     let sim = pushed("6:1.5:180");
     let spec = WalkSpec::default();
     let (r, log) = fil("level-push", spec.clone(), sim.clone(), &[]);
-    // The push costs distance (0.214 of 0.260 m; 0.226 before the clock hold became the
-    // default: the held clock waits for the caught foot).
+    // The push costs distance (the held clock waits for the caught foot).
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
     assert_eq!(r.exit_code, Some(0), "{}", w.line());
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
@@ -718,7 +714,7 @@ fn commanded_com_gap(log: &DecodedLog, cfg: &walker_contract::Config) -> (f64, u
     (gap, n)
 }
 
-/// Seed 001's Fourier CoM walks in the firmware on the MuJoCo robot (issue 12): the plan file
+/// Seed 001's Fourier CoM walks in the firmware on the MuJoCo robot: the plan file
 /// `plans/table2-fourier.toml` (Table 2, `com = "fourier"`, 12 terms) completes its 14 steps
 /// without a fall, and the firmware really commands the series: with τ kept near 0 (1 mHz φ̈
 /// filter), its logged CoM is the host's rebuild of the Fourier walk to the log's 10 µm unit
@@ -802,7 +798,7 @@ fn logged_overruns(log: &DecodedLog) -> Option<u16> {
     log.ticks.last().map(|t| t.overruns)
 }
 
-/// Issue 14: the Table 2 walk (14 steps, TLIPFM) on the MuJoCo robot by the Cortex-M3 firmware
+/// The Table 2 walk (14 steps, TLIPFM) on the MuJoCo robot by the Cortex-M3 firmware
 /// with the fixed-point path, on QEMU's Cortex-M3 machine (mps2-an385) at the OpenCM 9.04's
 /// 72 MHz, against the same walk by the Cortex-M7 firmware in f32 (mps2-an500, 216 MHz). Both
 /// complete without a fall or an overrun, and the commanded CoM and ZMP reference agree tick by
@@ -901,10 +897,11 @@ fn stack_bound(elf: &std::path::Path) -> u32 {
         .unwrap_or_else(|| panic!("no worst case in {text}"))
 }
 
-/// Issue 14's 1 kHz: the Table 2 walk at dt = 0.001 s with the bus at 4.5 Mbps on the MuJoCo
-/// robot, the firmware at its board's real clock: the QEMU board charges the bench's
-/// worst-case instructions per tick ÷ the core clock on top of the modelled bus time (≈ 431 µs
-/// of gait traffic, ≈ 62 µs on the ticks with one of the servo monitor's READs). The walk
+/// 1 kHz: the Table 2 walk at dt = 0.001 s with the bus at 4.5 Mbps on the MuJoCo robot, the
+/// firmware at its board's real clock: the QEMU board charges the bench's worst-case
+/// instructions per tick ÷ the core clock on top of the modelled bus time (the gait's traffic,
+/// and one of the servo monitor's READs on some ticks; BENCHMARKS.md "Bus budget per control
+/// tick"). The walk
 /// completes, no fall, and the firmware's log counts zero overruns.
 fn table2_at_1_khz_and_4_5_mbps(name: &str, elf: PathBuf, machine: &str, tokens: &[&str]) {
     let spec = WalkSpec {
@@ -981,12 +978,12 @@ fn command_script_run(
     (r, drove, script, f)
 }
 
-/// A footstep list on the command port (issue 17): `plans/commands-steps.toml` (stand 1 s, six
+/// A footstep list on the command port: `plans/commands-steps.toml` (stand 1 s, six
 /// listed steps: two forward, a 0.3 rad left turn in two, a 2 cm side step) on the MuJoCo
 /// robot. No fall; the six listed steps and one stop step, each the generator's explicit step
 /// for the logged entry (replayed exactly); the robot stops by itself after the list (the run
-/// ends by the script's torque off once it stands). Measured: 0.004 m from the commanded end
-/// pose (3.0 % of the 0.135 m path), +2.0° heading; asserted ≤ 10 % of the path and ≤ 10°.
+/// ends by the script's torque off once it stands). Asserted: the end pose within 10 % of the
+/// commanded path and 10° of the commanded heading.
 #[test]
 #[ignore]
 fn steps_demo_walks_a_footstep_list_on_mujoco() {
@@ -1011,17 +1008,15 @@ fn steps_demo_walks_a_footstep_list_on_mujoco() {
     );
 }
 
-/// Walking on command (issue 17): `plans/commands-demo.toml` (stand 1 s, forward 0.05 m/s 4 s,
+/// Walking on command: `plans/commands-demo.toml` (stand 1 s, forward 0.05 m/s 4 s,
 /// turn in place 20°/s 4 s, side-step left 0.03 m/s 3 s, diagonal 3 s, stop) drives the
 /// firmware (no autostart) through its command port on the MuJoCo robot. No fall; the run ends
 /// by the script's torque off (stop `Requested`); every footstep the firmware logs is the
 /// step generator's for the logged commands and heading-hold corrections (replayed on the host,
 /// f32, exactly). The torso's end pose against the commands' (integrated through the step
-/// limits without the corrections): with the heading hold (`heading_gain` 0.5) 0.028 m off over
-/// the 0.41 m commanded path (6.9 %; 22.9 % of the 0.12 m net displacement) and +2.5° in heading
-/// (the hold turned −10.5°); without it 0.043 m (10.6 %) and +12.0° (the soles slip in yaw when
-/// turning and side-stepping). Asserted: the issue's 10 % of the commanded distance (read as the
-/// path walked) and 10° of its heading.
+/// limits without the corrections; the soles slip in yaw when turning and side-stepping, which
+/// the heading hold turns back). Asserted: 10 % of the commanded distance (read as the path
+/// walked) and 10° of its heading.
 #[test]
 #[ignore]
 fn commands_demo_walks_on_mujoco() {

@@ -936,8 +936,8 @@ fn tick_staircase_crouch_keeps_zmp_near_com() {
     // The firmware's start-up: a 1.5 s minimum-jerk crouch written every 5 ms as whole servo
     // ticks. Hip and ankle pitch round together, the knee (twice the angle) on other ticks, so
     // the pelvis pitch follows a ±1-tick (1.5 mrad) staircase of rounding errors. A first-order
-    // servo lag turned every goal change into a velocity jump and the true ZMP swung by ±0.27 m
-    // at the tick rate; a continuous-velocity servo leaves a ripple of about a centimetre.
+    // servo lag turns every goal change into a velocity jump and the true ZMP swings at the tick
+    // rate; a continuous-velocity servo leaves only a small ripple.
     let cfg = kin();
     let mut sim = Simulator::new(&cfg).unwrap();
     torque_on(&mut sim);

@@ -17,7 +17,7 @@ the SDK over TCP (Protocol 2.0, ID 150):
    GroupSyncRead, and checks it (support foot, walk velocity within the command, ZMP);
 5. stops: Mode = stop; waits for State = standing with the step count settled;
 6. Mode = torque off ends the run: `walker fil` must exit 0 and report no fall;
-7. runs README's example, host/examples/sdk_drive.py (walk, turn, stop, torque off), against a
+7. runs the example of docs/command-port.md, host/examples/sdk_drive.py (walk, turn, stop, torque off), against a
    second run: it must exit 0 having printed walking status lines, and the robot not fall;
 8. `walker drive --sim` (keyboard teleoperation) in a pseudo-terminal: waits for the standing
    status line, types w w w w (walk +40 mm/s), a (turn +100 mrad/s), x (quit: stop, torque off)
@@ -253,7 +253,7 @@ def session(c, walker, elf):
 
 
 def example(c, walker, elf):
-    """host/examples/sdk_drive.py (README's example) against another run."""
+    """host/examples/sdk_drive.py (the example of docs/command-port.md) against another run."""
     out = Path(tempfile.mkdtemp(prefix="sdk-example-"))
     run = FilRun(walker, elf, out)
     try:
