@@ -15,7 +15,7 @@
 //!    (`SensorStale`, exit 19) whatever `hold_ticks`.
 //! 4. Measured ZMP from the 8 forces (gait-core `measured_zmp` by a `ZmpMeter`, feet placed
 //!    where the previous gait sample put them moved by the leg odometry's corrections
-//!    (`sole_poses=measured`, the default, f32 path: gait-core [`gait_core::odometry`]; each
+//!    (`sole_poses=measured`, the default, f32 path: gait-core [`gait_core::measure::odometry`]; each
 //!    landing surveyed once in its double support from the Present Position of the stance leg's
 //!    six servos, then the new leg's on the next tick, in one more BULK READ each), feet under
 //!    [`Config::min_load_n`] ignored); φ̈
@@ -23,21 +23,21 @@
 //!    (fall → stop).
 //! 5. One gait sample with τ, checked finite (CoM, ZMP, feet; then the stabilizer's shift) before
 //!    the IK: a non-finite one holds the last targets and stops (`NonFiniteSample`, exit 18); with `stab=on` the feedback stabilizer (gait-core
-//!    [`gait_core::stabilizer`]) turns the measured ZMP error and the gyro into a bounded shift
+//!    [`gait_core::feedback::stabilizer`]) turns the measured ZMP error and the gyro into a bounded shift
 //!    δ of the commanded CoM (‖δ‖ ≤ `stab_max` ≤ 2 cm, rate-limited, ZMP command inside the
 //!    support polygon with margin; a missing or non-finite measurement never reaches it);
 //!    then [`Targets`] (built once): the paper's pipeline (pelvis on the model's CoM + δ, two-leg
 //!    IK) or, with `comp=wholebody`, whole-body compensation (pelvis placed so the multi-body
-//!    CoM is on the model's CoM + δ, gait-core [`gait_core::wholebody`]); the IK clamps to
+//!    CoM is on the model's CoM + δ, gait-core [`gait_core::kinematics::wholebody`]); the IK clamps to
 //!    reach and joint limits; with `compliance_roll`/`compliance_pitch` = k the servos' predicted static sag under
-//!    the gait's loads is added (k·τ/K per joint, gait-core [`gait_core::compliance`], also on
+//!    the gait's loads is added (k·τ/K per joint, gait-core [`gait_core::feedback::compliance`], also on
 //!    the start-up ramp's end pose; f32 only: off with `math=fixed`); the gyro damping; with
-//!    `deflection_ki` > 0 the servo deflection feedback (gait-core [`gait_core::deflection`],
+//!    `deflection_ki` > 0 the servo deflection feedback (gait-core [`gait_core::feedback::deflection`],
 //!    f32 only: the pitch servos' Present Position, read in one more BULK READ right after the
 //!    sensors', drives the stance leg's joints to their targets); [`safe_targets`] to the servo ticks (a non-finite target holds
 //!    the previous tick and stops); ONE SYNC WRITE of the 12 Goal Positions (116, 4 bytes
 //!    each).
-//!    The catching step (`catch_gain`, default on; gait-core [`gait_core::catching`], f32
+//!    The catching step (`catch_gain`, default on; gait-core [`gait_core::feedback::catch`], f32
 //!    only) runs before the stabilizer: the attitude and the gyro give the capture-point
 //!    error; beyond the ankles' deadband it moves the swing foot's landing place, and the
 //!    feet's and the body's offsets from the plan are added to copies of the samples (the IK's,
@@ -122,15 +122,16 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table, x_series};
 use dxl::{BulkReadRequest, DeviceResult};
-use gait_core::balance::{FixedGyroFeedback, FootForceControl, FootForceState};
-use gait_core::catching::{StepAdaptation, StepAdapter};
-use gait_core::compliance::{Compliance, LoadModel};
-use gait_core::fixed_point::{fx_sat, FixedFoot, Fx};
+use gait_core::feedback::catch::{StepAdaptation, StepAdapter};
+use gait_core::feedback::compliance::{Compliance, LoadModel};
+use gait_core::feedback::fdc::{FootForceControl, FootForceState};
+use gait_core::feedback::gyro::FixedGyroFeedback;
+use gait_core::feedback::stabilizer::{Stabilizer, StabilizerInput};
 use gait_core::gait::{Arithmetic, Sample};
-use gait_core::measured::{FixedZmpMeter, ForceReading, SolePose, ZmpMeter};
-use gait_core::odometry::SurveyedSole;
+use gait_core::maths::fixed_point::{fx_sat, FixedFoot, Fx};
+use gait_core::measure::odometry::SurveyedSole;
+use gait_core::measure::zmp::{FixedZmpMeter, ForceReading, SolePose, ZmpMeter};
 use gait_core::robot::LEG_JOINTS;
-use gait_core::stabilizer::{Stabilizer, StabilizerInput};
 use gait_core::{GaitError, GaitSample, Robot, Side};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 use walker_contract::ExitCode;
@@ -161,7 +162,7 @@ use modes::{Motion, Walk};
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
-pub type GaitSampler = gait_core::fourier_walk::WalkSampler<f32, MAX_STEPS>;
+pub type GaitSampler = gait_core::trajectory::fourier_walk::WalkSampler<f32, MAX_STEPS>;
 pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;
@@ -322,7 +323,7 @@ impl CatchLog {
                 let side_code: u8 = if side == Side::Left { 1 } else { 2 };
                 for (component, v) in (0u8..).zip(self.largest) {
                     // |v| ≤ the limits (< 0.1 m): the µm fit an i32.
-                    let um = gait_core::fastmath::round_i32(v * 1e6);
+                    let um = gait_core::maths::fastmath::round_i32(v * 1e6);
                     let rec = fault(now, FaultKind::CatchStep, side_code * 16 + component, um);
                     log.write(board, rec);
                 }
@@ -419,16 +420,16 @@ fn write_goals<B: Board>(bus: &mut BoardMaster<'_, B>, ticks: &[i32; LEG_JOINTS]
 }
 
 /// The servos' Present Position and what the firmware makes of it (f32 path only): the servo
-/// deflection feedback ([`gait_core::deflection`], `deflection_ki`: its joints read in one BULK
+/// deflection feedback ([`gait_core::feedback::deflection`], `deflection_ki`: its joints read in one BULK
 /// READ every tick, the targets of the last walking tick before the correction (D1)) and the leg
-/// odometry ([`gait_core::odometry`], `sole_poses=measured`: once a step, the stance leg's six
+/// odometry ([`gait_core::measure::odometry`], `sole_poses=measured`: once a step, the stance leg's six
 /// on the tick after a survey falls due, the new leg's six on the next, O3′). Built only while one of them acts; the OpenCM build has a
 /// zero-sized stand-in (`NoServoSense`: its RAM is short).
 #[cfg(not(feature = "board-opencm"))]
 struct ServoSense {
-    deflection: Option<gait_core::deflection::DeflectionFeedback>,
+    deflection: Option<gait_core::feedback::deflection::DeflectionFeedback>,
     /// The deflection feedback's joints.
-    mask: gait_core::deflection::JointSet,
+    mask: gait_core::feedback::deflection::JointSet,
     odometry: Option<Odometry>,
     reqs: heapless::Vec<BulkReadRequest, LEG_JOINTS>,
     /// Per request: the joint index.
@@ -444,8 +445,8 @@ struct ServoSense {
 /// The leg odometry's firmware side: its state, the legs' FK and the survey's two reads.
 #[cfg(not(feature = "board-opencm"))]
 struct Odometry {
-    legs: gait_core::odometry::LegOdometry<f32>,
-    kin: gait_core::kinematics::LegKinematics<f32>,
+    legs: gait_core::measure::odometry::LegOdometry<f32>,
+    kin: gait_core::kinematics::leg::LegKinematics<f32>,
     stage: Survey,
     /// The IK's joint targets of the last walking tick (before the feed-forwards and the
     /// feedback: the gait's planned motion, which the loaded leg follows), rad.
@@ -475,18 +476,18 @@ impl ServoSense {
     /// The deflection feedback of `cfg` at tick period `dt_s` and the odometry when `odometry`;
     /// `None` while neither acts.
     fn new(
-        cfg: &gait_core::deflection::DeflectionConfig,
+        cfg: &gait_core::feedback::deflection::DeflectionConfig,
         odometry: bool,
         robot: &Robot,
         dt_s: f32,
     ) -> Option<Self> {
-        let feedback = gait_core::deflection::DeflectionFeedback::new(cfg, dt_s);
+        let feedback = gait_core::feedback::deflection::DeflectionFeedback::new(cfg, dt_s);
         let deflection = feedback.is_on().then_some(feedback);
         let odometry = odometry.then(|| Odometry {
-            legs: gait_core::odometry::LegOdometry::new(
-                &gait_core::odometry::OdometryLimits::DEFAULT,
+            legs: gait_core::measure::odometry::LegOdometry::new(
+                &gait_core::measure::odometry::OdometryLimits::DEFAULT,
             ),
-            kin: gait_core::kinematics::LegKinematics::new(robot),
+            kin: gait_core::kinematics::leg::LegKinematics::new(robot),
             stage: Survey::Idle,
             ik: [f32::NAN; LEG_JOINTS],
         });
@@ -569,7 +570,7 @@ impl ServoSense {
                 ik: o.ik,
             },
             Survey::New { stance, first, ik } => {
-                let q = gait_core::odometry::legs_at_first_read(
+                let q = gait_core::measure::odometry::legs_at_first_read(
                     stance,
                     &first,
                     &self.present,
@@ -649,7 +650,7 @@ struct NoServoSense;
 #[cfg(feature = "board-opencm")]
 impl NoServoSense {
     fn new(
-        _: &gait_core::deflection::DeflectionConfig,
+        _: &gait_core::feedback::deflection::DeflectionConfig,
         _: bool,
         _: &Robot,
         _: f32,
@@ -829,7 +830,7 @@ enum Goal {
 }
 
 /// A foot sample in fixed point (exact for a sample the fixed-point sampler made).
-fn fixed_foot(f: &gait_core::swing::FootSample<f32>) -> FixedFoot {
+fn fixed_foot(f: &gait_core::trajectory::swing::FootSample<f32>) -> FixedFoot {
     FixedFoot {
         x: fx_sat(f.x),
         y: fx_sat(f.y),
@@ -1167,7 +1168,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
                     // The online walk's heading hold (f32 path): the gyro's yaw, the bias
                     // learnt while it stands.
                     if let Some(o) = walk.gait.online_mut() {
-                        let still = matches!(o.mode(), gait_core::online::WalkMode::Standing(_));
+                        let still = matches!(
+                            o.mode(),
+                            gait_core::trajectory::online::WalkMode::Standing(_)
+                        );
                         o.set_heading(heading.update(g, &att, dt_f32, still));
                     }
                     roll_pitch = Some([att.roll, att.pitch]);
@@ -1208,7 +1212,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
             let forces = |f: &Option<FootForces>| f.map(|f| f.forces_mn);
             let [fpl, fpr] = prev_feet_fx.unwrap_or_else(|| [fixed_foot(pl), fixed_foot(pr)]);
             meas_fx = zmp_meter.zmp((&fpl, forces(fl)), (&fpr, forces(fr)));
-            meas_fx.map(|z| z.map(gait_core::fixed_point::fx_to_f32))
+            meas_fx.map(|z| z.map(gait_core::maths::fixed_point::fx_to_f32))
         } else {
             match servo_sense.as_mut() {
                 Some(d) => {

@@ -40,9 +40,9 @@ use crate::bus::BoardMaster;
 use crate::control::{Targets, MAX_STEPS};
 use crate::record::MAX_MISSING;
 use crate::Config;
-use gait_core::fourier_walk::WalkSampler;
-use gait_core::kinematics::JointSpeedReport;
+use gait_core::kinematics::leg::JointSpeedReport;
 use gait_core::robot::LEG_JOINTS;
+use gait_core::trajectory::fourier_walk::WalkSampler;
 use gait_core::{GaitError, Robot};
 
 pub use gait_core::gait::{

@@ -16,11 +16,11 @@
 //! standing / walking / stopping (the online walk's mode), walking (the plan), stopped (the
 //! supervisor stopped).
 
-use gait_core::fourier_walk::WalkSampler;
 use gait_core::gait::{Engine, Sample, Targets};
-use gait_core::online::OnlineWalk;
-use gait_core::plan::Footstep;
 use gait_core::robot::LEG_JOINTS;
+use gait_core::trajectory::fourier_walk::WalkSampler;
+use gait_core::trajectory::online::OnlineWalk;
+use gait_core::trajectory::plan::Footstep;
 use gait_core::{GaitError, GaitSample, Robot};
 use walker_contract::command_port::PortState;
 

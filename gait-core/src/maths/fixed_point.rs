@@ -13,9 +13,9 @@
 //! bookkeeping of [`Sampler`] — software floats on an FPU-less core, but off the per-sample path.
 
 use crate::error::GaitError;
-use crate::plan::{Place, Plan, SwingShape};
 use crate::robot::Side;
-use crate::sampler::{Sampler, StepPhase, SupportPhase, TAU_LIMIT};
+use crate::trajectory::plan::{Place, Plan, SwingShape};
+use crate::trajectory::sampler::{Sampler, StepPhase, SupportPhase, TAU_LIMIT};
 use fixed::types::{I16F16, I2F30};
 
 /// A length (m), velocity (m/s) or time (s) in the sampler's fixed-point format.
@@ -231,8 +231,8 @@ pub fn fx_to_f32(x: Fx) -> f32 {
 
 impl FixedFoot {
     /// The foot in f32.
-    pub fn to_f32(&self) -> crate::swing::FootSample<f32> {
-        crate::swing::FootSample {
+    pub fn to_f32(&self) -> crate::trajectory::swing::FootSample<f32> {
+        crate::trajectory::swing::FootSample {
             x: fx_to_f32(self.x),
             y: fx_to_f32(self.y),
             z: fx_to_f32(self.z),
@@ -302,7 +302,7 @@ impl FixedPlace {
     }
 }
 
-/// The step being walked, with its places in fixed point (see [`crate::sampler::CurrentStep`]).
+/// The step being walked, with its places in fixed point (see [`crate::trajectory::sampler::CurrentStep`]).
 #[derive(Clone, Copy, Debug)]
 struct FixedStep {
     swing: Side,

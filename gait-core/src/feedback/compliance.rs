@@ -40,10 +40,10 @@
 //! (12 sine/cosine pairs) and 6 cross products per tick (the moments grouped by joint origin:
 //! the hip, the knee, the ankle).
 
-use crate::kinematics::LegKinematics;
-use crate::pipeline::pelvis_pose;
+use crate::kinematics::leg::LegKinematics;
+use crate::kinematics::pipeline::pelvis_pose;
 use crate::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
-use crate::sampler::{GaitSample, SupportPhase};
+use crate::trajectory::sampler::{GaitSample, SupportPhase};
 
 /// Feed-forward settings: gains, the servos' stiffness and the saturation.
 #[derive(Clone, Copy, Debug, PartialEq)]
