@@ -396,7 +396,7 @@ positions and the BULK READ of feet + IMU. The paths differ in the middle:
   (\`control::Targets::WholeBody\`, 2 iterations: 4 two-leg IK and 3 FK/CoM evaluations).
 - **fixed** (the firmware's \`math=fixed\`): integer pitch-rate filter with τ in mN·m
   (\`imu::FixedPitchAccel\`), fixed-point sampler (\`FixedSampler::next\`), fixed-point
-  measured ZMP (\`measured::FixedZmpMeter\`), integer-only two-leg IK
+  measured ZMP (\`measure::zmp::FixedZmpMeter\`), integer-only two-leg IK
   (\`fixed_ik::joint_targets\`) and the integer limit and rad → tick conversion
   (\`supervisor::safe_targets_fx\`): no float in the tick but the sampler's once-per-segment
   bookkeeping.
@@ -517,7 +517,7 @@ EOF
         "support:support polygon of a sample (\`control::support_of\`)" \
         "stab:stabilizer step: support polygon + \`Stabilizer::update\`" \
         "mzmp:measured ZMP, f32 (\`measured::measured_zmp\`)" \
-        "mzmp.fixed:measured ZMP, fixed point (\`measured::FixedZmpMeter::zmp\`)" \
+        "mzmp.fixed:measured ZMP, fixed point (\`measure::zmp::FixedZmpMeter::zmp\`)" \
         "tick.f32:full tick, f32" \
         "tick.comp_stab:full tick, f32 + compensation + stabilizer" \
         "tick.fixed:full tick, fixed"; do

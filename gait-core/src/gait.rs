@@ -20,7 +20,7 @@
 //!
 //! # Arithmetic ([`Engine`])
 //! The per-sample work runs in f32 ([`Arithmetic::F32`]) or in fixed point
-//! ([`Arithmetic::Fixed`]: the I16F16 sampler of `fixed_point.rs` and the integer-only IK of
+//! ([`Arithmetic::Fixed`]: the I16F16 sampler of `fixed_sampler.rs` and the integer-only IK of
 //! `fixed_ik.rs`, same plan and timeline; BENCHMARKS.md gives its accuracy against f64, CoM
 //! ≤ 5.4e-5 m over the Table 2 walk). The log, the stabilizer and the support polygon take
 //! the sample in f32 either way.
@@ -39,11 +39,11 @@ use crate::kinematics::fixed_ik::FixedLegKinematics;
 use crate::kinematics::leg::{JointSpeedMonitor, JointSpeedReport, LegKinematics, LegsIkReport};
 use crate::kinematics::pipeline::joint_targets;
 use crate::kinematics::wholebody::WholeBody;
-use crate::maths::fixed_point::FixedSample;
-#[cfg(feature = "fixed-engine")]
-use crate::maths::fixed_point::FixedSampler;
 use crate::measure::support::SupportPolygon;
 use crate::robot::LEG_JOINTS;
+use crate::trajectory::fixed_sampler::FixedSample;
+#[cfg(feature = "fixed-engine")]
+use crate::trajectory::fixed_sampler::FixedSampler;
 pub use crate::trajectory::fourier_walk::ComMethod;
 use crate::trajectory::fourier_walk::WalkSampler;
 use crate::trajectory::plan::SwingShape;
@@ -172,7 +172,7 @@ fn walk_params(w: &WalkConfig, robot: &Robot) -> Result<crate::GaitParams<f32>, 
 pub enum Arithmetic {
     /// The f32 sampler and the f32 IK (or whole-body compensation).
     F32,
-    /// The fixed-point sampler ([`crate::maths::fixed_point`]) and, with [`Compensation::None`], the
+    /// The fixed-point sampler ([`crate::trajectory::fixed_sampler`]) and, with [`Compensation::None`], the
     /// integer-only two-leg IK ([`crate::kinematics::fixed_ik`]); whole-body compensation stays f32 on the
     /// fixed-point sample.
     Fixed,

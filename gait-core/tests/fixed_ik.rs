@@ -7,8 +7,9 @@ use gait_core::kinematics::fixed_ik::{
 };
 use gait_core::kinematics::leg::{LegKinematics, Pose};
 use gait_core::kinematics::pipeline;
-use gait_core::maths::fixed_point::{FixedSampler, Fx};
+use gait_core::maths::fixed_point::Fx;
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
+use gait_core::trajectory::fixed_sampler::FixedSampler;
 use gait_core::{ForwardWalk, Model, ModelKind, Robot, Sampler, Side};
 use proptest::prelude::*;
 use proptest::test_runner::{RngAlgorithm, TestRng};

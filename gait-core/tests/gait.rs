@@ -589,7 +589,7 @@ proptest! {
 
 #[test]
 fn fixed_point_agrees_with_f64_over_the_whole_walk() {
-    use gait_core::maths::fixed_point::FixedSampler;
+    use gait_core::trajectory::fixed_sampler::FixedSampler;
     for kind in ModelKind::ALL {
         let robot = Robot::reference();
         let walk = ForwardWalk::table2();

@@ -598,9 +598,9 @@ fn inside_fraction_against_the_support_polygon() {
 // The fixed-point measured ZMP
 // ---------------------------------------------------------------------------------------------
 
-fn fixed_foot(x: f64, y: f64, yaw: f64) -> gait_core::maths::fixed_point::FixedFoot {
+fn fixed_foot(x: f64, y: f64, yaw: f64) -> gait_core::trajectory::fixed_sampler::FixedFoot {
     use gait_core::maths::fixed_point::Fx;
-    gait_core::maths::fixed_point::FixedFoot {
+    gait_core::trajectory::fixed_sampler::FixedFoot {
         x: Fx::from_num(x),
         y: Fx::from_num(y),
         z: Fx::ZERO,

@@ -49,8 +49,9 @@ mod firmware {
     use gait_core::kinematics::leg::LegKinematics;
     use gait_core::kinematics::pipeline::joint_targets;
     use gait_core::kinematics::wholebody::WholeBody;
-    use gait_core::maths::fixed_point::{FixedSample, FixedSampler, Fx};
+    use gait_core::maths::fixed_point::Fx;
     use gait_core::measure::zmp::{FixedZmpMeter, ForceReading, MeasuredZmp, SolePose, ZmpMeter};
+    use gait_core::trajectory::fixed_sampler::{FixedSample, FixedSampler};
     use gait_core::trajectory::fourier::FourierCom;
     use gait_core::trajectory::plan::SwingShape;
     use gait_core::trajectory::swing::swing_foot;

@@ -1,5 +1,5 @@
 //! The two-leg inverse kinematics in fixed point, for cores without an FPU (Cortex-M0/M3):
-//! with [`crate::maths::fixed_point::FixedSampler`] the whole path sampler → IK → joint targets needs
+//! with [`crate::trajectory::fixed_sampler::FixedSampler`] the whole path sampler → IK → joint targets needs
 //! no floating point per sample.
 //!
 //! # Method
@@ -50,12 +50,13 @@
 //! for level poses and 2.3e-5 rad with ±0.15 rad pelvis/foot roll and pitch (the 2e-4 rad budget;
 //! half of it is the 2⁻¹⁶ rad output resolution); the `f64` forward kinematics of the fixed-point
 //! angles lands within 4 µm of the target. The Table 2 walk through
-//! [`crate::maths::fixed_point::FixedSampler`] and this IK stays within 4.5e-4 rad of the `f64`
+//! [`crate::trajectory::fixed_sampler::FixedSampler`] and this IK stays within 4.5e-4 rad of the `f64`
 //! sampler and IK (mostly the sampler's share).
 
 use crate::kinematics::leg::{KNEE_MIN_BEND, MAX_POSITION};
-use crate::maths::fixed_point::{mul30_32, sin_cos, FixedFoot, FixedSample, Fx};
+use crate::maths::fixed_point::{mul30_32, sin_cos, Fx};
 use crate::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
+use crate::trajectory::fixed_sampler::{FixedFoot, FixedSample};
 
 const ONE: i64 = 1 << 30;
 /// π in 2⁻³⁰ rad units.

@@ -42,10 +42,11 @@
 //! overflow; the sum saturates at `f64::MAX`. Memory is O(1).
 
 use crate::error::GaitError;
-use crate::maths::fixed_point::{FixedFoot, Fx};
+use crate::maths::fixed_point::Fx;
 use crate::maths::real::Real;
 use crate::measure::support::{is_positive, to_world, SupportPolygon};
 use crate::robot::Robot;
+use crate::trajectory::fixed_sampler::FixedFoot;
 use crate::trajectory::plan::Place;
 use crate::trajectory::swing::FootSample;
 use core::marker::PhantomData;

@@ -4,6 +4,7 @@
 
 pub mod com;
 pub mod command;
+pub mod fixed_sampler;
 pub mod fourier;
 pub mod fourier_walk;
 pub mod online;
