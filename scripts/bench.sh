@@ -332,7 +332,7 @@ breakdown() {
     done
     printf 'the rest (glue, conversions, goal ticks) %s (%s %%)' "$(n "$rest")" "$(pct "$rest" "$total")"
 }
-# Transcendental calls per two-leg IK, counted in gait-core/src/kinematics.rs (legs_ik):
+# Transcendental calls per two-leg IK, counted in gait-core/src/kinematics/leg.rs (legs_ik):
 # 3 rot_cols × 3 sin_cos + 2 legs × 2 sin_cos, 2 legs × 7 atan2, 2 legs × 5 sqrt.
 ik_sc=13 ik_at=14 ik_sq=10
 ik_tr() { # array → instructions in the IK's sin_cos/atan2/sqrt (primitive figures × calls)
@@ -341,7 +341,7 @@ ik_tr() { # array → instructions in the IK's sin_cos/atan2/sqrt (primitive fig
 }
 ik7=$(ik_tr M7)
 ik3=$(ik_tr M3)
-# The fixed-point IK (gait-core/src/fixed_ik.rs, legs_ik): 2 legs × 7 atan2 and 5 isqrt; its
+# The fixed-point IK (gait-core/src/kinematics/fixed_ik.rs, legs_ik): 2 legs × 7 atan2 and 5 isqrt; its
 # sin_cos calls skip zero angles (the forward walk is level and straight: 2 legs × 2).
 fik_at=14 fik_sc=4
 fik3=$(calc "$fik_at * ${M3[prim.fx_atan2.avg]} + $fik_sc * ${M3[prim.fx_sin_cos.avg]}")
@@ -396,7 +396,7 @@ positions and the BULK READ of feet + IMU. The paths differ in the middle:
   (\`control::Targets::WholeBody\`, 2 iterations: 4 two-leg IK and 3 FK/CoM evaluations).
 - **fixed** (the firmware's \`math=fixed\`): integer pitch-rate filter with τ in mN·m
   (\`imu::FixedPitchAccel\`), fixed-point sampler (\`FixedSampler::next\`), fixed-point
-  measured ZMP (\`measured::FixedZmpMeter\`), integer-only two-leg IK
+  measured ZMP (\`measure::zmp::FixedZmpMeter\`), integer-only two-leg IK
   (\`fixed_ik::joint_targets\`) and the integer limit and rad → tick conversion
   (\`supervisor::safe_targets_fx\`): no float in the tick but the sampler's once-per-segment
   bookkeeping.
@@ -443,7 +443,7 @@ their sum):
   The codec: decoding and parsing the $rx_bytes reply bytes $(n "${M7[dxl.decode3_block.avg]}") ≈ $(per_rx M7 dxl.decode3_block) per byte, the
   ${M7[bytes.sync_write]}-byte SYNC WRITE $(n "${M7[dxl.sync_write12.avg]}"), the BULK READ $(n "${M7[dxl.bulk_read3.avg]}") (a 72-byte
   CRC alone: $(n "${M7[dxl.crc16_72.avg]}"); per-byte figures in the codec table below). The IK's
-  $ik_sc sin_cos + $ik_at \`atan2\` + $ik_sq \`sqrt\` (\`gait_core::fastmath\`) are ≈ $(n "$ik7") by the primitive figures below
+  $ik_sc sin_cos + $ik_at \`atan2\` + $ik_sq \`sqrt\` (\`gait_core::maths::fastmath\`) are ≈ $(n "$ik7") by the primitive figures below
   (\`sqrt\` is the FPU's \`VSQRT.F32\`, $(n "${M7[prim.sqrt_fast.avg]}") a call with the bench's loads and stores, against
   $(n "${M7[prim.sqrtf.avg]}") for libm's software \`sqrtf\`; \`atan2\` $(n "${M7[prim.atan2_fast.avg]}") against $(n "${M7[prim.atan2f.avg]}") for \`libm::atan2f\`). Without the codec the tick
   is $(n "$t7 - $codec7").
@@ -517,7 +517,7 @@ EOF
         "support:support polygon of a sample (\`control::support_of\`)" \
         "stab:stabilizer step: support polygon + \`Stabilizer::update\`" \
         "mzmp:measured ZMP, f32 (\`measured::measured_zmp\`)" \
-        "mzmp.fixed:measured ZMP, fixed point (\`measured::FixedZmpMeter::zmp\`)" \
+        "mzmp.fixed:measured ZMP, fixed point (\`measure::zmp::FixedZmpMeter::zmp\`)" \
         "tick.f32:full tick, f32" \
         "tick.comp_stab:full tick, f32 + compensation + stabilizer" \
         "tick.fixed:full tick, fixed"; do
@@ -548,9 +548,9 @@ Primitives (per call, including a \`black_box\` store and load of the argument a
 | --- | --- | --- | --- |
 EOF
     for st in "prim.expf:\`libm::expf\`" "prim.sqrtf:\`libm::sqrtf\` (software)" \
-        "prim.sqrt_fast:\`gait_core::fastmath::sqrt\` (\`VSQRT.F32\` on M7/M4F, libm on M3)" \
-        "prim.atan2f:\`libm::atan2f\`" "prim.atan2_fast:\`gait_core::fastmath::atan2\`" \
-        "prim.sin_cos_fast:\`gait_core::fastmath::sin_cos\`" \
+        "prim.sqrt_fast:\`gait_core::maths::fastmath::sqrt\` (\`VSQRT.F32\` on M7/M4F, libm on M3)" \
+        "prim.atan2f:\`libm::atan2f\`" "prim.atan2_fast:\`gait_core::maths::fastmath::atan2\`" \
+        "prim.sin_cos_fast:\`gait_core::maths::fastmath::sin_cos\`" \
         "prim.sinf_libm:\`libm::sinf\` (software doubles)" "prim.fmul:f32 multiply" \
         "prim.fdiv:f32 divide" "prim.fx_exp_neg:\`fixed_point::exp_neg\`" \
         "prim.fx_sin_cos:\`fixed_point::sin_cos\`" "prim.fx_sqrt:\`fixed_ik::sqrt\` (Fx)" \

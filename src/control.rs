@@ -151,7 +151,7 @@ use modes::Walk;
 
 pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
-pub type GaitSampler = gait_core::fourier_walk::WalkSampler<f32, MAX_STEPS>;
+pub type GaitSampler = gait_core::trajectory::fourier_walk::WalkSampler<f32, MAX_STEPS>;
 pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;

@@ -28,7 +28,7 @@ use core::ops::{Deref, DerefMut};
 
 use dxl::table::{foot, foot::FootForces, imu, imu::ImuSample, x_series};
 use dxl::{encode_status, Instruction, StatusError};
-use gait_core::kinematics::{leg_fk, Pose};
+use gait_core::kinematics::leg::{leg_fk, Pose};
 use gait_core::{Robot, Side};
 use walker_contract::bus_map::{self, TickMap};
 

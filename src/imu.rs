@@ -251,7 +251,7 @@ pub struct Tilt {
     pub tilt: f32,
 }
 
-use gait_core::fastmath::{sin_cos, sqrt};
+use gait_core::maths::fastmath::{sin_cos, sqrt};
 
 /// Time constant of the attitude filter's accelerometer correction, s.
 pub const ATTITUDE_TAU_S: f32 = 0.5;
@@ -380,7 +380,7 @@ const ONE_30: i64 = 1 << 30;
 
 /// [`AttitudeFilter`] in integers for FPU-less cores (`math=fixed`): the same equations on
 /// the IMU's raw units (µrad/s, µm/s²), angles in 2⁻³⁰ rad (`i64`), sin/cos by
-/// `gait_core::fixed_point::sin_cos`, atan2 and √ by `gait_core::fixed_ik` (|error| < 2e-8 rad
+/// `gait_core::maths::fixed_point::sin_cos`, atan2 and √ by `gait_core::kinematics::fixed_ik` (|error| < 2e-8 rad
 /// and exact floor); one 64-bit division per sample (tan θ). It agrees with the f32 filter
 /// to ≈ 1e-4 rad (I16F16 sin/cos arguments; test `fixed_attitude_tracks_the_f32_filter`).
 #[derive(Clone, Debug, Default)]
@@ -424,7 +424,7 @@ impl FixedAttitudeFilter {
     /// Feeds one IMU sample (body rates µrad/s, specific force µm/s²); returns the tilt
     /// from vertical, rad.
     pub fn update(&mut self, gyro_urad_s: [i32; 3], accel_um_s2: [i32; 3]) -> f32 {
-        use gait_core::fixed_ik::{atan2_fac, isqrt};
+        use gait_core::kinematics::fixed_ik::{atan2_fac, isqrt};
         let [ax, ay, az] = accel_um_s2.map(i64::from);
         let sq = |v: i64| v.unsigned_abs() * v.unsigned_abs();
         // < 3·2⁶² < 2⁶⁴.
@@ -471,15 +471,15 @@ impl FixedAttitudeFilter {
     /// The present tilt from vertical, rad: cos(tilt) = cos φ · cos θ.
     pub fn tilt(&self) -> f32 {
         let c = ((sin_cos30(self.roll).1 * sin_cos30(self.pitch).1) >> 30).clamp(-ONE_30, ONE_30);
-        let s = gait_core::fixed_ik::isqrt((ONE_30 * ONE_30 - c * c) as u64) as i64;
-        gait_core::fixed_ik::atan2_fac(s, c) as f32 / ONE_30 as f32
+        let s = gait_core::kinematics::fixed_ik::isqrt((ONE_30 * ONE_30 - c * c) as u64) as i64;
+        gait_core::kinematics::fixed_ik::atan2_fac(s, c) as f32 / ONE_30 as f32
     }
 }
 
 /// sin and cos (2⁻³⁰) of an angle in 2⁻³⁰ rad within [−π, π].
 fn sin_cos30(a: i64) -> (i64, i64) {
     let bits = ((a + (1 << 13)) >> 14) as i32;
-    gait_core::fixed_point::sin_cos(gait_core::fixed_point::Fx::from_bits(bits))
+    gait_core::maths::fixed_point::sin_cos(gait_core::maths::fixed_point::Fx::from_bits(bits))
 }
 
 /// Wraps an angle in 2⁻³⁰ rad to (−π, π] (0 when it is more than 8 turns out).

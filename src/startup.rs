@@ -37,13 +37,14 @@ use walker_contract::bus_map as ids;
 
 use crate::board::{Clock, ServoBus};
 use crate::bus::BoardMaster;
-use crate::control::{Targets, MAX_STEPS};
 use crate::record::MAX_MISSING;
 use crate::Config;
-use gait_core::fourier_walk::WalkSampler;
-use gait_core::kinematics::JointSpeedReport;
+use gait_core::gait::Targets;
+use gait_core::kinematics::leg::JointSpeedReport;
 use gait_core::robot::LEG_JOINTS;
+use gait_core::trajectory::fourier_walk::WalkSampler;
 use gait_core::{GaitError, Robot};
+use walker_contract::config::MAX_STEPS;
 
 pub use gait_core::gait::{
     stretched, TimingCheck, TimingNote, MAX_DRY_RUN_WORK, MAX_TIMING_ROUNDS, TIMING_MARGIN,

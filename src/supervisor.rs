@@ -279,7 +279,7 @@ impl JointMap {
             *hi = l.max as f32;
         }
         let ticks = TickMap::from_robot(robot);
-        let bits = |v: f32| gait_core::fixed_point::fx_sat(v).to_bits();
+        let bits = |v: f32| gait_core::maths::fixed_point::fx_sat(v).to_bits();
         let mut limits_fx = [[0i32; 2]; LEG_JOINTS];
         for (l, (&lo, &hi)) in limits_fx.iter_mut().zip(min_rad.iter().zip(max_rad.iter())) {
             *l = [bits(lo), bits(hi)];
@@ -389,7 +389,7 @@ pub fn safe_targets(
 /// [`safe_targets`] for joint targets in I16F16 rad (the fixed-point path: integer only,
 /// [`TickMap::tick_fx_k`]); fixed-point angles are always finite, so it cannot fail.
 pub fn safe_targets_fx(
-    targets: &[gait_core::fixed_point::Fx; LEG_JOINTS],
+    targets: &[gait_core::maths::fixed_point::Fx; LEG_JOINTS],
     map: &JointMap,
 ) -> SafeTargets {
     let mut ticks = [0i32; LEG_JOINTS];
@@ -603,7 +603,7 @@ mod tests {
 
     #[test]
     fn fixed_point_targets_match_the_f32_conversion() {
-        use gait_core::fixed_point::Fx;
+        use gait_core::maths::fixed_point::Fx;
         let m = map();
         let prev = [2048; 12];
         // In range, below and above the limits (knee 0..2.5, hip pitch ..0.9).

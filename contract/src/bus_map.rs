@@ -112,7 +112,7 @@ impl TickMap {
     pub fn tick_f32(&self, j: usize, rad: f32) -> i32 {
         let t = self.sign_of(j) * rad * self.ticks_per_rad_f32();
         self.zero_tick
-            .saturating_add(gait_core::fastmath::round_i32(t))
+            .saturating_add(gait_core::maths::fastmath::round_i32(t))
     }
 
     /// The joint angle (rad, f32) of joint `j` at `tick`.

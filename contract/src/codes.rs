@@ -315,7 +315,7 @@ pub enum FaultKind {
     /// 16: the catching step moved the landing place of a swing foot (two records at the end
     /// of that single support: `id` = side (1 left, 2 right) · 16 + component (0 forward, 1
     /// leftward, trunk frame), `value` = the largest move asked in that swing, µm; gait-core
-    /// `catching` A3–A4). An event of the walk, not a fault.
+    /// `feedback::catch` A3–A4). An event of the walk, not a fault.
     CatchStep,
     /// Other kind (code kept for forward compatibility).
     Other(u8),

@@ -32,7 +32,7 @@
 //! | 144 | 2 | Walk Yaw Rate | R | i16, mrad/s |
 //! | 146 | 2 | Command Count | R | u16, accepted writes to the command registers (wraps) |
 //!
-//! The velocity ranges are [`gait_core::command::CommandLimits::DEFAULT`]'s in the wire's units.
+//! The velocity ranges are [`gait_core::trajectory::command::CommandLimits::DEFAULT`]'s in the wire's units.
 //!
 //! # Checks (the protocol's error statuses; a rejected write changes nothing)
 //! * an address beyond the table or in a gap: **Data Range**; a read-only byte: **Access**;
@@ -51,7 +51,7 @@
 
 use dxl::instruction::{ErrorCode, Instruction, ParseError, StatusError};
 use dxl::packet::{Decoder, Packet, BROADCAST_ID};
-use gait_core::command::{CommandLimits, WalkCommand};
+use gait_core::trajectory::command::{CommandLimits, WalkCommand};
 
 /// The command port's device ID (not used on the servo bus).
 pub const PORT_ID: u8 = 150;
@@ -373,8 +373,8 @@ pub fn milli_i16(v: f32) -> i16 {
     if bits << 1 == 0 || !v.is_finite() {
         return 0;
     }
-    gait_core::fastmath::round_i32(v * 1000.0).clamp(i32::from(i16::MIN), i32::from(i16::MAX))
-        as i16
+    gait_core::maths::fastmath::round_i32(v * 1000.0)
+        .clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
 }
 
 /// The control table's memory and its access rules (the device side of the port).

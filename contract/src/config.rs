@@ -6,7 +6,7 @@
 pub const MAX_STEPS: usize = 64;
 /// Default Position I Gain of the ankle-roll servos (register units; the factory value is 0).
 /// With [`DEFAULT_SERVO_I_HIP_ROLL`] and the compliance feed-forward at 0.75 roll / 0.15 pitch
-/// ([`gait_core::compliance::Compliance::DEFAULT`]) it removes the stance leg's steady roll sag
+/// ([`gait_core::feedback::compliance::Compliance::DEFAULT`]) it removes the stance leg's steady roll sag
 /// the feed-forward's model misses (docs/beyond.md, "Servo compliance").
 pub const DEFAULT_SERVO_I_ROLL: u16 = 1250;
 /// Default Position I Gain of the hip-roll servos: less than the ankle rolls', because the hip's
@@ -152,28 +152,28 @@ pub struct Config {
     /// The ZMP/DCM feedback stabilizer is on.
     pub stabilizer_on: bool,
     /// The stabilizer's gains and limits.
-    pub stabilizer: gait_core::stabilizer::StabilizerConfig,
+    pub stabilizer: gait_core::feedback::stabilizer::StabilizerConfig,
     /// Gyro damping through the ankles and hips of the legs on the ground
-    /// ([`gait_core::balance`]).
-    pub gyro_feedback: gait_core::balance::GyroFeedback,
-    /// Feed-forward of the position servos' static sag ([`gait_core::compliance`]).
-    pub compliance: gait_core::compliance::Compliance,
-    /// Foot force difference control in double support ([`gait_core::balance`]).
-    pub foot_force: gait_core::balance::FootForceControl,
+    /// ([`gait_core::feedback::gyro`]).
+    pub gyro_feedback: gait_core::feedback::gyro::GyroFeedback,
+    /// Feed-forward of the position servos' static sag ([`gait_core::feedback::compliance`]).
+    pub compliance: gait_core::feedback::compliance::Compliance,
+    /// Foot force difference control in double support ([`gait_core::feedback::fdc`]).
+    pub foot_force: gait_core::feedback::fdc::FootForceControl,
     /// The catching step: the swing foot's landing place moved by the capture-point error
-    /// beyond the ankles' reach ([`gait_core::catching`]).
-    pub step_adaptation: gait_core::catching::StepAdaptation,
+    /// beyond the ankles' reach ([`gait_core::feedback::catch`]).
+    pub step_adaptation: gait_core::feedback::catch::StepAdaptation,
     /// The stance leg's joints driven to their targets from the servos' Present Position
-    /// ([`gait_core::deflection`]).
-    pub deflection: gait_core::deflection::DeflectionConfig,
+    /// ([`gait_core::feedback::deflection`]).
+    pub deflection: gait_core::feedback::deflection::DeflectionConfig,
     /// Where the measured ZMP places the feet: the plan's places, or each landing surveyed by
-    /// forward kinematics of the servos' Present Position ([`gait_core::odometry`]).
+    /// forward kinematics of the servos' Present Position ([`gait_core::measure::odometry`]).
     pub sole_poses_measured: bool,
     /// The online walk's heading hold: share of the gyro-measured heading error each walking
-    /// step turns back ([`gait_core::online`] H1–H2; 0 = off).
+    /// step turns back ([`gait_core::trajectory::online`] H1–H2; 0 = off).
     pub heading_gain: f32,
     /// The online walk's position hold: share of the surveyed feet's distance from the commanded
-    /// track each walking step corrects ([`gait_core::online`] P1–P2; 0 = off).
+    /// track each walking step corrects ([`gait_core::trajectory::online`] P1–P2; 0 = off).
     pub position_gain: f32,
     /// What start-up does when the plan needs joints faster than the servos.
     pub feasibility: Feasibility,
@@ -232,7 +232,7 @@ impl Config {
             zmp_b: None,
             swing_sinusoid: false,
             com_fourier: false,
-            fourier_terms: gait_core::fourier_walk::DEFAULT_FOURIER_TERMS,
+            fourier_terms: gait_core::trajectory::fourier_walk::DEFAULT_FOURIER_TERMS,
             servo_lead_s: 0.0,
             servo_i_roll: DEFAULT_SERVO_I_ROLL,
             servo_i_hip_roll: DEFAULT_SERVO_I_HIP_ROLL,
@@ -248,12 +248,12 @@ impl Config {
             core_mhz: 216,
             compensation: Compensation::None,
             stabilizer_on: false,
-            stabilizer: gait_core::stabilizer::StabilizerConfig::default_gains(),
-            gyro_feedback: gait_core::balance::GyroFeedback::DEFAULT,
-            compliance: gait_core::compliance::Compliance::DEFAULT,
-            foot_force: gait_core::balance::FootForceControl::OFF,
-            step_adaptation: gait_core::catching::StepAdaptation::DEFAULT,
-            deflection: gait_core::deflection::DeflectionConfig::OFF,
+            stabilizer: gait_core::feedback::stabilizer::StabilizerConfig::default_gains(),
+            gyro_feedback: gait_core::feedback::gyro::GyroFeedback::DEFAULT,
+            compliance: gait_core::feedback::compliance::Compliance::DEFAULT,
+            foot_force: gait_core::feedback::fdc::FootForceControl::OFF,
+            step_adaptation: gait_core::feedback::catch::StepAdaptation::DEFAULT,
+            deflection: gait_core::feedback::deflection::DeflectionConfig::OFF,
             sole_poses_measured: true,
             heading_gain: DEFAULT_HEADING_GAIN,
             position_gain: 0.5,

@@ -221,7 +221,7 @@ const fn int(min: u32, max: u32) -> Domain {
 }
 
 /// Longest step or lead phase, s (gait-core's `plan::MAX_SEGMENT`).
-const MAX_PHASE_S: f64 = gait_core::plan::MAX_SEGMENT;
+const MAX_PHASE_S: f64 = gait_core::trajectory::plan::MAX_SEGMENT;
 const ON_OFF: &[&str] = &["off", "on"];
 
 /// Declares the parameters once and generates from that one list: the metadata table
@@ -704,7 +704,7 @@ params! {
         key: "stab_max",
         plan_key: None,
         unit: "m",
-        domain: range(0.0, gait_core::stabilizer::MAX_SHIFT_CEILING_M),
+        domain: range(0.0, gait_core::feedback::stabilizer::MAX_SHIFT_CEILING_M),
         doc: "stabilizer: saturation of the CoM shift",
         set: |c, v| { c.stabilizer.max_shift = v },
         get: |c| { Some(Value::Num(c.stabilizer.max_shift)) },
@@ -771,7 +771,7 @@ params! {
         plan_key: None,
         unit: "s",
         domain: range(0.0, 1.0),
-        doc: "gyro damping gain at the ankles of the legs on the ground (gait-core balance)",
+        doc: "gyro damping gain at the ankles of the legs on the ground (gait-core gyro)",
         set: |c, v| { c.gyro_feedback.ankle = v as f32 },
         get: |c| { Some(Value::Num32(c.gyro_feedback.ankle)) },
     },
@@ -834,7 +834,7 @@ params! {
         plan_key: None,
         unit: "m/(N·s)",
         domain: range(0.0, 0.01),
-        doc: "foot force difference control in double support: gain k_f (gait-core balance F3; 0 = off)",
+        doc: "foot force difference control in double support: gain k_f (gait-core fdc F3; 0 = off)",
         set: |c, v| { c.foot_force.gain = v as f32 },
         get: |c| { Some(Value::Num32(c.foot_force.gain)) },
     },
@@ -861,7 +861,7 @@ params! {
         plan_key: None,
         unit: "1",
         domain: range(0.0, 3.0),
-        doc: "catching step: gain k of the capture-point error beyond the deadband on the swing foot's landing place (gait-core catching A3; 0 = off)",
+        doc: "catching step: gain k of the capture-point error beyond the deadband on the swing foot's landing place (gait-core catch A3; 0 = off)",
         set: |c, v| { c.step_adaptation.gain = v as f32 },
         get: |c| { Some(Value::Num32(c.step_adaptation.gain)) },
     },
@@ -968,7 +968,7 @@ params! {
         key: "deflection_max",
         plan_key: None,
         unit: "rad",
-        domain: range(0.0, gait_core::deflection::MAX_CORRECTION_RAD),
+        domain: range(0.0, gait_core::feedback::deflection::MAX_CORRECTION_RAD),
         doc: "servo deflection feedback: largest correction of one joint",
         set: |c, v| { c.deflection.max_rad = v as f32 },
         get: |c| { Some(Value::Num32(c.deflection.max_rad)) },
@@ -979,8 +979,8 @@ params! {
         unit: "",
         domain: Domain::Word(&["pitch", "roll", "both"]),
         doc: "servo deflection feedback: the stance leg's joints it drives (hip pitch, knee, ankle pitch; hip and ankle roll; or both)",
-        set: |c, v| { c.deflection.joints = gait_core::deflection::JointSet::BY_INDEX.get(v as usize).copied().unwrap_or(gait_core::deflection::JointSet::PITCH) },
-        get: |c| { gait_core::deflection::JointSet::BY_INDEX.iter().position(|s| *s == c.deflection.joints).map(Value::Word) },
+        set: |c, v| { c.deflection.joints = gait_core::feedback::deflection::JointSet::BY_INDEX.get(v as usize).copied().unwrap_or(gait_core::feedback::deflection::JointSet::PITCH) },
+        get: |c| { gait_core::feedback::deflection::JointSet::BY_INDEX.iter().position(|s| *s == c.deflection.joints).map(Value::Word) },
     },
     {
         key: "sole_poses",
@@ -1055,7 +1055,7 @@ params! {
         key: "fourier_terms",
         plan_key: Some("fourier_terms"),
         unit: "",
-        domain: int(1, gait_core::fourier_walk::MAX_FOURIER_TERMS as u32),
+        domain: int(1, gait_core::trajectory::fourier_walk::MAX_FOURIER_TERMS as u32),
         doc: "terms per axis of the Fourier CoM (`com=fourier`)",
         set: |c, v| { c.fourier_terms = v as u8 },
         get: |c| { Some(Value::Int(u32::from(c.fourier_terms))) },

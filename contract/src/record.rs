@@ -240,7 +240,7 @@ pub fn tau_from_nm(t: f32) -> i16 {
         return TAU_NA;
     }
     // In range after the clamp: the cast keeps the value.
-    gait_core::fastmath::round_i32(t * 1000.0).clamp(-32_767, 32_767) as i16
+    gait_core::maths::fastmath::round_i32(t * 1000.0).clamp(-32_767, 32_767) as i16
 }
 
 /// mN·m → N·m; [`TAU_NA`] → NaN.

@@ -1,7 +1,7 @@
 //! Criterion benchmark of one two-leg inverse kinematics (f32 and f64).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use gait_core::kinematics::{legs_ik, LegKinematics, Pose};
+use gait_core::kinematics::leg::{legs_ik, LegKinematics, Pose};
 use gait_core::Robot;
 use std::hint::black_box;
 

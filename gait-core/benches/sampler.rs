@@ -3,8 +3,8 @@
 //! Run: `cargo bench --target host-tuple -p gait-core --bench sampler`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use gait_core::fixed_point::FixedSampler;
-use gait_core::fourier::FourierCom;
+use gait_core::trajectory::fixed_sampler::FixedSampler;
+use gait_core::trajectory::fourier::FourierCom;
 use gait_core::{ForwardWalk, Model, ModelKind, Real, Robot, Sampler};
 use std::hint::black_box;
 

@@ -5,22 +5,22 @@
 //!
 //! # Joint targets ([`Targets`])
 //! * [`Compensation::None`], the paper's pipeline: the pelvis point on the model's CoM c + δ
-//!   (δ = the stabilizer's shift, 0 without feedback), two-leg IK ([`crate::pipeline`]);
+//!   (δ = the stabilizer's shift, 0 without feedback), two-leg IK ([`crate::kinematics::pipeline`]);
 //! * [`Compensation::WholeBody`]: the pelvis placed so that the multi-body CoM (swing leg
-//!   included) is on c + δ ([`crate::wholebody`], [`WHOLEBODY_ITERATIONS`] fixed-point steps).
+//!   included) is on c + δ ([`crate::kinematics::wholebody`], [`WHOLEBODY_ITERATIONS`] fixed-point steps).
 //!
 //! # Support polygon ([`support_of`], [`SupportCache`])
 //! The support sole in single support, the hull of both soles otherwise. The cache rebuilds it
 //! only when the phase or a supporting foot changes (a few times per step).
 //!
 //! # CoM method ([`ComMethod`])
-//! Seed 000's exact bounded solution ([`crate::com`]), or seed 001's Fourier series through the
+//! Seed 000's exact bounded solution ([`crate::trajectory::com`]), or seed 001's Fourier series through the
 //! steady steps, blended C¹ with the exact one at the start and the stop
-//! ([`crate::fourier_walk`]: the series is periodic, a walk is not). f32 only.
+//! ([`crate::trajectory::fourier_walk`]: the series is periodic, a walk is not). f32 only.
 //!
 //! # Arithmetic ([`Engine`])
 //! The per-sample work runs in f32 ([`Arithmetic::F32`]) or in fixed point
-//! ([`Arithmetic::Fixed`]: the I16F16 sampler of `fixed_point.rs` and the integer-only IK of
+//! ([`Arithmetic::Fixed`]: the I16F16 sampler of `fixed_sampler.rs` and the integer-only IK of
 //! `fixed_ik.rs`, same plan and timeline; BENCHMARKS.md gives its accuracy against f64, CoM
 //! ≤ 5.4e-5 m over the Table 2 walk). The log, the stabilizer and the support polygon take
 //! the sample in f32 either way.
@@ -36,19 +36,19 @@
 //! refused.
 
 #[cfg(feature = "fixed-engine")]
-use crate::fixed_ik::FixedLegKinematics;
-use crate::fixed_point::FixedSample;
-#[cfg(feature = "fixed-engine")]
-use crate::fixed_point::FixedSampler;
-pub use crate::fourier_walk::ComMethod;
-use crate::fourier_walk::WalkSampler;
-use crate::kinematics::{JointSpeedMonitor, JointSpeedReport, LegKinematics, LegsIkReport};
-use crate::pipeline::joint_targets;
-use crate::plan::SwingShape;
+use crate::kinematics::fixed_ik::FixedLegKinematics;
+use crate::kinematics::leg::{JointSpeedMonitor, JointSpeedReport, LegKinematics, LegsIkReport};
+use crate::kinematics::pipeline::joint_targets;
+use crate::kinematics::wholebody::WholeBody;
+use crate::measure::support::SupportPolygon;
 use crate::robot::LEG_JOINTS;
-use crate::support::SupportPolygon;
-use crate::wholebody::WholeBody;
-use crate::zmp::ZmpShape;
+use crate::trajectory::fixed_sampler::FixedSample;
+#[cfg(feature = "fixed-engine")]
+use crate::trajectory::fixed_sampler::FixedSampler;
+pub use crate::trajectory::fourier_walk::ComMethod;
+use crate::trajectory::fourier_walk::WalkSampler;
+use crate::trajectory::plan::SwingShape;
+use crate::trajectory::zmp::ZmpShape;
 use crate::{ForwardWalk, GaitError, GaitSample, Model, ModelKind, Place, Robot};
 
 /// Fixed-point steps of the whole-body compensation per sample (cost: that + 1 two-leg IK and
@@ -171,8 +171,8 @@ fn walk_params(w: &WalkConfig, robot: &Robot) -> Result<crate::GaitParams<f32>, 
 pub enum Arithmetic {
     /// The f32 sampler and the f32 IK (or whole-body compensation).
     F32,
-    /// The fixed-point sampler ([`crate::fixed_point`]) and, with [`Compensation::None`], the
-    /// integer-only two-leg IK ([`crate::fixed_ik`]); whole-body compensation stays f32 on the
+    /// The fixed-point sampler ([`crate::trajectory::fixed_sampler`]) and, with [`Compensation::None`], the
+    /// integer-only two-leg IK ([`crate::kinematics::fixed_ik`]); whole-body compensation stays f32 on the
     /// fixed-point sample.
     Fixed,
 }
@@ -352,7 +352,7 @@ impl<const N: usize> Engine<N> {
     /// a fixed-point sample with [`Targets::Plain`], `targets` otherwise.
     pub fn joints(&self, targets: &Targets, s: &Sample, shift: [f32; 2]) -> [f32; LEG_JOINTS] {
         if let Some(q) = self.joints_fx(targets, s, shift) {
-            return q.map(crate::fixed_point::fx_to_f32);
+            return q.map(crate::maths::fixed_point::fx_to_f32);
         }
         targets.joints(&s.f32, shift).0
     }
@@ -365,15 +365,15 @@ impl<const N: usize> Engine<N> {
         targets: &Targets,
         s: &Sample,
         shift: [f32; 2],
-    ) -> Option<[crate::fixed_point::Fx; LEG_JOINTS]> {
+    ) -> Option<[crate::maths::fixed_point::Fx; LEG_JOINTS]> {
         #[cfg(feature = "fixed-engine")]
         if let (Engine::Fixed(_, ik), Some(f), Targets::Plain(_)) = (self, &s.fixed, targets) {
             // No shift (the stabilizer off): the sample as it is, without the two f32 → fixed
             // conversions (library calls on FPU-less cores) and the copy.
             let q = if shift.iter().all(|d| d.to_bits() << 1 == 0) {
-                crate::fixed_ik::joint_targets(ik, f)
+                crate::kinematics::fixed_ik::joint_targets(ik, f)
             } else {
-                crate::fixed_ik::joint_targets(ik, &f.shifted(shift))
+                crate::kinematics::fixed_ik::joint_targets(ik, &f.shifted(shift))
             };
             return Some(q.0);
         }

@@ -1,44 +1,35 @@
 //! gait-core: the walking trajectory generator of seed 000 (Wong et al. 2020, TLIPFM) and
 //! seed 001 (Erbatur et al. 2009), `no_std`, allocation-free, for the servo loop.
+//!
+//! The modules follow the data of a walking tick:
+//!
+//! - [`maths`]: the scalar type, fast `f32` functions and the fixed-point numbers.
+//! - [`robot`], [`model`], [`error`]: the robot description, the pendulum models, the errors.
+//! - [`trajectory`]: plan → ZMP reference → CoM → swing feet → one sample per tick.
+//! - [`kinematics`]: a sample → 12 joint targets (leg IK, whole-body compensation).
+//! - [`measure`]: the measured ZMP, support polygons and leg odometry.
+//! - [`feedback`]: the corrections of the sample (catching step, stabilizer, foot force
+//!   difference control) and of the joints (gyro damping, sole levelling, compliance,
+//!   deflection), and the clock hold.
+//! - [`gait`]: the firmware's and the host tools' choices of sampler and joint pipeline.
 #![no_std]
-// One audited exception: the FPU's square root (`fastmath::vfp`, inline `VSQRT.F32`).
+// One audited exception: the FPU's square root (`maths::fastmath::vfp`, inline `VSQRT.F32`).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod error;
-pub mod fastmath;
+pub mod feedback;
+pub mod gait;
 pub mod kinematics;
-pub mod real;
+pub mod maths;
+pub mod measure;
+pub mod model;
 pub mod robot;
+pub mod trajectory;
 
 pub use error::GaitError;
-pub use real::Real;
-pub use robot::{Robot, Side};
-pub mod com;
-pub mod command;
-pub mod fourier;
-pub mod fourier_walk;
-pub mod measured;
-pub mod model;
-pub mod online;
-pub mod plan;
-pub mod sampler;
-pub mod support;
-pub mod swing;
-pub mod zmp;
-
+pub use maths::real::Real;
 pub use model::{Model, ModelKind};
-pub use plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
-pub use sampler::{CurrentStep, GaitSample, Sampler, StepPhase, SupportPhase};
-pub mod balance;
-pub mod catching;
-pub mod compliance;
-pub mod correction;
-pub mod deflection;
-pub mod fixed_ik;
-pub mod fixed_point;
-pub mod gait;
-pub mod odometry;
-pub mod pipeline;
-pub mod stabilizer;
-pub mod wholebody;
+pub use robot::{Robot, Side};
+pub use trajectory::plan::{Footstep, ForwardWalk, GaitParams, Place, Plan};
+pub use trajectory::sampler::{CurrentStep, GaitSample, Sampler, StepPhase, SupportPhase};

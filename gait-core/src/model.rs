@@ -27,7 +27,7 @@
 //! `p + τ·T_TF²/C_τ²`: a positive τ shifts it forward ([`Model::tau_offset`]).
 
 use crate::error::GaitError;
-use crate::real::Real;
+use crate::maths::real::Real;
 use crate::robot::Robot;
 
 /// Which pendulum model the generator uses.

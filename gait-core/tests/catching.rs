@@ -1,12 +1,13 @@
-//! The catching step (`gait_core::catching`, A1–A7): the capture-point error from the trunk's
-//! attitude, the landing move beyond the deadband within reach and never inward, the rate
-//! limit, the early touchdown, the body's offset, and the offsets on a sample; the swing
-//! sole kept level (A10): its ramps, its bound and the joints it turns; the clock hold (A11).
+//! The catching step (`gait_core::feedback::catch`, A1–A7): the capture-point error from the
+//! trunk's attitude, the landing move beyond the deadband within reach and never inward, the
+//! rate limit, the early touchdown, the body's offset, and the offsets on a sample; the swing
+//! sole kept level (`feedback::level`, A10): its ramps, its bound and the joints it turns; the
+//! clock hold (`feedback::hold`, A11); the levelling and the hold alone.
 
-use gait_core::catching::{
-    StepAdaptation, StepAdapter, HOLD_HEIGHT_M, MAX_LEVEL_RAD, MAX_OFFSET_M,
-};
-use gait_core::swing::FootSample;
+use gait_core::feedback::catch::{StepAdaptation, StepAdapter, MAX_OFFSET_M};
+use gait_core::feedback::hold::HOLD_HEIGHT_M;
+use gait_core::feedback::level::MAX_LEVEL_RAD;
+use gait_core::trajectory::swing::FootSample;
 use gait_core::{GaitSample, Robot, Side, SupportPhase};
 use proptest::prelude::*;
 
@@ -532,4 +533,100 @@ fn the_clock_never_holds_at_lift_off_without_a_budget_or_after_touchdown() {
     let ds = sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.0]);
     c.update(&ds, Some(tip.0), Some(tip.1), NO_LOAD);
     assert!(!c.wants_hold());
+}
+
+// The parts alone: the levelling (A10) fed a deviation and a phase, the clock hold (A11) fed
+// a swing foot.
+
+#[test]
+fn the_sole_level_alone_ramps_in_on_the_swing_leg_holds_a_lost_deviation_and_ramps_out() {
+    use gait_core::feedback::level::SoleLevel;
+    let cfg = StepAdaptation {
+        level_pitch: 1.0,
+        level_roll: 0.5,
+        level_ramp_s: 4.0 * DT,
+        ..StepAdaptation::DEFAULT
+    };
+    let mut l = SoleLevel::new(&cfg, DT);
+    assert!(l.is_on());
+    // Left stance: the right leg swings; w steps by 1/4 a tick.
+    l.update(Some([0.1, 0.2]), SupportPhase::Single(Side::Left));
+    let c = l.corrections();
+    assert_eq!(c[0], [0.0, 0.0]);
+    assert!(close(c[1], [-0.025, -0.025]), "{c:?}");
+    for _ in 0..3 {
+        l.update(None, SupportPhase::Single(Side::Left));
+    }
+    assert!(
+        close(l.corrections()[1], [-0.1, -0.1]),
+        "{:?}",
+        l.corrections()
+    );
+    let mut q = [0.0f32; 12];
+    l.apply(&mut q);
+    for (j, v) in q.iter().enumerate() {
+        let want = match j {
+            10 => -0.1,
+            11 => -0.1,
+            _ => 0.0,
+        };
+        assert!((v - want).abs() < 1e-6, "{j}: {v}");
+    }
+    // Double support: out again in four ticks, and a large deviation is bounded.
+    l.update(Some([2.0, -2.0]), SupportPhase::Double);
+    assert_eq!(l.corrections()[1], [-MAX_LEVEL_RAD, MAX_LEVEL_RAD]);
+    for _ in 0..3 {
+        l.update(None, SupportPhase::Double);
+    }
+    assert_eq!(l.corrections(), [[0.0; 2]; 2]);
+    // No tick, no levelling.
+    assert!(!SoleLevel::new(&cfg, 0.0).is_on());
+    assert!(!SoleLevel::new(&StepAdaptation::OFF, DT).is_on());
+}
+
+#[test]
+fn the_clock_hold_alone_waits_for_a_travelling_foot_within_its_budget() {
+    use gait_core::feedback::hold::{ClockHold, SwingFoot, HOLD_GAP_M};
+    let cfg = StepAdaptation {
+        hold_max_s: 3.0 * DT,
+        hold_settle_s: 2.0 * DT,
+        ..StepAdaptation::DEFAULT
+    };
+    let single = SupportPhase::Single(Side::Left);
+    let low = 0.5 * HOLD_HEIGHT_M;
+    let foot = |z_m: f32, gap_m: f32| Some(SwingFoot { z_m, gap_m });
+    let mut h = ClockHold::new(&cfg, DT);
+    let held = |h: &mut ClockHold, phase, swing| {
+        h.update(phase, swing);
+        h.wants_hold()
+    };
+    // The first low sample has no height before it (not known to descend): no hold.
+    assert!(!held(&mut h, single, foot(low, 0.01)));
+    // Descending and on its way: held; arrived: held while it settles (two ticks).
+    assert!(held(&mut h, single, foot(0.9 * low, 0.01)));
+    assert!(held(&mut h, single, foot(0.9 * low, 0.0)));
+    assert!(!held(&mut h, single, foot(0.9 * low, 0.0)));
+    // On its way again: the third and last tick of the budget.
+    assert!(held(&mut h, single, foot(0.9 * low, 2.0 * HOLD_GAP_M)));
+    assert!(!held(&mut h, single, foot(0.9 * low, 2.0 * HOLD_GAP_M)));
+    // No swing foot (landed): no hold; double support refills the budget.
+    assert!(!held(&mut h, single, None));
+    assert!(!held(&mut h, SupportPhase::Double, None));
+    // Rising (lift-off) or high: no hold; then descending below z_h: held again.
+    assert!(!held(&mut h, single, foot(0.5 * low, 0.01)));
+    assert!(!held(&mut h, single, foot(low, 0.01)));
+    assert!(!held(&mut h, single, foot(2.0 * HOLD_HEIGHT_M, 0.01)));
+    assert!(held(&mut h, single, foot(low, 0.01)));
+    assert!(held(&mut h, single, foot(0.5 * low, 0.01)));
+    // No budget: never.
+    let mut off = ClockHold::new(
+        &StepAdaptation {
+            hold_max_s: 0.0,
+            ..cfg
+        },
+        DT,
+    );
+    off.update(single, foot(low, 0.01));
+    off.update(single, foot(0.5 * low, 0.01));
+    assert!(!off.wants_hold());
 }

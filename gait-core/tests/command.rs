@@ -2,8 +2,8 @@
 //! commands, the limits on random command sequences, stopping, and the footsteps walked by the
 //! streaming sampler with steps appended while walking (continuity of the CoM).
 
-use gait_core::command::{CommandLimits, StepGenerator, WalkCommand, SOLE_GAP};
-use gait_core::plan::StepLimits;
+use gait_core::trajectory::command::{CommandLimits, StepGenerator, WalkCommand, SOLE_GAP};
+use gait_core::trajectory::plan::StepLimits;
 use gait_core::{ForwardWalk, Place, Robot, Sampler, Side};
 
 const T: f64 = 0.64;

@@ -3,10 +3,10 @@
 //! (τ_j = −F·∂x_cop/∂q_j plus the links' m·g·∂z/∂q_j, by central differences of the forward
 //! kinematics).
 
-use gait_core::compliance::{Compliance, LoadModel, XM430_STIFFNESS};
-use gait_core::kinematics::{LegKinematics, Pose};
-use gait_core::pipeline::{joint_targets, pelvis_pose};
-use gait_core::swing::FootSample;
+use gait_core::feedback::compliance::{Compliance, LoadModel, XM430_STIFFNESS};
+use gait_core::kinematics::leg::{LegKinematics, Pose};
+use gait_core::kinematics::pipeline::{joint_targets, pelvis_pose};
+use gait_core::trajectory::swing::FootSample;
 use gait_core::{ForwardWalk, GaitSample, Model, ModelKind, Robot, Sampler, Side, SupportPhase};
 
 fn foot(x: f32, y: f32) -> FootSample<f32> {

@@ -1,8 +1,10 @@
-//! Servo deflection feedback (`gait_core::deflection`, D1–D5): the stance leg's sag removed at
+//! Servo deflection feedback (`gait_core::feedback::deflection`, D1–D5): the stance leg's sag removed at
 //! the integral's rate, the swing leg's decay, the hold in double support, the joint mask, the
 //! saturation and any configuration and input being total.
 
-use gait_core::deflection::{DeflectionConfig, DeflectionFeedback, JointSet, MAX_CORRECTION_RAD};
+use gait_core::feedback::deflection::{
+    DeflectionConfig, DeflectionFeedback, JointSet, MAX_CORRECTION_RAD,
+};
 use gait_core::{Side, SupportPhase};
 use proptest::prelude::*;
 

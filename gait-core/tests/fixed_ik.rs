@@ -2,13 +2,15 @@
 //! FK round trips, the Table 2 walk through `FixedSampler` + fixed IK against the f64 pipeline,
 //! and unreachable / absurd targets.
 
-use gait_core::fixed_ik::{
+use gait_core::kinematics::fixed_ik::{
     atan2, atan2_fac, isqrt, joint_targets, sqrt, FixedIkReport, FixedLegKinematics, FixedPose,
 };
-use gait_core::fixed_point::{FixedSampler, Fx};
-use gait_core::kinematics::{LegKinematics, Pose};
+use gait_core::kinematics::leg::{LegKinematics, Pose};
+use gait_core::kinematics::pipeline;
+use gait_core::maths::fixed_point::Fx;
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
-use gait_core::{pipeline, ForwardWalk, Model, ModelKind, Robot, Sampler, Side};
+use gait_core::trajectory::fixed_sampler::FixedSampler;
+use gait_core::{ForwardWalk, Model, ModelKind, Robot, Sampler, Side};
 use proptest::prelude::*;
 use proptest::test_runner::{RngAlgorithm, TestRng};
 use std::f64::consts::PI;
@@ -318,8 +320,10 @@ fn table2_walk_fixed_pipeline_matches_f64_pipeline() {
             assert!(!rep64.clamped());
             assert_within_limits(&q);
             // The same fixed-point sample through the f64 IK: the IK's own share of the error.
-            let pelvis = gait_core::fixed_ik::pelvis_pose(&a);
-            let feet = a.feet.map(|ft| gait_core::fixed_ik::foot_pose(&ft));
+            let pelvis = gait_core::kinematics::fixed_ik::pelvis_pose(&a);
+            let feet = a
+                .feet
+                .map(|ft| gait_core::kinematics::fixed_ik::foot_pose(&ft));
             let (q_same, _) =
                 k64.legs_ik(&to_pose(&pelvis), &to_pose(&feet[0]), &to_pose(&feet[1]));
             for j in 0..12 {

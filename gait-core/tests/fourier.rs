@@ -4,9 +4,9 @@
 //! Run with `--nocapture` to see the measured errors and the truncation bounds.
 
 use core::f64::consts::PI;
-use gait_core::fourier::{fourier_coefficients, FourierCom, PeriodicWalk, TAIL_TERMS};
-use gait_core::plan::{GaitParams, SwingShape, Timing};
-use gait_core::zmp::ZmpShape;
+use gait_core::trajectory::fourier::{fourier_coefficients, FourierCom, PeriodicWalk, TAIL_TERMS};
+use gait_core::trajectory::plan::{GaitParams, SwingShape, Timing};
+use gait_core::trajectory::zmp::ZmpShape;
 use gait_core::{ForwardWalk, GaitError, Model, ModelKind, Plan, Robot, Sampler};
 
 const G: f64 = 9.80665;

@@ -2,8 +2,10 @@
 //! `ComMethod::Fourier` against the same walk with the exact solver, sample by sample.
 //! Run with `--nocapture` to see the figures.
 
-use gait_core::fourier_walk::{ComMethod, WalkSampler, MAX_FOURIER_TERMS, MIN_FOURIER_STEPS};
 use gait_core::gait::{self, Arithmetic, Engine, WalkConfig};
+use gait_core::trajectory::fourier_walk::{
+    ComMethod, WalkSampler, MAX_FOURIER_TERMS, MIN_FOURIER_STEPS,
+};
 use gait_core::{ForwardWalk, GaitError, GaitSample, ModelKind, Robot};
 
 const DT: f64 = 0.001;

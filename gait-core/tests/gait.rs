@@ -1,11 +1,13 @@
 //! Scenario and property tests of the gait generator against independent numbers: eq 4 by hand,
 //! the model ODE by finite differences, RK4 integration, f32 against f64.
 
-use gait_core::com::ComSegment;
 use gait_core::model::{model_constants, Model, ModelKind};
-use gait_core::plan::{Footstep, ForwardWalk, GaitParams, Place, Plan, SwingShape, Timing};
-use gait_core::sampler::{GaitSample, Sampler, Stage, SupportPhase};
-use gait_core::zmp::ZmpShape;
+use gait_core::trajectory::com::ComSegment;
+use gait_core::trajectory::plan::{
+    Footstep, ForwardWalk, GaitParams, Place, Plan, SwingShape, Timing,
+};
+use gait_core::trajectory::sampler::{GaitSample, Sampler, Stage, SupportPhase};
+use gait_core::trajectory::zmp::ZmpShape;
 use gait_core::{GaitError, Real, Robot, Side};
 use proptest::prelude::*;
 
@@ -587,7 +589,7 @@ proptest! {
 
 #[test]
 fn fixed_point_agrees_with_f64_over_the_whole_walk() {
-    use gait_core::fixed_point::FixedSampler;
+    use gait_core::trajectory::fixed_sampler::FixedSampler;
     for kind in ModelKind::ALL {
         let robot = Robot::reference();
         let walk = ForwardWalk::table2();
@@ -623,7 +625,7 @@ fn fixed_point_agrees_with_f64_over_the_whole_walk() {
 
 #[test]
 fn fixed_point_math_primitives() {
-    use gait_core::fixed_point::{exp_neg, sin_cos, Fx};
+    use gait_core::maths::fixed_point::{exp_neg, sin_cos, Fx};
     for i in 0..2000 {
         let x = i as f64 * 0.01;
         let e = exp_neg(Fx::from_num(x)) as f64 / (1u64 << 30) as f64;
@@ -645,7 +647,7 @@ fn fixed_point_math_primitives() {
 /// The ZMP reference never leaves the support polygon: the support sole in single support, the
 /// hull of both soles in double support and while standing.
 fn zmp_margin_min(samples: &[GaitSample<f64>], robot: &Robot) -> f64 {
-    use gait_core::support::SupportPolygon;
+    use gait_core::measure::support::SupportPolygon;
     let mut worst = f64::INFINITY;
     for s in samples {
         let place = |i: usize| Place::new(s.feet[i].x, s.feet[i].y, s.feet[i].yaw);
@@ -693,7 +695,7 @@ proptest! {
 
 #[test]
 fn fixed_point_conversion_refuses_out_of_range_and_non_finite() {
-    use gait_core::fixed_point::fx;
+    use gait_core::maths::fixed_point::fx;
     assert_eq!(fx(40_000.0), Err(GaitError::FixedPointOverflow));
     assert_eq!(fx(-1e30), Err(GaitError::FixedPointOverflow));
     assert_eq!(fx(f32::NAN), Err(GaitError::NonFinite));

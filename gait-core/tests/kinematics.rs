@@ -1,7 +1,7 @@
 //! Leg kinematics: FK/IK round trips, sign conventions, unreachable and invalid targets, and
 //! the joint-speed feasibility monitor.
 
-use gait_core::kinematics::{
+use gait_core::kinematics::leg::{
     check, leg_fk, leg_ik, leg_points, legs_ik, IkSolution, JointSpeedMonitor, LegKinematics, Pose,
     KNEE_MIN_BEND,
 };

@@ -1,6 +1,6 @@
-//! Accuracy of the fast f32 sine / cosine of `gait_core::fastmath` against f64 `libm`.
+//! Accuracy of the fast f32 sine / cosine of `gait_core::maths::fastmath` against f64 `libm`.
 
-use gait_core::fastmath::{cos, sin, sin_cos, sin_cos_real, FAST_RANGE};
+use gait_core::maths::fastmath::{cos, sin, sin_cos, sin_cos_real, FAST_RANGE};
 
 /// Largest |fast − exact| over `n + 1` evenly spaced f32 points of [lo, hi]; exact values are
 /// computed in f64 at the very f32 argument the fast functions receive.

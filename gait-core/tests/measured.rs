@@ -3,11 +3,11 @@
 //! Reference robot: sole 0.100 × 0.060 m centred under the ankle (half sizes 0.05 × 0.03),
 //! force sensors at (±0.040, ±0.025) m, order front-left, front-right, rear-left, rear-right.
 
-use gait_core::measured::{
+use gait_core::measure::support::{sole_corners, SupportPolygon, FAR_OUTSIDE, MAX_VERTICES};
+use gait_core::measure::zmp::{
     measured_zmp, sensor_positions, Contact, ForceReading, MeasuredZmp, SolePose, ZmpErrorStats,
 };
-use gait_core::support::{sole_corners, SupportPolygon, FAR_OUTSIDE, MAX_VERTICES};
-use gait_core::swing::FootSample;
+use gait_core::trajectory::swing::FootSample;
 use gait_core::{GaitError, Place, Real, Robot};
 use proptest::prelude::*;
 
@@ -598,9 +598,9 @@ fn inside_fraction_against_the_support_polygon() {
 // The fixed-point measured ZMP
 // ---------------------------------------------------------------------------------------------
 
-fn fixed_foot(x: f64, y: f64, yaw: f64) -> gait_core::fixed_point::FixedFoot {
-    use gait_core::fixed_point::Fx;
-    gait_core::fixed_point::FixedFoot {
+fn fixed_foot(x: f64, y: f64, yaw: f64) -> gait_core::trajectory::fixed_sampler::FixedFoot {
+    use gait_core::maths::fixed_point::Fx;
+    gait_core::trajectory::fixed_sampler::FixedFoot {
         x: Fx::from_num(x),
         y: Fx::from_num(y),
         z: Fx::ZERO,
@@ -620,7 +620,7 @@ proptest! {
         rf in prop::array::uniform4(-2_000i32..40_000),
         min_load in 0.0f32..30.0,
     ) {
-        use gait_core::measured::FixedZmpMeter;
+        use gait_core::measure::zmp::FixedZmpMeter;
         let (l, r) = (fixed_foot(lx, ly, lyaw), fixed_foot(rx, ry, ryaw));
         let meter = FixedZmpMeter::new(&ROBOT, min_load);
         let got = meter.zmp((&l, Some(lf)), (&r, Some(rf)));
@@ -646,7 +646,7 @@ proptest! {
 
 #[test]
 fn fixed_zmp_without_readings_or_load_is_none() {
-    use gait_core::measured::FixedZmpMeter;
+    use gait_core::measure::zmp::FixedZmpMeter;
     let meter = FixedZmpMeter::new(&ROBOT, 5.0);
     let f = fixed_foot(0.0, 0.05, 0.0);
     assert_eq!(meter.zmp((&f, None), (&f, None)), None);

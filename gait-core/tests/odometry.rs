@@ -1,9 +1,9 @@
-//! Leg odometry (`gait_core::odometry`, O1–O6): a landing placed off its plan by a known amount
+//! Leg odometry (`gait_core::measure::odometry`, O1–O6): a landing placed off its plan by a known amount
 //! is recovered from the joint angles the IK gives for it, whatever the pelvis pose; the
 //! corrections chain from step to step; the survey's timing, limits and refusals.
 
-use gait_core::kinematics::{LegKinematics, Pose};
-use gait_core::odometry::{
+use gait_core::kinematics::leg::{LegKinematics, Pose};
+use gait_core::measure::odometry::{
     compose, inverse, legs_at_first_read, relative_place, LegOdometry, OdometryLimits, SurveyError,
 };
 use gait_core::{Place, Robot, Side, SupportPhase};

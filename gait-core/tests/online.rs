@@ -2,14 +2,14 @@
 //! the command changes mid-step, reverses or stops at any phase, and the joint targets of the
 //! IK continuous and unclamped throughout.
 
-use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
-use gait_core::kinematics::LegKinematics;
-use gait_core::online::{
+use gait_core::kinematics::leg::LegKinematics;
+use gait_core::kinematics::pipeline::joint_targets;
+use gait_core::trajectory::command::{CommandLimits, StepGenerator, WalkCommand};
+use gait_core::trajectory::online::{
     ListedStep, OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, MAX_HEADING_TURN,
     MAX_POSITION_SHIFT, STEP_QUEUE_LEN, ZMP_MARGIN,
 };
-use gait_core::pipeline::joint_targets;
-use gait_core::plan::SwingShape;
+use gait_core::trajectory::plan::SwingShape;
 use gait_core::{GaitSample, Place, Robot, Side};
 
 const W: f64 = 0.045;

@@ -1,7 +1,7 @@
 //! The Table 2 walk through the leg IK: 12 joint trajectories, limits, continuity, feasibility.
 
-use gait_core::kinematics::{check, leg_fk, JointSpeedMonitor, LegKinematics};
-use gait_core::pipeline::{foot_pose, joint_targets, pelvis_pose};
+use gait_core::kinematics::leg::{check, leg_fk, JointSpeedMonitor, LegKinematics};
+use gait_core::kinematics::pipeline::{foot_pose, joint_targets, pelvis_pose};
 use gait_core::robot::JOINT_NAMES;
 use gait_core::{ForwardWalk, Model, ModelKind, Robot, Sampler, Side};
 

@@ -1,9 +1,9 @@
 //! Whole-body compensation against the multi-body ZMP of the planned motion (W3), computed
 //! independently from the link mass points by finite differences.
 
-use gait_core::kinematics::Pose;
-use gait_core::pipeline::{joint_targets, pelvis_pose};
-use gait_core::wholebody::{WholeBody, MASS_POINTS};
+use gait_core::kinematics::leg::Pose;
+use gait_core::kinematics::pipeline::{joint_targets, pelvis_pose};
+use gait_core::kinematics::wholebody::{WholeBody, MASS_POINTS};
 use gait_core::{ForwardWalk, Model, ModelKind, Robot, Sampler, SupportPhase};
 
 type Points = [(f64, [f64; 3]); MASS_POINTS];

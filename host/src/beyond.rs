@@ -2,7 +2,7 @@
 //! compensation, the feedback stabilizer) walked side by side in the firmware-in-the-loop setup, scored against the simulator's ground truth.
 //!
 //! Six runs of the same plan: LIPM, DLIPM, TLIPFM (the paper's pipeline, seed 000's exact CoM),
-//! TLIPFM with seed 001's Fourier CoM (`com=fourier`, `gait_core::fourier_walk`), TLIPFM +
+//! TLIPFM with seed 001's Fourier CoM (`com=fourier`, `gait_core::trajectory::fourier_walk`), TLIPFM +
 //! whole-body compensation (`comp=wholebody`), TLIPFM + compensation + the feedback stabilizer
 //! (`comp=wholebody stab=on`). The simulator's servos are XM430-class: speed limit 4.8 rad/s
 //! (`SimConfig::servo_speed_limit`) and the torque–speed line of a 3.5 N·m stall torque with
@@ -15,7 +15,7 @@
 //! * ZMP error against the firmware's reference: mean and max |e| per axis for the true ZMP
 //!   (truth.csv) and for the measured one (foot sensors, ticks with a valid measurement);
 //! * the fraction of walking ticks whose true ZMP is inside the support polygon of the plan's
-//!   sample at that tick with a 5 mm margin (`gait_core::support`; the k-th walking tick of the
+//!   sample at that tick with a 5 mm margin (`gait_core::measure::support`; the k-th walking tick of the
 //!   log is the k-th sample of the firmware's sampler, rebuilt here from the same tokens and
 //!   the start-up timing adjustment);
 //! * distance walked: truth pelvis x at the last gait sample the firmware commanded minus at

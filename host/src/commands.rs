@@ -21,7 +21,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use dxl::{Decoder, ErrorCode, Instruction, Status};
-use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
+use gait_core::trajectory::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::{Place, Robot, Side};
 use serde::Deserialize;
 use walker_contract::command_port::{self as port, Mode, PortState, PORT_ID, VELOCITY_RANGE};

@@ -15,9 +15,9 @@
 
 use crate::planfile::{CompensationName, PlanError, WalkSpec};
 use gait_core::gait::WHOLEBODY_ITERATIONS;
-use gait_core::kinematics::{legs_ik, Pose};
+use gait_core::kinematics::leg::{legs_ik, Pose};
+use gait_core::kinematics::wholebody::WholeBody;
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
-use gait_core::wholebody::WholeBody;
 use gait_core::Robot;
 use std::io::Write;
 

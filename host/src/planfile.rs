@@ -52,9 +52,9 @@
 //! from it, and [`WalkSpec::check`] runs the firmware's own parser on them first, so a value
 //! out of its physical range (`d2 = 1e38`, `h_z = 10`) is refused here as on the robot.
 
-use gait_core::fourier_walk::{ComMethod, WalkSampler, DEFAULT_FOURIER_TERMS};
-use gait_core::plan::{SwingShape, Timing};
-use gait_core::zmp::ZmpShape;
+use gait_core::trajectory::fourier_walk::{ComMethod, WalkSampler, DEFAULT_FOURIER_TERMS};
+use gait_core::trajectory::plan::{SwingShape, Timing};
+use gait_core::trajectory::zmp::ZmpShape;
 use gait_core::{
     Footstep, ForwardWalk, GaitError, GaitParams, Model, ModelKind, Place, Plan, Robot, Side,
 };
@@ -579,7 +579,7 @@ impl WalkSpec {
         positive("period", self.period)?;
         positive("lead_in", self.lead_in)?;
         positive("lead_out", self.lead_out)?;
-        let max = gait_core::plan::MAX_SEGMENT;
+        let max = gait_core::trajectory::plan::MAX_SEGMENT;
         for (f, v) in [
             ("period", self.period),
             ("lead_in", self.lead_in),

@@ -18,9 +18,9 @@
 
 use crate::planfile::{WalkSpec, PLAN_CAPACITY};
 use crate::plot::{Dash, Figure, Panel, Series};
-use gait_core::measured::{AxisErrorStats, ZmpErrorStats};
+use gait_core::measure::support::SupportPolygon;
+use gait_core::measure::zmp::{AxisErrorStats, ZmpErrorStats};
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
-use gait_core::support::SupportPolygon;
 use gait_core::{Robot, SupportPhase as PlanPhase};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;

@@ -20,7 +20,7 @@ use std::fmt::Write as _;
 
 use crate::commands::{CommandScript, ScriptCommand};
 use crate::fil::{self, FilOptions};
-use gait_core::command::{CommandLimits, StepGenerator, WalkCommand};
+use gait_core::trajectory::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::{Robot, Side};
 use walker_contract::codes::{ExitCode, FaultKind};
 use walker_contract::record::Record;

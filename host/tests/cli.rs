@@ -1,7 +1,7 @@
 //! End-to-end tests of the `walker` CLI: export round trip, report on a synthetic log with
 //! garbage, plan-file errors, hand-computed statistics, compare and capture --from-file.
 
-use gait_core::kinematics::{leg_fk, Pose};
+use gait_core::kinematics::leg::{leg_fk, Pose};
 use gait_core::{Robot, Side};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -537,7 +537,7 @@ fn closed_loop_walk_survives_a_sagittal_push() {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() {
-    // The closed-loop issue's step adaptation (gait-core `catching`, on by default): Table 2
+    // The closed-loop issue's step adaptation (gait-core `feedback::catch`, on by default): Table 2
     // at the firmware's default timing, a 1.6 N·s backward push on the torso at 5.9 s, early
     // in the single support on the left foot. The right foot's landing moves back by the
     // capture-point error beyond the ankles' deadband (logged as `CatchStep` records) and the
@@ -580,7 +580,7 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
 fn the_level_swing_sole_survives_the_backward_push_that_fells_the_robot_without_it() {
     // The closed-loop issue's sagittal push goal: 1.5 N·s backward on the torso at 6 s, late
     // in the single support on the left foot (the swing foot lands ≈ 0.2 s later). With the
-    // defaults the swing sole is kept level (gait-core `catching` A10) and the catching step
+    // defaults the swing sole is kept level (gait-core `feedback::level` A10) and the catching step
     // moves its landing back: the walk completes. With the levelling off the swing foot, its
     // sole pitched back with the trunk, lands heel first short of the catch and the robot
     // rolls back over both heels and falls (exit 13); with the catching step off it falls too

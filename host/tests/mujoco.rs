@@ -43,9 +43,9 @@ fn lean(a: f64) -> [f64; 12] {
 
 /// x of the soles (both at the same x) from P, by the leg's forward kinematics.
 fn sole_x(q: &[f64; 12]) -> f64 {
-    let pelvis = gait_core::kinematics::Pose::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let pelvis = gait_core::kinematics::leg::Pose::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     let ql: [f64; 6] = q[..6].try_into().unwrap();
-    gait_core::kinematics::leg_fk(
+    gait_core::kinematics::leg::leg_fk(
         &gait_core::Robot::reference(),
         gait_core::Side::Left,
         &pelvis,
@@ -325,7 +325,7 @@ fn rand_suffix() -> u64 {
 fn the_mujoco_model_is_the_robot_description() {
     // One source: MuJoCo's kinematics of the generated model put each sole exactly where
     // gait-core's forward kinematics does, for joint angles across the limits.
-    use gait_core::kinematics::{leg_fk, Pose};
+    use gait_core::kinematics::leg::{leg_fk, Pose};
     use gait_core::{Robot, Side};
     let robot = Robot::reference();
     let mut rng = 12345u64;

@@ -8,7 +8,7 @@ use std::time::Duration;
 use dxl::instruction::{encode_bulk_read, encode_sync_write, opcode, BulkReadRequest};
 use dxl::table::{foot, foot::FootForces, imu, imu::ImuSample, x_series};
 use dxl::{Decoder, Instruction, Status, BROADCAST_ID};
-use gait_core::kinematics::{leg_points, Pose};
+use gait_core::kinematics::leg::{leg_points, Pose};
 use gait_core::{Robot, Side};
 use walker_contract::bus_map::TickMap;
 use walker_host::sim::forces::{center_of_pressure, distribute, FootContact};

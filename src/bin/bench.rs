@@ -44,16 +44,17 @@ mod firmware {
     use dxl::table::imu::ImuSample;
     use dxl::table::{foot, imu, x_series};
     use dxl::{BulkReadRequest, Decoder, Status, StatusError};
-    use gait_core::fixed_ik::{self, FixedLegKinematics};
-    use gait_core::fixed_point::{FixedSample, FixedSampler, Fx};
-    use gait_core::fourier::FourierCom;
-    use gait_core::kinematics::LegKinematics;
-    use gait_core::measured::{FixedZmpMeter, ForceReading, MeasuredZmp, SolePose, ZmpMeter};
-    use gait_core::pipeline::joint_targets;
-    use gait_core::plan::SwingShape;
-    use gait_core::stabilizer::{Stabilizer, StabilizerInput};
-    use gait_core::swing::swing_foot;
-    use gait_core::wholebody::WholeBody;
+    use gait_core::feedback::stabilizer::{Stabilizer, StabilizerInput};
+    use gait_core::kinematics::fixed_ik::{self, FixedLegKinematics};
+    use gait_core::kinematics::leg::LegKinematics;
+    use gait_core::kinematics::pipeline::joint_targets;
+    use gait_core::kinematics::wholebody::WholeBody;
+    use gait_core::maths::fixed_point::Fx;
+    use gait_core::measure::zmp::{FixedZmpMeter, ForceReading, MeasuredZmp, SolePose, ZmpMeter};
+    use gait_core::trajectory::fixed_sampler::{FixedSample, FixedSampler};
+    use gait_core::trajectory::fourier::FourierCom;
+    use gait_core::trajectory::plan::SwingShape;
+    use gait_core::trajectory::swing::swing_foot;
     use gait_core::{
         ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
     };
@@ -534,13 +535,13 @@ mod firmware {
             black_box(libm::atan2f(x(i) - 1.7, 0.9));
         });
         bench!("prim.sqrt_fast", K, |i| {
-            black_box(gait_core::fastmath::sqrt(x(i)));
+            black_box(gait_core::maths::fastmath::sqrt(x(i)));
         });
         bench!("prim.atan2_fast", K, |i| {
-            black_box(gait_core::fastmath::atan2(x(i) - 1.7, 0.9));
+            black_box(gait_core::maths::fastmath::atan2(x(i) - 1.7, 0.9));
         });
         bench!("prim.sin_cos_fast", K, |i| {
-            black_box(gait_core::fastmath::sin_cos(x(i)));
+            black_box(gait_core::maths::fastmath::sin_cos(x(i)));
         });
         bench!("prim.sinf_libm", K, |i| {
             black_box(libm::sinf(x(i)));
@@ -555,10 +556,10 @@ mod firmware {
         let fxs: [Fx; 16] = core::array::from_fn(|k| Fx::from_bits(3_000 + 9_001 * k as i32));
         let fxx = |i: u32| black_box(fxs[(i % 16) as usize]);
         bench!("prim.fx_exp_neg", K, |i| {
-            black_box(gait_core::fixed_point::exp_neg(fxx(i)));
+            black_box(gait_core::maths::fixed_point::exp_neg(fxx(i)));
         });
         bench!("prim.fx_sin_cos", K, |i| {
-            black_box(gait_core::fixed_point::sin_cos(fxx(i)));
+            black_box(gait_core::maths::fixed_point::sin_cos(fxx(i)));
         });
         bench!("prim.fx_sqrt", K, |i| {
             black_box(fixed_ik::sqrt(fxx(i)));

@@ -1,20 +1,20 @@
 //! Walking on command in the loop: the command port polled each tick (bounded: at most
 //! [`RX_PER_TICK`] bytes, each reply sent at once), the commands logged as they change
 //! (`CommandReceived` fault records), the online walk of gait-core
-//! ([`gait_core::online::OnlineWalk`]: standing, starting, walking, stopping) built from the
+//! ([`gait_core::trajectory::online::OnlineWalk`]: standing, starting, walking, stopping) built from the
 //! configured walk's timing and swing, its footsteps logged (`Footstep` fault records), and the
 //! status registers published.
 //!
 //! The online walk starts standing with the feet at (0, ±`step_width`), heading 0, the CoM at
 //! rest on their midpoint at `z_c`; it steps with the configured walk's T, t1, t2 (after the
 //! servo-speed check's stretch) and swing shape, the command limits of
-//! [`gait_core::command::CommandLimits::DEFAULT`]. `servo_lead` does not apply to it.
+//! [`gait_core::trajectory::command::CommandLimits::DEFAULT`]. `servo_lead` does not apply to it.
 
-use gait_core::command::{CommandLimits, WalkCommand};
-use gait_core::online::{
+use gait_core::trajectory::command::{CommandLimits, WalkCommand};
+use gait_core::trajectory::online::{
     ListedStep, OnlineParams, OnlineWalk, WalkMode, DEFAULT_ZMP_INSET, STEP_QUEUE_LEN,
 };
-use gait_core::plan::SwingShape;
+use gait_core::trajectory::plan::SwingShape;
 use gait_core::{GaitError, Place, Robot, Side, SupportPhase};
 use walker_contract::codes::CommandField;
 use walker_contract::command_port::{CommandPort, Mode, PortState, PortStatus, REPLY_MAX};

@@ -11,10 +11,11 @@
 //! (f32 or fixed point); the supervisor's action decides whether the walk runs, holds the pose
 //! or turns torque off.
 
-use gait_core::correction::{IkCommand, Measured};
-use gait_core::fixed_point::{FixedFoot, Fx};
+use gait_core::feedback::{IkCommand, Measured};
 use gait_core::gait::Targets;
+use gait_core::maths::fixed_point::Fx;
 use gait_core::robot::LEG_JOINTS;
+use gait_core::trajectory::fixed_sampler::FixedFoot;
 use gait_core::GaitSample;
 use walker_contract::command_port::{Mode, PortState, PortStatus};
 

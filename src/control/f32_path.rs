@@ -2,17 +2,16 @@
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
-use gait_core::balance::GyroFeedback;
-use gait_core::catching::StepAdapter;
-use gait_core::compliance::LoadModel;
-use gait_core::correction::{
-    FootForceCorrection, IkCommand, JointCorrection, JointInput, Measured, SagFeedForward,
-    SampleCorrection, StabilizerCorrection,
-};
-use gait_core::fixed_point::FixedFoot;
+use gait_core::feedback::catch::StepAdapter;
+use gait_core::feedback::compliance::{LoadModel, SagFeedForward};
+use gait_core::feedback::fdc::FootForceCorrection;
+use gait_core::feedback::gyro::GyroFeedback;
+use gait_core::feedback::stabilizer::StabilizerCorrection;
+use gait_core::feedback::{IkCommand, JointCorrection, JointInput, Measured, SampleCorrection};
 use gait_core::gait::Targets;
-use gait_core::measured::{ForceReading, SolePose, ZmpMeter};
+use gait_core::measure::zmp::{ForceReading, SolePose, ZmpMeter};
 use gait_core::robot::LEG_JOINTS;
+use gait_core::trajectory::fixed_sampler::FixedFoot;
 use gait_core::{GaitSample, Robot, Side};
 
 use crate::board::Board;
@@ -35,7 +34,7 @@ fn reading(f: &Option<FootForces>) -> ForceReading<f32> {
     ForceReading::new(f.map_or([f32::NAN; 4], |f| f.forces_mn.map(|v| v as f32 * 1e-3)))
 }
 
-/// The catching step (gait-core `catching` A1–A7) as the first sample correction, with its
+/// The catching step (gait-core `feedback::catch` A1–A7) as the first sample correction, with its
 /// log: the largest landing move asked during one single support, written as two `CatchStep`
 /// records when that single support ends. Its state also keeps the swing sole level (A10:
 /// a joint correction) and holds the walk's clock (A11).
@@ -74,7 +73,7 @@ impl Catching {
                 let side_code: u8 = if side == Side::Left { 1 } else { 2 };
                 for (component, v) in (0u8..).zip(self.largest) {
                     // |v| ≤ the limits (< 0.1 m): the µm fit an i32.
-                    let um = gait_core::fastmath::round_i32(v * 1e6);
+                    let um = gait_core::maths::fastmath::round_i32(v * 1e6);
                     let rec = fault(now, FaultKind::CatchStep, side_code * 16 + component, um);
                     log.write(board, rec);
                 }
@@ -199,7 +198,10 @@ impl TickPath for F32Path<'_> {
         let att = self.attitude.update(g, s.accel_m_s2(), self.dt_s);
         // The online walk's heading hold: the gyro's yaw, the bias learnt while it stands.
         if let Some(o) = walk.gait.online_mut() {
-            let still = matches!(o.mode(), gait_core::online::WalkMode::Standing(_));
+            let still = matches!(
+                o.mode(),
+                gait_core::trajectory::online::WalkMode::Standing(_)
+            );
             o.set_heading(self.heading.update(g, &att, self.dt_s, still));
         }
         let gyro = finite_rates(g);

@@ -3,13 +3,13 @@
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
-use gait_core::balance::{FixedGyroFeedback, GyroFeedback};
-use gait_core::correction::{
-    IkCommand, JointCorrection, JointInput, Measured, SampleCorrection, StabilizerCorrection,
-};
-use gait_core::fixed_point::{fx_sat, fx_to_f32, FixedFoot, Fx};
+use gait_core::feedback::gyro::{FixedGyroFeedback, GyroFeedback};
+use gait_core::feedback::stabilizer::StabilizerCorrection;
+use gait_core::feedback::{IkCommand, JointCorrection, JointInput, Measured, SampleCorrection};
 use gait_core::gait::Targets;
-use gait_core::measured::FixedZmpMeter;
+use gait_core::maths::fixed_point::{fx_sat, fx_to_f32, Fx};
+use gait_core::measure::zmp::FixedZmpMeter;
+use gait_core::trajectory::fixed_sampler::FixedFoot;
 use gait_core::{GaitSample, Robot};
 
 use crate::board::Board;
@@ -52,7 +52,7 @@ impl<'r> FixedPath<'r> {
 }
 
 /// A foot sample in fixed point (exact for a sample the fixed-point sampler made).
-fn fixed_foot(f: &gait_core::swing::FootSample<f32>) -> FixedFoot {
+fn fixed_foot(f: &gait_core::trajectory::swing::FootSample<f32>) -> FixedFoot {
     FixedFoot {
         x: fx_sat(f.x),
         y: fx_sat(f.y),

@@ -16,11 +16,11 @@
 //! standing / walking / stopping (the online walk's mode), walking (the plan), stopped (the
 //! supervisor stopped).
 
-use gait_core::fourier_walk::WalkSampler;
 use gait_core::gait::{Engine, Sample, Targets};
-use gait_core::online::OnlineWalk;
-use gait_core::plan::Footstep;
 use gait_core::robot::LEG_JOINTS;
+use gait_core::trajectory::fourier_walk::WalkSampler;
+use gait_core::trajectory::online::OnlineWalk;
+use gait_core::trajectory::plan::Footstep;
 use gait_core::{GaitError, GaitSample, Robot};
 use walker_contract::command_port::PortState;
 
@@ -380,7 +380,7 @@ impl Walk {
     }
 
     /// This tick's motion; the ramp's last tick hands over to the gait (Starting → Gait). With
-    /// `hold` a gait tick hands out the same samples again (gait-core `catching` A11).
+    /// `hold` a gait tick hands out the same samples again (gait-core `feedback::hold` A11).
     pub fn tick(&mut self, tau: Tau, hold: bool) -> Motion {
         match &mut self.mode {
             Mode::Starting(s) => {

@@ -4,7 +4,7 @@
 //! is generic over it, so a build that never runs a path leaves it out (the OpenCM 9.04 has
 //! only the fixed one).
 //!
-//! The corrections around the IK (gait-core [`gait_core::correction`]) in their order:
+//! The corrections around the IK (gait-core [`gait_core::feedback`]) in their order:
 //!
 //! | path | sample corrections (before the IK) | joint corrections (after it) |
 //! | --- | --- | --- |
@@ -13,11 +13,12 @@
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
-use gait_core::correction::{IkCommand, Measured, StabilizerCorrection};
-use gait_core::fixed_point::{FixedFoot, Fx};
+use gait_core::feedback::stabilizer::{Stabilizer, StabilizerCorrection};
+use gait_core::feedback::{IkCommand, Measured};
 use gait_core::gait::{Sample, Targets};
+use gait_core::maths::fixed_point::Fx;
 use gait_core::robot::LEG_JOINTS;
-use gait_core::stabilizer::Stabilizer;
+use gait_core::trajectory::fixed_sampler::FixedFoot;
 use gait_core::{GaitSample, Robot};
 
 use crate::board::Board;

@@ -1,10 +1,10 @@
 //! The servos' Present Position and what the f32 path makes of it: the servo deflection
-//! feedback ([`gait_core::deflection`]) and the leg odometry ([`gait_core::odometry`]).
+//! feedback ([`gait_core::feedback::deflection`]) and the leg odometry ([`gait_core::measure::odometry`]).
 
 use dxl::table::x_series;
 use dxl::{BulkReadRequest, DeviceResult};
-use gait_core::correction::{JointCorrection, JointInput, Measured};
-use gait_core::odometry::SurveyedSole;
+use gait_core::feedback::{JointCorrection, JointInput, Measured};
+use gait_core::measure::odometry::SurveyedSole;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::{Robot, Side};
 use walker_contract::bus_map as ids;
@@ -14,15 +14,15 @@ use crate::bus::BoardMaster;
 use crate::supervisor::JointMap;
 
 /// The servos' Present Position and what the firmware makes of it (f32 path only): the servo
-/// deflection feedback ([`gait_core::deflection`], `deflection_ki`: its joints read in one BULK
+/// deflection feedback ([`gait_core::feedback::deflection`], `deflection_ki`: its joints read in one BULK
 /// READ every tick, the targets of the last walking tick before the correction (D1)) and the leg
-/// odometry ([`gait_core::odometry`], `sole_poses=measured`: once a step, the stance leg's six
+/// odometry ([`gait_core::measure::odometry`], `sole_poses=measured`: once a step, the stance leg's six
 /// on the tick after a survey falls due, the new leg's six on the next, O3′). Built only while
 /// one of them acts.
 pub(super) struct ServoSense {
-    deflection: Option<gait_core::deflection::DeflectionFeedback>,
+    deflection: Option<gait_core::feedback::deflection::DeflectionFeedback>,
     /// The deflection feedback's joints.
-    mask: gait_core::deflection::JointSet,
+    mask: gait_core::feedback::deflection::JointSet,
     odometry: Option<Odometry>,
     reqs: heapless::Vec<BulkReadRequest, LEG_JOINTS>,
     /// Per request: the joint index.
@@ -37,8 +37,8 @@ pub(super) struct ServoSense {
 
 /// The leg odometry's firmware side: its state, the legs' FK and the survey's two reads.
 struct Odometry {
-    legs: gait_core::odometry::LegOdometry<f32>,
-    kin: gait_core::kinematics::LegKinematics<f32>,
+    legs: gait_core::measure::odometry::LegOdometry<f32>,
+    kin: gait_core::kinematics::leg::LegKinematics<f32>,
     stage: Survey,
     /// The IK's joint targets of the last walking tick (before the feed-forwards and the
     /// feedback: the gait's planned motion, which the loaded leg follows), rad.
@@ -66,18 +66,18 @@ impl ServoSense {
     /// The deflection feedback of `cfg` at tick period `dt_s` and the odometry when `odometry`;
     /// `None` while neither acts.
     pub(super) fn new(
-        cfg: &gait_core::deflection::DeflectionConfig,
+        cfg: &gait_core::feedback::deflection::DeflectionConfig,
         odometry: bool,
         robot: &Robot,
         dt_s: f32,
     ) -> Option<Self> {
-        let feedback = gait_core::deflection::DeflectionFeedback::new(cfg, dt_s);
+        let feedback = gait_core::feedback::deflection::DeflectionFeedback::new(cfg, dt_s);
         let deflection = feedback.is_on().then_some(feedback);
         let odometry = odometry.then(|| Odometry {
-            legs: gait_core::odometry::LegOdometry::new(
-                &gait_core::odometry::OdometryLimits::DEFAULT,
+            legs: gait_core::measure::odometry::LegOdometry::new(
+                &gait_core::measure::odometry::OdometryLimits::DEFAULT,
             ),
-            kin: gait_core::kinematics::LegKinematics::new(robot),
+            kin: gait_core::kinematics::leg::LegKinematics::new(robot),
             stage: Survey::Idle,
             ik: [f32::NAN; LEG_JOINTS],
         });
@@ -160,7 +160,7 @@ impl ServoSense {
                 ik: o.ik,
             },
             Survey::New { stance, first, ik } => {
-                let q = gait_core::odometry::legs_at_first_read(
+                let q = gait_core::measure::odometry::legs_at_first_read(
                     stance,
                     &first,
                     &self.present,

@@ -10,9 +10,9 @@ use crate::record::{FaultRecord, LoggedPhase, Record, TickRecord};
 use crate::record::{FaultState, StartupRecord};
 use crate::supervisor::safe_targets;
 use dxl::opcode;
-use gait_core::compliance::Compliance;
+use gait_core::feedback::compliance::Compliance;
 use gait_core::gait::{Arithmetic, Targets};
-use gait_core::support::SupportPolygon;
+use gait_core::measure::support::SupportPolygon;
 use gait_core::{Robot, Side};
 use std::vec::Vec;
 use walker_contract::command_port::PortState;
@@ -88,14 +88,14 @@ fn startup_of(recs: &[Record]) -> StartupRecord {
 
 /// The sole of `side` (pose in the frame of a level pelvis at the origin) that the goal ticks
 /// `g` command, through the leg FK.
-fn sole_of_goals(g: &[i32; 12], side: gait_core::Side) -> gait_core::kinematics::Pose<f64> {
+fn sole_of_goals(g: &[i32; 12], side: gait_core::Side) -> gait_core::kinematics::leg::Pose<f64> {
     let robot = Robot::reference();
     let map = JointMap::from_robot(&robot);
     let leg = side.index();
-    let pelvis = gait_core::kinematics::Pose::level(0.0f64, 0.0, 0.0, 0.0);
+    let pelvis = gait_core::kinematics::leg::Pose::level(0.0f64, 0.0, 0.0, 0.0);
     let q: [f64; 6] =
         core::array::from_fn(|j| f64::from(map.rad_of_tick(6 * leg + j, g[6 * leg + j])));
-    gait_core::kinematics::leg_fk(&robot, side, &pelvis, &q)
+    gait_core::kinematics::leg::leg_fk(&robot, side, &pelvis, &q)
 }
 
 fn assert_goals_in_limits(b: &FakeBoard) {
@@ -784,7 +784,7 @@ fn no_shift_can_push_a_target_outside_the_limits() {
             }
             for d in 0..8 {
                 let a = d as f32 * core::f32::consts::FRAC_PI_4;
-                let m = gait_core::stabilizer::MAX_SHIFT_CEILING_M as f32;
+                let m = gait_core::feedback::stabilizer::MAX_SHIFT_CEILING_M as f32;
                 let (q, _) = targets.joints(&g, [m * a.cos(), m * a.sin()]);
                 for (j, v) in q.iter().enumerate() {
                     assert!(v.is_finite());
@@ -1506,7 +1506,7 @@ fn port_walk_generator(
     cfg: &Config,
     feet: [gait_core::Place<f32>; 2],
     first: Side,
-) -> gait_core::command::StepGenerator<f32> {
+) -> gait_core::trajectory::command::StepGenerator<f32> {
     let w = startup::servo_timing(
         cfg,
         &Robot::reference(),
@@ -1514,10 +1514,10 @@ fn port_walk_generator(
     )
     .unwrap()
     .walk;
-    gait_core::command::StepGenerator::new(
+    gait_core::trajectory::command::StepGenerator::new(
         &Robot::reference(),
         w.z_c,
-        gait_core::command::CommandLimits::DEFAULT,
+        gait_core::trajectory::command::CommandLimits::DEFAULT,
         w.step_width as f32,
         (f64::from(commanded::period_us(&Config { walk: w, ..*cfg })) * 1e-6) as f32,
         feet,
@@ -1598,7 +1598,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
 
     // Replay the logged footsteps through the generator with the logged commands.
     let recs = b.inner.records();
-    let mut gen: Option<gait_core::command::StepGenerator<f32>> = None;
+    let mut gen: Option<gait_core::trajectory::command::StepGenerator<f32>> = None;
     let mut feet = [
         gait_core::Place {
             x: 0.0f32,
@@ -1642,13 +1642,13 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
         let g = gen.as_mut().unwrap();
         let [mode, vx, vy, w] = logged.command;
         let c = if mode == 2 {
-            gait_core::command::WalkCommand {
+            gait_core::trajectory::command::WalkCommand {
                 vx: vx as f32 / 1000.0,
                 vy: vy as f32 / 1000.0,
                 yaw_rate: w as f32 / 1000.0,
             }
         } else {
-            gait_core::command::WalkCommand::zero()
+            gait_core::trajectory::command::WalkCommand::zero()
         };
         let shift = logged.shift.map(|v| (f64::from(v) * 1e-6) as f32);
         let (s, _, _) = g.next_step_held(&c, (f64::from(logged.turn) * 1e-6) as f32, shift);
@@ -1692,7 +1692,7 @@ fn fixed_point_loop_agrees_with_the_f32_loop() {
             arithmetic,
             compliance: Compliance::OFF,
             sole_poses_measured: false,
-            step_adaptation: gait_core::catching::StepAdaptation::OFF,
+            step_adaptation: gait_core::feedback::catch::StepAdaptation::OFF,
             ..autostart_config()
         };
         let mut b = board(&cfg);
@@ -1747,7 +1747,7 @@ fn fixed_point_loop_detects_a_fall() {
     fall_stops_with(Arithmetic::Fixed);
 }
 
-/// Foot force difference control (`fdc_gain`, gait-core `balance` F1–F4): the left foot
+/// Foot force difference control (`fdc_gain`, gait-core `feedback::fdc` F1–F4): the left foot
 /// reports the whole weight and the right nothing, so in double support the left carries more
 /// than any split the ZMP reference asks for (ΔF − ΔF_d = 80·(1 − α) N ≥ 0): the left sole is
 /// raised and the right lowered by the same height (the soles' heights in the pelvis frame,
@@ -1916,7 +1916,7 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
             }
             None => {
                 assert!(g.is_empty(), "step {n}: a stop step");
-                gen.next_step(&gait_core::command::WalkCommand::zero())
+                gen.next_step(&gait_core::trajectory::command::WalkCommand::zero())
             }
         };
         let want = [s.place.x, s.place.y, s.place.yaw].map(|v| (v * 1e6).round() as i32);
@@ -1989,7 +1989,7 @@ fn assert_nothing_moved_before_the_tip(
     );
 }
 
-/// The catching step (`catch_gain`, gait-core `catching` A1–A7): the IMU reports the trunk
+/// The catching step (`catch_gain`, gait-core `feedback::catch` A1–A7): the IMU reports the trunk
 /// tipping backward (−1.5 rad/s for 60 ms) early in a left swing. Against the same run with
 /// `catch_gain=0` (its τ = J·φ̈ sees the tip too): the goals are the same bits until the tip; then the left sole moves back
 /// relative to the right one (FK of the goal ticks, pelvis frame) by at most `catch_max_x`,
@@ -2050,7 +2050,7 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
     assert_goals_in_limits(&b);
 }
 
-/// The swing sole kept level (`catch_level_pitch`, `catch_level_roll`, gait-core `catching`
+/// The swing sole kept level (`catch_level_pitch`, `catch_level_roll`, gait-core `feedback::level`
 /// A10), the catching step off: the IMU reports the trunk tipping backward (−1.5 rad/s for
 /// 60 ms, ≈ 0.09 rad) early in a left swing. Against the same run without the levelling: the
 /// goals are the same bits until the tip, then only the ankle joints differ; the swinging left
@@ -2059,7 +2059,7 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
 /// joint limits.
 #[test]
 fn a_backward_tip_in_a_swing_turns_only_the_swing_ankle_back_to_level() {
-    use gait_core::catching::MAX_LEVEL_RAD;
+    use gait_core::feedback::level::MAX_LEVEL_RAD;
     let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
     let off =
         cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_level_pitch=0 catch_level_roll=0");
@@ -2310,10 +2310,10 @@ fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
                 };
             f64::from(map.ticks.rad_f32(j, t))
         });
-        let p = gait_core::kinematics::leg_fk(
+        let p = gait_core::kinematics::leg::leg_fk(
             &robot,
             Side::Left,
-            &gait_core::kinematics::Pose::default(),
+            &gait_core::kinematics::leg::Pose::default(),
             &q,
         );
         [p.x, p.y]

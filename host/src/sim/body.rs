@@ -56,9 +56,9 @@
 //!   `θ̈ = (g/L)·(sin θ + 0.05)`, until it lies on the ground (θ = π/2 − 0.05). While it falls the
 //!   whole load sits on the edge; once it lies, the feet carry nothing.
 
-use gait_core::kinematics::{LegKinematics, Pose};
-use gait_core::plan::Place;
-use gait_core::support::SupportPolygon;
+use gait_core::kinematics::leg::{LegKinematics, Pose};
+use gait_core::measure::support::SupportPolygon;
+use gait_core::trajectory::plan::Place;
 use gait_core::{Robot, Side};
 
 use super::forces::{center_of_pressure, distribute, FootContact};

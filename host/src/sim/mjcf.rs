@@ -9,7 +9,7 @@
 //!   accelerometer). Collision boxes for the trunk and the head (a fall is a torso contact).
 //! * `{l,r}_thigh` at the hip (0, σ·d, 0) with the joints `hip_yaw` (z), `hip_roll` (x),
 //!   `hip_pitch` (y) in that order (MuJoCo composes a body's joints in order, giving
-//!   `Rz(q0)·Rx(q1)·Ry(q2)` of [`gait_core::kinematics`]); mass m_t at (0, 0, −L1/2).
+//!   `Rz(q0)·Rx(q1)·Ry(q2)` of [`gait_core::kinematics::leg`]); mass m_t at (0, 0, −L1/2).
 //! * `{l,r}_calf` at (0, 0, −L1), joint `knee` (y); mass of the calf at (0, 0, −L2/2).
 //! * `{l,r}_foot` at the ankle (0, 0, −L2), joints `ankle_pitch` (y), `ankle_roll` (x); the sole
 //!   mass `masses.sole_height` above the sole; the sole box `{l,r}_sole` (length × width of the
@@ -33,7 +33,7 @@
 
 use std::fmt::Write as _;
 
-use gait_core::kinematics::{leg_fk, Pose};
+use gait_core::kinematics::leg::{leg_fk, Pose};
 use gait_core::robot::JOINT_NAMES;
 use gait_core::{Robot, Side};
 

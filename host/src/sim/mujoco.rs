@@ -36,8 +36,8 @@
 //! the weld `hold` (a person holding it) until all 12 servos have torque on (or from the start
 //! with [`super::SimConfig::hold_until_torque`] off): a robot whose servos are off collapses.
 
-use gait_core::plan::Place;
-use gait_core::support::SupportPolygon;
+use gait_core::measure::support::SupportPolygon;
+use gait_core::trajectory::plan::Place;
 use gait_core::Robot;
 use mujoco_rs::prelude::*;
 use mujoco_rs::wrappers::mj_model::MjtObjBase;

@@ -17,8 +17,8 @@
 //! F_z = h_s·(1 − cos 2πu)/2; constant outside the single support. Zero velocity at both ends.
 //! The heading turns with the same fraction as the horizontal motion.
 
-use crate::plan::{Place, SwingShape};
-use crate::real::Real;
+use crate::maths::real::Real;
+use crate::trajectory::plan::{Place, SwingShape};
 use core::f64::consts::PI;
 
 /// A foot pose sample: sole point position (m) and heading (rad), world frame.

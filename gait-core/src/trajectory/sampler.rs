@@ -11,12 +11,12 @@
 //! Per sample: two `exp` calls for the CoM (com.rs C1-C2), the swing-foot profile (swing.rs),
 //! and the τ response (com.rs C6). At each segment boundary: one or two DCM back-steps (C4).
 
-use crate::com::{decay, ComSegment, TauResponse, ZmpSpan};
 use crate::error::GaitError;
-use crate::plan::{Footstep, Place, Plan};
-use crate::real::Real;
+use crate::maths::real::Real;
 use crate::robot::Side;
-use crate::swing::{swing_foot, FootSample};
+use crate::trajectory::com::{decay, ComSegment, TauResponse, ZmpSpan};
+use crate::trajectory::plan::{Footstep, Place, Plan};
+use crate::trajectory::swing::{swing_foot, FootSample};
 
 /// Largest |τ| the sampler accepts, N·m; larger measured values are clamped (a kid-size upper
 /// body with J = 0.026 kg·m² reaches this only at φ̈ ≈ 1900 rad/s², i.e. a sensor fault).

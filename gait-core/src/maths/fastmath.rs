@@ -48,7 +48,7 @@
 //! finite and in [−1, 1], with an error growing like |x|·1.8e-7 (libm's exact reduction would
 //! cost 3 KiB of flash for angles nobody walks). NaN and ±∞ give NaN, as for `libm`.
 
-use crate::real::Real;
+use crate::maths::real::Real;
 
 /// Largest |x| handled by the fast path directly; larger finite arguments are reduced first.
 pub const FAST_RANGE: f32 = 8192.0;

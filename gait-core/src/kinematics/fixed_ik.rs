@@ -1,10 +1,10 @@
 //! The two-leg inverse kinematics in fixed point, for cores without an FPU (Cortex-M0/M3):
-//! with [`crate::fixed_point::FixedSampler`] the whole path sampler → IK → joint targets needs
+//! with [`crate::trajectory::fixed_sampler::FixedSampler`] the whole path sampler → IK → joint targets needs
 //! no floating point per sample.
 //!
 //! # Method
 //!
-//! The chain, conventions, clamping and report are those of [`crate::kinematics`] (see its
+//! The chain, conventions, clamping and report are those of [`crate::kinematics::leg`] (see its
 //! module documentation for the equations); only the arithmetic differs:
 //!
 //! - Inputs and outputs are [`Fx`] (`I16F16`): positions in m, angles in rad (resolution
@@ -20,7 +20,7 @@
 //!   step (`i64` multiplications only) for the ratio in [0, 1], then a degree-17 odd polynomial
 //!   (Chebyshev fit in t², measured |error| < 1.6e-8 rad). No 64-bit division anywhere: the
 //!   Cortex-M3 build of the per-sample path has one `udiv` and no division or float calls.
-//! - Sines and cosines: [`crate::fixed_point::sin_cos`] (|error| < 4e-7).
+//! - Sines and cosines: [`crate::maths::fixed_point::sin_cos`] (|error| < 4e-7).
 //! - The knee and the ankle pitch come without any division:
 //!   `a = √((L1+L2)² − D²)`, `b = √(D² − (L1−L2)²)` (exact integer differences, so there is no
 //!   cancellation near the straight leg), `q3 = 2·atan2(a, b)` and, since
@@ -50,12 +50,13 @@
 //! for level poses and 2.3e-5 rad with ±0.15 rad pelvis/foot roll and pitch (the 2e-4 rad budget;
 //! half of it is the 2⁻¹⁶ rad output resolution); the `f64` forward kinematics of the fixed-point
 //! angles lands within 4 µm of the target. The Table 2 walk through
-//! [`crate::fixed_point::FixedSampler`] and this IK stays within 4.5e-4 rad of the `f64`
+//! [`crate::trajectory::fixed_sampler::FixedSampler`] and this IK stays within 4.5e-4 rad of the `f64`
 //! sampler and IK (mostly the sampler's share).
 
-use crate::fixed_point::{mul30_32, sin_cos, FixedFoot, FixedSample, Fx};
-use crate::kinematics::{KNEE_MIN_BEND, MAX_POSITION};
+use crate::kinematics::leg::{KNEE_MIN_BEND, MAX_POSITION};
+use crate::maths::fixed_point::{mul30_32, sin_cos, Fx};
 use crate::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
+use crate::trajectory::fixed_sampler::{FixedFoot, FixedSample};
 
 const ONE: i64 = 1 << 30;
 /// π in 2⁻³⁰ rad units.
@@ -71,7 +72,7 @@ const PI_16: i64 = 205_887;
 const HALF_PI_16: i64 = 102_943;
 
 /// A pose in fixed point: position (m) and ZYX angles (rad), `R = Rz(yaw)·Ry(pitch)·Rx(roll)`
-/// (the convention of [`crate::kinematics::Pose`]).
+/// (the convention of [`crate::kinematics::leg::Pose`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FixedPose {
     /// Position x (forward), m.
@@ -114,7 +115,7 @@ impl FixedPose {
     }
 }
 
-/// Report of a fixed-point two-leg IK (the meaning of [`crate::kinematics::LegsIkReport`]).
+/// Report of a fixed-point two-leg IK (the meaning of [`crate::kinematics::leg::LegsIkReport`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FixedIkReport {
     /// Reach deficit of the left and right leg, m (0 when reachable).
@@ -325,7 +326,7 @@ fn round_angle(a: i64) -> Fx {
     Fx::from_bits(((a + (1 << 13)) >> 14) as i32)
 }
 
-/// `a` wrapped into [−π, π] in Fx bits (0 for |a| ≥ 64 rad, like [`crate::swing::wrap_pi`]).
+/// `a` wrapped into [−π, π] in Fx bits (0 for |a| ≥ 64 rad, like [`crate::trajectory::swing::wrap_pi`]).
 fn wrap_pi(a: i64) -> i64 {
     if a.abs() >= 64 << 16 {
         return 0;
@@ -517,7 +518,7 @@ struct LegOut {
 impl FixedLegKinematics {
     /// Converts the robot's geometry (lengths limited to 0.5 m) and joint limits (mirrored for
     /// the right leg as in [`Robot::joint_limit`]) to fixed point; the reach bounds are those of
-    /// [`crate::kinematics::LegKinematics`].
+    /// [`crate::kinematics::leg::LegKinematics`].
     pub fn new(robot: &Robot) -> Self {
         let g = &robot.geometry;
         let len = |v: f64| -> f64 {
@@ -729,7 +730,7 @@ impl FixedLegKinematics {
 }
 
 /// The pelvis pose of a fixed-point sample: (com_x, com_y, z_c), level, heading between the
-/// feet (the [`crate::pipeline::pelvis_pose`] rule).
+/// feet (the [`crate::kinematics::pipeline::pelvis_pose`] rule).
 pub fn pelvis_pose(sample: &FixedSample) -> FixedPose {
     let [l, r] = sample.feet;
     let half = wrap_pi(r.yaw.to_bits() as i64 - l.yaw.to_bits() as i64) >> 1;
@@ -745,7 +746,7 @@ pub fn foot_pose(f: &FixedFoot) -> FixedPose {
 }
 
 /// The 12 joint targets (left leg then right leg, rad) of a fixed-point sample and what the IK
-/// had to clamp, like [`crate::pipeline::joint_targets`], with integer arithmetic only.
+/// had to clamp, like [`crate::kinematics::pipeline::joint_targets`], with integer arithmetic only.
 pub fn joint_targets(
     kin: &FixedLegKinematics,
     sample: &FixedSample,
@@ -760,7 +761,7 @@ pub fn joint_targets(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fixed_point::mul30;
+    use crate::maths::fixed_point::mul30;
     extern crate std;
 
     /// The `i64` Horner evaluation `atan_unit` was before it moved to `i32`.

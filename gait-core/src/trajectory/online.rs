@@ -1,4 +1,4 @@
-//! Online walking: footsteps from velocity commands ([`crate::command::StepGenerator`]) and the
+//! Online walking: footsteps from velocity commands ([`crate::trajectory::command::StepGenerator`]) and the
 //! CoM from a bounded preview of the divergent component of motion (DCM), one sample per tick,
 //! in walk modes with explicit transitions (standing, starting, walking, stopping).
 //!
@@ -84,14 +84,14 @@
 //!   δ = clamp(−k·e, ±δ_max)      (k = `heading_gain`, δ_max = MAX_HEADING_TURN)          (H2)
 //! ```
 //!
-//! on top of the command's turn ((S3) of [`crate::command`]; scaled with the step by the
+//! on top of the command's turn ((S3) of [`crate::trajectory::command`]; scaled with the step by the
 //! limits, the stepped λ·δ is what Σδ adds). Not in the start phase nor while stopping: a stop
 //! ends with the feet parallel as commanded.
 //!
 //! **Position hold.** The feet land where the servos put them, not where the plan does (a
 //! stance leg that yields under the robot's weight lands every step long, more so the faster
 //! the walk): the walk drifts ahead of its commands. With the leg odometry's survey of each
-//! landing ([`crate::odometry`]; [`OnlineWalk::set_landing_offset`]: the surveyed place minus
+//! landing ([`crate::measure::odometry`]; [`OnlineWalk::set_landing_offset`]: the surveyed place minus
 //! the planned one, o, world frame) and Σc the position corrections stepped so far (world
 //! frame), the support foot's distance from the commanded track when a walking step begins is
 //!
@@ -106,23 +106,23 @@
 //!   c = R(−θ_S)·clamp(−k_p·e, ±c_max)   (k_p = `position_gain`, c_max = MAX_POSITION_SHIFT)     (P2)
 //! ```
 //!
-//! ((S4) of [`crate::command`], support-foot frame; the stepped λ·c, back in the world frame,
+//! ((S4) of [`crate::trajectory::command`], support-foot frame; the stepped λ·c, back in the world frame,
 //! is what Σc adds). A landing error Δ that repeats every step leaves e = Δ/k_p: the feet keep
 //! the commanded velocity, a fixed distance ahead. Only for a support foot surveyed since it
 //! landed; not in the start phase, while stopping or for listed steps, like the heading hold.
 //!
-//! **Swing.** The swing foot follows [`crate::swing::swing_foot`] between lift-off t1 and
+//! **Swing.** The swing foot follows [`crate::trajectory::swing::swing_foot`] between lift-off t1 and
 //! touch-down t2 of the walk's timing; both feet are on the ground outside it.
 
 use heapless::Deque;
 
-use crate::command::{CommandLimits, StepGenerator, WalkCommand};
 use crate::error::GaitError;
-use crate::plan::{Footstep, Place, SwingShape};
-use crate::real::Real;
+use crate::maths::real::Real;
 use crate::robot::{Robot, Side};
-use crate::sampler::{GaitSample, SupportPhase};
-use crate::swing::{swing_foot, FootSample};
+use crate::trajectory::command::{CommandLimits, StepGenerator, WalkCommand};
+use crate::trajectory::plan::{Footstep, Place, SwingShape};
+use crate::trajectory::sampler::{GaitSample, SupportPhase};
+use crate::trajectory::swing::{swing_foot, FootSample};
 
 /// Steps previewed beyond the current one.
 pub const PREVIEW_STEPS: usize = 3;

@@ -7,10 +7,10 @@ use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
 /// A floating-point scalar (`f32` or `f64`) with the maths gait-core needs.
 ///
-/// For `f32`, `sin`/`cos`/`atan2` are the short polynomials of [`crate::fastmath`] (|error|
-/// < 1e-7 for sin/cos, ≤ [`crate::fastmath::ATAN2_MAX_ERR`] for atan2; libm's `sinf` computes
+/// For `f32`, `sin`/`cos`/`atan2` are the short polynomials of [`crate::maths::fastmath`] (|error|
+/// < 1e-7 for sin/cos, ≤ [`crate::maths::fastmath::ATAN2_MAX_ERR`] for atan2; libm's `sinf` computes
 /// in software doubles, far slower on a single-precision FPU) and `sqrt` is the FPU's
-/// `VSQRT.F32` on hard-float ARM ([`crate::fastmath::sqrt`]).
+/// `VSQRT.F32` on hard-float ARM ([`crate::maths::fastmath::sqrt`]).
 pub trait Real:
     Copy
     + PartialOrd
@@ -131,12 +131,12 @@ macro_rules! impl_real {
 impl_real!(
     f32,
     of: |v| v as f32,
-    sin_cos: crate::fastmath::sin_cos,
-    atan2: crate::fastmath::atan2,
+    sin_cos: crate::maths::fastmath::sin_cos,
+    atan2: crate::maths::fastmath::atan2,
     exp: libm::expf,
-    sqrt: crate::fastmath::sqrt,
-    sin: crate::fastmath::sin,
-    cos: crate::fastmath::cos,
+    sqrt: crate::maths::fastmath::sqrt,
+    sin: crate::maths::fastmath::sin,
+    cos: crate::maths::fastmath::cos,
     abs: libm::fabsf
 );
 impl_real!(

@@ -35,7 +35,7 @@
 //! the ODE exactly while τ is constant, and |e| ≤ max|Δ| for any bounded τ: a measured torque
 //! can never make the CoM diverge (a divergent CoM is a fall).
 
-use crate::real::Real;
+use crate::maths::real::Real;
 
 /// One step of (C4): the DCM at a segment's start from the DCM at its end.
 pub fn dcm_back<R: Real>(omega: R, p0: [R; 2], p1: [R; 2], d: R, xi1: [R; 2]) -> [R; 2] {

@@ -29,9 +29,9 @@
 //! Margins are never below [`FAR_OUTSIDE`] (−10³⁰ m); a non-finite point gets exactly that.
 
 use crate::error::GaitError;
-use crate::plan::Place;
-use crate::real::Real;
+use crate::maths::real::Real;
 use crate::robot::Robot;
+use crate::trajectory::plan::Place;
 use core::cmp::Ordering;
 use heapless::Vec;
 
@@ -75,7 +75,7 @@ pub(crate) fn heading_sin_cos<R: Real>(yaw: R) -> (R, R) {
     if yaw == R::zero() {
         (R::zero(), R::one())
     } else {
-        crate::fastmath::sin_cos_real(yaw)
+        crate::maths::fastmath::sin_cos_real(yaw)
     }
 }
 

@@ -52,9 +52,9 @@
 //! commands to the same footprints.
 
 use crate::error::GaitError;
-use crate::plan::{Footstep, Place, StepLimits};
-use crate::real::Real;
+use crate::maths::real::Real;
 use crate::robot::{Robot, Side};
+use crate::trajectory::plan::{Footstep, Place, StepLimits};
 
 /// Clearance between the soles' facing edges, m.
 pub const SOLE_GAP: f64 = 0.005;

@@ -1,7 +1,7 @@
 //! Leg odometry: where each landing foot really stands, from forward kinematics of the servos'
 //! Present Position, and the soles' places the measured ZMP uses.
 //!
-//! The measured ZMP ([`crate::measured`]) places each foot's load cells at a sole place. The
+//! The measured ZMP ([`crate::measure::zmp`]) places each foot's load cells at a sole place. The
 //! plan's places are where the feet should be; a position servo that yields under load lands the
 //! swing foot elsewhere (every step a little long, more so the faster the gait). A landed sole
 //! does not move until it lifts again (a loaded sole barely slides), so one survey per landing is enough: in the double support after a single
@@ -68,14 +68,14 @@
 //! `sin_cos` once per step; (O2) a tick is two compositions with the corrections' sines and
 //! cosines kept (none while the corrections are the identity).
 
-use crate::kinematics::{LegKinematics, Pose};
-use crate::measured::SolePose;
-use crate::plan::Place;
-use crate::real::Real;
+use crate::kinematics::leg::{LegKinematics, Pose};
+use crate::maths::real::Real;
+use crate::measure::support::heading_sin_cos;
+use crate::measure::zmp::SolePose;
 use crate::robot::{Side, JOINTS_PER_LEG, LEG_JOINTS};
-use crate::sampler::SupportPhase;
-use crate::support::heading_sin_cos;
-use crate::swing::wrap_pi;
+use crate::trajectory::plan::Place;
+use crate::trajectory::sampler::SupportPhase;
+use crate::trajectory::swing::wrap_pi;
 
 /// Limits of a survey (SI units; module docs (O5) and the due rule).
 #[derive(Clone, Copy, Debug, PartialEq)]

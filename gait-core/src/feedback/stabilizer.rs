@@ -27,7 +27,7 @@
 //! stabilizer (its lateral δ stays 0: the lateral error then feeds neither (S4) nor (S5)).
 //!
 //! δ is added to the commanded CoM (the pelvis point of the plain pipeline, the target of the
-//! whole-body CoM with [`crate::wholebody`]). Quasi-statically a CoM shift δ moves the ZMP by δ
+//! whole-body CoM with [`crate::kinematics::wholebody`]). Quasi-statically a CoM shift δ moves the ZMP by δ
 //! (the ZMP of a resting body is under its CoM), so (S5) drives the ZMP error toward zero; the
 //! non-minimum-phase term −δ̈/ω² of p = c − c̈/ω² is why the proportional gain stays small and
 //! the rate (S6) is limited. (S7) treats p_ref + δ* as the ZMP the correction asks for and keeps
@@ -41,8 +41,11 @@
 //! change it reaches the new polygon's limit at v_max). Cost: a few dozen flops plus one support-polygon margin per bisection
 //! step ([`BISECTION_STEPS`] at most).
 
-use crate::real::Real;
-use crate::support::SupportPolygon;
+use super::{IkCommand, Measured, SampleCorrection};
+use crate::gait::SupportCache;
+use crate::maths::real::Real;
+use crate::measure::support::SupportPolygon;
+use crate::robot::Robot;
 
 /// Most bisection steps of the support-polygon limit (S7).
 pub const BISECTION_STEPS: u8 = 6;
@@ -307,11 +310,48 @@ fn limit_norm<R: Real>(v: [R; 2], max: R) -> [R; 2] {
     }
 }
 
+/// The feedback stabilizer as a sample correction: δ from the measured ZMP's error against
+/// the previous sample's reference, inside that sample's support polygon (cached).
+#[derive(Clone, Debug)]
+pub struct StabilizerCorrection<'r> {
+    /// The stabilizer (gait-core [`crate::stabilizer`]).
+    pub stabilizer: Stabilizer<f32>,
+    on: bool,
+    support: SupportCache,
+    robot: &'r Robot,
+}
+
+impl<'r> StabilizerCorrection<'r> {
+    /// `stabilizer` for `robot`; `on` = false leaves δ at 0 and the state untouched.
+    pub fn new(stabilizer: Stabilizer<f32>, on: bool, robot: &'r Robot) -> Self {
+        StabilizerCorrection {
+            stabilizer,
+            on,
+            support: SupportCache::default(),
+            robot,
+        }
+    }
+}
+
+impl SampleCorrection for StabilizerCorrection<'_> {
+    fn correct_sample(&mut self, m: &Measured<'_>, cmd: &mut IkCommand<'_>) {
+        if !self.on {
+            return;
+        }
+        cmd.com_shift = self.stabilizer.update(&StabilizerInput {
+            zmp_ref: m.previous.zmp,
+            zmp_meas: m.zmp,
+            gyro: m.gyro,
+            support: self.support.get(self.robot, m.previous),
+        });
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::Place;
     use crate::robot::Robot;
+    use crate::trajectory::plan::Place;
 
     fn stab(cfg: StabilizerConfig) -> Stabilizer<f64> {
         Stabilizer::new(&cfg, 0.005, 0.09)

@@ -40,10 +40,11 @@
 //! (12 sine/cosine pairs) and 6 cross products per tick (the moments grouped by joint origin:
 //! the hip, the knee, the ankle).
 
-use crate::kinematics::LegKinematics;
-use crate::pipeline::pelvis_pose;
+use super::{JointCorrection, JointInput, Measured};
+use crate::kinematics::leg::LegKinematics;
+use crate::kinematics::pipeline::pelvis_pose;
 use crate::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
-use crate::sampler::{GaitSample, SupportPhase};
+use crate::trajectory::sampler::{GaitSample, SupportPhase};
 
 /// Feed-forward settings: gains, the servos' stiffness and the saturation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -302,5 +303,27 @@ fn origin_of(j: usize) -> usize {
         0..=2 => 0,
         3 => 1,
         _ => 2,
+    }
+}
+
+/// The servos' predicted sag under the gait's loads, fed forward (gait-core
+/// [`crate::compliance`] C3) as a joint correction.
+#[derive(Clone, Debug)]
+pub struct SagFeedForward {
+    /// The loads' model.
+    pub load: LoadModel,
+    /// Gains (off: nothing added).
+    pub compliance: Compliance,
+}
+
+impl JointCorrection for SagFeedForward {
+    fn correct_joints(
+        &mut self,
+        _: &Measured<'_>,
+        input: &JointInput<'_>,
+        q: &mut [f32; LEG_JOINTS],
+    ) {
+        self.load
+            .apply(&self.compliance, q, input.loaded, input.com_shift);
     }
 }

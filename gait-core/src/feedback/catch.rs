@@ -1,6 +1,11 @@
 //! Step adaptation: the catching step. When the capture point leaves what the ankles can hold,
 //! the swing foot lands where the pushed body needs it, and the rest of the walk follows.
 //!
+//! [`CatchingStep`] is the catch (A1)–(A7); [`StepAdapter`], what the firmware runs, composes
+//! it with the swing sole's levelling ([`crate::feedback::level`], (A10), on the catch's
+//! attitude baseline) and the clock hold ([`crate::feedback::hold`], (A11), on the catch's
+//! swing foot). One configuration, [`StepAdaptation`], carries the gains and limits of all three.
+//!
 //! # Capture-point error from the trunk's attitude
 //! A push rotates the whole robot about its stance sole (stiff position servos hold the legs'
 //! shape); the CoM at height z_c then moves by z_c times the trunk's rotation. With the
@@ -46,81 +51,24 @@
 //! further, which is what absorbs the push. Every offset moves toward its target at most
 //! v_max·dt per axis per tick (continuous joint targets), and |d| ≤ [`MAX_OFFSET_M`].
 //!
-//! # The swing sole kept level
-//! The IK puts both soles parallel to the pelvis (level for an upright trunk). A trunk turned
-//! off its baseline by (φ − φ̄, θ − θ̄) turns the swing sole with it: pushed back, the robot
-//! lands its swing foot heel first, the heel pins the rotation before the foot is where the
-//! catch wants it, and the robot rolls back over both heels. The swing leg's ankle targets
-//! turn the sole back by the trunk's deviation:
-//!
-//! ```text
-//!   Δq_ankle_pitch = −k_θ·w·(θ − θ̄),   Δq_ankle_roll = −k_φ·w·(φ − φ̄),
-//!   |Δq| ≤ Δq_max ([`MAX_LEVEL_RAD`])                                                 (A10)
-//!   w ← w ± dt/T_r toward 1 on the swing leg, toward 0 on a leg on the ground
-//! ```
-//!
-//! The three pitch joints are parallel, so the sole's pitch in the world is θ + q_hp + q_k +
-//! q_ap and k_θ = 1 levels it exactly; the ankle roll turns the sole about the same axis as the
-//! trunk's roll up to the hip's pitch in between (small in a swing), so k_φ = 1 levels it to
-//! first order. w ramps the correction in over T_r after lift-off and out over T_r after
-//! touchdown (continuous joint targets; a foot on the ground keeps the plan's ankle). A
-//! missing attitude holds the last deviation while w ramps. The levelling runs with the
-//! catching step off (`gain` = 0) too, on the same baseline (A2).
-//!
-//! # The landing waits for the caught foot
-//! The servos lag ≈ 0.1 s, so a catch asked late in a swing is not where the plan sets the
-//! foot down. With a hold budget H > 0 the plan's clock stands still (the firmware takes the
-//! same sample again) for the next tick while
-//!
-//! ```text
-//!   z_swing < z_h  and  ( |d*_swing − d_swing|∞ > ε  or  0 < t_arrived < T_s )  and  held < H  (A11)
-//! ```
-//!
-//! (the planned swing sole below z_h = [`HOLD_HEIGHT_M`] and not rising — no hold at lift-off —,
-//! the swing foot's offset more than ε = [`HOLD_GAP_M`] from (A5) or, having moved in this
-//! single support, arrived less than the settling time T_s ago); the budget is per single
-//! support and refills outside single support. A swing that carries the touchdown load
-//! never holds. The clock only stands still: a shorter swing would need the CoM re-planned,
-//! which the precomputed TLIPFM segments cannot do mid-step.
-//!
 //! A missing or non-finite attitude or gyro sample gives e = 0 (no catch, offsets hold;
 //! non-finite inputs never reach the state). g, the weight and every per-tick
 //! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
-//! and the tick period once, in [`StepAdapter::new`]. Cost without a push: the error (A1), the
+//! and the tick period once, in [`CatchingStep::new`]. Cost without a push: the error (A1), the
 //! baseline (A2), the levelling (A10) and the deadband test, then an early return (the control
 //! tick's cost is in BENCHMARKS.md).
 
-use crate::robot::{Robot, Side, ANKLE_PITCH, ANKLE_ROLL, JOINTS_PER_LEG, LEG_JOINTS};
-use crate::sampler::{GaitSample, SupportPhase};
+use crate::feedback::hold::{ClockHold, SwingFoot};
+use crate::feedback::level::SoleLevel;
+use crate::robot::{Robot, Side, LEG_JOINTS};
+use crate::trajectory::sampler::{GaitSample, SupportPhase};
 
 /// Largest offset of a foot or of the body from the plan, m (the offsets are clamped to it).
 pub const MAX_OFFSET_M: f32 = 2.0;
 
-/// Largest correction of an ankle joint by the swing sole's levelling (A10), rad.
-pub const MAX_LEVEL_RAD: f32 = 0.3;
-
-/// Planned swing sole height below which the clock holds for a foot still on its way (A11), m.
-pub const HOLD_HEIGHT_M: f32 = 0.01;
-
-/// Distance of the swing foot's offset from its target beyond which it is still on its way
-/// (A11, ε), m.
-pub const HOLD_GAP_M: f32 = 1e-4;
-
-/// Whole ticks of `s` seconds at `dt_s` (0 when not `ok` or not finite).
-fn ticks_of(s: f32, dt_s: f32, ok: bool) -> u32 {
-    if !ok {
-        return 0;
-    }
-    let n = s / dt_s;
-    if n.is_finite() && n > 0.0 {
-        // Saturating float-to-int cast (`as` saturates; no panic).
-        (n + 0.5) as u32
-    } else {
-        0
-    }
-}
-
-/// Gains and limits of the catching step (SI units; module docs (A1)–(A7)).
+/// Gains and limits of the step adaptation: the catching step (module docs (A1)–(A7)), the
+/// swing sole's levelling ([`crate::feedback::level`], (A10)) and the clock hold
+/// ([`crate::feedback::hold`], (A11)); SI units.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepAdaptation {
     /// Gain k of the capture-point excess on the landing place (A3); 0 turns the step
@@ -204,12 +152,48 @@ impl StepAdaptation {
             .iter()
             .any(|k| k.is_finite() && *k > 0.0)
     }
+
+    /// Every limit finite and ≥ 0 (a clamp with crossed or NaN bounds would panic): any other
+    /// value counts as 0. `touchdown_share` is taken as it is.
+    pub(crate) fn limited(&self) -> StepAdaptation {
+        let limit = |v: f32| if v.is_finite() && v >= 0.0 { v } else { 0.0 };
+        StepAdaptation {
+            deadband_m: self.deadband_m.map(limit),
+            max_x_m: limit(self.max_x_m),
+            max_out_m: limit(self.max_out_m),
+            max_in_m: limit(self.max_in_m),
+            speed_m_s: limit(self.speed_m_s),
+            body_speed_m_s: limit(self.body_speed_m_s),
+            baseline_s: limit(self.baseline_s),
+            gain: limit(self.gain),
+            level_pitch: limit(self.level_pitch),
+            level_roll: limit(self.level_roll),
+            level_ramp_s: limit(self.level_ramp_s),
+            hold_max_s: limit(self.hold_max_s),
+            hold_settle_s: limit(self.hold_settle_s),
+            ..*self
+        }
+    }
 }
 
-/// The catching step's state: the attitude baseline and the offsets of the feet and the body.
+/// Whether a CoM height `z_c` (m), a tick of `dt_s` seconds and gravity `g` (m/s²) can run the
+/// step adaptation (finite and positive).
+fn valid(z_c: f32, dt_s: f32, g: f32) -> bool {
+    z_c.is_finite() && z_c > 0.0 && dt_s.is_finite() && dt_s > 0.0 && g > 0.0
+}
+
+/// The catching step's state (A1)–(A7): the attitude baseline, the capture-point error and the
+/// offsets of the feet and the body.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StepAdapter {
-    cfg: StepAdaptation,
+pub struct CatchingStep {
+    /// Gain k (A3); 0 when off.
+    gain: f32,
+    /// Deadband m per axis (x, y), m (A3).
+    deadband_m: [f32; 2],
+    /// Largest forward/backward, outward and inward moves of the landing place, m (A4).
+    max_x_m: f32,
+    max_out_m: f32,
+    max_in_m: f32,
     z_c: f32,
     touchdown_n: f32,
     inv_omega: f32,
@@ -225,68 +209,26 @@ pub struct StepAdapter {
     feet: [[f32; 2]; 2],
     /// Offset of the body (CoM and ZMP reference), plan frame, m.
     body: [f32; 2],
-    /// The levelling's weight w per leg (left, right), 0..1 (A10).
-    level_w: [f32; 2],
-    /// The levelling's per-tick weight step dt/T_r (A10).
-    level_step: f32,
-    /// The trunk's last deviation from its baseline (pitch, roll), rad (A10).
-    level_dev: [f32; 2],
-    /// The levelling's ankle corrections per leg (left, right): (pitch, roll), rad (A10).
-    level: [[f32; 2]; 2],
-    /// Ticks the clock may still be held in this single support (A11).
-    hold_left: u32,
-    /// Largest hold per single support, ticks (A11).
-    hold_max_ticks: u32,
-    /// Settling time after the offset arrived, ticks (A11).
-    settle_ticks: u32,
-    /// Ticks since the swing foot's offset arrived at its target (A11).
-    settled: u32,
-    /// Whether the next tick holds the plan's clock (A11).
-    hold: bool,
-    /// Whether the swing foot's offset moved in this single support (A11).
-    moving: bool,
-    /// The swing sole's planned height at the last update, m (NaN outside single support).
-    swing_z: f32,
 }
 
-impl StepAdapter {
+impl CatchingStep {
     /// A catching step for `robot` (its gravity and weight) walking at the CoM height `z_c`
     /// (m) with ticks of `dt_s` seconds; a non-positive or non-finite height or tick turns it
     /// off.
     pub fn new(cfg: &StepAdaptation, robot: &Robot, z_c: f32, dt_s: f32) -> Self {
         let g = robot.gravity as f32;
-        let ok = z_c.is_finite() && z_c > 0.0 && dt_s.is_finite() && dt_s > 0.0 && g > 0.0;
-        // Every limit finite and ≥ 0 (a clamp with crossed or NaN bounds would panic): any
-        // other value counts as 0.
-        let limit = |v: f32| if v.is_finite() && v >= 0.0 { v } else { 0.0 };
-        let mut cfg = StepAdaptation {
-            deadband_m: cfg.deadband_m.map(limit),
-            max_x_m: limit(cfg.max_x_m),
-            max_out_m: limit(cfg.max_out_m),
-            max_in_m: limit(cfg.max_in_m),
-            speed_m_s: limit(cfg.speed_m_s),
-            body_speed_m_s: limit(cfg.body_speed_m_s),
-            baseline_s: limit(cfg.baseline_s),
-            gain: limit(cfg.gain),
-            level_pitch: limit(cfg.level_pitch),
-            level_roll: limit(cfg.level_roll),
-            level_ramp_s: limit(cfg.level_ramp_s),
-            hold_max_s: limit(cfg.hold_max_s),
-            hold_settle_s: limit(cfg.hold_settle_s),
-            ..*cfg
-        };
-        if !ok {
-            cfg.gain = 0.0;
-            cfg.level_pitch = 0.0;
-            cfg.level_roll = 0.0;
-        }
-        let hold_max_ticks = ticks_of(cfg.hold_max_s, dt_s, ok);
-        StepAdapter {
-            cfg,
+        let ok = valid(z_c, dt_s, g);
+        let cfg = cfg.limited();
+        CatchingStep {
+            gain: if ok { cfg.gain } else { 0.0 },
+            deadband_m: cfg.deadband_m,
+            max_x_m: cfg.max_x_m,
+            max_out_m: cfg.max_out_m,
+            max_in_m: cfg.max_in_m,
             z_c: if ok { z_c } else { 0.0 },
             touchdown_n: cfg.touchdown_share * (robot.masses.total() * robot.gravity) as f32,
             inv_omega: if ok {
-                crate::fastmath::sqrt(z_c / g)
+                crate::maths::fastmath::sqrt(z_c / g)
             } else {
                 0.0
             },
@@ -304,53 +246,12 @@ impl StepAdapter {
             error: [0.0; 2],
             feet: [[0.0; 2]; 2],
             body: [0.0; 2],
-            level_w: [0.0; 2],
-            // A ramp shorter than a tick: w jumps (at most one tick's step of 1).
-            level_step: if ok && cfg.level_ramp_s > dt_s {
-                dt_s / cfg.level_ramp_s
-            } else {
-                1.0
-            },
-            level_dev: [0.0; 2],
-            level: [[0.0; 2]; 2],
-            hold_left: hold_max_ticks,
-            hold_max_ticks,
-            settle_ticks: ticks_of(cfg.hold_settle_s, dt_s, ok),
-            settled: 0,
-            hold: false,
-            moving: false,
-            swing_z: f32::NAN,
         }
     }
 
-    /// Whether the plan's clock should stand still for the next tick (A11): the caught swing
-    /// foot is still on its way (or settling) as the plan would set it down.
-    pub fn wants_hold(&self) -> bool {
-        self.hold
-    }
-
-    /// The swing sole's levelling (A10): the ankle corrections (pitch, roll) of the left and
-    /// the right leg, rad, each within ±[`MAX_LEVEL_RAD`].
-    pub fn sole_level(&self) -> [[f32; 2]; 2] {
-        self.level
-    }
-
-    /// Adds the levelling (A10) to the joint targets `q` (left leg then right leg, rad).
-    pub fn apply_level(&self, q: &mut [f32; LEG_JOINTS]) {
-        for (leg, [pitch, roll]) in self.level.into_iter().enumerate() {
-            let base = leg * JOINTS_PER_LEG;
-            if let Some(v) = q.get_mut(base + ANKLE_PITCH) {
-                *v += pitch;
-            }
-            if let Some(v) = q.get_mut(base + ANKLE_ROLL) {
-                *v += roll;
-            }
-        }
-    }
-
-    /// Whether it runs (the catching step or the levelling).
+    /// Whether the catching step runs (finite positive gain).
     pub fn is_on(&self) -> bool {
-        self.cfg.is_on() || self.cfg.is_levelling()
+        self.gain.is_finite() && self.gain > 0.0
     }
 
     /// The capture-point error of the last update (A1), trunk frame (x forward, y left), m.
@@ -376,26 +277,18 @@ impl StepAdapter {
             .any(|d| d[0] != 0.0 || d[1] != 0.0)
     }
 
-    /// One tick (of the period given to [`StepAdapter::new`]): the attitude `roll_pitch` (rad)
-    /// and the gyro's `rates` (roll, pitch rate, rad/s), both `None` when missing, the feet's
-    /// measured loads `loads_n` (left, right; N, NaN when not measured), with the present
-    /// (unshifted) gait `sample`; moves the offsets
-    /// (A1)–(A5), (A7). Returns the landing move Δ_b (trunk frame) asked this tick, 0 when no
-    /// catch is needed or outside single support. A swing foot that already carries
-    /// `touchdown_share` of the weight has landed early: its offset holds.
-    pub fn update(
+    /// (A1), (A2): the capture-point error from the attitude `roll_pitch` (rad) and the gyro's
+    /// `rates` (roll, pitch rate, rad/s), both `None` when missing (e = 0), and the baseline
+    /// one tick on. Returns the trunk's deviation from the baseline (pitch, roll), rad, for
+    /// the levelling (A10), `None` without a finite attitude and rates.
+    pub fn observe(
         &mut self,
-        sample: &GaitSample<f32>,
         roll_pitch: Option<[f32; 2]>,
         rates: Option<[f32; 2]>,
-        loads_n: [f32; 2],
-    ) -> [f32; 2] {
-        if !self.is_on() {
-            return [0.0; 2];
-        }
+    ) -> Option<[f32; 2]> {
         let finite = |v: &[f32; 2]| v[0].is_finite() && v[1].is_finite();
-        let m = self.cfg.deadband_m;
-        // (A1), (A2)
+        let m = self.deadband_m;
+        let mut deviation = None;
         self.error = match (roll_pitch.filter(finite), rates.filter(finite)) {
             (Some([roll, pitch]), Some([roll_rate, pitch_rate])) => {
                 let [b_roll, b_pitch] = *self.baseline.get_or_insert([roll, pitch]);
@@ -410,7 +303,7 @@ impl StepAdapter {
                         b_pitch + k * (pitch - b_pitch),
                     ]);
                 }
-                self.level_dev = [pitch - b_pitch, roll - b_roll];
+                deviation = Some([pitch - b_pitch, roll - b_roll]);
                 if finite(&e) {
                     e
                 } else {
@@ -419,17 +312,26 @@ impl StepAdapter {
             }
             _ => [0.0; 2],
         };
-        self.level_sole(sample.phase);
-        self.hold = false;
-        if !matches!(sample.phase, SupportPhase::Single(_)) {
-            self.hold_left = self.hold_max_ticks;
-            self.settled = 0;
-            self.moving = false;
-            self.swing_z = f32::NAN;
-        }
+        deviation
+    }
+
+    /// (A3)–(A5), (A7) for the error of the last [`CatchingStep::observe`], with the present
+    /// (unshifted) gait `sample` and the feet's measured loads `loads_n` (left, right; N, NaN
+    /// when not measured): moves the offsets. Returns the landing move Δ_b (trunk frame) asked
+    /// this tick, 0 when no catch is needed or outside single support, and, in single support
+    /// while the swing foot has not landed, the swing foot for the clock hold (A11). A swing
+    /// foot that already carries `touchdown_share` of the weight has landed early: its offset
+    /// holds.
+    pub fn step(
+        &mut self,
+        sample: &GaitSample<f32>,
+        loads_n: [f32; 2],
+    ) -> ([f32; 2], Option<SwingFoot>) {
+        let finite = |v: &[f32; 2]| v[0].is_finite() && v[1].is_finite();
+        let m = self.deadband_m;
         // Inside the deadband with every offset at 0 nothing moves: the common tick ends here.
         if self.error[0].abs() <= m[0] && self.error[1].abs() <= m[1] && !self.is_shifting() {
-            return [0.0; 2];
+            return ([0.0; 2], None);
         }
         let mut asked = [0.0; 2];
         let mut targets = self.feet;
@@ -440,12 +342,11 @@ impl StepAdapter {
                 let swing = stance.other();
                 // (A3), (A4)
                 let dz = |v: f32, m: f32| v.signum() * (v.abs() - m).max(0.0);
-                let k = self.cfg.gain;
+                let k = self.gain;
                 let sigma = if swing == Side::Left { 1.0 } else { -1.0 };
-                let dx = (k * dz(self.error[0], m[0])).clamp(-self.cfg.max_x_m, self.cfg.max_x_m);
+                let dx = (k * dz(self.error[0], m[0])).clamp(-self.max_x_m, self.max_x_m);
                 let dy = sigma
-                    * (sigma * k * dz(self.error[1], m[1]))
-                        .clamp(-self.cfg.max_in_m, self.cfg.max_out_m);
+                    * (sigma * k * dz(self.error[1], m[1])).clamp(-self.max_in_m, self.max_out_m);
                 asked = [dx, dy];
                 // Constant indices (the left foot first): checked at compile time.
                 let (ds, swing_load, stance_yaw) = match stance {
@@ -464,7 +365,7 @@ impl StepAdapter {
                     let [px, py] = if asked == [0.0; 2] {
                         [0.0; 2]
                     } else {
-                        let (s, c) = crate::fastmath::sin_cos(stance_yaw);
+                        let (s, c) = crate::maths::fastmath::sin_cos(stance_yaw);
                         [c * dx - s * dy, s * dx + c * dy]
                     };
                     let [tl, tr] = &mut targets;
@@ -501,56 +402,16 @@ impl StepAdapter {
         if finite(&body_target) {
             self.body = toward(self.body, body_target, self.steps[1]);
         }
-        // (A11)
-        if let Some((swing, z)) = swing_hold {
-            let gap = match (swing, self.feet, targets) {
+        // (A11): how far the swing foot's offset still is from its target (|·|∞).
+        let swing = swing_hold.map(|(swing, z_m)| {
+            let gap_m = match (swing, self.feet, targets) {
                 (Side::Left, [d, _], [t, _]) | (Side::Right, [_, d], [_, t]) => {
                     (t[0] - d[0]).abs().max((t[1] - d[1]).abs())
                 }
             };
-            if gap > HOLD_GAP_M {
-                self.moving = true;
-                self.settled = 0;
-            } else {
-                self.settled = self.settled.saturating_add(1);
-            }
-            let waiting = gap > HOLD_GAP_M || (self.moving && self.settled < self.settle_ticks);
-            // Descending or held (not rising: no hold at lift-off); NaN compares false.
-            let landing = z < HOLD_HEIGHT_M && z <= self.swing_z;
-            self.swing_z = z;
-            if waiting && landing && self.hold_left > 0 {
-                self.hold = true;
-                self.hold_left -= 1;
-            }
-        }
-        asked
-    }
-
-    /// (A10): the weights one tick toward the legs' phase, then the corrections from the
-    /// last deviation.
-    fn level_sole(&mut self, phase: SupportPhase) {
-        let swing = match phase {
-            SupportPhase::Single(stance) => Some(stance.other()),
-            _ => None,
-        };
-        let [dev_pitch, dev_roll] = self.level_dev;
-        let (k_pitch, k_roll) = (self.cfg.level_pitch, self.cfg.level_roll);
-        let step = self.level_step;
-        for ((w, c), side) in self
-            .level_w
-            .iter_mut()
-            .zip(self.level.iter_mut())
-            .zip([Side::Left, Side::Right])
-        {
-            let target = if swing == Some(side) { 1.0 } else { 0.0 };
-            *w += (target - *w).clamp(-step, step);
-            let v = [-k_pitch * *w * dev_pitch, -k_roll * *w * dev_roll];
-            *c = if v.iter().all(|x| x.is_finite()) {
-                v.map(|x| x.clamp(-MAX_LEVEL_RAD, MAX_LEVEL_RAD))
-            } else {
-                [0.0; 2]
-            };
-        }
+            SwingFoot { z_m, gap_m }
+        });
+        (asked, swing)
     }
 
     /// (A6) on a sample: the feet by their offsets, the CoM and the ZMP reference by the body's.
@@ -563,5 +424,114 @@ impl StepAdapter {
             sample.com[i] += self.body[i];
             sample.zmp[i] += self.body[i];
         }
+    }
+}
+
+/// The step adaptation the firmware runs: the catching step ([`CatchingStep`]), the swing
+/// sole's levelling ([`SoleLevel`]) and the clock hold ([`ClockHold`]), updated in that order
+/// on one configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepAdapter {
+    catch: CatchingStep,
+    level: SoleLevel,
+    hold: ClockHold,
+}
+
+impl StepAdapter {
+    /// A step adaptation for `robot` (its gravity and weight) walking at the CoM height `z_c`
+    /// (m) with ticks of `dt_s` seconds; a non-positive or non-finite height or tick turns it
+    /// off.
+    pub fn new(cfg: &StepAdaptation, robot: &Robot, z_c: f32, dt_s: f32) -> Self {
+        let cfg = if valid(z_c, dt_s, robot.gravity as f32) {
+            *cfg
+        } else {
+            // Off: no catch, no levelling, no hold budget (every part at rest).
+            StepAdaptation {
+                gain: 0.0,
+                level_pitch: 0.0,
+                level_roll: 0.0,
+                level_ramp_s: 0.0,
+                hold_max_s: 0.0,
+                hold_settle_s: 0.0,
+                ..*cfg
+            }
+        };
+        StepAdapter {
+            catch: CatchingStep::new(&cfg, robot, z_c, dt_s),
+            level: SoleLevel::new(&cfg, dt_s),
+            hold: ClockHold::new(&cfg, dt_s),
+        }
+    }
+
+    /// Whether the plan's clock should stand still for the next tick (A11): the caught swing
+    /// foot is still on its way (or settling) as the plan would set it down.
+    pub fn wants_hold(&self) -> bool {
+        self.hold.wants_hold()
+    }
+
+    /// The swing sole's levelling (A10): the ankle corrections (pitch, roll) of the left and
+    /// the right leg, rad, each within ±[`crate::feedback::level::MAX_LEVEL_RAD`].
+    pub fn sole_level(&self) -> [[f32; 2]; 2] {
+        self.level.corrections()
+    }
+
+    /// Adds the levelling (A10) to the joint targets `q` (left leg then right leg, rad).
+    pub fn apply_level(&self, q: &mut [f32; LEG_JOINTS]) {
+        self.level.apply(q);
+    }
+
+    /// Whether it runs (the catching step or the levelling).
+    pub fn is_on(&self) -> bool {
+        self.catch.is_on() || self.level.is_on()
+    }
+
+    /// The capture-point error of the last update (A1), trunk frame (x forward, y left), m.
+    pub fn error(&self) -> [f32; 2] {
+        self.catch.error()
+    }
+
+    /// The offsets of the left and right foot, plan frame, m.
+    pub fn foot_offsets(&self) -> [[f32; 2]; 2] {
+        self.catch.foot_offsets()
+    }
+
+    /// The body's offset (CoM and ZMP reference), plan frame, m.
+    pub fn body_offset(&self) -> [f32; 2] {
+        self.catch.body_offset()
+    }
+
+    /// Whether any offset is non-zero (the sample needs (A6)).
+    pub fn is_shifting(&self) -> bool {
+        self.catch.is_shifting()
+    }
+
+    /// One tick (of the period given to [`StepAdapter::new`]): the attitude `roll_pitch` (rad)
+    /// and the gyro's `rates` (roll, pitch rate, rad/s), both `None` when missing, the feet's
+    /// measured loads `loads_n` (left, right; N, NaN when not measured), with the present
+    /// (unshifted) gait `sample`: the error and the baseline (A1), (A2), the levelling (A10),
+    /// the offsets (A3)–(A5), (A7), the clock hold (A11). Returns the landing move Δ_b (trunk
+    /// frame) asked this tick, 0 when no catch is needed or outside single support. A swing
+    /// foot that already carries `touchdown_share` of the weight has landed early: its offset
+    /// holds.
+    pub fn update(
+        &mut self,
+        sample: &GaitSample<f32>,
+        roll_pitch: Option<[f32; 2]>,
+        rates: Option<[f32; 2]>,
+        loads_n: [f32; 2],
+    ) -> [f32; 2] {
+        if !self.is_on() {
+            return [0.0; 2];
+        }
+        let deviation = self.catch.observe(roll_pitch, rates);
+        self.level.update(deviation, sample.phase);
+        let (asked, swing) = self.catch.step(sample, loads_n);
+        self.hold.update(sample.phase, swing);
+        asked
+    }
+
+    /// (A6) on a sample: the feet by their offsets, the CoM and the ZMP reference by the body's.
+    pub fn apply(&self, sample: &mut GaitSample<f32>) {
+        self.catch.apply(sample);
     }
 }

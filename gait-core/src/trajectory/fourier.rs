@@ -1,6 +1,6 @@
 //! The Fourier-series CoM of seed 001 (Erbatur et al. 2009, eqs 3-17): a second solver for
 //! periodic (steady-state) straight walking, next to the exact piecewise solution of
-//! [`crate::com`].
+//! [`crate::trajectory::com`].
 //!
 //! **Model.** Per axis (seed 001 eqs 1-2, 8-9) c̈ = ω²(c − p), with ω² = g/z_c for the LIPM; here
 //! ω is any of our models' `omega` = 1/T_TF (τ = 0). For a ZMP with period P,
@@ -17,10 +17,10 @@
 //! **Time origin and geometry.** t = 0 is the *start of a step*: the ZMP is at the boundary
 //! point B₀ between the previous support foot (−B, −A) and the support foot of step 0, (0, A).
 //! Step n (t ∈ [nT, (n+1)T]) stands on (n·B, (−1)ⁿ·A) and its ZMP runs through the four knots
-//! of [`crate::zmp`]: p(nT) = B_n, p(nT + t₁) = S − a·e, p(nT + t₂) = S + a·e, p((n+1)T) = B_{n+1}.
+//! of [`crate::trajectory::zmp`]: p(nT) = B_n, p(nT + t₁) = S − a·e, p(nT + t₂) = S + a·e, p((n+1)T) = B_{n+1}.
 //! With seed 001's t₁ = τ, t₂ = T − τ the boundary is the middle of the double support, which
 //! is seed 001's origin (erratum to eq 3); it is also where our sampler's steps start, so step n
-//! of a [`crate::sampler::Sampler`] walk with support feet (n·B, (−1)ⁿ·A) is t ∈ [nT, (n+1)T]
+//! of a [`crate::trajectory::sampler::Sampler`] walk with support feet (n·B, (−1)ⁿ·A) is t ∈ [nT, (n+1)T]
 //! here. A is signed: it is the y of step 0's support foot.
 //!
 //! **x** (eqs 3-6, 14-17): p_x(t) = (B/T)(t − T/2) + p̃_x(t), p̃_x periodic with period T,
@@ -54,7 +54,7 @@
 //!
 //! **Eq 6, our reading.** δ = p̃_x(τ) is the peak of the periodic part. As printed,
 //! δ = (T − 2τ)/T·(B/2 − b) moves the ZMP only ±b(T − 2τ)/T under the sole (erratum). We
-//! implement the reading of [`crate::zmp::ZmpShape::Continuous`]: the ZMP moves exactly ±b under
+//! implement the reading of [`crate::trajectory::zmp::ZmpShape::Continuous`]: the ZMP moves exactly ±b under
 //! the sole in single support, i.e. δ = B(T − 2τ)/(2T) − b. The printed δ is our walk with
 //! b replaced by b(T − 2τ)/T. Seed 001's numbers (Fig. 8): A = 0.1 m, B = 0.1 m, b = 0.04 m,
 //! T = 1 s, τ = 0.2 s, N = 24: δ = −0.01 m ours, 0.006 m printed; Table II: 2T = 3 s,
@@ -77,9 +77,9 @@
 //! rotation recurrence (cos, sin)((k+1)θ) = (cos, sin)(kθ) rotated by θ for y and by 2θ for x.
 
 use crate::error::GaitError;
-use crate::plan::{GaitParams, Timing};
-use crate::real::Real;
-use crate::zmp::ZmpShape;
+use crate::maths::real::Real;
+use crate::trajectory::plan::{GaitParams, Timing};
+use crate::trajectory::zmp::ZmpShape;
 use core::f64::consts::PI;
 
 /// Harmonics summed exactly (beyond the N kept terms) for the truncation bound.
@@ -175,7 +175,7 @@ fn walk64<R: Real>(w: &PeriodicWalk<R>, omega: R) -> Result<Walk64, GaitError> {
     if offs.iter().any(|v| *v < 0.0) {
         return Err(GaitError::ZmpOffsetOffSole);
     }
-    // Previous support foot P = (−B, −A), this one S = (0, A), heading +x (see crate::zmp).
+    // Previous support foot P = (−B, −A), this one S = (0, A), heading +x (see crate::trajectory::zmp).
     let (x0, y0, sole) = match w.zmp {
         ZmpShape::Natural { .. } => {
             let [d1, d2, a_sole] = offs;
@@ -536,7 +536,7 @@ impl<R: Real, const K: usize> FourierCom<R, K> {
         (com, [slope + vel[0], vel[1]], zmp)
     }
 
-    /// The exact piecewise-linear ZMP reference at time `t` (the knots of [`crate::zmp`]).
+    /// The exact piecewise-linear ZMP reference at time `t` (the knots of [`crate::trajectory::zmp`]).
     pub fn zmp_reference(&self, t: R) -> [R; 2] {
         let period = self.period;
         let n = floor_r(t / period);

@@ -29,9 +29,9 @@
 //! feet (standing, both feet on the ground).
 
 use crate::error::GaitError;
-use crate::plan::{Place, Timing};
-use crate::real::Real;
+use crate::maths::real::Real;
 use crate::robot::Robot;
+use crate::trajectory::plan::{Place, Timing};
 
 /// The shape of the ZMP reference.
 #[derive(Clone, Copy, Debug, PartialEq)]

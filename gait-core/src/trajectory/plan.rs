@@ -14,10 +14,10 @@
 //! robot ends standing with its feet together at x = (N−1)·S_L.
 
 use crate::error::GaitError;
+use crate::maths::real::Real;
 use crate::model::{Model, ModelKind};
-use crate::real::Real;
 use crate::robot::{Robot, Side};
-use crate::zmp::ZmpShape;
+use crate::trajectory::zmp::ZmpShape;
 use heapless::Deque;
 
 /// A foot place on the ground: sole point (x, y), m, and heading yaw, rad, in the world frame.
@@ -236,7 +236,7 @@ impl StepLimits {
         let (s, c) = (support.yaw.sin(), support.yaw.cos());
         let fwd = (c * dx + s * dy).to_f64();
         let lat = ((c * dy - s * dx) * R::of(side.sign())).to_f64();
-        let turn = crate::swing::wrap_pi(to.yaw - support.yaw).to_f64();
+        let turn = crate::trajectory::swing::wrap_pi(to.yaw - support.yaw).to_f64();
         if libm::fabs(fwd) > self.max_length
             || lat < self.min_width
             || lat > self.max_width
@@ -444,7 +444,7 @@ impl<R: Real, const N: usize> Plan<R, N> {
         Some(e)
     }
 
-    /// ZMP knots of queued step `i`: at t = 0, t1, t2 and T (see [`crate::zmp`]).
+    /// ZMP knots of queued step `i`: at t = 0, t1, t2 and T (see [`crate::trajectory::zmp`]).
     pub fn knots(&self, i: usize) -> Option<[[R; 2]; 4]> {
         let e = self.step(i)?;
         let end = match self.step(i + 1) {
@@ -462,7 +462,7 @@ impl<R: Real, const N: usize> Plan<R, N> {
     }
 
     /// Recomputes the divergent component of motion backward from the final rest state
-    /// (ξ_end = p_end): the bounded solution of the ODE (see [`crate::com`]).
+    /// (ξ_end = p_end): the bounded solution of the ODE (see [`crate::trajectory::com`]).
     fn update_dcm(&mut self) {
         let mut xi = self.end_zmp();
         let n = self.steps.len();
@@ -478,7 +478,7 @@ impl<R: Real, const N: usize> Plan<R, N> {
             }
             for seg in (0..3).rev() {
                 let (p0, p1, d) = (knots[seg], knots[seg + 1], durs[seg]);
-                xi = crate::com::dcm_back(w, p0, p1, d, xi);
+                xi = crate::trajectory::com::dcm_back(w, p0, p1, d, xi);
             }
         }
     }
@@ -492,7 +492,7 @@ impl<R: Real, const N: usize> Plan<R, N> {
                 let durs = [t.t1, t.t2 - t.t1, t.period - t.t2];
                 let mut xi = self.steps.front().map(|e| e.dcm_end).unwrap_or(k[3]);
                 for seg in (0..3).rev() {
-                    xi = crate::com::dcm_back(
+                    xi = crate::trajectory::com::dcm_back(
                         self.params.model.omega,
                         k[seg],
                         k[seg + 1],

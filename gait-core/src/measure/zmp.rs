@@ -42,12 +42,13 @@
 //! overflow; the sum saturates at `f64::MAX`. Memory is O(1).
 
 use crate::error::GaitError;
-use crate::fixed_point::{FixedFoot, Fx};
-use crate::plan::Place;
-use crate::real::Real;
+use crate::maths::fixed_point::Fx;
+use crate::maths::real::Real;
+use crate::measure::support::{is_positive, to_world, SupportPolygon};
 use crate::robot::Robot;
-use crate::support::{is_positive, to_world, SupportPolygon};
-use crate::swing::FootSample;
+use crate::trajectory::fixed_sampler::FixedFoot;
+use crate::trajectory::plan::Place;
+use crate::trajectory::swing::FootSample;
 use core::marker::PhantomData;
 
 /// The four force readings of one foot, N, in the sensor order of the robot description.
@@ -349,7 +350,7 @@ impl FixedZmpMeter {
         }
         let yaw = foot.yaw;
         if yaw != Fx::ZERO {
-            let (sn, cs) = crate::fixed_point::sin_cos(yaw);
+            let (sn, cs) = crate::maths::fixed_point::sin_cos(yaw);
             // sin, cos to 2⁻²⁰: products ≤ 2⁶⁰.
             let (sn, cs) = (sn >> 10, cs >> 10);
             m = [(m[0] * cs - m[1] * sn) >> 20, (m[0] * sn + m[1] * cs) >> 20];

@@ -1,11 +1,11 @@
 //! From a gait sample to the 12 joint targets: pelvis = the CoM point at height z_c (upright,
 //! heading = mean of the feet's headings), both feet from the sample, then the analytic leg IK
-//! of [`crate::kinematics`]. The data flows one way: plan → ZMP → CoM → feet → IK → targets.
+//! of [`crate::kinematics::leg`]. The data flows one way: plan → ZMP → CoM → feet → IK → targets.
 
-use crate::kinematics::{LegKinematics, LegsIkReport, Pose};
-use crate::real::Real;
-use crate::sampler::GaitSample;
-use crate::swing::{wrap_pi, FootSample};
+use crate::kinematics::leg::{LegKinematics, LegsIkReport, Pose};
+use crate::maths::real::Real;
+use crate::trajectory::sampler::GaitSample;
+use crate::trajectory::swing::{wrap_pi, FootSample};
 
 /// The pelvis pose of a sample: (com_x, com_y, z_c), level, heading between the feet.
 pub fn pelvis_pose<R: Real>(sample: &GaitSample<R>) -> Pose<R> {

@@ -27,11 +27,11 @@
 //! With the CoM on c*, the remaining ZMP error comes only from the links' vertical
 //! accelerations and the CoM height's variation (the swing foot lifts 3 cm), both small.
 
-use crate::kinematics::{LegKinematics, LegsIkReport, Pose};
-use crate::pipeline::{foot_pose, pelvis_pose};
-use crate::real::Real;
+use crate::kinematics::leg::{LegKinematics, LegsIkReport, Pose};
+use crate::kinematics::pipeline::{foot_pose, pelvis_pose};
+use crate::maths::real::Real;
 use crate::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
-use crate::sampler::GaitSample;
+use crate::trajectory::sampler::GaitSample;
 
 /// Number of link mass points: the upper body and three per leg.
 pub const MASS_POINTS: usize = 7;

@@ -1,12 +1,12 @@
-//! Seed 001's Fourier CoM walked from rest to rest: the series of [`crate::fourier`] drives the
+//! Seed 001's Fourier CoM walked from rest to rest: the series of [`crate::trajectory::fourier`] drives the
 //! CoM through the steady steps of a straight forward walk, the exact solver of
-//! [`crate::sampler`] through the start and the stop, with a C¹ blend between them.
+//! [`crate::trajectory::sampler`] through the start and the stop, with a C¹ blend between them.
 //!
 //! **Why a blend.** The Fourier CoM (seed 001 eqs 10-17) is the periodic solution of
 //! c̈ = ω²(c − p) for a ZMP that repeats forever: it has no start and no stop. A robot starts at
 //! rest with its CoM between the feet, which is not on the periodic orbit (at t = 0 the series
 //! puts the CoM ≈ A·(1 − sech) to the side and moving). The exact bounded solution of
-//! [`crate::com`] starts and ends at rest and, away from both ends, converges to the periodic
+//! [`crate::trajectory::com`] starts and ends at rest and, away from both ends, converges to the periodic
 //! one like e^{−ω·distance} (e^{−ωT} = 0.024 per step for TLIPFM with Table 2's T = 0.64 s), and
 //! `gait-core/tests/fourier.rs` shows that in the middle of a long walk the two differ by less
 //! than the series' truncation bound. So the walk uses, with walk time t (0 at the end of the
@@ -33,10 +33,10 @@
 //! pair and O(N_terms) multiply-adds) while w > 0.
 
 use crate::error::GaitError;
-use crate::fourier::FourierCom;
-use crate::plan::{ForwardWalk, GaitParams, Plan};
-use crate::real::Real;
-use crate::sampler::{GaitSample, Sampler};
+use crate::maths::real::Real;
+use crate::trajectory::fourier::FourierCom;
+use crate::trajectory::plan::{ForwardWalk, GaitParams, Plan};
+use crate::trajectory::sampler::{GaitSample, Sampler};
 
 /// Most Fourier terms per axis a walk may use (the capacity of the series).
 pub const MAX_FOURIER_TERMS: usize = 24;
@@ -49,9 +49,9 @@ pub const MIN_FOURIER_STEPS: usize = 5;
 /// Which solver gives the CoM of a walk (firmware token `com=`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ComMethod {
-    /// Seed 000's exact piecewise solution from rest to rest ([`crate::com`]).
+    /// Seed 000's exact piecewise solution from rest to rest ([`crate::trajectory::com`]).
     Exact,
-    /// Seed 001's Fourier series through the steady steps ([`crate::fourier`]), blended with
+    /// Seed 001's Fourier series through the steady steps ([`crate::trajectory::fourier`]), blended with
     /// the exact solution at the start and the stop (this module). Needs the crate feature
     /// `fourier-com` (default; without it a sampler refuses it: `GaitError::NotBuiltIn`).
     Fourier {

@@ -3,7 +3,7 @@
 //!
 //! A position servo holds its goal with a spring, `τ = K·(q_goal − q)` (K ≈ 19 N·m/rad for an
 //! XM430-W350 at the factory P gain): a stance leg under the robot's weight stands a few degrees
-//! away from its targets. [`crate::compliance`] predicts that sag from the planned load and adds
+//! away from its targets. [`crate::feedback::compliance`] predicts that sag from the planned load and adds
 //! it to the targets (feed-forward); its pitch-joint share depends on the real centre of pressure,
 //! which the plan does not know (a stance ankle yields under a CoM ahead of it and every step
 //! lands long, more so the faster the walk). This feedback measures the
@@ -34,7 +34,7 @@
 //! BENCHMARKS.md's bus budget).
 
 use crate::robot::Side;
-use crate::sampler::SupportPhase;
+use crate::trajectory::sampler::SupportPhase;
 
 /// Joints per leg.
 const PER_LEG: usize = 6;

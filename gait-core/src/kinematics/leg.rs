@@ -61,7 +61,7 @@
 //! result is always finite and within the limits. Both legs use the same code (σ and the
 //! mirrored limits of [`Robot::joint_limit`]).
 //!
-//! For `f32` the sines and cosines come from [`crate::fastmath`] (a short polynomial instead of
+//! For `f32` the sines and cosines come from [`crate::maths::fastmath`] (a short polynomial instead of
 //! libm's software-double `sinf`/`cosf` on the Cortex-M7F).
 //!
 //! # Feasibility
@@ -71,8 +71,8 @@
 //! peak in O(1) memory; [`check`] compares the worst one with the servo speed limit.
 
 use crate::error::GaitError;
-use crate::fastmath::sin_cos_real;
-use crate::real::Real;
+use crate::maths::fastmath::sin_cos_real;
+use crate::maths::real::Real;
 use crate::robot::{Robot, Side, JOINTS_PER_LEG, JOINT_NAMES, LEG_JOINTS};
 
 /// A position (m) and ZYX orientation (rad): `R = Rz(yaw)·Ry(pitch)·Rx(roll)`.
