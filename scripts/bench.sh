@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Benchmarks of issue 6, written into BENCHMARKS.md between <!-- bench:begin --> and
+# The on-target and host benchmarks, written into BENCHMARKS.md between <!-- bench:begin --> and
 # <!-- bench:end --> (the rest of the file is hand-written and left alone).
 #
 # Usage: bash scripts/bench.sh [--no-host]
@@ -120,7 +120,7 @@ load "$out/an500.txt" M7
 load "$out/an386.txt" M4
 load "$out/an385.txt" M3
 
-# ---- the control tick by crate (issue 14's "the loop, not the library calls") ----
+# ---- the control tick by crate ("the loop, not the library calls") ----
 # scripts/tick-profile.sh counts every instruction of the M7 control tick in QEMU (a TCG
 # plugin) and attributes it to the crate whose code runs (the runtime helpers, memcpy and
 # the like, to their caller's crate). Needs llvm-nm / llvm-symbolizer (Debian: llvm) and a C
@@ -246,7 +246,7 @@ profiled_loop() {
 }
 profiled_target() {
     if [ -n "$prof_loop" ]; then
-        echo "the loop $(n "$prof_loop") ($(n "$prof_loop_master") with the dxl master's transactions) of the profiled tick's $(n "$prof_tick") (\`tick-profile.sh m7 crates\`; the tick minus the f32 library-call stage, $(n "${M7[control.tick.avg]} - $t7"), leaves library calls in)"
+        echo "the loop $(n "$prof_loop") ($(n "$prof_loop_master") with the dxl master's transactions) of the profiled tick's $(n "$prof_tick") (\`tick-profile.sh m7 crates\`; counted instruction by instruction)"
     else
         echo "not measured (no llvm tools)"
     fi
@@ -305,7 +305,7 @@ codec() { # array → Dynamixel codec instructions per tick (decode + parse 3 re
     local -n a=$1
     calc "${a[dxl.decode3_block.avg]} + ${a[dxl.sync_write12.avg]} + ${a[dxl.bulk_read3.avg]}"
 }
-# Per-byte codec figures (issue 14: decoder ≤ 20 per received byte, encoder ≤ 12 per sent byte).
+# Per-byte codec figures (targets: decoder ≤ 20 per received byte, encoder ≤ 12 per sent byte).
 rx_bytes=$((${M7[bytes.status_foot_left]} + ${M7[bytes.status_foot_right]} + ${M7[bytes.status_imu]}))
 per_rx() { local -n a=$1; calc "${a[$2.avg]} / $rx_bytes" 1; }
 per_sw() { local -n a=$1; calc "${a[dxl.sync_write12.avg]} / ${M7[bytes.sync_write]}" 1; }
@@ -330,7 +330,7 @@ breakdown() {
     printf '%s\n' "${parts[@]}" | sort -t'|' -k1,1 -g -r | while IFS='|' read -r v l; do
         printf '%s %s (%s %%), ' "$l" "$(n "$v")" "$(pct "$v" "$total")"
     done
-    printf 'the rest (glue, conversions, goal ticks) %s (%s %%)' "$(n "$rest")" "$(pct "$rest" "$total")"
+    printf 'the rest of the loop (supervisor, corrections, the master, the log) %s (%s %%)' "$(n "$rest")" "$(pct "$rest" "$total")"
 }
 # Transcendental calls per two-leg IK, counted in gait-core/src/kinematics/leg.rs (legs_ik):
 # 3 rot_cols × 3 sin_cos + 2 legs × 2 sin_cos, 2 legs × 7 atan2, 2 legs × 5 sqrt.
@@ -383,53 +383,53 @@ scripts/qemu-run.sh target/bench-build/thumbv7m-none-eabi/release-m3/bench --raw
 
 ### Full control tick, instructions (avg over the walk, max per tick in parentheses)
 
-A tick = decode the three status replies (\`dxl::Decoder::feed\`, block decoding as the bus master does) → pitch-rate filter,
-τ = J·φ̈ (\`imu::PitchAccel\`, f32) → one gait sample with that τ → measured ZMP from the 8
-forces (f32) → joint targets → 12 goal positions in ticks → encode the SYNC WRITE of 12 goal
-positions and the BULK READ of feet + IMU. The paths differ in the middle:
+The firmware's control loop itself, \`control::run\` (\`control::controller::Controller::tick\`),
+walking Table 2 with each model on an in-memory bus of emulated devices (12 servos, two loaded
+foot boards, the IMU; ramp and final hold cut to one tick). Per walking tick = SysTick from the
+return of one \`wait_tick\` to the next, minus the time inside the board's methods (device
+emulation behind \`send\`, byte queue behind \`recv\`, log sink; the calls themselves count),
+the first 2 and last 4 ticks left out. The paths:
 
-- **f32**: exact f32 sampler (\`Sampler::next\`), f32 two-leg IK (\`pipeline::joint_targets\`),
-  \`x_series::rad_to_ticks\`.
-- **f32 + compensation + stabilizer** (the firmware's \`comp=wholebody stab=on\`): as f32, then
-  the stabilizer's per-tick call (support polygon of the previous sample, \`Stabilizer::update\`
-  with the measured ZMP and the gyro) and the whole-body compensation with its shift
-  (\`control::Targets::WholeBody\`, 2 iterations: 4 two-leg IK and 3 FK/CoM evaluations).
-- **fixed** (the firmware's \`math=fixed\`): integer pitch-rate filter with τ in mN·m
-  (\`imu::FixedPitchAccel\`), fixed-point sampler (\`FixedSampler::next\`), fixed-point
-  measured ZMP (\`measure::zmp::FixedZmpMeter\`), integer-only two-leg IK
-  (\`fixed_ik::joint_targets\`) and the integer limit and rad → tick conversion
-  (\`supervisor::safe_targets_fx\`): no float in the tick but the sampler's once-per-segment
-  bookkeeping.
-
-These are the library calls alone; the firmware's own loop is measured below.
+- **f32**: the defaults (paper pipeline, the gyro damping, the compliance feed-forward, the
+  catching step with the levelling and the clock hold, the leg odometry; stabilizer off).
+- **f32 + compensation + stabilizer** (\`comp=wholebody stab=on\`): the stabilizer's shift
+  from the measured ZMP and the gyro, and the whole-body compensation with it
+  (\`gait::Targets::WholeBody\`, 2 iterations: 4 two-leg IK and 3 FK/CoM evaluations).
+- **fixed** (\`math=fixed\`, the \`fixed-gait\` build of the Cortex-M3): integer pitch-rate
+  filter with τ in mN·m, fixed-point sampler, fixed-point measured ZMP, integer-only two-leg
+  IK and the integer limit and rad → tick conversion: no float in the tick but the sampler's
+  once-per-segment bookkeeping.
 
 | machine | path | LIPM | DLIPM | TLIPFM |
 | --- | --- | --- | --- | --- |
 | Cortex-M7, mps2-an500 | f32 | $(cell M7 tick.f32.lipm) | $(cell M7 tick.f32.dlipm) | $(cell M7 tick.f32.tlipfm) |
 | Cortex-M7, mps2-an500 | f32 + compensation + stabilizer | $(cell M7 tick.comp_stab.lipm) | $(cell M7 tick.comp_stab.dlipm) | $(cell M7 tick.comp_stab.tlipfm) |
-| Cortex-M7, mps2-an500 | fixed | $(cell M7 tick.fixed.lipm) | $(cell M7 tick.fixed.dlipm) | $(cell M7 tick.fixed.tlipfm) |
 | Cortex-M4F, mps2-an386 | f32 | $(cell M4 tick.f32.lipm) | $(cell M4 tick.f32.dlipm) | $(cell M4 tick.f32.tlipfm) |
 | Cortex-M4F, mps2-an386 | f32 + compensation + stabilizer | $(cell M4 tick.comp_stab.lipm) | $(cell M4 tick.comp_stab.dlipm) | $(cell M4 tick.comp_stab.tlipfm) |
 | Cortex-M3, mps2-an385 | fixed | $(cell M3 tick.fixed.lipm) | $(cell M3 tick.fixed.dlipm) | $(cell M3 tick.fixed.tlipfm) |
 | Cortex-M3, mps2-an385 | f32 (soft float) | $(cell M3 tick.f32.lipm) | $(cell M3 tick.f32.dlipm) | $(cell M3 tick.f32.tlipfm) |
 | Cortex-M3, mps2-an385 | f32 + compensation + stabilizer (soft float) | $(cell M3 tick.comp_stab.lipm) | $(cell M3 tick.comp_stab.dlipm) | $(cell M3 tick.comp_stab.tlipfm) |
 
-The firmware's control loop itself: \`control::run\` with the default configuration
-(${M7[control.model]}, paper pipeline, stabilizer off, ramp and final hold cut to one tick) on an
-in-memory bus of emulated devices (12 servos, two loaded foot boards, the IMU). Per walking tick
-= SysTick from the return of one \`wait_tick\` to the next, minus the time inside the board's
-methods (device emulation behind \`send\`, byte queue behind \`recv\`, log sink; the calls
-themselves count), over $(n "${M7[control.tick.n]}") ticks (the first 2 and last 4 of
-${M7[control.ticks]} left out). It adds to the library calls above: the dxl master driver (one
-BULK READ transaction, byte-by-byte reads through \`bus::Link\`), the supervisor, the tilt
-estimate, \`safe_targets\` and the log record (≈ $(calc "${M7[control.log_bytes]} / ${M7[control.ticks]}") bytes per tick).
+### The tick by stage
 
-| machine | control-loop tick, avg (max) | vs the f32 library-call tick above (TLIPFM) |
-| --- | --- | --- |
-| Cortex-M7, mps2-an500 | $(cell M7 control.tick) | $(ratio "${M7[control.tick.avg]}" "$t7" 2)× |
-| Cortex-M4F, mps2-an386 | $(cell M4 control.tick) | $(ratio "${M4[control.tick.avg]}" "$t4" 2)× |
-| Cortex-M3, mps2-an385, f32 soft float (\`math=f32\`) | $(cell M3 control.tick) | $(ratio "${M3[control.tick.avg]}" "$t3f" 2)× |
-| Cortex-M3, mps2-an385, fixed-point path (\`math=fixed\`) | $(cell M3 control.tick_fixed) | $(ratio "${M3[control.tick_fixed.avg]}" "$t3" 2)× the fixed library-call tick |
+The default configuration (${M7[control.model]}) as above, each stage of
+\`Controller::tick\` metered by the controller's stage marks (\`board::Stage\`), avg (max)
+per walking tick over $(n "${M7[control.tick.n]}") ticks; the log record is
+≈ $(calc "${M7[control.log_bytes]} / ${M7[control.ticks]}") bytes per tick.
+
+| stage | Cortex-M7 | Cortex-M4F | Cortex-M3, f32 soft float | Cortex-M3, fixed-point path |
+| --- | --- | --- | --- | --- |
+$(for st in sense estimate command walk act report; do
+    echo "| $st | $(cell M7 control.stage.$st) | $(cell M4 control.stage.$st) | $(cell M3 control.stage.$st) | $(cell M3 control_fixed.stage.$st) |"
+done)
+| the tick | $(cell M7 control.tick) | $(cell M4 control.tick) | $(cell M3 control.tick) | $(cell M3 control.tick_fixed) |
+
+sense: the sensors' BULK READ (the dxl master's transaction), the plausibility checks, the
+supervisor's freshness (and the leg odometry's reads, two ticks a step); estimate: the attitude,
+τ, the measured ZMP, the loads; command: the command port; walk: the walk mode, the sample
+corrections, the IK, the joint corrections; act: the servo ticks, the SYNC WRITE, the servo
+monitor; report: the tick record and the command port's status. The stages' sum is the tick
+less the tick's own bookkeeping (the crash cell, the overrun count).
 
 The Cortex-M3 bench is built as the M3 firmware is (profile \`release-m3\`, opt-level "$opt_level_m3", with
 the \`fixed-gait\` feature); its stage figures below are of that build too.
@@ -468,22 +468,18 @@ their sum):
   plan bookkeeping, still f32 in soft float (the fixed-point sample's max is $(n "${M3[sample.fixed.tlipfm.max]}")). The fixed path saves $(n "$t3f - $t3") instructions per tick on the M3 against
   f32 soft float ($(n "$t3f")).
 - **Control loop, M7 $(n "${M7[control.tick.avg]}")**: the loop alone, measured
-  instruction by instruction ($(profiled)): $(profiled_loop). The tick minus the f32
-  library-call tick above, $(n "${M7[control.tick.avg]} - $t7"), is not the loop: that stage holds only the
-  sample, the IK, the codec, the measured ZMP and the pitch filter, while the tick also calls
-  gait-core's compliance feed-forward, gyro feedback, catching step and odometry and the dxl
-  master's transactions.
+  instruction by instruction ($(profiled)): $(profiled_loop).
 
-### Issue 14 targets
+### Targets
 
 | target | measured | verdict |
 | --- | --- | --- |
 | M7 firmware control-loop tick, the loop alone (not the library calls) ≤ 8,000 instructions avg | $(profiled_target) | $(profiled_verdict) |
 | codec: decode ≤ 20 per received byte, encode ≤ 12 per sent byte (M7) | decode (block) $(per_rx M7 dxl.feed3), SYNC WRITE $(per_sw M7), BULK READ $(per_br M7) | decode $(verdict "$(per_rx M7 dxl.feed3)" 20), SYNC WRITE $(verdict "$(per_sw M7)" 12), BULK READ $(verdict "$(per_br M7)" 12) |
-| M3 control-loop tick with the fixed-point path ≤ 25,000 | $(n "${M3[control.tick_fixed.avg]}") avg, $(n "${M3[control.tick_fixed.max]}") max (the library-call fixed tick alone is $(n "$t3")) | $(verdict "${M3[control.tick_fixed.avg]}" 25000) |
+| M3 control-loop tick with the fixed-point path ≤ 25,000 | $(n "${M3[control.tick_fixed.avg]}") avg, $(n "${M3[control.tick_fixed.max]}") max | $(verdict "${M3[control.tick_fixed.avg]}" 25000) |
 | M3 builds ≤ 112 KiB flash, ≤ 16 KiB static RAM | OpenCM 9.04 $(n "$m_flash") B / $(n "$m_ram") B; QEMU M3 $(n "$q3_flash") B / $(n "$q3_ram") B | OpenCM $(verdict "$m_flash" 114688) / $(verdict "$m_ram" 16384); QEMU M3 $(verdict "$q3_flash" 114688) / $(verdict "$q3_ram" 16384) |
 
-### Dynamixel codec per byte (issue 14 targets: decode ≤ 20 per received byte, encode ≤ 12 per sent byte)
+### Dynamixel codec per byte (targets: decode ≤ 20 per received byte, encode ≤ 12 per sent byte)
 
 The three status replies ($rx_bytes bytes: $sfl + $sfr + $simu) and the two instruction packets of a
 tick, instructions per byte (stage avg ÷ bytes). **Block decoding** (\`Decoder::feed\`) is what the
@@ -518,9 +514,9 @@ EOF
         "stab:stabilizer step: support polygon + \`Stabilizer::update\`" \
         "mzmp:measured ZMP, f32 (\`measured::measured_zmp\`)" \
         "mzmp.fixed:measured ZMP, fixed point (\`measure::zmp::FixedZmpMeter::zmp\`)" \
-        "tick.f32:full tick, f32" \
-        "tick.comp_stab:full tick, f32 + compensation + stabilizer" \
-        "tick.fixed:full tick, fixed"; do
+        "tick.f32:control loop tick, f32 (\`control::run\`)" \
+        "tick.comp_stab:control loop tick, f32 + compensation + stabilizer" \
+        "tick.fixed:control loop tick, fixed point"; do
         for m in lipm dlipm tlipfm; do
             core_row "${st%%:*}.$m" "${st#*:}" "$m"
         done
@@ -609,7 +605,7 @@ tick over the modelled core clock, one instruction per cycle (\`src/boards/tick_
 regenerated by this script; \`qemu_mps2::compute_ns\`): $(n "${M7[control.tick.max]}") instructions
 ÷ 216 MHz (\`core_mhz\`, the OpenCR) = $(calc "${M7[control.tick.max]} / 216" 1) µs per tick on the hard-float ELF;
 the soft-float (Cortex-M3) figure $(n "${M3[control.tick.max]}") ÷ 72 MHz = $(calc "${M3[control.tick.max]} / 72" 1) µs. \`compute_us=\` still
-overrides it (before issue 14: a fixed 150 µs).
+overrides it.
 
 The firmware's default configuration (tick ${M7[tick_us]} µs, bus $(calc "${M7[bus_baud]} / 1000000" 1) Mbps) $fits: the bus
 needs $(calc "$bus_bytes * 10000000 / ${M7[bus_baud]} + $packets * $turnaround_us") µs of it. A 1 kHz tick needs at least 3 Mbps.

@@ -140,6 +140,53 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
     fn command_tx(&mut self, bytes: &[u8]) {
         let _ = bytes;
     }
+    /// The control tick enters `stage` (a profiler's mark: the bench meters each stage of the
+    /// real tick). The robot boards ignore it (the default).
+    #[inline(always)]
+    fn stage(&mut self, stage: Stage) {
+        let _ = stage;
+    }
+}
+
+/// The stages of the control tick, in their order (`control::controller`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// The sensors' BULK READs, their checks and the supervisor's freshness.
+    Sense,
+    /// The trunk, τ, the measured ZMP and the loads.
+    Estimate,
+    /// The command port.
+    Command,
+    /// The walk mode, the sample corrections, the IK and the joint corrections.
+    Walk,
+    /// The targets to servo ticks, the SYNC WRITE and the servo monitor.
+    Act,
+    /// The tick record and the command port's status.
+    Report,
+}
+
+impl Stage {
+    /// Every stage, in order.
+    pub const ALL: [Stage; 6] = [
+        Stage::Sense,
+        Stage::Estimate,
+        Stage::Command,
+        Stage::Walk,
+        Stage::Act,
+        Stage::Report,
+    ];
+
+    /// The stage's name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Sense => "sense",
+            Stage::Estimate => "estimate",
+            Stage::Command => "command",
+            Stage::Walk => "walk",
+            Stage::Act => "act",
+            Stage::Report => "report",
+        }
+    }
 }
 
 pub use walker_contract::codes::{CrashCode, ResetCause};

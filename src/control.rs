@@ -510,6 +510,7 @@ fn walk_on<B: Board, P: TickPath>(
         last_ticks: present.map(|t| t.clamp(map.tick_min, map.tick_max)),
         prev: first,
         prev_feet_fx: None,
+        goal: path::Goal::Rad([0.0; LEG_JOINTS]),
         clamped_seen: 0,
         final_hold: u16::try_from(cfg.ticks_for_us(cfg.final_hold_us)).unwrap_or(u16::MAX),
         no_lead: cfg.lead_ticks() == 0,
@@ -549,5 +550,7 @@ fn is_foot(id: u8) -> bool {
     id == ids::FOOT_LEFT || id == ids::FOOT_RIGHT
 }
 
+#[cfg(test)]
+mod stage_tests;
 #[cfg(test)]
 mod tests;

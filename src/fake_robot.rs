@@ -188,6 +188,8 @@ pub trait Observer {
     fn enter(&mut self) {}
     /// The board's own code ends.
     fn leave(&mut self) {}
+    /// The control tick enters `stage`.
+    fn stage(&mut self, _stage: crate::board::Stage) {}
     /// The firmware exits with `code`.
     fn exit(&mut self, code: i32) -> !;
 }
@@ -796,6 +798,10 @@ impl<O: Observer> Board for FakeRobot<O> {
 
     fn exit(&mut self, code: i32) -> ! {
         self.observer.exit(code)
+    }
+
+    fn stage(&mut self, stage: crate::board::Stage) {
+        self.observer.stage(stage);
     }
 }
 

@@ -1,5 +1,7 @@
-//! On-target benchmark (issue 6): instructions per call of every stage of the control tick and
-//! of a full tick, counted in QEMU with `-icount shift=0` (1 instruction = 1 virtual ns).
+//! On-target benchmark: instructions per call of the library stages of the control tick, and per
+//! tick and per stage of the firmware's own control loop (`control::run` on the fake robot, the
+//! stages marked by the controller: [`Stage`]), counted in QEMU with `-icount shift=0`
+//! (1 instruction = 1 virtual ns).
 //!
 //! Build and run (`scripts/bench.sh` does all of this and rewrites BENCHMARKS.md):
 //! ```text
@@ -18,7 +20,9 @@
 //! 40-instruction granularity falls out, K·40 instructions ≥ …), minus the loop's own
 //! overhead per iteration measured with an empty call; the **max** is the largest count
 //! between the two reads around a single call, times 40 (resolution one count = 40
-//! instructions; it includes the ≈ 10 instructions of the call and the reads).
+//! instructions; it includes the call and the two reads). The control loop's figures are per
+//! walking tick and per stage of it, the board's own code (the emulated bus and devices, the
+//! log sink) left out.
 //! Inputs that a stage takes from an earlier stage (the IK's gait samples) are computed
 //! beforehand into RAM, so that each stage is timed alone.
 //!
@@ -50,7 +54,7 @@ mod firmware {
     use gait_core::kinematics::pipeline::joint_targets;
     use gait_core::kinematics::wholebody::WholeBody;
     use gait_core::maths::fixed_point::Fx;
-    use gait_core::measure::zmp::{FixedZmpMeter, ForceReading, MeasuredZmp, SolePose, ZmpMeter};
+    use gait_core::measure::zmp::{FixedZmpMeter, ForceReading, ZmpMeter};
     use gait_core::trajectory::fixed_sampler::{FixedSample, FixedSampler};
     use gait_core::trajectory::fourier::FourierCom;
     use gait_core::trajectory::plan::SwingShape;
@@ -58,14 +62,14 @@ mod firmware {
     use gait_core::{
         ForwardWalk, GaitParams, GaitSample, Model, ModelKind, Place, Plan, Robot, Sampler,
     };
-    use walker_firmware::board::{ServoBus, Tick, TickTimer};
+    use walker_firmware::board::{ServoBus, Stage, Tick, TickTimer};
     use walker_firmware::boards::qemu_mps2::semihosting_exit;
-    use walker_firmware::bus_map::{self, TickMap};
+    use walker_firmware::bus_map;
     use walker_firmware::config::Arithmetic;
-    use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache, Targets};
+    use walker_firmware::control::{self, support_of, Compensation, RunEnd, SupportCache};
     use walker_firmware::fake_robot::{FakeRobot, Feet, ImuMotion, Observer};
     use walker_firmware::imu::{FixedPitchAccel, PitchAccel, PitchAccelConfig};
-    use walker_firmware::supervisor::{safe_targets_fx, JointMap, StopReason};
+    use walker_firmware::supervisor::StopReason;
     use walker_firmware::Config;
 
     /// Plan capacity (Table 2 has 14 steps).
@@ -325,131 +329,9 @@ mod firmware {
         dxl::encode_bulk_read(buf, &BULK).unwrap_or(0)
     }
 
-    /// State of a full tick, shared by every path.
-    struct TickIo {
-        robot: Robot,
-        kin: LegKinematics<f32>,
-        fkin: FixedLegKinematics,
-        /// The firmware's whole-body pipeline (`comp=wholebody`, 2 iterations).
-        wholebody: Targets,
-        stab: Stabilizer<f32>,
-        support: SupportCache,
-        pitch: PitchAccel,
-        /// The fixed-point path's pitch filter, measured ZMP and joint map (`math=fixed`).
-        pitch_fx: FixedPitchAccel,
-        meter: FixedZmpMeter,
-        /// The f32 measured ZMP (sensor offsets converted once, as the firmware does).
-        meter_f32: ZmpMeter<f32>,
-        map: JointMap,
-        dec: Decoder<64>,
-        sensors: Sensors,
-        gyro: Option<[f32; 2]>,
-        goals: [i32; 12],
-        sw: [u8; 128],
-        br: [u8; 64],
-    }
-
-    impl TickIo {
-        fn new() -> Self {
-            let robot = Robot::reference();
-            TickIo {
-                robot,
-                kin: LegKinematics::new(&robot),
-                fkin: FixedLegKinematics::new(&robot),
-                wholebody: Targets::new(&robot, Compensation::WholeBody),
-                stab: new_stabilizer(&robot),
-                support: SupportCache::default(),
-                pitch: PitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
-                pitch_fx: FixedPitchAccel::new(PitchAccelConfig::reference(DT_S as f32)),
-                meter: FixedZmpMeter::new(&robot, MIN_LOAD_N),
-                meter_f32: ZmpMeter::new(&robot, MIN_LOAD_N),
-                map: JointMap::from_robot(&robot),
-                dec: Decoder::new(),
-                sensors: Sensors::default(),
-                gyro: None,
-                goals: [x_series::CENTER_TICK; 12],
-                sw: [0; 128],
-                br: [0; 64],
-            }
-        }
-
-        /// Start of a tick: the replies of the last BULK READ → τ (N·m).
-        fn sense(&mut self, replies: &[u8]) -> f32 {
-            decode_replies_block(&mut self.dec, replies, &mut self.sensors);
-            let [roll_rate, rate, _] = self.sensors.imu.gyro_rad_s();
-            self.gyro = Some([roll_rate, rate]);
-            self.pitch.update(rate);
-            self.pitch.torque()
-        }
-
-        /// Start of a fixed-point tick: the replies → τ in mN·m (integer pitch filter).
-        fn sense_fixed(&mut self, replies: &[u8]) -> i32 {
-            decode_replies_block(&mut self.dec, replies, &mut self.sensors);
-            self.pitch_fx.update(Some(self.sensors.imu.gyro_urad_s[1]));
-            self.pitch_fx.torque_mnm()
-        }
-
-        /// Measured ZMP from the 8 forces, the soles at `l` and `r`.
-        fn measured<L: SolePose<f32>, Q: SolePose<f32>>(&self, l: &L, r: &Q) -> MeasuredZmp<f32> {
-            let f = self
-                .sensors
-                .feet
-                .map(|f| ForceReading::new(f.forces_mn.map(|v| v as f32 * 1e-3)));
-            self.meter_f32.zmp((l, &f[0]), (r, &f[1]))
-        }
-
-        /// End of a tick: 12 goal positions out, next BULK READ; bytes encoded.
-        fn send(&mut self, q: &[f32; 12]) -> usize {
-            for (j, (g, &a)) in self.goals.iter_mut().zip(q).enumerate() {
-                if a.is_finite() {
-                    *g = TickMap::reference().tick_f32(j, a);
-                }
-            }
-            self.encode()
-        }
-
-        fn encode(&mut self) -> usize {
-            let n = encode_goals(&mut self.sw, &self.goals);
-            n + encode_bulk(&mut self.br)
-        }
-
-        /// Rest of an f32 tick: measured ZMP, IK, goal positions out, next BULK READ.
-        fn act(&mut self, s: &GaitSample<f32>) -> usize {
-            black_box(self.measured(&s.feet[0], &s.feet[1]));
-            let (q, rep) = joint_targets(&self.kin, s);
-            black_box(&rep);
-            self.send(&q)
-        }
-
-        /// Rest of an f32 tick as `control::run` does it with `comp=wholebody stab=on`:
-        /// measured ZMP on the previous sample's soles, stabilizer against the previous
-        /// sample's ZMP reference, whole-body compensation of `s` with the shift, goals out.
-        fn act_comp_stab(&mut self, s: &GaitSample<f32>, prev: &GaitSample<f32>) -> usize {
-            let meas = self.measured(&prev.feet[0], &prev.feet[1]);
-            let shift = stab_step(
-                &self.robot,
-                &mut self.stab,
-                &mut self.support,
-                prev,
-                meas.zmp,
-                self.gyro,
-            );
-            let (q, rep) = self.wholebody.joints(s, shift);
-            black_box(&rep);
-            self.send(&q)
-        }
-
-        /// Rest of a fixed-point tick as `control::run` does it with `math=fixed`: measured
-        /// ZMP in fixed point, integer-only IK, the integer limit and tick conversion
-        /// (`supervisor::safe_targets_fx`), goals out, next BULK READ.
-        fn act_fixed(&mut self, s: &FixedSample) -> usize {
-            let f = self.sensors.feet.map(|f| Some(f.forces_mn));
-            black_box(self.meter.zmp((&s.feet[0], f[0]), (&s.feet[1], f[1])));
-            let (q, rep) = fixed_ik::joint_targets(&self.fkin, s);
-            black_box(&rep);
-            self.goals = safe_targets_fx(&q, &self.map).ticks;
-            self.encode()
-        }
+    /// `report(name, measure(n, f), ovh)`: `n` calls of `f`, without the loop overhead `ovh`.
+    fn bench(name: &str, n: u32, ovh: u64, f: &mut dyn FnMut(u32)) {
+        report(name, measure(n, f), ovh)
     }
 
     #[entry]
@@ -462,11 +344,6 @@ mod firmware {
         cp.SYST.clear_current();
         cp.SYST.enable_counter();
 
-        // SAFETY: taken once each, here, before anything else can refer to the buffers.
-        let buf = unsafe { slots(core::ptr::addr_of_mut!(SAMPLES)) };
-        // SAFETY: as above.
-        let fx_buf = unsafe { slots(core::ptr::addr_of_mut!(FX_SAMPLES)) };
-
         hprintln!(
             "target {}",
             if cfg!(target_abi = "eabihf") {
@@ -477,12 +354,14 @@ mod firmware {
         );
         hprintln!("tick_us {}", Config::default_config().tick_period_us);
         hprintln!("bus_baud {}", Config::default_config().bus_baud);
-        // `BENCH_CONTROL_ONLY=1` at build time: the control loop alone (quick iterations on
-        // the firmware's loop; scripts/bench.sh never sets it).
+        // `BENCH_CONTROL_ONLY=1` at build time: the control loop alone (`=fixed`: its
+        // fixed-point path alone); scripts/tick-profile.sh, never scripts/bench.sh.
         if let Some(only) = option_env!("BENCH_CONTROL_ONLY") {
             #[cfg(feature = "fixed-gait")]
             if only == "fixed" {
-                control_loop_with(Arithmetic::Fixed, "control_fixed", "control.tick_fixed");
+                let cfg = bench_config(ModelKind::Tlipfm, Arithmetic::Fixed, false);
+                let board = control_run(&cfg, "control_fixed");
+                report("control.tick_fixed", board.folded, 0);
                 hprintln!("done 1");
                 semihosting_exit(0)
             }
@@ -500,15 +379,73 @@ mod firmware {
         let t = (ovh + 50) / 100;
         hprintln!("overhead.avg {}.{}", t / 10, t % 10);
         hprintln!("overhead.max {}", u64::from(empty.max) * INSN_PER_COUNT);
-        // One measurement: `$n` runs of `$body` (the loop index `$i`), reported as `$name`
-        // without the loop overhead.
-        macro_rules! bench {
-            ($name:expr, $n:expr, |$i:pat_param| $body:block) => {
-                report($name, measure($n, &mut |$i| $body), ovh)
-            };
-        }
 
-        // ---- bus packets: sizes from the dxl encoders ----
+        primitives(ovh);
+        codec(ovh);
+        imu_filters(ovh);
+        for kind in ModelKind::ALL {
+            per_model(kind, ovh);
+        }
+        control_loop();
+
+        hprintln!("done 1");
+        semihosting_exit(0)
+    }
+
+    /// Maths primitives, f32 and fixed point.
+    fn primitives(ovh: u64) {
+        let xs: [f32; 16] = core::array::from_fn(|k| 0.05 + 0.37 * k as f32);
+        let x = |i: u32| black_box(xs[(i % 16) as usize]);
+        bench("prim.expf", K, ovh, &mut |i| {
+            black_box(libm::expf(-x(i)));
+        });
+        bench("prim.sqrtf", K, ovh, &mut |i| {
+            black_box(libm::sqrtf(x(i)));
+        });
+        bench("prim.atan2f", K, ovh, &mut |i| {
+            black_box(libm::atan2f(x(i) - 1.7, 0.9));
+        });
+        bench("prim.sqrt_fast", K, ovh, &mut |i| {
+            black_box(gait_core::maths::fastmath::sqrt(x(i)));
+        });
+        bench("prim.atan2_fast", K, ovh, &mut |i| {
+            black_box(gait_core::maths::fastmath::atan2(x(i) - 1.7, 0.9));
+        });
+        bench("prim.sin_cos_fast", K, ovh, &mut |i| {
+            black_box(gait_core::maths::fastmath::sin_cos(x(i)));
+        });
+        bench("prim.sinf_libm", K, ovh, &mut |i| {
+            black_box(libm::sinf(x(i)));
+        });
+        bench("prim.fmul", K, ovh, &mut |i| {
+            black_box(x(i) * x(i + 1));
+        });
+        bench("prim.fdiv", K, ovh, &mut |i| {
+            black_box(x(i) / x(i + 1));
+        });
+
+        let fxs: [Fx; 16] = core::array::from_fn(|k| Fx::from_bits(3_000 + 9_001 * k as i32));
+        let fxx = |i: u32| black_box(fxs[(i % 16) as usize]);
+        bench("prim.fx_exp_neg", K, ovh, &mut |i| {
+            black_box(gait_core::maths::fixed_point::exp_neg(fxx(i)));
+        });
+        bench("prim.fx_sin_cos", K, ovh, &mut |i| {
+            black_box(gait_core::maths::fixed_point::sin_cos(fxx(i)));
+        });
+        bench("prim.fx_sqrt", K, ovh, &mut |i| {
+            black_box(fixed_ik::sqrt(fxx(i)));
+        });
+        bench("prim.fx_atan2", K, ovh, &mut |i| {
+            let y = i64::from(fxx(i).to_bits()) << 14;
+            black_box(fixed_ik::atan2(
+                black_box(y - (1 << 29)),
+                black_box(1 << 29),
+            ));
+        });
+    }
+
+    /// The Dynamixel codec: the tick's packets' sizes, encoders, decoders, CRC.
+    fn codec(ovh: u64) {
         let mut replies = [0u8; 160];
         let (rlen, rlens) = reply_stream(&mut replies);
         let replies = &replies[..rlen];
@@ -522,79 +459,28 @@ mod firmware {
         hprintln!("bytes.status_imu {}", rlens[2]);
         hprintln!("bytes.sync_write {}", sw_len);
 
-        // ---- primitives ----
-        let xs: [f32; 16] = core::array::from_fn(|k| 0.05 + 0.37 * k as f32);
-        let x = |i: u32| black_box(xs[(i % 16) as usize]);
-        bench!("prim.expf", K, |i| {
-            black_box(libm::expf(-x(i)));
-        });
-        bench!("prim.sqrtf", K, |i| {
-            black_box(libm::sqrtf(x(i)));
-        });
-        bench!("prim.atan2f", K, |i| {
-            black_box(libm::atan2f(x(i) - 1.7, 0.9));
-        });
-        bench!("prim.sqrt_fast", K, |i| {
-            black_box(gait_core::maths::fastmath::sqrt(x(i)));
-        });
-        bench!("prim.atan2_fast", K, |i| {
-            black_box(gait_core::maths::fastmath::atan2(x(i) - 1.7, 0.9));
-        });
-        bench!("prim.sin_cos_fast", K, |i| {
-            black_box(gait_core::maths::fastmath::sin_cos(x(i)));
-        });
-        bench!("prim.sinf_libm", K, |i| {
-            black_box(libm::sinf(x(i)));
-        });
-        bench!("prim.fmul", K, |i| {
-            black_box(x(i) * x(i + 1));
-        });
-        bench!("prim.fdiv", K, |i| {
-            black_box(x(i) / x(i + 1));
-        });
-
-        let fxs: [Fx; 16] = core::array::from_fn(|k| Fx::from_bits(3_000 + 9_001 * k as i32));
-        let fxx = |i: u32| black_box(fxs[(i % 16) as usize]);
-        bench!("prim.fx_exp_neg", K, |i| {
-            black_box(gait_core::maths::fixed_point::exp_neg(fxx(i)));
-        });
-        bench!("prim.fx_sin_cos", K, |i| {
-            black_box(gait_core::maths::fixed_point::sin_cos(fxx(i)));
-        });
-        bench!("prim.fx_sqrt", K, |i| {
-            black_box(fixed_ik::sqrt(fxx(i)));
-        });
-        bench!("prim.fx_atan2", K, |i| {
-            let y = i64::from(fxx(i).to_bits()) << 14;
-            black_box(fixed_ik::atan2(
-                black_box(y - (1 << 29)),
-                black_box(1 << 29),
-            ));
-        });
-
-        // ---- codec ----
         let goal_sets: [[i32; 12]; 16] = core::array::from_fn(|k| {
             core::array::from_fn(|j| 1_500 + ((k * 37 + j * 101) % 1_000) as i32)
         });
-        bench!("dxl.sync_write12", K, |i| {
+        bench("dxl.sync_write12", K, ovh, &mut |i| {
             black_box(encode_goals(
                 &mut swb,
                 black_box(&goal_sets[(i % 16) as usize]),
             ));
         });
-        bench!("dxl.bulk_read3", K, |_| {
+        bench("dxl.bulk_read3", K, ovh, &mut |_| {
             black_box(encode_bulk(black_box(&mut brb)));
         });
         let mut dec = Decoder::<64>::new();
         let mut sensors = Sensors::default();
-        bench!("dxl.decode3", K, |_| {
+        bench("dxl.decode3", K, ovh, &mut |_| {
             let got = decode_replies(&mut dec, black_box(replies), &mut sensors);
             black_box(got);
         });
         if decode_replies(&mut dec, replies, &mut sensors) != 3 {
             fail("decode");
         }
-        bench!("dxl.decode3_block", K, |_| {
+        bench("dxl.decode3_block", K, ovh, &mut |_| {
             let got = decode_replies_block(&mut dec, black_box(replies), &mut sensors);
             black_box(got);
         });
@@ -612,7 +498,7 @@ mod firmware {
             }
             got
         };
-        bench!("dxl.feed3", K, |_| {
+        bench("dxl.feed3", K, ovh, &mut |_| {
             black_box(feed3(&mut dec, black_box(replies)));
         });
         if feed3(&mut dec, replies) != 3 {
@@ -626,185 +512,177 @@ mod firmware {
             }
             got
         };
-        bench!("dxl.push3", K, |_| {
+        bench("dxl.push3", K, ovh, &mut |_| {
             black_box(push3(&mut dec, black_box(replies)));
         });
         if push3(&mut dec, replies) != 3 {
             fail("push3");
         }
         let crc_in: [u8; 72] = core::array::from_fn(|k| (k as u8).wrapping_mul(29) ^ 0x5A);
-        bench!("dxl.crc16_72", K, |_| {
+        bench("dxl.crc16_72", K, ovh, &mut |_| {
             black_box(dxl::crc::crc16(black_box(&crc_in[..])));
         });
+    }
 
-        // ---- IMU filter ----
+    /// The IMU's pitch filters and the swing foot alone.
+    fn imu_filters(ovh: u64) {
+        let xs: [f32; 16] = core::array::from_fn(|k| 0.05 + 0.37 * k as f32);
+        let x = |i: u32| black_box(xs[(i % 16) as usize]);
         let mut pitch = PitchAccel::new(PitchAccelConfig::reference(DT_S as f32));
-        bench!("imu.pitch_accel", K, |i| {
+        bench("imu.pitch_accel", K, ovh, &mut |i| {
             black_box(pitch.update(x(i)));
             black_box(pitch.torque());
         });
         let mut pitch_fx = FixedPitchAccel::new(PitchAccelConfig::reference(DT_S as f32));
-        bench!("imu.pitch_accel_fixed", K, |i| {
+        bench("imu.pitch_accel_fixed", K, ovh, &mut |i| {
             pitch_fx.update(Some((x(i) * 1.0e6) as i32));
             black_box(pitch_fx.torque_mnm());
         });
-
-        // ---- swing foot alone (cycloid, one single support) ----
+        // The swing foot alone (cycloid, one single support).
         let (params, _) = walk_plan(ModelKind::Tlipfm);
         let from = Place::<f32>::new(0.0, 0.045, 0.0);
         let to = Place::<f32>::new(0.04, 0.045, 0.0);
         let shape: SwingShape<f32> = params.swing;
-        bench!("swing.cycloid", K, |i| {
+        bench("swing.cycloid", K, ovh, &mut |i| {
             let u = black_box(i as f32 / K as f32);
             black_box(swing_foot(&shape, &from, &to, u, 1.0));
         });
+    }
 
-        // ---- per model: samplers, Fourier, IK, measured ZMP, full ticks ----
+    /// Per model: the samplers, the Fourier CoM, the IKs, the measured ZMP, the support
+    /// polygon and the stabilizer on the walk's own samples, then the firmware's control loop
+    /// walking it ([`control_walk`]): f32, f32 with whole-body compensation and the
+    /// stabilizer, and (with the fixed-point path built in) fixed point.
+    fn per_model(kind: ModelKind, ovh: u64) {
+        let m = kind.name();
         let robot = Robot::reference();
-        let kin = LegKinematics::<f32>::new(&robot);
-        let fkin = FixedLegKinematics::new(&robot);
-        let wholebody = WholeBody::<f32>::new(&robot, control::WHOLEBODY_ITERATIONS);
+        let (params, plan) = walk_plan(kind);
+        let Ok(fresh) = Sampler::<f32, CAP>::new(plan.clone(), DT_S) else {
+            fail("sampler")
+        };
+        let mut s = fresh.clone();
+        let mut n = 0u32;
+        while !s.is_done() {
+            black_box(s.next(0.0));
+            n += 1;
+        }
+        hprintln!("walk.{}.ticks {}", m, n);
+
+        let mut s = fresh.clone();
+        let mut name = Name::new();
+        bench(name.set("sample.f32.", m), n, ovh, &mut |_| {
+            black_box(s.next(black_box(0.0)));
+        });
+        let Ok(fresh_fx) = FixedSampler::<CAP>::new(plan.clone(), DT_S) else {
+            fail("fixed sampler")
+        };
+        let mut fs = fresh_fx.clone();
+        bench(name.set("sample.fixed.", m), n, ovh, &mut |_| {
+            black_box(fs.next(black_box(0)));
+        });
         let walk = ForwardWalk::table2();
-        for kind in ModelKind::ALL {
-            let m = kind.name();
-            let (params, plan) = walk_plan(kind);
-            let Ok(fresh) = Sampler::<f32, CAP>::new(plan.clone(), DT_S) else {
-                fail("sampler")
-            };
-            let mut s = fresh.clone();
-            let mut n = 0u32;
-            while !s.is_done() {
-                black_box(s.next(0.0));
-                n += 1;
-            }
-            hprintln!("walk.{}.ticks {}", m, n);
+        let Ok(fourier) = FourierCom::<f32, 24>::from_params(
+            &params,
+            walk.step_length as f32,
+            -walk.step_width as f32,
+            24,
+        ) else {
+            fail("fourier")
+        };
+        bench(name.set("fourier24.", m), n, ovh, &mut |i| {
+            black_box(fourier.sample(black_box(i as f32 * DT_S as f32)));
+        });
 
-            let mut s = fresh.clone();
-            let mut name = Name::new();
-            bench!(name.set("sample.f32.", m), n, |_| {
-                black_box(s.next(black_box(0.0)));
-            });
+        // SAFETY: taken once per call, here; nothing else refers to the buffer while
+        // `samples` lives (the calls run one after the other).
+        let buf = unsafe { slots(core::ptr::addr_of_mut!(SAMPLES)) };
+        let mut s = fresh.clone();
+        let samples = record(buf, || (!s.is_done()).then(|| s.next(0.0)));
+        f32_stages(m, &robot, samples, ovh);
 
-            let Ok(fresh_fx) = FixedSampler::<CAP>::new(plan.clone(), DT_S) else {
-                fail("fixed sampler")
-            };
-            let mut fs = fresh_fx.clone();
-            bench!(name.set("sample.fixed.", m), n, |_| {
-                black_box(fs.next(black_box(0)));
-            });
-
-            let Ok(fourier) = FourierCom::<f32, 24>::from_params(
-                &params,
-                walk.step_length as f32,
-                -walk.step_width as f32,
-                24,
-            ) else {
-                fail("fourier")
-            };
-            bench!(name.set("fourier24.", m), n, |i| {
-                black_box(fourier.sample(black_box(i as f32 * DT_S as f32)));
-            });
-
-            // The IK and the measured ZMP on the f32 samples of the whole walk.
-            let mut s = fresh.clone();
-            let samples = record(buf, || (!s.is_done()).then(|| s.next(0.0)));
-            bench!(name.set("ik.", m), samples.len() as u32, |i| {
-                black_box(joint_targets(&kin, black_box(&samples[i as usize])));
-            });
-            bench!(name.set("wholebody.", m), samples.len() as u32, |i| {
-                black_box(wholebody.joint_targets(black_box(&samples[i as usize])));
-            });
-            bench!(name.set("support.", m), samples.len() as u32, |i| {
-                black_box(support_of(&robot, black_box(&samples[i as usize])));
-            });
-            // The stabilizer on the walk: the measured ZMP off the reference by a
-            // deterministic ±12 mm pattern (saturation, rate limit and the support-polygon
-            // limit all take part), a constant gyro.
-            let mut stab = new_stabilizer(&robot);
-            let mut cache = SupportCache::default();
-            bench!(name.set("stab.", m), samples.len() as u32, |i| {
-                let smp = black_box(&samples[i as usize]);
-                let e = ((i % 64) as f32 - 31.5) * 4e-4;
-                let meas = Some([smp.zmp[0] + e, smp.zmp[1] - 0.5 * e]);
-                black_box(stab_step(
-                    &robot,
-                    &mut stab,
-                    &mut cache,
-                    smp,
-                    meas,
-                    black_box(Some([0.02, -0.01])),
-                ));
-            });
-            let lf = ForceReading::new([4.1f32, 3.9, 4.3, 3.7]);
-            let rf = ForceReading::new([3.8f32, 4.2, 3.6, 4.4]);
-            let zmp_meter = ZmpMeter::new(&robot, MIN_LOAD_N);
-            bench!(name.set("mzmp.", m), samples.len() as u32, |i| {
-                let smp = black_box(&samples[i as usize]);
-                black_box(zmp_meter.zmp(
-                    (&smp.feet[0], black_box(&lf)),
-                    (&smp.feet[1], black_box(&rf)),
-                ));
-            });
-
-            // Full tick, f32 path: decode → τ → exact f32 sample → measured ZMP → IK →
-            // SYNC WRITE + BULK READ encode.
-            let mut io = TickIo::new();
-            let mut s = fresh.clone();
-            bench!(name.set("tick.f32.", m), n, |_| {
-                let tau = io.sense(black_box(replies));
-                let smp = s.next(tau);
-                black_box(io.act(&smp));
-            });
-
-            // Full tick, f32 with whole-body compensation and the stabilizer (the firmware's
-            // `comp=wholebody stab=on`).
-            let mut io = TickIo::new();
-            let mut s = fresh.clone();
-            let mut prev = s.clone().next(0.0);
-            bench!(name.set("tick.comp_stab.", m), n, |_| {
-                let tau = io.sense(black_box(replies));
-                let smp = s.next(tau);
-                black_box(io.act_comp_stab(&smp, &prev));
-                prev = smp;
-            });
-
-            // The fixed-point IK alone on the fixed-point samples of the whole walk.
-            let mut fs = fresh_fx.clone();
-            let fx_samples = record(fx_buf, || (!fs.is_done()).then(|| fs.next(0)));
-            bench!(name.set("ik.fixed.", m), fx_samples.len() as u32, |i| {
+        // SAFETY: as above, for the fixed-point samples.
+        let fx_buf = unsafe { slots(core::ptr::addr_of_mut!(FX_SAMPLES)) };
+        let mut fs = fresh_fx.clone();
+        let fx_samples = record(fx_buf, || (!fs.is_done()).then(|| fs.next(0)));
+        let fkin = FixedLegKinematics::new(&robot);
+        bench(
+            name.set("ik.fixed.", m),
+            fx_samples.len() as u32,
+            ovh,
+            &mut |i| {
                 black_box(fixed_ik::joint_targets(
                     &fkin,
                     black_box(&fx_samples[i as usize]),
                 ));
-            });
-
-            // The measured ZMP in fixed point on the fixed-point samples' soles.
-            let meter = FixedZmpMeter::new(&robot, MIN_LOAD_N);
-            let (lf, rf) = ([4_100, 3_900, 4_300, 3_700], [3_800, 4_200, 3_600, 4_400]);
-            bench!(name.set("mzmp.fixed.", m), fx_samples.len() as u32, |i| {
+            },
+        );
+        // The measured ZMP in fixed point on the fixed-point samples' soles.
+        let meter = FixedZmpMeter::new(&robot, MIN_LOAD_N);
+        let (lf, rf) = ([4_100, 3_900, 4_300, 3_700], [3_800, 4_200, 3_600, 4_400]);
+        bench(
+            name.set("mzmp.fixed.", m),
+            fx_samples.len() as u32,
+            ovh,
+            &mut |i| {
                 let smp = black_box(&fx_samples[i as usize]);
                 black_box(meter.zmp(
                     (&smp.feet[0], black_box(Some(lf))),
                     (&smp.feet[1], black_box(Some(rf))),
                 ));
-            });
+            },
+        );
 
-            // Full tick, fixed path as `control::run` with `math=fixed`: the integer pitch
-            // filter (τ in mN·m), the fixed-point sampler, the fixed-point measured ZMP, the
-            // fixed-point IK and the integer limit and rad → tick conversion.
-            let mut io = TickIo::new();
-            let mut fs = fresh_fx.clone();
-            bench!(name.set("tick.fixed.", m), n, |_| {
-                let tau = io.sense_fixed(black_box(replies));
-                let smp = fs.next(tau);
-                black_box(io.act_fixed(&smp));
-            });
-        }
+        // The firmware's control loop walking this model's plan.
+        control_walk(kind, Arithmetic::F32, false, name.set("tick.f32.", m));
+        control_walk(kind, Arithmetic::F32, true, name.set("tick.comp_stab.", m));
+        #[cfg(feature = "fixed-gait")]
+        control_walk(kind, Arithmetic::Fixed, false, name.set("tick.fixed.", m));
+    }
 
-        control_loop();
-
-        hprintln!("done 1");
-        semihosting_exit(0)
+    /// The f32 library stages on the walk's samples: the IK, whole-body compensation, the
+    /// support polygon, the stabilizer and the measured ZMP.
+    fn f32_stages(m: &str, robot: &Robot, samples: &[GaitSample<f32>], ovh: u64) {
+        let n = samples.len() as u32;
+        let kin = LegKinematics::<f32>::new(robot);
+        let wholebody = WholeBody::<f32>::new(robot, control::WHOLEBODY_ITERATIONS);
+        let mut name = Name::new();
+        bench(name.set("ik.", m), n, ovh, &mut |i| {
+            black_box(joint_targets(&kin, black_box(&samples[i as usize])));
+        });
+        bench(name.set("wholebody.", m), n, ovh, &mut |i| {
+            black_box(wholebody.joint_targets(black_box(&samples[i as usize])));
+        });
+        bench(name.set("support.", m), n, ovh, &mut |i| {
+            black_box(support_of(robot, black_box(&samples[i as usize])));
+        });
+        // The stabilizer on the walk: the measured ZMP off the reference by a deterministic
+        // ±12 mm pattern (saturation, rate limit and the support-polygon limit all take
+        // part), a constant gyro.
+        let mut stab = new_stabilizer(robot);
+        let mut cache = SupportCache::default();
+        bench(name.set("stab.", m), n, ovh, &mut |i| {
+            let smp = black_box(&samples[i as usize]);
+            let e = ((i % 64) as f32 - 31.5) * 4e-4;
+            let meas = Some([smp.zmp[0] + e, smp.zmp[1] - 0.5 * e]);
+            black_box(stab_step(
+                robot,
+                &mut stab,
+                &mut cache,
+                smp,
+                meas,
+                black_box(Some([0.02, -0.01])),
+            ));
+        });
+        let lf = ForceReading::new([4.1f32, 3.9, 4.3, 3.7]);
+        let rf = ForceReading::new([3.8f32, 4.2, 3.6, 4.4]);
+        let zmp_meter = ZmpMeter::new(robot, MIN_LOAD_N);
+        bench(name.set("mzmp.", m), n, ovh, &mut |i| {
+            let smp = black_box(&samples[i as usize]);
+            black_box(zmp_meter.zmp(
+                (&smp.feet[0], black_box(&lf)),
+                (&smp.feet[1], black_box(&rf)),
+            ));
+        });
     }
 
     // ---- the firmware's control loop on the fake robot ----
@@ -812,20 +690,35 @@ mod firmware {
     /// The bench's observer of the fake robot: it meters the firmware's CPU work per tick,
     /// SysTick from the return of one `wait_tick` to the next call, minus the time spent inside
     /// the board's own code (the device emulation behind `send`, the byte queue behind `recv`,
-    /// the log sink; the calls themselves are counted), and counts the log bytes.
+    /// the log sink; the calls themselves are counted), and the same per stage of the tick
+    /// (the controller's [`Stage`] marks), and counts the log bytes.
     struct TickMeter {
         mark: Option<u32>,
         paused_at: u32,
         excluded: u32,
+        /// The stage running, where it began and the board time excluded until then.
+        stage: Option<(usize, u32, u32)>,
+        /// This tick's counts per stage.
+        stages: [u32; STAGES],
         seen: u32,
-        recent: heapless::Deque<u32, 4>,
+        recent: heapless::Deque<(u32, [u32; STAGES]), 4>,
         folded: Stat,
+        folded_stages: [Stat; STAGES],
         log_bytes: u32,
     }
+
+    /// Stages of the tick ([`Stage::ALL`]).
+    const STAGES: usize = Stage::ALL.len();
 
     /// Ticks left out of the statistics at the start (first tick, ramp) and end (final hold,
     /// torque off).
     const SKIP_FIRST: u32 = 2;
+
+    const NO_STAT: Stat = Stat {
+        n: 0,
+        total: 0,
+        max: 0,
+    };
 
     impl TickMeter {
         fn new() -> Self {
@@ -833,38 +726,57 @@ mod firmware {
                 mark: None,
                 paused_at: 0,
                 excluded: 0,
+                stage: None,
+                stages: [0; STAGES],
                 seen: 0,
                 recent: heapless::Deque::new(),
-                folded: Stat {
-                    n: 0,
-                    total: 0,
-                    max: 0,
-                },
+                folded: NO_STAT,
+                folded_stages: [NO_STAT; STAGES],
                 log_bytes: 0,
             }
         }
 
-        /// Folds one tick's count into the statistics, leaving out the first
+        /// Closes the running stage at SysTick `t`.
+        fn close_stage(&mut self, t: u32) {
+            if let Some((k, start, excluded)) = self.stage.take() {
+                let c = (start.wrapping_sub(t) & MASK).saturating_sub(self.excluded - excluded);
+                if let Some(slot) = self.stages.get_mut(k) {
+                    *slot += c;
+                }
+            }
+        }
+
+        /// Folds one tick's counts into the statistics, leaving out the first
         /// [`SKIP_FIRST`] ticks and (by holding the last four back) the last four.
         fn record_tick(&mut self, counts: u32) {
             self.seen += 1;
             if self.recent.is_full() {
-                if let Some(c) = self.recent.pop_front() {
+                if let Some((c, st)) = self.recent.pop_front() {
                     if self.seen > SKIP_FIRST + 4 {
-                        self.folded.n += 1;
-                        self.folded.total += u64::from(c);
-                        self.folded.max = self.folded.max.max(c);
+                        fold(&mut self.folded, c);
+                        for (f, c) in self.folded_stages.iter_mut().zip(st) {
+                            fold(f, c);
+                        }
                     }
                 }
             }
-            let _ = self.recent.push_back(counts);
+            let _ = self.recent.push_back((counts, self.stages));
+            self.stages = [0; STAGES];
         }
+    }
+
+    /// Adds one count to `s`.
+    fn fold(s: &mut Stat, c: u32) {
+        s.n += 1;
+        s.total += u64::from(c);
+        s.max = s.max.max(c);
     }
 
     impl Observer for TickMeter {
         #[cfg_attr(feature = "tick-profile", inline(never))]
         fn tick_start(&mut self) {
             let t = now();
+            self.close_stage(t);
             if let Some(m) = self.mark {
                 let c = (m.wrapping_sub(t) & MASK).saturating_sub(self.excluded);
                 self.record_tick(c);
@@ -875,6 +787,15 @@ mod firmware {
         fn tick(&mut self, _tick: Tick) {
             self.excluded = 0;
             self.mark = Some(now());
+        }
+
+        fn stage(&mut self, stage: Stage) {
+            let t = now();
+            self.close_stage(t);
+            let k = Stage::ALL.iter().position(|&s| s == stage).unwrap_or(0);
+            // The mark's own work is the bench's, not the tick's: left out like the board's.
+            self.excluded += t.wrapping_sub(now()) & MASK;
+            self.stage = Some((k, now(), self.excluded));
         }
 
         fn log(&mut self, bytes: &[u8]) {
@@ -911,26 +832,55 @@ mod firmware {
         board
     }
 
-    /// `control::run` with the default configuration (ramp and final hold cut to one tick)
-    /// on the in-memory bus: instructions per walking tick of the real control loop
-    /// (`control.tick`); in a build with the `fixed-gait` feature (the Cortex-M3 bench of
-    /// scripts/bench.sh) also with the fixed-point path, `math=fixed` (`control.tick_fixed`).
+    /// `control::run` with the default configuration (ramp and final hold cut to one tick) on
+    /// the in-memory bus: instructions per walking tick of the real control loop
+    /// (`control.tick`) and of each of its stages (`control.stage.<stage>`); in a build with
+    /// the `fixed-gait` feature also with the fixed-point path, `math=fixed`
+    /// (`control.tick_fixed`, `control_fixed.stage.<stage>`).
     fn control_loop() {
-        control_loop_with(Arithmetic::F32, "control", "control.tick");
+        let cfg = bench_config(ModelKind::Tlipfm, Arithmetic::F32, false);
+        let board = control_run(&cfg, "control");
+        report("control.tick", board.folded, 0);
+        report_stages("control", &board);
         #[cfg(feature = "fixed-gait")]
-        control_loop_with(Arithmetic::Fixed, "control_fixed", "control.tick_fixed");
+        {
+            let cfg = bench_config(ModelKind::Tlipfm, Arithmetic::Fixed, false);
+            let board = control_run(&cfg, "control_fixed");
+            report("control.tick_fixed", board.folded, 0);
+            report_stages("control_fixed", &board);
+        }
     }
 
-    /// One `control::run` with `arithmetic`: its counts under `key.*`, the instructions per
-    /// walking tick under `tick.*`.
-    fn control_loop_with(arithmetic: Arithmetic, key: &str, tick: &str) {
+    /// The control loop walking Table 2 with `model` and `arithmetic` (with whole-body
+    /// compensation and the stabilizer when `comp_stab`): instructions per walking tick as
+    /// `key`.
+    fn control_walk(model: ModelKind, arithmetic: Arithmetic, comp_stab: bool, key: &str) {
+        let cfg = bench_config(model, arithmetic, comp_stab);
+        let board = control_run(&cfg, key);
+        report(key, board.folded, 0);
+    }
+
+    /// The bench's configuration: the defaults with `model`, `arithmetic`, autostart, and the
+    /// ramp and the final hold one tick each; `comp=wholebody stab=on` when `comp_stab`.
+    fn bench_config(model: ModelKind, arithmetic: Arithmetic, comp_stab: bool) -> Config {
         let mut cfg = Config::default_config();
         cfg.ramp_us = cfg.tick_period_us;
         cfg.final_hold_us = cfg.tick_period_us;
         cfg.arithmetic = arithmetic;
+        cfg.model = model;
         cfg.autostart = true;
-        let mut board = bench_robot(&cfg);
-        let end = control::run(&mut board, &cfg);
+        if comp_stab {
+            cfg.compensation = Compensation::WholeBody;
+            cfg.stabilizer_on = true;
+        }
+        cfg
+    }
+
+    /// One `control::run` of `cfg` on the bench robot (ends the bench unless the plan is
+    /// done); its counts under `key.*`.
+    fn control_run(cfg: &Config, key: &str) -> FakeRobot<TickMeter> {
+        let mut board = bench_robot(cfg);
+        let end = control::run(&mut board, cfg);
         if end != RunEnd::Stopped(StopReason::PlanDone) {
             hprintln!("error {}.run ended with exit code {}", key, end.exit_code());
             semihosting_exit(1);
@@ -939,7 +889,17 @@ mod firmware {
         hprintln!("{}.ticks {}", key, board.seen);
         hprintln!("{}.log_bytes {}", key, board.log_bytes);
         hprintln!("{}.overruns {}", key, board.overruns());
-        report(tick, board.folded, 0);
+        board
+    }
+
+    /// The stages' counts of `board`'s run as `key.stage.<stage>`.
+    fn report_stages(key: &str, board: &FakeRobot<TickMeter>) {
+        let mut name = Name::new();
+        for (stage, stat) in Stage::ALL.iter().zip(board.folded_stages) {
+            let mut prefix = Name::new();
+            let p = prefix.set(key, ".stage.");
+            report(name.set(p, stage.name()), stat, 0);
+        }
     }
 
     /// A small stack string for `prefix + model` keys.

@@ -11,7 +11,8 @@
 //! (f32 or fixed point); the supervisor's action decides whether the walk runs, holds the pose
 //! or turns torque off.
 
-use gait_core::feedback::{IkCommand, Measured};
+use gait_core::feedback::{IkOffsets, Measured};
+use gait_core::gait::Sample;
 use gait_core::gait::Targets;
 use gait_core::maths::fixed_point::Fx;
 use gait_core::robot::LEG_JOINTS;
@@ -19,7 +20,7 @@ use gait_core::trajectory::fixed_sampler::FixedFoot;
 use gait_core::GaitSample;
 use walker_contract::command_port::{Mode, PortState, PortStatus};
 
-use crate::board::Board;
+use crate::board::{Board, Stage};
 use crate::bus::BoardMaster;
 use crate::monitor::ServoMonitor;
 use crate::record::{FaultKind, FaultState, LogWriter, LoggedPhase, Record, TickRecord};
@@ -61,6 +62,8 @@ pub(super) struct Controller<'a, P: TickPath> {
     pub prev: GaitSample<f32>,
     /// Its integer feet when the fixed-point sampler made it (no lead, no shift).
     pub prev_feet_fx: Option<[FixedFoot; 2]>,
+    /// This tick's joint targets (written in place by the walk stage).
+    pub goal: Goal,
     /// Joints whose clamping was logged.
     pub clamped_seen: u16,
     /// Ticks of the final hold after the plan.
@@ -79,12 +82,16 @@ impl<P: TickPath> Controller<'_, P> {
         bus.board().crash_cell().note_tick(tick.index);
         self.sup.tick_timing(tick.overrun);
 
+        bus.board().stage(Stage::Sense);
         self.sense.read(bus);
         self.path.read_servos(bus, &self.prev, self.walk);
         let imu = self.sense.supervise(bus, &mut self.log, &mut self.sup);
+        bus.board().stage(Stage::Estimate);
         let est = self.estimate(imu);
+        bus.board().stage(Stage::Command);
         self.command(bus.board());
 
+        bus.board().stage(Stage::Walk);
         let action = self.sup.step();
         let mut rec = TickRecord {
             time_us: tick.nominal_us as u32,
@@ -93,21 +100,23 @@ impl<P: TickPath> Controller<'_, P> {
         };
         match action {
             Action::Run => {
-                let goal = self.walk_tick(bus.board(), &est, &mut rec);
-                self.act(bus, goal, &mut rec);
+                let has_goal = self.walk_tick(bus.board(), &est, &mut rec);
+                bus.board().stage(Stage::Act);
+                self.act(bus, has_goal, &mut rec);
             }
             Action::HoldPose => write_goals(bus, &self.last_ticks),
             Action::SendTorqueOff => torque_off(bus, &mut self.log, self.cfg),
             Action::Idle => {}
         }
-        self.report(bus, action, &est, rec);
+        bus.board().stage(Stage::Report);
+        self.report(bus, action, &est, &mut rec);
         self.end(bus, action)
     }
 
     /// Estimate: the trunk (the supervisor's tilt), τ, the measured ZMP and the loads; the leg
     /// odometry follows the executed phase.
     fn estimate(&mut self, imu: Option<dxl::table::imu::ImuSample>) -> Estimate {
-        let trunk = self.path.trunk(imu, self.walk);
+        let trunk = self.path.trunk(imu.as_ref(), self.walk);
         self.sup.tilt(trunk.tilt);
         let tau = self.path.tau();
         let feet = self.sense.feet();
@@ -137,30 +146,40 @@ impl<P: TickPath> Controller<'_, P> {
     }
 
     /// The walk mode's motion, the sample corrections, the IK and the joint corrections: this
-    /// tick's goal (`None`: a non-finite sample, the stop has begun).
-    fn walk_tick<B: Board>(
-        &mut self,
-        board: &mut B,
-        est: &Estimate,
-        rec: &mut TickRecord,
-    ) -> Option<Goal> {
+    /// tick's goal into [`Controller::goal`] (false: none, a non-finite sample, the stop has
+    /// begun).
+    fn walk_tick<B: Board>(&mut self, board: &mut B, est: &Estimate, rec: &mut TickRecord) -> bool {
         let hold = self.path.wants_hold();
         let (k, footstep) = match self.walk.tick(est.tau, hold) {
-            Motion::Ramp(q) => return Some(Goal::Rad(q)),
+            Motion::Ramp(q) => {
+                self.goal = Goal::Rad(q);
+                return true;
+            }
             Motion::Gait { k, footstep } => (k, footstep),
         };
         if let Some(f) = footstep {
             log_footstep(board, &mut self.log, &f);
         }
-        let mut present = *self.walk.present();
-        let mut ahead = self.walk.ahead().copied();
-        self.faults
-            .sample(k, ahead.as_mut().map_or(&mut present, |a| &mut a.f32));
+        // The walk's own samples, borrowed; copied only when a fault spoils them or a sample
+        // correction moves them (copies: the walk hands out the plan's samples again on a held
+        // tick).
+        let mut own_present: Option<GaitSample<f32>> = None;
+        let mut own_ahead: Option<Sample> = None;
+        if self.faults.sample_at(k) {
+            match self.walk.ahead() {
+                Some(a) => self.faults.sample(k, &mut own_ahead.insert(*a).f32),
+                None => self
+                    .faults
+                    .sample(k, own_present.insert(*self.walk.present())),
+            }
+        }
+        let present = own_present.as_ref().unwrap_or(self.walk.present());
+        let ahead = own_ahead.as_ref().or(self.walk.ahead());
         // Before the IK (which would clamp a NaN pelvis to finite, meaningless angles).
-        if !(present.is_finite() && ahead.as_ref().is_none_or(|a| a.f32.is_finite())) {
+        if !(present.is_finite() && ahead.is_none_or(|a| a.f32.is_finite())) {
             crate::fw_log!(error, "non-finite gait sample at walk tick {}", k);
             self.sup.stop(StopReason::NonFiniteSample { tick: k });
-            return None;
+            return false;
         }
         let measured = Measured {
             attitude: est.trunk.attitude,
@@ -169,30 +188,39 @@ impl<P: TickPath> Controller<'_, P> {
             zmp: est.zmp.m,
             previous: &self.prev,
         };
-        let mut cmd = IkCommand {
-            present: &mut present,
-            ahead: ahead.as_mut().map(|a| &mut a.f32),
-            com_shift: [0.0; 2],
-            sole_dz: [0.0; 2],
-        };
-        self.path
-            .correct_sample(board, &mut self.log, &measured, &mut cmd);
-        let (com_shift, sole_dz) = (cmd.com_shift, cmd.sole_dz);
+        let mut offsets = IkOffsets::default();
+        let moves =
+            self.path
+                .update_samples(board, &mut self.log, &measured, present, &mut offsets);
+        if moves {
+            let p = own_present.get_or_insert(*self.walk.present());
+            self.path.apply_samples(p);
+            if let Some(a) = self.walk.ahead() {
+                let a = own_ahead.get_or_insert(*a);
+                self.path.apply_samples(&mut a.f32);
+                // The integer IK would not see the moves.
+                a.fixed = None;
+            }
+        }
+        let present = own_present.as_ref().unwrap_or(self.walk.present());
+        let ahead = own_ahead.as_ref().or(self.walk.ahead());
+        let IkOffsets { com_shift, sole_dz } = offsets;
         if !com_shift.iter().all(|v| v.is_finite()) {
             self.sup.stop(StopReason::NonFiniteSample { tick: k });
-            return None;
+            return false;
         }
         let ik = IkRequest {
             plan: self.walk.gait.plan(),
-            ahead: ahead.as_ref(),
-            present: &present,
+            ahead,
+            present,
             com_shift,
             sole_dz,
             walk_tick: k,
             gyro_raw: est.trunk.gyro_raw,
             f32_only: self.faults.targets_at(k),
         };
-        let mut goal = self.path.joints(self.targets, &measured, &ik);
+        self.path
+            .joints(self.targets, &measured, &ik, &mut self.goal);
         if self.walk.gait.plan_done() {
             self.sup
                 .stop_with_hold(StopReason::PlanDone, self.final_hold);
@@ -200,13 +228,12 @@ impl<P: TickPath> Controller<'_, P> {
         if self.faults.stop_at(k) {
             self.sup.stop(StopReason::Requested);
         }
-        if let Goal::Rad(q) = &mut goal {
+        if let Goal::Rad(q) = &mut self.goal {
             self.faults.targets(k, q);
         }
         // The present sample in fixed point (the one the integer IK took: no lead, no shift)
         // goes to the log without float.
         let present_fx = ahead
-            .as_ref()
             .and_then(|a| a.fixed.as_ref())
             .filter(|_| self.no_lead && !self.cfg.stabilizer_on);
         match present_fx {
@@ -220,10 +247,10 @@ impl<P: TickPath> Controller<'_, P> {
                 rec.set_com_m(cx + com_shift[0], cy + com_shift[1]);
             }
         }
-        rec.phase = phase_of(&present);
+        rec.phase = phase_of(present);
         self.prev_feet_fx = present_fx.map(|f| f.feet);
-        self.prev = present;
-        Some(goal)
+        self.prev = *present;
+        true
     }
 
     /// Act: the goal through the joint limits to servo ticks (a non-finite target holds the
@@ -232,12 +259,12 @@ impl<P: TickPath> Controller<'_, P> {
     fn act<B: Board>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
-        goal: Option<Goal>,
+        has_goal: bool,
         rec: &mut TickRecord,
     ) {
-        let checked = goal.map(|g| match g {
-            Goal::Rad(q) => safe_targets(&q, self.map, &self.last_ticks),
-            Goal::Fx(q) => Ok(safe_targets_fx(&q, self.map)),
+        let checked = has_goal.then(|| match &self.goal {
+            Goal::Rad(q) => safe_targets(q, self.map, &self.last_ticks),
+            Goal::Fx(q) => Ok(safe_targets_fx(q, self.map)),
         });
         let ticks = match checked {
             None => {
@@ -280,7 +307,7 @@ impl<P: TickPath> Controller<'_, P> {
         bus: &mut BoardMaster<'_, B>,
         action: Action,
         est: &Estimate,
-        mut rec: TickRecord,
+        rec: &mut TickRecord,
     ) {
         if action != Action::Run {
             let ([zx, zy], [cx, cy, _]) = (self.prev.zmp, self.prev.com);
@@ -327,7 +354,7 @@ impl<P: TickPath> Controller<'_, P> {
         });
         rec.bus = bus.counters();
         rec.overruns = u16::try_from(bus.board().overruns()).unwrap_or(u16::MAX);
-        self.log.write(bus.board(), Record::Tick(rec));
+        self.log.write(bus.board(), Record::Tick(*rec));
         bus.board().feed();
     }
 

@@ -7,7 +7,7 @@ use gait_core::feedback::compliance::{LoadModel, SagFeedForward};
 use gait_core::feedback::fdc::FootForceCorrection;
 use gait_core::feedback::gyro::GyroFeedback;
 use gait_core::feedback::stabilizer::StabilizerCorrection;
-use gait_core::feedback::{IkCommand, JointCorrection, JointInput, Measured, SampleCorrection};
+use gait_core::feedback::{IkOffsets, JointCorrection, JointInput, Measured, SampleCorrection};
 use gait_core::gait::Targets;
 use gait_core::measure::zmp::{ForceReading, SolePose, ZmpMeter};
 use gait_core::robot::LEG_JOINTS;
@@ -88,27 +88,19 @@ impl Catching {
         }
     }
 
-    /// (A1)–(A7) on `cmd`'s samples; the move asked is noted for the log.
-    fn correct<B: Board>(
+    /// (A1)–(A7) from the `present` sample; the move asked is noted for the log.
+    fn update<B: Board>(
         &mut self,
         board: &mut B,
         log: &mut LogWriter,
         m: &Measured<'_>,
-        cmd: &mut IkCommand<'_>,
+        present: &GaitSample<f32>,
     ) {
         if !self.adapter.is_on() {
             return;
         }
-        let asked = self
-            .adapter
-            .update(cmd.present, m.attitude, m.gyro, m.loads);
-        self.note(board, log, cmd.present.phase, asked);
-        if self.adapter.is_shifting() {
-            self.adapter.apply(cmd.present);
-            if let Some(a) = cmd.ahead.as_deref_mut() {
-                self.adapter.apply(a);
-            }
-        }
+        let asked = self.adapter.update(present, m.attitude, m.gyro, m.loads);
+        self.note(board, log, present.phase, asked);
     }
 }
 
@@ -183,7 +175,7 @@ impl TickPath for F32Path<'_> {
             .apply(&self.sag.compliance, q, loaded, [0.0; 2]);
     }
 
-    fn trunk(&mut self, imu: Option<ImuSample>, walk: &mut Walk) -> Trunk {
+    fn trunk(&mut self, imu: Option<&ImuSample>, walk: &mut Walk) -> Trunk {
         let Some(s) = imu else {
             self.pitch.update(f32::NAN);
             return Trunk {
@@ -259,19 +251,26 @@ impl TickPath for F32Path<'_> {
         self.catching.adapter.wants_hold()
     }
 
-    fn correct_sample<B: Board>(
+    fn update_samples<B: Board>(
         &mut self,
         board: &mut B,
         log: &mut LogWriter,
         m: &Measured<'_>,
-        cmd: &mut IkCommand<'_>,
-    ) {
-        self.catching.correct(board, log, m, cmd);
-        self.stabilizer.correct_sample(m, cmd);
-        self.foot_force.correct_sample(m, cmd);
+        present: &GaitSample<f32>,
+        offsets: &mut IkOffsets,
+    ) -> bool {
+        self.catching.update(board, log, m, present);
+        self.stabilizer.update(m, present, offsets);
+        self.foot_force.update(m, present, offsets);
+        self.catching.adapter.is_shifting()
     }
 
-    fn joints(&mut self, targets: &Targets, m: &Measured<'_>, ik: &IkRequest<'_>) -> Goal {
+    fn apply_samples(&self, sample: &mut GaitSample<f32>) {
+        // (A6): the feet by their offsets, the CoM and the ZMP reference by the body's.
+        self.catching.adapter.apply(sample);
+    }
+
+    fn joints(&mut self, targets: &Targets, m: &Measured<'_>, ik: &IkRequest<'_>, goal: &mut Goal) {
         let (mut q, loaded) = ik_f32(targets, ik);
         let input = JointInput {
             phase: ik.present.phase,
@@ -288,7 +287,7 @@ impl TickPath for F32Path<'_> {
         if let Some(d) = self.servo_sense.as_mut() {
             d.correct_joints(m, &input, &mut q);
         }
-        Goal::Rad(q)
+        *goal = Goal::Rad(q);
     }
 
     fn surveys(&self) -> Option<(u16, u16)> {

@@ -40,14 +40,23 @@ impl FaultInjector {
         FaultInjector
     }
 
-    /// At walk tick `k`, spoils the CoM of `sample` (the one the IK takes).
+    /// Whether walk tick `k`'s sample is spoiled ([`FaultInjector::sample`]).
     #[inline]
-    pub(crate) fn sample(&self, k: u32, sample: &mut GaitSample<f32>) {
+    pub(crate) fn sample_at(&self, k: u32) -> bool {
         #[cfg(any(test, feature = "board-qemu"))]
         if self.nan_com == Some(k) {
+            return true;
+        }
+        let _ = k;
+        false
+    }
+
+    /// At walk tick `k`, spoils the CoM of `sample` (a copy of the one the IK takes).
+    #[inline]
+    pub(crate) fn sample(&self, k: u32, sample: &mut GaitSample<f32>) {
+        if self.sample_at(k) {
             sample.com[0] = f32::NAN;
         }
-        let _ = (k, sample);
     }
 
     /// Whether walk tick `k`'s joint targets are spoiled (they must come from the f32 IK).

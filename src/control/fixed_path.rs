@@ -5,7 +5,7 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use gait_core::feedback::gyro::{FixedGyroFeedback, GyroFeedback};
 use gait_core::feedback::stabilizer::StabilizerCorrection;
-use gait_core::feedback::{IkCommand, JointCorrection, JointInput, Measured, SampleCorrection};
+use gait_core::feedback::{IkOffsets, JointCorrection, JointInput, Measured, SampleCorrection};
 use gait_core::gait::Targets;
 use gait_core::maths::fixed_point::{fx_sat, fx_to_f32, Fx};
 use gait_core::measure::zmp::FixedZmpMeter;
@@ -62,7 +62,7 @@ fn fixed_foot(f: &gait_core::trajectory::swing::FootSample<f32>) -> FixedFoot {
 }
 
 impl TickPath for FixedPath<'_> {
-    fn trunk(&mut self, imu: Option<ImuSample>, _: &mut Walk) -> Trunk {
+    fn trunk(&mut self, imu: Option<&ImuSample>, _: &mut Walk) -> Trunk {
         let Some(s) = imu else {
             self.pitch.update(None);
             return Trunk {
@@ -104,17 +104,19 @@ impl TickPath for FixedPath<'_> {
         }
     }
 
-    fn correct_sample<B: Board>(
+    fn update_samples<B: Board>(
         &mut self,
         _: &mut B,
         _: &mut LogWriter,
         m: &Measured<'_>,
-        cmd: &mut IkCommand<'_>,
-    ) {
-        self.stabilizer.correct_sample(m, cmd);
+        present: &GaitSample<f32>,
+        offsets: &mut IkOffsets,
+    ) -> bool {
+        self.stabilizer.update(m, present, offsets);
+        false
     }
 
-    fn joints(&mut self, targets: &Targets, m: &Measured<'_>, ik: &IkRequest<'_>) -> Goal {
+    fn joints(&mut self, targets: &Targets, m: &Measured<'_>, ik: &IkRequest<'_>, goal: &mut Goal) {
         let fx_q = match (ik.ahead, ik.plan) {
             (Some(a), Some(p)) if !ik.f32_only => p.engine().joints_fx(targets, a, ik.com_shift),
             _ => None,
@@ -127,7 +129,7 @@ impl TickPath for FixedPath<'_> {
                             *v = v.saturating_add(Fx::from_bits(d));
                         }
                     });
-                Goal::Fx(q)
+                *goal = Goal::Fx(q);
             }
             None => {
                 let (mut q, loaded) = ik_f32(targets, ik);
@@ -138,7 +140,7 @@ impl TickPath for FixedPath<'_> {
                     walk_tick: ik.walk_tick,
                 };
                 self.gyro.correct_joints(m, &input, &mut q);
-                Goal::Rad(q)
+                *goal = Goal::Rad(q);
             }
         }
     }

@@ -14,7 +14,7 @@
 use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use gait_core::feedback::stabilizer::{Stabilizer, StabilizerCorrection};
-use gait_core::feedback::{IkCommand, Measured};
+use gait_core::feedback::{IkOffsets, Measured};
 use gait_core::gait::{Sample, Targets};
 use gait_core::maths::fixed_point::Fx;
 use gait_core::robot::LEG_JOINTS;
@@ -98,7 +98,7 @@ pub(super) trait TickPath {
     fn ramp_end(&mut self, _q: &mut [f32; LEG_JOINTS], _loaded: &GaitSample<f32>) {}
 
     /// The IMU's fresh sample (or none) into the trunk's estimate; the online walk's heading.
-    fn trunk(&mut self, imu: Option<ImuSample>, walk: &mut Walk) -> Trunk;
+    fn trunk(&mut self, imu: Option<&ImuSample>, walk: &mut Walk) -> Trunk;
 
     /// τ = J·φ̈ for the sampler.
     fn tau(&self) -> Tau;
@@ -125,17 +125,29 @@ pub(super) trait TickPath {
         false
     }
 
-    /// The sample corrections, in this path's order.
-    fn correct_sample<B: Board>(
+    /// The sample corrections' updates, in this path's order, from the `present` sample as the
+    /// walk gave it: their offsets into `offsets`; whether they move the samples this tick
+    /// ([`TickPath::apply_samples`]).
+    fn update_samples<B: Board>(
         &mut self,
         board: &mut B,
         log: &mut LogWriter,
         measured: &Measured<'_>,
-        cmd: &mut IkCommand<'_>,
-    );
+        present: &GaitSample<f32>,
+        offsets: &mut IkOffsets,
+    ) -> bool;
+
+    /// The sample corrections' moves on a copy of a sample, in this path's order.
+    fn apply_samples(&self, _sample: &mut GaitSample<f32>) {}
 
     /// The IK and the joint corrections, in this path's order.
-    fn joints(&mut self, targets: &Targets, measured: &Measured<'_>, ik: &IkRequest<'_>) -> Goal;
+    fn joints(
+        &mut self,
+        targets: &Targets,
+        measured: &Measured<'_>,
+        ik: &IkRequest<'_>,
+        goal: &mut Goal,
+    );
 
     /// Leg odometry surveys taken and refused, when it runs.
     fn surveys(&self) -> Option<(u16, u16)> {
@@ -193,7 +205,7 @@ pub(super) fn finite_rates(g: [f32; 3]) -> Option<[f32; 2]> {
 }
 
 /// The raw rates of `imu` when the f32 ones passed.
-pub(super) fn raw_rates(imu: Option<ImuSample>, gyro: Option<[f32; 2]>) -> Option<[i32; 2]> {
+pub(super) fn raw_rates(imu: Option<&ImuSample>, gyro: Option<[f32; 2]>) -> Option<[i32; 2]> {
     imu.filter(|_| gyro.is_some())
         .map(|s| [s.gyro_urad_s[0], s.gyro_urad_s[1]])
 }

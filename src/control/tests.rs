@@ -236,13 +236,20 @@ fn table2_walk_runs_to_plan_done() {
         }
     }
 
+    assert_table2_log(&b, ramp, walk, ticks.len());
+}
+
+/// The Table 2 walk's log on the fake robot: the start-up record, a tick record per tick at the
+/// nominal times, the stop `PlanDone`, the measured ZMP under the support foot and the CoM's
+/// final place.
+fn assert_table2_log(b: &FakeBoard, ramp: usize, walk: usize, n_ticks: usize) {
     // The log: start-up (probed, nothing missing), one tick record per tick, stop PlanDone.
     let recs = b.records();
     let st = startup_of(&recs);
     assert!(st.probed && st.missing.is_empty());
     assert_eq!(st.tick_period_us, 5000);
     let tr = ticks_of(&recs);
-    assert_eq!(tr.len(), ticks.len());
+    assert_eq!(tr.len(), n_ticks);
     assert_eq!(stop_of(&recs), Some(StopReason::PlanDone));
     assert!(matches!(recs.last(), Some(Record::Stop(_))));
     assert!(tr.iter().all(|t| !t.overrun && t.overruns == 0));

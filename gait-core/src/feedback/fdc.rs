@@ -24,8 +24,8 @@
 //! double support only and only while both feet are measured; otherwise Δz only leaks back to
 //! 0 with T_v. k_f in m/(N·s); 0 turns the control off.
 
-use super::{IkCommand, Measured, SampleCorrection};
-use crate::trajectory::sampler::SupportPhase;
+use super::{IkOffsets, Measured, SampleCorrection};
+use crate::trajectory::sampler::{GaitSample, SupportPhase};
 
 /// Foot force difference control: gains and limits (equations F1–F4 of the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,7 +124,7 @@ impl FootForceCorrection {
 }
 
 impl SampleCorrection for FootForceCorrection {
-    fn correct_sample(&mut self, m: &Measured<'_>, cmd: &mut IkCommand<'_>) {
+    fn update(&mut self, m: &Measured<'_>, _: &GaitSample<f32>, offsets: &mut IkOffsets) {
         let [pl, pr] = &m.previous.feet;
         let dz = self.state.update(
             &self.control,
@@ -135,7 +135,7 @@ impl SampleCorrection for FootForceCorrection {
             self.dt_s,
         );
         if self.state.dz != 0.0 {
-            cmd.sole_dz = dz;
+            offsets.sole_dz = dz;
         }
     }
 }

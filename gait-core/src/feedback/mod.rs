@@ -18,8 +18,9 @@
 //! ```text
 //!   gait sample ──▶ SampleCorrection… ──▶ IK ──▶ JointCorrection… ──▶ joint targets
 //! ```
-//! A [`SampleCorrection`] changes what the IK is asked for ([`IkCommand`]: the samples, the
-//! commanded CoM's shift δ, the soles' heights); a [`JointCorrection`] adds to the 12 joint
+//! A [`SampleCorrection`] changes what the IK is asked for: its [`IkOffsets`] (the commanded
+//! CoM's shift δ, the soles' heights) and, while it moves them, the samples themselves (on
+//! copies: the walk's own samples stay the plan's); a [`JointCorrection`] adds to the 12 joint
 //! targets the IK gave. Both read this tick's [`Measured`] values; each chain's order is the
 //! controller's, stated once where it runs them. Static dispatch: a chain is a fixed list of
 //! concrete types, so a correction that is off costs its `is_on` test.
@@ -51,23 +52,36 @@ pub struct Measured<'a> {
     pub previous: &'a GaitSample<f32>,
 }
 
-/// What the IK is asked for this tick.
-#[derive(Debug)]
-pub struct IkCommand<'a> {
-    /// The present sample (the reference of the log and of the next tick's measurements).
-    pub present: &'a mut GaitSample<f32>,
-    /// The sample the IK takes when it is not the present one (a servo lead), else `None`.
-    pub ahead: Option<&'a mut GaitSample<f32>>,
+/// What the sample corrections add to the IK's command this tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct IkOffsets {
     /// Shift δ of the commanded CoM (x, y), m.
     pub com_shift: [f32; 2],
-    /// Heights added to the left and right sole of the IK's sample, m.
+    /// Heights added to the left and right sole of the IK's sample, m (0: none).
     pub sole_dz: [f32; 2],
 }
 
 /// A correction of the gait sample before the IK.
 pub trait SampleCorrection {
-    /// Updates from `measured` and corrects `cmd`.
-    fn correct_sample(&mut self, measured: &Measured<'_>, cmd: &mut IkCommand<'_>);
+    /// Updates from `measured` and the `present` sample as the walk gave it; adds its part to
+    /// `offsets`.
+    fn update(
+        &mut self,
+        measured: &Measured<'_>,
+        present: &GaitSample<f32>,
+        offsets: &mut IkOffsets,
+    );
+
+    /// Whether it moves the samples themselves this tick ([`SampleCorrection::apply`] then runs
+    /// on copies of the present sample and of the one the IK takes).
+    fn moves_samples(&self) -> bool {
+        false
+    }
+
+    /// Moves `sample` (a copy) by this correction.
+    fn apply(&self, sample: &mut GaitSample<f32>) {
+        let _ = sample;
+    }
 }
 
 /// What a joint correction knows of the tick besides the measurements.

@@ -41,11 +41,12 @@
 //! change it reaches the new polygon's limit at v_max). Cost: a few dozen flops plus one support-polygon margin per bisection
 //! step ([`BISECTION_STEPS`] at most).
 
-use super::{IkCommand, Measured, SampleCorrection};
+use super::{IkOffsets, Measured, SampleCorrection};
 use crate::gait::SupportCache;
 use crate::maths::real::Real;
 use crate::measure::support::SupportPolygon;
 use crate::robot::Robot;
+use crate::trajectory::sampler::GaitSample;
 
 /// Most bisection steps of the support-polygon limit (S7).
 pub const BISECTION_STEPS: u8 = 6;
@@ -334,11 +335,11 @@ impl<'r> StabilizerCorrection<'r> {
 }
 
 impl SampleCorrection for StabilizerCorrection<'_> {
-    fn correct_sample(&mut self, m: &Measured<'_>, cmd: &mut IkCommand<'_>) {
+    fn update(&mut self, m: &Measured<'_>, _: &GaitSample<f32>, offsets: &mut IkOffsets) {
         if !self.on {
             return;
         }
-        cmd.com_shift = self.stabilizer.update(&StabilizerInput {
+        offsets.com_shift = self.stabilizer.update(&StabilizerInput {
             zmp_ref: m.previous.zmp,
             zmp_meas: m.zmp,
             gyro: m.gyro,
