@@ -423,9 +423,20 @@ pub struct BeyondArgs {
 /// `walker sweep`.
 #[derive(Debug, Args)]
 pub struct SweepArgs {
-    /// Output folder (sweep.md, one folder per case).
+    /// Output folder (sweep.md, rows.csv, one folder per case).
     #[arg(long, value_name = "DIR", default_value = "out/sweep")]
     pub out: PathBuf,
+    /// Walks at a time (each a QEMU process and a simulator thread).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    pub jobs: u16,
+    /// Only the K-th of N interleaved parts of the case list (case i when i mod N = K − 1); its
+    /// rows go to OUT/rows.csv for `--merge`.
+    #[arg(long, value_name = "K/N", value_parser = crate::sweep::Shard::parse)]
+    pub shard: Option<crate::sweep::Shard>,
+    /// No walks: the table of the rows.csv of these sweep folders (the shards of one sweep),
+    /// written to OUT/sweep.md.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["shard", "jobs"])]
+    pub merge: Vec<PathBuf>,
     /// The runs (each case changes one knob of the nominal simulated robot).
     #[command(flatten)]
     pub run: RunArgs,
@@ -1428,20 +1439,39 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
 }
 
 fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
+    use crate::sweep::{self, goal, Shard};
     let out = a.out;
+    if !a.merge.is_empty() {
+        return merge_sweep(&out, &a.merge);
+    }
     let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
-    let n = crate::sweep::cases().len();
-    eprintln!("walker sweep: {plan_name}, {n} firmware-in-the-loop walks");
-    let rows = crate::sweep::run(&opts, |name| eprintln!("  walking {name} …"))?;
-    use crate::sweep::goal;
+    let shard = a.shard.unwrap_or(Shard::ALL);
+    let n = (0..sweep::cases().len()).filter(|&i| shard.has(i)).count();
+    eprintln!(
+        "walker sweep: {plan_name}, {n} firmware-in-the-loop walks (shard {}/{}), {} at a time",
+        shard.index, shard.count, a.jobs
+    );
+    let rows = sweep::run(&opts, shard, usize::from(a.jobs), |k, n, name| {
+        eprintln!("  [{k}/{n}] walking {name} …")
+    })?;
+    std::fs::create_dir_all(&out)
+        .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
+    sweep::write_rows(&out.join("rows.csv"), &rows).map_err(CliError::failed)?;
+    let title = match shard {
+        Shard::ALL => plan_name,
+        s => format!(
+            "{plan_name} (shard {}/{}; `walker sweep --merge` joins the shards)",
+            s.index, s.count
+        ),
+    };
     let mut md = format!(
-        "# Robustness sweep: {plan_name}\n\nThe firmware's defaults (closed loop) on the MuJoCo robot, nominal and one perturbation per case; true CoP − reference over the walking ticks. Goals: no fall, ≥ {:.0} % of the planned distance, heading drift < {}°, ZMP mean |e| < {} mm sagittal and < {} mm lateral.\n\n",
+        "# Robustness sweep: {title}\n\nThe firmware's defaults (closed loop) on the MuJoCo robot, nominal and one perturbation per case; true CoP − reference over the walking ticks. Goals: no fall, ≥ {:.0} % of the planned distance, heading drift < {}°, ZMP mean |e| < {} mm sagittal and < {} mm lateral.\n\n",
         goal::DISTANCE * 100.0,
         goal::HEADING_DEG,
         goal::ZMP_X * 1e3,
         goal::ZMP_Y * 1e3
     );
-    md.push_str(&crate::sweep::table(&rows));
+    md.push_str(&sweep::table(&rows));
     write_report(&out, "sweep.md", &md)?;
     match rows.iter().find(|r| r.exit_code != Some(0)) {
         None => Ok(()),
@@ -1449,6 +1479,45 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
             message: format!("case {} exited with {:?}", r.name, r.exit_code),
             code: 3,
         }),
+    }
+}
+
+/// `walker sweep --merge DIR…`: the table of the shards' rows.
+fn merge_sweep(out: &std::path::Path, dirs: &[PathBuf]) -> Result<(), CliError> {
+    use crate::sweep;
+    let parts = dirs
+        .iter()
+        .map(|d| sweep::read_rows(&d.join("rows.csv")))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(CliError::failed)?;
+    let (rows, missing) = sweep::merge(parts).map_err(CliError::failed)?;
+    if !missing.is_empty() {
+        eprintln!(
+            "walker sweep --merge: no shard ran {} of {} cases: {}",
+            missing.len(),
+            sweep::cases().len(),
+            missing.join(", ")
+        );
+    }
+    std::fs::create_dir_all(out)
+        .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
+    sweep::write_rows(&out.join("rows.csv"), &rows).map_err(CliError::failed)?;
+    let mut md = format!(
+        "# Robustness sweep (merged from {} shards)\n\nThe firmware's defaults (closed loop) on the MuJoCo robot; true CoP − reference over the walking ticks.\n\n",
+        dirs.len()
+    );
+    md.push_str(&sweep::table(&rows));
+    write_report(out, "sweep.md", &md)?;
+    match rows.iter().find(|r| r.exit_code != Some(0)) {
+        Some(r) => Err(CliError {
+            message: format!("case {} exited with {:?}", r.name, r.exit_code),
+            code: 3,
+        }),
+        None if !missing.is_empty() => Err(CliError::failed(format!(
+            "{} cases missing from the shards",
+            missing.len()
+        ))),
+        None => Ok(()),
     }
 }
 

@@ -11,6 +11,12 @@
 //! | `latency+5ms` | the foot boards' and the IMU's samples 5 ms older |
 //! | `drop5%` | 5 % of the status packets lost on the bus |
 //!
+//! The cases run `--jobs N` at a time (each a QEMU process and a simulator thread); `--shard K/N`
+//! runs the K-th of N interleaved parts of the case list (case i when i mod N = K − 1) and writes
+//! its rows to `OUT/rows.csv`, and `walker sweep --merge DIR…` makes the table of the shards'
+//! rows, so that a batch system (GNU parallel, Slurm, a CI matrix) can spread a sweep over
+//! machines.
+//!
 //! Each run is scored like `walker beyond` ([`crate::beyond::score`]: true CoP − reference over
 //! the walking ticks) and [`crate::fil::walk_figures`] (distance walked / planned, heading drift,
 //! torso tilt), and the table says which of the goals each case misses: no fall,
@@ -18,8 +24,13 @@
 //! < 14 mm lateral.
 
 use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
-use crate::beyond::{self, RunMetrics};
+use serde::{Deserialize, Serialize};
+
+use crate::beyond::{self, AxisError};
 use crate::fil::{self, FilOptions, WalkFigures};
 use crate::sim::SimConfig;
 
@@ -83,18 +94,156 @@ pub fn cases() -> [SweepCase; 11] {
 }
 
 /// One scored run of the sweep.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SweepRow {
     /// The case's name.
-    pub name: &'static str,
+    pub name: String,
     /// What it changes.
-    pub what: &'static str,
+    pub what: String,
     /// The firmware's exit code.
     pub exit_code: Option<i32>,
-    /// The ZMP and speed figures.
-    pub metrics: RunMetrics,
+    /// True CoP − reference over the walking ticks, x and y.
+    pub true_err: [AxisError; 2],
     /// Distance, heading, tilt.
     pub figures: WalkFigures,
+}
+
+/// A part of the case list: the `index`-th (1-based) of `count` interleaved parts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    /// 1 ..= `count`.
+    pub index: usize,
+    /// Parts, ≥ 1.
+    pub count: usize,
+}
+
+impl Shard {
+    /// The whole list.
+    pub const ALL: Shard = Shard { index: 1, count: 1 };
+
+    /// `K/N` with 1 ≤ K ≤ N.
+    pub fn parse(s: &str) -> Result<Shard, String> {
+        let bad = || format!("shard '{s}': expected K/N with 1 <= K <= N");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let index: usize = k.trim().parse().map_err(|_| bad())?;
+        let count: usize = n.trim().parse().map_err(|_| bad())?;
+        if count == 0 || index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// Whether case number `i` (0-based, table order) is in this part.
+    pub fn has(&self, i: usize) -> bool {
+        i % self.count == self.index - 1
+    }
+}
+
+/// A row as one line of `rows.csv` (flat; NaN written as `NaN`, read back as NaN).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct RowRecord {
+    case: String,
+    what: String,
+    exit_code: Option<i32>,
+    fell_at_s: Option<f64>,
+    walked_m: f64,
+    planned_m: f64,
+    heading_drift_rad: f64,
+    max_tilt_rad: f64,
+    true_err_x_n: usize,
+    true_err_x_mean_m: f64,
+    true_err_x_max_m: f64,
+    true_err_y_n: usize,
+    true_err_y_mean_m: f64,
+    true_err_y_max_m: f64,
+}
+
+impl From<&SweepRow> for RowRecord {
+    fn from(r: &SweepRow) -> Self {
+        let f = &r.figures;
+        let [x, y] = r.true_err;
+        RowRecord {
+            case: r.name.clone(),
+            what: r.what.clone(),
+            exit_code: r.exit_code,
+            fell_at_s: f.fell_at,
+            walked_m: f.walked,
+            planned_m: f.planned,
+            heading_drift_rad: f.heading_drift,
+            max_tilt_rad: f.max_tilt,
+            true_err_x_n: x.n,
+            true_err_x_mean_m: x.mean,
+            true_err_x_max_m: x.max,
+            true_err_y_n: y.n,
+            true_err_y_mean_m: y.mean,
+            true_err_y_max_m: y.max,
+        }
+    }
+}
+
+impl From<RowRecord> for SweepRow {
+    fn from(r: RowRecord) -> Self {
+        let axis = |n, mean, max| AxisError { n, mean, max };
+        SweepRow {
+            name: r.case,
+            what: r.what,
+            exit_code: r.exit_code,
+            true_err: [
+                axis(r.true_err_x_n, r.true_err_x_mean_m, r.true_err_x_max_m),
+                axis(r.true_err_y_n, r.true_err_y_mean_m, r.true_err_y_max_m),
+            ],
+            figures: WalkFigures {
+                fell_at: r.fell_at_s,
+                walked: r.walked_m,
+                planned: r.planned_m,
+                heading_drift: r.heading_drift_rad,
+                max_tilt: r.max_tilt_rad,
+            },
+        }
+    }
+}
+
+/// Writes `rows` to `path` (CSV, one row per case).
+pub fn write_rows(path: &Path, rows: &[SweepRow]) -> Result<(), String> {
+    let err = |e: csv::Error| format!("{}: {e}", path.display());
+    let mut w = csv::Writer::from_path(path).map_err(err)?;
+    for r in rows {
+        w.serialize(RowRecord::from(r)).map_err(err)?;
+    }
+    w.flush().map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Reads the rows a sweep (or a shard of one) wrote to `path`.
+pub fn read_rows(path: &Path) -> Result<Vec<SweepRow>, String> {
+    let err = |e: csv::Error| format!("{}: {e}", path.display());
+    let mut r = csv::Reader::from_path(path).map_err(err)?;
+    r.deserialize::<RowRecord>()
+        .map(|rec| rec.map(SweepRow::from).map_err(err))
+        .collect()
+}
+
+/// The shards' rows in table order: every case once (a case twice or unknown is an error; the
+/// cases no shard ran are returned by name).
+pub fn merge(parts: Vec<Vec<SweepRow>>) -> Result<(Vec<SweepRow>, Vec<&'static str>), String> {
+    let order = cases();
+    let mut slots: Vec<Option<SweepRow>> = vec![None; order.len()];
+    for row in parts.into_iter().flatten() {
+        let i = order
+            .iter()
+            .position(|c| c.name == row.name)
+            .ok_or_else(|| format!("unknown sweep case '{}'", row.name))?;
+        if slots[i].is_some() {
+            return Err(format!("sweep case '{}' in two shards", row.name));
+        }
+        slots[i] = Some(row);
+    }
+    let missing = order
+        .iter()
+        .zip(&slots)
+        .filter(|(_, s)| s.is_none())
+        .map(|(c, _)| c.name)
+        .collect();
+    Ok((slots.into_iter().flatten().collect(), missing))
 }
 
 impl SweepRow {
@@ -113,7 +262,7 @@ impl SweepRow {
         if h.is_nan() || h.abs() >= goal::HEADING_DEG {
             out.push(format!("heading {h:+.1}°"));
         }
-        let [ex, ey] = self.metrics.true_err.map(|e| e.mean);
+        let [ex, ey] = self.true_err.map(|e| e.mean);
         if ex.is_nan() || ex >= goal::ZMP_X {
             out.push(format!("ZMP x {:.1} mm", ex * 1e3));
         }
@@ -124,8 +273,14 @@ impl SweepRow {
     }
 }
 
-/// Walks every case and scores it; `progress(name)` before each run.
-pub fn run(opts: &FilOptions, progress: impl Fn(&str)) -> Result<Vec<SweepRow>, String> {
+/// Walks the cases of `shard`, `jobs` at a time, and scores them (table order);
+/// `progress(k, n, name)` as the k-th of the n runs starts.
+pub fn run(
+    opts: &FilOptions,
+    shard: Shard,
+    jobs: usize,
+    progress: impl Fn(usize, usize, &str) + Sync,
+) -> Result<Vec<SweepRow>, String> {
     let variant = beyond::variants()
         .into_iter()
         .find(|v| v.name == "tlipfm")
@@ -133,9 +288,13 @@ pub fn run(opts: &FilOptions, progress: impl Fn(&str)) -> Result<Vec<SweepRow>, 
     let mut tokens = fil::firmware_tokens(&opts.spec)?;
     tokens.extend(opts.extra_tokens.iter().cloned());
     let cfg = beyond::firmware_config(&tokens)?;
-    let mut out = Vec::new();
-    for case in cases() {
-        progress(case.name);
+    let mine: Vec<SweepCase> = cases()
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| shard.has(*i))
+        .map(|(_, c)| c)
+        .collect();
+    let walk = |case: &SweepCase| -> Result<SweepRow, String> {
         let mut sim = opts.sim.clone();
         (case.apply)(&mut sim);
         let fopts = FilOptions {
@@ -146,15 +305,43 @@ pub fn run(opts: &FilOptions, progress: impl Fn(&str)) -> Result<Vec<SweepRow>, 
         let fell = r.sim.fall_started_us.map(|t| t as f64 * 1e-6);
         let metrics = beyond::score(&variant, &cfg, &r.log, &r.truth, r.exit_code, fell)?;
         let figures = fil::walk_figures(&r.truth, &opts.spec)?;
-        out.push(SweepRow {
-            name: case.name,
-            what: case.what,
+        Ok(SweepRow {
+            name: case.name.into(),
+            what: case.what.into(),
             exit_code: r.exit_code,
-            metrics,
+            true_err: metrics.true_err,
             figures,
-        });
-    }
-    Ok(out)
+        })
+    };
+    let next = AtomicUsize::new(0);
+    let started = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<Result<SweepRow, String>>>> = Mutex::new(vec![None; mine.len()]);
+    let worker = || loop {
+        let i = next.fetch_add(1, Ordering::SeqCst);
+        let Some(case) = mine.get(i) else {
+            return;
+        };
+        let k = started.fetch_add(1, Ordering::SeqCst) + 1;
+        progress(k, mine.len(), case.name);
+        let row = walk(case);
+        if let Ok(mut res) = results.lock() {
+            if let Some(slot) = res.get_mut(i) {
+                *slot = Some(row);
+            }
+        }
+    };
+    std::thread::scope(|s| {
+        for _ in 0..jobs.clamp(1, mine.len().max(1)) {
+            s.spawn(worker);
+        }
+    });
+    let results = results
+        .into_inner()
+        .map_err(|_| "a sweep worker panicked")?;
+    results
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| Err("a sweep case did not run".into())))
+        .collect()
 }
 
 /// The sweep table (Markdown).
@@ -167,7 +354,7 @@ pub fn table(rows: &[SweepRow]) -> String {
     let _ = writeln!(s, "| --- | --- | ---: | ---: | ---: | ---: | ---: | --- |");
     for r in rows {
         let f = &r.figures;
-        let [ex, ey] = r.metrics.true_err.map(|e| e.mean * 1e3);
+        let [ex, ey] = r.true_err.map(|e| e.mean * 1e3);
         let missed = r.missed();
         let _ = writeln!(
             s,
@@ -228,13 +415,11 @@ mod tests {
             mean: m,
             max: m,
         };
-        let mut metrics = crate::beyond::tests::metrics("x", [0.0; 2]);
-        metrics.true_err = [e(zmp[0]), e(zmp[1])];
         SweepRow {
-            name: "x",
-            what: "y",
+            name: "x".into(),
+            what: "y".into(),
             exit_code: Some(0),
-            metrics,
+            true_err: [e(zmp[0]), e(zmp[1])],
             figures: WalkFigures {
                 fell_at: fell,
                 walked,
@@ -258,5 +443,56 @@ mod tests {
         assert_eq!(m.len(), 4, "{m:?}");
         let t = table(&[row(0.26, 1.0, [0.010, 0.013], None)]);
         assert!(t.contains("| none |"), "{t}");
+    }
+
+    /// Every case is in exactly one shard of any split, and the shards interleave the list.
+    #[test]
+    fn shards_partition_the_cases() {
+        let n = cases().len();
+        for count in 1..=n + 2 {
+            for i in 0..n {
+                let owners = (1..=count)
+                    .filter(|&k| Shard { index: k, count }.has(i))
+                    .count();
+                assert_eq!(owners, 1, "case {i}, {count} shards");
+            }
+        }
+        assert_eq!(Shard::parse("2/3"), Ok(Shard { index: 2, count: 3 }));
+        for bad in ["0/3", "4/3", "1/0", "3", "a/b", "", "1/-2"] {
+            assert!(Shard::parse(bad).is_err(), "{bad}");
+        }
+        assert!((0..n).all(|i| Shard::ALL.has(i)));
+    }
+
+    /// Rows survive the CSV round trip bit for bit, NaN and a fall included, and the merge of
+    /// shards gives the table order, names the cases no shard ran and refuses a case twice.
+    #[test]
+    fn shard_rows_round_trip_and_merge_in_table_order() {
+        let named = |name: &str, r: SweepRow| SweepRow {
+            name: name.into(),
+            ..r
+        };
+        let a = named("mass+10", row(0.25, -1.5, [0.012, 0.009], Some(7.25)));
+        let b = named("nominal", row(0.2731, 0.5, [0.0057, 0.0099], None));
+        let c = named("drop5%", row(f64::NAN, f64::NAN, [f64::NAN; 2], None));
+        let dir = std::env::temp_dir().join(format!("walker-sweep-rows-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p1 = dir.join("one.csv");
+        let p2 = dir.join("two.csv");
+        write_rows(&p1, &[a.clone(), c.clone()]).unwrap();
+        write_rows(&p2, std::slice::from_ref(&b)).unwrap();
+        let back1 = read_rows(&p1).unwrap();
+        assert_eq!(back1[0], a);
+        assert!(back1[1].figures.walked.is_nan() && back1[1].true_err[1].mean.is_nan());
+        assert_eq!(back1[1].name, "drop5%");
+        let back2 = read_rows(&p2).unwrap();
+        let (rows, missing) = merge(vec![back1.clone(), back2.clone()]).unwrap();
+        let names: Vec<_> = rows.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, ["nominal", "mass+10", "drop5%"]);
+        assert_eq!(missing.len(), cases().len() - 3);
+        assert!(!missing.contains(&"nominal"));
+        assert!(merge(vec![back2.clone(), back2]).is_err());
+        assert!(merge(vec![vec![named("nope", b)]]).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
