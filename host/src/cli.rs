@@ -426,6 +426,10 @@ pub struct SweepArgs {
     /// Output folder (sweep.md, rows.csv, one folder per case).
     #[arg(long, value_name = "DIR", default_value = "out/sweep")]
     pub out: PathBuf,
+    /// The robot family walked: the reference robot's (11 cases) or the servos a robot of this
+    /// class really has (16 cases: stall torque, speed, gains, supply, masses, friction, latency).
+    #[arg(long, value_enum, default_value_t = crate::sweep::Family::Reference)]
+    pub family: crate::sweep::Family,
     /// Walks at a time (each a QEMU process and a simulator thread).
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
     pub jobs: u16,
@@ -1442,16 +1446,18 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
     use crate::sweep::{self, goal, Shard};
     let out = a.out;
     if !a.merge.is_empty() {
-        return merge_sweep(&out, &a.merge);
+        return merge_sweep(&out, a.family, &a.merge);
     }
     let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
     let shard = a.shard.unwrap_or(Shard::ALL);
-    let n = (0..sweep::cases().len()).filter(|&i| shard.has(i)).count();
+    let n = (0..a.family.cases().len())
+        .filter(|&i| shard.has(i))
+        .count();
     eprintln!(
         "walker sweep: {plan_name}, {n} firmware-in-the-loop walks (shard {}/{}), {} at a time",
         shard.index, shard.count, a.jobs
     );
-    let rows = sweep::run(&opts, shard, usize::from(a.jobs), |k, n, name| {
+    let rows = sweep::run(&opts, a.family, shard, usize::from(a.jobs), |k, n, name| {
         eprintln!("  [{k}/{n}] walking {name} …")
     })?;
     std::fs::create_dir_all(&out)
@@ -1483,19 +1489,23 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
 }
 
 /// `walker sweep --merge DIR…`: the table of the shards' rows.
-fn merge_sweep(out: &std::path::Path, dirs: &[PathBuf]) -> Result<(), CliError> {
+fn merge_sweep(
+    out: &std::path::Path,
+    family: crate::sweep::Family,
+    dirs: &[PathBuf],
+) -> Result<(), CliError> {
     use crate::sweep;
     let parts = dirs
         .iter()
         .map(|d| sweep::read_rows(&d.join("rows.csv")))
         .collect::<Result<Vec<_>, _>>()
         .map_err(CliError::failed)?;
-    let (rows, missing) = sweep::merge(parts).map_err(CliError::failed)?;
+    let (rows, missing) = sweep::merge(family, parts).map_err(CliError::failed)?;
     if !missing.is_empty() {
         eprintln!(
             "walker sweep --merge: no shard ran {} of {} cases: {}",
             missing.len(),
-            sweep::cases().len(),
+            family.cases().len(),
             missing.join(", ")
         );
     }

@@ -57,6 +57,103 @@ pub struct SweepCase {
     pub apply: fn(&mut SimConfig),
 }
 
+/// The families a sweep walks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Family {
+    /// The reference robot's family: the nominal run and ten perturbations ([`cases`]).
+    Reference,
+    /// The servos a robot of this class really has ([`servo_cases`]): stall torque 2.5 – 5.0
+    /// N·m, no-load speed 2.5 – 4.8 rad/s (and a weak servo, 3.0 N·m / 2.8 rad/s), drive gains
+    /// × 0.6 – 1.4, supply 10.5 – 12.6 V, link masses ± 15 %, floor friction 0.4, sensor
+    /// latency 10 ms.
+    Servos,
+}
+
+impl Family {
+    /// The family's cases, in table order (the nominal run first).
+    pub fn cases(self) -> Vec<SweepCase> {
+        match self {
+            Family::Reference => cases().to_vec(),
+            Family::Servos => servo_cases().to_vec(),
+        }
+    }
+}
+
+/// The servo family: the nominal run and one servo, supply, body or floor change per case, to
+/// the ends of the ranges a robot of this class meets (a 3S battery near empty, a warm motor, a
+/// different servo model). Gear backlash and Present Position latency are not modelled by the
+/// simulator and not in it.
+pub fn servo_cases() -> [SweepCase; 16] {
+    fn c(name: &'static str, what: &'static str, apply: fn(&mut SimConfig)) -> SweepCase {
+        SweepCase { name, what, apply }
+    }
+    [
+        c("nominal", "XM430-W350, reference robot, friction 1", |_| {}),
+        c("stall2.5", "servo stall torque 2.5 N·m", |s| {
+            s.xservo.stall_torque = 2.5
+        }),
+        c("stall5.0", "servo stall torque 5.0 N·m", |s| {
+            s.xservo.stall_torque = 5.0
+        }),
+        c("speed2.5", "servo no-load speed 2.5 rad/s", |s| {
+            s.xservo.no_load_speed = 2.5
+        }),
+        c("speed4.8", "servo no-load speed 4.8 rad/s", |s| {
+            s.xservo.no_load_speed = 4.8
+        }),
+        c(
+            "weak3.0/2.8",
+            "servo 3.0 N·m stall, 2.8 rad/s no-load",
+            |s| {
+                s.xservo.stall_torque = 3.0;
+                s.xservo.no_load_speed = 2.8;
+            },
+        ),
+        c("gains×0.6", "servo gains × 0.6", |s| {
+            s.xservo.gain_scale *= 0.6
+        }),
+        c("gains×1.4", "servo gains × 1.4", |s| {
+            s.xservo.gain_scale *= 1.4
+        }),
+        c("supply10.5V", "servo supply 10.5 V", |s| {
+            s.xservo.supply_voltage = 10.5
+        }),
+        c("supply12.6V", "servo supply 12.6 V", |s| {
+            s.xservo.supply_voltage = 12.6
+        }),
+        c("mass-15", "link masses × 0.85", |s| {
+            s.env.mass_scale *= 0.85
+        }),
+        c("mass+15", "link masses × 1.15", |s| {
+            s.env.mass_scale *= 1.15
+        }),
+        c("friction0.4", "floor friction 0.4", |s| {
+            s.env.floor_friction = 0.4
+        }),
+        c("latency+10ms", "sensor latency + 10 ms", |s| {
+            s.noise.latency_us += 10_000
+        }),
+        c(
+            "weak+supply10.5V",
+            "weak servo (3.0 N·m, 2.8 rad/s) at 10.5 V",
+            |s| {
+                s.xservo.stall_torque = 3.0;
+                s.xservo.no_load_speed = 2.8;
+                s.xservo.supply_voltage = 10.5;
+            },
+        ),
+        c(
+            "weak+gains×0.6",
+            "weak servo (3.0 N·m, 2.8 rad/s), gains × 0.6",
+            |s| {
+                s.xservo.stall_torque = 3.0;
+                s.xservo.no_load_speed = 2.8;
+                s.xservo.gain_scale *= 0.6;
+            },
+        ),
+    ]
+}
+
 /// The nominal run and the ten perturbations, in table order.
 pub fn cases() -> [SweepCase; 11] {
     fn c(name: &'static str, what: &'static str, apply: fn(&mut SimConfig)) -> SweepCase {
@@ -224,8 +321,11 @@ pub fn read_rows(path: &Path) -> Result<Vec<SweepRow>, String> {
 
 /// The shards' rows in table order: every case once (a case twice or unknown is an error; the
 /// cases no shard ran are returned by name).
-pub fn merge(parts: Vec<Vec<SweepRow>>) -> Result<(Vec<SweepRow>, Vec<&'static str>), String> {
-    let order = cases();
+pub fn merge(
+    family: Family,
+    parts: Vec<Vec<SweepRow>>,
+) -> Result<(Vec<SweepRow>, Vec<&'static str>), String> {
+    let order = family.cases();
     let mut slots: Vec<Option<SweepRow>> = vec![None; order.len()];
     for row in parts.into_iter().flatten() {
         let i = order
@@ -277,6 +377,7 @@ impl SweepRow {
 /// `progress(k, n, name)` as the k-th of the n runs starts.
 pub fn run(
     opts: &FilOptions,
+    family: Family,
     shard: Shard,
     jobs: usize,
     progress: impl Fn(usize, usize, &str) + Sync,
@@ -288,7 +389,8 @@ pub fn run(
     let mut tokens = fil::firmware_tokens(&opts.spec)?;
     tokens.extend(opts.extra_tokens.iter().cloned());
     let cfg = beyond::firmware_config(&tokens)?;
-    let mine: Vec<SweepCase> = cases()
+    let mine: Vec<SweepCase> = family
+        .cases()
         .into_iter()
         .enumerate()
         .filter(|(i, _)| shard.has(*i))
@@ -381,6 +483,51 @@ pub fn table(rows: &[SweepRow]) -> String {
 mod tests {
     use super::*;
     use crate::beyond::AxisError;
+
+    /// The servo family: names unique, the nominal run first and unchanged, every other case
+    /// changes the simulated robot, within the ranges, and validates.
+    #[test]
+    fn the_servo_family_stays_in_its_ranges() {
+        let nominal = SimConfig::default();
+        let cs = servo_cases();
+        assert_eq!(cs[0].name, "nominal");
+        let mut names: Vec<_> = cs.iter().map(|c| c.name).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), cs.len());
+        for c in cs.iter().skip(1) {
+            let mut s = nominal.clone();
+            (c.apply)(&mut s);
+            let x = &s.xservo;
+            assert!(
+                format!("{s:?}") != format!("{nominal:?}"),
+                "{} changes nothing",
+                c.name
+            );
+            assert!((2.5..=5.0).contains(&x.stall_torque), "{}", c.name);
+            assert!((2.5..=4.82).contains(&x.no_load_speed), "{}", c.name);
+            assert!(
+                (0.6 - 1e-9..=1.4 + 1e-9).contains(&x.gain_scale),
+                "{}",
+                c.name
+            );
+            assert!((10.5..=12.6).contains(&x.supply_voltage), "{}", c.name);
+            assert!(
+                (0.85 - 1e-9..=1.15 + 1e-9).contains(&s.env.mass_scale),
+                "{}",
+                c.name
+            );
+            assert!((0.4..=1.0).contains(&s.env.floor_friction), "{}", c.name);
+            assert!(
+                s.noise.latency_us <= nominal.noise.latency_us + 10_000,
+                "{}",
+                c.name
+            );
+            s.validate().unwrap_or_else(|e| panic!("{}: {e}", c.name));
+        }
+        assert_eq!(Family::Servos.cases().len(), cs.len());
+        assert_eq!(Family::Reference.cases().len(), cases().len());
+    }
 
     /// Every case changes the nominal simulator, and only in the knob it names.
     #[test]
@@ -486,13 +633,13 @@ mod tests {
         assert!(back1[1].figures.walked.is_nan() && back1[1].true_err[1].mean.is_nan());
         assert_eq!(back1[1].name, "drop5%");
         let back2 = read_rows(&p2).unwrap();
-        let (rows, missing) = merge(vec![back1.clone(), back2.clone()]).unwrap();
+        let (rows, missing) = merge(Family::Reference, vec![back1.clone(), back2.clone()]).unwrap();
         let names: Vec<_> = rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(names, ["nominal", "mass+10", "drop5%"]);
         assert_eq!(missing.len(), cases().len() - 3);
         assert!(!missing.contains(&"nominal"));
-        assert!(merge(vec![back2.clone(), back2]).is_err());
-        assert!(merge(vec![vec![named("nope", b)]]).is_err());
+        assert!(merge(Family::Reference, vec![back2.clone(), back2]).is_err());
+        assert!(merge(Family::Reference, vec![vec![named("nope", b)]]).is_err());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
