@@ -10,6 +10,8 @@
 #                              = the README's first row, the whole table = the robustness sweep)
 #   out/results/paper-timing/  walker sweep --plan plans/table2.toml --firmware-args feasibility=off
 #   out/results/paper-open/    walker sweep --plan plans/table2-paper.toml (the paper's open loop)
+#   out/results/servos/        walker sweep --family servos --plan plans/table2.toml
+#   out/results/servos-open/   walker sweep --family servos --plan plans/table2-paper.toml
 #   out/results/ablation/      walker beyond --ablation --plan plans/table2.toml
 #   out/results/pushes/        walker pushes --plan plans/table2.toml
 # Each sweep row is scored as `walker sweep` does: distance, heading drift and tilt from the
@@ -38,9 +40,12 @@ if [ "${SKIP_WALKS:-0}" != 1 ]; then
         echo "== $dir: walker $*"
         "$walker" "$@" --out "$out/$dir" || echo "   (walker exited with $?; its report is kept)"
     }
-    walk default sweep --plan plans/table2.toml
-    walk paper-timing sweep --plan plans/table2.toml --firmware-args "feasibility=off"
-    walk paper-open sweep --plan plans/table2-paper.toml
+    jobs=$(nproc 2>/dev/null || echo 1)
+    walk default sweep --plan plans/table2.toml --jobs "$jobs"
+    walk paper-timing sweep --plan plans/table2.toml --firmware-args "feasibility=off" --jobs "$jobs"
+    walk paper-open sweep --plan plans/table2-paper.toml --jobs "$jobs"
+    walk servos sweep --family servos --plan plans/table2.toml --jobs "$jobs"
+    walk servos-open sweep --family servos --plan plans/table2-paper.toml --jobs "$jobs"
     walk ablation beyond --ablation --plan plans/table2.toml
     walk pushes pushes --plan plans/table2.toml
 fi
@@ -136,6 +141,12 @@ no fall, ≥ 95 % of the planned distance, heading drift < 3°, true mean |e| < 
 {section("The paper's open loop across the family",
          "`walker sweep --plan plans/table2-paper.toml` (TLIPFM, the paper's timing, every feedback and feed-forward off, the servos' factory gains).",
          "paper-open", "sweep.md")}
+{section("The servo family (the firmware's defaults)",
+         "`walker sweep --family servos --plan plans/table2.toml`: the servos a robot of this class really has, one change per row (stall torque, no-load speed, drive gains, supply, masses, friction, latency; `host/src/sweep.rs` `servo_cases`).",
+         "servos", "sweep.md")}
+{section("The servo family, the paper's open loop",
+         "`walker sweep --family servos --plan plans/table2-paper.toml`: the same family walked open loop, the baseline the defaults must never fall behind in distance.",
+         "servos-open", "sweep.md")}
 {section("The closed loop, one part at a time",
          "`walker beyond --ablation --plan plans/table2.toml` (the stretched timing): the three models open loop, then TLIPFM with one part added per row; the row marked (default) is the firmware's default configuration. Distance here is the pelvis's travel between the first and the last gait sample the firmware commanded.",
          "ablation", "beyond.md")}
