@@ -6,9 +6,10 @@
 #                                 full-walk suite (`slow` below)
 #   bash scripts/test.sh --full   every check and every walk (CI: .ci/run)
 #
-# Host tools and the firmware-in-the-loop tests run in the dev profile the host tests build
-# (the release profile, fat LTO, is the firmware's: a second build of the host crates in it
-# took ≈ 10 minutes on 2 cores). CARGO_TARGET_DIR is honoured.
+# Host tools and the firmware-in-the-loop tests run in the dev profile the host tests build,
+# with the same --workspace feature set (the release profile, fat LTO, is the firmware's: a
+# second build of the host crates in it took ≈ 10 minutes on 2 cores). CARGO_TARGET_DIR is
+# honoured.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 full=0
@@ -123,8 +124,9 @@ if [ "$code" != 2 ]; then
 fi
 
 step "the official ROBOTIS dynamixel-sdk (PyPI) reads and writes every simulated device"
-# The dev-profile `walker` the host tests built (a no-op build here).
-cargo build --target host-tuple -p walker-host --bin walker
+# The dev-profile `walker` that `cargo test --workspace` built above (for host/tests/cli.rs). No
+# cargo call for it here: `-p walker-host` alone unifies the dependencies' features differently
+# and would build them again.
 bash scripts/sdk-test.sh "$host_bin/walker"
 
 step "the official dynamixel-sdk drives the firmware's command port in a firmware-in-the-loop run (walk, read status, stop; bad commands rejected with error statuses; README's example script)"
@@ -158,6 +160,6 @@ step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism,
 WALKER_QEMU_ELF="$target/thumbv7em-none-eabihf/release/qemu" \
 WALKER_QEMU_FIXED_ELF="$target/thumbv7em-none-eabihf/release/qemu-fixed" \
 WALKER_QEMU_M3_ELF="$target/thumbv7m-none-eabi/release-m3/qemu" \
-    cargo test --target host-tuple -p walker-host --test fil -- "${fil_args[@]}"
+    cargo test --target host-tuple --workspace --test fil -- "${fil_args[@]}"
 
 printf '\n(%ds)\nall checks passed in %dm%02ds\n' $((SECONDS - last)) $((SECONDS / 60)) $((SECONDS % 60))
