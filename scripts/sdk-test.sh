@@ -64,8 +64,13 @@ else
     echo '*' >"$VENV/.gitignore"
 fi
 
+# pip only when a pinned version is missing (a no-op pip install costs seconds on every run).
+installed='import importlib.metadata as m, sys
+sys.exit(any(m.version(n) != v for n, v in (a.split("==") for a in sys.argv[1:])))'
 if [[ "${py[0]}" == "$VENV/bin/python" ]]; then
-    "${py[@]}" -m pip install --quiet --disable-pip-version-check "${PACKAGES[@]}"
+    if ! "${py[@]}" -c "$installed" "${PACKAGES[@]}" >/dev/null 2>&1; then
+        "${py[@]}" -m pip install --quiet --disable-pip-version-check "${PACKAGES[@]}"
+    fi
 elif ! "${py[@]}" -c 'import dynamixel_sdk, serial' >/dev/null 2>&1; then
     "$PYTHON" -m pip install --quiet --disable-pip-version-check --upgrade \
         --target "$VENV/site-packages" "${PACKAGES[@]}"

@@ -1,11 +1,34 @@
 #!/usr/bin/env bash
 # Runs every check of the project: format, clippy (host and target), host tests, firmware builds
-# for both boards, on-target tests in QEMU and a short firmware-in-the-loop walk.
+# for both boards, on-target tests in QEMU and the firmware-in-the-loop walks.
+#
+#   bash scripts/test.sh          every check; of the firmware-in-the-loop walks, all but the slow
+#                                 full-walk suite (`slow` below)
+#   bash scripts/test.sh --full   every check and every walk (CI: .ci/run)
+#
+# Host tools and the firmware-in-the-loop tests run in the dev profile the host tests build,
+# with the same --workspace feature set (the release profile, fat LTO, is the firmware's: a
+# second build of the host crates in it took ≈ 10 minutes on 2 cores). CARGO_TARGET_DIR is
+# honoured.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
+full=0
+for a in "$@"; do
+    case $a in
+        --full) full=1 ;;
+        *) echo "usage: $0 [--full]" >&2; exit 2 ;;
+    esac
+done
 source scripts/setup.sh
+target=${CARGO_TARGET_DIR:-target}
+host_bin="$target/$(rustc -vV | sed -n 's/^host: //p')/debug"
 
-step() { printf '\n== %s\n' "$*"; }
+# Each step prints the wall time of the one before it, and the total at the end.
+last=$SECONDS
+step() {
+    printf '\n(%ds)\n== %s\n' $((SECONDS - last)) "$*"
+    last=$SECONDS
+}
 
 step "cargo fmt --check"
 cargo fmt --all --check
@@ -39,7 +62,7 @@ cargo clippy --release --no-deps --no-default-features --features board-opencr -
 # qemu-fixed for the firmware-in-the-loop test, then the default ELF is built.
 cargo clippy --release --no-deps --no-default-features --features board-qemu,fixed-gait --bins -- -D warnings
 cargo build --release --no-default-features --features board-qemu,fixed-gait --bin qemu
-cp target/thumbv7em-none-eabihf/release/qemu target/thumbv7em-none-eabihf/release/qemu-fixed
+cp "$target/thumbv7em-none-eabihf/release/qemu" "$target/thumbv7em-none-eabihf/release/qemu-fixed"
 cargo build --release --no-default-features --features board-qemu --bin qemu
 cargo build --release --no-default-features --features board-opencr --bin opencr
 # The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
@@ -52,22 +75,22 @@ cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
 
 step "firmware sizes: flash and static RAM of every board build (the FPU-less M3 board, OpenCM 9.04: ≤ 112 KiB flash, ≤ 16 KiB RAM)"
 python3 scripts/sizes.py \
-    target/thumbv7em-none-eabihf/release/qemu \
-    target/thumbv7em-none-eabihf/release/qemu-fixed \
-    target/thumbv7em-none-eabihf/release/opencr \
-    target/thumbv7m-none-eabi/release-m3/qemu \
-    --limit 112:16 target/thumbv7m-none-eabi/release-m3/opencm
+    "$target/thumbv7em-none-eabihf/release/qemu" \
+    "$target/thumbv7em-none-eabihf/release/qemu-fixed" \
+    "$target/thumbv7em-none-eabihf/release/opencr" \
+    "$target/thumbv7m-none-eabi/release-m3/qemu" \
+    --limit 112:16 "$target/thumbv7m-none-eabi/release-m3/opencm"
 # The limit check itself must be able to fail: the qemu ELF is far over 1 KiB of flash.
-if python3 scripts/sizes.py --limit 1:16 target/thumbv7em-none-eabihf/release/qemu >/dev/null; then
+if python3 scripts/sizes.py --limit 1:16 "$target/thumbv7em-none-eabihf/release/qemu" >/dev/null; then
     echo "scripts/sizes.py did not flag an ELF over its limit" >&2
     exit 1
 fi
 
 step "firmware RAM: the OpenCM 9.04's worst-case stack plus static RAM within its 20 KiB (call graph of the ELF)"
-python3 scripts/stack-depth.py --ram 20 --top 5 target/thumbv7m-none-eabi/release-m3/opencm
-python3 scripts/stack-depth.py --top 0 target/thumbv7em-none-eabihf/release/opencr
+python3 scripts/stack-depth.py --ram 20 --top 5 "$target/thumbv7m-none-eabi/release-m3/opencm"
+python3 scripts/stack-depth.py --top 0 "$target/thumbv7em-none-eabihf/release/opencr"
 # The check must be able to fail: no build fits 1 KiB.
-if python3 scripts/stack-depth.py --ram 1 --top 0 target/thumbv7m-none-eabi/release-m3/opencm >/dev/null; then
+if python3 scripts/stack-depth.py --ram 1 --top 0 "$target/thumbv7m-none-eabi/release-m3/opencm" >/dev/null; then
     echo "scripts/stack-depth.py did not flag a build over its RAM" >&2
     exit 1
 fi
@@ -78,7 +101,7 @@ CARGO_TARGET_THUMBV7EM_NONE_EABIHF_RUNNER=scripts/qemu-run.sh \
 
 step "firmware: boots in QEMU without a robot and reports every device missing (exit 11)"
 code=0
-scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --timeout 120 || code=$?
+scripts/qemu-run.sh "$target/thumbv7em-none-eabihf/release/qemu" --timeout 120 || code=$?
 if [ "$code" != 11 ]; then
     echo "expected exit code 11 (device missing at start-up), got $code" >&2
     exit 1
@@ -87,13 +110,13 @@ fi
 step "firmware: a command line over its 1024-byte semihosting buffer is refused (script: before QEMU; firmware: exit 2, not defaults)"
 long=$(printf 'stop_at=1 %.0s' $(seq 110))
 code=0
-scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --timeout 60 -append "$long" || code=$?
+scripts/qemu-run.sh "$target/thumbv7em-none-eabihf/release/qemu" --timeout 60 -append "$long" || code=$?
 if [ "$code" != 2 ]; then
     echo "qemu-run.sh: expected exit 2 for an over-long command line, got $code" >&2
     exit 1
 fi
 code=0
-scripts/qemu-run.sh target/thumbv7em-none-eabihf/release/qemu --raw --unchecked --timeout 60 \
+scripts/qemu-run.sh "$target/thumbv7em-none-eabihf/release/qemu" --raw --unchecked --timeout 60 \
     --log null -append "$long" >/dev/null || code=$?
 if [ "$code" != 2 ]; then
     echo "firmware: expected exit 2 (configuration rejected) for a refused command line, got $code" >&2
@@ -101,21 +124,42 @@ if [ "$code" != 2 ]; then
 fi
 
 step "the official ROBOTIS dynamixel-sdk (PyPI) reads and writes every simulated device"
-cargo build --release --target host-tuple -p walker-host --bin walker
-bash scripts/sdk-test.sh "target/$(rustc -vV | sed -n 's/^host: //p')/release/walker"
+# The dev-profile `walker` that `cargo test --workspace` built above (for host/tests/cli.rs). No
+# cargo call for it here: `-p walker-host` alone unifies the dependencies' features differently
+# and would build them again.
+bash scripts/sdk-test.sh "$host_bin/walker"
 
 step "the official dynamixel-sdk drives the firmware's command port in a firmware-in-the-loop run (walk, read status, stop; bad commands rejected with error statuses; README's example script)"
-bash scripts/sdk-test.sh --fil "target/$(rustc -vV | sed -n 's/^host: //p')/release/walker" \
-    target/thumbv7em-none-eabihf/release/qemu
+bash scripts/sdk-test.sh --fil "$host_bin/walker" "$target/thumbv7em-none-eabihf/release/qemu"
 
 step "video: MuJoCo renders a walk headless (EGL) into an MP4"
 render_py=$(bash scripts/render-setup.sh | tail -n 1)
 "$render_py" scripts/render_selftest.py
 
-step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism, faults, falls, a 14-step walk with its video, the Cortex-M3 fixed-point walk on mps2-an385, 1 kHz at 4.5 Mbps)"
-WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu \
-WALKER_QEMU_FIXED_ELF=target/thumbv7em-none-eabihf/release/qemu-fixed \
-WALKER_QEMU_M3_ELF=target/thumbv7m-none-eabi/release-m3/qemu \
-    cargo test --release --target host-tuple -p walker-host --test fil -- --ignored --test-threads 1
+# The firmware-in-the-loop walks (host/tests/fil.rs): each a QEMU process and a simulation in
+# lock-step on virtual time, so that their figures do not depend on the host's load; they run
+# side by side, WALKER_FIL_JOBS at a time (default: the cores), the longest first. `slow`: the
+# full-walk suite, run with --full (CI): the 1 kHz walks (five times the ticks of a 200 Hz one),
+# the M3 fixed-point Table 2 against the M7's, the Fourier CoM walks and the idealised goal
+# walks; the everyday walks cover the same firmware paths on shorter or fewer walks.
+slow=(
+    table2_at_1_khz_and_4_5_mbps_has_no_overrun_on_the_m7
+    table2_at_1_khz_and_4_5_mbps_has_no_overrun_on_the_m3_fixed_point
+    m3_fixed_point_walks_table2_and_agrees_with_the_m7_f32_walk
+    fourier_com_walks_on_the_mujoco_robot
+    compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_model
+)
+fil_args=(--ignored --test-threads 64)
+if [ "$full" = 1 ]; then
+    what="every walk"
+else
+    what="all but the slow full-walk suite (${#slow[@]} tests, run by: bash scripts/test.sh --full)"
+    for t in "${slow[@]}"; do fil_args+=(--skip "$t"); done
+fi
+step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism, faults, falls, pushes, a 14-step walk with its video, walking on command, the Cortex-M3 fixed-point walk on mps2-an385, 1 kHz at 4.5 Mbps): $what"
+WALKER_QEMU_ELF="$target/thumbv7em-none-eabihf/release/qemu" \
+WALKER_QEMU_FIXED_ELF="$target/thumbv7em-none-eabihf/release/qemu-fixed" \
+WALKER_QEMU_M3_ELF="$target/thumbv7m-none-eabi/release-m3/qemu" \
+    cargo test --target host-tuple --workspace --test fil -- "${fil_args[@]}"
 
-printf '\nall checks passed\n'
+printf '\n(%ds)\nall checks passed in %dm%02ds\n' $((SECONDS - last)) $((SECONDS / 60)) $((SECONDS % 60))

@@ -3,7 +3,13 @@
 //! These tests need QEMU and the firmware ELF, so they are `#[ignore]`d in a plain `cargo test`
 //! and run by `scripts/test.sh` after it has built the ELF:
 //! `WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu cargo test --release
-//!  --target host-tuple -p walker-host --test fil -- --ignored --test-threads 1`.
+//!  --target host-tuple -p walker-host --test fil -- --ignored --test-threads 64`.
+//!
+//! Each run is a QEMU process and a simulation in lock-step on virtual time (`-icount`, the
+//! firmware's virtual clock): how many run side by side changes their wall time, not one
+//! figure. At most `WALKER_FIL_JOBS` runs (default: the machine's cores) run at a time, the
+//! longest planned walk first ([`slot`]); the tests themselves may all start at once, and a
+//! test's independent runs run side by side ([`both`]).
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -14,6 +20,92 @@ use walker_host::fil::{run, FilOptions, FilResult, WalkFigures};
 use walker_host::planfile::WalkSpec;
 use walker_host::report::{decode_file, DecodedLog};
 use walker_host::sim::SimConfig;
+
+/// A place among the `WALKER_FIL_JOBS` firmware-in-the-loop runs allowed at a time (default:
+/// the machine's cores), held until dropped. Waiting runs are let in by their cost, the largest
+/// first (the longest walks start first, so that the short ones fill in at the end); the
+/// first places are handed out after a short gathering time, once the harness has started the
+/// other tests.
+fn slot(cost: u64) -> Slot {
+    use std::sync::OnceLock;
+    use std::time::Instant;
+    static SLOTS: OnceLock<(std::sync::Mutex<Slots>, std::sync::Condvar)> = OnceLock::new();
+    let (lock, cv) = SLOTS.get_or_init(|| {
+        let jobs = std::env::var("WALKER_FIL_JOBS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .filter(|&n: &usize| n > 0)
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let slots = Slots {
+            free: jobs,
+            waiting: Vec::new(),
+            tickets: 0,
+            open_at: Instant::now() + Duration::from_millis(300),
+        };
+        (std::sync::Mutex::new(slots), std::sync::Condvar::new())
+    });
+    let mut s = lock.lock().unwrap();
+    let ticket = (cost, u64::MAX - s.tickets);
+    s.tickets += 1;
+    s.waiting.push(ticket);
+    loop {
+        let now = Instant::now();
+        let first = s.waiting.iter().max() == Some(&ticket);
+        if s.free > 0 && first && now >= s.open_at {
+            s.free -= 1;
+            s.waiting.retain(|t| *t != ticket);
+            cv.notify_all();
+            return Slot { lock, cv };
+        }
+        let wait = s
+            .open_at
+            .saturating_duration_since(now)
+            .max(Duration::from_millis(50));
+        s = cv.wait_timeout(s, wait).unwrap().0;
+    }
+}
+
+struct Slots {
+    free: usize,
+    /// (cost, order of arrival reversed): the largest is let in next.
+    waiting: Vec<(u64, u64)>,
+    tickets: u64,
+    open_at: std::time::Instant,
+}
+
+struct Slot {
+    lock: &'static std::sync::Mutex<Slots>,
+    cv: &'static std::sync::Condvar,
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        if let Ok(mut s) = self.lock.lock() {
+            s.free += 1;
+        }
+        self.cv.notify_all();
+    }
+}
+
+/// A walk's cost for [`slot`]: its planned control ticks.
+fn cost(spec: &WalkSpec) -> u64 {
+    let secs = spec.steps.max(0) as f64 * spec.period + spec.lead_in + spec.lead_out;
+    (secs / spec.dt).max(0.0) as u64
+}
+
+/// Two independent firmware-in-the-loop runs side by side (each takes its own [`slot`]); a
+/// panic in either is raised again here, after both have ended.
+fn both<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+    std::thread::scope(|scope| {
+        let b = scope.spawn(b);
+        let a = std::panic::catch_unwind(std::panic::AssertUnwindSafe(a));
+        let b = b.join();
+        match (a, b) {
+            (Ok(a), Ok(b)) => (a, b),
+            (Err(p), _) | (_, Err(p)) => std::panic::resume_unwind(p),
+        }
+    })
+}
 
 fn elf() -> PathBuf {
     elf_at(
@@ -57,6 +149,7 @@ fn fil_on(
     sim: SimConfig,
     tokens: &[&str],
 ) -> (FilResult, DecodedLog) {
+    let _slot = slot(cost(&spec));
     let opts = FilOptions {
         elf,
         spec,
@@ -110,15 +203,19 @@ fn compute_time_follows_the_core_clock() {
     // OpenCR's 216 MHz a tick's compute is a small part of the 5 ms period: no overrun. At 3 MHz
     // it is longer than the period: every tick overruns and the supervisor stops the walk for an
     // overrun burst.
-    let (fast, log_fast) = fil("clock-216", short_walk(1), SimConfig::default(), &[]);
+    let ((fast, log_fast), (slow, log_slow)) = both(
+        || fil("clock-216", short_walk(1), SimConfig::default(), &[]),
+        || {
+            fil(
+                "clock-3",
+                short_walk(1),
+                SimConfig::default(),
+                &["core_mhz=3"],
+            )
+        },
+    );
     assert_eq!(fast.exit_code, Some(0));
     assert_eq!(log_fast.ticks.last().map(|t| t.overruns), Some(0));
-    let (slow, log_slow) = fil(
-        "clock-3",
-        short_walk(1),
-        SimConfig::default(),
-        &["core_mhz=3"],
-    );
     assert_ne!(slow.exit_code, Some(0));
     assert!(
         matches!(
@@ -135,8 +232,11 @@ fn compute_time_follows_the_core_clock() {
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn short_walk_completes_and_is_deterministic() {
     let spec = short_walk(4);
-    let (a, log_a) = fil("det-a", spec.clone(), seeded(7), &[]);
-    let (b, log_b) = fil("det-b", spec.clone(), seeded(7), &[]);
+    // Side by side: the lock-step runs do not depend on the host's load.
+    let ((a, log_a), (b, log_b)) = both(
+        || fil("det-a", spec.clone(), seeded(7), &[]),
+        || fil("det-b", spec.clone(), seeded(7), &[]),
+    );
     assert_eq!(a.exit_code, Some(0));
     assert_eq!(stop_reason(&log_a), Some(StopReason::PlanDone));
     assert_eq!(log_a.bad(), 0, "a clean run has no bad log frames");
@@ -390,11 +490,13 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_m
         Some(walker_host::sim::ServoTorque::XM430),
         "the default simulator has the torque limit"
     );
-    let mut scored = Vec::new();
-    for v in variants()
+    let vs: Vec<_> = variants()
         .into_iter()
         .filter(|v| v.name == "tlipfm" || v.name == "tlipfm-wb-fb")
-    {
+        .collect();
+    assert_eq!(vs.len(), 2);
+    // Each variant's walk and checks; the two walks side by side.
+    let walk = |v: &walker_host::beyond::Variant| {
         let spec = v.spec(&WalkSpec::default());
         let tokens = walker_host::fil::firmware_tokens(&spec).unwrap();
         let cfg = firmware_config(&tokens).unwrap();
@@ -418,7 +520,7 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_m
         );
         assert_eq!(r.exit_code, Some(0), "{}", v.name);
         assert_eq!(stop_reason(&log), Some(StopReason::PlanDone), "{}", v.name);
-        let m = score(&v, &cfg, &r.log, &r.truth, r.exit_code, None).unwrap();
+        let m = score(v, &cfg, &r.log, &r.truth, r.exit_code, None).unwrap();
         assert!(
             m.walking_ticks > 2000,
             "{}: {} walking ticks",
@@ -437,9 +539,10 @@ fn compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_m
             "{:?}",
             m.peak_torque
         );
-        scored.push(m);
-    }
-    let (plain, full) = (&scored[0], &scored[1]);
+        m
+    };
+    let scored = both(|| walk(&vs[0]), || walk(&vs[1]));
+    let (plain, full) = (&scored.0, &scored.1);
     assert!(
         meets_goal(full),
         "compensation + feedback: {:?}",
@@ -520,18 +623,22 @@ fn closed_loop_walk_survives_a_sagittal_push() {
     // robot fall.
     let sim = pushed("6:1.5:0");
     let spec = WalkSpec::default();
-    let (r, log) = fil(
-        "closed-loop-push",
-        spec.clone(),
-        sim.clone(),
-        &["feasibility=off"],
+    let ((r, log), (r_open, log_open)) = both(
+        || {
+            fil(
+                "closed-loop-push",
+                spec.clone(),
+                sim.clone(),
+                &["feasibility=off"],
+            )
+        },
+        || fil("open-loop-push", spec.clone(), sim.clone(), &open_loop()),
     );
     walked_the_plan(&r, &log, &spec);
     // Bounds: no target clamped to a joint limit, none non-finite (that stops with exit 15).
     assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
     // The same push open loop: the robot falls and the firmware says so.
-    let (r, log) = fil("open-loop-push", spec.clone(), sim, &open_loop());
-    assert_fell(&r, &log);
+    assert_fell(&r_open, &log_open);
 }
 
 #[test]
@@ -548,7 +655,17 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
     use walker_contract::record::FaultKind;
     let sim = pushed("5.9:1.6:180");
     let spec = WalkSpec::default();
-    let (r, log) = fil("catch-push", spec.clone(), sim.clone(), &[]);
+    let ((r, log), (r_off, log_off)) = both(
+        || fil("catch-push", spec.clone(), sim.clone(), &[]),
+        || {
+            fil(
+                "catch-push-off",
+                spec.clone(),
+                sim.clone(),
+                &["catch_gain=0"],
+            )
+        },
+    );
     // The plan completes without a fall; the push costs distance.
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
     assert_eq!(r.exit_code, Some(0), "{}", w.line());
@@ -571,8 +688,7 @@ fn the_catching_step_survives_a_backward_push_that_fells_the_robot_without_it() 
         "{catches:?}"
     );
     assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
-    let (r, log) = fil("catch-push-off", spec, sim, &["catch_gain=0"]);
-    assert_fell(&r, &log);
+    assert_fell(&r_off, &log_off);
 }
 
 #[test]
@@ -587,7 +703,17 @@ fn the_level_swing_sole_survives_the_backward_push_that_fells_the_robot_without_
     // (docs/beyond.md, "The swing sole kept level"). The clock hold (A11) is on in both runs.
     let sim = pushed("6:1.5:180");
     let spec = WalkSpec::default();
-    let (r, log) = fil("level-push", spec.clone(), sim.clone(), &[]);
+    let ((r, log), (r_off, log_off)) = both(
+        || fil("level-push", spec.clone(), sim.clone(), &[]),
+        || {
+            fil(
+                "level-push-off",
+                spec.clone(),
+                sim.clone(),
+                &["catch_level_pitch=0", "catch_level_roll=0"],
+            )
+        },
+    );
     // The push costs distance (the held clock waits for the caught foot).
     let w = walker_host::fil::walk_figures(&r.truth, &spec).unwrap();
     assert_eq!(r.exit_code, Some(0), "{}", w.line());
@@ -595,13 +721,7 @@ fn the_level_swing_sole_survives_the_backward_push_that_fells_the_robot_without_
     assert_eq!(w.fell_at, None, "{}", w.line());
     assert!(w.walked > 0.75 * w.planned, "{}", w.line());
     assert!(clamped_targets(&log).is_empty(), "{:?}", log.events);
-    let (r, log) = fil(
-        "level-push-off",
-        spec,
-        sim,
-        &["catch_level_pitch=0", "catch_level_roll=0"],
-    );
-    assert_fell(&r, &log);
+    assert_fell(&r_off, &log_off);
 }
 
 /// The firmware ELF built with `--features fixed-gait` (scripts/test.sh builds it and sets
@@ -645,13 +765,16 @@ fn fixed_point_path_walks_and_agrees_with_f32() {
             },
             extra_tokens: tokens.iter().map(|s| s.to_string()).collect(),
         };
+        let _slot = slot(cost(&opts.spec));
         let r = run(&opts, |_, _| {}).expect("firmware-in-the-loop run");
         let log = decode_file(&r.log).expect("log");
         (r, log)
     };
     let [c0, c1] = NO_COMPLIANCE;
-    let (rf, float) = run_with("math-f32", fixed_elf(), &["math=f32", NO_TAU, c0, c1]);
-    let (rx, fixed) = run_with("math-fixed", fixed_elf(), &["math=fixed", NO_TAU, c0, c1]);
+    let ((rf, float), (rx, fixed)) = both(
+        || run_with("math-f32", fixed_elf(), &["math=f32", NO_TAU, c0, c1]),
+        || run_with("math-fixed", fixed_elf(), &["math=fixed", NO_TAU, c0, c1]),
+    );
     assert_eq!(rf.exit_code, Some(0));
     assert_eq!(rx.exit_code, Some(0), "the fixed-point walk completes");
     assert_eq!(stop_reason(&fixed), Some(StopReason::PlanDone));
@@ -734,7 +857,14 @@ fn fourier_com_walks_on_the_mujoco_robot() {
         tokens.extend(extra.iter().map(|t| t.to_string()));
         firmware_config(&tokens).unwrap()
     };
-    let (r, log) = fil("fourier", spec.clone(), SimConfig::default(), &[NO_TAU]);
+    let one = WalkSpec {
+        fourier_terms: Some(1),
+        ..spec.clone()
+    };
+    let ((r, log), (r1, log1)) = both(
+        || fil("fourier", spec.clone(), SimConfig::default(), &[NO_TAU]),
+        || fil("fourier-1", one.clone(), SimConfig::default(), &[NO_TAU]),
+    );
     assert_eq!(r.exit_code, Some(0), "the Fourier walk completes");
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
     assert!(r.sim.fall_started_us.is_none());
@@ -759,11 +889,6 @@ fn fourier_com_walks_on_the_mujoco_robot() {
     );
     assert!(n > 1500 && gap < 5e-5, "gap {gap} m over {n} ticks");
 
-    let one = WalkSpec {
-        fourier_terms: Some(1),
-        ..spec.clone()
-    };
-    let (r1, log1) = fil("fourier-1", one.clone(), SimConfig::default(), &[NO_TAU]);
     assert_eq!(r1.exit_code, Some(0), "the one-term Fourier walk completes");
     let cfg1 = cfg_of(&one, &[NO_TAU]);
     let (gap1, n1) = commanded_com_gap(&log1, &cfg1);
@@ -811,19 +936,25 @@ fn logged_overruns(log: &DecodedLog) -> Option<u16> {
 fn m3_fixed_point_walks_table2_and_agrees_with_the_m7_f32_walk() {
     const NO_TAU: &str = "imu_cutoff=0.001";
     let spec = WalkSpec::default();
-    let (r7, f32_walk) = fil(
-        "m7-f32-table2",
-        spec.clone(),
-        SimConfig::default(),
-        &[NO_TAU],
-    );
-    let (r3, fixed_walk) = fil_on(
-        "m3-fixed-table2",
-        m3_elf(),
-        "mps2-an385",
-        spec.clone(),
-        SimConfig::default(),
-        &["math=fixed", "core_mhz=72", NO_TAU],
+    let ((r7, f32_walk), (r3, fixed_walk)) = both(
+        || {
+            fil(
+                "m7-f32-table2",
+                spec.clone(),
+                SimConfig::default(),
+                &[NO_TAU],
+            )
+        },
+        || {
+            fil_on(
+                "m3-fixed-table2",
+                m3_elf(),
+                "mps2-an385",
+                spec.clone(),
+                SimConfig::default(),
+                &["math=fixed", "core_mhz=72", NO_TAU],
+            )
+        },
     );
     let w7 = walker_host::fil::walk_figures(&r7.truth, &spec).unwrap();
     let w3 = walker_host::fil::walk_figures(&r3.truth, &spec).unwrap();
@@ -973,6 +1104,9 @@ fn command_script_run(
         sim: SimConfig::default(),
         extra_tokens: vec![],
     };
+    // Its cost for `slot`: the script's length in control ticks.
+    let secs = script.command.last().map_or(0.0, |c| c.t) + opts.spec.lead_out;
+    let _slot = slot((secs / opts.spec.dt) as u64);
     let (r, drove) = walker_host::fil::run_commands(&opts, &script, |_, _| {}).expect("run");
     let f = walker_host::fil::command_figures(&r, &opts.spec, &opts.extra_tokens).unwrap();
     (r, drove, script, f)
