@@ -1219,6 +1219,8 @@ pub enum ArgErrorKind {
     OutOfRange,
     /// A bare word other than `lockstep` (or the program name) where `key=value` is expected.
     StrayWord,
+    /// The key was given before on the same command line (the position is the second one's).
+    Repeated,
 }
 
 impl ArgErrorKind {
@@ -1229,6 +1231,7 @@ impl ArgErrorKind {
             ArgErrorKind::BadValue => "bad value",
             ArgErrorKind::OutOfRange => "out of range",
             ArgErrorKind::StrayWord => "not a key=value pair",
+            ArgErrorKind::Repeated => "given twice",
         }
     }
 }
@@ -1470,12 +1473,35 @@ fn error(kind: ArgErrorKind, key: &[u8], position: usize) -> ArgError {
     }
 }
 
+/// Which keys of [`PARAMS`] a command line has set (one bit per key index; 0xFF, unknown,
+/// never set).
+#[derive(Default)]
+struct Seen([u64; 4]);
+
+impl Seen {
+    /// Marks `index`; false when it was marked before.
+    fn first(&mut self, index: u8) -> bool {
+        let (word, bit) = (usize::from(index / 64), 1u64 << (index % 64));
+        match self.0.get_mut(word) {
+            Some(w) if *w & bit != 0 => false,
+            Some(w) => {
+                *w |= bit;
+                true
+            }
+            None => true,
+        }
+    }
+}
+
 /// Applies every `key=value` token of `cmdline` to `cfg` (see the module docs); stops at the
-/// first bad token. `cfg` may be partly updated when an error is returned.
+/// first bad token. A key given twice is refused ([`ArgErrorKind::Repeated`], at the second
+/// token): which of the two should win is the writer's to say. `cfg` may be partly updated
+/// when an error is returned.
 pub fn apply(cfg: &mut Config, cmdline: &[u8]) -> Result<(), ArgError> {
     let tokens = cmdline
         .split(|&b| b == b' ' || b == b'\t' || b == 0 || b == b'\n' || b == b'\r')
         .filter(|t| !t.is_empty());
+    let mut seen = Seen::default();
     for (pos, tok) in tokens.enumerate() {
         let Some(eq) = tok.iter().position(|&b| b == b'=') else {
             if tok == b"lockstep" || pos == 0 {
@@ -1488,6 +1514,10 @@ pub fn apply(cfg: &mut Config, cmdline: &[u8]) -> Result<(), ArgError> {
         let (Ok(k), Ok(v)) = (core::str::from_utf8(key), core::str::from_utf8(val)) else {
             return Err(error(ArgErrorKind::BadValue, key, pos));
         };
+        let index = key_index(k);
+        if index != UNKNOWN_KEY && !seen.first(index) {
+            return Err(error(ArgErrorKind::Repeated, key, pos));
+        }
         apply_one(cfg, k, v).map_err(|kind| error(kind, key, pos))?;
     }
     Ok(())
@@ -1915,6 +1945,53 @@ mod tests {
             on_disk == text,
             "docs/tuning.md facts are stale: WALKER_BLESS=1 cargo test --target host-tuple -p walker-contract"
         );
+    }
+
+    #[test]
+    fn a_repeated_key_is_refused_at_its_second_token() {
+        let e = parse("elf lockstep t1=0.1 dt=0.002 t1=0.12").unwrap_err();
+        assert_eq!(
+            (e.kind, e.key(), e.position),
+            (ArgErrorKind::Repeated, "t1", 4)
+        );
+        assert_eq!(
+            Some(usize::from(e.key_index)),
+            KEYS.iter().position(|k| *k == "t1")
+        );
+        assert_eq!(e.to_string(), "`t1`: given twice");
+        // The same value twice is refused too, and so is a word key.
+        let e = parse("elf stab=on stab=on").unwrap_err();
+        assert_eq!(
+            (e.kind, e.key(), e.position),
+            (ArgErrorKind::Repeated, "stab", 2)
+        );
+        // The last key of the table (the bit set's far end) and the first.
+        let last = KEYS[KEYS.len() - 1];
+        let first = KEYS[0];
+        let line = format!("elf {first}=lipm {last}=1 {first}=dlipm");
+        let e = parse(&line).unwrap_err();
+        assert_eq!(
+            (e.kind, e.key(), e.key_index),
+            (ArgErrorKind::Repeated, first, 0)
+        );
+        // Different keys are not repeats; an unknown key twice is an unknown key.
+        assert!(parse(&format!("elf {first}=lipm {last}=1")).is_ok());
+        let e = parse("elf stepz=1 stepz=2").unwrap_err();
+        assert_eq!(e.kind, ArgErrorKind::UnknownKey);
+        // Every key once: accepted.
+        let every: Vec<String> = PARAMS
+            .iter()
+            .filter_map(|p| {
+                let v = p.value(&Config::default())?;
+                let mut t = format!("{}=", p.key);
+                p.write_value(v, &mut t).ok()?;
+                Some(t)
+            })
+            .collect();
+        assert!(every.len() > 40);
+        assert_eq!(parse(&every.join(" ")).map(|_| ()), Ok(()));
+        let twice = format!("{} {}", every.join(" "), every[every.len() - 1]);
+        assert_eq!(parse(&twice).unwrap_err().kind, ArgErrorKind::Repeated);
     }
 
     #[test]

@@ -285,8 +285,9 @@ impl RunMetrics {
 /// The firmware configuration the tokens give (as the firmware parses them).
 pub fn firmware_config(tokens: &[String]) -> Result<Config, String> {
     let mut cfg = Config::default();
+    let (tokens, _) = fil::merge_tokens(tokens.to_vec());
     let line = tokens.join(" ");
-    params::apply(&mut cfg, line.as_bytes()).map_err(|e| fil::token_error(&e, tokens))?;
+    params::apply(&mut cfg, line.as_bytes()).map_err(|e| fil::token_error(&e, &tokens))?;
     Ok(cfg)
 }
 

@@ -242,11 +242,17 @@ pub fn capture(opts: &CaptureOptions) -> Result<(DecodedLog, CaptureEnd), String
     Ok((log, end))
 }
 
-/// Decodes a saved capture and writes its CSVs beside `out` (or beside the capture).
-pub fn from_file(input: &Path, out: Option<&Path>) -> Result<(DecodedLog, Vec<PathBuf>), String> {
+/// Decodes a saved capture and writes its CSVs beside `out` (or beside the capture); the
+/// reader's warnings. A capture that [`crate::report::check_log`] refuses (empty, garbage, no
+/// start-up or no tick record) is an error and nothing is written.
+pub fn from_file(
+    input: &Path,
+    out: Option<&Path>,
+) -> Result<(DecodedLog, Vec<PathBuf>, Vec<String>), String> {
     let bytes =
         std::fs::read(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
     let log = crate::report::decode_bytes(&bytes);
+    let warnings = crate::report::check_log(&log, input)?;
     let target = out.unwrap_or(input);
     create_parent(target)?;
     if let Some(o) = out {
@@ -255,5 +261,5 @@ pub fn from_file(input: &Path, out: Option<&Path>) -> Result<(DecodedLog, Vec<Pa
         }
     }
     let files = write_decoded(&log, target)?;
-    Ok((log, files))
+    Ok((log, files, warnings))
 }

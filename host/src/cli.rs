@@ -668,6 +668,9 @@ impl RunSetup {
         // The firmware's own parser, on the host, before QEMU starts.
         crate::fil::check_tokens(&spec, &extra_tokens)
             .map_err(|e| CliError::usage(format!("walker {cmd}: --firmware-args: {e}")))?;
+        for w in crate::fil::token_overrides(&spec, &extra_tokens) {
+            eprintln!("warning: walker {cmd}: --firmware-args: {w}");
+        }
         let elf = a.elf.or(file.0).unwrap_or_else(|| DEFAULT_ELF.into());
         let machine = a
             .machine
@@ -943,6 +946,9 @@ fn run_report(a: ReportArgs) -> Result<(), CliError> {
         plan_name,
     };
     let r = report::run(&opts, &Robot::reference())?;
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(m) = &mcap {
         let counts = crate::mcap_export::export_run(&opts, &r, &Robot::reference(), m)?;
         println!(
@@ -992,7 +998,19 @@ fn run_compare(a: CompareArgs) -> Result<(), CliError> {
             )));
         }
         let log = report::decode_file(path)?;
+        let warnings = report::check_walking(&log, path)
+            .map_err(|e| CliError::failed(format!("run {name}: {e}")))?;
+        for w in warnings {
+            eprintln!("warning: run {name}: {w}");
+        }
         let stats = report::error_stats(&report::tick_rows(&log.ticks));
+        if stats.x.count == 0 {
+            return Err(CliError::failed(format!(
+                "run {name}: the log {} has no tick with a valid measured ZMP ({} ticks): nothing to compare",
+                path.display(),
+                stats.ticks
+            )));
+        }
         results.push((name.clone(), log, stats));
     }
     let table = report::compare_table(&results);
@@ -1035,7 +1053,10 @@ fn run_capture(a: CaptureArgs) -> Result<(), CliError> {
         let mut name = raw.file_name().unwrap_or_default().to_os_string();
         name.push(".log");
         let text = raw.with_file_name(name);
-        let l = crate::defmt_log::decode_file(elf, raw, &text)?;
+        let (l, warnings) = crate::defmt_log::decode_checked_file(elf, raw, &text)?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
         println!("{}: {}", text.display(), l.summary());
         for w in l.warnings().take(20) {
             println!("  {}", w.text);
@@ -1068,7 +1089,10 @@ fn run_capture(a: CaptureArgs) -> Result<(), CliError> {
                     input.display()
                 )));
             }
-            let (log, files) = capture::from_file(&input, out.as_deref())?;
+            let (log, files, warnings) = capture::from_file(&input, out.as_deref())?;
+            for w in warnings {
+                eprintln!("warning: {w}");
+            }
             println!(
                 "wrote {}",
                 files
@@ -1094,6 +1118,20 @@ fn run_capture(a: CaptureArgs) -> Result<(), CliError> {
                 capture::csv_path(&out).display(),
                 capture::events_path(&out).display()
             );
+            // What was read is kept whatever it is; a capture that is no usable log fails.
+            match report::check_log(&log, &out) {
+                Ok(warnings) => {
+                    for w in warnings {
+                        eprintln!("warning: {w}");
+                    }
+                }
+                Err(e) => {
+                    return Err(CliError::failed(format!(
+                        "{e} (the bytes read are kept in {}; wrong baud rate or port?)",
+                        out.display()
+                    )))
+                }
+            }
             log
         }
     };
@@ -1382,15 +1420,13 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         Err(e) => eprintln!("  firmware log: not decoded: {e}"),
     }
     eprintln!("  wall clock {:.1} s", r.wall.as_secs_f64());
-    // The report's support bounds follow the timing the firmware adjusted at start-up.
-    let events = report::decode_file(&r.log)
-        .map(|l| l.events)
-        .unwrap_or_default();
+    // The report draws the plan with the timing the firmware adjusted at start-up (it reads
+    // the adjustments from the log).
     let ropts = report::ReportOptions {
         log: r.log.clone(),
         out_dir: out.join("report"),
         truth: Some(r.truth.clone()),
-        spec: crate::beyond::adjusted_spec(&spec, &events),
+        spec: spec.clone(),
         plan_name,
     };
     let rep = match report::run(&ropts, &Robot::reference()) {
@@ -1404,6 +1440,9 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         }
         Err(e) => return Err(e.into()),
     };
+    for w in &rep.warnings {
+        eprintln!("warning: {w}");
+    }
     println!(
         "{}: {} good records ({} ticks, {} events), {} bad",
         r.log.display(),

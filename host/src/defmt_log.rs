@@ -137,6 +137,55 @@ pub fn decode_file(elf: &Path, raw: &Path, out: &Path) -> Result<DefmtLog, Strin
     Ok(log)
 }
 
+/// Checks a decoded stream of `bytes` bytes from `raw` before its text is kept: refuses an
+/// empty stream, one in which no frame decodes with the ELF's table (random bytes, another
+/// build's ELF) and one with more malformed frames than decoded ones; warns of malformed
+/// frames and of a stream cut inside a frame.
+pub fn check(log: &DefmtLog, bytes: usize, raw: &Path) -> Result<Vec<String>, String> {
+    let name = raw.display();
+    if bytes == 0 {
+        return Err(format!("the defmt stream {name} is empty (0 bytes)"));
+    }
+    if log.lines.is_empty() || log.malformed > log.lines.len() {
+        return Err(format!(
+            "the defmt stream {name} does not decode with this ELF's table ({bytes} bytes: {} frames decoded, {} malformed): not this firmware's defmt output (another build's ELF?)",
+            log.lines.len(),
+            log.malformed
+        ));
+    }
+    let mut w = Vec::new();
+    if log.malformed > 0 {
+        w.push(format!(
+            "the defmt stream {name}: {} malformed frames skipped",
+            log.malformed
+        ));
+    }
+    if log.truncated {
+        w.push(format!(
+            "the defmt stream {name} ends inside a frame (cut after {} lines)",
+            log.lines.len()
+        ));
+    }
+    Ok(w)
+}
+
+/// [`decode_file`] that refuses what [`check`] refuses (nothing written then); the text log
+/// and the warnings.
+pub fn decode_checked_file(
+    elf: &Path,
+    raw: &Path,
+    out: &Path,
+) -> Result<(DefmtLog, Vec<String>), String> {
+    let elf_bytes =
+        std::fs::read(elf).map_err(|e| format!("cannot read the ELF {}: {e}", elf.display()))?;
+    let bytes = std::fs::read(raw)
+        .map_err(|e| format!("cannot read the defmt stream {}: {e}", raw.display()))?;
+    let log = decode(&elf_bytes, &bytes).map_err(|e| format!("{}: {e}", elf.display()))?;
+    let warnings = check(&log, bytes.len(), raw)?;
+    std::fs::write(out, log.text()).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+    Ok((log, warnings))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -228,6 +277,34 @@ mod tests {
             log.summary(),
             "3 defmt lines (1 warnings/errors), 1 malformed, cut at the end"
         );
+    }
+
+    #[test]
+    fn garbage_and_empty_streams_are_refused() {
+        let elf = elf("rzcobs", &ENTRIES);
+        let p = Path::new("x.defmt");
+        assert!(check(&decode(&elf, &[]).unwrap(), 0, p)
+            .unwrap_err()
+            .contains("is empty"));
+        // Random bytes (xorshift): nothing decodes, or far more malformed than decoded.
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let random: Vec<u8> = (0..4096)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x >> 24) as u8
+            })
+            .collect();
+        let log = decode(&elf, &random).unwrap();
+        let e = check(&log, random.len(), p).unwrap_err();
+        assert!(e.contains("does not decode with this ELF"), "{e}");
+        // A good stream cut inside a frame: kept, with a warning.
+        let mut raw = rz(&[1, 0, 42]);
+        raw.extend(&rzcobs::encode(&[1, 0, 7])[..2]);
+        let w = check(&decode(&elf, &raw).unwrap(), raw.len(), p).unwrap();
+        assert_eq!(w.len(), 1);
+        assert!(w[0].contains("ends inside a frame"), "{w:?}");
     }
 
     #[test]

@@ -88,13 +88,57 @@ pub fn firmware_tokens(spec: &WalkSpec) -> Result<Vec<String>, String> {
 }
 
 /// The firmware's command-line tokens of a run: `lockstep`, the plan's tokens, `autostart=1`
-/// (the plan walks at power-on; a command-script run appends `autostart=0`), then `extra`.
+/// (the plan walks at power-on; a command-script run appends `autostart=0`), then `extra`,
+/// each key once ([`merge_tokens`]: a later token replaces an earlier one of the same key, as
+/// the firmware refuses a key given twice).
 fn command_tokens(spec: &WalkSpec, extra: &[String]) -> Result<Vec<String>, String> {
     let mut t = vec!["lockstep".to_string()];
     t.extend(firmware_tokens(spec)?);
     t.push("autostart=1".to_string());
     t.extend(extra.iter().cloned());
-    Ok(t)
+    Ok(merge_tokens(t).0)
+}
+
+/// The key of a `key=value` token (`None` for a bare word).
+fn token_key(t: &str) -> Option<&str> {
+    t.split_once('=').map(|(k, _)| k)
+}
+
+/// `tokens` with each key once: a later `key=value` replaces an earlier one of the same key
+/// (in the earlier one's place); bare words are kept as they are. The firmware refuses a key
+/// given twice, so the host, which layers the plan's tokens, the command's and the user's,
+/// decides here; returns the replaced tokens as (earlier, winner) pairs.
+pub fn merge_tokens(tokens: Vec<String>) -> (Vec<String>, Vec<(String, String)>) {
+    let mut out: Vec<String> = Vec::with_capacity(tokens.len());
+    let mut replaced = Vec::new();
+    for t in tokens {
+        let slot = token_key(&t).and_then(|k| out.iter().position(|o| token_key(o) == Some(k)));
+        match slot {
+            Some(i) => {
+                if out[i] != t {
+                    replaced.push((std::mem::replace(&mut out[i], t.clone()), t));
+                }
+            }
+            None => out.push(t),
+        }
+    }
+    (out, replaced)
+}
+
+/// The user's tokens (`extra`) that replace one of the plan's: "`t1=0.2` replaces the plan's
+/// `t1=0.15`" lines, for a warning before a run.
+pub fn token_overrides(spec: &WalkSpec, extra: &[String]) -> Vec<String> {
+    let Ok(plan) = firmware_tokens(spec) else {
+        return Vec::new();
+    };
+    let mut all = plan;
+    all.push("autostart=1".to_string());
+    all.extend(extra.iter().cloned());
+    merge_tokens(all)
+        .1
+        .into_iter()
+        .map(|(old, new)| format!("`{new}` replaces `{old}` (the later token wins)"))
+        .collect()
 }
 
 /// The firmware's command line of a run (`lockstep`, the plan's tokens, then `extra`), checked
@@ -137,6 +181,10 @@ pub fn token_error(e: &walker_contract::params::ArgError, tokens: &[String]) -> 
             format!("`{token}`: {} (expected {domain})", e.kind.reason())
         }
         ArgErrorKind::StrayWord => format!("`{token}`: not a key=value pair"),
+        ArgErrorKind::Repeated => format!(
+            "`{token}`: the key `{}` is given twice (the firmware refuses repeated keys)",
+            e.key()
+        ),
     }
 }
 
@@ -738,6 +786,54 @@ pub fn planned_feet_travel(spec: &WalkSpec) -> Result<[f64; 2], String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn merged_tokens_keep_each_key_once_and_the_later_value() {
+        let t = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let (out, replaced) = merge_tokens(t(&[
+            "lockstep",
+            "t1=0.15",
+            "stab=off",
+            "autostart=1",
+            "t1=0.2",
+            "autostart=0",
+            "stab=off",
+        ]));
+        assert_eq!(out, t(&["lockstep", "t1=0.2", "stab=off", "autostart=0"]));
+        assert_eq!(
+            replaced,
+            vec![
+                ("t1=0.15".to_string(), "t1=0.2".to_string()),
+                ("autostart=1".to_string(), "autostart=0".to_string())
+            ]
+        );
+        // The merged line passes the firmware's parser, which refuses the unmerged one.
+        let spec = WalkSpec::default();
+        let extra = t(&["t1=0.14", "autostart=0"]);
+        let (tokens, cfg) = check_tokens(&spec, &extra).unwrap();
+        assert_eq!(tokens.iter().filter(|t| t.starts_with("t1=")).count(), 1);
+        assert_eq!(cfg.walk.t1, 0.14);
+        assert!(!cfg.autostart);
+        let mut raw = vec!["lockstep".to_string()];
+        raw.extend(firmware_tokens(&spec).unwrap());
+        raw.extend(extra.iter().cloned());
+        let e = walker_contract::params::apply(
+            &mut walker_contract::Config::default(),
+            raw.join(" ").as_bytes(),
+        )
+        .unwrap_err();
+        assert_eq!(e.kind, walker_contract::params::ArgErrorKind::Repeated);
+        assert!(
+            token_error(&e, &raw).contains("given twice"),
+            "{}",
+            token_error(&e, &raw)
+        );
+        let w = token_overrides(&spec, &extra);
+        assert!(
+            w.iter().any(|l| l.starts_with("`t1=0.14` replaces `t1=")),
+            "{w:?}"
+        );
+    }
 
     #[test]
     fn sole_figures_measure_the_travel_and_the_slip_of_a_loaded_sole() {

@@ -280,7 +280,7 @@ pub fn export_run(
     };
     let dt = crate::report::tick_period(&summary.log).clamp(0.001, 0.02);
     let targets =
-        crate::report::planned_joint_angles(&opts.spec, robot, dt, summary.alignment.offset);
+        crate::report::planned_joint_angles(&summary.spec, robot, dt, summary.alignment.offset);
     if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(d).map_err(|e| format!("cannot create {}: {e}", d.display()))?;
     }

@@ -27,8 +27,8 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use walker_contract::record::{
-    FaultState, LoggedPhase, Record, RecordDecoder, RecordDecoderStats, RecordError, TickRecord,
-    POS_NA, TAU_NA,
+    BoardId, FaultState, LoggedPhase, Record, RecordDecoder, RecordDecoderStats, RecordError,
+    StartupRecord, TickRecord, POS_NA, TAU_NA,
 };
 
 /// Rejections by cause.
@@ -270,19 +270,231 @@ pub fn write_response_csv(rows: &[TickRow], mut w: impl Write) -> std::io::Resul
     Ok(())
 }
 
-/// One event as text.
+/// One event as text: (seq, time µs, kind, detail in words: names, values with units).
 pub fn event_text(r: &Record) -> (u16, u32, &'static str, String) {
     match r {
-        // Debug of the whole record: robust to the record's fields evolving.
-        Record::Startup(s) => (s.seq, s.time_us, "startup", format!("{s:?}")),
-        Record::Stop(s) => (s.seq, s.time_us, "stop", format!("{:?}", s.reason)),
-        Record::Fault(f) => (
-            f.seq,
-            f.time_us,
-            "fault",
-            format!("{:?} id {} value {}", f.kind, f.id, f.value),
-        ),
+        Record::Startup(s) => (s.seq, s.time_us, "startup", startup_words(s)),
+        Record::Stop(s) => (s.seq, s.time_us, "stop", stop_words(&s.reason)),
+        Record::Fault(f) => (f.seq, f.time_us, "fault", fault_words(f)),
         Record::Tick(t) => (t.seq, t.time_us, "tick", String::new()),
+    }
+}
+
+fn board_name(b: BoardId) -> &'static str {
+    match b {
+        BoardId::Unknown => "unknown board",
+        BoardId::QemuMps2 => "QEMU mps2",
+        BoardId::OpenCr => "OpenCR 1.0",
+        BoardId::OpenCm => "OpenCM 9.04",
+    }
+}
+
+fn startup_words(s: &StartupRecord) -> String {
+    let period = f64::from(s.tick_period_us) * 1e-3;
+    let rate = if s.tick_period_us > 0 {
+        format!(" ({:.0} Hz)", 1e6 / f64::from(s.tick_period_us))
+    } else {
+        String::new()
+    };
+    let bus = if !s.probed {
+        format!("{} devices expected, bus not probed", s.device_count)
+    } else if s.missing.is_empty() {
+        format!("{} devices, all answered the probe", s.device_count)
+    } else {
+        let ids: Vec<String> = s.missing.iter().map(u8::to_string).collect();
+        format!("{} devices, missing ids {}", s.device_count, ids.join(", "))
+    };
+    format!(
+        "{}, firmware {}.{}.{}, control tick {period:.3} ms{rate}, servo bus {} baud, {bus}",
+        board_name(s.board),
+        s.fw[0],
+        s.fw[1],
+        s.fw[2],
+        s.bus_baud
+    )
+}
+
+/// A joint index 0..12 by name (`l_knee`), else the number.
+fn joint_word(j: u8) -> String {
+    JOINT_NAMES
+        .get(usize::from(j))
+        .map_or_else(|| format!("joint {j}"), |n| (*n).to_string())
+}
+
+fn stop_words(r: &walker_contract::StopReason) -> String {
+    use walker_contract::StopReason as S;
+    match *r {
+        S::DeviceMissing { id } => format!("device {id} did not answer the start-up probe"),
+        S::DeviceLost { id } => format!("device {id} lost (too many missed replies in a row)"),
+        S::Fall { tilt_mrad } => format!(
+            "fall: trunk tilted {:.1}° ({tilt_mrad} mrad), beyond the limit",
+            (f64::from(tilt_mrad) * 1e-3).to_degrees()
+        ),
+        S::OverrunBurst { count } => format!("{count} tick overruns in a row"),
+        S::NonFiniteTarget { joint } => {
+            format!("non-finite joint target ({})", joint_word(joint))
+        }
+        S::PlanDone => "plan done".into(),
+        S::Requested => "stop requested".into(),
+        S::NonFiniteSample { tick } => format!("non-finite gait sample at walk tick {tick}"),
+        S::SensorStale { id, age_ms } => {
+            format!("sensor {id} gave no plausible reply for {age_ms} ms")
+        }
+        S::ServoFault { id, check, reading } => {
+            use walker_contract::codes::ServoCheck as C;
+            let what = match check {
+                C::HardwareError => format!("hardware error status 0x{reading:02X}"),
+                C::Temperature => format!("temperature {reading} °C"),
+                C::VoltageLow => {
+                    format!("input voltage {:.1} V, too low", f64::from(reading) * 0.1)
+                }
+                C::VoltageHigh => {
+                    format!("input voltage {:.1} V, too high", f64::from(reading) * 0.1)
+                }
+                C::Current => format!("current {reading} mA"),
+            };
+            format!("servo {id} fault: {what}")
+        }
+        S::NotPowerOn { cause } => format!(
+            "reset other than power-on ({}): not walking without a command",
+            reset_word(cause)
+        ),
+    }
+}
+
+fn reset_word(c: walker_contract::codes::ResetCause) -> &'static str {
+    use walker_contract::codes::ResetCause as R;
+    match c {
+        R::PowerOn => "power-on",
+        R::BrownOut => "brown-out",
+        R::Watchdog => "watchdog",
+        R::Software => "software reset",
+        R::Pin => "reset pin",
+        R::LowPower => "low-power management",
+        R::Unknown => "unknown cause",
+    }
+}
+
+fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
+    use walker_contract::codes::{
+        CommandField, CrashCode, ResetCause, SensorRejection, StartupStep,
+    };
+    use walker_contract::FaultKind as K;
+    let (id, v) = (f.id, f.value);
+    match f.kind {
+        K::DeviceHolding => format!(
+            "device holding: device {id} missed its reply, last good value held ({v} ticks)"
+        ),
+        K::DeviceRecovered => {
+            format!("device recovered: device {id} answered again after {v} ticks held")
+        }
+        K::TargetClamped => format!(
+            "target clamped to its joint limit: first {}, joint mask 0x{v:03X}",
+            joint_word(id)
+        ),
+        K::ImuNonFinite => {
+            format!("IMU non-finite: sample replaced by the last good one ({v} so far)")
+        }
+        K::ConfigRejected => {
+            let key = match id {
+                0xFF => "an unknown key".to_string(),
+                0xFE => "the plan (gait-core refused it)".to_string(),
+                0xFD => "the command line (longer than the firmware's buffer)".to_string(),
+                i => walker_contract::params::KEYS
+                    .get(usize::from(i))
+                    .map_or_else(|| format!("key index {i}"), |k| format!("`{k}`")),
+            };
+            let value = match id {
+                0xFE => format!("gait-core error code {v}"),
+                0xFD => format!("buffer {v} bytes"),
+                _ => format!("token {v}"),
+            };
+            format!("configuration rejected: {key} ({value})")
+        }
+        K::StartupFailed => format!(
+            "start-up step failed: device {id}, step {}",
+            StartupStep::try_from(u8::try_from(v).unwrap_or(0))
+                .map_or_else(|_| format!("code {v}"), |s| format!("{s:?}"))
+        ),
+        K::TimingStretched => format!(
+            "step timing stretched ×{:.3} (t1, t2, T) for the servo speed limit, worst joint {}",
+            f64::from(v) * 1e-3,
+            joint_word(id)
+        ),
+        K::SwingLowered => format!(
+            "swing lowered to {:.1} mm for the servo speed limit, worst joint {}",
+            f64::from(v) * 1e-3,
+            joint_word(id)
+        ),
+        K::SpeedLimit => format!(
+            "servo speed limit exceeded: {} needs {:.2} rad/s",
+            joint_word(id),
+            f64::from(v) * 1e-3
+        ),
+        K::SensorRejected => format!(
+            "sensor reply rejected: device {id}, {}",
+            SensorRejection::try_from(u8::try_from(v).unwrap_or(0))
+                .map_or_else(|_| format!("code {v}"), |s| format!("{s:?}"))
+        ),
+        K::TorqueOffUnconfirmed => format!(
+            "torque off not confirmed: {v} servos (first: servo {id}); servo power cut anyway"
+        ),
+        K::ResetCause => format!(
+            "reset cause: {} (reset flags 0x{v:02X})",
+            ResetCause::try_from(id).map_or("unknown", reset_word)
+        ),
+        K::CrashRecord => format!(
+            "previous run ended by a {} at control tick {v}",
+            match CrashCode::try_from(id) {
+                Ok(CrashCode::Panic) => "panic".to_string(),
+                Ok(CrashCode::Watchdog) => "watchdog reset".to_string(),
+                Err(_) => format!("crash (code {id})"),
+            }
+        ),
+        K::CommandReceived => match CommandField::try_from(id) {
+            Ok(CommandField::Mode) => format!("command: mode {v}"),
+            Ok(CommandField::VelocityX) => format!("command: forward velocity {v} mm/s"),
+            Ok(CommandField::VelocityY) => format!("command: leftward velocity {v} mm/s"),
+            Ok(CommandField::YawRate) => format!("command: yaw rate {v} mrad/s"),
+            Err(_) => format!("command: field {id}, value {v}"),
+        },
+        K::Footstep => {
+            if id == 0 {
+                return format!(
+                    "footstep: online walk step period {:.3} s",
+                    f64::from(v) * 1e-6
+                );
+            }
+            let side = match id >> 4 {
+                1 => "left",
+                2 => "right",
+                _ => "?",
+            };
+            match id & 0xF {
+                0 => format!("footstep: {side} x {:.4} m", f64::from(v) * 1e-6),
+                1 => format!("footstep: {side} y {:.4} m", f64::from(v) * 1e-6),
+                2 => format!("footstep: {side} yaw {:.4} rad", f64::from(v) * 1e-6),
+                3 => format!(
+                    "footstep: heading hold correction {:.4} rad",
+                    f64::from(v) * 1e-6
+                ),
+                4 => format!("footstep: explicit step travel x {v} mm"),
+                5 => format!("footstep: explicit step travel y {v} mm"),
+                6 => format!("footstep: explicit step turn {v} mrad"),
+                c => format!("footstep: component {c}, value {v}"),
+            }
+        }
+        K::CatchStep => format!(
+            "catching step moved the {} foot's landing {} by up to {:.1} mm",
+            match id >> 4 {
+                1 => "left",
+                2 => "right",
+                _ => "?",
+            },
+            if id & 0xF == 0 { "forward" } else { "leftward" },
+            f64::from(v) * 1e-3
+        ),
+        K::Other(c) => format!("fault kind {c} (unknown to this reader): id {id}, value {v}"),
     }
 }
 
@@ -555,6 +767,14 @@ pub struct ReportSummary {
     pub alignment: Alignment,
     /// Files written.
     pub files: Vec<PathBuf>,
+    /// The plan as the firmware walked it (the options' plan with the logged start-up
+    /// adjustments): the plan drawn in the figures and the MCAP.
+    pub spec: WalkSpec,
+    /// What the reader warns of (a cut log, a partial truth file); also in report.md and
+    /// stats.json.
+    pub warnings: Vec<String>,
+    /// The start-up's plan adjustments, in words.
+    pub adjustments: Vec<String>,
 }
 
 /// A Table 3 style markdown table of one run.
@@ -890,9 +1110,11 @@ pub fn is_walking(p: LoggedPhase) -> bool {
     )
 }
 
-/// Refuses a log that cannot be reported on: nothing decodable (not a firmware log, or an
-/// empty file), or no tick record in a walking phase (the firmware never walked).
-pub fn check_walking(log: &DecodedLog, path: &Path) -> Result<(), String> {
+/// Checks a firmware log before any figure is drawn from it: refuses what is not a whole run
+/// (an empty file; nothing decodable, e.g. random bytes; no start-up record, i.e. not from
+/// the firmware's start; no tick record) with a one-line reason, and returns warnings for what
+/// is readable but incomplete: no stop record (the log was cut: where it ends is said).
+pub fn check_log(log: &DecodedLog, path: &Path) -> Result<Vec<String>, String> {
     let name = path.display();
     if log.bytes == 0 {
         return Err(format!(
@@ -906,31 +1128,111 @@ pub fn check_walking(log: &DecodedLog, path: &Path) -> Result<(), String> {
             log.bad()
         ));
     }
-    if !log.ticks.iter().any(|t| is_walking(t.phase)) {
-        let events: Vec<String> = log
-            .events
-            .iter()
-            .map(|e| {
-                let (_, _, kind, detail) = event_text(e);
-                format!("{kind} {detail}")
-            })
-            .collect();
+    if !log.events.iter().any(|e| matches!(e, Record::Startup(_))) {
         return Err(format!(
-            "the log {name} has no walking record ({} tick records, none in double or single support; {} events{}{}): the firmware did not walk",
+            "the log {name} has no start-up record ({} tick records, {} events): not a whole firmware run (a capture started after the firmware's start-up?)",
             log.ticks.len(),
-            log.events.len(),
-            if events.is_empty() { "" } else { ": " },
-            events.join("; ")
+            log.events.len()
         ));
     }
-    Ok(())
+    if log.ticks.is_empty() {
+        return Err(format!(
+            "the log {name} has no tick record ({} events: {}): the firmware stopped before its control loop",
+            log.events.len(),
+            events_line(&log.events)
+        ));
+    }
+    let mut warnings = Vec::new();
+    if !log.events.iter().any(|e| matches!(e, Record::Stop(_))) {
+        let rows = tick_rows(&log.ticks);
+        let (first, last) = match (rows.first(), rows.last()) {
+            (Some(a), Some(b)) => (a, b),
+            _ => return Ok(warnings),
+        };
+        warnings.push(format!(
+            "the log {name} has no stop record: it ends at t = {:.3} s (the log begins at {:.3} s), in {} ({}): cut mid-run? Everything after that is missing",
+            last.t,
+            first.t,
+            phase_name(last.rec.phase),
+            fault_name(last.rec.fault)
+        ));
+    }
+    Ok(warnings)
+}
+
+fn events_line(events: &[Record]) -> String {
+    events
+        .iter()
+        .map(|e| {
+            let (_, _, kind, detail) = event_text(e);
+            format!("{kind} {detail}")
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// Refuses a log that cannot be reported on ([`check_log`]), or one without a tick record in a
+/// walking phase (the firmware never walked); returns [`check_log`]'s warnings.
+pub fn check_walking(log: &DecodedLog, path: &Path) -> Result<Vec<String>, String> {
+    let warnings = check_log(log, path)?;
+    if !log.ticks.iter().any(|t| is_walking(t.phase)) {
+        return Err(format!(
+            "the log {} has no walking record ({} tick records, none in double or single support; {} events{}{}): the firmware did not walk",
+            path.display(),
+            log.ticks.len(),
+            log.events.len(),
+            if log.events.is_empty() { "" } else { ": " },
+            events_line(&log.events)
+        ));
+    }
+    Ok(warnings)
+}
+
+/// How much of the log's time span `[first tick, last tick]` the truth's time span covers:
+/// (share 0..=1, truth start, truth end, log start, log end).
+pub fn truth_coverage(rows: &[TickRow], truth: &TruthTable) -> (f64, f64, f64, f64, f64) {
+    let (l0, l1) = match (rows.first(), rows.last()) {
+        (Some(a), Some(b)) => (a.t, b.t),
+        _ => (0.0, 0.0),
+    };
+    let (t0, t1) = match (truth.t.first(), truth.t.last()) {
+        (Some(a), Some(b)) => (*a, *b),
+        _ => (f64::NAN, f64::NAN),
+    };
+    let overlap = (t1.min(l1) - t0.max(l0)).max(0.0);
+    let share = if l1 > l0 {
+        if overlap.is_finite() {
+            overlap / (l1 - l0)
+        } else {
+            0.0
+        }
+    } else {
+        f64::from(u8::from(t0 <= l0 && l0 <= t1))
+    };
+    (share, t0, t1, l0, l1)
+}
+
+/// A warning when the truth covers less than 99 % of the log's time, saying how much.
+pub fn truth_warning(rows: &[TickRow], truth: &TruthTable, path: &Path) -> Option<String> {
+    let (share, t0, t1, l0, l1) = truth_coverage(rows, truth);
+    (share < 0.99).then(|| {
+        format!(
+            "the truth file {} covers {:.0} % of the log (truth {t0:.3} s to {t1:.3} s, log {l0:.3} s to {l1:.3} s): the measured − true statistics and the truth figures cover only that part",
+            path.display(),
+            100.0 * share
+        )
+    })
 }
 
 /// Writes the whole report; returns what it found. A log that [`check_walking`] refuses is an
-/// error (nothing is written).
+/// error (nothing is written). The plan is drawn as the firmware walked it: with the start-up's
+/// logged adjustments (`TimingStretched`, `SwingLowered`: [`crate::beyond::adjusted_spec`],
+/// the firmware's own `gait_core::gait::stretched`), so `opts.spec` is the plan as configured.
 pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String> {
     let log = decode_file(&opts.log)?;
-    check_walking(&log, &opts.log)?;
+    let mut warnings = check_walking(&log, &opts.log)?;
+    let spec = crate::beyond::adjusted_spec(&opts.spec, &log.events);
+    let adjustments = adjustment_lines(&opts.spec, &spec);
     std::fs::create_dir_all(&opts.out_dir)
         .map_err(|e| format!("cannot create {}: {e}", opts.out_dir.display()))?;
     let rows = tick_rows(&log.ticks);
@@ -946,13 +1248,22 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
 
     // Support bounds from the same plan, sampled at the log's tick period.
     let dt = tick_period(&log).clamp(0.001, 0.02);
-    let bounds = support_bounds(&opts.spec, robot, dt)?;
+    let bounds = support_bounds(&spec, robot, dt)?;
     let alignment = align(&rows, bounds.walk_start);
 
     let truth = match &opts.truth {
         Some(p) => Some(read_truth(p)?),
         None => None,
     };
+    if let (Some(tr), Some(p)) = (&truth, &opts.truth) {
+        if tr.t.is_empty() {
+            return Err(format!("the truth file {} has no data row", p.display()));
+        }
+        warnings.extend(truth_warning(&rows, tr, p));
+    }
+    let outcome = truth
+        .as_ref()
+        .and_then(|tr| outcome_json(tr, &opts.spec).ok());
     let truth_stats = truth.as_ref().map(|tr| {
         let mut s = ZmpErrorStats::<f64>::new();
         for r in &rows {
@@ -974,7 +1285,7 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
     write_figure(&fig, &opts.out_dir, "zmp_response", &mut files)?;
     let mut figures = vec!["zmp_response"];
     if let Some(tr) = &truth {
-        let planned = planned_joint_speeds(&opts.spec, robot, dt, alignment.offset);
+        let planned = planned_joint_speeds(&spec, robot, dt, alignment.offset);
         let speeds = joint_figure(
             &format!("Joint speeds: plan vs simulated robot ({model})"),
             tr,
@@ -1011,6 +1322,18 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         "- plan: {} (model {model}) — used for the support-polygon bounds",
         opts.plan_name
     );
+    if adjustments.is_empty() {
+        let _ = writeln!(md, "- plan adjustments at start-up: none logged");
+    }
+    for a in &adjustments {
+        let _ = writeln!(
+            md,
+            "- plan adjustment at start-up, applied to the plan drawn here: {a}"
+        );
+    }
+    for w in &warnings {
+        let _ = writeln!(md, "- **warning**: {w}");
+    }
     let _ = writeln!(
         md,
         "- records: {} good ({} ticks, {} events), {} bad (COBS {}, CRC {}, type {}, length {}, field {}, overlong {}, unterminated at end {}), {} sequence gaps",
@@ -1087,6 +1410,9 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         },
         "zmp_error": stats_json(&stats),
         "truth_error": truth_stats.as_ref().map(stats_json),
+        "outcome": outcome,
+        "plan_adjustments": adjustments,
+        "warnings": warnings,
         "figures": figures,
     });
     let json = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())? + "\n";
@@ -1103,7 +1429,60 @@ pub fn run(opts: &ReportOptions, robot: &Robot) -> Result<ReportSummary, String>
         truth_stats,
         alignment,
         files,
+        spec,
+        warnings,
+        adjustments,
     })
+}
+
+/// The start-up's adjustments of the plan (`adjusted` against `configured`), in words.
+pub fn adjustment_lines(configured: &WalkSpec, adjusted: &WalkSpec) -> Vec<String> {
+    let mut out = Vec::new();
+    if adjusted.period != configured.period {
+        out.push(format!(
+            "step timing stretched ×{:.3} for the servo speed limit (t1 {:.3} → {:.3} s, t2 {:.3} → {:.3} s, T {:.3} → {:.3} s)",
+            adjusted.period / configured.period,
+            configured.t1,
+            adjusted.t1,
+            configured.t2,
+            adjusted.t2,
+            configured.period,
+            adjusted.period
+        ));
+    }
+    if adjusted.h_z != configured.h_z {
+        out.push(format!(
+            "swing lowered for the servo speed limit (h_z {:.4} → {:.4} m)",
+            configured.h_z, adjusted.h_z
+        ));
+    }
+    out
+}
+
+/// The walk's outcome in the physics (the simulator's truth): what `walker fil` prints as its
+/// "in the physics:" line ([`crate::fil::walk_figures_of`], [`crate::fil::sole_figures`]), as
+/// the `outcome` object of stats.json. An error when the truth lacks the columns.
+pub fn outcome_json(truth: &TruthTable, spec: &WalkSpec) -> Result<serde_json::Value, String> {
+    let w = crate::fil::walk_figures_of(truth, Path::new("truth"), spec)?;
+    let soles = crate::fil::planned_feet_travel(spec)
+        .ok()
+        .and_then(|p| crate::fil::sole_figures(truth, p));
+    Ok(serde_json::json!({
+        "fell": w.fell_at.is_some(),
+        "fell_at_s": w.fell_at.map_or(serde_json::Value::Null, json_num),
+        "walked_m": json_num(w.walked),
+        "planned_m": json_num(w.planned),
+        "walked_share": json_num(w.walked / w.planned),
+        "heading_drift_rad": json_num(w.heading_drift),
+        "max_tilt_rad": json_num(w.max_tilt),
+        "soles": soles.map(|f| serde_json::json!({
+            "left_travel_m": json_num(f.travel[0]),
+            "right_travel_m": json_num(f.travel[1]),
+            "left_planned_m": json_num(f.planned[0]),
+            "right_planned_m": json_num(f.planned[1]),
+            "max_slip_m": json_num(f.max_slip),
+        })),
+    }))
 }
 
 /// The tick period of a log, s: from its start-up record, else the median tick spacing,

@@ -451,7 +451,8 @@ fn usage_errors_exit_2() {
     }
     // A firmware command line over the firmware's 1024-byte semihosting buffer: refused
     // before QEMU starts (QEMU would hand the firmware no parameter at all).
-    let long = vec!["stop_at=1"; 110].join(" ");
+    // (One token with a long value: repeats of one key would be merged into one token.)
+    let long = format!("t1=0.15{}", "0".repeat(1100));
     assert!(long.len() > 1024);
     let out = walker(&["fil", "--firmware-args", &long]);
     assert_eq!(out.status.code(), Some(2));
@@ -578,23 +579,30 @@ fn firmware_args_are_checked_before_qemu_starts() {
     }
 }
 
-/// Three ticks with hand-picked errors (and one without a measured ZMP).
+/// A start-up record, three ticks with hand-picked errors (and one without a measured ZMP),
+/// a stop record.
 fn hand_log(scale: f32) -> Vec<u8> {
     let errs = [[0.001, 0.0], [-0.002, 0.004], [0.003, -0.004]];
     let mut bytes = vec![0u8];
+    bytes.extend(frame(&startup(999_000, 1000, true)));
     for (i, e) in errs.iter().enumerate() {
         let r = [0.01, -0.02];
         let m = [r[0] + e[0] * scale, r[1] + e[1] * scale];
         bytes.extend(frame(&tick(i as u16, r, Some(m), LoggedPhase::Double)));
     }
     bytes.extend(frame(&tick(3, [0.0, 0.0], None, LoggedPhase::Double)));
+    bytes.extend(frame(&Record::Stop(StopRecord {
+        seq: 4,
+        time_us: 1_004_000,
+        reason: StopReason::PlanDone,
+    })));
     bytes
 }
 
 #[test]
 fn statistics_match_a_hand_computed_case() {
     let log = report::decode_bytes(&hand_log(1.0));
-    assert_eq!((log.good(), log.bad()), (4, 0));
+    assert_eq!((log.good(), log.bad()), (6, 0));
     let st = report::error_stats(&report::tick_rows(&log.ticks));
     assert_eq!((st.ticks, st.skipped), (4, 1));
     let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
@@ -871,29 +879,53 @@ fn report_with_truth_file() {
     assert!(report::joint_figure("j", &tr, speed, "rad/s", None).is_none());
 }
 
-#[test]
-fn report_refuses_logs_without_a_walk() {
-    let dir = tmp("refuse");
-    // 5 KB of random bytes (xorshift, fixed seed): nothing decodes.
+/// 5 KB of random bytes (xorshift, fixed seed): nothing decodes.
+fn random_bytes() -> Vec<u8> {
     let mut x = 0x9E37_79B9_7F4A_7C15u64;
-    let random: Vec<u8> = (0..5 * 1024)
+    (0..5 * 1024)
         .map(|_| {
             x ^= x << 13;
             x ^= x >> 7;
             x ^= x << 17;
             (x >> 24) as u8
         })
-        .collect();
+        .collect()
+}
+
+/// Logs no reader may accept, each with the words its refusal must contain.
+fn unusable_logs() -> Vec<(&'static str, Vec<u8>, &'static str)> {
     // Only standing ticks: decodable, but the firmware never walked.
     let mut standing = vec![0u8];
-    for seq in 0..50u16 {
+    standing.extend(frame(&startup(0, 1000, true)));
+    for seq in 1..50u16 {
         standing.extend(frame(&tick(seq, [0.0, 0.0], None, LoggedPhase::Standing)));
     }
-    for (name, bytes, want) in [
-        ("random.log", random, "no firmware log record"),
+    // Walking ticks, but no start-up record (not the firmware's whole run).
+    let mut headless = vec![0u8];
+    for seq in 1..50u16 {
+        headless.extend(frame(&tick(
+            seq,
+            [0.0, 0.0],
+            Some([0.001, 0.0]),
+            LoggedPhase::Double,
+        )));
+    }
+    // A start-up record and nothing else.
+    let mut startup_only = vec![0u8];
+    startup_only.extend(frame(&startup(0, 1000, true)));
+    vec![
+        ("random.log", random_bytes(), "no firmware log record"),
         ("empty.log", Vec::new(), "is empty"),
         ("standing.log", standing, "no walking record"),
-    ] {
+        ("headless.log", headless, "no start-up record"),
+        ("startup-only.log", startup_only, "no tick record"),
+    ]
+}
+
+#[test]
+fn report_refuses_logs_without_a_walk() {
+    let dir = tmp("refuse");
+    for (name, bytes, want) in unusable_logs() {
         let path = dir.join(name);
         std::fs::write(&path, &bytes).unwrap();
         let out = dir.join(format!("{name}.report"));
@@ -901,11 +933,239 @@ fn report_refuses_logs_without_a_walk() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{name}: {err}");
         assert!(err.contains(want) && err.contains(name), "{name}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{name}: one line: {err}");
         assert!(
             !out.join("zmp_response.png").exists(),
             "{name}: plots written"
         );
     }
+}
+
+#[test]
+fn compare_refuses_what_report_refuses() {
+    let dir = tmp("compare-refuse");
+    let good = dir.join("good.log");
+    std::fs::write(&good, hand_log(1.0)).unwrap();
+    let mut cases = unusable_logs();
+    // Decodable and walking, but never a valid measured ZMP: it would rank best at 0.000.
+    let mut blind = vec![0u8];
+    blind.extend(frame(&startup(0, 1000, true)));
+    for seq in 1..20u16 {
+        blind.extend(frame(&tick(seq, [0.01, 0.0], None, LoggedPhase::Double)));
+    }
+    cases.push(("blind.log", blind, "no tick with a valid measured ZMP"));
+    for (name, bytes, want) in cases {
+        let path = dir.join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let out = dir.join(format!("{name}.md"));
+        let runs = format!("good={},bad={}", s(&good), s(&path));
+        let o = walker(&["compare", "--runs", &runs, "--out", s(&out)]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert!(
+            err.contains(want) && err.contains("run bad"),
+            "{name}: {err}"
+        );
+        assert!(
+            !stdout.contains("smallest first"),
+            "{name} ranked: {stdout}"
+        );
+        assert!(!out.exists(), "{name}: {} written", out.display());
+    }
+}
+
+#[test]
+fn capture_refuses_garbage_and_empty_captures() {
+    let dir = tmp("capture-refuse");
+    for (name, bytes, want) in unusable_logs() {
+        // capture decodes any log, walking or not: only the non-walking one passes.
+        if name == "standing.log" {
+            continue;
+        }
+        let path = dir.join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let out = dir.join(format!("out-{name}"));
+        let o = walker(&["capture", "--from-file", s(&path), "--out", s(&out)]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(want), "{name}: {err}");
+        assert!(
+            !dir.join(format!("out-{name}"))
+                .with_extension("csv")
+                .exists(),
+            "{name}"
+        );
+    }
+    // --defmt on random bytes and on an empty file: refused whatever ELF (here the firmware's
+    // own table is not needed: an ELF with no defmt table is refused too, so build the check
+    // on a real ELF only when there is one).
+    let elf = workspace().join("target/thumbv7em-none-eabihf/release/qemu");
+    if elf.is_file() {
+        for (name, bytes) in [
+            ("random.defmt", random_bytes()),
+            ("empty.defmt", Vec::new()),
+        ] {
+            let path = dir.join(name);
+            std::fs::write(&path, &bytes).unwrap();
+            let o = walker(&["capture", "--defmt", s(&path), "--elf", s(&elf)]);
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+            assert!(err.contains(name), "{name}: {err}");
+        }
+    }
+}
+
+/// The synthetic walk's log cut at half its bytes: every reader warns where it ends (no stop
+/// record) and goes on.
+#[test]
+fn readers_warn_of_a_log_cut_at_half() {
+    let dir = tmp("cut");
+    let (log, truth, _) = synthetic_walk(&dir);
+    let bytes = std::fs::read(&log).unwrap();
+    let cut = dir.join("cut.log");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let whole = report::decode_bytes(&bytes);
+    let half = report::decode_bytes(&bytes[..bytes.len() / 2]);
+    let end = report::tick_rows(&half.ticks).last().unwrap().t;
+    assert!(half.ticks.len() * 2 <= whole.ticks.len() + 2);
+    let want = format!("ends at t = {end:.3} s");
+    let check = |o: &Output, what: &str| {
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{what}: {err}");
+        assert!(
+            err.contains("warning:") && err.contains("no stop record") && err.contains(&want),
+            "{what}: {err}"
+        );
+    };
+    // report (with the whole truth: it covers the cut log, no truth warning).
+    let out = dir.join("report");
+    let o = walker(&[
+        "report",
+        "--log",
+        s(&cut),
+        "--truth",
+        s(&truth),
+        "--out",
+        s(&out),
+    ]);
+    check(&o, "report");
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("truth file"));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    assert!(
+        json["warnings"][0].as_str().unwrap().contains(&want),
+        "{json}"
+    );
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("**warning**") && md.contains(&want), "{md}");
+    // compare, against the whole log.
+    let runs = format!("whole={},cut={}", s(&log), s(&cut));
+    let o = walker(&["compare", "--runs", &runs, "--out", s(&dir.join("c.md"))]);
+    check(&o, "compare");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("run cut"));
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("run whole"));
+    // capture --from-file.
+    let o = walker(&[
+        "capture",
+        "--from-file",
+        s(&cut),
+        "--out",
+        s(&dir.join("cap.log")),
+    ]);
+    check(&o, "capture");
+    // The whole log: no warning at all.
+    let o = walker(&[
+        "report",
+        "--log",
+        s(&log),
+        "--truth",
+        s(&truth),
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success());
+    assert!(
+        !String::from_utf8_lossy(&o.stderr).contains("warning"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// A truth file that covers a fifth of the log: the report says how much.
+#[test]
+fn report_warns_of_a_partial_truth() {
+    let dir = tmp("partial-truth");
+    let (log, truth, _) = synthetic_walk(&dir);
+    let text = std::fs::read_to_string(&truth).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let keep = 1 + (lines.len() - 1) / 5;
+    let part = dir.join("part.csv");
+    std::fs::write(&part, lines[..keep].join("\n") + "\n").unwrap();
+    let o = walker(&[
+        "report",
+        "--log",
+        s(&log),
+        "--truth",
+        s(&part),
+        "--out",
+        s(&dir.join("report")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning: the truth file") && err.contains("covers 20 % of the log"),
+        "{err}"
+    );
+}
+
+/// A start-up `TimingStretched` record: the plan drawn (support bounds, MCAP joint targets) is
+/// the stretched one, and the report says so.
+#[test]
+fn report_draws_the_stretched_plan() {
+    let dir = tmp("stretch");
+    let (log, truth, _) = synthetic_walk(&dir);
+    let bytes = std::fs::read(&log).unwrap();
+    let head = 1 + frame(&startup(0, 5000, true)).len();
+    let mut stretched = bytes[..head].to_vec();
+    stretched.extend(frame(&Record::Fault(
+        walker_contract::record::FaultRecord {
+            seq: 0,
+            time_us: 0,
+            kind: walker_contract::FaultKind::TimingStretched,
+            id: 9,
+            value: 1264,
+        },
+    )));
+    stretched.extend(&bytes[head..]);
+    let slog = dir.join("stretched.log");
+    std::fs::write(&slog, &stretched).unwrap();
+    let targets = |log: &Path, name: &str| {
+        let mcap_path = dir.join(format!("{name}.mcap"));
+        let out = dir.join(name);
+        report_ok(log, &truth, &out, &["--mcap", s(&mcap_path)]);
+        let bytes = std::fs::read(&mcap_path).unwrap();
+        let n = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .filter(|m| m.as_ref().unwrap().channel.topic == "/joints/target")
+            .count();
+        (n, out)
+    };
+    let (plain, plain_out) = targets(&log, "plain");
+    let (longer, out) = targets(&slog, "stretched");
+    // The walk part of the plan is 1.264 times longer; the lead-in and the hold are not.
+    assert!(longer as f64 > plain as f64 * 1.15, "{plain} → {longer}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("step timing stretched ×1.264"), "{md}");
+    assert!(md.contains("right knee") || md.contains("r_knee"), "{md}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    assert!(json["plan_adjustments"][0]
+        .as_str()
+        .unwrap()
+        .contains("×1.264"));
+    let plain_md = std::fs::read_to_string(plain_out.join("report.md")).unwrap();
+    assert!(plain_md.contains("plan adjustments at start-up: none logged"));
 }
 
 /// A synthetic 14-step walk (Table 2 through the plan's own trajectory): the firmware log
