@@ -50,7 +50,7 @@ cargo test --target host-tuple --workspace
 # gait-core as the OpenCM 9.04 build has it (no Fourier CoM): that method refused.
 cargo test --target host-tuple -p gait-core --no-default-features --lib without_fourier_com
 # The control loop with the fixed-point path (`math=fixed`, feature fixed-gait) against f32.
-cargo test --target host-tuple -p walker-firmware --features fixed-gait --lib control::tests::fixed
+cargo test --target host-tuple -p walker-firmware --features fixed-gait --lib -- control::tests::fixed control::stage_tests::the_fixed_path
 
 step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (release)"
 DXL_FUZZ_CASES=10000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams

@@ -10,7 +10,6 @@ use gait_core::{GaitSample, Robot, SupportPhase};
 
 use super::f32_path::F32Path;
 use super::faults::FaultInjector;
-use super::modes::Plan;
 use super::path::{Goal, IkRequest, TickPath};
 use crate::fake_robot::trace::FakeBoard;
 use crate::record::LogWriter;
@@ -192,6 +191,7 @@ fn a_tipped_trunk_makes_the_f32_sample_chain_move_the_swing_foot_back() {
 #[test]
 fn the_fixed_path_takes_the_integer_ik_unless_f32_only() {
     use super::fixed_path::FixedPath;
+    use super::modes::Plan;
     let cfg = Config {
         arithmetic: Arithmetic::Fixed,
         autostart: true,
