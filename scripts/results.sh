@@ -10,7 +10,9 @@
 #                              = the README's first row, the whole table = the robustness sweep)
 #   out/results/paper-timing/  walker sweep --plan plans/table2.toml --firmware-args feasibility=off
 #   out/results/paper-open/    walker sweep --plan plans/table2-paper.toml (the paper's open loop)
-#   out/results/servos/        walker sweep --family servos --plan plans/table2.toml
+#   out/results/servos/        walker sweep --family servos --plan plans/table2.toml --ablate
+#                              (defaults/: the defaults across the servo family; FEATURE/: the
+#                              same with one feature off; ablation.md: which earns its place)
 #   out/results/servos-open/   walker sweep --family servos --plan plans/table2-paper.toml
 #   out/results/ablation/      walker beyond --ablation --plan plans/table2.toml
 #   out/results/pushes/        walker pushes --plan plans/table2.toml
@@ -44,7 +46,7 @@ if [ "${SKIP_WALKS:-0}" != 1 ]; then
     walk default sweep --plan plans/table2.toml --jobs "$jobs"
     walk paper-timing sweep --plan plans/table2.toml --firmware-args "feasibility=off" --jobs "$jobs"
     walk paper-open sweep --plan plans/table2-paper.toml --jobs "$jobs"
-    walk servos sweep --family servos --plan plans/table2.toml --jobs "$jobs"
+    walk servos sweep --family servos --plan plans/table2.toml --ablate --jobs "$jobs"
     walk servos-open sweep --family servos --plan plans/table2-paper.toml --jobs "$jobs"
     walk ablation beyond --ablation --plan plans/table2.toml
     walk pushes pushes --plan plans/table2.toml
@@ -104,6 +106,31 @@ summary = [
 ]
 for what, how, name in rows:
     summary.append("| " + " | ".join([what, how] + nominal(name)) + " |")
+
+def worst(name):
+    """README row of a sweep's worst case (a fall first, then the shortest walk): its name and
+    the row's cells as `nominal` gives them."""
+    best = None
+    for line in table(read(f"{out}/{name}/sweep.md"))[2:]:
+        c = cells(line)
+        m = re.match(r"([-0-9.]+) / ([0-9.]+) m", c[3])
+        share = float(m.group(1)) / float(m.group(2)) if m else float("-inf")
+        key = (c[2] == "0", share)
+        if best is None or key < best[0]:
+            best = (key, c)
+    if best is None:
+        return None
+    c = best[1]
+    fall = {"0": "no", "13": "**fell**"}.get(c[2], f"exit {c[2]}")
+    m = re.match(r"([-0-9.]+) / ([0-9.]+) m \((-?[0-9]+) %\)", c[3])
+    dist = f"{m.group(1)} m ({m.group(3)} %)" if m else c[3]
+    return c[0], [fall, dist, c[4], c[6]]
+
+w = worst("servos/defaults")
+if w is not None:
+    summary.append("| " + " | ".join(
+        [f"Table 2, the defaults on the servo family's worst case (`{w[0]}`)",
+         "`walker sweep --family servos`"] + w[1]) + " |")
 summary = "\n".join(summary)
 
 commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
@@ -115,6 +142,13 @@ source = os.environ.get("RESULTS_NOTE") or (
 def section(title, intro, name, file):
     t = table(read(f"{out}/{name}/{file}"))
     body = "\n".join(t) if t else f"(no report in `{out}/{name}/{file}`: not walked)"
+    return f"## {title}\n\n{intro}\n\n{body}\n"
+
+def section_all(title, intro, name, file):
+    """A section with everything of the report from its first table on."""
+    md = read(f"{out}/{name}/{file}")
+    i = md.find("\n|") if md else -1
+    body = md[i + 1:].strip() if i >= 0 else f"(no report in `{out}/{name}/{file}`: not walked)"
     return f"## {title}\n\n{intro}\n\n{body}\n"
 
 doc = f"""# Current figures
@@ -142,8 +176,11 @@ no fall, ≥ 95 % of the planned distance, heading drift < 3°, true mean |e| < 
          "`walker sweep --plan plans/table2-paper.toml` (TLIPFM, the paper's timing, every feedback and feed-forward off, the servos' factory gains).",
          "paper-open", "sweep.md")}
 {section("The servo family (the firmware's defaults)",
-         "`walker sweep --family servos --plan plans/table2.toml`: the servos a robot of this class really has, one change per row (stall torque, no-load speed, drive gains, supply, masses, friction, latency; `host/src/sweep.rs` `servo_cases`).",
-         "servos", "sweep.md")}
+         "`walker sweep --family servos --plan plans/table2.toml`: the servos a robot of this class really has, one change per row (stall torque, no-load speed, drive gains, supply, masses, the trunk's CoM, friction, sensor and Present Position latency; `host/src/sweep.rs` `servo_cases`).",
+         "servos/defaults", "sweep.md")}
+{section_all("Which default earns its place: the servo family, one feature off at a time",
+         "`walker sweep --family servos --plan plans/table2.toml --ablate`: the family walked with the defaults and once per feature off (`host/src/ablation.rs`); a feature stays on by default only if it is nowhere worse than off — falls first, then the distance (|walked/planned − 1|, 2 % margin) and the true ZMP (1 mm margin).",
+         "servos", "ablation.md")}
 {section("The servo family, the paper's open loop",
          "`walker sweep --family servos --plan plans/table2-paper.toml`: the same family walked open loop, the baseline the defaults must never fall behind in distance.",
          "servos-open", "sweep.md")}

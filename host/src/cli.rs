@@ -427,7 +427,8 @@ pub struct SweepArgs {
     #[arg(long, value_name = "DIR", default_value = "out/sweep")]
     pub out: PathBuf,
     /// The robot family walked: the reference robot's (11 cases) or the servos a robot of this
-    /// class really has (16 cases: stall torque, speed, gains, supply, masses, friction, latency).
+    /// class really has (20 cases: stall torque, speed, gains, supply, masses, trunk CoM,
+    /// friction, sensor and Present Position latency).
     #[arg(long, value_enum, default_value_t = crate::sweep::Family::Reference)]
     pub family: crate::sweep::Family,
     /// Walks at a time (each a QEMU process and a simulator thread).
@@ -441,6 +442,11 @@ pub struct SweepArgs {
     /// written to OUT/sweep.md.
     #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["shard", "jobs"])]
     pub merge: Vec<PathBuf>,
+    /// Walk the family with the defaults and once per feature off (host/src/ablation.rs
+    /// `FEATURES`) into OUT/defaults/ and OUT/FEATURE/, and write OUT/ablation.md: which
+    /// feature is nowhere worse on than off. With --merge: the DIRs are ablation folders.
+    #[arg(long)]
+    pub ablate: bool,
     /// The runs (each case changes one knob of the nominal simulated robot).
     #[command(flatten)]
     pub run: RunArgs,
@@ -1483,6 +1489,9 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
 
 fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
     use crate::sweep::{self, goal, Shard};
+    if a.ablate {
+        return run_ablation(a);
+    }
     let out = a.out;
     if !a.merge.is_empty() {
         return merge_sweep(&out, a.family, &a.merge);
@@ -1525,6 +1534,108 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
             code: 3,
         }),
     }
+}
+
+/// `walker sweep --ablate`: the family walked with the defaults and once per feature off (each
+/// into its sub-folder, sharded like a sweep), or with `--merge` the sub-folders of the shards
+/// joined; then OUT/ablation.md.
+fn run_ablation(a: SweepArgs) -> Result<(), CliError> {
+    use crate::ablation::{self, DEFAULTS, FEATURES};
+    let out = a.out.clone();
+    use crate::sweep::{self, Shard};
+    let configs: Vec<(&str, &[&str])> = std::iter::once((DEFAULTS, &[][..]))
+        .chain(FEATURES.iter().map(|f| (f.name, f.off)))
+        .collect();
+    let mut all: Vec<Vec<sweep::SweepRow>> = Vec::new();
+    if a.merge.is_empty() {
+        let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
+        let shard = a.shard.unwrap_or(Shard::ALL);
+        let n = (0..a.family.cases().len())
+            .filter(|&i| shard.has(i))
+            .count();
+        eprintln!(
+            "walker sweep --ablate: {plan_name}, {} configurations × {n} walks (shard {}/{}), {} at a time",
+            configs.len(),
+            shard.index,
+            shard.count,
+            a.jobs
+        );
+        for (name, off) in &configs {
+            let mut o = opts.in_sub(name);
+            o.extra_tokens.extend(off.iter().map(|t| t.to_string()));
+            // Resume: the cases this folder's rows.csv already holds are not walked again.
+            let rows_csv = o.out_dir.join("rows.csv");
+            let done = sweep::read_rows(&rows_csv).unwrap_or_default();
+            let todo: Vec<sweep::SweepCase> = a
+                .family
+                .cases()
+                .into_iter()
+                .enumerate()
+                .filter(|(i, c)| shard.has(*i) && !done.iter().any(|r| r.name == c.name))
+                .map(|(_, c)| c)
+                .collect();
+            if !done.is_empty() {
+                eprintln!(
+                    "  {name}: {} cases from {}, {} to walk",
+                    n - todo.len(),
+                    rows_csv.display(),
+                    todo.len()
+                );
+            }
+            let walked = sweep::run_cases(&o, &todo, usize::from(a.jobs), |k, n, case| {
+                eprintln!("  {name}: [{k}/{n}] walking {case} …")
+            })?;
+            let (rows, _) = sweep::merge(a.family, vec![done, walked]).map_err(CliError::failed)?;
+            std::fs::create_dir_all(&o.out_dir)
+                .map_err(|e| CliError::failed(format!("{}: {e}", o.out_dir.display())))?;
+            sweep::write_rows(&rows_csv, &rows).map_err(CliError::failed)?;
+            let md = format!(
+                "# Robustness sweep: {plan_name}, {name}\n\nFirmware tokens after the run's own: `{}`.\n\n{}",
+                off.join(" "),
+                sweep::table(&rows)
+            );
+            write_report(&o.out_dir, "sweep.md", &md)?;
+            all.push(rows);
+        }
+    } else {
+        for (name, off) in &configs {
+            let parts = a
+                .merge
+                .iter()
+                .map(|d| sweep::read_rows(&d.join(name).join("rows.csv")))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(CliError::failed)?;
+            let (rows, missing) = sweep::merge(a.family, parts).map_err(CliError::failed)?;
+            if !missing.is_empty() {
+                eprintln!(
+                    "walker sweep --ablate --merge: {name}: no shard ran {}",
+                    missing.join(", ")
+                );
+            }
+            let dir = out.join(name);
+            std::fs::create_dir_all(&dir)
+                .map_err(|e| CliError::failed(format!("{}: {e}", dir.display())))?;
+            sweep::write_rows(&dir.join("rows.csv"), &rows).map_err(CliError::failed)?;
+            let md = format!(
+                "# Robustness sweep (merged from {} shards), {name}\n\nFirmware tokens after the run's own: `{}`.\n\n{}",
+                a.merge.len(),
+                off.join(" "),
+                sweep::table(&rows)
+            );
+            write_report(&dir, "sweep.md", &md)?;
+            all.push(rows);
+        }
+    }
+    let mut it = all.into_iter();
+    let defaults = it.next().unwrap_or_default();
+    let offs: [Vec<sweep::SweepRow>; FEATURES.len()] =
+        std::array::from_fn(|_| it.next().unwrap_or_default());
+    let md = format!(
+        "# Ablation over the {:?} family\n\nThe family walked with the firmware's defaults and once per feature off; a feature stays on by default only if it is nowhere worse than off (host/src/ablation.rs).\n\n{}",
+        a.family,
+        ablation::tables(&defaults, &offs)
+    );
+    write_report(&out, "ablation.md", &md)
 }
 
 /// `walker sweep --merge DIR…`: the table of the shards' rows.

@@ -1,5 +1,6 @@
 //! walker-host: host tools for the walking controller.
 
+pub mod ablation;
 pub mod beyond;
 pub mod capture;
 pub mod cli;

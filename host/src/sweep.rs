@@ -63,9 +63,9 @@ pub enum Family {
     /// The reference robot's family: the nominal run and ten perturbations ([`cases`]).
     Reference,
     /// The servos a robot of this class really has ([`servo_cases`]): stall torque 2.5 – 5.0
-    /// N·m, no-load speed 2.5 – 4.8 rad/s (and a weak servo, 3.0 N·m / 2.8 rad/s), drive gains
-    /// × 0.6 – 1.4, supply 10.5 – 12.6 V, link masses ± 15 %, floor friction 0.4, sensor
-    /// latency 10 ms.
+    /// N·m, no-load speed 2.5 – 4.8 rad/s (and a weak servo, 3.0 N·m / 2.8 rad/s, also at the
+    /// nominal stiffness), drive gains × 0.6 – 1.4, supply 10.5 – 12.6 V, link masses ± 15 %,
+    /// the trunk's CoM ± 1 cm, floor friction 0.4, sensor and Present Position latency 10 ms.
     Servos,
 }
 
@@ -81,9 +81,10 @@ impl Family {
 
 /// The servo family: the nominal run and one servo, supply, body or floor change per case, to
 /// the ends of the ranges a robot of this class meets (a 3S battery near empty, a warm motor, a
-/// different servo model). Gear backlash and Present Position latency are not modelled by the
-/// simulator and not in it.
-pub fn servo_cases() -> [SweepCase; 16] {
+/// different servo model: `stiff-weak` is a position servo whose stiffness stays the nominal
+/// one while its torque tops out at 3.0 N·m, as a fixed-kp actuator with a torque limit). Gear
+/// backlash is not modelled by the simulator and not in it.
+pub fn servo_cases() -> [SweepCase; 20] {
     fn c(name: &'static str, what: &'static str, apply: fn(&mut SimConfig)) -> SweepCase {
         SweepCase { name, what, apply }
     }
@@ -150,6 +151,26 @@ pub fn servo_cases() -> [SweepCase; 16] {
                 s.xservo.no_load_speed = 2.8;
                 s.xservo.gain_scale *= 0.6;
             },
+        ),
+        c(
+            "stiff-weak",
+            "weak servo (3.0 N·m, 2.8 rad/s) at the nominal stiffness (gains × 4.1/3.0)",
+            |s| {
+                s.xservo.stall_torque = 3.0;
+                s.xservo.no_load_speed = 2.8;
+                s.xservo.gain_scale *= 4.1 / 3.0;
+            },
+        ),
+        c("trunk+1cm", "upper body's CoM 1 cm forward", |s| {
+            s.env.trunk_com_dx_m = 0.01
+        }),
+        c("trunk-1cm", "upper body's CoM 1 cm back", |s| {
+            s.env.trunk_com_dx_m = -0.01
+        }),
+        c(
+            "position+10ms",
+            "servos' Present Position 10 ms late",
+            |s| s.noise.position_latency_us += 10_000,
         ),
     ]
 }
@@ -382,13 +403,6 @@ pub fn run(
     jobs: usize,
     progress: impl Fn(usize, usize, &str) + Sync,
 ) -> Result<Vec<SweepRow>, String> {
-    let variant = beyond::variants()
-        .into_iter()
-        .find(|v| v.name == "tlipfm")
-        .ok_or("no tlipfm variant")?;
-    let mut tokens = fil::firmware_tokens(&opts.spec)?;
-    tokens.extend(opts.extra_tokens.iter().cloned());
-    let cfg = beyond::firmware_config(&tokens)?;
     let mine: Vec<SweepCase> = family
         .cases()
         .into_iter()
@@ -396,6 +410,25 @@ pub fn run(
         .filter(|(i, _)| shard.has(*i))
         .map(|(_, c)| c)
         .collect();
+    run_cases(opts, &mine, jobs, progress)
+}
+
+/// Walks `cases`, `jobs` at a time, and scores them (in the order given); `progress(k, n,
+/// name)` as the k-th of the n runs starts.
+pub fn run_cases(
+    opts: &FilOptions,
+    cases: &[SweepCase],
+    jobs: usize,
+    progress: impl Fn(usize, usize, &str) + Sync,
+) -> Result<Vec<SweepRow>, String> {
+    let variant = beyond::variants()
+        .into_iter()
+        .find(|v| v.name == "tlipfm")
+        .ok_or("no tlipfm variant")?;
+    let mut tokens = fil::firmware_tokens(&opts.spec)?;
+    tokens.extend(opts.extra_tokens.iter().cloned());
+    let cfg = beyond::firmware_config(&tokens)?;
+    let mine = cases;
     let walk = |case: &SweepCase| -> Result<SweepRow, String> {
         let mut sim = opts.sim.clone();
         (case.apply)(&mut sim);
@@ -523,6 +556,8 @@ mod tests {
                 "{}",
                 c.name
             );
+            assert!(s.noise.position_latency_us <= 10_000, "{}", c.name);
+            assert!(s.env.trunk_com_dx_m.abs() <= 0.01 + 1e-12, "{}", c.name);
             s.validate().unwrap_or_else(|e| panic!("{}: {e}", c.name));
         }
         assert_eq!(Family::Servos.cases().len(), cs.len());

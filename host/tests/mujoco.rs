@@ -370,3 +370,27 @@ fn the_mujoco_model_is_the_robot_description() {
         }
     }
 }
+
+#[test]
+fn the_trunk_com_offset_moves_the_whole_body_com_by_its_mass_share() {
+    let com_x = |dx: f64| {
+        let q = lean(0.0);
+        let mut cfg = SimConfig {
+            initial_q: q,
+            ..SimConfig::default()
+        };
+        cfg.env.trunk_com_dx_m = dx;
+        let mut sim = Simulator::new(&cfg).unwrap();
+        hold_pose(&mut sim, &q);
+        sim.advance_to(2_000).unwrap();
+        sim.physics.truth().com[0]
+    };
+    // Upper body 3.05 kg of 4.95 kg (reference-robot.md): 1 cm moves the CoM 6.16 mm.
+    let shift = com_x(0.01) - com_x(0.0);
+    assert!((shift - 0.01 * 3.05 / 4.95).abs() < 2e-4, "shift {shift} m");
+    let back = com_x(-0.01) - com_x(0.0);
+    assert!((back + 0.01 * 3.05 / 4.95).abs() < 2e-4, "shift {back} m");
+    let mut cfg = SimConfig::default();
+    cfg.env.trunk_com_dx_m = 0.06;
+    assert!(cfg.validate().is_err());
+}

@@ -1302,3 +1302,41 @@ fn swinging_knee_torque_is_inertia_times_acceleration_plus_gravity() {
     // The inertia term is well above the tolerance: leaving it out would fail.
     assert!(inertial > 0.025, "inertia term only {inertial} N·m");
 }
+
+/// Present Position of joint 1 over 300 ms of a swinging goal, with the true joint angle.
+fn present_positions(position_latency_us: u64) -> Vec<(i32, f64)> {
+    let mut cfg = kin();
+    cfg.fall.enabled = false;
+    cfg.noise.position_latency_us = position_latency_us;
+    let mut sim = Simulator::new(&cfg).unwrap();
+    torque_on(&mut sim);
+    let mut rows = Vec::new();
+    for k in 0..300u64 {
+        let mut q = [0.0; 12];
+        q[0] = 0.3 * (std::f64::consts::TAU * 2.0 * k as f64 * 1e-3).sin();
+        set_goals(&mut sim, &q);
+        sim.advance_to((k + 1) * 1000).unwrap();
+        let reported = sim.bus.devices[0].get_i32(x_series::PRESENT_POSITION);
+        rows.push((reported, sim.physics.q()[0]));
+    }
+    rows
+}
+
+#[test]
+fn present_position_latency_delays_the_reported_angle() {
+    let ticks = |q: f64| TickMap::reference().tick_f64(0, q);
+    let now = present_positions(0);
+    assert!(now.iter().all(|&(r, q)| r == ticks(q)));
+    let moved = now.iter().map(|r| r.0).max().unwrap() - now.iter().map(|r| r.0).min().unwrap();
+    assert!(moved > 100, "the joint must move: {moved} ticks");
+    let late = present_positions(10_000);
+    // Same motion (the servo loop sees the joint without delay), reported 10 physics steps late.
+    assert_eq!(
+        late.iter().map(|r| r.1).collect::<Vec<_>>(),
+        now.iter().map(|r| r.1).collect::<Vec<_>>()
+    );
+    for k in 10..late.len() {
+        assert_eq!(late[k].0, ticks(now[k - 10].1), "step {k}");
+    }
+    assert_eq!(late[0].0, ticks(now[0].1));
+}

@@ -60,6 +60,9 @@ pub struct EnvConfig {
     pub payload_pos_m: [f64; 3],
     /// Scale of every link mass (robustness sweeps; 1 = the robot description).
     pub mass_scale: f64,
+    /// Forward offset of the upper body's centre of mass from the robot description's, m
+    /// (MuJoCo model; robustness sweeps; 0 = the description).
+    pub trunk_com_dx_m: f64,
     /// The robot starts this high above the floor (0: standing on it), m.
     pub start_lift_m: f64,
 }
@@ -74,6 +77,7 @@ impl Default for EnvConfig {
             payload_kg: 0.0,
             payload_pos_m: [0.0, 0.0, 0.15],
             mass_scale: 1.0,
+            trunk_com_dx_m: 0.0,
             start_lift_m: 0.0,
         }
     }
@@ -106,6 +110,9 @@ impl EnvConfig {
         }
         if !(fin(self.mass_scale) && (0.5..=2.0).contains(&self.mass_scale)) {
             return Err("mass scale must be in [0.5, 2]".into());
+        }
+        if !(fin(self.trunk_com_dx_m) && self.trunk_com_dx_m.abs() <= 0.05) {
+            return Err("trunk CoM offset must be within ±0.05 m".into());
         }
         Ok(())
     }
@@ -251,7 +258,7 @@ pub fn model_xml(
     inertial(
         &mut x,
         "      ",
-        [0.0, 0.0, m.upper_body_height],
+        [env.trunk_com_dx_m, 0.0, m.upper_body_height],
         m.upper_body * ms,
         [j, j, 0.5 * j],
     );

@@ -73,6 +73,9 @@ pub struct NoiseConfig {
     pub accel_bias_m_s2: [f64; 3],
     /// Latency of the foot boards' and the IMU's samples, µs (rounded to physics steps).
     pub latency_us: u64,
+    /// Latency of the servos' Present Position and Present Velocity, µs (rounded to physics
+    /// steps; the servos' own position loops see the joint without delay).
+    pub position_latency_us: u64,
 }
 
 /// External pitch torque on the upper body (the angular-momentum disturbance).
@@ -334,6 +337,9 @@ impl SimConfig {
         if self.noise.latency_us > 1_000_000 {
             return bad("sensor latency must be at most 1 s");
         }
+        if self.noise.position_latency_us > 1_000_000 {
+            return bad("Present Position latency must be at most 1 s");
+        }
         Ok(())
     }
 }
@@ -512,6 +518,8 @@ pub struct Simulator {
     next_qpos_us: u64,
     /// Sensor samples waiting out the configured latency: (time µs, foot samples, IMU sample).
     delayed: std::collections::VecDeque<(u64, [FootForces; 2], ImuSample)>,
+    /// Joint angles and speeds waiting out the Present Position latency: (time µs, q, q̇).
+    delayed_joints: std::collections::VecDeque<(u64, [f64; 12], [f64; 12])>,
     counter: u16,
     steps: u64,
     bytes_in: u64,
@@ -569,6 +577,7 @@ impl Simulator {
             qpos_log,
             next_qpos_us: 0,
             delayed: std::collections::VecDeque::new(),
+            delayed_joints: std::collections::VecDeque::new(),
             counter: 0,
             steps: 0,
             bytes_in: 0,
@@ -643,8 +652,26 @@ impl Simulator {
     /// Writes the present state into the device tables and the truth log.
     fn publish(&mut self) -> Result<(), SimError> {
         let volts = self.cfg.xservo.supply_voltage;
+        // Present Position latency: the newest joint state at least `position_latency_us` old
+        // (the oldest there is during the first steps).
+        let now = self.physics.time_us();
+        let (mut q_seen, mut qd_seen) = (*self.physics.q(), *self.physics.qd());
+        let lat = self.cfg.noise.position_latency_us;
+        if lat > 0 {
+            self.delayed_joints.push_back((now, q_seen, qd_seen));
+            while self
+                .delayed_joints
+                .get(1)
+                .is_some_and(|&(ts, _, _)| ts + lat <= now)
+            {
+                self.delayed_joints.pop_front();
+            }
+            if let Some(&(_, q, qd)) = self.delayed_joints.front() {
+                (q_seen, qd_seen) = (q, qd);
+            }
+        }
         for j in 0..12 {
-            let (q, qd) = (self.physics.q()[j], self.physics.qd()[j]);
+            let (q, qd) = (q_seen[j], qd_seen[j]);
             let out = match &self.physics {
                 Body::MuJoCo(b) => b.outputs()[j],
                 Body::Kinematic(_) => XServoOutput::default(),
