@@ -197,14 +197,17 @@ impl Progress {
             bar.set_position(st.done as u64);
             return;
         }
-        if st.done < st.next_print || st.total == 0 {
-            return;
-        }
         let step = st.total.div_ceil(10).max(1);
-        st.next_print = (st.done / step + 1) * step;
-        if st.done == 0 {
+        if st.next_print == 0 {
+            st.next_print = step.min(st.total);
+        }
+        if st.done == 0 || st.done < st.next_print {
             return;
         }
+        st.next_print = match st.done >= st.total {
+            true => usize::MAX,
+            false => ((st.done / step + 1) * step).min(st.total),
+        };
         let elapsed = self.start.elapsed();
         let left = match eta(elapsed, st.done, st.total) {
             Some(d) if st.done < st.total => format!("ETA {}", human(d)),
@@ -374,6 +377,7 @@ mod tests {
         for k in 1..=200 {
             p.position(k, "frames");
         }
+        p.position(200, "frames");
         let text = buf.text();
         assert_eq!(text.lines().count(), 10, "{text}");
         assert!(text

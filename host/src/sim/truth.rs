@@ -140,7 +140,7 @@ mod tests {
         fields.extend([t.zmp[0], t.zmp[1], t.fz].map(|v| n(v, 6)));
         fields.extend([0.0; 9].map(|v| n(v, 6)));
         fields.extend([t.support.code().to_string(), "L".into(), n(0.0, 6)]);
-        fields.extend([0.0; 14].map(|v| n(v, 6)));
+        fields.extend([0.0; 15].map(|v| n(v, 6)));
         fields.extend(["1".into(), n(0.0, 6)]);
         fields.extend(t.joint_speed.map(|v| n(v, 5)));
         fields.extend(t.joint_torque.map(|v| n(v, 5)));
