@@ -199,12 +199,16 @@ def main():
     # GIF path, small and at double speed: 1.5 s of video at 15 fps.
     gif = os.path.join(a.out_dir, "walk.gif")
     cmd = [sys.executable, renderer, "--model", model, "--qpos", qpos, "--out", gif, "--gif",
-           "--fps", "15", "--speed", "2", "--width", "320", "--height", "240"]
+           "--fps", "15", "--speed", "2", "--width", "320", "--height", "240", "--progress"]
     print("render_selftest: $ " + " ".join(cmd))
-    r = subprocess.run(cmd)
+    r = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
     check(r.returncode == 0, f"render_walk.py --gif exit {r.returncode}")
     probe = ffprobe_frames(gif) if os.path.isfile(gif) else None
     expected_gif = int(math.floor(DURATION_S / 2 * 15 + 1e-9)) + 1
+    # --progress: one 'progress K N' line per frame (walker's progress bar reads them).
+    marks = [line.split() for line in r.stdout.splitlines() if line.startswith("progress ")]
+    check(len(marks) == expected_gif and marks[-1] == ["progress", str(expected_gif), str(expected_gif)],
+          f"--progress: {len(marks)} lines, the last {marks[-1] if marks else None}")
     check(probe is not None and abs(probe[0] - expected_gif) <= 2,
           f"gif ffprobe: {probe}, expected {expected_gif} frames of 320x240")
 

@@ -83,6 +83,8 @@ def parse_args(argv):
                    help="upper bound of the shadow map size (the model's default is 4096)")
     p.add_argument("--no-text", action="store_true", help="no time overlay")
     p.add_argument("--crf", type=int, default=20, help="x264 quality (lower = better)")
+    p.add_argument("--progress", action="store_true",
+                   help="print 'progress K N' on stdout after each frame (for walker's progress bar)")
     a = p.parse_args(argv)
     if a.fps <= 0 or a.speed <= 0:
         p.error("--fps and --speed must be > 0")
@@ -287,6 +289,8 @@ def main(argv=None):
                                    f"t = {frame_t[k]:5.2f} s", None, con)
             mujoco.mjr_readPixels(rgb, None, rect, con)
             enc.stdin.write(rgb[::-1].tobytes())  # OpenGL rows are bottom-up
+            if a.progress:
+                print(f"progress {k + 1} {n_frames}", flush=True)
     except BrokenPipeError:
         pass
     finally:

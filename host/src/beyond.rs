@@ -554,12 +554,12 @@ pub struct BeyondOptions {
     pub sim: SimConfig,
 }
 
-/// Walks `variants` ([`variants`] or [`ablation`]) and scores them; `progress(name)` before
-/// each run.
+/// Walks `variants` ([`variants`] or [`ablation`]) and scores them; `progress` counts the
+/// finished walks.
 pub fn run(
     opts: &BeyondOptions,
     variants: &[Variant],
-    progress: impl Fn(&str),
+    progress: &crate::progress::Progress,
 ) -> Result<Vec<RunMetrics>, String> {
     // Every variant's firmware command line is checked before the first run starts.
     let runs = variants
@@ -579,7 +579,7 @@ pub fn run(
         .collect::<Result<Vec<_>, String>>()?;
     let mut out = Vec::new();
     for (v, spec, extra, cfg) in runs {
-        progress(v.name);
+        progress.start(v.name);
         let sim = SimConfig {
             seed: opts.seed,
             servo_speed_limit: XM430_SPEED_RAD_S,
@@ -595,15 +595,44 @@ pub fn run(
             sim,
             extra_tokens: extra,
         };
-        let r = fil::run(&fopts, |_, _| {})?;
-        let fell = r.sim.fall_started_us.map(|t| t as f64 * 1e-6);
-        let mut m = score(&v, &cfg, &r.log, &r.truth, r.exit_code, fell)?;
-        let f = fil::walk_figures(&r.truth, &fopts.spec)?;
-        m.heading_drift = f.heading_drift;
-        m.max_tilt = f.max_tilt;
-        out.push(m);
+        let scored = walk_and_score(&v, &cfg, &fopts);
+        match &scored {
+            Ok(m) => progress.finish_case(v.name, &m.outcome()),
+            Err(e) => progress.finish_case(v.name, &format!("error: {e}")),
+        }
+        out.push(scored?);
     }
+    progress.finish();
     Ok(out)
+}
+
+/// One walk of `run` and its scores.
+fn walk_and_score(v: &Variant, cfg: &Config, fopts: &FilOptions) -> Result<RunMetrics, String> {
+    let r = fil::run(fopts, |_, _| {})?;
+    let fell = r.sim.fall_started_us.map(|t| t as f64 * 1e-6);
+    let mut m = score(v, cfg, &r.log, &r.truth, r.exit_code, fell)?;
+    let f = fil::walk_figures(&r.truth, &fopts.spec)?;
+    m.heading_drift = f.heading_drift;
+    m.max_tilt = f.max_tilt;
+    Ok(m)
+}
+
+impl RunMetrics {
+    /// The run in a few words (a progress line): exit or fall, true ZMP error, distance.
+    pub fn outcome(&self) -> String {
+        let exit = match (self.exit_code, self.fell_at) {
+            (_, Some(t)) => format!("fell at {t:.2} s"),
+            (Some(c), None) => format!("exit {c}"),
+            (None, None) => "killed".into(),
+        };
+        format!(
+            "{exit}, true ZMP mean |e| x / y {} / {} mm, walked {:.3} of {:.3} m",
+            mm(self.true_err[0].mean),
+            mm(self.true_err[1].mean),
+            self.walked,
+            self.planned
+        )
+    }
 }
 
 fn mm(v: f64) -> String {
@@ -676,16 +705,14 @@ pub fn table(runs: &[RunMetrics]) -> String {
     s
 }
 
-/// One CSV row per run.
+/// One CSV row per run (written with the `csv` crate).
 pub fn csv(runs: &[RunMetrics]) -> String {
-    let mut s = String::from(CSV_HEADER);
-    s.push('\n');
+    let mut out = ::csv::Writer::from_writer(Vec::new());
+    let n = report::csv_number;
+    let mut rows = vec![CSV_HEADER.split(',').map(String::from).collect::<Vec<_>>()];
     for r in runs {
-        let n = report::csv_number;
-        let _ = writeln!(
-            s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            r.variant.name,
+        rows.push(vec![
+            r.variant.name.to_string(),
             r.exit_code.map_or(String::new(), |c| c.to_string()),
             r.fell_at.map_or(String::new(), |t| n(t, 3)),
             n(r.timing_factor, 4),
@@ -698,19 +725,26 @@ pub fn csv(runs: &[RunMetrics]) -> String {
             n(r.meas_err[0].max, 6),
             n(r.meas_err[1].max, 6),
             n(r.inside, 4),
-            r.walking_ticks,
+            r.walking_ticks.to_string(),
             n(r.walked, 4),
             n(r.planned, 4),
             n(r.worst_joint().1, 3),
             n(r.worst_true_joint().1, 3),
             n(r.worst_torque_joint().1, 3),
             n(r.torque_limited, 4),
-            r.ref_mismatch,
+            r.ref_mismatch.to_string(),
             n(r.heading_drift, 4),
-            n(r.max_tilt, 4)
-        );
+            n(r.max_tilt, 4),
+        ]);
     }
-    s
+    for row in rows {
+        // Writing into memory cannot fail.
+        let _ = out.write_record(row);
+    }
+    out.into_inner()
+        .ok()
+        .and_then(|b| String::from_utf8(b).ok())
+        .unwrap_or_default()
 }
 
 /// The goal for compensation + feedback (the paper's TLIPFM figures on its real robot):

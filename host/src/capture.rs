@@ -17,6 +17,7 @@
 //! The raw stream is written unchanged to `--out` (so it can be decoded again later) and the
 //! decoded ticks to the same path with the extension `.csv`.
 
+use crate::progress::{StatusLine, STATUS_EVERY};
 use crate::report::{tick_rows, write_events_csv, write_response_csv, DecodedLog, LogCollector};
 use std::fs::File;
 use std::io::{Read, Write};
@@ -227,16 +228,29 @@ pub fn capture(opts: &CaptureOptions) -> Result<(DecodedLog, CaptureEnd), String
         opts.seconds
             .map_or(" (Ctrl-C to stop)".to_string(), |s| format!(" for {s} s"))
     );
-    let (log, end) = capture_stream(port, true, &mut out, deadline, |c| {
+    let status = StatusLine::stderr(STATUS_EVERY);
+    let waiting = |since: Instant| {
+        format!(
+            "waiting for the first byte on {} ({} so far) …",
+            opts.port,
+            crate::progress::human(since.elapsed())
+        )
+    };
+    let started = Instant::now();
+    status.set(&waiting(started));
+    let captured = capture_stream(port, true, &mut out, deadline, |c| {
         let l = c.log();
-        eprint!(
-            "\r{} bytes, {} ticks, {} events   ",
-            l.bytes,
-            l.ticks.len(),
-            l.events.len()
-        );
-    })?;
-    eprintln!();
+        status.set(&match l.bytes {
+            0 => waiting(started),
+            b => format!(
+                "{b} bytes, {} ticks, {} events",
+                l.ticks.len(),
+                l.events.len()
+            ),
+        });
+    });
+    status.finish();
+    let (log, end) = captured?;
     eprintln!("capture ended: {end}");
     write_decoded(&log, &opts.out)?;
     Ok((log, end))

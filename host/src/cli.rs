@@ -11,6 +11,7 @@
 //! value), 3 the firmware failed (`fil`, `beyond`).
 
 use crate::planfile::{self, ModelName, WalkSpec};
+use crate::progress::{Progress, StatusLine, STATUS_EVERY};
 use crate::{capture, export, report};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use gait_core::Robot;
@@ -141,7 +142,7 @@ pub enum Command {
 /// `walker export`.
 #[derive(Debug, Args)]
 pub struct ExportArgs {
-    /// Plan file (TOML, e.g. plans/table2.toml); default: the built-in Table 2 walk.
+    /// Plan file (TOML, e.g. plans/table2.toml) or a run configuration (its walk); default: the built-in Table 2 walk.
     #[arg(long, value_name = "FILE")]
     pub plan: Option<PathBuf>,
     /// CSV to write.
@@ -889,8 +890,14 @@ pub fn apply_stall_torque(cfg: &mut crate::sim::SimConfig, t: f64) -> Result<(),
 
 fn run_export(a: ExportArgs) -> Result<(), CliError> {
     let ExportArgs { plan, out, dt } = a;
-    let (spec, name) = load_plan(plan.as_deref())?;
     let robot = Robot::reference();
+    let (spec, name) = match plan.as_deref() {
+        Some(p) => (
+            export::load_for_export(p, &robot).map_err(CliError::failed)?,
+            p.display().to_string(),
+        ),
+        None => load_plan(None)?,
+    };
     let dt = dt.unwrap_or(spec.dt);
     let (rows, summary) = export::export_rows(&spec, &robot, dt).map_err(|e| {
         let e = if e.field == "dt" {
@@ -1166,14 +1173,24 @@ fn run_simulate(a: SimulateArgs) -> Result<(), CliError> {
         create_parent(t)?;
     }
     cfg.log_truth = a.truth;
+    let connect = cfg.connect;
+    let handle = crate::sim::transport::spawn(cfg)
+        .map_err(|e| CliError::failed(format!("walker simulate: {e}")))?;
+    // The addresses bound (with `--port 0`: the port the system chose, never 0).
     eprintln!(
-        "simulated robot on 127.0.0.1:{} (lock-step {}); waiting for the firmware…",
-        cfg.port,
-        cfg.lockstep_port
-            .map_or("off".to_string(), |p| format!("127.0.0.1:{p}"))
+        "simulated robot on {} (lock-step {}); {}",
+        handle.bus_addr(),
+        handle
+            .lockstep_addr()
+            .map_or("off".to_string(), |a| a.to_string()),
+        match connect {
+            true => "connecting to the firmware (QEMU listening) …",
+            false => "waiting for the firmware to connect …",
+        }
     );
-    let summary =
-        crate::sim::run(cfg).map_err(|e| CliError::failed(format!("walker simulate: {e}")))?;
+    let summary = handle
+        .join()
+        .map_err(|e| CliError::failed(format!("walker simulate: {e}")))?;
     println!("{summary:#?}");
     Ok(())
 }
@@ -1213,7 +1230,8 @@ fn run_beyond(a: BeyondArgs) -> Result<(), CliError> {
         "walker beyond: {plan_name}, {} firmware-in-the-loop walks",
         variants.len()
     );
-    let runs = crate::beyond::run(&opts, &variants, |name| eprintln!("  walking {name} …"))?;
+    let progress = Progress::stderr(variants.len(), "walking");
+    let runs = crate::beyond::run(&opts, &variants, &progress)?;
     let table = crate::beyond::table(&runs);
     let servo_torque = opts.servo_torque;
     let servos = match opts.sim.physics {
@@ -1285,14 +1303,12 @@ fn run_fil_command_port(
         opts.machine,
         walker_contract::command_port::PORT_ID
     );
-    let last = std::cell::Cell::new(-1.0f64);
+    let status = StatusLine::stderr(STATUS_EVERY);
     let r = crate::fil::run_command_port(opts, port, |t, _| {
-        if t - last.get() >= 0.5 {
-            eprint!("\r  simulated time {t:6.2} s");
-            last.set(t);
-        }
-    })?;
-    eprintln!();
+        status.set(&format!("  simulated time {t:6.2} s"))
+    });
+    status.finish();
+    let r = r?;
     eprintln!("  {}", crate::fil::summary_line(&r.sim));
     eprintln!("  wall clock {:.1} s", r.wall.as_secs_f64());
     match crate::fil::command_figures(&r, spec, &opts.extra_tokens) {
@@ -1366,10 +1382,12 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
             script.command.len(),
             opts.machine
         );
-        let (r, d) = crate::fil::run_commands_to_the_end(&opts, &script, |t, _| {
-            eprint!("\r  simulated time {t:6.2} s");
-        })?;
-        eprintln!();
+        let status = StatusLine::stderr(STATUS_EVERY);
+        let ran = crate::fil::run_commands_to_the_end(&opts, &script, |t, _| {
+            status.set(&format!("  simulated time {t:6.2} s"))
+        });
+        status.finish();
+        let (r, d) = ran?;
         eprintln!("  {}", crate::fil::summary_line(&r.sim));
         match &d {
             Ok(d) => eprintln!(
@@ -1403,14 +1421,12 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         "walker fil: {} ({:?}) in QEMU {} against the simulated robot",
         plan_name, spec.model, opts.machine
     );
-    let last = std::cell::Cell::new(-1.0f64);
+    let status = StatusLine::stderr(STATUS_EVERY);
     let r = crate::fil::run(&opts, |t, n| {
-        if t - last.get() >= 0.5 {
-            eprint!("\r  simulated time {t:6.2} s, {n} bus instructions");
-            last.set(t);
-        }
-    })?;
-    eprintln!();
+        status.set(&format!("  simulated time {t:6.2} s, {n} bus instructions"))
+    });
+    status.finish();
+    let r = r?;
     eprintln!("  {}", crate::fil::summary_line(&r.sim));
     match &r.firmware_log {
         Ok(l) => {
@@ -1498,16 +1514,13 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
     }
     let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
     let shard = a.shard.unwrap_or(Shard::ALL);
-    let n = (0..a.family.cases().len())
-        .filter(|&i| shard.has(i))
-        .count();
+    let n = sweep::shard_cases(a.family, shard).len();
     eprintln!(
         "walker sweep: {plan_name}, {n} firmware-in-the-loop walks (shard {}/{}), {} at a time",
         shard.index, shard.count, a.jobs
     );
-    let rows = sweep::run(&opts, a.family, shard, usize::from(a.jobs), |k, n, name| {
-        eprintln!("  [{k}/{n}] walking {name} …")
-    })?;
+    let progress = Progress::stderr(n, "walking");
+    let rows = sweep::run(&opts, a.family, shard, usize::from(a.jobs), &progress)?;
     std::fs::create_dir_all(&out)
         .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
     sweep::write_rows(&out.join("rows.csv"), &rows).map_err(CliError::failed)?;
@@ -1550,9 +1563,7 @@ fn run_ablation(a: SweepArgs) -> Result<(), CliError> {
     if a.merge.is_empty() {
         let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
         let shard = a.shard.unwrap_or(Shard::ALL);
-        let n = (0..a.family.cases().len())
-            .filter(|&i| shard.has(i))
-            .count();
+        let n = sweep::shard_cases(a.family, shard).len();
         eprintln!(
             "walker sweep --ablate: {plan_name}, {} configurations × {n} walks (shard {}/{}), {} at a time",
             configs.len(),
@@ -1566,13 +1577,9 @@ fn run_ablation(a: SweepArgs) -> Result<(), CliError> {
             // Resume: the cases this folder's rows.csv already holds are not walked again.
             let rows_csv = o.out_dir.join("rows.csv");
             let done = sweep::read_rows(&rows_csv).unwrap_or_default();
-            let todo: Vec<sweep::SweepCase> = a
-                .family
-                .cases()
+            let todo: Vec<sweep::SweepCase> = sweep::shard_cases(a.family, shard)
                 .into_iter()
-                .enumerate()
-                .filter(|(i, c)| shard.has(*i) && !done.iter().any(|r| r.name == c.name))
-                .map(|(_, c)| c)
+                .filter(|c| !done.iter().any(|r| r.name == c.name))
                 .collect();
             if !done.is_empty() {
                 eprintln!(
@@ -1582,9 +1589,8 @@ fn run_ablation(a: SweepArgs) -> Result<(), CliError> {
                     todo.len()
                 );
             }
-            let walked = sweep::run_cases(&o, &todo, usize::from(a.jobs), |k, n, case| {
-                eprintln!("  {name}: [{k}/{n}] walking {case} …")
-            })?;
+            let progress = Progress::stderr(todo.len(), &format!("{name}: walking"));
+            let walked = sweep::walk_cases(&o, &todo, usize::from(a.jobs), &progress)?;
             let (rows, _) = sweep::merge(a.family, vec![done, walked]).map_err(CliError::failed)?;
             std::fs::create_dir_all(&o.out_dir)
                 .map_err(|e| CliError::failed(format!("{}: {e}", o.out_dir.display())))?;
@@ -1709,8 +1715,10 @@ fn run_pushes(a: PushesArgs) -> Result<(), CliError> {
         stand_after: a.stand_after,
         conditions,
     };
-    eprintln!("walker pushes: {plan_name}");
-    let rows = pushes::run(&opts, |line| eprintln!("  {line} …")).map_err(CliError::failed)?;
+    let total = pushes::planned_runs(&opts);
+    eprintln!("walker pushes: {plan_name}, at most {total} firmware-in-the-loop walks");
+    let progress = Progress::stderr(total, "walking");
+    let rows = pushes::run(&opts, &progress).map_err(CliError::failed)?;
     let mut md = format!(
         "# Largest torso push survived: {plan_name}\n\nThe firmware's defaults on the MuJoCo robot; a push is a 10 ms horizontal force on the torso. Walking: pushed at {:.2} s of the walk, survived = no fall and the walk ends normally. Standing: pushed {:.2} s after standing ready, survived = no fall and the run ends by the commanded torque off. Resolution {:.2} N·s, up to {:.2} N·s; one run per level (host/src/pushes.rs).\n\n",
         a.walk_at, a.stand_after, a.step, a.max
@@ -1733,7 +1741,6 @@ fn write_report(out: &std::path::Path, name: &str, md: &str) -> Result<(), CliEr
 /// `walker drive`: the port, the terminal in raw mode, the session, then (with `--sim`) the
 /// run's end.
 fn run_drive(a: DriveArgs) -> Result<(), CliError> {
-    use std::io::Write as _;
     let mut sim = match a.sim {
         true => Some(crate::drive::SimRun::start(
             a.plan.as_deref(),
@@ -1742,14 +1749,25 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
         )?),
         false => None,
     };
+    let wait = crate::drive::CONNECT_WAIT.as_secs();
     let master = match (&a.connect, &a.serial, &mut sim) {
-        (Some(addr), _, _) => crate::drive::connect(addr, None),
-        (_, Some(dev), _) => crate::commands::PortMaster::serial(dev, a.baud),
+        (Some(addr), _, _) => {
+            eprintln!("walker drive: waiting for the firmware on {addr} (up to {wait} s) …");
+            crate::drive::connect(addr, None)
+        }
+        (_, Some(dev), _) => {
+            eprintln!("walker drive: opening {dev} at {} baud …", a.baud);
+            crate::commands::PortMaster::serial(dev, a.baud)
+        }
         (_, _, Some(run)) => {
             eprintln!(
                 "walker drive: the simulated robot starts (walker fil --command-port {}, output in {})",
                 run.port,
                 a.out.display()
+            );
+            eprintln!(
+                "walker drive: waiting for the firmware on 127.0.0.1:{} (up to {wait} s) …",
+                run.port
             );
             crate::drive::connect(&format!("127.0.0.1:{}", run.port), Some(run))
         }
@@ -1764,6 +1782,15 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
             return Err(CliError::failed(e));
         }
     };
+    let port_name = match (&a.connect, &a.serial, &sim) {
+        (Some(addr), _, _) => addr.clone(),
+        (_, Some(dev), _) => dev.clone(),
+        (_, _, Some(run)) => format!("127.0.0.1:{}", run.port),
+        _ => String::new(),
+    };
+    eprintln!(
+        "walker drive: waiting for the firmware's command port on {port_name} to answer (up to {wait} s) …"
+    );
     if let Err(e) = master.wait_ready(crate::drive::CONNECT_WAIT) {
         if let Some(run) = sim.as_mut() {
             run.kill();
@@ -1773,13 +1800,13 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
     eprintln!("{}", crate::drive::HELP);
     let ended = {
         let _raw = crate::drive::RawTerminal::enter()?;
-        let mut out = std::io::stderr();
-        crate::drive::session(&mut master, crate::drive::terminal_key, |line| {
-            let _ = write!(out, "\r{line}\x1b[K");
-            let _ = out.flush();
-        })
+        let status = StatusLine::stderr(STATUS_EVERY);
+        let ended = crate::drive::session(&mut master, crate::drive::terminal_key, |line| {
+            status.set(line)
+        });
+        status.finish();
+        ended
     };
-    eprintln!();
     let ended = match ended {
         Ok(e) => e,
         Err(e) => {
@@ -1818,8 +1845,10 @@ fn run_speed(a: SpeedArgs) -> Result<(), CliError> {
         step_v: a.step_v,
         step_w: a.step_w,
     };
-    eprintln!("walker speed: {plan_name}");
-    let rows = speed::run(&opts, |line| eprintln!("  {line} …")).map_err(CliError::failed)?;
+    let total = speed::planned_runs(&opts);
+    eprintln!("walker speed: {plan_name}, at most {total} firmware-in-the-loop walks");
+    let progress = Progress::stderr(total, "walking");
+    let rows = speed::run(&opts, &progress).map_err(CliError::failed)?;
     let mut md = format!(
         "# Fastest sustained walk on command: {plan_name}\n\nThe firmware's defaults on the MuJoCo robot, through the command port: the level held {:.0} s after the acceleration ramp; sustained = no fall, the run ends by the commanded torque off and the pelvis's mean over the hold within ± {:.0} % of the level. \"Delivered\" is what the step generator steps for the level after the leg's reach (host/src/speed.rs). Resolution {:.3} m/s and {:.3} rad/s, up to the command limits.\n\n",
         speed::HOLD_S,

@@ -87,12 +87,9 @@ pub fn mean_angle(a: f64, b: f64) -> f64 {
     (a.sin() + b.sin()).atan2(a.cos() + b.cos())
 }
 
-/// Samples the plan at `dt` until the lead-out ends and solves the leg IK per sample.
-pub fn export_rows(
-    spec: &WalkSpec,
-    robot: &Robot,
-    dt: f64,
-) -> Result<(Vec<ExportRow>, ExportSummary), PlanError> {
+/// Whether `spec` can be exported at `dt`: no stabilizer (feedback on measurements, which an
+/// export has not) and a plan the sampler accepts.
+pub fn check_exportable(spec: &WalkSpec, robot: &Robot, dt: f64) -> Result<(), PlanError> {
     if spec.stabilizer {
         return Err(PlanError::new(
             "stabilizer",
@@ -100,6 +97,16 @@ pub fn export_rows(
              (set it false, or walk the plan with `walker fil`)",
         ));
     }
+    spec.sampler(robot, dt).map(|_| ())
+}
+
+/// Samples the plan at `dt` until the lead-out ends and solves the leg IK per sample.
+pub fn export_rows(
+    spec: &WalkSpec,
+    robot: &Robot,
+    dt: f64,
+) -> Result<(Vec<ExportRow>, ExportSummary), PlanError> {
+    check_exportable(spec, robot, dt)?;
     let wholebody = (spec.compensation == CompensationName::Wholebody)
         .then(|| WholeBody::<f64>::new(robot, WHOLEBODY_ITERATIONS));
     let mut sampler = spec.sampler(robot, dt)?;
@@ -154,11 +161,26 @@ pub fn header() -> String {
         .join(",")
 }
 
-/// Writes the CSV (header and rows; 9 decimals: 1 nm, 1 nrad).
-pub fn write_csv(rows: &[ExportRow], mut w: impl Write) -> std::io::Result<()> {
-    writeln!(w, "{}", header())?;
+/// A value as the export writes it: 9 decimals (1 nm, 1 nrad), `-0` as `0`.
+fn field(v: f64) -> String {
+    let f = format!("{v:.9}");
+    if f == "-0.000000000" {
+        "0.000000000".to_string()
+    } else {
+        f
+    }
+}
+
+/// Writes the CSV (header and rows; 9 decimals: 1 nm, 1 nrad) with the `csv` crate.
+pub fn write_csv(rows: &[ExportRow], w: impl Write) -> std::io::Result<()> {
+    let mut out = csv::Writer::from_writer(w);
+    out.write_record(
+        LEAD_COLUMNS
+            .iter()
+            .map(|c| c.to_string())
+            .chain(JOINT_NAMES.iter().map(|n| joint_column(n))),
+    )?;
     for r in rows {
-        let mut line = String::with_capacity(256);
         let lead = [
             r.t,
             r.zmp[0],
@@ -173,20 +195,55 @@ pub fn write_csv(rows: &[ExportRow], mut w: impl Write) -> std::io::Result<()> {
             r.feet[1][1],
             r.feet[1][2],
         ];
-        for (i, v) in lead.iter().chain(r.q.iter()).enumerate() {
-            if i > 0 {
-                line.push(',');
-            }
-            let f = format!("{v:.9}");
-            line.push_str(if f == "-0.000000000" {
-                "0.000000000"
-            } else {
-                &f
-            });
-        }
-        writeln!(w, "{line}")?;
+        out.write_record(lead.iter().chain(r.q.iter()).map(|v| field(*v)))?;
     }
-    Ok(())
+    out.flush()
+}
+
+/// The header line of a plan file that says why `walker export` refuses the file:
+/// `# Not exported: REASON` among the comment lines before the first key.
+pub const NOT_EXPORTED: &str = "Not exported:";
+
+/// The reason the header of a file's `text` gives for not exporting (see [`NOT_EXPORTED`]).
+pub fn not_exported_reason(text: &str) -> Option<String> {
+    text.lines()
+        .map(str::trim)
+        .take_while(|l| l.is_empty() || l.starts_with('#'))
+        .find_map(|l| {
+            l.trim_start_matches('#')
+                .trim()
+                .strip_prefix(NOT_EXPORTED)
+                .map(|r| r.trim().to_string())
+        })
+}
+
+/// Whether TOML `text` is a run configuration (`walker fil --config`: a `[plan]` table or
+/// `plan_file`) rather than a plan file.
+pub fn is_run_config(text: &str) -> bool {
+    text.parse::<toml::Table>()
+        .is_ok_and(|t| t.contains_key("plan") || t.contains_key("plan_file"))
+}
+
+/// The walk `walker export --plan FILE` samples: a plan file, or a run configuration's walk,
+/// checked as [`export_rows`] checks it (at the plan's dt). A refusal carries the reason the
+/// file's header gives, if it gives one ([`not_exported_reason`]).
+pub fn load_for_export(path: &std::path::Path, robot: &Robot) -> Result<WalkSpec, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read the plan: {e}", path.display()))?;
+    let loaded = if is_run_config(&text) {
+        crate::runconfig::load(path).map(|rc| rc.spec)
+    } else {
+        crate::planfile::load(path).map_err(|e| e.to_string())
+    };
+    let checked = loaded.and_then(|spec| {
+        check_exportable(&spec, robot, spec.dt)
+            .map(|()| spec)
+            .map_err(|e| format!("{}: {e}", path.display()))
+    });
+    checked.map_err(|e| match not_exported_reason(&text) {
+        Some(why) => format!("{e} (the file's header: {NOT_EXPORTED} {why})"),
+        None => e,
+    })
 }
 
 #[cfg(test)]
@@ -234,5 +291,98 @@ mod compensation_tests {
         };
         let e = export_rows(&fb, &robot, 0.005).unwrap_err();
         assert_eq!(e.field, "stabilizer");
+    }
+}
+
+#[cfg(test)]
+mod shipped_plans {
+    use super::*;
+
+    /// Every file in plans/ exports (a plan, or a run configuration's walk) or its header says
+    /// why not (`# Not exported: …`), never both; a refusal names that reason; a header that
+    /// shows a `walker export --plan` command names its own file.
+    #[test]
+    fn every_shipped_plan_exports_or_says_why_not() {
+        let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../plans"));
+        let robot = Robot::reference();
+        let mut files: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        files.sort();
+        let (mut exported, mut refused) = (0, 0);
+        for path in &files {
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            let text = std::fs::read_to_string(path).unwrap();
+            let why = not_exported_reason(&text);
+            match (load_for_export(path, &robot), &why) {
+                (Ok(spec), None) => {
+                    let (rows, _) = export_rows(&spec, &robot, spec.dt)
+                        .unwrap_or_else(|e| panic!("{name}: {e}"));
+                    assert!(rows.len() > 100, "{name}: {} rows", rows.len());
+                    exported += 1;
+                }
+                (Ok(_), Some(w)) => panic!("{name} exports but its header says: {w}"),
+                (Err(e), None) => panic!("{name} does not export and its header says not why: {e}"),
+                (Err(e), Some(w)) => {
+                    assert!(w.len() > 10, "{name}: reason {w:?}");
+                    assert!(e.contains(w.as_str()) && e.contains(&name), "{name}: {e}");
+                    refused += 1;
+                }
+            }
+            for (i, _) in text.match_indices("walker export --plan ") {
+                let named = text[i + "walker export --plan ".len()..]
+                    .split([' ', '`'])
+                    .next()
+                    .unwrap_or("");
+                assert!(
+                    named.ends_with(&format!("/{name}")) || named == name,
+                    "{name}'s header shows an export of {named}"
+                );
+            }
+        }
+        assert!(
+            exported >= 9 && refused >= 1,
+            "{exported} exported, {refused} refused"
+        );
+    }
+
+    #[test]
+    fn the_reason_is_read_from_the_header_only() {
+        assert_eq!(
+            not_exported_reason("# A plan.\n# Not exported: feedback.\nmodel = \"lipm\"\n"),
+            Some("feedback.".into())
+        );
+        assert_eq!(
+            not_exported_reason("model = \"lipm\"\n# Not exported: late.\n"),
+            None
+        );
+        assert!(is_run_config("plan_file = \"table2.toml\"\n"));
+        assert!(is_run_config("[plan]\ndt = 0.001\n"));
+        assert!(!is_run_config("model = \"tlipfm\"\n"));
+    }
+
+    /// The CSV written with the `csv` crate has the bytes the hand-made one had: the header,
+    /// 9 decimals, `-0` written as `0`, one `\n` per row.
+    #[test]
+    fn the_csv_keeps_its_bytes() {
+        let row = ExportRow {
+            t: 0.005,
+            zmp: [-0.0000000001, 0.045],
+            com: [0.0, -0.02, 0.217],
+            feet: [[0.0, 0.045, 0.0], [0.0, -0.045, 0.0]],
+            feet_yaw: [0.0, 0.0],
+            q: [-0.1; LEG_JOINTS],
+        };
+        let mut out = Vec::new();
+        write_csv(&[row], &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let mut expect = header();
+        expect.push('\n');
+        expect.push_str("0.005000000,0.000000000,0.045000000,0.000000000,-0.020000000,0.217000000,0.000000000,0.045000000,0.000000000,0.000000000,-0.045000000,0.000000000");
+        expect.push_str(&",-0.100000000".repeat(LEG_JOINTS));
+        expect.push('\n');
+        assert_eq!(text, expect);
     }
 }

@@ -12,6 +12,7 @@ pub mod fil;
 pub mod mcap_export;
 pub mod planfile;
 pub mod plot;
+pub mod progress;
 pub mod pushes;
 pub mod qemu;
 pub mod report;

@@ -26,6 +26,7 @@ use std::fmt::Write as _;
 
 use crate::commands::{CommandScript, ScriptCommand};
 use crate::fil::{self, FilOptions};
+use crate::progress::Progress;
 use crate::sim::Push;
 use walker_contract::codes::ExitCode;
 
@@ -130,6 +131,25 @@ pub fn search(
     Ok(out)
 }
 
+/// The most runs [`search`] makes with `step` and `max` (every coarse level, then the one in
+/// between); 0 when it would refuse them.
+pub fn max_runs(step: f64, max: f64) -> usize {
+    if !(step.is_finite() && step > 0.0 && max.is_finite() && max >= step) {
+        return 0;
+    }
+    let kmax = (max / step + 1e-9).floor() as u32;
+    let mut coarse = 0;
+    let mut k = 2.min(kmax);
+    while k <= kmax {
+        coarse += 1;
+        if k == kmax {
+            break;
+        }
+        k = (k + 2).min(kmax);
+    }
+    coarse + 1
+}
+
 /// Options of [`run`].
 #[derive(Clone, Debug)]
 pub struct PushOptions {
@@ -207,16 +227,34 @@ fn push_run(
     ))
 }
 
-/// Searches every condition and direction; `progress(line)` before each run.
-pub fn run(opts: &PushOptions, progress: impl Fn(&str)) -> Result<Vec<PushRow>, String> {
+/// The most runs [`run`] makes with `opts`: the standing reference run and, per condition and
+/// direction, [`max_runs`]; a search that ends sooner lowers the count as it ends.
+pub fn planned_runs(opts: &PushOptions) -> usize {
+    let standing = opts.conditions.contains(&Condition::Standing);
+    usize::from(standing) + opts.conditions.len() * DIRECTIONS.len() * max_runs(opts.step, opts.max)
+}
+
+/// Searches every condition and direction; `progress` counts the runs (its total starts at
+/// [`planned_runs`] and shrinks as each search ends).
+pub fn run(opts: &PushOptions, progress: &Progress) -> Result<Vec<PushRow>, String> {
     let mut rows = Vec::new();
+    let bound = max_runs(opts.step, opts.max);
     for &condition in &opts.conditions {
         let at_s = match condition {
             Condition::Walking => opts.walk_at,
             Condition::Standing => {
-                progress("standing without a push (the time it stands ready)");
                 let name = "standing-nopush";
-                match push_run(opts, condition, None, name)? {
+                progress.start(name);
+                let r = push_run(opts, condition, None, name);
+                let outcome = match &r {
+                    Ok((true, Some(ready_us))) => {
+                        format!("stood ready at {:.2} s", *ready_us as f64 * 1e-6)
+                    }
+                    Ok(_) => "did not end by torque off".to_string(),
+                    Err(e) => format!("error: {e}"),
+                };
+                progress.finish_case(name, &outcome);
+                match r? {
                     (true, Some(ready_us)) => ready_us as f64 * 1e-6 + opts.stand_after,
                     _ => {
                         return Err(format!(
@@ -230,15 +268,24 @@ pub fn run(opts: &PushOptions, progress: impl Fn(&str)) -> Result<Vec<PushRow>, 
         for (direction, deg) in DIRECTIONS {
             let result = search(opts.step, opts.max, |j| {
                 let name = format!("{}-{direction}-{j:.2}", condition.name());
-                progress(&format!("{name} (push at {at_s:.2} s)"));
+                progress.start(&name);
                 let push = Push {
                     at_s,
                     impulse_ns: j,
                     direction_rad: deg.to_radians(),
                     duration_s: 0.01,
                 };
-                push_run(opts, condition, Some(push), &name).map(|(ok, _)| ok)
+                let r = push_run(opts, condition, Some(push), &name).map(|(ok, _)| ok);
+                let outcome = match &r {
+                    Ok(true) => format!("{j:.2} N·s at {at_s:.2} s survived"),
+                    Ok(false) => format!("{j:.2} N·s at {at_s:.2} s fell"),
+                    Err(e) => format!("error: {e}"),
+                };
+                progress.finish_case(&name, &outcome);
+                r
             })?;
+            let (_, total) = progress.counts();
+            progress.set_total(total.saturating_sub(bound.saturating_sub(result.trials.len())));
             rows.push(PushRow {
                 condition,
                 direction,
@@ -248,6 +295,7 @@ pub fn run(opts: &PushOptions, progress: impl Fn(&str)) -> Result<Vec<PushRow>, 
             });
         }
     }
+    progress.finish();
     Ok(rows)
 }
 
@@ -292,6 +340,32 @@ mod tests {
     /// A robot that survives up to `limit` N·s, recording what it was asked.
     fn threshold(limit: f64) -> impl FnMut(f64) -> Result<bool, String> {
         move |j| Ok(j <= limit + 1e-9)
+    }
+
+    /// The progress bound is the most runs a search makes: all coarse levels survived, or a
+    /// fall at the last coarse level and the level in between.
+    #[test]
+    fn max_runs_bounds_every_search() {
+        for (step, max) in [
+            (0.25, 4.0),
+            (0.25, 3.75),
+            (0.5, 0.5),
+            (0.1, 1.0),
+            (1.0, 3.0),
+        ] {
+            let bound = max_runs(step, max);
+            let kmax = (max / step + 1e-9).floor() as usize;
+            let mut most = 0;
+            for limit in 0..=kmax + 1 {
+                let r = search(step, max, threshold(limit as f64 * step - step / 2.0)).unwrap();
+                most = most.max(r.trials.len());
+            }
+            assert!(
+                most <= bound && bound <= most + 1,
+                "{step} {max}: {most} {bound}"
+            );
+        }
+        assert_eq!(max_runs(0.0, 1.0), 0);
     }
 
     #[test]

@@ -240,34 +240,33 @@ pub fn csv_number(v: f64, decimals: usize) -> String {
     }
 }
 
-/// Writes the tick rows as CSV (not-available values are empty fields).
-pub fn write_response_csv(rows: &[TickRow], mut w: impl Write) -> std::io::Result<()> {
-    writeln!(w, "{RESPONSE_HEADER}")?;
+/// Writes the tick rows as CSV with the `csv` crate (not-available values are empty fields).
+pub fn write_response_csv(rows: &[TickRow], w: impl Write) -> std::io::Result<()> {
+    let mut out = csv::Writer::from_writer(w);
+    out.write_record(RESPONSE_HEADER.split(','))?;
     for r in rows {
         let b = r.rec.bus;
-        writeln!(
-            w,
-            "{:.6},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            r.t,
-            r.rec.seq,
+        out.write_record([
+            format!("{:.6}", r.t),
+            r.rec.seq.to_string(),
             csv_number(r.zmp_ref[0], 5),
             csv_number(r.zmp_ref[1], 5),
             csv_number(r.zmp_meas[0], 5),
             csv_number(r.zmp_meas[1], 5),
-            u8::from(r.rec.zmp_valid),
+            u8::from(r.rec.zmp_valid).to_string(),
             csv_number(r.com[0], 5),
             csv_number(r.com[1], 5),
             csv_number(r.tau, 3),
-            phase_name(r.rec.phase),
-            fault_name(r.rec.fault),
-            u8::from(r.rec.overrun),
-            b.timeouts,
-            b.crc,
-            b.status,
-            r.rec.overruns
-        )?;
+            phase_name(r.rec.phase).to_string(),
+            fault_name(r.rec.fault).to_string(),
+            u8::from(r.rec.overrun).to_string(),
+            b.timeouts.to_string(),
+            b.crc.to_string(),
+            b.status.to_string(),
+            r.rec.overruns.to_string(),
+        ])?;
     }
-    Ok(())
+    out.flush()
 }
 
 /// One event as text: (seq, time µs, kind, detail in words: names, values with units).
@@ -1556,6 +1555,38 @@ pub fn ranking(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `zmp_response.csv` written with the `csv` crate has the bytes of the hand-made one:
+    /// the header, a not-available value empty, names and counters as they are, `\n` rows.
+    #[test]
+    fn response_rows_keep_their_bytes() {
+        let rec = TickRecord {
+            seq: 7,
+            zmp_valid: true,
+            overruns: 2,
+            ..TickRecord::default()
+        };
+        let row = TickRow {
+            t: 1.5,
+            rec,
+            zmp_ref: [0.0123456, f64::NAN],
+            zmp_meas: [-0.00001, 0.045],
+            com: [0.1, -0.02],
+            tau: f64::NAN,
+        };
+        let mut out = Vec::new();
+        write_response_csv(&[row], &mut out).unwrap();
+        let expect = format!(
+            "{RESPONSE_HEADER}\n1.500000,7,0.01235,,-0.00001,0.04500,1,0.10000,-0.02000,,{},{},{},{},{},{},2\n",
+            phase_name(rec.phase),
+            fault_name(rec.fault),
+            u8::from(rec.overrun),
+            rec.bus.timeouts,
+            rec.bus.crc,
+            rec.bus.status
+        );
+        assert_eq!(String::from_utf8(out).unwrap(), expect);
+    }
 
     fn bounds() -> SupportBounds {
         SupportBounds {

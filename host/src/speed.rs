@@ -20,6 +20,7 @@ use std::fmt::Write as _;
 
 use crate::commands::{CommandScript, ScriptCommand};
 use crate::fil::{self, FilOptions};
+use crate::progress::Progress;
 use gait_core::trajectory::command::{CommandLimits, StepGenerator, WalkCommand};
 use gait_core::{Robot, Side};
 use walker_contract::codes::{ExitCode, FaultKind};
@@ -76,6 +77,26 @@ pub struct SpeedRun {
 }
 
 impl SpeedRun {
+    /// The run in a few words (a progress line).
+    pub fn outcome(&self) -> String {
+        let verdict = match self.sustained() {
+            true => "sustained",
+            false => "not sustained",
+        };
+        let fell = match self.fell_at {
+            Some(t) if t.is_finite() => format!(", fell at {t:.2} s"),
+            Some(_) => ", fell".to_string(),
+            None => String::new(),
+        };
+        let measured = self
+            .measured
+            .map_or("no mean".to_string(), |m| format!("mean {m:.3}"));
+        format!(
+            "{verdict} ({measured} for {:.3} delivered{fell})",
+            self.delivered
+        )
+    }
+
     /// Sustained (see the module docs).
     pub fn sustained(&self) -> bool {
         self.fell_at.is_none()
@@ -280,22 +301,47 @@ pub struct SpeedRow {
     pub runs: Vec<SpeedRun>,
 }
 
-/// Searches both axes up to the command limits; `progress(line)` before each run.
-pub fn run(opts: &SpeedOptions, progress: impl Fn(&str)) -> Result<Vec<SpeedRow>, String> {
+/// The axes searched: each with its resolution and its command limit.
+fn axes(opts: &SpeedOptions) -> [(Axis, f64, f64); 2] {
     let l = CommandLimits::DEFAULT;
-    let mut rows = Vec::new();
-    for (axis, step, max) in [
+    [
         (Axis::Forward, opts.step_v, l.vx_forward),
         (Axis::Turn, opts.step_w, l.yaw_rate),
-    ] {
+    ]
+}
+
+/// The most runs [`run`] makes with `opts` (the searches' bound,
+/// [`crate::pushes::max_runs`]); a search that ends sooner lowers the count as it ends.
+pub fn planned_runs(opts: &SpeedOptions) -> usize {
+    axes(opts)
+        .iter()
+        .map(|&(_, step, max)| crate::pushes::max_runs(step, max))
+        .sum()
+}
+
+/// Searches both axes up to the command limits; `progress` counts the runs (its total starts
+/// at [`planned_runs`] and shrinks as each search ends).
+pub fn run(opts: &SpeedOptions, progress: &Progress) -> Result<Vec<SpeedRow>, String> {
+    let mut rows = Vec::new();
+    for (axis, step, max) in axes(opts) {
         let mut runs = Vec::new();
         let found = crate::pushes::search(step, max, |level| {
-            progress(&format!("{} {level:.3}", axis.name()));
-            let r = speed_run(opts, axis, level)?;
+            let name = format!("{}-{level:.3}", axis.name());
+            progress.start(&name);
+            let r = speed_run(opts, axis, level);
+            let outcome = match &r {
+                Ok(r) => r.outcome(),
+                Err(e) => format!("error: {e}"),
+            };
+            progress.finish_case(&name, &outcome);
+            let r = r?;
             let ok = r.sustained();
             runs.push(r);
             Ok(ok)
         })?;
+        let bound = crate::pushes::max_runs(step, max);
+        let (_, total) = progress.counts();
+        progress.set_total(total.saturating_sub(bound.saturating_sub(found.trials.len())));
         rows.push(SpeedRow {
             axis,
             sustained: found.survived,
@@ -303,6 +349,7 @@ pub fn run(opts: &SpeedOptions, progress: impl Fn(&str)) -> Result<Vec<SpeedRow>
             runs,
         });
     }
+    progress.finish();
     Ok(rows)
 }
 

@@ -32,6 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::beyond::{self, AxisError};
 use crate::fil::{self, FilOptions, WalkFigures};
+use crate::progress::Progress;
 use crate::sim::SimConfig;
 
 /// The goals of the closed-loop issue, per run.
@@ -368,6 +369,24 @@ pub fn merge(
 }
 
 impl SweepRow {
+    /// The run in a few words (a progress line): exit, distance, the goals missed.
+    pub fn outcome(&self) -> String {
+        let f = &self.figures;
+        let exit = self
+            .exit_code
+            .map_or("killed".to_string(), |c| format!("exit {c}"));
+        let missed = self.missed();
+        format!(
+            "{exit}, walked {:.3} m ({:.0} %), {}",
+            f.walked,
+            100.0 * f.walked / f.planned,
+            match missed.is_empty() {
+                true => "every goal met".to_string(),
+                false => format!("missed: {}", missed.join("; ")),
+            }
+        )
+    }
+
     /// The goals this run misses (empty: all met).
     pub fn missed(&self) -> Vec<String> {
         let f = &self.figures;
@@ -394,32 +413,36 @@ impl SweepRow {
     }
 }
 
-/// Walks the cases of `shard`, `jobs` at a time, and scores them (table order);
-/// `progress(k, n, name)` as the k-th of the n runs starts.
-pub fn run(
-    opts: &FilOptions,
-    family: Family,
-    shard: Shard,
-    jobs: usize,
-    progress: impl Fn(usize, usize, &str) + Sync,
-) -> Result<Vec<SweepRow>, String> {
-    let mine: Vec<SweepCase> = family
+/// The cases of `family` in `shard`, in table order.
+pub fn shard_cases(family: Family, shard: Shard) -> Vec<SweepCase> {
+    family
         .cases()
         .into_iter()
         .enumerate()
         .filter(|(i, _)| shard.has(*i))
         .map(|(_, c)| c)
-        .collect();
-    run_cases(opts, &mine, jobs, progress)
+        .collect()
 }
 
-/// Walks `cases`, `jobs` at a time, and scores them (in the order given); `progress(k, n,
-/// name)` as the k-th of the n runs starts.
-pub fn run_cases(
+/// Walks the cases of `shard`, `jobs` at a time, and scores them (table order); `progress`
+/// counts the finished walks ([`run_cases`]).
+pub fn run(
+    opts: &FilOptions,
+    family: Family,
+    shard: Shard,
+    jobs: usize,
+    progress: &Progress,
+) -> Result<Vec<SweepRow>, String> {
+    walk_cases(opts, &shard_cases(family, shard), jobs, progress)
+}
+
+/// Walks `cases` with `opts`, `jobs` at a time, and scores them (in the order given);
+/// `progress` counts the finished walks ([`run_cases`]).
+pub fn walk_cases(
     opts: &FilOptions,
     cases: &[SweepCase],
     jobs: usize,
-    progress: impl Fn(usize, usize, &str) + Sync,
+    progress: &Progress,
 ) -> Result<Vec<SweepRow>, String> {
     let variant = beyond::variants()
         .into_iter()
@@ -428,7 +451,6 @@ pub fn run_cases(
     let mut tokens = fil::firmware_tokens(&opts.spec)?;
     tokens.extend(opts.extra_tokens.iter().cloned());
     let cfg = beyond::firmware_config(&tokens)?;
-    let mine = cases;
     let walk = |case: &SweepCase| -> Result<SweepRow, String> {
         let mut sim = opts.sim.clone();
         (case.apply)(&mut sim);
@@ -448,17 +470,32 @@ pub fn run_cases(
             figures,
         })
     };
+    run_cases(cases, jobs, progress, walk)
+}
+
+/// Runs `walk` on every case, `jobs` at a time (each worker takes the next case), and returns
+/// the results in the cases' order; `progress` hears of each case as it starts and as it
+/// finishes ([`SweepRow::outcome`], or the error), so its k/N counts finished walks.
+pub fn run_cases(
+    cases: &[SweepCase],
+    jobs: usize,
+    progress: &Progress,
+    walk: impl Fn(&SweepCase) -> Result<SweepRow, String> + Sync,
+) -> Result<Vec<SweepRow>, String> {
     let next = AtomicUsize::new(0);
-    let started = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Result<SweepRow, String>>>> = Mutex::new(vec![None; mine.len()]);
+    let results: Mutex<Vec<Option<Result<SweepRow, String>>>> = Mutex::new(vec![None; cases.len()]);
     let worker = || loop {
         let i = next.fetch_add(1, Ordering::SeqCst);
-        let Some(case) = mine.get(i) else {
+        let Some(case) = cases.get(i) else {
             return;
         };
-        let k = started.fetch_add(1, Ordering::SeqCst) + 1;
-        progress(k, mine.len(), case.name);
+        progress.start(case.name);
         let row = walk(case);
+        let outcome = match &row {
+            Ok(r) => r.outcome(),
+            Err(e) => format!("error: {e}"),
+        };
+        progress.finish_case(case.name, &outcome);
         if let Ok(mut res) = results.lock() {
             if let Some(slot) = res.get_mut(i) {
                 *slot = Some(row);
@@ -466,10 +503,11 @@ pub fn run_cases(
         }
     };
     std::thread::scope(|s| {
-        for _ in 0..jobs.clamp(1, mine.len().max(1)) {
+        for _ in 0..jobs.clamp(1, cases.len().max(1)) {
             s.spawn(worker);
         }
     });
+    progress.finish();
     let results = results
         .into_inner()
         .map_err(|_| "a sweep worker panicked")?;
@@ -625,6 +663,65 @@ mod tests {
         assert_eq!(m.len(), 4, "{m:?}");
         let t = table(&[row(0.26, 1.0, [0.010, 0.013], None)]);
         assert!(t.contains("| none |"), "{t}");
+    }
+
+    /// The sweep's progress under a pipe (not a terminal): the parallel runner prints one plain
+    /// line per case, `[k/N] case: outcome (elapsed …, ETA …)`, k = 1 … N once each however
+    /// the three workers interleave, every case named once, no `\r`; the rows come back in
+    /// table order and a failed walk is a line too.
+    #[test]
+    fn sweep_progress_under_a_pipe_prints_one_line_per_case() {
+        let cs = servo_cases();
+        let buf = crate::progress::SharedBuffer::default();
+        let progress = Progress::lines(cs.len(), "walking", Box::new(buf.clone()));
+        let rows = run_cases(&cs, 3, &progress, |case| {
+            // Uneven durations so that the workers finish out of order.
+            let i = cs.iter().position(|c| c.name == case.name).unwrap_or(0);
+            std::thread::sleep(std::time::Duration::from_millis(2 + (7 * i as u64) % 11));
+            match case.name {
+                "friction0.4" => Err("QEMU did not start".into()),
+                _ => Ok(SweepRow {
+                    name: case.name.into(),
+                    ..row(0.26, 1.0, [0.010, 0.013], None)
+                }),
+            }
+        });
+        assert_eq!(rows.unwrap_err(), "QEMU did not start");
+        let text = buf.text();
+        assert!(!text.contains('\r'), "{text:?}");
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), cs.len(), "{text}");
+        let n = cs.len();
+        for (k, line) in lines.iter().enumerate() {
+            let head = format!("[{}/{n}] ", k + 1);
+            assert!(line.starts_with(&head), "line {k}: {line}");
+            assert!(line.contains(" (elapsed ") && line.ends_with(')'), "{line}");
+        }
+        assert!(lines[n - 1].ends_with(", done)"), "{text}");
+        for c in &cs {
+            let named = lines
+                .iter()
+                .filter(|l| l.contains(&format!("] {}: ", c.name)))
+                .count();
+            assert_eq!(named, 1, "{}: {text}", c.name);
+        }
+        assert!(
+            text.contains("] friction0.4: error: QEMU did not start ("),
+            "{text}"
+        );
+        assert!(text.contains("] nominal: exit 0, walked 0.260 m (100 %), every goal met ("));
+        assert_eq!(progress.counts(), (n, n));
+        // Without failures the rows come back in table order.
+        let quiet = Progress::lines(cs.len(), "walking", Box::new(std::io::sink()));
+        let rows = run_cases(&cs, 4, &quiet, |case| {
+            Ok(SweepRow {
+                name: case.name.into(),
+                ..row(0.26, 1.0, [0.010, 0.013], None)
+            })
+        })
+        .unwrap();
+        let names: Vec<_> = rows.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, cs.map(|c| c.name));
     }
 
     /// Every case is in exactly one shard of any split, and the shards interleave the list.

@@ -514,7 +514,7 @@ pub struct Simulator {
     cfg: SimConfig,
     log: Option<truth::TruthLog>,
     next_log_us: u64,
-    qpos_log: Option<std::io::BufWriter<std::fs::File>>,
+    qpos_log: Option<csv::Writer<std::fs::File>>,
     next_qpos_us: u64,
     /// Sensor samples waiting out the configured latency: (time µs, foot samples, IMU sample).
     delayed: std::collections::VecDeque<(u64, [FootForces; 2], ImuSample)>,
@@ -558,10 +558,10 @@ impl Simulator {
         };
         let qpos_log = match (&cfg.qpos_out, &physics) {
             (Some(p), Body::MuJoCo(b)) => {
-                use std::io::Write;
-                let mut w = std::io::BufWriter::new(std::fs::File::create(p)?);
-                let cols: Vec<String> = (0..b.qpos().len()).map(|i| format!("qpos_{i}")).collect();
-                writeln!(w, "t_s,{}", cols.join(","))?;
+                let mut w = csv::Writer::from_writer(std::fs::File::create(p)?);
+                let cols = (0..b.qpos().len()).map(|i| format!("qpos_{i}"));
+                w.write_record(std::iter::once("t_s".to_string()).chain(cols))
+                    .map_err(std::io::Error::from)?;
                 Some(w)
             }
             _ => None,
@@ -756,12 +756,14 @@ impl Simulator {
         }
         if let (Some(w), Body::MuJoCo(b)) = (&mut self.qpos_log, &self.physics) {
             if now >= self.next_qpos_us {
-                use std::io::Write;
-                let mut row = format!("{:.4}", now as f64 * 1e-6);
+                w.write_field(format!("{:.4}", now as f64 * 1e-6))
+                    .map_err(std::io::Error::from)?;
                 for v in b.qpos() {
-                    row.push_str(&format!(",{v:.5}"));
+                    w.write_field(format!("{v:.5}"))
+                        .map_err(std::io::Error::from)?;
                 }
-                writeln!(w, "{row}")?;
+                w.write_record(None::<&[u8]>)
+                    .map_err(std::io::Error::from)?;
                 self.next_qpos_us = now + 10_000;
             }
         }
@@ -807,7 +809,6 @@ impl Simulator {
             l.rows()
         });
         if let Some(w) = &mut self.qpos_log {
-            use std::io::Write;
             let _ = w.flush();
         }
         SimSummary {

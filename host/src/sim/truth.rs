@@ -20,7 +20,6 @@
 //! [`crate::report::read_truth`] is the one reader.
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use super::body::TruthSample;
@@ -45,63 +44,58 @@ pub fn joint_torque_column(id: usize) -> String {
     format!("tq_{id}_nm")
 }
 
-/// Writer of the truth CSV.
+/// Writer of the truth CSV (the `csv` crate).
 #[derive(Debug)]
 pub struct TruthLog {
-    out: BufWriter<File>,
+    out: csv::Writer<File>,
     rows: u64,
 }
 
 impl TruthLog {
     /// Creates the file and writes the header.
     pub fn create(path: &Path) -> std::io::Result<Self> {
-        let mut out = BufWriter::new(File::create(path)?);
-        writeln!(out, "{HEADER}")?;
+        let mut out = csv::Writer::from_writer(File::create(path)?);
+        out.write_record(HEADER.split(','))?;
         Ok(TruthLog { out, rows: 0 })
     }
 
     /// Appends one row.
     pub fn row(&mut self, t: &TruthSample) -> std::io::Result<()> {
-        let mut s = format!("{:.6}", t.t_us as f64 * 1e-6);
-        let put = |s: &mut String, v: f64, decimals: usize| {
-            s.push(',');
-            s.push_str(&crate::report::csv_number(v, decimals));
-        };
+        /// A number with `decimals` decimals (empty when not available).
+        fn num(w: &mut csv::Writer<File>, v: f64, decimals: usize) -> csv::Result<()> {
+            w.write_field(crate::report::csv_number(v, decimals))
+        }
+        let w = &mut self.out;
+        w.write_field(format!("{:.6}", t.t_us as f64 * 1e-6))?;
         for v in [t.zmp[0], t.zmp[1], t.fz] {
-            put(&mut s, v, 6);
+            num(w, v, 6)?;
         }
         for v in t.com.iter().chain(&t.pelvis).chain(&t.pelvis_rpy) {
-            put(&mut s, *v, 6);
+            num(w, *v, 6)?;
         }
-        s.push_str(&format!(
-            ",{},{}",
-            t.support.code(),
-            if t.stance_left { 'L' } else { 'R' }
-        ));
-        put(&mut s, t.margin, 6);
+        w.write_field(t.support.code().to_string())?;
+        w.write_field(if t.stance_left { "L" } else { "R" })?;
+        num(w, t.margin, 6)?;
         for v in t.forces.iter().flatten().chain(&t.gyro).chain(&t.accel) {
-            put(&mut s, *v, 6);
+            num(w, *v, 6)?;
         }
-        put(&mut s, t.tau, 6);
-        s.push_str(&format!(",{}", u8::from(t.falling)));
-        put(&mut s, t.fall_angle, 6);
+        num(w, t.tau, 6)?;
+        w.write_field(u8::from(t.falling).to_string())?;
+        num(w, t.fall_angle, 6)?;
         for v in t.joint_speed.iter().chain(&t.joint_torque) {
-            put(&mut s, *v, 5);
+            num(w, *v, 5)?;
         }
-        s.push_str(&format!(",{}", t.torque_limited));
-        s.push_str(&format!(
-            ",{},{}",
-            u8::from(t.sole_contact[0]),
-            u8::from(t.sole_contact[1])
-        ));
+        w.write_field(t.torque_limited.to_string())?;
+        w.write_field(u8::from(t.sole_contact[0]).to_string())?;
+        w.write_field(u8::from(t.sole_contact[1]).to_string())?;
         for v in t.sole_wrench.iter().flatten() {
-            put(&mut s, *v, 4);
+            num(w, *v, 4)?;
         }
-        s.push_str(&format!(",{}", u8::from(t.other_contact)));
+        w.write_field(u8::from(t.other_contact).to_string())?;
         for v in t.soles.iter().flatten() {
-            put(&mut s, *v, 6);
+            num(w, *v, 6)?;
         }
-        writeln!(self.out, "{s}")?;
+        w.write_record(None::<&[u8]>)?;
         self.rows += 1;
         Ok(())
     }
@@ -114,5 +108,56 @@ impl TruthLog {
     /// Flushes the file.
     pub fn flush(&mut self) -> std::io::Result<()> {
         self.out.flush()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The truth CSV written with the `csv` crate has the bytes of the hand-made one: the
+    /// header, each value with its decimals joined by commas, an unavailable value (NaN) empty,
+    /// `\n` after each row.
+    #[test]
+    fn truth_rows_keep_their_bytes() {
+        let mut t = TruthSample {
+            t_us: 1_234_567,
+            zmp: [f64::NAN, -0.0123456789],
+            fz: 35.5,
+            stance_left: true,
+            falling: true,
+            torque_limited: 0b101,
+            sole_contact: [true, false],
+            other_contact: true,
+            ..TruthSample::default()
+        };
+        t.joint_torque = [f64::NAN; 12];
+        t.joint_speed[3] = -1.234567;
+        t.sole_wrench[1][2] = 20.12345;
+        t.soles[0] = [0.1, 0.045, -0.01];
+        let n = crate::report::csv_number;
+        let mut fields = vec![format!("{:.6}", 1.234567)];
+        fields.extend([t.zmp[0], t.zmp[1], t.fz].map(|v| n(v, 6)));
+        fields.extend([0.0; 9].map(|v| n(v, 6)));
+        fields.extend([t.support.code().to_string(), "L".into(), n(0.0, 6)]);
+        fields.extend([0.0; 15].map(|v| n(v, 6)));
+        fields.extend(["1".into(), n(0.0, 6)]);
+        fields.extend(t.joint_speed.map(|v| n(v, 5)));
+        fields.extend(t.joint_torque.map(|v| n(v, 5)));
+        fields.extend(["5".into(), "1".into(), "0".into()]);
+        fields.extend(t.sole_wrench.iter().flatten().map(|v| n(*v, 4)));
+        fields.push("1".into());
+        fields.extend(t.soles.iter().flatten().map(|v| n(*v, 6)));
+        let expect = format!("{HEADER}\n{}\n", fields.join(","));
+        assert_eq!(fields.len(), HEADER.split(',').count());
+        let path = std::env::temp_dir().join(format!("walker-truth-{}.csv", std::process::id()));
+        let mut log = TruthLog::create(&path).unwrap();
+        log.row(&t).unwrap();
+        log.flush().unwrap();
+        drop(log);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(text, expect);
+        assert!(text.contains("1.234567,,-0.012346,35.500000,"), "{text}");
     }
 }
