@@ -179,8 +179,11 @@ fn cell(r: Option<&SweepRow>) -> String {
             let [ex, ey] = r.true_err.map(|e| e.mean * 1e3);
             match r.figures.fell_at {
                 Some(t) => format!("fell {t:.1} s"),
-                None if r.exit_code != Some(0) => format!("exit {:?}", r.exit_code),
-                None => format!("{share:.0} % · {ex:.0} / {ey:.0}"),
+                None => match r.exit_code {
+                    Some(0) => format!("{share:.0} % · {ex:.0} / {ey:.0}"),
+                    Some(c) => format!("stopped, exit {c}"),
+                    None => "killed".into(),
+                },
             }
         }
     }
@@ -208,7 +211,7 @@ pub fn tables(defaults: &[SweepRow], offs: &[Vec<SweepRow>; FEATURES.len()]) -> 
     }
     let _ = writeln!(
         s,
-        "\nEach cell: walked / planned · true ZMP mean |e| x / y (mm), or when the robot fell.\n"
+        "\nEach cell: walked / planned · true ZMP mean |e| x / y (mm); or when the robot fell; or the firmware's stop code (a stop counts as a fall in the verdict).\n"
     );
     let _ = writeln!(
         s,

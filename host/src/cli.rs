@@ -1608,7 +1608,15 @@ fn run_ablation(a: SweepArgs) -> Result<(), CliError> {
             let parts = a
                 .merge
                 .iter()
-                .map(|d| sweep::read_rows(&d.join(name).join("rows.csv")))
+                .map(|d| {
+                    let path = d.join(name).join("rows.csv");
+                    if path.exists() {
+                        sweep::read_rows(&path)
+                    } else {
+                        eprintln!("walker sweep --ablate --merge: {} absent", path.display());
+                        Ok(Vec::new())
+                    }
+                })
                 .collect::<Result<Vec<_>, _>>()
                 .map_err(CliError::failed)?;
             let (rows, missing) = sweep::merge(a.family, parts).map_err(CliError::failed)?;
