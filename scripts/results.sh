@@ -121,7 +121,8 @@ def worst(name):
     if best is None:
         return None
     c = best[1]
-    fall = {"0": "no", "13": "**fell**"}.get(c[2], f"exit {c[2]}")
+    fell = "fell at" in c[7]
+    fall = {"0": "no", "13": "**fell**"}.get(c[2], "**fell** " * fell + f"(exit {c[2]})")
     m = re.match(r"([-0-9.]+) / ([0-9.]+) m \((-?[0-9]+) %\)", c[3])
     dist = f"{m.group(1)} m ({m.group(3)} %)" if m else c[3]
     return c[0], [fall, dist, c[4], c[6]]
