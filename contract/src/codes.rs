@@ -25,7 +25,8 @@
 //! | 101 | panic |
 //!
 //! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0). Stop
-//! code 10 is never used: its exit code would be start-up's 20.
+//! code 10 is never used: its exit code would be start-up's 20. Stop code 13 (the command
+//! deadman) is the online walk's stop to standing, not the supervisor's: no run exits with it.
 
 /// Declares a code table once: an enum whose every variant carries its explicit wire code
 /// (`Variant = code`), and from it the enum, `ALL` (every variant, in declaration order),
@@ -109,6 +110,11 @@ wire_codes! {
         /// The last reset was not a power-on: the firmware does not walk by itself (value =
         /// [`ResetCause`] code).
         NotPowerOn = 12,
+        /// The command deadman: in Mode = walk, no valid command write on the command port for
+        /// `deadman_ms`; the online walk stopped to standing. Not a supervisor stop: the robot
+        /// stands with torque on, no stop record is written and no run ends with it; the
+        /// command port's Stop Code reads it until the master writes Mode again.
+        Deadman = 13,
     }
 }
 
@@ -127,6 +133,9 @@ impl StopCode {
             StopCode::SensorStale => ExitCode::SensorStale,
             StopCode::ServoFault => ExitCode::ServoFault,
             StopCode::NotPowerOn => ExitCode::NotPowerOn,
+            // Never a run's end (see the variant); a master that then writes Mode = torque off
+            // ends the run as requested.
+            StopCode::Deadman => ExitCode::Requested,
         }
     }
 }
@@ -258,6 +267,8 @@ impl StopReason {
             StopCode::NotPowerOn => StopReason::NotPowerOn {
                 cause: ResetCause::try_from(u8::try_from(value).ok()?).ok()?,
             },
+            // No stop record carries it (the walk's stop, not the supervisor's).
+            StopCode::Deadman => return None,
         })
     }
 }
@@ -317,6 +328,10 @@ pub enum FaultKind {
     /// leftward, trunk frame), `value` = the largest move asked in that swing, µm; gait-core
     /// `feedback::catch` A3–A4). An event of the walk, not a fault.
     CatchStep,
+    /// 17: the command deadman fired: in Mode = walk no valid command write came for
+    /// `deadman_ms`, the walk stops to standing (`id` 0, `value` = ms since the last valid
+    /// write); the command port's Stop Code then reads [`StopCode::Deadman`].
+    Deadman,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -359,6 +374,7 @@ impl FaultKind {
             Self::CommandReceived => 14,
             Self::Footstep => 15,
             Self::CatchStep => 16,
+            Self::Deadman => 17,
             Self::Other(c) => c,
         }
     }
@@ -381,6 +397,7 @@ impl FaultKind {
             14 => Self::CommandReceived,
             15 => Self::Footstep,
             16 => Self::CatchStep,
+            17 => Self::Deadman,
             c => Self::Other(c),
         }
     }
@@ -591,6 +608,10 @@ mod tests {
             let e = s.exit();
             if s == StopCode::PlanDone {
                 assert_eq!(e, ExitCode::PlanDone);
+            } else if s == StopCode::Deadman {
+                // Not a supervisor stop: no run ends with it.
+                assert_eq!(e, ExitCode::Requested);
+                assert_eq!(StopReason::from_code(s.code(), 0, 0), None);
             } else {
                 assert_eq!(e.code(), 10 + s.code(), "{s:?}");
             }

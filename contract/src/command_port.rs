@@ -17,6 +17,7 @@
 //! | 66 | 2 | Velocity X | RW | i16, mm/s forward, −100 ..= 200 |
 //! | 68 | 2 | Velocity Y | RW | i16, mm/s leftward, −100 ..= 100 |
 //! | 70 | 2 | Yaw Rate | RW | i16, mrad/s counter-clockwise, −600 ..= 600 |
+//! | 72 | 1 | Heartbeat | RW | any value: a valid command write that changes no command (the deadman) |
 //! | 80 | 8 | Step Entry | RW | dx, dy (i16 mm), dyaw (i16 mrad), side (1 left, 2 right), 0; each write appends to the step list |
 //! | 128 | 1 | State | R | [`PortState`] |
 //! | 129 | 1 | Support Foot | R | 0 both, 1 left, 2 right |
@@ -24,7 +25,7 @@
 //! | 132 | 2 | Measured ZMP X | R | i16, mm (robot frame) |
 //! | 134 | 2 | Measured ZMP Y | R | i16, mm |
 //! | 136 | 1 | ZMP Valid | R | 1 when the feet measure a ZMP |
-//! | 137 | 1 | Stop Code | R | the last [`crate::StopCode`], 0 none |
+//! | 137 | 1 | Stop Code | R | the supervisor's [`crate::StopCode`], else 13 ([`crate::StopCode::Deadman`]) after a deadman stop until Mode is written again, 0 none |
 //! | 138 | 1 | Fault Kind | R | the last [`crate::FaultKind`] logged, 0 none |
 //! | 139 | 1 | Step List Length | R | entries not yet stepped: in the port (≤ [`STEP_LIST_LEN`]) and taken by the walk (≤ 8) |
 //! | 140 | 2 | Walk Velocity X | R | i16, mm/s: the velocity the feet step (after the limits) |
@@ -33,6 +34,13 @@
 //! | 146 | 2 | Command Count | R | u16, accepted writes to the command registers (wraps) |
 //!
 //! The velocity ranges are [`gait_core::trajectory::command::CommandLimits::DEFAULT`]'s in the wire's units.
+//!
+//! # Valid command writes and the deadman
+//! A **valid command write** is a WRITE, SYNC WRITE or BULK WRITE (its own entry) addressed to
+//! the port (its ID or broadcast) that the table accepts: every one advances Command Count by
+//! one ([`CommandTable::command_count`]); a rejected write, a READ or a PING is none. Writing
+//! Heartbeat (72, any value) is one that changes no command. In Mode = walk the firmware stops
+//! the walk when none came for `deadman_ms` ([`CommandTable::deadman_stop`]).
 //!
 //! # Checks (the protocol's error statuses; a rejected write changes nothing)
 //! * an address beyond the table or in a gap: **Data Range**; a read-only byte: **Access**;
@@ -97,6 +105,8 @@ pub const VELOCITY_X: Reg = reg(66, 2);
 pub const VELOCITY_Y: Reg = reg(68, 2);
 /// Yaw rate, mrad/s (RW).
 pub const YAW_RATE: Reg = reg(70, 2);
+/// Heartbeat (RW, any value): a valid command write that changes no command.
+pub const HEARTBEAT: Reg = reg(72, 1);
 /// Step entry (RW; a write appends).
 pub const STEP_ENTRY: Reg = reg(80, 8);
 /// State (R, [`PortState`]).
@@ -131,7 +141,7 @@ pub const COMMAND_COUNT: Reg = reg(146, 2);
 pub const STATUS_BLOCK: Reg = reg(128, 20);
 
 /// Every register, in address order.
-pub const REGISTERS: [Reg; 21] = [
+pub const REGISTERS: [Reg; 22] = [
     MODEL_NUMBER,
     FIRMWARE_VERSION,
     ID,
@@ -139,6 +149,7 @@ pub const REGISTERS: [Reg; 21] = [
     VELOCITY_X,
     VELOCITY_Y,
     YAW_RATE,
+    HEARTBEAT,
     STEP_ENTRY,
     STATE,
     SUPPORT_FOOT,
@@ -156,7 +167,9 @@ pub const REGISTERS: [Reg; 21] = [
 ];
 
 /// The writable registers.
-pub const WRITABLE: [Reg; 5] = [MODE, VELOCITY_X, VELOCITY_Y, YAW_RATE, STEP_ENTRY];
+pub const WRITABLE: [Reg; 6] = [
+    MODE, VELOCITY_X, VELOCITY_Y, YAW_RATE, HEARTBEAT, STEP_ENTRY,
+];
 
 /// What the higher level asks for (the Mode register).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -289,7 +302,8 @@ pub struct PortStatus {
     pub step_count: u16,
     /// Measured ZMP (m), if the feet measure one.
     pub zmp_m: Option<[f32; 2]>,
-    /// The last stop code (0 none).
+    /// The stop code (0 none): the supervisor's; the deadman's is added by the table
+    /// ([`CommandTable::set_status`]).
     pub stop_code: u8,
     /// The last fault kind logged (0 none).
     pub fault_kind: u8,
@@ -385,6 +399,8 @@ pub struct CommandTable {
     commands: u16,
     /// Steps the walk took from the list and has not stepped (published).
     queued: u8,
+    /// The deadman stopped the walk and Mode was not written since.
+    deadman: bool,
 }
 
 impl Default for CommandTable {
@@ -410,6 +426,7 @@ impl CommandTable {
             steps: heapless::Deque::new(),
             commands: 0,
             queued: 0,
+            deadman: false,
         };
         t.put(MODEL_NUMBER, &MODEL_NUMBER_VALUE.to_le_bytes());
         t.put(FIRMWARE_VERSION, &[FIRMWARE_VERSION_VALUE]);
@@ -494,10 +511,10 @@ impl CommandTable {
             let _ = self.steps.push_back(e);
         }
         if mode == Some(Mode::Stop) {
-            for r in [VELOCITY_X, VELOCITY_Y, YAW_RATE] {
-                self.put(r, &[0, 0]);
-            }
-            self.steps.clear();
+            self.clear_command();
+        }
+        if mode.is_some() {
+            self.deadman = false;
         }
         self.commands = self.commands.wrapping_add(1);
         self.put(COMMAND_COUNT, &self.commands.to_le_bytes());
@@ -511,6 +528,29 @@ impl CommandTable {
             .get(usize::from(MODE.addr))
             .and_then(|&m| Mode::from_code(m))
             .unwrap_or(Mode::Stand)
+    }
+
+    /// Velocity registers 0 and the step list empty (Mode = stop's effect).
+    fn clear_command(&mut self) {
+        for r in [VELOCITY_X, VELOCITY_Y, YAW_RATE] {
+            self.put(r, &[0, 0]);
+        }
+        self.steps.clear();
+        self.put_step_list();
+    }
+
+    /// The deadman's stop, from the firmware's side: what an accepted Mode = stop does (Mode 3,
+    /// velocity 0, the step list emptied), but not a command write (Command Count unchanged);
+    /// Stop Code then reads [`crate::StopCode::Deadman`] until a master writes Mode.
+    pub fn deadman_stop(&mut self) {
+        self.put(MODE, &[Mode::Stop.code()]);
+        self.clear_command();
+        self.deadman = true;
+    }
+
+    /// True after [`CommandTable::deadman_stop`] until a master writes Mode.
+    pub fn deadman_stopped(&self) -> bool {
+        self.deadman
     }
 
     /// Sets the mode from the firmware's side (after torque off, or to clear a stop).
@@ -567,7 +607,11 @@ impl CommandTable {
         self.put(ZMP_X, &milli_i16(zx).to_le_bytes());
         self.put(ZMP_Y, &milli_i16(zy).to_le_bytes());
         self.put(ZMP_VALID, &[u8::from(s.zmp_m.is_some())]);
-        self.put(STOP_CODE, &[s.stop_code]);
+        let stop = match s.stop_code {
+            0 if self.deadman => crate::StopCode::Deadman.code(),
+            c => c,
+        };
+        self.put(STOP_CODE, &[stop]);
         self.put(FAULT_KIND, &[s.fault_kind]);
         let [vx, vy, w] = s.walk_velocity;
         self.put(WALK_VX, &milli_i16(vx).to_le_bytes());

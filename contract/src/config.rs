@@ -199,6 +199,9 @@ pub struct Config {
     /// Walk the configured forward plan at power-on (`true`: demos and the FIL tests), or
     /// stand up and wait for commands on the command port (`false`, the default).
     pub autostart: bool,
+    /// The command deadman, ms: in Mode = walk, no valid command write for this long stops the
+    /// online walk to standing.
+    pub deadman_ms: u32,
 }
 
 impl Config {
@@ -267,6 +270,7 @@ impl Config {
             torque_off_attempts: 3,
             servo_limits: ServoLimits::xm430(),
             autostart: false,
+            deadman_ms: 500,
         }
     }
 

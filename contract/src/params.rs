@@ -1177,6 +1177,15 @@ params! {
         set: |c, v| { c.autostart = v as usize == 1 },
         get: |c| { Some(Value::Word(usize::from(c.autostart))) },
     },
+    {
+        key: "deadman_ms",
+        plan_key: None,
+        unit: "ms",
+        domain: int(50, 10_000),
+        doc: "command deadman: in Mode = walk, no valid command write on the command port for this long stops the online walk to standing (Stop Code 13)",
+        set: |c, v| { c.deadman_ms = v as u32 },
+        get: |c| { Some(Value::Int(c.deadman_ms)) },
+    },
 }
 
 /// Key index meaning "not a known key".
@@ -1968,14 +1977,14 @@ mod tests {
         // The last key of the table (the bit set's far end) and the first.
         let last = KEYS[KEYS.len() - 1];
         let first = KEYS[0];
-        let line = format!("elf {first}=lipm {last}=1 {first}=dlipm");
+        let line = format!("elf {first}=lipm {last}=500 {first}=dlipm");
         let e = parse(&line).unwrap_err();
         assert_eq!(
             (e.kind, e.key(), e.key_index),
             (ArgErrorKind::Repeated, first, 0)
         );
         // Different keys are not repeats; an unknown key twice is an unknown key.
-        assert!(parse(&format!("elf {first}=lipm {last}=1")).is_ok());
+        assert!(parse(&format!("elf {first}=lipm {last}=500")).is_ok());
         let e = parse("elf stepz=1 stepz=2").unwrap_err();
         assert_eq!(e.kind, ArgErrorKind::UnknownKey);
         // Every key once: accepted.

@@ -51,6 +51,71 @@ fn ping_answers_model_and_version_also_to_broadcast() {
     assert_eq!(ask(&mut p, 1, Instruction::Ping), None);
 }
 
+/// Heartbeat (72) takes any value, counts as a command write and changes no command; the
+/// deadman's stop is Mode = stop's (velocity 0, the step list emptied) without counting, and Stop
+/// Code reads 13 until a master writes Mode (the supervisor's code first).
+#[test]
+fn heartbeat_counts_and_the_deadman_stop_reads_back_until_mode_is_written() {
+    let mut p = CommandPort::new();
+    let mut v = 50i16.to_le_bytes().to_vec();
+    v.extend_from_slice(&[0; 4]);
+    assert_eq!(write(&mut p, VELOCITY_X.addr, &v), None);
+    assert_eq!(write(&mut p, MODE.addr, &[2]), None);
+    let entry = StepEntry {
+        dx: 10,
+        dy: 0,
+        dyaw: 0,
+        side: 1,
+    };
+    assert_eq!(write(&mut p, STEP_ENTRY.addr, &entry.to_bytes()), None);
+    let cmd = p.table.raw_command();
+    for b in [0u8, 1, 0xFF] {
+        assert_eq!(write(&mut p, HEARTBEAT.addr, &[b]), None);
+    }
+    assert_eq!(p.table.raw_command(), cmd);
+    assert_eq!(p.table.command_count(), 6);
+    // Half of Heartbeat and Yaw Rate: Data Length; a broadcast WRITE counts (no reply).
+    assert_eq!(write(&mut p, 71, &[0, 0]), Some(ErrorCode::DataLength));
+    let mut pkt = [0u8; 32];
+    let n = Instruction::Write {
+        addr: HEARTBEAT.addr,
+        data: &[7],
+    }
+    .encode(&mut pkt, BROADCAST_ID)
+    .unwrap();
+    let mut replies = 0;
+    p.feed(&pkt[..n], |_| replies += 1);
+    assert_eq!((replies, p.table.command_count()), (0, 7));
+
+    let stop_code = |p: &mut CommandPort| read(p, STOP_CODE.addr, 1).unwrap()[0];
+    let status = |code| PortStatus {
+        stop_code: code,
+        ..PortStatus::default()
+    };
+    p.table.set_status(&status(0));
+    assert_eq!(stop_code(&mut p), 0);
+    assert!(!p.table.deadman_stopped());
+    p.table.deadman_stop();
+    assert_eq!(p.table.mode(), Mode::Stop);
+    assert_eq!(p.table.raw_command(), [3, 0, 0, 0]);
+    assert_eq!(read(&mut p, STEP_LIST.addr, 1), Ok(vec![0]));
+    assert_eq!(p.table.take_step(), None);
+    assert_eq!(p.table.command_count(), 7, "not a command write");
+    p.table.set_status(&status(0));
+    assert_eq!(stop_code(&mut p), walker_contract::StopCode::Deadman.code());
+    // The supervisor's stop code comes first.
+    p.table.set_status(&status(17));
+    assert_eq!(stop_code(&mut p), 17);
+    // A heartbeat does not clear it; a Mode write does.
+    assert_eq!(write(&mut p, HEARTBEAT.addr, &[0]), None);
+    p.table.set_status(&status(0));
+    assert_eq!(stop_code(&mut p), 13);
+    assert_eq!(write(&mut p, MODE.addr, &[2]), None);
+    p.table.set_status(&status(0));
+    assert_eq!(stop_code(&mut p), 0);
+    assert!(!p.table.deadman_stopped());
+}
+
 #[test]
 fn velocity_write_reaches_the_command_in_si_units() {
     let mut p = CommandPort::new();

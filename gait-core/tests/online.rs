@@ -521,3 +521,53 @@ fn a_footstep_list_is_walked_in_order_and_the_walk_stops_after_it() {
     assert_eq!(n.queued(), 0);
     assert!(matches!(n.mode(), WalkMode::Standing(_)));
 }
+
+/// `clear_steps` (the firmware's command deadman) while a footstep list walks under the zero
+/// command: the listed step under way lands where it was committed, no listed step after it
+/// is walked, the generator's stop steps close the feet and the walk stands; the CoM stays
+/// continuous through it. Without the clear the rest of the list is walked.
+#[test]
+fn clearing_the_steps_mid_list_lands_the_step_under_way_then_stops() {
+    let list: Vec<ListedStep<f64>> = (0..6)
+        .map(|i| ListedStep {
+            side: if i % 2 == 0 { Side::Left } else { Side::Right },
+            d: [0.03, 0.0, 0.0],
+        })
+        .collect();
+    let run = |clear: bool| {
+        let mut w = walk();
+        let mut steps = Vec::new();
+        let mut samples = Vec::new();
+        let mut cleared_at = None;
+        for k in 0..2400 {
+            if k == 10 {
+                for l in &list {
+                    assert!(w.push_step(*l));
+                }
+            }
+            samples.push(w.tick());
+            if let Some(f) = w.take_footstep() {
+                steps.push((f, w.last_given()));
+                if clear && steps.len() == 2 {
+                    w.clear_steps();
+                    assert_eq!(w.queued(), 0);
+                    cleared_at = Some(steps.len());
+                }
+            }
+        }
+        assert!(matches!(w.mode(), WalkMode::Standing(_)), "stands again");
+        assert_continuous(&samples);
+        (steps, cleared_at)
+    };
+    let (all, _) = run(false);
+    assert!(all.iter().filter(|(_, g)| g.is_some()).count() == list.len());
+    let (steps, cleared_at) = run(true);
+    assert_eq!(cleared_at, Some(2));
+    // The two listed steps committed before the clear, then only the stop's (unlisted) steps.
+    assert!(steps[..2].iter().all(|(_, g)| g.is_some()));
+    assert!(steps[2..].iter().all(|(_, g)| g.is_none()), "{steps:?}");
+    assert!(steps.len() <= 4, "{} steps", steps.len());
+    // The same first two steps as the uncleared walk's.
+    assert_eq!(steps[0].0, all[0].0);
+    assert_eq!(steps[1].0, all[1].0);
+}

@@ -16,6 +16,10 @@ It waits until the robot stands, walks forward at 0.05 m/s for 5 s, turns in pla
 for 4 s, stops, waits for standing and turns the torque off (which also ends a `walker fil`
 run; --keep-torque leaves the robot standing). A status line is printed every 0.5 s.
 
+While it walks it writes the Heartbeat register every 0.1 s: the firmware's command deadman
+(`deadman_ms`, 500 ms by default) stops a walk to standing when no valid command write (an
+accepted WRITE) came for that long — READs do not count (docs/command-port.md).
+
 The helpers (register map, status decoding, the TCP port handler) are used by the SDK tests in
 host/tests/sdk/, and a Rust test (host/tests/cli.rs
 `sdk_example_uses_the_contract_registers`) checks the numbers below against the contract
@@ -40,6 +44,9 @@ ADDR_FIRMWARE_VERSION = 6
 ADDR_ID = 7
 ADDR_MODE = 64
 ADDR_VELOCITY_X = 66  # then Velocity Y (68) and Yaw Rate (70): i16 mm/s, mm/s, mrad/s
+ADDR_HEARTBEAT = 72  # any value: a valid command write that changes no command
+HEARTBEAT_S = 0.1  # how often a walking master writes it (well under the 500 ms deadman)
+STOP_CODE_DEADMAN = 13  # Stop Code after the command deadman stopped the walk
 ADDR_STATUS = 128  # State; the status block runs to Command Count (146, 2 bytes)
 STATUS_LEN = 20
 ADDR_STEP_COUNT = 130
@@ -137,6 +144,11 @@ def set_velocity(port, ph, vx_mm_s, vy_mm_s, vyaw_mrad_s):
     return ph.writeTxRx(port, PORT_ID, ADDR_VELOCITY_X, len(data), data)
 
 
+def heartbeat(port, ph):
+    """WRITE Heartbeat (the command deadman's keep-alive); returns (comm result, error status)."""
+    return ph.write1ByteTxRx(port, PORT_ID, ADDR_HEARTBEAT, 0)
+
+
 def set_mode(port, ph, mode):
     """WRITE Mode; returns (comm result, error status)."""
     return ph.write1ByteTxRx(port, PORT_ID, ADDR_MODE, mode)
@@ -159,13 +171,17 @@ def wait_state(port, ph, state, timeout_s, every_s=0.5):
 
 
 def hold(port, ph, seconds, every_s=0.5):
-    """Prints the status every every_s for seconds."""
+    """Writes Heartbeat every HEARTBEAT_S and prints the status every every_s, for seconds."""
     end = time.monotonic() + seconds
+    shown = 0.0
     while time.monotonic() < end:
-        st = read_status(port, ph)
-        if st is not None:
-            print(status_line(st), flush=True)
-        time.sleep(every_s)
+        heartbeat(port, ph)
+        if time.monotonic() - shown >= every_s:
+            st = read_status(port, ph)
+            if st is not None:
+                print(status_line(st), flush=True)
+            shown = time.monotonic()
+        time.sleep(HEARTBEAT_S)
 
 
 def wait_ready(port, ph, timeout_s=120.0):

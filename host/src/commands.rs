@@ -8,6 +8,13 @@
 //! walk (or Mode = stop). After the last command the driver waits until the firmware stands
 //! again and sends Mode = torque off: the run ends (stop `Requested`).
 //!
+//! Between commands the driver writes the port's Heartbeat register every
+//! [`HEARTBEAT_EVERY_US`] of virtual time (the firmware's command deadman, `deadman_ms`,
+//! 500 ms by default, stops a walk without valid command writes). A command with
+//! `silence = S` (s) plays a lost master instead: from its `t` nothing is sent for S s of virtual
+//! time (no write, no heartbeat, no read), then the status block is read once
+//! ([`DriveReport::silences`]) and the script goes on.
+//!
 //! The firmware logs every command as it takes it (`CommandReceived`) and every footstep
 //! (`Footstep`): [`replay_footsteps`] integrates the logged commands through the step
 //! generator exactly as the firmware does (f32) — the check that the footsteps are the
@@ -108,6 +115,9 @@ pub struct ScriptCommand {
     /// walked first, then the velocity's steps (with velocity 0 the robot stops after them).
     #[serde(default)]
     pub steps: Vec<ScriptStep>,
+    /// A lost master: send nothing for this long, s (no velocity, stop or steps beside it).
+    #[serde(default)]
+    pub silence: f64,
 }
 
 impl ScriptCommand {
@@ -141,16 +151,33 @@ pub struct CommandScript {
 }
 
 impl CommandScript {
-    /// Parses and checks a script (times finite, non-negative and increasing; velocities in
-    /// the port's ranges; `stop` without a velocity).
+    /// Parses and checks a script (times finite, non-negative and increasing, none within a
+    /// silence; velocities in the port's ranges; `stop` without a velocity; `silence` alone).
     pub fn parse(text: &str) -> Result<Self, String> {
         let s: CommandScript = toml::from_str(text).map_err(|e| e.to_string())?;
         let mut last = -1.0;
+        // The end of the last silence: the next command comes after it.
+        let mut after = 0.0;
         for c in &s.command {
             if !(c.t.is_finite() && c.t >= 0.0 && c.t > last) {
                 return Err(format!("command times must increase from 0: t = {}", c.t));
             }
+            if c.t < after {
+                return Err(format!("command at t = {} s: within a silence", c.t));
+            }
+            if !(c.silence.is_finite() && c.silence >= 0.0) {
+                return Err(format!("command at t = {} s: silence {}", c.t, c.silence));
+            }
+            if c.silence > 0.0
+                && (c.stop || c.vx != 0.0 || c.vy != 0.0 || c.vyaw != 0.0 || !c.steps.is_empty())
+            {
+                return Err(format!(
+                    "command at t = {} s: silence with a velocity, a stop or steps",
+                    c.t
+                ));
+            }
             last = c.t;
+            after = c.t + c.silence;
             c.wire()?;
             if c.stop && (c.vx != 0.0 || c.vy != 0.0 || c.vyaw != 0.0 || !c.steps.is_empty()) {
                 return Err(format!(
@@ -368,6 +395,22 @@ impl PortMaster {
     }
 }
 
+/// How often the driver writes Heartbeat between commands, virtual µs: well under the
+/// firmware's default command deadman (500 ms).
+pub const HEARTBEAT_EVERY_US: u64 = 100_000;
+
+/// A silence of the script (a lost master): when the driver last wrote before it and the status
+/// block it read after it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Silence {
+    /// Virtual time of the last valid write before the silence (its reply), µs.
+    pub last_write_us: u64,
+    /// Virtual time the silence ended, µs.
+    pub end_us: u64,
+    /// The status block read after the silence.
+    pub status: port::StatusBlock,
+}
+
 /// What the driver did: the virtual time the firmware stood ready, and when each command was
 /// sent (virtual µs).
 #[derive(Clone, Debug, Default)]
@@ -376,6 +419,8 @@ pub struct DriveReport {
     pub ready_us: u64,
     /// Virtual time each command was sent, µs.
     pub sent_us: Vec<u64>,
+    /// The script's silences, in order.
+    pub silences: Vec<Silence>,
 }
 
 /// Drives a script on the port (see the module docs); `progress` is the simulator's virtual
@@ -403,16 +448,43 @@ pub fn drive(
     let mut rep = DriveReport {
         ready_us: now(),
         sent_us: Vec::new(),
+        silences: Vec::new(),
     };
+    let mut last_write = now();
+    // Waits until virtual time `until`, writing Heartbeat every HEARTBEAT_EVERY_US.
+    let wait_beating =
+        |m: &mut PortMaster, until: u64, last_write: &mut u64| -> Result<(), String> {
+            while now() < until {
+                if quit.load(Ordering::Relaxed) {
+                    return Err("aborted".into());
+                }
+                if now() >= last_write.saturating_add(HEARTBEAT_EVERY_US) {
+                    m.write(port::HEARTBEAT.addr, &[0])?;
+                    *last_write = now();
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            Ok(())
+        };
     for c in &script.command {
         let at = rep.ready_us + (c.t * 1e6) as u64;
-        while now() < at {
-            if quit.load(Ordering::Relaxed) {
-                return Err("aborted".into());
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        wait_beating(master, at, &mut last_write)?;
         rep.sent_us.push(now());
+        if c.silence > 0.0 {
+            let end = now() + (c.silence * 1e6) as u64;
+            while now() < end {
+                if quit.load(Ordering::Relaxed) {
+                    return Err("aborted".into());
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            rep.silences.push(Silence {
+                last_write_us: last_write,
+                end_us: now(),
+                status: master.status()?,
+            });
+            continue;
+        }
         if c.stop {
             master.write(port::MODE.addr, &[Mode::Stop.code()])?;
         } else {
@@ -427,13 +499,16 @@ pub fn drive(
             master.write(port::VELOCITY_X.addr, &data)?;
             master.write(port::MODE.addr, &[Mode::Walk.code()])?;
         }
+        last_write = now();
     }
     // Past the last command: wait for standing, then torque off ends the run.
     let settle = now() + 1_000_000;
-    while now() < settle {
-        std::thread::sleep(Duration::from_millis(5));
+    wait_beating(master, settle, &mut last_write)?;
+    // A walk command last (a footstep list under velocity 0) walks on in Mode = walk until it
+    // stands: the heartbeats go on.
+    while master.state()? != Some(PortState::Standing) {
+        wait_beating(master, now() + 20_000, &mut last_write)?;
     }
-    wait_state(master, PortState::Standing)?;
     master.write(port::MODE.addr, &[Mode::TorqueOff.code()])?;
     Ok(rep)
 }
@@ -648,6 +723,16 @@ mod tests {
             "[[command]]\nt = 1\nstop = true\nsteps = [{ foot = \"left\" }]\n"
         )
         .is_err());
+        // A silence: alone, finite, and the next command after it.
+        let q = CommandScript::parse("[[command]]\nt = 1\nsilence = 2.0\n[[command]]\nt = 3\n")
+            .unwrap();
+        assert_eq!(q.command[0].silence, 2.0);
+        assert!(CommandScript::parse("[[command]]\nt = 1\nsilence = 2.0\nvx = 0.05\n").is_err());
+        assert!(CommandScript::parse("[[command]]\nt = 1\nsilence = -1.0\n").is_err());
+        assert!(
+            CommandScript::parse("[[command]]\nt = 1\nsilence = 2.0\n[[command]]\nt = 2.5\n")
+                .is_err()
+        );
         let nine = ["{ foot = \"left\" }"; 9].join(", ");
         assert!(CommandScript::parse(&format!("[[command]]\nt = 1\nsteps = [{nine}]\n")).is_err());
     }

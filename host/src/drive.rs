@@ -17,7 +17,10 @@
 //! produces a write the port would refuse. A status line, redrawn every [`STATUS_EVERY`] from
 //! one READ of the status block ([`port::STATUS_BLOCK`]), shows the state, support foot, step
 //! count, the velocity the feet step (after the acceleration limits), the measured ZMP and the
-//! stop code and last fault.
+//! stop code and last fault. Each refresh also writes the port's Heartbeat register (72): a
+//! valid command write that changes no command, so the firmware's command deadman
+//! (`deadman_ms`, 500 ms) stops the walk only when `walker drive` itself stalls or loses the
+//! port (Stop Code 13 on the status line; a key walks again).
 //!
 //! [`Teleop`], [`status_line`] and [`session`] are free of the terminal (tested against the
 //! contract's own control table); `walker drive` (cli.rs) reads the keys with `crossterm` in
@@ -215,8 +218,9 @@ pub enum Ended {
 }
 
 /// The teleoperation loop: waits up to [`STATUS_EVERY`] for a key (`next_key`), sends what it
-/// asks, and shows the status line (`show`) at least every [`STATUS_EVERY`]. Ends on quit (after
-/// sending Mode = stop), on torque off, or when the firmware reports State = stopped.
+/// asks, and shows the status line (`show`) at least every [`STATUS_EVERY`], each time followed
+/// by a WRITE of Heartbeat (the command deadman's keep-alive). Ends on quit (after sending Mode
+/// = stop), on torque off, or when the firmware reports State = stopped.
 pub fn session(
     link: &mut dyn Link,
     mut next_key: impl FnMut(Duration) -> Result<Option<Key>, String>,
@@ -232,6 +236,7 @@ pub fn session(
             if st.state == Some(PortState::Stopped) {
                 return Ok(Ended::Stopped);
             }
+            link.write(port::HEARTBEAT.addr, &[0])?;
         }
         let Some(k) = next_key(STATUS_EVERY)? else {
             continue;
@@ -587,6 +592,15 @@ mod tests {
         assert_eq!(end, Ended::Quit);
         let mode = port::MODE.addr;
         let vel = port::VELOCITY_X.addr;
+        // A heartbeat after each status line.
+        let beats = l
+            .writes
+            .iter()
+            .filter(|w| **w == (port::HEARTBEAT.addr, vec![0]))
+            .count();
+        assert_eq!(beats, lines.len(), "{:?}", l.writes);
+        assert_eq!(l.table.command_count() as usize, l.writes.len());
+        l.writes.retain(|(a, _)| *a != port::HEARTBEAT.addr);
         assert_eq!(
             l.writes,
             [
@@ -609,6 +623,42 @@ mod tests {
             lines.iter().any(|l| l.contains("cmd  +20   +0 mm/s +100")),
             "{lines:?}"
         );
+    }
+
+    /// With no key for a while the session still writes Heartbeat at every status refresh
+    /// (every [`STATUS_EVERY`]), and nothing else: the command deadman stays quiet.
+    #[test]
+    fn a_session_without_keys_keeps_writing_heartbeats() {
+        let mut l = link();
+        let mut waits = 0;
+        let started = Instant::now();
+        let end = session(
+            &mut l,
+            |wait| {
+                waits += 1;
+                if waits > 5 {
+                    return Ok(Some(Key::Quit));
+                }
+                std::thread::sleep(wait);
+                Ok(None)
+            },
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(end, Ended::Quit);
+        let beats = l
+            .writes
+            .iter()
+            .filter(|w| **w == (port::HEARTBEAT.addr, vec![0]))
+            .count();
+        assert!(beats >= 5, "{beats} heartbeats: {:?}", l.writes);
+        // Never more than one a refresh period (the first at once).
+        let periods = started.elapsed().as_secs_f64() / STATUS_EVERY.as_secs_f64();
+        assert!(
+            beats as f64 <= periods + 1.0,
+            "{beats} in {periods:.1} periods"
+        );
+        assert_eq!(l.writes.last(), Some(&(port::MODE.addr, vec![3])));
     }
 
     #[test]

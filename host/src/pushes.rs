@@ -207,6 +207,7 @@ fn push_run(
                     vyaw: 0.0,
                     stop: true,
                     steps: Vec::new(),
+                    silence: 0.0,
                 }],
             };
             match fil::run_commands(&fopts, &script, |_, _| {}) {

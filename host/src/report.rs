@@ -493,6 +493,9 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
             if id & 0xF == 0 { "forward" } else { "leftward" },
             f64::from(v) * 1e-3
         ),
+        K::Deadman => format!(
+            "command deadman: no valid command write for {v} ms in Mode = walk; the walk stops to standing"
+        ),
         K::Other(c) => format!("fault kind {c} (unknown to this reader): id {id}, value {v}"),
     }
 }

@@ -1349,6 +1349,7 @@ fn sdk_example_uses_the_contract_registers() {
         ("ADDR_ID", port::ID.addr),
         ("ADDR_MODE", port::MODE.addr),
         ("ADDR_VELOCITY_X", port::VELOCITY_X.addr),
+        ("ADDR_HEARTBEAT", port::HEARTBEAT.addr),
         ("ADDR_STATUS", port::STATE.addr),
         ("ADDR_STEP_COUNT", port::STEP_COUNT.addr),
         ("ADDR_COMMAND_COUNT", port::COMMAND_COUNT.addr),
@@ -1385,6 +1386,10 @@ fn sdk_example_uses_the_contract_registers() {
     assert_eq!(c("PORT_ID"), i64::from(port::PORT_ID));
     assert_eq!(c("PORT_MODEL"), i64::from(port::MODEL_NUMBER_VALUE));
     assert_eq!(c("VELOCITY_X_MAX"), i64::from(port::VELOCITY_RANGE[0].1));
+    assert_eq!(
+        c("STOP_CODE_DEADMAN"),
+        i64::from(walker_contract::StopCode::Deadman.code())
+    );
     for (name, m) in [
         ("MODE_TORQUE_OFF", Mode::TorqueOff),
         ("MODE_STAND", Mode::Stand),

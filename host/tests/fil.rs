@@ -1182,3 +1182,120 @@ fn commands_demo_walks_on_mujoco() {
         f.line()
     );
 }
+
+/// The command deadman (issue 37): `plans/commands-deadman.toml` walks at 0.05 m/s on the
+/// command port (the driver writing Heartbeat every 100 ms of virtual time), then the master
+/// goes silent for 4 s (nothing sent, not even a READ) and reads the status block once after.
+/// The firmware's deadman (`deadman_ms`, 500 ms) fires 0.5 s after the last write (its
+/// `Deadman` record, on the simulator's clock); the walk lands the step under way, takes at
+/// most one more step (the stop's, which closes the feet) and stands: State = standing and
+/// Stop Code 13 read back after the silence; standing within 0.5 s + two step periods of the
+/// last write; the pelvis still from then on and no fall (the simulator's truth); every
+/// footstep the generator's for the logged commands (the zero command the deadman logged
+/// included). The run ends by the driver's torque off.
+#[test]
+#[ignore]
+fn a_silent_master_is_stopped_by_the_deadman_on_mujoco() {
+    use walker_contract::codes::FaultKind;
+    use walker_contract::command_port::PortState;
+    use walker_contract::footstep_log::FootstepLog;
+    use walker_contract::record::LoggedPhase;
+    use walker_contract::StopCode;
+    let (r, drove, _, f) = command_script_run("commands-deadman");
+    eprintln!("{}", f.line());
+    assert_eq!(r.exit_code, Some(17), "ends by the script's torque off");
+    assert_eq!(f.fell_at, None, "{}", f.line());
+    assert!(
+        f.footsteps.mismatches.is_empty(),
+        "{:?}",
+        f.footsteps.mismatches
+    );
+    let silence = drove.silences.first().expect("the script's silence");
+    assert_eq!(
+        (silence.status.state, silence.status.stop_code),
+        (Some(PortState::Standing), StopCode::Deadman.code()),
+        "{:?}",
+        silence.status
+    );
+    let log = decode_file(&r.log).expect("log");
+    let dead: Vec<_> = log
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Record::Fault(f) if f.kind == FaultKind::Deadman => Some(*f),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(dead.len(), 1, "{dead:?}");
+    let t_dead = i64::from(dead[0].time_us);
+    let last_write = silence.last_write_us as i64;
+    let fired_after = t_dead - last_write;
+    // The firmware's own count: 500 ms (whole ticks of 5 ms); the host's clock saw the last
+    // write's reply within a few ticks of the firmware taking it.
+    assert!((500..=505).contains(&dead[0].value), "{:?}", dead[0]);
+    assert!(
+        (480_000..=530_000).contains(&fired_after),
+        "deadman {fired_after} µs after the last write"
+    );
+    // Footsteps begun after the deadman, and the step period.
+    let mut fl = FootstepLog::new();
+    let mut before = 0;
+    let mut after = 0;
+    for e in &log.events {
+        let Record::Fault(f) = e else { continue };
+        if fl.push(f.kind, f.id, f.value).is_some() {
+            if i64::from(f.time_us) <= t_dead {
+                before += 1;
+            } else {
+                after += 1;
+            }
+        }
+    }
+    let period = i64::from(fl.period_us().expect("the online walk's period"));
+    assert!(before >= 3, "{before} steps before the deadman");
+    assert!(after <= 1, "{after} steps begun after the deadman");
+    // Standing from the last tick not standing before the torque off.
+    let ticks: Vec<_> = log
+        .ticks
+        .iter()
+        .take_while(|t| t.phase != LoggedPhase::Stopped)
+        .collect();
+    let i = ticks
+        .iter()
+        .rposition(|t| t.phase != LoggedPhase::Standing)
+        .expect("walked");
+    let standing_from = i64::from(ticks.get(i + 1).expect("stands").time_us);
+    let stopped_after = standing_from - last_write;
+    eprintln!(
+        "deadman {:.3} s after the last write, {after} step(s) begun after it, standing {:.3} s \
+         after the last write (step period {:.3} s)",
+        fired_after as f64 * 1e-6,
+        stopped_after as f64 * 1e-6,
+        period as f64 * 1e-6
+    );
+    assert!(
+        stopped_after <= 500_000 + 2 * period + 10_000,
+        "standing {stopped_after} µs after the last write, period {period} µs"
+    );
+    // The truth: the pelvis stays where it stood until the silence's end.
+    let truth = walker_host::report::read_truth(&r.truth).expect("truth");
+    let px = truth.column("pelvis_x_m").expect("pelvis x");
+    let still: Vec<f64> = truth
+        .t
+        .iter()
+        .zip(px)
+        .filter(|(t, _)| {
+            **t * 1e6 >= standing_from as f64 + 0.3e6 && **t * 1e6 <= silence.end_us as f64
+        })
+        .map(|(_, x)| *x)
+        .collect();
+    let (lo, hi) = still
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(*x), b.max(*x)));
+    assert!(still.len() > 100, "{} truth rows standing", still.len());
+    assert!(
+        hi - lo < 0.005,
+        "the pelvis moved {:.4} m standing",
+        hi - lo
+    );
+}

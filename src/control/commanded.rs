@@ -5,6 +5,15 @@
 //! configured walk's timing and swing, its footsteps logged (`Footstep` fault records), and the
 //! status registers published.
 //!
+//! **The command deadman** ([`CommandLink::deadman`]): in Mode = walk, with the online walk,
+//! no valid command write (an accepted WRITE, SYNC WRITE or BULK WRITE: one that advances
+//! Command Count; Heartbeat (72) is one that changes no command) for `deadman_ms` stops the
+//! walk as a master's Mode = stop does (the velocity 0, the port's step list emptied) and also
+//! drops the listed steps the walk took: the step under way lands, the generator's stop steps
+//! close the feet, the robot stands (torque on). Logged as a `Deadman` fault record and the
+//! command fields it changed (`CommandReceived`, so the host's replay sees the zero command);
+//! Stop Code reads 13 until a master writes Mode. Never armed for the autostart plan.
+//!
 //! The online walk starts standing with the feet at (0, ±`step_width`), heading 0, the CoM at
 //! rest on their midpoint at `z_c`; it steps with the configured walk's T, t1, t2 (after the
 //! servo-speed check's stretch) and swing shape, the command limits of
@@ -87,6 +96,8 @@ pub struct CommandLink {
     pub port: CommandPort,
     logged: [i32; 4],
     count: u16,
+    /// Time of the last valid command write seen (µs, the board's clock).
+    last_write_us: u64,
 }
 
 impl Default for CommandLink {
@@ -104,6 +115,7 @@ impl CommandLink {
             port,
             logged,
             count: 0,
+            last_write_us: 0,
         }
     }
 
@@ -119,18 +131,65 @@ impl CommandLink {
                 board.command_tx(r);
             }
         }
+        if self.note_writes(board.now_us()) {
+            self.log_changes(board, log);
+        }
+    }
+
+    /// Notes whether valid command writes came since the last call (Command Count moved):
+    /// then `now_us` is the last write's time.
+    fn note_writes(&mut self, now_us: u64) -> bool {
         let count = self.port.table.command_count();
-        if count != self.count {
-            self.count = count;
-            let now = board.now_us();
-            let cmd = self.port.table.raw_command();
-            for ((field, v), old) in CommandField::ALL.iter().zip(cmd).zip(self.logged.iter()) {
-                if v != *old {
-                    let rec = super::fault(now, FaultKind::CommandReceived, field.code(), v);
-                    log.write(board, rec);
-                }
+        if count == self.count {
+            return false;
+        }
+        self.count = count;
+        self.last_write_us = now_us;
+        true
+    }
+
+    /// Logs the command fields that changed since the last logged command
+    /// (`CommandReceived`).
+    fn log_changes<B: Board>(&mut self, board: &mut B, log: &mut LogWriter) {
+        let now = board.now_us();
+        let cmd = self.port.table.raw_command();
+        for ((field, v), old) in CommandField::ALL.iter().zip(cmd).zip(self.logged.iter()) {
+            if v != *old {
+                let rec = super::fault(now, FaultKind::CommandReceived, field.code(), v);
+                log.write(board, rec);
             }
-            self.logged = cmd;
+        }
+        self.logged = cmd;
+    }
+
+    /// Time since the last valid command write, µs, if the deadman is armed: Mode = walk.
+    pub fn silent_us(&self, now_us: u64) -> Option<u64> {
+        (self.mode() == Mode::Walk).then(|| now_us.saturating_sub(self.last_write_us))
+    }
+
+    /// The command deadman (see the module docs), checked after [`CommandLink::poll`]: armed
+    /// in Mode = walk; with no valid command write for `limit_us` it stops the port's command
+    /// ([`walker_contract::command_port::CommandTable::deadman_stop`]) and the walk's listed
+    /// steps, logs it, and returns true (the tick it fires).
+    pub fn deadman<B: Board>(
+        &mut self,
+        board: &mut B,
+        log: &mut LogWriter,
+        walk: &mut OnlineWalk<f32>,
+        limit_us: u64,
+    ) -> bool {
+        let now = board.now_us();
+        match self.silent_us(now) {
+            Some(silent) if silent >= limit_us => {
+                self.port.table.deadman_stop();
+                walk.clear_steps();
+                let ms = i32::try_from(silent / 1000).unwrap_or(i32::MAX);
+                log.write(board, super::fault(now, FaultKind::Deadman, 0, ms));
+                self.log_changes(board, log);
+                crate::fw_log!(warn, "command deadman: no command write for {} ms", ms);
+                true
+            }
+            _ => false,
         }
     }
 
@@ -215,4 +274,91 @@ pub fn log_footstep<B: Board>(
         given.map(|d| d.map(|v| scaled(v, 1000.0))),
         |id, value| log.write(board, super::fault(now, FaultKind::Footstep, id, value)),
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dxl::packet::BROADCAST_ID;
+    use dxl::Instruction;
+    use walker_contract::command_port::{HEARTBEAT, MODE, PORT_ID};
+
+    /// The bytes of `ins` to `id`.
+    fn packet(ins: Instruction<'_>, id: u8) -> Vec<u8> {
+        let mut buf = [0u8; 64];
+        let n = ins.encode(&mut buf, id).unwrap();
+        buf[..n].to_vec()
+    }
+
+    /// Feeds `bytes` to the link's port at `now_us` as [`CommandLink::poll`] does.
+    fn feed(link: &mut CommandLink, bytes: &[u8], now_us: u64) {
+        link.port.feed(bytes, |_| {});
+        link.note_writes(now_us);
+    }
+
+    const LIMIT: u64 = 500_000;
+
+    fn due(link: &CommandLink, now_us: u64) -> bool {
+        link.silent_us(now_us).is_some_and(|s| s >= LIMIT)
+    }
+
+    /// Armed in Mode = walk only: due `deadman_ms` after the last valid write (WRITE to the
+    /// port's ID or broadcast, the Heartbeat included), not before; a READ, a PING or a
+    /// rejected write does not reset it; Mode = stand / stop disarm it.
+    #[test]
+    fn the_deadman_is_due_deadman_ms_after_the_last_valid_write_in_mode_walk() {
+        let mut l = CommandLink::new();
+        let mode = |m: u8| {
+            packet(
+                Instruction::Write {
+                    addr: MODE.addr,
+                    data: &[m],
+                },
+                PORT_ID,
+            )
+        };
+        let beat = |id: u8| {
+            packet(
+                Instruction::Write {
+                    addr: HEARTBEAT.addr,
+                    data: &[0x5A],
+                },
+                id,
+            )
+        };
+        // Standing (Mode = stand, the power-on mode): never armed.
+        assert_eq!(l.silent_us(10_000_000), None);
+        feed(&mut l, &mode(2), 1_000_000);
+        assert_eq!(l.silent_us(1_000_000), Some(0));
+        assert!(!due(&l, 1_499_999));
+        assert!(due(&l, 1_500_000));
+        // A heartbeat resets it.
+        feed(&mut l, &beat(PORT_ID), 1_300_000);
+        assert!(!due(&l, 1_799_999));
+        assert!(due(&l, 1_800_000));
+        // So does a broadcast write (no reply).
+        feed(&mut l, &beat(BROADCAST_ID), 1_700_000);
+        assert!(!due(&l, 2_199_999));
+        // Not a READ, a PING, a rejected write (mode 7: Data Range; State: Access).
+        let read = packet(Instruction::Read { addr: 128, len: 20 }, PORT_ID);
+        feed(&mut l, &read, 2_000_000);
+        feed(&mut l, &packet(Instruction::Ping, PORT_ID), 2_000_000);
+        feed(&mut l, &mode(7), 2_100_000);
+        let state = Instruction::Write {
+            addr: 128,
+            data: &[1],
+        };
+        feed(&mut l, &packet(state, PORT_ID), 2_100_000);
+        // Another device's write neither.
+        feed(&mut l, &beat(PORT_ID + 1), 2_100_000);
+        assert!(due(&l, 2_200_000));
+        // Mode = stop, Mode = stand: disarmed however long the silence.
+        for m in [3, 1] {
+            feed(&mut l, &mode(m), 3_000_000);
+            assert_eq!(l.silent_us(60_000_000), None, "mode {m}");
+        }
+        // Walk again: armed from that write.
+        feed(&mut l, &mode(2), 4_000_000);
+        assert!(!due(&l, 4_499_999) && due(&l, 4_500_000));
+    }
 }

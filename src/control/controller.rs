@@ -131,11 +131,16 @@ impl<P: TickPath> Controller<'_, P> {
         }
     }
 
-    /// The command port: answered every tick; torque off on command; the online walk's command.
+    /// The command port: answered every tick; torque off on command; the command deadman; the
+    /// online walk's command.
     fn command<B: Board>(&mut self, board: &mut B) {
         self.link.poll(board, &mut self.log);
         if self.link.mode() == Mode::TorqueOff {
             self.sup.stop(StopReason::Requested);
+        }
+        if let Some(o) = self.walk.gait.online_mut() {
+            let limit_us = u64::from(self.cfg.deadman_ms).saturating_mul(1000);
+            self.link.deadman(board, &mut self.log, o, limit_us);
         }
         if !self.walk.is_starting() {
             if let Some(o) = self.walk.gait.online_mut() {

@@ -1500,6 +1500,22 @@ fn write_mode(m: u8) -> Vec<u8> {
     })
 }
 
+/// Broadcast WRITEs of Heartbeat (any value; no reply, so a script's replies stay its own)
+/// every 20 ticks (100 ms) in `from..to`: a master keeping the command deadman quiet.
+fn heartbeats(from: usize, to: usize) -> Vec<(usize, Vec<u8>)> {
+    let mut buf = [0u8; 64];
+    let n = dxl::Instruction::Write {
+        addr: walker_contract::command_port::HEARTBEAT.addr,
+        data: &[1],
+    }
+    .encode(&mut buf, dxl::packet::BROADCAST_ID)
+    .unwrap();
+    (from..to)
+        .step_by(20)
+        .map(|k| (k, buf[..n].to_vec()))
+        .collect()
+}
+
 fn reply_of(bytes: &[u8]) -> (Option<dxl::ErrorCode>, Vec<u8>) {
     let mut buf = [0u8; 600];
     let p = dxl::decode(bytes, &mut buf).unwrap();
@@ -1570,7 +1586,8 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
     let mut v = 50i16.to_le_bytes().to_vec();
     v.extend_from_slice(&0i16.to_le_bytes());
     v.extend_from_slice(&100i16.to_le_bytes());
-    let script = vec![
+    // Heartbeats after the scripted packets (the board takes the first one due each tick).
+    let mut script = vec![
         (ramp + 40, read_state()),
         (
             ramp + 50,
@@ -1586,6 +1603,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
         (ramp + 2300, read_state()),
         (ramp + 2310, write_mode(0)),
     ];
+    script.extend(heartbeats(ramp + 60, ramp + 1100));
     let (b, replies) = run_port_script(&cfg, script);
     assert_eq!(
         replies,
@@ -1857,6 +1875,7 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
     script.push((ramp + 1801, read(STEP_LIST)));
     script.push((ramp + 1802, read(FAULT_KIND)));
     script.push((ramp + 1810, write_mode(0)));
+    script.extend(heartbeats(ramp + 120, ramp + 1810));
     let (b, replies) = run_port_script(&cfg, script);
     assert_eq!(
         replies,
@@ -1939,6 +1958,141 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
     );
     assert!(torque_off_sent(&b.inner));
     assert_goals_in_limits(&b.inner);
+}
+
+/// The command deadman on the fake robot: walking at 50 mm/s on the port, the master sends
+/// heartbeats for 1.65 s after Mode = walk, then nothing. `deadman_ms` (500 ms, the default)
+/// after the last heartbeat the firmware logs `Deadman` (value 500 ms) and the zero command it
+/// took (Mode 3, velocity 0: the host's replay), finishes the step under way, closes the feet
+/// with the generator's stop steps and stands with torque on; Stop Code reads 13, Command Count
+/// did not move. The master's torque off then ends the run.
+#[test]
+fn a_silent_master_is_stopped_by_the_deadman_to_standing() {
+    use walker_contract::command_port::{COMMAND_COUNT, MODE, STATE, STOP_CODE, VELOCITY_X};
+    use walker_contract::StopCode;
+    let cfg = Config::default();
+    assert_eq!(cfg.deadman_ms, 500);
+    let ramp = ramp_ticks(&cfg);
+    let read = |r: walker_contract::command_port::Reg| {
+        port_packet(dxl::Instruction::Read {
+            addr: r.addr,
+            len: r.len,
+        })
+    };
+    let mut v = 50i16.to_le_bytes().to_vec();
+    v.extend_from_slice(&[0; 4]);
+    let (walk_at, last_beat) = (ramp + 51, ramp + 380);
+    let mut script = vec![
+        (
+            ramp + 50,
+            port_packet(dxl::Instruction::Write {
+                addr: VELOCITY_X.addr,
+                data: &v,
+            }),
+        ),
+        (walk_at, write_mode(2)),
+        (ramp + 2000, read(STOP_CODE)),
+        (ramp + 2001, read(STATE)),
+        (ramp + 2002, read(MODE)),
+        (ramp + 2003, read(COMMAND_COUNT)),
+        (ramp + 2010, write_mode(0)),
+    ];
+    script.extend(heartbeats(ramp + 60, last_beat + 1));
+    let beats = heartbeats(ramp + 60, last_beat + 1).len() as u16;
+    let (b, replies) = run_port_script(&cfg, script);
+    assert_eq!(
+        replies,
+        vec![
+            (None, vec![]),
+            (None, vec![]),
+            (None, vec![StopCode::Deadman.code()]),
+            (None, vec![PortState::Standing.code()]),
+            (None, vec![3]),
+            (None, (2 + beats).to_le_bytes().to_vec()),
+            (None, vec![]),
+        ]
+    );
+    let recs = b.inner.records();
+    let dead = faults_of(&recs, FaultKind::Deadman);
+    assert_eq!(dead.len(), 1, "{dead:?}");
+    assert_eq!(dead[0].value, 500, "ms since the last valid write");
+    let commands = faults_of(&recs, FaultKind::CommandReceived);
+    let walk_cmd = commands.iter().find(|f| f.id == 0 && f.value == 2).unwrap();
+    // The last heartbeat 329 ticks after Mode = walk, then 500 ms: at the tick.
+    let after = u64::from(dead[0].time_us - walk_cmd.time_us);
+    let want = ((last_beat - walk_at) as u32 * cfg.tick_period_us + 500_000) as u64;
+    assert!(
+        after >= want && after <= want + u64::from(cfg.tick_period_us),
+        "{after} µs after Mode = walk, want {want}"
+    );
+    // The zero command logged with it (Mode 3, vx 0), for the host's replay.
+    let at_dead: Vec<(u8, i32)> = commands
+        .iter()
+        .filter(|f| f.time_us == dead[0].time_us)
+        .map(|f| (f.id, f.value))
+        .collect();
+    assert_eq!(at_dead, vec![(0, 3), (1, 0)]);
+    // The steps: those begun after the deadman are the stop's (at most two: the walk finishes
+    // the step under way, one step decelerates and closes the feet), then it stands.
+    let mut log = walker_contract::footstep_log::FootstepLog::new();
+    let mut before = 0;
+    let mut late = Vec::new();
+    for r in &recs {
+        let Record::Fault(f) = r else { continue };
+        if log.push(f.kind, f.id, f.value).is_some() {
+            if f.time_us <= dead[0].time_us {
+                before += 1;
+            } else {
+                late.push(f.time_us);
+            }
+        }
+    }
+    assert!(before >= 2, "{before} steps before the deadman");
+    assert!(late.len() <= 2, "steps after the deadman: {late:?}");
+    // The ticks before the master's torque off.
+    let ticks: Vec<TickRecord> = ticks_of(&recs)
+        .into_iter()
+        .take_while(|t| t.phase != LoggedPhase::Stopped)
+        .collect();
+    let standing_from = ticks
+        .iter()
+        .rposition(|t| t.phase != LoggedPhase::Standing)
+        .map(|i| ticks[i + 1].time_us)
+        .unwrap();
+    let period_us = commanded::period_us(&Config {
+        walk: startup::servo_timing(
+            &cfg,
+            &Robot::reference(),
+            &Targets::new(&Robot::reference(), cfg.compensation),
+        )
+        .unwrap()
+        .walk,
+        ..cfg
+    }) as u64;
+    let stood_after = u64::from(standing_from - dead[0].time_us);
+    eprintln!("standing {stood_after} µs after the deadman (period {period_us} µs)");
+    assert!(
+        stood_after <= 2 * period_us + period_us / 2,
+        "standing {stood_after} µs after the deadman, period {period_us} µs"
+    );
+    assert!(torque_off_sent(&b.inner));
+    assert_goals_in_limits(&b.inner);
+}
+
+/// The deadman is never armed for the autostart plan: Mode = walk written once on the port,
+/// then silence for the whole plan; the plan walks to `PlanDone` with no `Deadman` record.
+#[test]
+fn the_deadman_does_not_arm_for_the_autostart_plan() {
+    let cfg = autostart_config();
+    let mut b = PortBoard {
+        inner: board(&cfg),
+        script: vec![(10, write_mode(2))],
+        replies: Vec::new(),
+    };
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(b.replies.len(), 1);
+    assert!(faults_of(&b.inner.records(), FaultKind::Deadman).is_empty());
 }
 
 /// The trunk's backward tip of the push tests: pitch rate, rad/s, and duration, µs.

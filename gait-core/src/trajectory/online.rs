@@ -385,6 +385,25 @@ impl<R: Real> OnlineWalk<R> {
         true
     }
 
+    /// Drops the explicit steps waiting (not the step under way, whose landing is committed):
+    /// the walk goes on under the command alone; under the zero command it stops as
+    /// [`OnlineWalk::set_command`] does (Walking → Stopping, decelerated, feet-closing steps).
+    pub fn clear_steps(&mut self) {
+        if self.queue.is_empty() {
+            return;
+        }
+        self.queue.clear();
+        match self.mode {
+            WalkMode::Walking(w) if !self.wants_walk() => {
+                self.mode = WalkMode::Stopping(Stopping { step: w.step });
+                self.replan();
+            }
+            WalkMode::Walking(_) | WalkMode::Stopping(_) => self.replan(),
+            WalkMode::Starting(_) => self.replan_start(),
+            WalkMode::Standing(_) => {}
+        }
+    }
+
     /// Explicit steps waiting.
     pub fn queued(&self) -> usize {
         self.queue.len()

@@ -58,8 +58,9 @@ from dynamixel_sdk import (  # noqa: E402
 # host/tests/cli.rs `sdk_example_uses_the_contract_registers`).
 from sdk_drive import (  # noqa: E402
     ADDR_FIRMWARE_VERSION, ADDR_ID, ADDR_MODE, ADDR_MODEL, ADDR_STATUS, ADDR_VELOCITY_X,
-    MODE_STOP, MODE_TORQUE_OFF, MODE_WALK, PORT_ID, PORT_MODEL, STATE_STANDING, STATE_WALKING,
-    STATUS_LEN, decode_status, open_port, read_status, set_mode, set_velocity, wait_ready)
+    HEARTBEAT_S, MODE_STOP, MODE_TORQUE_OFF, MODE_WALK, PORT_ID, PORT_MODEL, STATE_STANDING,
+    STATE_WALKING, STATUS_LEN, decode_status, heartbeat, open_port, read_status, set_mode,
+    set_velocity, wait_ready)
 
 DEFAULT_QEMU_ELF = "target/thumbv7em-none-eabihf/release/qemu"
 EXAMPLE = REPO / "host/examples/sdk_drive.py"
@@ -94,11 +95,19 @@ def connect(run):
     return open_port(f"socket://127.0.0.1:{run.port}", 1_000_000, CONNECT_S)
 
 
-def wait_for(port, ph, what, timeout, run):
-    """Polls the status block until what(status) holds; returns the last status (or None)."""
+def wait_for(port, ph, what, timeout, run, beats=None):
+    """Polls the status block until what(status) holds; returns the last status (or None).
+    With `beats` (a dict counting "ok" and "lost"), writes Heartbeat every HEARTBEAT_S too (the
+    command deadman's keep-alive while walking), counting the accepted ones and those without a
+    reply (which the firmware may have accepted)."""
     end = time.monotonic() + timeout
     st = None
+    beat_at = 0.0
     while time.monotonic() < end and run.proc.poll() is None:
+        if beats is not None and time.monotonic() - beat_at >= HEARTBEAT_S:
+            r, err = heartbeat(port, ph)
+            beats["ok" if r == COMM_SUCCESS and err == 0 else "lost"] += 1
+            beat_at = time.monotonic()
         st = read_status(port, ph) or st
         if st is not None and what(st):
             return st, True
@@ -172,12 +181,16 @@ def run_checks(c, port, ph, run):
     r, err = set_mode(port, ph, MODE_WALK)
     c.check("WRITE Mode = walk accepted", r == COMM_SUCCESS and err == 0,
             f"{ph.getTxRxResult(r)}, error {err}")
+    beats = {"ok": 0, "lost": 0}
     st, ok = wait_for(port, ph, lambda s: s["state"] == STATE_WALKING and s["steps"] >= STEPS,
-                      WALK_S, run)
-    if not c.check(f"State = walking and Step Count >= {STEPS}", ok, f"{st}"):
+                      WALK_S, run, beats)
+    if not c.check(f"State = walking and Step Count >= {STEPS} (Heartbeat written every "
+                   f"{HEARTBEAT_S} s: no deadman stop)", ok, f"{st}, heartbeats {beats}"):
         return
-    c.check("Command Count counts the two accepted writes",
-            st["commands"] == before["commands"] + 2, f"{before['commands']} -> {st['commands']}")
+    low = before["commands"] + 2 + beats["ok"]
+    c.check("Command Count counts the two accepted writes and the accepted heartbeats",
+            low <= st["commands"] <= low + beats["lost"],
+            f"{before['commands']} -> {st['commands']}, heartbeats {beats}")
     c.check(f"Walk Velocity X in (0, {WALK_MM_S}] mm/s, Y and yaw rate ~0 (the heading hold "
             "may turn a little)", 0 < st["walk_vx"] <= WALK_MM_S and abs(st["walk_vy"]) <= 5,
             f"{st}")
