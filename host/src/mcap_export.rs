@@ -560,11 +560,8 @@ pub fn write_mcap<W: Write + Seek>(
                 P::SingleRight => [false, true],
                 _ => [true, true],
             };
-            for k in 0..2 {
-                if on[k] {
-                    let f = row.feet[k];
-                    corners.extend(sole_corners(f[0], f[1], row.feet_yaw[k], extra.sole));
-                }
+            for ((f, yaw), _) in row.feet.iter().zip(row.feet_yaw).zip(on).filter(|x| x.1) {
+                corners.extend(sole_corners(f[0], f[1], yaw, extra.sole));
             }
         }
         let hull = convex_hull(corners);
