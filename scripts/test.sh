@@ -148,6 +148,7 @@ slow=(
     m3_fixed_point_walks_table2_and_agrees_with_the_m7_f32_walk
     fourier_com_walks_on_the_mujoco_robot
     compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_model
+    table2_mcap_is_foxglove_ready_and_at_most_5_mb
 )
 fil_args=(--ignored --test-threads 64)
 if [ "$full" = 1 ]; then

@@ -378,6 +378,10 @@ pub struct FilArgs {
     /// Render the walk to this video (MuJoCo, headless; needs `bash scripts/render-setup.sh`).
     #[arg(long, value_name = "FILE")]
     pub video: Option<PathBuf>,
+    /// Also write the run as one MCAP file for Foxglove (robot model, transforms, scene, events;
+    /// docs/simulation.md: "Opening a run in Foxglove").
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["commands", "command_port"])]
+    pub mcap: Option<PathBuf>,
     /// Walk on command: the firmware starts without autostart and this script of `[[command]]`
     /// tables (`t` s from standing ready; `vx`, `vy` m/s, `vyaw` rad/s, or `stop = true`; a
     /// footstep list `steps = [{ foot = "left", dx = 0.03, dy = 0, dyaw = 0 }, …]`) drives it
@@ -963,7 +967,7 @@ fn run_report(a: ReportArgs) -> Result<(), CliError> {
         eprintln!("warning: {w}");
     }
     if let Some(m) = &mcap {
-        let counts = crate::mcap_export::export_run(&opts, &r, &Robot::reference(), m)?;
+        let counts = crate::mcap_export::export_run(&opts, &r, &Robot::reference(), None, m)?;
         println!(
             "{}: {} channels, {} messages (Foxglove: open the file)",
             m.display(),
@@ -1494,6 +1498,19 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         }
     }
     println!("\nreport: {}", out.join("report").display());
+    if let Some(m) = &a.mcap {
+        let tokens: Vec<String> = crate::fil::qemu_append(&opts)
+            .map(|t| t.split_whitespace().map(str::to_string).collect())
+            .map_err(|e| CliError::failed(format!("walker fil: {e}")))?;
+        let counts =
+            crate::mcap_export::export_run(&ropts, &rep, &Robot::reference(), Some(&tokens), m)?;
+        println!(
+            "mcap: {} ({} channels, {} messages)",
+            m.display(),
+            counts.len(),
+            counts.values().sum::<u64>()
+        );
+    }
     if let Some(v) = &video {
         eprintln!("  rendering {} …", v.display());
         crate::video::render(&out.join("model.xml"), &out.join("qpos.csv"), v)

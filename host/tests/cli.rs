@@ -1233,7 +1233,7 @@ fn mcap_of_a_14_step_walk_holds_every_channel() {
         &dir.join("report"),
         &["--mcap", s(&mcap_path)],
     );
-    assert!(stdout.contains("run.mcap: 11 channels"), "{stdout}");
+    assert!(stdout.contains("run.mcap: 15 channels"), "{stdout}");
     // The report's joint and foot figures come from the same truth.
     for f in ["joint_speeds.png", "joint_torques.svg", "foot_forces.png"] {
         assert!(dir.join("report").join(f).is_file(), "{f}");
@@ -1280,7 +1280,106 @@ fn mcap_of_a_14_step_walk_holds_every_channel() {
     assert_eq!(pose["frame_id"], "world");
     assert_eq!(pose["pose"]["position"]["z"], 0.217);
     let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
-    assert_eq!(summary.channels.len(), 11);
+    assert_eq!(summary.channels.len(), 15);
+    assert_foxglove_ready(&bytes);
+    // The transforms follow the plan's joint targets at ≤ 50 Hz over the whole walk.
+    let tf = count["/tf"];
+    assert!(
+        tf * 4 <= ticks + 4 && tf * 4 + 8 >= ticks,
+        "{tf} transforms for {ticks} ticks at 200 Hz"
+    );
+}
+
+/// The Foxglove-ready parts of an MCAP of a run (`walker report --mcap`, `walker fil --mcap`):
+/// zstd chunks, `foxglove.FrameTransforms` from the world through the pelvis to both soles,
+/// the URDF as an attachment and on `/robot_description`, events as `foxglove.Log`, the
+/// `foxglove.SceneUpdate` scene and footsteps, and the `robot`, `plan`, `firmware` metadata.
+fn assert_foxglove_ready(bytes: &[u8]) {
+    let summary = mcap::Summary::read(bytes).unwrap().expect("a summary");
+    assert!(!summary.chunk_indexes.is_empty(), "chunked");
+    for c in &summary.chunk_indexes {
+        assert_eq!(c.compression, "zstd", "chunk at {}", c.chunk_start_offset);
+        assert!(c.compressed_size < c.uncompressed_size, "{c:?}");
+    }
+    let schema_of = |topic: &str| -> String {
+        let ch = summary
+            .channels
+            .values()
+            .find(|c| c.topic == topic)
+            .unwrap_or_else(|| panic!("no channel {topic}"));
+        ch.schema.as_ref().expect("a schema").name.clone()
+    };
+    assert_eq!(schema_of("/tf"), "foxglove.FrameTransforms");
+    assert_eq!(schema_of("/events"), "foxglove.Log");
+    assert_eq!(schema_of("/scene"), "foxglove.SceneUpdate");
+    assert_eq!(schema_of("/footsteps"), "foxglove.SceneUpdate");
+    assert_eq!(schema_of("/robot_description"), "std_msgs/String");
+    // The URDF attachment.
+    let urdf_index = summary
+        .attachment_indexes
+        .iter()
+        .find(|a| a.name == "robot.urdf")
+        .expect("a robot.urdf attachment");
+    let urdf = mcap::read::attachment(bytes, urdf_index).unwrap();
+    let urdf = std::str::from_utf8(&urdf.data).unwrap().to_string();
+    for j in walker_host::sim::urdf::tree(&Robot::reference()) {
+        assert!(
+            urdf.contains(&format!("<joint name=\"{}\"", j.name)),
+            "{}",
+            j.name
+        );
+    }
+    let names: Vec<&str> = summary
+        .metadata_indexes
+        .iter()
+        .map(|m| m.name.as_str())
+        .collect();
+    for m in ["robot", "plan", "firmware"] {
+        assert!(names.contains(&m), "metadata {m}: {names:?}");
+    }
+    let mut logs = 0;
+    let mut tf_frames = None;
+    let mut description = None;
+    for m in mcap::MessageStream::new(bytes).unwrap() {
+        let m = m.unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        match m.channel.topic.as_str() {
+            "/events" => {
+                logs += 1;
+                assert!(
+                    v["level"].as_u64().is_some_and(|l| (1..=5).contains(&l)),
+                    "{v}"
+                );
+                assert!(!v["message"].as_str().unwrap().is_empty(), "{v}");
+                assert!(v["timestamp"]["sec"].is_u64(), "{v}");
+            }
+            "/tf" if tf_frames.is_none() => {
+                let list = v["transforms"].as_array().unwrap();
+                let pairs: Vec<(String, String)> = list
+                    .iter()
+                    .map(|t| {
+                        let f = |k: &str| t[k].as_str().unwrap().to_string();
+                        (f("parent_frame_id"), f("child_frame_id"))
+                    })
+                    .collect();
+                tf_frames = Some(pairs);
+            }
+            "/robot_description" => description = v["data"].as_str().map(str::to_string),
+            _ => {}
+        }
+    }
+    assert!(logs > 0, "foxglove.Log messages");
+    assert_eq!(description.as_deref(), Some(urdf.as_str()));
+    // Every link of the URDF is reached from `world` by the transforms.
+    let pairs = tf_frames.expect("a /tf message");
+    let mut reached = vec!["world".to_string()];
+    for (parent, child) in &pairs {
+        assert!(reached.contains(parent), "{parent} → {child}: {pairs:?}");
+        reached.push(child.clone());
+    }
+    for s in ["l_sole", "r_sole", "pelvis"] {
+        assert!(reached.iter().any(|r| r == s), "{s}: {pairs:?}");
+    }
 }
 
 /// `--config`: one file per run; a typo is refused with the field's path before anything starts.

@@ -1183,7 +1183,7 @@ fn commands_demo_walks_on_mujoco() {
     );
 }
 
-/// The command deadman (issue 37): `plans/commands-deadman.toml` walks at 0.05 m/s on the
+/// The command deadman: `plans/commands-deadman.toml` walks at 0.05 m/s on the
 /// command port (the driver writing Heartbeat every 100 ms of virtual time), then the master
 /// goes silent for 4 s (nothing sent, not even a READ) and reads the status block once after.
 /// The firmware's deadman (`deadman_ms`, 500 ms) fires 0.5 s after the last write (its
@@ -1298,4 +1298,57 @@ fn a_silent_master_is_stopped_by_the_deadman_on_mujoco() {
         "the pelvis moved {:.4} m standing",
         hi - lo
     );
+/// `walker fil --plan plans/table2.toml --mcap`: the Table 2 walk (the firmware's defaults) as
+/// one Foxglove-ready MCAP — zstd chunks, `foxglove.FrameTransforms`, the URDF attachment,
+/// `foxglove.Log` events — of at most 5 MB (the uncompressed JSON of the same run is ≈ 20 MB).
+#[test]
+#[ignore = "needs QEMU, MuJoCo and the firmware ELF; run by scripts/test.sh --full"]
+fn table2_mcap_is_foxglove_ready_and_at_most_5_mb() {
+    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let spec = walker_host::planfile::load(&root.join("plans/table2.toml")).unwrap();
+    let (r, _) = fil("mcap-table2", spec.clone(), SimConfig::default(), &[]);
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mcap-table2");
+    let ropts = walker_host::report::ReportOptions {
+        log: r.log.clone(),
+        out_dir: out.join("report"),
+        truth: Some(r.truth.clone()),
+        spec,
+        plan_name: "plans/table2.toml".into(),
+    };
+    let robot = gait_core::Robot::reference();
+    let rep = walker_host::report::run(&ropts, &robot).unwrap();
+    let path = out.join("run.mcap");
+    let tokens = vec!["lockstep".to_string()];
+    walker_host::mcap_export::export_run(&ropts, &rep, &robot, Some(&tokens), &path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let mb = bytes.len() as f64 / 1e6;
+    eprintln!("Table 2 MCAP: {mb:.2} MB");
+    assert!(bytes.len() <= 5_000_000, "{mb:.2} MB");
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+    assert!(!summary.chunk_indexes.is_empty());
+    assert!(summary
+        .chunk_indexes
+        .iter()
+        .all(|c| c.compression == "zstd"));
+    let schema = |topic: &str| {
+        summary
+            .channels
+            .values()
+            .find(|c| c.topic == topic)
+            .and_then(|c| c.schema.as_ref().map(|s| s.name.clone()))
+    };
+    assert_eq!(schema("/tf").as_deref(), Some("foxglove.FrameTransforms"));
+    assert_eq!(schema("/events").as_deref(), Some("foxglove.Log"));
+    assert!(summary
+        .attachment_indexes
+        .iter()
+        .any(|a| a.name == "robot.urdf"));
+    let stats = summary.stats.expect("statistics");
+    let events = summary
+        .channels
+        .iter()
+        .find(|(_, c)| c.topic == "/events")
+        .map(|(id, _)| *id)
+        .unwrap();
+    assert!(stats.channel_message_counts[&events] > 0);
 }

@@ -42,6 +42,17 @@ use super::rng::Rng;
 
 /// Thickness of the sole box, m.
 pub const SOLE_THICKNESS: f64 = 0.010;
+/// Radius of a leg link's capsule, m.
+pub const LINK_RADIUS: f64 = 0.018;
+/// A leg link's capsule starts and ends this far inside its joints, m.
+pub const LINK_INSET: f64 = 0.012;
+/// The torso's collision boxes (name, half sizes, centre from P), m.
+pub const TORSO_BOXES: [(&str, [f64; 3], [f64; 3]); 2] = [
+    ("pelvis", [0.035, 0.07, 0.02], [0.0, 0.0, 0.005]),
+    ("trunk", [0.045, 0.08, 0.1], [0.0, 0.0, 0.13]),
+];
+/// The head sphere (radius, centre height above P), m.
+pub const HEAD: (f64, f64) = (0.045, 0.29);
 
 /// The environment the robot walks in.
 #[derive(Clone, Debug, PartialEq)]
@@ -158,8 +169,9 @@ fn rod_link(out: &mut String, pad: &str, len: f64, mass: f64) {
     );
     let _ = writeln!(
         out,
-        "{pad}<geom type=\"capsule\" fromto=\"0 0 -0.012 0 0 {}\" size=\"0.018\"/>",
-        -len + 0.012
+        "{pad}<geom type=\"capsule\" fromto=\"0 0 {} 0 0 {}\" size=\"{LINK_RADIUS}\"/>",
+        -LINK_INSET,
+        -len + LINK_INSET
     );
 }
 
@@ -263,9 +275,18 @@ pub fn model_xml(
         [j, j, 0.5 * j],
     );
     x.push_str("      <site name=\"imu\" pos=\"0 0 0\" size=\"0.01\"/>\n");
-    x.push_str("      <geom name=\"pelvis\" type=\"box\" size=\"0.035 0.07 0.02\" pos=\"0 0 0.005\" material=\"body\"/>\n");
-    x.push_str("      <geom name=\"trunk\" type=\"box\" size=\"0.045 0.08 0.1\" pos=\"0 0 0.13\" material=\"body\"/>\n");
-    x.push_str("      <geom name=\"head\" type=\"sphere\" size=\"0.045\" pos=\"0 0 0.29\" material=\"body\"/>\n");
+    for (name, h, p) in TORSO_BOXES {
+        let _ = writeln!(
+            x,
+            "      <geom name=\"{name}\" type=\"box\" size=\"{} {} {}\" pos=\"{} {} {}\" material=\"body\"/>",
+            h[0], h[1], h[2], p[0], p[1], p[2]
+        );
+    }
+    let _ = writeln!(
+        x,
+        "      <geom name=\"head\" type=\"sphere\" size=\"{}\" pos=\"0 0 {}\" material=\"body\"/>",
+        HEAD.0, HEAD.1
+    );
     x.push_str("      <camera name=\"track\" mode=\"trackcom\" pos=\"0.55 -0.75 0.25\" xyaxes=\"0.81 0.59 0 -0.2 0.28 0.94\"/>\n");
     if env.payload_kg > 0.0 {
         let p = env.payload_pos_m;

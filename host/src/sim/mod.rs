@@ -31,6 +31,7 @@ pub mod rng;
 pub mod servo;
 pub mod transport;
 pub mod truth;
+pub mod urdf;
 pub mod zmp;
 
 use std::fmt;
