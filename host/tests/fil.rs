@@ -1298,6 +1298,8 @@ fn a_silent_master_is_stopped_by_the_deadman_on_mujoco() {
         "the pelvis moved {:.4} m standing",
         hi - lo
     );
+}
+
 /// `walker fil --plan plans/table2.toml --mcap`: the Table 2 walk (the firmware's defaults) as
 /// one Foxglove-ready MCAP — zstd chunks, `foxglove.FrameTransforms`, the URDF attachment,
 /// `foxglove.Log` events — of at most 5 MB (the uncompressed JSON of the same run is ≈ 20 MB).
