@@ -1825,11 +1825,15 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
     eprintln!("{}", crate::drive::HELP);
     let ended = {
         let _raw = crate::drive::RawTerminal::enter()?;
-        let status = StatusLine::stderr(STATUS_EVERY);
+        // The drive's terminal is in raw mode (a terminal, never a file): the whole status
+        // line is rewritten in place, however wide.
+        use std::io::Write as _;
+        let mut out = std::io::stderr();
         let ended = crate::drive::session(&mut master, crate::drive::terminal_key, |line| {
-            status.set(line)
+            let _ = write!(out, "\r{line}\x1b[K");
+            let _ = out.flush();
         });
-        status.finish();
+        eprintln!();
         ended
     };
     let ended = match ended {
