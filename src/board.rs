@@ -135,6 +135,13 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
         let _ = buf;
         0
     }
+    /// The level of the board's operator button (the enable, [`crate::control::standby`]):
+    /// its raw input, `None` on a board without one (the default). Either polarity: the
+    /// standby takes the level it finds as the idle one and a change held for
+    /// [`crate::control::BUTTON_HOLD_US`] as a press.
+    fn enable_button(&mut self) -> Option<bool> {
+        None
+    }
     /// Sends a reply on the command port (bounded waits; bytes the port cannot take are
     /// dropped: the master times out and asks again). A board without a port drops them.
     fn command_tx(&mut self, bytes: &[u8]) {

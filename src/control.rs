@@ -47,8 +47,9 @@
 //! 9. Act: [`safe_targets`](crate::supervisor::safe_targets) to the servo ticks (a non-finite
 //!    target holds the previous tick and stops); ONE SYNC WRITE of the 12 Goal Positions (116,
 //!    4 bytes each);
-//!    the servo monitor ([`crate::monitor`]) reads one leg servo's Hardware Error Status,
-//!    current, voltage and temperature (round-robin); a limit exceeded stops (`ServoFault`).
+//!    the servo monitor ([`crate::monitor`]) reads the leg servos round-robin (Torque Enable
+//!    and Hardware Error Status, voltage and temperature, current); a servo silent or limp, or
+//!    a limit exceeded, stops (`ServoLost`, `ServoFault`).
 //! 10. Report: the tick log record (nominal time, ZMP reference, measured ZMP, CoM, τ, support
 //!     phase, fault state, bus error counters, overruns); the watchdog is fed.
 //!
@@ -63,7 +64,7 @@
 //! Bus traffic per tick at 1 Mbps (no byte stuffing needed for typical data): BULK READ
 //! instruction 25 bytes out; replies 29 + 29 + 37 = 95 bytes in; SYNC WRITE 74 bytes out — 99
 //! bytes out and 95 in, ≈ 1.94 ms of line time (+ the Return Delay Times, 0 after start-up);
-//! while walking the servo monitor adds two READs (14 + 14 bytes out, 12 + 32 in): 2.66 ms.
+//! while walking the servo monitor adds two READs (14 + 14 bytes out, at most 18 + 18 in): 2.6 ms.
 //!
 //! # Phases
 //! What moves the legs is a walk mode ([`modes`]: one type per mode, explicit transitions):
@@ -79,8 +80,11 @@
 //! * Walk: one gait sample per tick until the sampler is done.
 //! * Final hold: the final pose for [`Config::final_hold_us`], then torque off (broadcast WRITE
 //!   Torque Enable = 0) and the stop record `PlanDone`.
-//! * Any supervisor stop: the pose is held for `stopping_ticks`, torque off, stop record with
-//!   the reason.
+//! * Any supervisor stop, by its grade (docs/stops.md): a fall or a servo's hardware error
+//!   turns torque off at once; the others lower the robot to the crouch
+//!   ([`Config::lower_us`], [`Config::crouch_m`]) — operator stops and minor faults after the
+//!   online walk has stopped to standing ([`Config::settle_us`]) — hold it for
+//!   `stopping_ticks`, then torque off and the stop record with the reason.
 //! * Torque off (every stop, start-up failures included) is confirmed: up to
 //!   [`Config::torque_off_attempts`] rounds of broadcast Torque Enable = 0 and a READ of Torque
 //!   Enable (64) from each servo not yet confirmed at 0; then the servo power is cut
@@ -115,6 +119,7 @@ use gait_core::gait::TimingCheck;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::{GaitError, Robot};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
+use walker_contract::command_port::{Mode, PortState};
 use walker_contract::ExitCode;
 
 use crate::board::{Board, CrashCode, CrashNote, ResetCause};
@@ -276,6 +281,84 @@ pub fn report_cmdline_too_long<B: Board>(board: &mut B, cfg: &Config) {
 /// Runs start-up and the walk on `board` with `cfg` until torque is off (see the module docs).
 /// Never returns before torque is off once it was enabled.
 pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
+    run_with(board, cfg, &mut commanded::CommandLink::new())
+}
+
+/// The board's whole life with the operator's enable ([`Config::wait_enable`]; module docs
+/// "Enable"): torque off and the command port answered ([`standby`]) until a master writes
+/// Mode = stand or walk, then a run ([`run_with`], the same port); after its stop, the same
+/// again. Returns the last run's end (or `Requested` before any) when a master writes Mode =
+/// torque off while the firmware waits.
+pub fn run_on_enable<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
+    let mut link = commanded::CommandLink::new();
+    let mut last = None;
+    loop {
+        let state = match last {
+            None => PortState::Waiting,
+            Some(_) => PortState::Stopped,
+        };
+        if !standby(board, &mut link, state) {
+            return last.unwrap_or(RunEnd::Stopped(StopReason::Requested));
+        }
+        crate::fw_log!(info, "enabled: starting a run");
+        last = Some(run_with(board, cfg, &mut link));
+    }
+}
+
+/// How long the board's operator button must read other than its idle level to count as a
+/// press (the enable), µs.
+pub const BUTTON_HOLD_US: u64 = 50_000;
+
+/// Torque off, the operator's enable awaited: every tick the command port is answered, its
+/// State reads `state` (the rest of the status as the last run left it: Stop Code, Fault Kind,
+/// step count) and the watchdog is fed. Mode reads torque off meanwhile: true on a master's
+/// Mode write of stand or walk, or a press of the board's button ([`Board::enable_button`]:
+/// its level other than the one found at the start for [`BUTTON_HOLD_US`]) — the enable;
+/// false on a Mode write of torque off; a write of stop is taken and ignored.
+pub fn standby<B: Board>(
+    board: &mut B,
+    link: &mut commanded::CommandLink,
+    state: PortState,
+) -> bool {
+    let mut log = LogWriter::new();
+    link.set_mode(Mode::TorqueOff);
+    link.port.table.set_state(state);
+    let mut seen = link.port.table.mode_writes();
+    let idle = board.enable_button();
+    let mut pressed_since: Option<u64> = None;
+    loop {
+        board.wait_tick();
+        board.feed();
+        link.poll(board, &mut log);
+        let now = board.now_us();
+        match (idle, board.enable_button()) {
+            (Some(i), Some(level)) if level != i => {
+                let since = *pressed_since.get_or_insert(now);
+                if now.saturating_sub(since) >= BUTTON_HOLD_US {
+                    link.set_mode(Mode::Stand);
+                    return true;
+                }
+            }
+            _ => pressed_since = None,
+        }
+        if link.port.table.mode_writes() == seen {
+            continue;
+        }
+        seen = link.port.table.mode_writes();
+        match link.mode() {
+            Mode::Stand | Mode::Walk => return true,
+            Mode::TorqueOff => return false,
+            Mode::Stop => link.set_mode(Mode::TorqueOff),
+        }
+    }
+}
+
+/// [`run`] with the command port `link` (kept by [`run_on_enable`] across runs).
+pub fn run_with<B: Board>(
+    board: &mut B,
+    cfg: &Config,
+    link: &mut commanded::CommandLink,
+) -> RunEnd {
     let robot = Robot::reference();
     let mut log = LogWriter::new();
     // The watchdog runs from boot: the boards feed it in their wait loops, the dry run every
@@ -324,7 +407,7 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     // `math=fixed` selects it where the build has it (feature `fixed-gait`).
     #[cfg(feature = "board-opencm")]
     {
-        walk_on(&mut bus, log, &parts, &mut walk, started, |_| {
+        walk_on(&mut bus, log, &parts, &mut walk, link, started, |_| {
             fixed_path::FixedPath::new(cfg, &robot)
         })
     }
@@ -332,11 +415,11 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     {
         #[cfg(feature = "fixed-gait")]
         if cfg.arithmetic == gait_core::gait::Arithmetic::Fixed {
-            return walk_on(&mut bus, log, &parts, &mut walk, started, |_| {
+            return walk_on(&mut bus, log, &parts, &mut walk, link, started, |_| {
                 fixed_path::FixedPath::new(cfg, &robot)
             });
         }
-        walk_on(&mut bus, log, &parts, &mut walk, started, |z_c| {
+        walk_on(&mut bus, log, &parts, &mut walk, link, started, |z_c| {
             f32_path::F32Path::new(cfg, &robot, &map, z_c)
         })
     }
@@ -416,7 +499,9 @@ fn start_up<B: Board>(
             let _ = critical.push(id);
         }
     }
-    let mut sup = Supervisor::new(cfg.supervisor, SENSOR_IDS);
+    let ticks = |us: u32| u16::try_from(cfg.ticks_for_us(us)).unwrap_or(u16::MAX);
+    let mut sup = Supervisor::new(cfg.supervisor, SENSOR_IDS)
+        .with_grades(ticks(cfg.settle_us), ticks(cfg.lower_us));
     if let Err(reason) = sup.startup(&critical) {
         crate::fw_log!(
             error,
@@ -471,11 +556,14 @@ struct Parts<'a> {
 /// walk's standing pose, with the path's feed-forwards), then the [`Controller`] with the path
 /// `make_path(z_c)` ticks until torque is off. The controller is built where it lives (its
 /// fields in its literal: no copies on the stack).
+// The arguments are the controller's parts, each borrowed where it lives.
+#[allow(clippy::too_many_arguments)]
 fn walk_on<B: Board, P: TickPath>(
     bus: &mut BoardMaster<'_, B>,
     log: LogWriter,
     parts: &Parts<'_>,
     walk: &mut Walk,
+    link: &mut commanded::CommandLink,
     started: Started,
     make_path: impl FnOnce(f32) -> P,
 ) -> RunEnd {
@@ -504,7 +592,7 @@ fn walk_on<B: Board, P: TickPath>(
         ),
         sup,
         monitor: ServoMonitor::new(),
-        link: commanded::CommandLink::new(),
+        link,
         log,
         faults: FaultInjector::new(cfg),
         last_ticks: present.map(|t| t.clamp(map.tick_min, map.tick_max)),
@@ -513,6 +601,7 @@ fn walk_on<B: Board, P: TickPath>(
         goal: path::Goal::Rad([0.0; LEG_JOINTS]),
         clamped_seen: 0,
         final_hold: u16::try_from(cfg.ticks_for_us(cfg.final_hold_us)).unwrap_or(u16::MAX),
+        lowering: None,
         no_lead: cfg.lead_ticks() == 0,
     };
     c.path.ramp_end(&mut q0, &loaded);

@@ -228,10 +228,14 @@ pub struct FakeRobot<O> {
     pub crash: CrashCell,
     /// Script: device `id` dies once `n` SYNC WRITEs were seen.
     pub kill_at: Option<(u8, usize)>,
-    /// Script: device `id` answers again once `n` SYNC WRITEs were seen.
+    /// Script: device `id` answers again once `n` SYNC WRITEs were seen (a servo with its
+    /// torque off, as after a brown-out).
     pub revive_at: Option<(u8, usize)>,
     /// Script: the IMU tilts by 1 rad once `n` SYNC WRITEs were seen.
     pub fall_at: Option<usize>,
+    /// Script: the operator button reads high during these spans of board time, µs (from,
+    /// until; low otherwise); `None`: no button.
+    pub button_us: Option<[(u64, u64); 2]>,
     /// Script: the tick that made the `n`-th SYNC WRITE takes this much longer, µs.
     pub slow: heapless::Vec<(usize, u64), MAX_SLOW>,
     /// Script: board `id`'s sample counter stops advancing once `n` SYNC WRITEs were seen.
@@ -287,6 +291,7 @@ impl<O: Observer> FakeRobot<O> {
             kill_at: None,
             revive_at: None,
             fall_at: None,
+            button_us: None,
             slow: heapless::Vec::new(),
             freeze_at: None,
             spike_at: None,
@@ -481,6 +486,9 @@ impl<O: Observer> FakeRobot<O> {
             (Kind::Servo(_), 132, 4) => put(&d.present.to_le_bytes()),
             (Kind::Servo(_), 116, 4) => put(&d.goal.to_le_bytes()),
             (Kind::Servo(_), 64, 1) => put(&[u8::from(d.torque)]),
+            // The servo monitor's status READ: Torque Enable .. Hardware Error Status (LED 0,
+            // Status Return Level 2).
+            (Kind::Servo(_), 64, 7) => put(&[u8::from(d.torque), 0, 0, 0, 2, 0, d.hw_error]),
             (Kind::Servo(_), 82, 2) => put(&d.i_gain.to_le_bytes()),
             (Kind::Servo(_), 70, 1) => put(&[d.hw_error]),
             (Kind::Servo(_), 126, 2) => put(&d.current_raw.to_le_bytes()),
@@ -658,6 +666,10 @@ impl<O: Observer> FakeRobot<O> {
                 if self.sync_writes == n {
                     if let Some(d) = self.device_mut(id) {
                         d.dead = dead;
+                        // A servo that comes back has been through a power-on: torque off.
+                        if !dead && matches!(d.kind, Kind::Servo(_)) {
+                            d.torque = false;
+                        }
                     }
                 }
             }
@@ -802,6 +814,12 @@ impl<O: Observer> Board for FakeRobot<O> {
 
     fn stage(&mut self, stage: crate::board::Stage) {
         self.observer.stage(stage);
+    }
+
+    fn enable_button(&mut self) -> Option<bool> {
+        let now = self.now_us;
+        self.button_us
+            .map(|spans| spans.iter().any(|&(a, b)| now >= a && now < b))
     }
 }
 

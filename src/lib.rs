@@ -109,7 +109,9 @@ const fn parse_u8(s: &str) -> u8 {
 }
 
 /// The walk of a firmware binary once its board is up: logs the build and the configuration,
-/// runs [`control::run`] (start-up, walk, stop) and logs how it ended; the run's end.
+/// runs [`control::run`] (start-up, walk, stop) — with [`Config::wait_enable`]
+/// [`control::run_on_enable`] (each run on the operator's enable) — and logs how it ended;
+/// the (last) run's end.
 pub fn run_walk<B: board::Board>(board: &mut B, cfg: &Config) -> control::RunEnd {
     fw_log!(
         info,
@@ -121,7 +123,11 @@ pub fn run_walk<B: board::Board>(board: &mut B, cfg: &Config) -> control::RunEnd
         cfg.model.name(),
         cfg.walk.steps
     );
-    let end = control::run(board, cfg);
+    let end = if cfg.wait_enable {
+        control::run_on_enable(board, cfg)
+    } else {
+        control::run(board, cfg)
+    };
     fw_log!(
         info,
         "run ended at t = {=u64} us: exit code {=i32}",

@@ -1,22 +1,39 @@
-//! The servo monitor: while the robot walks, the leg servos' health, one servo after the other
-//! (round-robin over the 12), with two small READs a servo: Present Input Voltage and Present
-//! Temperature (144 ..= 146, 3 bytes: 14 + 14 bytes on the bus) and Present Current (126 ..= 127,
-//! 2 bytes: 14 + 13). A servo that has latched a hardware error sets the alert bit (bit 7 of
-//! the error byte) of every status packet it sends: a reply with it is followed by a READ of
-//! Hardware Error Status (70, 1 byte) for its value, so a healthy bus never pays for that one.
+//! The servo monitor: while the robot walks (and while a graded stop lowers it), every leg
+//! servo is watched, one small READ at a time, round-robin:
+//!
+//! | READ | addresses | bytes on the bus | checks |
+//! | --- | --- | --- | --- |
+//! | status | Torque Enable .. Hardware Error Status (64 ..= 70, 7 bytes) | 14 + 18 | torque found off, Hardware Error Status ≠ 0 |
+//! | supply | Present Input Voltage, Present Temperature (144 ..= 146, 3 bytes) | 14 + 14 | voltage, temperature |
+//! | current | Present Current (126 ..= 127, 2 bytes) | 14 + 13 | current |
+//!
+//! The round is 48 READs: four passes over the 12 servos, status, supply, status, current. Every
+//! servo is READ every 12 READs and its status every 24.
 //!
 //! The READs are spread in time, not in ticks: one every [`READ_EVERY_US`] (2.5 ms), so every
-//! servo is checked every 60 ms at any tick period up to 5 ms — two READs a tick at the 200 Hz
-//! default (≈ 0.55 ms of bus at 1 Mbps), at most one a tick at 1 kHz (≈ 62 µs at 4.5 Mbps: what
-//! lets the Cortex-M3's 1 kHz tick fit its period, BENCHMARKS.md "The Cortex-M3 board at 1 kHz"). Longer ticks read
-//! [`MAX_READS_PER_TICK`] a tick (every servo every 12 ticks), so the monitor never takes more
-//! of a tick's bus time than at 200 Hz.
+//! servo answers (or not) every 30 ms and reports its torque and hardware error every 60 ms at
+//! any tick period up to 5 ms — two READs a tick at the 200 Hz default (≈ 0.55 ms of bus at 1
+//! Mbps), at most one a tick at 1 kHz (≈ 62 µs at 4.5 Mbps: what lets the Cortex-M3's 1 kHz
+//! tick fit its period, BENCHMARKS.md "The Cortex-M3 board at 1 kHz"). Longer ticks read
+//! [`MAX_READS_PER_TICK`] a tick, so the monitor never takes more of a tick's bus time than at
+//! 200 Hz.
 //!
 //! Checks ([`ServoCheck`], limits [`ServoLimits`] from the parameter table):
-//! Hardware Error Status ≠ 0; temperature > `servo_temp_max` °C; voltage (0.1 V units) outside
-//! [`servo_volt_min`, `servo_volt_max`]; |current| (2.69 mA units) > `servo_current_max`. Any
-//! of them stops the robot (`ServoFault`, exit 21). A READ that fails (lost reply) is only
-//! counted by the bus statistics: that check of that servo waits for its next turn.
+//! * A READ left unanswered is READ again at the next turn (2.5 ms later) instead of moving on;
+//!   [`ServoLimits::miss_limit`] misses of one servo in a row make it lost: `ServoLost` (exit
+//!   24). With the default 8 a dead servo is found within 30 + 7 · 2.5 = 47.5 ms of its death,
+//!   and a bus that loses one reply in five stops a walk for nothing once in about 400,000
+//!   misses (0.2⁸).
+//!   A lost servo is still READ at its turns (once each), to see it come back.
+//! * Torque Enable read 0 (a servo that browned out comes back limp): its Goal Position is
+//!   written again (the last target sent) and its torque turned on again, and the robot stops
+//!   (`ServoFault` `TorqueOff`).
+//! * Hardware Error Status ≠ 0, temperature > `servo_temp_max` °C, voltage (0.1 V units)
+//!   outside [`servo_volt_min`, `servo_volt_max`], |current| (2.69 mA units) >
+//!   `servo_current_max`: `ServoFault` (exit 21).
+//!
+//! What each stop does (a hardware error goes limp at once; the others are graded stops) is the
+//! supervisor's ([`crate::supervisor`], docs/stops.md).
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
@@ -28,31 +45,44 @@ use crate::board::{Clock, ServoBus};
 use crate::bus::BoardMaster;
 use crate::supervisor::StopReason;
 
-/// Time between two of the monitor's READs, µs: 24 READs (two for each of the 12 servos) make
-/// a 60 ms round.
+/// Time between two of the monitor's READs, µs: 12 READs (one for each servo) make 30 ms.
 pub const READ_EVERY_US: u32 = 2_500;
 /// Most READs in one tick (a tick longer than 5 ms does not make the monitor's bus time grow).
 pub const MAX_READS_PER_TICK: u32 = 2;
+/// READs in a round: four passes over the leg servos (status, supply, status, current).
+pub const ROUND: usize = 4 * LEG_JOINTS;
 
+/// First address of the status READ (Torque Enable).
+pub const STATUS_ADDR: u16 = x_series::TORQUE_ENABLE.addr;
+/// Length of the status READ: Torque Enable (64) ..= Hardware Error Status (70).
+pub const STATUS_LEN: usize = (x_series::HARDWARE_ERROR_STATUS.addr
+    + x_series::HARDWARE_ERROR_STATUS.len
+    - STATUS_ADDR) as usize;
 /// First address of the voltage and temperature READ (Present Input Voltage).
 pub const SUPPLY_ADDR: u16 = x_series::PRESENT_INPUT_VOLTAGE.addr;
 /// Length of that READ: Present Input Voltage (144, 2 bytes) and Present Temperature (146).
 pub const SUPPLY_LEN: usize =
     (x_series::PRESENT_TEMPERATURE.addr + x_series::PRESENT_TEMPERATURE.len - SUPPLY_ADDR) as usize;
 
-/// Round-robin state: the next READ (servo `next / 2`, voltage and temperature when `next` is
-/// even, current when odd) and the time owed to the READs, µs.
+/// Round-robin state: the next READ of the round, the time owed to the READs (µs) and each
+/// servo's unanswered READs in a row.
 #[derive(Clone, Debug, Default)]
 pub struct ServoMonitor {
     next: usize,
     credit_us: u32,
+    misses: [u8; LEG_JOINTS],
 }
 
 /// What one READ of a servo answered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ServoHealth {
-    /// Hardware Error Status (read after a reply with the alert bit).
-    HardwareError(u8),
+    /// Torque Enable and Hardware Error Status.
+    Status {
+        /// Torque Enable (0 off, 1 on).
+        torque: u8,
+        /// Hardware Error Status.
+        error: u8,
+    },
     /// Present Input Voltage (0.1 V) and Present Temperature (°C).
     Supply {
         /// Present Input Voltage, 0.1 V units.
@@ -68,8 +98,11 @@ pub enum ServoHealth {
 pub fn check(id: u8, h: &ServoHealth, lim: &ServoLimits) -> Option<StopReason> {
     let fault = |check, reading: u16| Some(StopReason::ServoFault { id, check, reading });
     match *h {
-        ServoHealth::HardwareError(e) if e != 0 => fault(ServoCheck::HardwareError, u16::from(e)),
-        ServoHealth::HardwareError(_) => None,
+        ServoHealth::Status { error, .. } if error != 0 => {
+            fault(ServoCheck::HardwareError, u16::from(error))
+        }
+        ServoHealth::Status { torque: 0, .. } => fault(ServoCheck::TorqueOff, 0),
+        ServoHealth::Status { .. } => None,
         ServoHealth::Supply {
             voltage_dv,
             temperature_c,
@@ -97,72 +130,102 @@ pub fn check(id: u8, h: &ServoHealth, lim: &ServoLimits) -> Option<StopReason> {
 }
 
 impl ServoMonitor {
-    /// Starts with the first leg servo.
+    /// Starts with the first leg servo's status.
     pub const fn new() -> Self {
         ServoMonitor {
             next: 0,
             credit_us: 0,
+            misses: [0; LEG_JOINTS],
         }
     }
 
     /// One tick of `period_us`: the READs that fell due (one every [`READ_EVERY_US`], at most
-    /// [`MAX_READS_PER_TICK`]), each checked; the first fault found.
+    /// [`MAX_READS_PER_TICK`]), each checked; the first stop reason found. `goals` are the
+    /// Goal Positions last sent (ticks): a servo found limp gets its own back before its
+    /// torque.
     pub fn poll<B: ServoBus + Clock>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         lim: &ServoLimits,
         period_us: u32,
+        goals: &[i32; LEG_JOINTS],
     ) -> Option<StopReason> {
         let cap = READ_EVERY_US * MAX_READS_PER_TICK;
         self.credit_us = self.credit_us.saturating_add(period_us).min(cap);
         while self.credit_us >= READ_EVERY_US {
             self.credit_us -= READ_EVERY_US;
-            if let Some(fault) = self.read_next(bus, lim) {
+            if let Some(fault) = self.read_next(bus, lim, goals) {
                 return Some(fault);
             }
         }
         None
     }
 
-    /// The next READ of the round and its checks (and Hardware Error Status after an alert).
+    /// The next READ of the round and its checks.
     fn read_next<B: ServoBus + Clock>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         lim: &ServoLimits,
+        goals: &[i32; LEG_JOINTS],
     ) -> Option<StopReason> {
-        let k = self.next % (2 * LEG_JOINTS);
-        self.next = (k + 1) % (2 * LEG_JOINTS);
-        let id = *ids::LEGS.get(k / 2)?;
-        let alerts = bus.master().stats().hardware_alerts;
-        let health = if k.is_multiple_of(2) {
-            let mut b = [0u8; SUPPLY_LEN];
-            bus.master().read(id, SUPPLY_ADDR, &mut b).ok().map(|()| {
-                let [lo, hi, temperature_c] = b;
-                ServoHealth::Supply {
-                    voltage_dv: u16::from_le_bytes([lo, hi]),
-                    temperature_c,
-                }
-            })
-        } else {
-            let mut b = [0u8; 2];
-            bus.master()
-                .read(id, x_series::PRESENT_CURRENT.addr, &mut b)
-                .ok()
-                .map(|()| ServoHealth::Current(i16::from_le_bytes(b)))
-        };
-        // The alert bit of this reply (counted by the master): the error's value.
-        if bus.master().stats().hardware_alerts != alerts {
-            let mut e = [0u8; 1];
-            let read = bus
-                .master()
-                .read(id, x_series::HARDWARE_ERROR_STATUS.addr, &mut e);
-            if read.is_ok() {
-                if let Some(fault) = check(id, &ServoHealth::HardwareError(e[0]), lim) {
-                    return Some(fault);
-                }
+        let k = self.next % ROUND;
+        let j = k % LEG_JOINTS;
+        let id = *ids::LEGS.get(j)?;
+        let health = match k / LEG_JOINTS {
+            1 => {
+                let mut b = [0u8; SUPPLY_LEN];
+                bus.master().read(id, SUPPLY_ADDR, &mut b).ok().map(|()| {
+                    let [lo, hi, temperature_c] = b;
+                    ServoHealth::Supply {
+                        voltage_dv: u16::from_le_bytes([lo, hi]),
+                        temperature_c,
+                    }
+                })
             }
+            3 => {
+                let mut b = [0u8; 2];
+                bus.master()
+                    .read(id, x_series::PRESENT_CURRENT.addr, &mut b)
+                    .ok()
+                    .map(|()| ServoHealth::Current(i16::from_le_bytes(b)))
+            }
+            _ => {
+                let mut b = [0u8; STATUS_LEN];
+                bus.master().read(id, STATUS_ADDR, &mut b).ok().map(|()| {
+                    let [torque, .., error] = b;
+                    ServoHealth::Status { torque, error }
+                })
+            }
+        };
+        let misses = self.misses.get_mut(j)?;
+        let Some(health) = health else {
+            // Unanswered: READ again at the next turn, until the servo counts as lost (then
+            // once a turn, to see it come back).
+            let lost_before = *misses >= lim.miss_limit;
+            *misses = misses.saturating_add(1);
+            if lost_before {
+                self.next = (k + 1) % ROUND;
+            }
+            // Reported once, when the count reaches the limit.
+            return (*misses == lim.miss_limit).then_some(StopReason::ServoLost { id });
+        };
+        *misses = 0;
+        self.next = (k + 1) % ROUND;
+        let found = check(id, &health, lim);
+        if let Some(StopReason::ServoFault {
+            check: ServoCheck::TorqueOff,
+            ..
+        }) = found
+        {
+            // Limp after a brown-out: its last goal back, then its torque (best effort: the
+            // stop is on its way whatever the bus says).
+            let goal = goals.get(j).copied().unwrap_or(0);
+            let _ = bus
+                .master()
+                .write(id, x_series::GOAL_POSITION.addr, &goal.to_le_bytes());
+            let _ = bus.master().write(id, x_series::TORQUE_ENABLE.addr, &[1]);
         }
-        check(id, &health?, lim)
+        found
     }
 }
 
@@ -173,7 +236,7 @@ mod tests {
     #[test]
     fn each_limit() {
         let lim = ServoLimits::xm430();
-        assert_eq!(SUPPLY_LEN, 3);
+        assert_eq!((SUPPLY_LEN, STATUS_LEN), (3, 7));
         let supply = |voltage_dv, temperature_c| ServoHealth::Supply {
             voltage_dv,
             temperature_c,
@@ -187,12 +250,15 @@ mod tests {
         };
         assert_eq!(check(3, &supply(120, 40), &lim), None);
         assert_eq!(check(3, &ServoHealth::Current(500), &lim), None);
-        assert_eq!(check(3, &ServoHealth::HardwareError(0), &lim), None);
-        // Overload bit (5) of Hardware Error Status.
+        // Overload bit (5) of Hardware Error Status, whatever Torque Enable reads (the servo
+        // cut its own torque); torque found off.
+        let status = |torque, error| ServoHealth::Status { torque, error };
         assert_eq!(
-            check(3, &ServoHealth::HardwareError(0x20), &lim),
+            check(3, &status(0, 0x20), &lim),
             f(ServoCheck::HardwareError, 0x20)
         );
+        assert_eq!(check(3, &status(0, 0), &lim), f(ServoCheck::TorqueOff, 0));
+        assert_eq!(check(3, &status(1, 0), &lim), None);
         assert_eq!(check(3, &supply(120, 70), &lim), None);
         assert_eq!(
             check(3, &supply(120, 71), &lim),

@@ -1,9 +1,22 @@
 //! Supervisor: device freshness, fall and overrun detection, the stop sequence, and the target
 //! filter that keeps non-finite or out-of-limit values away from the servos.
 //!
-//! States: `Running` → (any stop reason) → `Stopping` (hold the last pose for
-//! [`SupervisorConfig::stopping_ticks`] ticks) → `TorqueOff` (broadcast Torque Enable = 0, sent
-//! once). The first stop reason wins and is reported (log stop record). A device missing at
+//! # The stop sequence (docs/stops.md has the whole table)
+//! Each stop reason has a grade ([`StopGrade`], defined with the reasons in the contract):
+//!
+//! ```text
+//!  Running ─Settle─▶ Settling ─standstill or settle_ticks─▶ Lowering ─lower_ticks─▶ Stopping ─stopping_ticks─▶ TorqueOff
+//!     │                 (the walk runs,                        (the ramp to            (hold the
+//!     ├─Lower──────────▶ stopped by the controller) ──────────▶ the crouch)  ─────────▶ crouch)
+//!     └─Limp (fall, hardware error) ──────────────────────────────────────────────────────────────▶ TorqueOff
+//! ```
+//!
+//! The finished plan (grade `Hold`) holds its final pose, then turns torque off. With
+//! `lower_ticks` = 0 the lowering is skipped (the pose is held, then torque off); with
+//! `settle_ticks` = 0 a `Settle` reason lowers at once. The first stop reason wins and is
+//! reported (log stop record), with one exception: a `Limp` reason while a graded stop runs
+//! (the robot fell while lowering) goes limp at once and is the one reported. A `Lower`
+//! reason while settling begins the lowering (the first reason stays). A device missing at
 //! start-up goes straight to `TorqueOff` (torque was never enabled).
 //!
 //! Per device, a missed reply is bridged by holding its last good value for at most
@@ -12,7 +25,7 @@
 use gait_core::robot::{Robot, Side, JOINTS_PER_LEG, LEG_JOINTS};
 use walker_contract::bus_map::TickMap;
 
-pub use walker_contract::codes::StopReason;
+pub use walker_contract::codes::{StopGrade, StopReason};
 pub use walker_contract::config::SupervisorConfig;
 
 /// Supervisor state.
@@ -21,12 +34,29 @@ pub use walker_contract::config::SupervisorConfig;
 pub enum State {
     /// Walking or standing under control.
     Running,
-    /// Holding the last pose before torque off.
+    /// Walking to a standstill: the walk runs, told to stop (graded stop, `Settle`).
+    Settling {
+        /// Why.
+        reason: StopReason,
+        /// Ticks left before the lowering begins anyway.
+        ticks_left: u16,
+    },
+    /// Lowering to the crouch.
+    Lowering {
+        /// Why.
+        reason: StopReason,
+        /// Tick of the lowering (0 ..= `lower_ticks` − 1).
+        k: u16,
+    },
+    /// Holding the pose before torque off (or before the lowering, after the plan's final
+    /// hold).
     Stopping {
         /// Why.
         reason: StopReason,
-        /// Ticks left before torque off.
+        /// Ticks left before torque off (or the lowering).
         ticks_left: u16,
+        /// The lowering follows the hold (the finished plan's final hold).
+        lower_next: bool,
     },
     /// Torque off (final).
     TorqueOff {
@@ -41,6 +71,8 @@ pub enum State {
 pub enum Action {
     /// Compute and send new targets.
     Run,
+    /// Send tick `k` of the lowering to the crouch (of [`Supervisor::lower_ticks`]).
+    Lower(u16),
     /// Send the last targets again (hold the pose).
     HoldPose,
     /// Send the broadcast torque-off now (returned once).
@@ -72,10 +104,13 @@ pub struct Supervisor<const N: usize> {
     state: State,
     overrun_run: u16,
     torque_off_sent: bool,
+    settle_ticks: u16,
+    lower_ticks: u16,
 }
 
 impl<const N: usize> Supervisor<N> {
-    /// A running supervisor watching the devices `ids`.
+    /// A running supervisor watching the devices `ids`; graded stops neither settle nor lower
+    /// until [`Supervisor::with_grades`].
     pub fn new(cfg: SupervisorConfig, ids: [u8; N]) -> Self {
         Supervisor {
             cfg,
@@ -84,7 +119,16 @@ impl<const N: usize> Supervisor<N> {
             state: State::Running,
             overrun_run: 0,
             torque_off_sent: false,
+            settle_ticks: 0,
+            lower_ticks: 0,
         }
+    }
+
+    /// The graded stops' longest walk to a standstill and their lowering, ticks.
+    pub fn with_grades(mut self, settle_ticks: u16, lower_ticks: u16) -> Self {
+        self.settle_ticks = settle_ticks;
+        self.lower_ticks = lower_ticks;
+        self
     }
 
     /// Current state.
@@ -97,12 +141,25 @@ impl<const N: usize> Supervisor<N> {
         &self.cfg
     }
 
+    /// Ticks of the lowering to the crouch (0: none).
+    pub fn lower_ticks(&self) -> u16 {
+        self.lower_ticks
+    }
+
     /// The stop reason, once stopping.
     pub fn stop_reason(&self) -> Option<StopReason> {
         match self.state {
             State::Running => None,
-            State::Stopping { reason, .. } | State::TorqueOff { reason } => Some(reason),
+            State::Settling { reason, .. }
+            | State::Lowering { reason, .. }
+            | State::Stopping { reason, .. }
+            | State::TorqueOff { reason } => Some(reason),
         }
+    }
+
+    /// True while a graded stop walks to a standstill.
+    pub fn is_settling(&self) -> bool {
+        matches!(self.state, State::Settling { .. })
     }
 
     /// True while at least one device is on last-good hold.
@@ -115,7 +172,9 @@ impl<const N: usize> Supervisor<N> {
         match self.state {
             State::Running if self.any_holding() => crate::record::FaultState::Holding,
             State::Running => crate::record::FaultState::Ok,
-            State::Stopping { .. } => crate::record::FaultState::Stopping,
+            State::Settling { .. } | State::Lowering { .. } | State::Stopping { .. } => {
+                crate::record::FaultState::Stopping
+            }
             State::TorqueOff { .. } => crate::record::FaultState::TorqueOff,
         }
     }
@@ -135,33 +194,71 @@ impl<const N: usize> Supervisor<N> {
         }
     }
 
-    /// Starts the stop sequence (the first reason wins).
+    /// Starts the stop sequence of `reason`'s grade (see the module docs: the first reason
+    /// wins; a limp reason cuts a graded stop short).
     pub fn stop(&mut self, reason: StopReason) {
-        if self.state == State::Running {
-            self.state = if self.cfg.stopping_ticks == 0 {
-                State::TorqueOff { reason }
-            } else {
-                State::Stopping {
-                    reason,
-                    ticks_left: self.cfg.stopping_ticks,
+        let grade = reason.grade();
+        match self.state {
+            State::Running => match grade {
+                StopGrade::Limp => self.state = State::TorqueOff { reason },
+                StopGrade::Settle if self.settle_ticks > 0 => {
+                    self.state = State::Settling {
+                        reason,
+                        ticks_left: self.settle_ticks,
+                    }
                 }
+                StopGrade::Settle | StopGrade::Lower => self.lower(reason),
+                StopGrade::Hold => self.state = self.hold(reason, self.cfg.stopping_ticks, false),
+            },
+            State::Settling { reason: first, .. } if grade == StopGrade::Lower => self.lower(first),
+            State::Settling { .. } | State::Lowering { .. } | State::Stopping { .. }
+                if grade == StopGrade::Limp =>
+            {
+                self.state = State::TorqueOff { reason }
+            }
+            _ => {}
+        }
+    }
+
+    /// The lowering (or, without one, the hold before torque off).
+    fn lower(&mut self, reason: StopReason) {
+        self.state = if self.lower_ticks > 0 {
+            State::Lowering { reason, k: 0 }
+        } else {
+            self.hold(reason, self.cfg.stopping_ticks, false)
+        };
+    }
+
+    /// Holding the pose for `ticks` (none: torque off, or the lowering when `lower_next`).
+    fn hold(&self, reason: StopReason, ticks: u16, lower_next: bool) -> State {
+        match (ticks, lower_next && self.lower_ticks > 0) {
+            (0, false) => State::TorqueOff { reason },
+            (0, true) => State::Lowering { reason, k: 0 },
+            (t, l) => State::Stopping {
+                reason,
+                ticks_left: t,
+                lower_next: l,
+            },
+        }
+    }
+
+    /// Starts the stop sequence holding the pose for `hold_ticks` ticks first (e.g. the final
+    /// hold after the plan), then lowering the robot if `reason`'s grade lowers it. The first
+    /// reason wins.
+    pub fn stop_with_hold(&mut self, reason: StopReason, hold_ticks: u16) {
+        if self.state == State::Running {
+            self.state = match reason.grade() {
+                StopGrade::Limp => State::TorqueOff { reason },
+                StopGrade::Hold => self.hold(reason, hold_ticks, false),
+                StopGrade::Settle | StopGrade::Lower => self.hold(reason, hold_ticks, true),
             };
         }
     }
 
-    /// Starts the stop sequence holding the pose for `hold_ticks` ticks instead of the
-    /// configured [`SupervisorConfig::stopping_ticks`] (e.g. the final hold after the plan).
-    /// The first reason wins, as with [`Supervisor::stop`].
-    pub fn stop_with_hold(&mut self, reason: StopReason, hold_ticks: u16) {
-        if self.state == State::Running {
-            self.state = if hold_ticks == 0 {
-                State::TorqueOff { reason }
-            } else {
-                State::Stopping {
-                    reason,
-                    ticks_left: hold_ticks,
-                }
-            };
+    /// The walk stands (or cannot walk to a standstill): a settling stop begins its lowering.
+    pub fn settled(&mut self) {
+        if let State::Settling { reason, .. } = self.state {
+            self.lower(reason);
         }
     }
 
@@ -192,7 +289,7 @@ impl<const N: usize> Supervisor<N> {
     pub fn tilt(&mut self, tilt_rad: f32) {
         if tilt_rad.is_finite() && libm::fabsf(tilt_rad) > self.cfg.tilt_limit_rad {
             let mrad = libm::fminf(libm::fabsf(tilt_rad) * 1000.0, 65535.0) as u16;
-            self.stop_with_hold(StopReason::Fall { tilt_mrad: mrad }, 0);
+            self.stop(StopReason::Fall { tilt_mrad: mrad });
         }
     }
 
@@ -219,16 +316,34 @@ impl<const N: usize> Supervisor<N> {
     pub fn step(&mut self) -> Action {
         match self.state {
             State::Running => Action::Run,
-            State::Stopping { reason, ticks_left } => {
+            State::Settling { reason, ticks_left } => {
                 let left = ticks_left.saturating_sub(1);
                 if left == 0 {
-                    self.state = State::TorqueOff { reason };
+                    self.lower(reason);
                 } else {
-                    self.state = State::Stopping {
+                    self.state = State::Settling {
                         reason,
                         ticks_left: left,
                     };
                 }
+                Action::Run
+            }
+            State::Lowering { reason, k } => {
+                let next = k.saturating_add(1);
+                self.state = if next >= self.lower_ticks {
+                    self.hold(reason, self.cfg.stopping_ticks, false)
+                } else {
+                    State::Lowering { reason, k: next }
+                };
+                Action::Lower(k)
+            }
+            State::Stopping {
+                reason,
+                ticks_left,
+                lower_next,
+            } => {
+                let left = ticks_left.saturating_sub(1);
+                self.state = self.hold(reason, left, lower_next);
                 Action::HoldPose
             }
             State::TorqueOff { .. } => {
@@ -553,6 +668,138 @@ mod tests {
         let mut z = sup();
         z.stop_with_hold(StopReason::PlanDone, 0);
         assert_eq!(z.step(), Action::SendTorqueOff);
+    }
+
+    /// The graded supervisor's actions from the lowering on: lower 3 ticks, hold 3, torque off.
+    const LOWER_HOLD_OFF: [Action; 7] = [
+        Action::Lower(0),
+        Action::Lower(1),
+        Action::Lower(2),
+        Action::HoldPose,
+        Action::HoldPose,
+        Action::HoldPose,
+        Action::SendTorqueOff,
+    ];
+
+    /// The graded supervisor: settle ≤ 4 ticks, lower 3 ticks, hold 3 ticks.
+    fn graded() -> Supervisor<15> {
+        sup().with_grades(4, 3)
+    }
+
+    #[test]
+    fn an_operator_stop_settles_lowers_holds_then_turns_torque_off() {
+        let mut s = graded();
+        s.stop(StopReason::Requested);
+        assert!(s.is_settling());
+        assert_eq!(s.fault_state(), crate::record::FaultState::Stopping);
+        // The walk runs while it settles; the standstill begins the lowering.
+        assert_eq!(s.step(), Action::Run);
+        s.settled();
+        assert!(!s.is_settling());
+        let seq: Vec<Action> = (0..7).map(|_| s.step()).collect();
+        assert_eq!(seq, LOWER_HOLD_OFF);
+        assert_eq!(s.step(), Action::Idle);
+        assert_eq!(s.stop_reason(), Some(StopReason::Requested));
+    }
+
+    #[test]
+    fn a_walk_that_does_not_stand_in_time_is_lowered_anyway() {
+        let mut s = graded();
+        s.stop(StopReason::SensorStale {
+            id: 200,
+            age_ms: 101,
+        });
+        let seq: Vec<Action> = (0..6).map(|_| s.step()).collect();
+        assert_eq!(
+            seq,
+            [
+                Action::Run,
+                Action::Run,
+                Action::Run,
+                Action::Run,
+                Action::Lower(0),
+                Action::Lower(1)
+            ]
+        );
+    }
+
+    #[test]
+    fn each_grade_has_its_own_first_action() {
+        // (reason, first action of the sequence)
+        let cases = [
+            (StopReason::Fall { tilt_mrad: 700 }, Action::SendTorqueOff),
+            (
+                StopReason::ServoFault {
+                    id: 3,
+                    check: walker_contract::codes::ServoCheck::HardwareError,
+                    reading: 0x20,
+                },
+                Action::SendTorqueOff,
+            ),
+            (StopReason::ServoLost { id: 4 }, Action::Lower(0)),
+            (
+                StopReason::ServoFault {
+                    id: 4,
+                    check: walker_contract::codes::ServoCheck::TorqueOff,
+                    reading: 0,
+                },
+                Action::Lower(0),
+            ),
+            (StopReason::NonFiniteSample { tick: 9 }, Action::Lower(0)),
+            (StopReason::NonFiniteTarget { joint: 2 }, Action::Lower(0)),
+            (StopReason::Requested, Action::Run),
+            (StopReason::OverrunBurst { count: 5 }, Action::Run),
+            (StopReason::DeviceLost { id: 111 }, Action::Run),
+            (
+                StopReason::ServoFault {
+                    id: 5,
+                    check: walker_contract::codes::ServoCheck::Temperature,
+                    reading: 71,
+                },
+                Action::Run,
+            ),
+        ];
+        for (reason, first) in cases {
+            let mut s = graded();
+            s.stop(reason);
+            assert_eq!(s.step(), first, "{reason:?}");
+            assert_eq!(s.stop_reason(), Some(reason));
+        }
+    }
+
+    #[test]
+    fn a_fall_cuts_a_graded_stop_short_and_a_lower_reason_ends_the_settling() {
+        let mut s = graded();
+        s.stop(StopReason::Requested);
+        s.stop(StopReason::ServoLost { id: 2 });
+        // Lowering now, the first reason kept.
+        assert_eq!(s.step(), Action::Lower(0));
+        assert_eq!(s.stop_reason(), Some(StopReason::Requested));
+        // Another graded reason changes nothing; a fall goes limp and is reported.
+        s.stop(StopReason::OverrunBurst { count: 5 });
+        assert_eq!(s.step(), Action::Lower(1));
+        s.tilt(0.8);
+        assert_eq!(s.stop_reason(), Some(StopReason::Fall { tilt_mrad: 800 }));
+        assert_eq!(s.step(), Action::SendTorqueOff);
+    }
+
+    #[test]
+    fn a_held_stop_lowers_after_its_hold_and_the_finished_plan_does_not() {
+        let mut s = graded();
+        s.stop_with_hold(StopReason::Requested, 2);
+        assert_eq!([s.step(), s.step()], [Action::HoldPose; 2]);
+        let seq: Vec<Action> = (0..7).map(|_| s.step()).collect();
+        assert_eq!(seq, LOWER_HOLD_OFF);
+        let mut p = graded();
+        p.stop_with_hold(StopReason::PlanDone, 2);
+        let seq: Vec<Action> = (0..3).map(|_| p.step()).collect();
+        assert_eq!(
+            seq,
+            [Action::HoldPose, Action::HoldPose, Action::SendTorqueOff]
+        );
+        let mut q = graded();
+        q.plan_done();
+        assert_eq!(q.step(), Action::HoldPose);
     }
 
     fn map() -> JointMap {

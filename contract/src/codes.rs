@@ -21,6 +21,7 @@
 //! | 19 | sensor data stale (no plausible reply from a sensor board for longer than `stale_ms`) |
 //! | 21 | servo fault (Hardware Error Status, temperature, input voltage or current beyond its limit) |
 //! | 22 | not walking after a reset other than power-on (brown-out, watchdog, software/panic, pin) |
+//! | 24 | a leg servo lost while running (no reply to `servo_misses` monitor READs in a row) |
 //! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
 //! | 101 | panic |
 //!
@@ -115,6 +116,8 @@ wire_codes! {
         /// stands with torque on, no stop record is written and no run ends with it; the
         /// command port's Stop Code reads it until the master writes Mode again.
         Deadman = 13,
+        /// A leg servo missed `servo_misses` of the servo monitor's READs in a row (id = servo).
+        ServoLost = 14,
     }
 }
 
@@ -133,6 +136,7 @@ impl StopCode {
             StopCode::SensorStale => ExitCode::SensorStale,
             StopCode::ServoFault => ExitCode::ServoFault,
             StopCode::NotPowerOn => ExitCode::NotPowerOn,
+            StopCode::ServoLost => ExitCode::ServoLost,
             // Never a run's end (see the variant); a master that then writes Mode = torque off
             // ends the run as requested.
             StopCode::Deadman => ExitCode::Requested,
@@ -200,6 +204,29 @@ pub enum StopReason {
         /// What reset the controller.
         cause: ResetCause,
     },
+    /// A leg servo missed `servo_misses` of the servo monitor's READs in a row.
+    ServoLost {
+        /// Its bus id.
+        id: u8,
+    },
+}
+
+/// How the supervisor brings the robot down for a stop reason (docs/stops.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(all(target_arch = "arm", target_os = "none"), derive(defmt::Format))]
+pub enum StopGrade {
+    /// Torque off at once: a fall (stiff legs would only lever it) or a servo's own hardware
+    /// error (the servo has already cut its torque).
+    Limp,
+    /// Hold the pose, then torque off: the finished plan (it already stands; its runs are the
+    /// paper's experiments, whose figures end with the final hold).
+    Hold,
+    /// Lower the robot to the crouch, hold, torque off: the walk cannot be trusted to reach a
+    /// standstill (its samples or targets were not finite, a leg servo was lost or found limp).
+    Lower,
+    /// Walk to a standstill (the online walk's stop: finish the step, feet together), then
+    /// lower, hold, torque off: operator stops and minor faults.
+    Settle,
 }
 
 impl StopReason {
@@ -217,6 +244,34 @@ impl StopReason {
             StopReason::SensorStale { .. } => StopCode::SensorStale,
             StopReason::ServoFault { .. } => StopCode::ServoFault,
             StopReason::NotPowerOn { .. } => StopCode::NotPowerOn,
+            StopReason::ServoLost { .. } => StopCode::ServoLost,
+        }
+    }
+
+    /// How the robot is brought down for this reason ([`StopGrade`]). Start-up's reasons
+    /// (`DeviceMissing`, `NotPowerOn`) never had torque on.
+    pub const fn grade(&self) -> StopGrade {
+        match self {
+            StopReason::Fall { .. }
+            | StopReason::DeviceMissing { .. }
+            | StopReason::NotPowerOn { .. }
+            | StopReason::ServoFault {
+                check: ServoCheck::HardwareError,
+                ..
+            } => StopGrade::Limp,
+            StopReason::NonFiniteSample { .. }
+            | StopReason::NonFiniteTarget { .. }
+            | StopReason::ServoLost { .. }
+            | StopReason::ServoFault {
+                check: ServoCheck::TorqueOff,
+                ..
+            } => StopGrade::Lower,
+            StopReason::PlanDone => StopGrade::Hold,
+            StopReason::DeviceLost { .. }
+            | StopReason::OverrunBurst { .. }
+            | StopReason::Requested
+            | StopReason::SensorStale { .. }
+            | StopReason::ServoFault { .. } => StopGrade::Settle,
         }
     }
 
@@ -224,7 +279,9 @@ impl StopReason {
     pub fn code(&self) -> (u8, u8, i32) {
         let c = self.kind().code();
         match *self {
-            StopReason::DeviceMissing { id } | StopReason::DeviceLost { id } => (c, id, 0),
+            StopReason::DeviceMissing { id }
+            | StopReason::DeviceLost { id }
+            | StopReason::ServoLost { id } => (c, id, 0),
             StopReason::Fall { tilt_mrad } => (c, 0, i32::from(tilt_mrad)),
             StopReason::OverrunBurst { count } => (c, 0, i32::from(count)),
             StopReason::NonFiniteTarget { joint } => (c, joint, 0),
@@ -267,6 +324,7 @@ impl StopReason {
             StopCode::NotPowerOn => StopReason::NotPowerOn {
                 cause: ResetCause::try_from(u8::try_from(value).ok()?).ok()?,
             },
+            StopCode::ServoLost => StopReason::ServoLost { id },
             // No stop record carries it (the walk's stop, not the supervisor's).
             StopCode::Deadman => return None,
         })
@@ -453,6 +511,10 @@ wire_codes! {
         VoltageHigh = 4,
         /// |Present Current| (126) above the limit [mA].
         Current = 5,
+        /// Torque Enable (64) read 0 while the robot walks: the servo browned out and came
+        /// back limp [the value read, 0]. The monitor turns its torque on again at its last
+        /// goal.
+        TorqueOff = 6,
     }
 }
 
@@ -537,6 +599,8 @@ wire_codes! {
         ServoFault = 21,
         /// Not walking after a reset other than power-on.
         NotPowerOn = 22,
+        /// A leg servo lost while running.
+        ServoLost = 24,
         /// Panic.
         Panic = 101,
     }
@@ -564,6 +628,7 @@ impl ExitCode {
             ExitCode::SensorStale => "sensor data stale",
             ExitCode::ServoFault => "servo fault",
             ExitCode::NotPowerOn => "reset other than power-on: not walking",
+            ExitCode::ServoLost => "leg servo lost",
             ExitCode::StartupFailed => "start-up step failed",
             ExitCode::Panic => "panic",
         }

@@ -218,10 +218,14 @@ pub enum PortState {
     Standing,
     /// 2: walking.
     Walking,
-    /// 3: stopping (the last steps to standing).
+    /// 3: stopping (the last steps to standing; a supervisor stop's lowering and hold).
     Stopping,
-    /// 4: stopped: torque off (see Stop Code).
+    /// 4: stopped: torque off (see Stop Code). With `wait_enable` the firmware then waits for
+    /// the operator's enable, as in Waiting.
     Stopped,
+    /// 5: torque off since power-on, waiting for the operator's enable (a Mode write of stand
+    /// or walk; `wait_enable`).
+    Waiting,
 }
 
 impl PortState {
@@ -233,6 +237,7 @@ impl PortState {
             PortState::Walking => 2,
             PortState::Stopping => 3,
             PortState::Stopped => 4,
+            PortState::Waiting => 5,
         }
     }
 
@@ -244,6 +249,7 @@ impl PortState {
             2 => Some(PortState::Walking),
             3 => Some(PortState::Stopping),
             4 => Some(PortState::Stopped),
+            5 => Some(PortState::Waiting),
             _ => None,
         }
     }
@@ -401,6 +407,8 @@ pub struct CommandTable {
     queued: u8,
     /// The deadman stopped the walk and Mode was not written since.
     deadman: bool,
+    /// Accepted writes of Mode (wraps).
+    mode_writes: u16,
 }
 
 impl Default for CommandTable {
@@ -427,6 +435,7 @@ impl CommandTable {
             commands: 0,
             queued: 0,
             deadman: false,
+            mode_writes: 0,
         };
         t.put(MODEL_NUMBER, &MODEL_NUMBER_VALUE.to_le_bytes());
         t.put(FIRMWARE_VERSION, &[FIRMWARE_VERSION_VALUE]);
@@ -515,6 +524,7 @@ impl CommandTable {
         }
         if mode.is_some() {
             self.deadman = false;
+            self.mode_writes = self.mode_writes.wrapping_add(1);
         }
         self.commands = self.commands.wrapping_add(1);
         self.put(COMMAND_COUNT, &self.commands.to_le_bytes());
@@ -596,6 +606,16 @@ impl CommandTable {
     /// Accepted command writes so far (wraps).
     pub fn command_count(&self) -> u16 {
         self.commands
+    }
+
+    /// Accepted writes of Mode so far (wraps): a master's explicit mode, even the same value.
+    pub fn mode_writes(&self) -> u16 {
+        self.mode_writes
+    }
+
+    /// Publishes the State register alone (the rest of the status stays as last published).
+    pub fn set_state(&mut self, s: PortState) {
+        self.put(STATE, &[s.code()]);
     }
 
     /// Publishes the firmware's status in the status registers.

@@ -67,6 +67,8 @@ pub struct ServoLimits {
     pub voltage_max_v: f32,
     /// Highest |Present Current|, A.
     pub current_max_a: f32,
+    /// Monitor READs of one servo left unanswered in a row that make it lost (`ServoLost`).
+    pub miss_limit: u8,
 }
 
 impl ServoLimits {
@@ -79,6 +81,7 @@ impl ServoLimits {
             voltage_min_v: 10.0,
             voltage_max_v: 14.8,
             current_max_a: 2.5,
+            miss_limit: 8,
         }
     }
 }
@@ -136,6 +139,13 @@ pub struct Config {
     pub ramp_us: u32,
     /// Time the final pose is held after the plan before torque off, µs.
     pub final_hold_us: u32,
+    /// A graded stop's longest walk to a standstill before the lowering begins anyway, µs.
+    pub settle_us: u32,
+    /// Duration of a graded stop's lowering to the crouch, µs (0: no lowering, the pose is
+    /// held, then torque off).
+    pub lower_us: u32,
+    /// How far the crouch lowers the pelvis below the walking height z_c, m.
+    pub crouch_m: f32,
     /// Smallest load of a foot that counts for the measured ZMP, N.
     pub min_load_n: f32,
     /// A foot board missing at start-up stops the robot (`true`) or is tolerated (`false`:
@@ -202,6 +212,11 @@ pub struct Config {
     /// The command deadman, ms: in Mode = walk, no valid command write for this long stops the
     /// online walk to standing.
     pub deadman_ms: u32,
+    /// Torque stays off until the operator's enable (a Mode write of stand or walk on the
+    /// command port) at power-on and after every stop, the command port answering meanwhile
+    /// (`true`: the OpenCR build); `false`: the firmware starts at once and its run ends at
+    /// the first stop (QEMU's firmware-in-the-loop runs).
+    pub wait_enable: bool,
 }
 
 impl Config {
@@ -245,6 +260,9 @@ impl Config {
             startup_attempts: 8,
             ramp_us: 1_500_000,
             final_hold_us: 1_000_000,
+            settle_us: 2_500_000,
+            lower_us: 1_500_000,
+            crouch_m: 0.05,
             min_load_n: 2.0,
             feet_required: true,
             compute_us: 0,
@@ -271,6 +289,7 @@ impl Config {
             servo_limits: ServoLimits::xm430(),
             autostart: false,
             deadman_ms: 500,
+            wait_enable: false,
         }
     }
 

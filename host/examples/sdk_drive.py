@@ -58,7 +58,7 @@ MODE_WALK = 2
 MODE_STOP = 3
 STATE_STANDING = 1
 STATE_WALKING = 2
-STATE_NAMES = {0: "starting", 1: "standing", 2: "walking", 3: "stopping", 4: "stopped"}
+STATE_NAMES = {0: "starting", 1: "standing", 2: "walking", 3: "stopping", 4: "stopped", 5: "waiting"}
 SUPPORT_NAMES = {0: "both", 1: "left", 2: "right"}
 
 # Extra packet timeout on a TCP port, ms (see SocketPortHandler).

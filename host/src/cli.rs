@@ -278,6 +278,11 @@ pub struct SimArgs {
     /// Devices that never answer, by bus id (e.g. 111,112); comma-separated or repeated.
     #[arg(long, value_name = "ID", value_delimiter = ',')]
     pub dead: Vec<u8>,
+    /// A device that dies for a while, ID:FROM_S[:FOR_S] (e.g. 4:6:0.2: servo 4 dead from 6 s,
+    /// back at 6.2 s with its torque off; without FOR_S it never comes back); comma-separated or repeated.
+    #[arg(long, value_name = "OUTAGE", value_delimiter = ',', value_parser = crate::sim::Outage::parse)]
+    #[serde(deserialize_with = "outages")]
+    pub outage: Vec<crate::sim::Outage>,
     /// Force a fall at this simulated time, s.
     #[arg(long, value_name = "S", value_parser = non_negative, allow_negative_numbers = true)]
     pub fall_at: Option<f64>,
@@ -287,6 +292,15 @@ pub struct SimArgs {
     /// Standard deviation of a random pitch torque on the upper body, N·m.
     #[arg(long, value_name = "NM", value_parser = non_negative, allow_negative_numbers = true)]
     pub tau_random: Option<f64>,
+}
+
+/// The `outage` list of a configuration file: strings `ID:FROM_S[:FOR_S]`.
+fn outages<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<crate::sim::Outage>, D::Error> {
+    let items = <Vec<String> as Deserialize>::deserialize(d)?;
+    items
+        .iter()
+        .map(|s| crate::sim::Outage::parse(s).map_err(serde::de::Error::custom))
+        .collect()
 }
 
 /// The `push` list of a configuration file: strings `T:IMPULSE_NS:DIRECTION_DEG`.
@@ -785,6 +799,7 @@ impl SimArgs {
             cfg.faults.p_corrupt = p;
         }
         cfg.faults.dead_ids.extend(self.dead.iter().copied());
+        cfg.faults.outages.extend(self.outage.iter().copied());
         if self.fall_at.is_some() {
             cfg.fall.forced_at_s = self.fall_at;
         }
@@ -815,6 +830,8 @@ impl SimArgs {
         push.extend(self.push);
         let mut dead = base.dead;
         dead.extend(self.dead);
+        let mut outage = base.outage;
+        outage.extend(self.outage);
         SimArgs {
             physics: self.physics.or(base.physics),
             seed: self.seed.or(base.seed),
@@ -832,6 +849,7 @@ impl SimArgs {
             p_drop: self.p_drop.or(base.p_drop),
             p_corrupt: self.p_corrupt.or(base.p_corrupt),
             dead,
+            outage,
             fall_at: self.fall_at.or(base.fall_at),
             tau_constant: self.tau_constant.or(base.tau_constant),
             tau_random: self.tau_random.or(base.tau_random),

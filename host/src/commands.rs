@@ -6,7 +6,13 @@
 //! robot frame) and `vyaw` (rad/s), omitted ones 0 — or `stop = true`. Commands are sent in
 //! order when the simulated (virtual) time reaches them: the velocity registers, then Mode =
 //! walk (or Mode = stop). After the last command the driver waits until the firmware stands
-//! again and sends Mode = torque off: the run ends (stop `Requested`).
+//! again and sends Mode = torque off: the run ends (stop `Requested`). A last command
+//! `torque_off = true` sends Mode = torque off at its time, walking or not (the firmware's
+//! graded stop: it walks to a standstill, lowers the robot, then turns torque off).
+//!
+//! A script for a firmware that waits for the operator's enable (`wait_enable=1`) says when to
+//! give it: top-level `enable_after = S` (s): the driver finds State = waiting, waits S s of
+//! virtual time with no write, then writes Mode = stand (the enable) and goes on as above.
 //!
 //! Between commands the driver writes the port's Heartbeat register every
 //! [`HEARTBEAT_EVERY_US`] of virtual time (the firmware's command deadman, `deadman_ms`,
@@ -118,6 +124,9 @@ pub struct ScriptCommand {
     /// A lost master: send nothing for this long, s (no velocity, stop or steps beside it).
     #[serde(default)]
     pub silence: f64,
+    /// Mode = torque off at `t` (the last command, alone): the run ends by the firmware's stop.
+    #[serde(default)]
+    pub torque_off: bool,
 }
 
 impl ScriptCommand {
@@ -148,6 +157,10 @@ impl ScriptCommand {
 pub struct CommandScript {
     /// The commands, in time order.
     pub command: Vec<ScriptCommand>,
+    /// The firmware waits for the enable (`wait_enable=1`): give it this long after it reports
+    /// State = waiting, s.
+    #[serde(default)]
+    pub enable_after: Option<f64>,
 }
 
 impl CommandScript {
@@ -155,6 +168,11 @@ impl CommandScript {
     /// silence; velocities in the port's ranges; `stop` without a velocity; `silence` alone).
     pub fn parse(text: &str) -> Result<Self, String> {
         let s: CommandScript = toml::from_str(text).map_err(|e| e.to_string())?;
+        if let Some(e) = s.enable_after {
+            if !(e.is_finite() && e >= 0.0) {
+                return Err(format!("enable_after = {e}: a time in s, ≥ 0"));
+            }
+        }
         let mut last = -1.0;
         // The end of the last silence: the next command comes after it.
         let mut after = 0.0;
@@ -182,6 +200,18 @@ impl CommandScript {
             if c.stop && (c.vx != 0.0 || c.vy != 0.0 || c.vyaw != 0.0 || !c.steps.is_empty()) {
                 return Err(format!(
                     "command at t = {} s: stop with a velocity or steps",
+                    c.t
+                ));
+            }
+            let alone = !c.stop
+                && c.silence == 0.0
+                && c.vx == 0.0
+                && c.vy == 0.0
+                && c.vyaw == 0.0
+                && c.steps.is_empty();
+            if c.torque_off && !(alone && std::ptr::eq(c, s.command.last().unwrap_or(c))) {
+                return Err(format!(
+                    "command at t = {} s: torque_off must be the last command, alone",
                     c.t
                 ));
             }
@@ -421,6 +451,9 @@ pub struct DriveReport {
     pub sent_us: Vec<u64>,
     /// The script's silences, in order.
     pub silences: Vec<Silence>,
+    /// With `enable_after`: virtual time the firmware was first seen waiting, and the enable's
+    /// write, µs.
+    pub enable: Option<(u64, u64)>,
 }
 
 /// Drives a script on the port (see the module docs); `progress` is the simulator's virtual
@@ -444,11 +477,25 @@ pub fn drive(
         }
     };
     master.wait_ready(Duration::from_secs(120))?;
+    let mut enable = None;
+    if let Some(after) = script.enable_after {
+        wait_state(master, PortState::Waiting)?;
+        let seen = now();
+        while now() < seen + (after * 1e6) as u64 {
+            if quit.load(Ordering::Relaxed) {
+                return Err("aborted".into());
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        master.write(port::MODE.addr, &[Mode::Stand.code()])?;
+        enable = Some((seen, now()));
+    }
     wait_state(master, PortState::Standing)?;
     let mut rep = DriveReport {
         ready_us: now(),
         sent_us: Vec::new(),
         silences: Vec::new(),
+        enable,
     };
     let mut last_write = now();
     // Waits until virtual time `until`, writing Heartbeat every HEARTBEAT_EVERY_US.
@@ -485,6 +532,11 @@ pub fn drive(
             });
             continue;
         }
+        if c.torque_off {
+            master.write(port::MODE.addr, &[Mode::TorqueOff.code()])?;
+            end_waiting(master, script)?;
+            return Ok(rep);
+        }
         if c.stop {
             master.write(port::MODE.addr, &[Mode::Stop.code()])?;
         } else {
@@ -510,7 +562,20 @@ pub fn drive(
         wait_beating(master, now() + 20_000, &mut last_write)?;
     }
     master.write(port::MODE.addr, &[Mode::TorqueOff.code()])?;
+    end_waiting(master, script)?;
     Ok(rep)
+}
+
+/// After the script's torque off: a firmware that waits for the enable (`enable_after`) waits
+/// again once stopped; Mode = torque off while it waits ends it.
+fn end_waiting(master: &mut PortMaster, script: &CommandScript) -> Result<(), String> {
+    if script.enable_after.is_none() {
+        return Ok(());
+    }
+    while master.state()? != Some(PortState::Stopped) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    master.write(port::MODE.addr, &[Mode::TorqueOff.code()])
 }
 
 /// Spawns the driver on `stream` in a thread.
@@ -732,6 +797,19 @@ mod tests {
         assert!(
             CommandScript::parse("[[command]]\nt = 1\nsilence = 2.0\n[[command]]\nt = 2.5\n")
                 .is_err()
+        );
+        // Torque off: the last command, alone.
+        let off = CommandScript::parse(
+            "[[command]]\nt = 1\nvx = 0.05\n[[command]]\nt = 3\ntorque_off = true\n",
+        )
+        .unwrap();
+        assert!(off.command[1].torque_off);
+        assert!(CommandScript::parse(
+            "[[command]]\nt = 1\ntorque_off = true\n[[command]]\nt = 3\n"
+        )
+        .is_err());
+        assert!(
+            CommandScript::parse("[[command]]\nt = 1\ntorque_off = true\nvx = 0.05\n").is_err()
         );
         let nine = ["{ foot = \"left\" }"; 9].join(", ");
         assert!(CommandScript::parse(&format!("[[command]]\nt = 1\nsteps = [{nine}]\n")).is_err());

@@ -10,7 +10,8 @@
 //! | ← / a, → / d | yaw rate ± [`YAW_STEP`] mrad/s (← turns left, counter-clockwise) |
 //! | q, e | sideways velocity ± [`VY_STEP`] mm/s (q left, e right) |
 //! | space | stop: velocity 0, Mode = stop (the walk slows to standing) |
-//! | t | torque off (Mode = 0): the robot goes limp; it ends a `walker fil` run |
+//! | r | ready: Mode = stand, the enable of a firmware that waits for one (`wait_enable`: at power-on and after a stop, State = waiting or stopped) |
+//! | t | torque off (Mode = 0): the graded stop (to standing, lowered, then limp); it ends a `walker fil` run |
 //! | Esc, x, Ctrl-C | quit: Mode = stop (with `--sim`, then torque off, which ends the run) |
 //!
 //! The commanded velocity is clamped to the port's range ([`VELOCITY_RANGE`]), so a key never
@@ -58,6 +59,8 @@ pub enum Key {
     SideRight,
     /// Space.
     Stop,
+    /// r.
+    Ready,
     /// t.
     TorqueOff,
     /// Esc, x or Ctrl-C.
@@ -75,6 +78,7 @@ impl Key {
             'q' => Key::SideLeft,
             'e' => Key::SideRight,
             ' ' => Key::Stop,
+            'r' => Key::Ready,
             't' => Key::TorqueOff,
             'x' => Key::Quit,
             _ => return None,
@@ -89,6 +93,8 @@ pub enum Action {
     Walk([i16; 3]),
     /// Mode = stop (the port clears the velocity).
     Stop,
+    /// Mode = stand (the enable of a waiting firmware).
+    Ready,
     /// Mode = torque off.
     TorqueOff,
     /// Leave the session.
@@ -117,6 +123,10 @@ impl Teleop {
             Key::Stop => {
                 self.velocity = [0; 3];
                 return Action::Stop;
+            }
+            Key::Ready => {
+                self.velocity = [0; 3];
+                return Action::Ready;
             }
             Key::TorqueOff => {
                 self.velocity = [0; 3];
@@ -167,6 +177,7 @@ pub fn send(link: &mut dyn Link, a: Action) -> Result<(), String> {
             link.write(port::MODE.addr, &[Mode::Walk.code()])
         }
         Action::Stop => link.write(port::MODE.addr, &[Mode::Stop.code()]),
+        Action::Ready => link.write(port::MODE.addr, &[Mode::Stand.code()]),
         Action::TorqueOff => link.write(port::MODE.addr, &[Mode::TorqueOff.code()]),
         Action::Quit | Action::Nothing => Ok(()),
     }
@@ -180,6 +191,7 @@ pub fn status_line(s: &StatusBlock, t: &Teleop) -> String {
         Some(PortState::Walking) => "walking",
         Some(PortState::Stopping) => "stopping",
         Some(PortState::Stopped) => "STOPPED",
+        Some(PortState::Waiting) => "WAITING (r: enable)",
         None => "state ?",
     };
     let support = match s.support {
@@ -254,13 +266,16 @@ pub fn session(
     }
 }
 
-/// Polls the status until State = standing (or stopped), at most `limit`; the last status.
+/// Polls the status until State = standing (or stopped, or waiting for the enable), at most
+/// `limit`; the last status.
 pub fn wait_standing(link: &mut dyn Link, limit: Duration) -> Result<StatusBlock, String> {
     let start = Instant::now();
     loop {
         let st = link.status()?;
-        if matches!(st.state, Some(PortState::Standing | PortState::Stopped))
-            || start.elapsed() >= limit
+        if matches!(
+            st.state,
+            Some(PortState::Standing | PortState::Stopped | PortState::Waiting)
+        ) || start.elapsed() >= limit
         {
             return Ok(st);
         }
@@ -269,7 +284,7 @@ pub fn wait_standing(link: &mut dyn Link, limit: Duration) -> Result<StatusBlock
 }
 
 /// The keys, one line (printed before the session).
-pub const HELP: &str = "keys: ↑/w ↓/s forward ±10 mm/s, ←/a →/d turn ±100 mrad/s, q/e side-step ±10 mm/s, space stop, t torque off, Esc/x/Ctrl-C quit";
+pub const HELP: &str = "keys: ↑/w ↓/s forward ±10 mm/s, ←/a →/d turn ±100 mrad/s, q/e side-step ±10 mm/s, space stop, r ready (enable), t torque off, Esc/x/Ctrl-C quit";
 
 /// The key of a terminal key event (crossterm), if it is one.
 pub fn key_of(
@@ -500,11 +515,14 @@ mod tests {
         assert_eq!(t.velocity, [0; 3]);
         assert_eq!(t.key(Key::Quit), Action::Quit);
         assert_eq!(t.key(Key::TorqueOff), Action::TorqueOff);
+        t.key(Key::Forward);
+        assert_eq!(t.key(Key::Ready), Action::Ready);
+        assert_eq!(t.velocity, [0; 3]);
     }
 
     #[test]
     fn letters_and_space_map_to_keys() {
-        let keys: Vec<_> = "wsadqe txW?".chars().map(Key::from_char).collect();
+        let keys: Vec<_> = "wsadqe trxW?".chars().map(Key::from_char).collect();
         use Key::*;
         assert_eq!(
             keys,
@@ -517,6 +535,7 @@ mod tests {
                 Some(SideRight),
                 Some(Stop),
                 Some(TorqueOff),
+                Some(Ready),
                 Some(Quit),
                 Some(Forward),
                 None
@@ -554,6 +573,7 @@ mod tests {
             Key::SideLeft,
             Key::SideRight,
             Key::Stop,
+            Key::Ready,
         ];
         let mut seed = 0x2545_f491_u32;
         let mut l = link();

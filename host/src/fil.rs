@@ -282,6 +282,10 @@ enum PortDriver<'a> {
 
 type DriveOutcome = Option<Result<crate::commands::DriveReport, String>>;
 
+/// Simulated time a run goes on after the firmware's end (torque off), µs: how the robot
+/// ended ([`crate::sim::EndPose`]; its truth in `OUT/truth-after.csv`).
+pub const AFTER_END_US: u64 = 2_000_000;
+
 fn run_inner(
     opts: &FilOptions,
     port: PortDriver<'_>,
@@ -313,6 +317,8 @@ fn run_inner(
     cfg.lockstep_port = Some(0);
     cfg.connect = false;
     cfg.log_truth = Some(truth.clone());
+    cfg.after_end_us = AFTER_END_US;
+    cfg.after_truth = Some(opts.out_dir.join("truth-after.csv"));
     let handle = sim::spawn(cfg).map_err(|e| format!("simulator: {e}"))?;
     let bus = handle.bus_addr();
     let lockstep = handle
@@ -466,6 +472,9 @@ pub fn summary_line(s: &SimSummary) -> String {
     );
     if let Some(t) = s.fall_started_us {
         let _ = write!(out, ", FELL at {:.2} s", t as f64 * 1e-6);
+    }
+    if let Some(e) = &s.end {
+        let _ = write!(out, "; ended {e}");
     }
     out
 }

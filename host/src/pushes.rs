@@ -202,13 +202,10 @@ fn push_run(
             let script = CommandScript {
                 command: vec![ScriptCommand {
                     t: STAND_HOLD,
-                    vx: 0.0,
-                    vy: 0.0,
-                    vyaw: 0.0,
                     stop: true,
-                    steps: Vec::new(),
-                    silence: 0.0,
+                    ..ScriptCommand::default()
                 }],
+                enable_after: None,
             };
             match fil::run_commands(&fopts, &script, |_, _| {}) {
                 Ok((r, d)) => (r, Some(d.ready_us)),

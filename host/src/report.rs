@@ -351,6 +351,7 @@ fn stop_words(r: &walker_contract::StopReason) -> String {
                     format!("input voltage {:.1} V, too high", f64::from(reading) * 0.1)
                 }
                 C::Current => format!("current {reading} mA"),
+                C::TorqueOff => "torque found off (browned out); torque turned on again".into(),
             };
             format!("servo {id} fault: {what}")
         }
@@ -358,6 +359,7 @@ fn stop_words(r: &walker_contract::StopReason) -> String {
             "reset other than power-on ({}): not walking without a command",
             reset_word(cause)
         ),
+        S::ServoLost { id } => format!("servo {id} lost (no reply to the servo monitor)"),
     }
 }
 

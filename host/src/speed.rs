@@ -139,6 +139,7 @@ pub fn script(axis: Axis, level: f64, period_s: f64) -> (CommandScript, (f64, f6
                 ..Default::default()
             },
         ],
+        enable_after: None,
     };
     (script, hold)
 }

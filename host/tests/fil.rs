@@ -1092,6 +1092,20 @@ fn command_script_run(
     walker_host::commands::CommandScript,
     walker_host::fil::CommandFigures,
 ) {
+    command_script_run_with(name, &[], SimConfig::default())
+}
+
+/// [`command_script_run`] with firmware tokens.
+fn command_script_run_with(
+    name: &str,
+    tokens: &[&str],
+    sim: SimConfig,
+) -> (
+    walker_host::fil::FilResult,
+    walker_host::commands::DriveReport,
+    walker_host::commands::CommandScript,
+    walker_host::fil::CommandFigures,
+) {
     use walker_host::commands::CommandScript;
     let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let script = CommandScript::read(&root.join(format!("plans/{name}.toml"))).unwrap();
@@ -1101,8 +1115,8 @@ fn command_script_run(
         out_dir: PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name),
         machine: "mps2-an500".into(),
         timeout: Duration::from_secs(900),
-        sim: SimConfig::default(),
-        extra_tokens: vec![],
+        sim,
+        extra_tokens: tokens.iter().map(|t| t.to_string()).collect(),
     };
     // Its cost for `slot`: the script's length in control ticks.
     let secs = script.command.last().map_or(0.0, |c| c.t) + opts.spec.lead_out;
@@ -1353,4 +1367,178 @@ fn table2_mcap_is_foxglove_ready_and_at_most_5_mb() {
         .map(|(id, _)| *id)
         .unwrap();
     assert!(stats.channel_message_counts[&events] > 0);
+}
+
+/// The pelvis height (m) in the last row of a run's truth (the firmware's end: torque off).
+fn pelvis_z_at_the_end(r: &FilResult) -> f64 {
+    let truth = walker_host::report::read_truth(&r.truth).expect("truth");
+    *truth
+        .column("pelvis_z_m")
+        .expect("pelvis z")
+        .last()
+        .expect("rows")
+}
+
+/// The ticks of a graded stop's lowering and hold in a log: from the first tick logged
+/// `Stopped` to the end. Asserts their number: the lowering, the hold, the torque-off tick.
+fn lowered_from(log: &DecodedLog) -> usize {
+    use walker_contract::record::LoggedPhase;
+    let cfg = walker_contract::Config::default();
+    let from = log
+        .ticks
+        .iter()
+        .position(|t| t.phase == LoggedPhase::Stopped)
+        .expect("lowered");
+    let lower = cfg.ticks_for_us(cfg.lower_us) as usize;
+    let hold = usize::from(cfg.supervisor.stopping_ticks);
+    assert_eq!(
+        log.ticks.len() - from,
+        lower + hold + 1,
+        "lowering, hold, torque off"
+    );
+    from
+}
+
+/// Mode = torque off mid-walk on the MuJoCo robot (`plans/commands-torque-off.toml`: forward
+/// at 0.05 m/s, torque off 3 s later) is a graded stop: the walk goes on to standing (at most
+/// the step under way and the closing one), the robot is lowered to the crouch (the pelvis
+/// 5 cm below z_c at torque off), held, and only then is torque off (exit 17). No fall before
+/// torque off. How the robot ended 2 s after torque off is printed (the simulator's limp
+/// servos keep nothing up: see docs/stops.md).
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn mode_0_mid_walk_walks_to_standing_then_lowers_the_robot_on_mujoco() {
+    use walker_contract::record::LoggedPhase;
+    let (r, drove, _, f) = command_script_run("commands-torque-off");
+    eprintln!("{}", f.line());
+    eprintln!("{}", walker_host::fil::summary_line(&r.sim));
+    assert_eq!(
+        r.exit_code,
+        Some(17),
+        "ends by the graded stop's torque off"
+    );
+    assert_eq!(f.fell_at, None, "{}", f.line());
+    let log = decode_file(&r.log).expect("log");
+    assert_eq!(stop_reason(&log), Some(StopReason::Requested));
+    let off_us = *drove.sent_us.last().expect("the torque-off command");
+    let from = lowered_from(&log);
+    let lowered_us = u64::from(log.ticks[from].time_us);
+    let before: Vec<_> = log
+        .ticks
+        .iter()
+        .filter(|t| u64::from(t.time_us) + 100_000 >= off_us && u64::from(t.time_us) < off_us)
+        .collect();
+    assert!(
+        before.iter().any(|t| t.phase != LoggedPhase::Standing),
+        "walking when the stop came"
+    );
+    let cfg = walker_contract::Config::default();
+    eprintln!(
+        "torque off written at {:.3} s; walked to standing and lowered from {:.3} s",
+        off_us as f64 * 1e-6,
+        lowered_us as f64 * 1e-6
+    );
+    assert!(lowered_us > off_us && lowered_us - off_us < u64::from(cfg.settle_us));
+    assert!(matches!(
+        log.ticks[from - 1].phase,
+        LoggedPhase::Standing | LoggedPhase::Double
+    ));
+    let z = pelvis_z_at_the_end(&r);
+    let z_c = gait_core::ForwardWalk::table2().z_c;
+    assert!(
+        (z - (z_c - f64::from(cfg.crouch_m))).abs() < 0.01,
+        "pelvis {z} m at torque off"
+    );
+    assert!(r.sim.end.is_some(), "the simulator ran on after torque off");
+}
+
+/// A leg servo (the left hip yaw, id 1) dies at 6 s of the Table 2 walk on the MuJoCo robot
+/// and never comes back: the servo monitor finds it within 50 ms (stop `ServoLost`, exit 24),
+/// the robot is lowered at once (no walk to a standstill on a dead leg), held, and torque goes
+/// off; no fall before torque off.
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn a_leg_servo_dying_at_6_s_is_found_within_50_ms_and_the_robot_lowered_on_mujoco() {
+    let mut sim = SimConfig::default();
+    sim.faults.outages = vec![walker_host::sim::Outage::parse("1:6").unwrap()];
+    let (r, log) = fil("servo-outage", WalkSpec::default(), sim, &[]);
+    eprintln!("{}", walker_host::fil::summary_line(&r.sim));
+    assert_eq!(r.exit_code, Some(24));
+    assert_eq!(stop_reason(&log), Some(StopReason::ServoLost { id: 1 }));
+    assert_eq!(r.sim.fall_started_us, None, "no fall before torque off");
+    let from = lowered_from(&log);
+    // The first tick acting on the stop is the lowering's first; the monitor found the servo
+    // on the tick before.
+    let first = log
+        .ticks
+        .iter()
+        .position(|t| t.fault != walker_contract::record::FaultState::Ok)
+        .unwrap();
+    assert_eq!(first, from, "lowered at once");
+    let found_us = u64::from(log.ticks[first - 1].time_us);
+    eprintln!(
+        "servo 1 dead at 6.000 s, found at {:.3} s",
+        found_us as f64 * 1e-6
+    );
+    assert!(
+        (6_000_000..=6_050_000).contains(&found_us),
+        "found at {found_us} µs"
+    );
+    let z = pelvis_z_at_the_end(&r);
+    assert!(
+        z < gait_core::ForwardWalk::table2().z_c - 0.04,
+        "pelvis {z} m at torque off"
+    );
+}
+
+/// Power-on with `wait_enable=1` on the MuJoCo robot (`plans/commands-enable.toml`): torque
+/// stays off (no leg servo's Torque Enable set) while the firmware waits, its port answering
+/// State = waiting, until the master writes Mode = stand 1 s after it saw it waiting; start-up
+/// follows at once and the script walks. After the script's torque off the firmware waits again; a second
+/// Mode = torque off ends the run with the last run's end (exit 17).
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn power_on_waits_for_the_enable_with_torque_off_on_mujoco() {
+    use walker_contract::codes::{CommandField, FaultKind};
+    // While the firmware only ticks, the lock-step runs the simulated time as fast as the
+    // physics goes and the firmware's ticks run ahead of the simulator by what the lock-step
+    // socket holds: the enable's time is the firmware's (its log), not the master's clock.
+    // Truth rows every 10 ms.
+    let sim = SimConfig {
+        log_every_us: 10_000,
+        ..SimConfig::default()
+    };
+    let (r, drove, _, f) = command_script_run_with("commands-enable", &["wait_enable=1"], sim);
+    eprintln!("{}", f.line());
+    assert_eq!(r.exit_code, Some(17));
+    assert_eq!(f.fell_at, None, "{}", f.line());
+    let (waiting, written) = drove.enable.expect("the enable");
+    assert!(written >= waiting + 1_000_000);
+    let log = decode_file(&r.log).expect("log");
+    // The enable as the firmware took it: its first logged command, Mode = stand.
+    let enabled = log
+        .events
+        .iter()
+        .find_map(|e| match e {
+            Record::Fault(f) if f.kind == FaultKind::CommandReceived => Some(*f),
+            _ => None,
+        })
+        .expect("the enable logged");
+    assert_eq!((enabled.id, enabled.value), (CommandField::Mode.code(), 1));
+    let enabled = u64::from(enabled.time_us);
+    let on = r.sim.torque_on_us.expect("torque on after the enable");
+    eprintln!(
+        "waiting from {:.3} s (the master's clock), enabled at {:.3} s (the firmware's), first \
+         torque on at {:.3} s",
+        waiting as f64 * 1e-6,
+        enabled as f64 * 1e-6,
+        on as f64 * 1e-6
+    );
+    assert!(on > enabled, "torque on at {on} µs, enable at {enabled} µs");
+    assert!(on < enabled + 100_000, "start-up at once");
+    assert!(
+        f.footsteps.mismatches.is_empty(),
+        "{:?}",
+        f.footsteps.mismatches
+    );
 }

@@ -314,6 +314,7 @@ fn fault_rates_and_dead_device() {
             p_drop: 0.1,
             p_corrupt: 0.05,
             dead_ids: vec![111],
+            ..FaultConfig::default()
         },
         ..kin()
     };
@@ -1339,4 +1340,66 @@ fn present_position_latency_delays_the_reported_angle() {
         assert_eq!(late[k].0, ticks(now[k - 10].1), "step {k}");
     }
     assert_eq!(late[0].0, ticks(now[0].1));
+}
+
+/// An outage `4:0.05:0.05`: servo 4 answers until 50 ms, not from 50 to 100 ms (nor moves),
+/// and after 100 ms again with its torque off (as after a power-on); the other servos as
+/// before. The parser takes `ID:FROM_S[:FOR_S]` and refuses anything else.
+#[test]
+fn a_servo_outage_silences_it_then_brings_it_back_with_torque_off() {
+    use walker_host::sim::Outage;
+    assert_eq!(
+        Outage::parse("4:0.05:0.05"),
+        Ok(Outage {
+            id: 4,
+            from_us: 50_000,
+            until_us: Some(100_000)
+        })
+    );
+    assert_eq!(Outage::parse("4:6").map(|o| o.until_us), Ok(None));
+    for bad in ["4", "x:1", "4:-1", "4:1:2:3", "4:nan"] {
+        assert!(Outage::parse(bad).is_err(), "{bad}");
+    }
+    let mut cfg = kin();
+    cfg.faults.outages = vec![Outage::parse("4:0.05:0.05").unwrap()];
+    let mut sim = Simulator::new(&cfg).unwrap();
+    let torque_on = Instruction::Write {
+        addr: x_series::TORQUE_ENABLE.addr,
+        data: &[1],
+    };
+    let torque = Instruction::Read {
+        addr: x_series::TORQUE_ENABLE.addr,
+        len: 1,
+    };
+    for id in [4, 5] {
+        assert!(!sim.feed(&packet(id, torque_on))[0].is_empty());
+    }
+    let answers = |sim: &mut Simulator, id: u8| -> Option<u8> {
+        let r = sim.feed(&packet(id, torque));
+        let mut d = Decoder::<64>::new();
+        let mut data = None;
+        for &b in &r[0] {
+            if let Some(Ok(p)) = d.push(b) {
+                data = Some(Status::from_packet(&p).unwrap().data[0]);
+            }
+        }
+        data
+    };
+    sim.advance_to(49_000).unwrap();
+    assert_eq!(
+        (answers(&mut sim, 4), answers(&mut sim, 5)),
+        (Some(1), Some(1))
+    );
+    sim.advance_to(50_000).unwrap();
+    assert_eq!(
+        (answers(&mut sim, 4), answers(&mut sim, 5)),
+        (None, Some(1))
+    );
+    sim.advance_to(99_000).unwrap();
+    assert_eq!(answers(&mut sim, 4), None);
+    sim.advance_to(100_000).unwrap();
+    assert_eq!(
+        (answers(&mut sim, 4), answers(&mut sim, 5)),
+        (Some(0), Some(1))
+    );
 }

@@ -1,14 +1,14 @@
-//! Firmware for the real robot: ROBOTIS OpenCR 1.0 (STM32F746ZG). Brings the board up, runs
-//! start-up and the walk with the compiled-in [`walker_firmware::Config`]
-//! ([`walker_firmware::control::run`]: probe, Return Delay Time, torque on, 1.5 s move to the
-//! initial pose, the walk, final hold, torque off), then idles: torque stays off, the tick
-//! keeps running and the watchdog (started when the control loop began) is fed, so the board
-//! does not reset into a new walk. `control::run` logs the reset cause (RCC_CSR) and any panic
-//! or watchdog record left in no-init RAM; after any reset but a power-on (brown-out, watchdog,
-//! panic's software reset, the reset button or the debugger) it does NOT walk: torque off
-//! (confirmed), servo power off, stop `NotPowerOn` (exit 22), then this idle loop, until the
-//! board is power-cycled. (A command to walk again comes with the online-walking issue's
-//! command port.)
+//! Firmware for the real robot: ROBOTIS OpenCR 1.0 (STM32F746ZG). Brings the board up and,
+//! with the compiled-in [`walker_firmware::Config`] (its defaults and `wait_enable`), waits
+//! with torque off for the operator's enable on the command port (a Mode write of stand or
+//! walk), then runs start-up and the walk ([`walker_firmware::control::run_on_enable`]:
+//! probe, Return Delay Time, torque on, 1.5 s move to the initial pose, standing for commands,
+//! the stop); after every stop the port keeps answering (State stopped, Stop Code, Fault
+//! Kind) and a new run needs a new enable. Each run logs the reset cause (RCC_CSR) and any
+//! panic or watchdog record left in no-init RAM; after any reset but a power-on (brown-out,
+//! watchdog, panic's software reset, the reset button or the debugger) a run does NOT walk:
+//! torque off (confirmed), servo power off, stop `NotPowerOn` (exit 22), until the board is
+//! power-cycled.
 //!
 //! Build: `cargo build --release --no-default-features --features board-opencr --bin opencr`
 //! Flash and run (needs probe-rs and a probe on the SWD header): `cargo run --release --bin opencr`
@@ -25,7 +25,10 @@ mod firmware {
 
     walker_firmware::stm32_firmware! {
         peripherals: stm32f7xx_hal::pac::Peripherals::take(),
-        config: Config::default(),
+        config: Config {
+            wait_enable: true,
+            ..Config::default()
+        },
         board: OpenCrBoard::new,
         panic: panic_reset,
     }

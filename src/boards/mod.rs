@@ -51,14 +51,22 @@ macro_rules! stm32_firmware {
     };
 }
 
-/// The main of a real robot controller after its board is up: logs the start-up line, runs
-/// [`crate::control::run`] once with `cfg` (probe, torque on, ramp, walk, hold, torque off;
-/// after any reset but a power-on it does not walk), then idles: torque stays off, the tick
-/// keeps running and the watchdog (started by the control loop) is fed, so the board does not
-/// reset into a new walk.
+/// The main of a real robot controller after its board is up: logs the start-up line, then
+/// with [`crate::Config::wait_enable`] (the OpenCR build) waits for the operator's enable on
+/// the command port before every run and answers the port between runs, for ever
+/// ([`crate::control::run_on_enable`]); without it (the OpenCM 9.04: no command port) runs
+/// [`crate::control::run`] once (probe, torque on, ramp, walk, stop; after any reset but a
+/// power-on it does not walk), then idles: torque stays off, the tick keeps running and the
+/// watchdog is fed, so the board does not reset into a new walk.
 #[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
 pub fn run_then_idle<B: crate::board::Board>(board: &mut B, cfg: &crate::Config) -> ! {
-    let end = crate::run_walk(board, cfg);
+    let end = loop {
+        let end = crate::run_walk(board, cfg);
+        if !cfg.wait_enable {
+            break end;
+        }
+        defmt::info!("Mode = torque off while waiting: waiting again");
+    };
     defmt::warn!(
         "run ended (exit code {=i32}); torque off, idling",
         end.exit_code()

@@ -7,6 +7,7 @@
 //! | Dynamixel TTL/RS-485 bus | **USART3**, PC10 TX / PC11 RX (AF7) | the Arduino core's `Serial3`, which `Dynamixel2Arduino` uses as `DXL_SERIAL` on the OpenCR (the task brief guessed USART6 on PC6/PC7: that is `Serial1`, the Arduino-header UART) |
 //! | bus direction (TX enable) | **PC9**, high = transmit | Arduino pin 84, `DXL_DIR_PIN` |
 //! | Dynamixel power switch (FET) | **PF15**, high = on | `BDPIN_DXL_PWR_EN` |
+//! | operator buttons (the enable) | **PC12** and **PG3**, inputs | `BDPIN_PUSH_SW_1`, `BDPIN_PUSH_SW_2` (the variant sources of different core versions swap the two names); either one enables: the standby takes the level found as released, whatever the polarity |
 //! | log UART | **USART6**, PC6 TX / PC7 RX (AF8) at 921 600 baud | Arduino header pins 1 (TX) / 0 (RX), `Serial1`; spare on this robot |
 //! | command port | **USART2**, PD5 TX / PD6 RX (AF7) at [`COMMAND_BAUD`] | the 4-pin "UART" connector of the OpenCR (Arduino `Serial2`, `huart_inst[DRV_UART_NUM_2]` in ROBOTIS' `drv_uart.c`), where ROBOTIS' BT-210/BT-410 modules and a USB–TTL adapter plug in |
 //! | tick and µs clock | TIM2, 32-bit, free-running at 1 MHz | extended to 64 bits in software |
@@ -166,6 +167,12 @@ impl OpenCrBoard<DxlDir> {
         let gpioc = dp.GPIOC.split();
         let gpiod = dp.GPIOD.split();
         let gpiof = dp.GPIOF.split();
+        let gpiog = dp.GPIOG.split();
+        // The operator buttons, read as raw levels by `enable_button` (the board pulls them).
+        let _buttons = (
+            gpioc.pc12.into_floating_input(),
+            gpiog.pg3.into_floating_input(),
+        );
 
         let mut dir = gpioc.pc9.into_push_pull_output();
         dir.set_low();
@@ -345,6 +352,15 @@ stm32_board! {
                 n += 1;
             }
             n
+        }
+
+        fn enable_button(&mut self) -> Option<bool> {
+            // SAFETY: reads of GPIOC/GPIOG's input data registers (PC12 and PG3 are inputs
+            // since `OpenCrBoard::new`).
+            let (gpioc, gpiog) = unsafe { (&*pac::GPIOC::ptr(), &*pac::GPIOG::ptr()) };
+            let c = gpioc.idr.read().idr12().bit_is_set();
+            let g = gpiog.idr.read().idr3().bit_is_set();
+            Some(c || g)
         }
 
         fn command_tx(&mut self, bytes: &[u8]) {

@@ -119,6 +119,15 @@ impl CommandLink {
         }
     }
 
+    /// Sets Mode from the firmware's side (the standby's torque off until the enable), taken as
+    /// the logged command's mode: a master's next Mode write that differs is logged.
+    pub fn set_mode(&mut self, m: Mode) {
+        self.port.table.set_mode(m);
+        if let Some(logged) = self.logged.first_mut() {
+            *logged = i32::from(m.code());
+        }
+    }
+
     /// Reads what arrived (at most [`RX_PER_TICK`] bytes), answers each instruction, and logs
     /// the command fields that changed.
     pub fn poll<B: Board>(&mut self, board: &mut B, log: &mut LogWriter) {

@@ -16,6 +16,7 @@ use gait_core::gait::Sample;
 use gait_core::gait::Targets;
 use gait_core::maths::fixed_point::Fx;
 use gait_core::robot::LEG_JOINTS;
+use gait_core::trajectory::command::WalkCommand;
 use gait_core::trajectory::fixed_sampler::FixedFoot;
 use gait_core::GaitSample;
 use walker_contract::command_port::{Mode, PortState, PortStatus};
@@ -24,6 +25,7 @@ use crate::board::{Board, Stage};
 use crate::bus::BoardMaster;
 use crate::monitor::ServoMonitor;
 use crate::record::{FaultKind, FaultState, LogWriter, LoggedPhase, Record, TickRecord};
+use crate::startup::Ramp;
 use crate::supervisor::{safe_targets, safe_targets_fx, Action, JointMap, StopReason, Supervisor};
 use crate::Config;
 
@@ -53,7 +55,7 @@ pub(super) struct Controller<'a, P: TickPath> {
     pub sense: Sense,
     pub sup: Supervisor<3>,
     pub monitor: ServoMonitor,
-    pub link: CommandLink,
+    pub link: &'a mut CommandLink,
     pub log: LogWriter,
     pub faults: FaultInjector,
     /// The goal ticks last written.
@@ -68,6 +70,8 @@ pub(super) struct Controller<'a, P: TickPath> {
     pub clamped_seen: u16,
     /// Ticks of the final hold after the plan.
     pub final_hold: u16,
+    /// A graded stop's lowering from the last targets to the crouch (built at its first tick).
+    pub lowering: Option<Ramp>,
     /// Whether the IK takes the present sample (no servo lead).
     pub no_lead: bool,
 }
@@ -92,6 +96,7 @@ impl<P: TickPath> Controller<'_, P> {
         self.command(bus.board());
 
         bus.board().stage(Stage::Walk);
+        let settling = self.sup.is_settling();
         let action = self.sup.step();
         let mut rec = TickRecord {
             time_us: tick.nominal_us as u32,
@@ -101,15 +106,22 @@ impl<P: TickPath> Controller<'_, P> {
         match action {
             Action::Run => {
                 let has_goal = self.walk_tick(bus.board(), &est, &mut rec);
+                if self.sup.is_settling() && self.walk.at_standstill() {
+                    self.sup.settled();
+                }
                 bus.board().stage(Stage::Act);
                 self.act(bus, has_goal, &mut rec);
+            }
+            Action::Lower(k) => {
+                bus.board().stage(Stage::Act);
+                self.lower(bus, k, &mut rec);
             }
             Action::HoldPose => write_goals(bus, &self.last_ticks),
             Action::SendTorqueOff => torque_off(bus, &mut self.log, self.cfg),
             Action::Idle => {}
         }
         bus.board().stage(Stage::Report);
-        self.report(bus, action, &est, &mut rec);
+        self.report(bus, action, settling, &est, &mut rec);
         self.end(bus, action)
     }
 
@@ -144,10 +156,39 @@ impl<P: TickPath> Controller<'_, P> {
         }
         if !self.walk.is_starting() {
             if let Some(o) = self.walk.gait.online_mut() {
-                o.set_command(self.link.velocity());
-                self.link.feed_steps(o);
+                if self.sup.is_settling() {
+                    // A graded stop walks to a standstill whatever the port commands.
+                    o.clear_steps();
+                    o.set_command(WalkCommand::default());
+                } else {
+                    o.set_command(self.link.velocity());
+                    self.link.feed_steps(o);
+                }
             }
         }
+    }
+
+    /// Tick `k` of a graded stop's lowering: the minimum-jerk ramp from the targets last sent
+    /// to the crouch ([`crouch_joints`]), through [`Controller::act`] (limits, the SYNC WRITE,
+    /// the servo monitor).
+    fn lower<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>, k: u16, rec: &mut TickRecord) {
+        if k == 0 || self.lowering.is_none() {
+            let mut from = [0.0f32; LEG_JOINTS];
+            for (j, (f, &t)) in from.iter_mut().zip(self.last_ticks.iter()).enumerate() {
+                *f = self.map.rad_of_tick(j, t);
+            }
+            let to = crouch_joints(self.targets, &self.prev, self.cfg.crouch_m).unwrap_or(from);
+            let ticks = u32::from(self.sup.lower_ticks());
+            self.lowering = Some(Ramp::new(from, to, ticks));
+        }
+        let has_goal = match &self.lowering {
+            Some(r) => {
+                self.goal = Goal::Rad(r.at(u32::from(k)));
+                true
+            }
+            None => false,
+        };
+        self.act(bus, has_goal, rec);
     }
 
     /// The walk mode's motion, the sample corrections, the IK and the joint corrections: this
@@ -300,17 +341,20 @@ impl<P: TickPath> Controller<'_, P> {
         write_goals(bus, &ticks);
         self.last_ticks = ticks;
         let limits = &self.cfg.servo_limits;
-        if let Some(reason) = self.monitor.poll(bus, limits, self.cfg.tick_period_us) {
+        let period = self.cfg.tick_period_us;
+        if let Some(reason) = self.monitor.poll(bus, limits, period, &self.last_ticks) {
             crate::fw_log!(error, "servo fault: {}", reason);
             self.sup.stop(reason);
         }
     }
 
-    /// Report: the tick record and the command port's status.
+    /// Report: the tick record (`settling`: the action came from a graded stop's walk to a
+    /// standstill) and the command port's status.
     fn report<B: Board>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         action: Action,
+        settling: bool,
         est: &Estimate,
         rec: &mut TickRecord,
     ) {
@@ -336,14 +380,16 @@ impl<P: TickPath> Controller<'_, P> {
         }
         // The state that produced this tick's action.
         rec.fault = match action {
+            Action::Run if settling => FaultState::Stopping,
             Action::Run if self.sup.any_holding() => FaultState::Holding,
             Action::Run => FaultState::Ok,
-            Action::HoldPose => FaultState::Stopping,
+            Action::Lower(_) | Action::HoldPose => FaultState::Stopping,
             Action::SendTorqueOff | Action::Idle => FaultState::TorqueOff,
         };
         let state = match action {
             Action::Run => self.walk.port_state(),
-            _ => PortState::Stopped,
+            Action::Lower(_) | Action::HoldPose => PortState::Stopping,
+            Action::SendTorqueOff | Action::Idle => PortState::Stopped,
         };
         let online = self.walk.gait.online();
         let steps = online.map_or(self.prev.steps_done, |o| o.steps_done());
@@ -376,6 +422,29 @@ impl<P: TickPath> Controller<'_, P> {
         }
         Some(RunEnd::Stopped(reason))
     }
+}
+
+/// The crouch of a graded stop: `s` with both soles on the ground where they are, the pelvis
+/// over their midpoint and `depth` (m) below the sample's height, through the IK (which clamps
+/// to reach); `None` if the joints come out non-finite.
+pub(super) fn crouch_joints(
+    targets: &Targets,
+    s: &GaitSample<f32>,
+    depth: f32,
+) -> Option<[f32; LEG_JOINTS]> {
+    let mut c = *s;
+    for f in c.feet.iter_mut() {
+        f.z = 0.0;
+    }
+    let [l, r] = &c.feet;
+    let mid = [0.5 * (l.x + r.x), 0.5 * (l.y + r.y)];
+    c.com = [mid[0], mid[1], s.com[2] - depth];
+    c.com_vel = [0.0; 2];
+    c.zmp = mid;
+    c.phase = gait_core::SupportPhase::Standing;
+    c.support_foot = None;
+    let q = targets.joints(&c, [0.0; 2]).0;
+    q.iter().all(|v| v.is_finite()).then_some(q)
 }
 
 /// Logs a footstep the online walk committed.

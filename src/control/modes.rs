@@ -370,6 +370,20 @@ impl Walk {
         matches!(self.mode, Mode::Starting(_))
     }
 
+    /// True when a graded stop may lower the robot now: the online walk stands, or the walk
+    /// cannot stop by itself (the ramp; a plan, which is walked to its end or not at all).
+    pub fn at_standstill(&self) -> bool {
+        match (&self.mode, &self.gait) {
+            (Mode::Gait(_), Gait::Online(o)) => {
+                matches!(
+                    o.mode(),
+                    gait_core::trajectory::online::WalkMode::Standing(_)
+                )
+            }
+            (Mode::Starting(_), _) | (Mode::Gait(_), Gait::Plan(_)) => true,
+        }
+    }
+
     /// The command port's State while the supervisor runs the walk.
     pub fn port_state(&self) -> PortState {
         match (&self.mode, &self.gait) {

@@ -118,6 +118,11 @@ fn torque_off_sent(b: &FakeBoard) -> bool {
         .any(|p| p.id == 0xFE && p.op == opcode::WRITE && p.addr == 64 && p.data == [0])
 }
 
+/// Ticks of the finished plan's end: the final hold (the torque-off tick not counted).
+fn plan_end_ticks(cfg: &Config) -> usize {
+    cfg.ticks_for_us(cfg.final_hold_us) as usize
+}
+
 #[test]
 fn table2_walk_runs_to_plan_done() {
     // The fake robot has no servo sag, so it stands at the compliance feed-forward's offsets
@@ -139,7 +144,8 @@ fn table2_walk_runs_to_plan_done() {
     assert_eq!((ramp, hold), (300, 200));
     assert!(walk > 2000, "{walk}");
     let ticks = per_tick(&b);
-    assert_eq!(ticks.len(), ramp + walk + hold + 1);
+    assert_eq!(plan_end_ticks(&cfg), hold);
+    assert_eq!(ticks.len(), ramp + walk + plan_end_ticks(&cfg) + 1);
     // The leg odometry's survey (`sole_poses=measured`, the default): one more BULK READ of one
     // leg's six Present Positions (10 + 6 × 5 bytes out, 6 × 15 in) on two consecutive ticks of
     // each landing's double support — 14 landings.
@@ -166,10 +172,10 @@ fn table2_walk_runs_to_plan_done() {
         let bulk: Vec<_> = pk.iter().filter(|p| p.op == opcode::BULK_READ).collect();
         let sync: Vec<_> = pk.iter().filter(|p| p.op == opcode::SYNC_WRITE).collect();
         assert_eq!(bulk.len(), 1, "tick {k}");
-        // Walking ticks: bulk read, sync write, the servo monitor's two READs of servo
-        // 1 + k mod 12 (ramp and walk; not the held final pose): voltage and temperature
-        // (144, 3 bytes), current (126, 2 bytes) — one READ every 2.5 ms, two a 5 ms tick. The
-        // last tick: bulk read, torque off, and its read-back from the 12 servos.
+        // Walking and lowering ticks (not the holds): bulk read, sync write, the servo
+        // monitor's next two READs of its round (status 64, supply 144, status 64, current 126
+        // of servos 1 ..= 12 in turn) — one READ every 2.5 ms, two a 5 ms tick. The last tick:
+        // bulk read, torque off, and its read-back from the 12 servos.
         let monitored = k < ramp + walk;
         let expected = if k == last {
             14
@@ -180,10 +186,12 @@ fn table2_walk_runs_to_plan_done() {
         };
         assert_eq!(pk.len(), expected, "tick {k}: {pk:?}");
         if monitored {
-            let id = 1 + (k % 12) as u8;
+            let polls = k;
+            let slot = |n: usize| (1 + (n % 12) as u8, [64, 144, 64, 126][(n % 48) / 12]);
+            let (a, b) = (slot(2 * polls), slot(2 * polls + 1));
             assert_eq!(
                 (pk[2].id, pk[2].addr, pk[3].id, pk[3].addr),
-                (id, 144, id, 126)
+                (a.0, a.1, b.0, b.1)
             );
         }
         if k < last {
@@ -436,7 +444,12 @@ fn dead_foot_board_is_held_then_stops() {
         .iter()
         .filter(|t| t.fault == FaultState::Stopping)
         .count();
-    assert_eq!(stopping, usize::from(cfg.supervisor.stopping_ticks));
+    // A graded stop: the tick that settles (a plan stops where it is), the lowering, the hold.
+    let lower = cfg.ticks_for_us(cfg.lower_us) as usize;
+    assert_eq!(
+        stopping,
+        1 + lower + usize::from(cfg.supervisor.stopping_ticks)
+    );
     // Held values: the measured ZMP stays valid while the board is held.
     assert!(tr[first_hold..first_hold + 10].iter().all(|t| t.zmp_valid));
     assert!(recs.iter().any(|r| matches!(r,
@@ -514,6 +527,16 @@ fn fall_stops_with(arithmetic: Arithmetic) {
 /// Runs `cfg` whose fault injection fires at walk tick 40; checks the stop, its exit code,
 /// that every goal stayed in the limits and torque went off. Returns the board and the index
 /// of walk tick 40's SYNC WRITE ([`walk_write`]).
+/// The knees of `end` (ticks) bent at least 0.5 rad more than in `start`: a 5 cm crouch
+/// from z_c bends them from ≈ 0.5 rad to ≈ 1.4 rad.
+fn assert_crouched(start: &[i32; 12], end: &[i32; 12]) {
+    let map = JointMap::from_robot(&Robot::reference());
+    for j in [3, 9] {
+        let (a, b) = (map.rad_of_tick(j, start[j]), map.rad_of_tick(j, end[j]));
+        assert!(b > a + 0.5, "knee {j}: {a} → {b} rad");
+    }
+}
+
 fn run_fault_at_tick_40(cfg: &Config, stop: StopReason, exit: i32) -> (FakeBoard, usize) {
     let mut b = board(cfg);
     let end = run(&mut b, cfg);
@@ -647,6 +670,8 @@ fn other_rates_and_shapes() {
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
     let ticks = per_tick(&b);
     assert_eq!(b.ticks.iter().filter(|t| t.tick.overrun).count(), 0);
+    // 0.1 s of final hold at 2 ms.
+    assert_eq!(plan_end_ticks(&cfg), 50);
     assert_eq!(ticks.len(), 100 + expected_walk_ticks(&cfg) + 50 + 1);
     assert_goals_in_limits(&b);
 }
@@ -752,7 +777,7 @@ fn wholebody_and_stabilizer_walk_to_plan_done_within_limits() {
         let ticks = ticks_of(&b.records());
         assert_eq!(
             ticks.len(),
-            300 + expected_walk_ticks(&cfg) + 200 + 1,
+            300 + expected_walk_ticks(&cfg) + plan_end_ticks(&cfg) + 1,
             "{tokens}"
         );
         // The logged (commanded) CoM stays within 2 cm of the same run without feedback
@@ -855,9 +880,14 @@ fn a_non_finite_sample_never_reaches_the_ik_and_stops() {
     let ramp = ramp_ticks(&cfg);
     let stop = StopReason::NonFiniteSample { tick: 40 };
     let (b, k) = run_fault_at_tick_40(&cfg, stop, 18);
-    // Every joint kept its previous target, then the pose is held until torque off.
+    // Every joint kept its previous target; then the lowering to the crouch (the walk is not
+    // trusted to stand: no settling), and the crouch held until torque off.
     assert_eq!(b.goals[k], b.goals[k - 1]);
-    assert!(b.goals[k..].windows(2).all(|w| w[0] == w[1]));
+    let lower = cfg.ticks_for_us(cfg.lower_us) as usize;
+    let held = &b.goals[k + lower..];
+    assert_eq!(held.len(), usize::from(cfg.supervisor.stopping_ticks) + 1);
+    assert!(held.windows(2).all(|w| w[0] == w[1]));
+    assert_crouched(&b.goals[k], &held[0]);
     let recs = b.records();
     assert_eq!(
         stop_of(&recs),
@@ -1000,8 +1030,12 @@ fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
     // All servos let go at once: one round, no fault record.
     let mut b = board(&cfg);
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::Requested));
-    let readbacks = b
+    let first_off = b
         .packets
+        .iter()
+        .position(|p| p.id == 0xFE && p.op == opcode::WRITE && p.addr == 64)
+        .unwrap();
+    let readbacks = b.packets[first_off..]
         .iter()
         .filter(|p| p.op == opcode::READ && p.addr == 64)
         .count();
@@ -1013,8 +1047,9 @@ fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
 #[test]
 fn the_servo_monitor_reads_by_time_not_by_tick() {
     // At 1 kHz one READ every 2.5 ticks (2.5 ms): never more than one a tick, the pattern
-    // 0, 0, 1, 0, 1 (the credit reaches 2.5 ms on the third and fifth of five ticks), and every
-    // servo's two READs once in 60 ticks (60 ms), as at 200 Hz.
+    // 0, 0, 1, 0, 1 (the credit reaches 2.5 ms on the third and fifth of five ticks), and the
+    // round's 48 READs (status, supply, status, current of the 12 servos) in 120 ticks, as at
+    // 200 Hz: every servo READ every 30 ms.
     let cfg = cfg_with("elf dt=0.001 baud=4500000 steps=2");
     let mut b = board(&cfg);
     b.set_baud(cfg.bus_baud).unwrap();
@@ -1024,7 +1059,7 @@ fn the_servo_monitor_reads_by_time_not_by_tick() {
     let ticks = per_tick(&b);
     let monitor = |pk: &[Pkt]| -> Vec<(u8, u16)> {
         pk.iter()
-            .filter(|p| p.op == opcode::READ && (p.addr == 144 || p.addr == 126))
+            .filter(|p| p.op == opcode::READ && [64, 144, 126].contains(&p.addr))
             .map(|p| (p.id, p.addr))
             .collect()
     };
@@ -1034,8 +1069,11 @@ fn the_servo_monitor_reads_by_time_not_by_tick() {
         let due = usize::from(k % 5 == 2 || k % 5 == 4);
         assert_eq!(r.len(), due, "tick {k}: {r:?}");
     }
-    let first_round: Vec<(u8, u16)> = reads.iter().take(60).flatten().copied().collect();
-    let want: Vec<(u8, u16)> = (1..=12u8).flat_map(|id| [(id, 144), (id, 126)]).collect();
+    let first_round: Vec<(u8, u16)> = reads.iter().take(120).flatten().copied().collect();
+    let want: Vec<(u8, u16)> = [64, 144, 64, 126]
+        .into_iter()
+        .flat_map(|addr| (1..=12u8).map(move |id| (id, addr)))
+        .collect();
     assert_eq!(first_round, want);
 }
 
@@ -1043,18 +1081,50 @@ fn the_servo_monitor_reads_by_time_not_by_tick() {
 fn the_servo_monitor_stops_on_each_limit() {
     use walker_contract::codes::ServoCheck;
     let cfg = autostart_config();
-    // Each fault set on servo 8 from the start: the monitor reads servo 8 on tick 7 (round-robin
-    // from servo 1 at tick 0), so the stop begins on tick 7 of the ramp.
+    // Each fault set on servo 8 from the start. Two READs a tick, round-robin from servo 1 at
+    // tick 0: servo 8's status is READ #7 (tick 3), its supply #19 (tick 9), its current #43
+    // (tick 21); the next tick acts on it: a hardware error goes limp at once (torque off), the
+    // other limits settle (the ramp cannot: the lowering begins at once).
     type SetFault = fn(&mut crate::fake_robot::FakeDevice);
-    let cases: [(SetFault, ServoCheck, u16); 5] = [
-        (|d| d.hw_error = 0x04, ServoCheck::HardwareError, 4),
-        (|d| d.temperature = 75, ServoCheck::Temperature, 75),
-        (|d| d.voltage_dv = 95, ServoCheck::VoltageLow, 95),
-        (|d| d.voltage_dv = 160, ServoCheck::VoltageHigh, 160),
+    let cases: [(SetFault, ServoCheck, u16, usize, FaultState); 5] = [
+        (
+            |d| d.hw_error = 0x04,
+            ServoCheck::HardwareError,
+            4,
+            4,
+            FaultState::TorqueOff,
+        ),
+        (
+            |d| d.temperature = 75,
+            ServoCheck::Temperature,
+            75,
+            10,
+            FaultState::Stopping,
+        ),
+        (
+            |d| d.voltage_dv = 95,
+            ServoCheck::VoltageLow,
+            95,
+            10,
+            FaultState::Stopping,
+        ),
+        (
+            |d| d.voltage_dv = 160,
+            ServoCheck::VoltageHigh,
+            160,
+            10,
+            FaultState::Stopping,
+        ),
         // −1000 units × 2.69 mA = 2.69 A > 2.5 A.
-        (|d| d.current_raw = -1000, ServoCheck::Current, 2690),
+        (
+            |d| d.current_raw = -1000,
+            ServoCheck::Current,
+            2690,
+            22,
+            FaultState::Stopping,
+        ),
     ];
-    for (set, check, reading) in cases {
+    for (set, check, reading, tick, state) in cases {
         let mut b = board(&cfg);
         set(b.device_mut(8).unwrap());
         let end = run(&mut b, &cfg);
@@ -1068,9 +1138,10 @@ fn the_servo_monitor_stops_on_each_limit() {
         let recs = b.records();
         assert_eq!(stop_of(&recs), Some(want));
         let tr = ticks_of(&recs);
+        let first = tr.iter().position(|t| t.fault != FaultState::Ok);
         assert_eq!(
-            tr.iter().position(|t| t.fault == FaultState::Stopping),
-            Some(8),
+            first.map(|k| (k, tr[k].fault)),
+            Some((tick, state)),
             "{check:?}"
         );
         assert!(torque_off_sent(&b));
@@ -2540,4 +2611,296 @@ fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
     assert!(left_full * 4 >= left * 3, "{left_full} of {left}");
     assert!(right_none * 4 >= right * 3, "{right_none} of {right}");
     assert!(left > 300 && right > 300, "{left} {right}");
+}
+
+/// Mode = 0 (torque off) mid-walk is a graded stop: the online walk finishes its step and
+/// stands (the port's velocity no longer counts), then the robot is lowered to the crouch,
+/// held, and only then is torque off (stop `Requested`).
+#[test]
+fn an_operator_stop_mid_walk_walks_to_standing_then_lowers_then_torque_off() {
+    use walker_contract::command_port::VELOCITY_X;
+    let cfg = Config::default();
+    let ramp = ramp_ticks(&cfg);
+    let mut v = 50i16.to_le_bytes().to_vec();
+    v.extend_from_slice(&[0; 4]);
+    let off_at = ramp + 400;
+    let mut script = vec![
+        (
+            ramp + 50,
+            port_packet(dxl::Instruction::Write {
+                addr: VELOCITY_X.addr,
+                data: &v,
+            }),
+        ),
+        (ramp + 51, write_mode(2)),
+        (off_at, write_mode(0)),
+    ];
+    script.extend(heartbeats(ramp + 60, off_at));
+    let (b, _) = run_port_script(&cfg, script);
+    let recs = b.inner.records();
+    let tr = ticks_of(&recs);
+    assert!(
+        tr[off_at - 20..off_at]
+            .iter()
+            .any(|t| t.phase != LoggedPhase::Standing),
+        "walking when the stop came"
+    );
+    // The walk goes on to standing (Stopping in the record: a graded stop), then the lowering.
+    let lowered_from = tr
+        .iter()
+        .position(|t| t.phase == LoggedPhase::Stopped)
+        .unwrap();
+    let settle = cfg.ticks_for_us(cfg.settle_us) as usize;
+    assert!(
+        lowered_from > off_at && lowered_from - off_at < settle,
+        "{lowered_from}"
+    );
+    assert!(matches!(
+        tr[lowered_from - 1].phase,
+        LoggedPhase::Standing | LoggedPhase::Double
+    ));
+    assert!(tr[off_at + 1..lowered_from]
+        .iter()
+        .all(|t| t.fault == FaultState::Stopping));
+    // Lowering, hold, the torque-off tick.
+    let lower = cfg.ticks_for_us(cfg.lower_us) as usize;
+    let stopping = usize::from(cfg.supervisor.stopping_ticks);
+    assert_eq!(tr.len() - lowered_from, lower + stopping + 1);
+    // The goals: the standing pose, then the crouch, held until torque off.
+    let goals = &b.inner.goals;
+    let at = |k: usize| goals[walk_write(&cfg, 0) - ramp + k - 1];
+    assert_crouched(&at(lowered_from - 1), &at(lowered_from + lower));
+    assert_eq!(at(lowered_from + lower), *goals.last().unwrap());
+    assert!(torque_off_sent(&b.inner));
+    assert_goals_in_limits(&b.inner);
+    // At most the step under way and the closing one began after the stop.
+    let mut fl = walker_contract::footstep_log::FootstepLog::new();
+    let off_us = tr[off_at].time_us;
+    let after = recs
+        .iter()
+        .filter_map(|r| match r {
+            Record::Fault(f) if f.time_us > off_us => fl.push(f.kind, f.id, f.value),
+            Record::Fault(f) => {
+                fl.push(f.kind, f.id, f.value);
+                None
+            }
+            _ => None,
+        })
+        .count();
+    assert!(after <= 2, "{after} steps after the stop");
+}
+
+/// Servo `id` got one WRITE of its own Goal Position after start-up (the monitor's, after
+/// finding it limp), and right after it its Torque Enable = 1.
+fn assert_goal_then_torque_once(b: &FakeBoard, id: u8) {
+    let own = |p: &&Pkt| p.id == id && p.op == opcode::WRITE;
+    let goals: Vec<usize> = (0..b.packets.len())
+        .filter(|&i| own(&&b.packets[i]) && b.packets[i].addr == 116)
+        .collect();
+    assert_eq!(goals.len(), 1, "{goals:?}");
+    let next = b.packets[goals[0] + 1..].iter().find(own).unwrap();
+    assert_eq!((next.addr, next.data.as_slice()), (64, &[1u8][..]));
+}
+
+/// A leg servo that dies mid-walk (no replies, no motion) is lost within 50 ms — the monitor
+/// READs every servo every 30 ms and retries one that missed at each next READ (2.5 ms;
+/// `servo_misses` = 8: 30 + 7 · 2.5 = 47.5 ms at worst) — whatever the phase of the monitor's
+/// round it dies at, and the robot is lowered at once (no walk to a standstill on a dead leg):
+/// exit 24. Back with its torque off 100 ms later, while the robot is lowered, its goal and
+/// its torque are written again.
+#[test]
+fn a_leg_servo_dying_mid_walk_is_lost_within_50_ms_and_the_robot_lowered() {
+    let cfg = autostart_config();
+    let ramp = ramp_ticks(&cfg);
+    let lower = cfg.ticks_for_us(cfg.lower_us) as usize;
+    let mut delays = Vec::new();
+    // Servo 4 is READ every 6 ticks: six deaths cover every phase of the round.
+    for k in 50..56 {
+        let mut b = board(&cfg);
+        b.kill_at = Some((4, walk_write(&cfg, k)));
+        b.revive_at = Some((4, walk_write(&cfg, k + 20)));
+        let end = run(&mut b, &cfg);
+        assert_eq!(end, RunEnd::Stopped(StopReason::ServoLost { id: 4 }));
+        assert_eq!(end.exit_code(), 24);
+        let recs = b.records();
+        assert_eq!(stop_of(&recs), Some(StopReason::ServoLost { id: 4 }));
+        let tr = ticks_of(&recs);
+        // Dead from the READs after the SYNC WRITE of walk tick k − 1 on; found on the tick
+        // before the first record that is not Ok.
+        let died = ramp + k - 1;
+        let stopped = tr.iter().position(|t| t.fault != FaultState::Ok).unwrap();
+        let found = stopped - 1;
+        assert!(
+            found >= died && found - died <= 10,
+            "found at {found}, died at {died}"
+        );
+        delays.push(found - died);
+        assert_eq!(tr[stopped].phase, LoggedPhase::Stopped, "lowering at once");
+        let w = walk_write(&cfg, 0) - ramp + stopped - 1;
+        assert_crouched(&b.goals[w - 1], &b.goals[w + lower - 1]);
+        // Back (torque off) during the lowering: its goal, then its torque, written once.
+        assert_goal_then_torque_once(&b, 4);
+        assert!(torque_off_sent(&b));
+        assert_goals_in_limits(&b);
+    }
+    // Not all found at the same delay: the deaths did fall at different phases.
+    assert!(delays.iter().max() > delays.iter().min(), "{delays:?}");
+}
+
+/// A leg servo that browns out for one tick (fewer missed READs than `servo_misses`) comes back
+/// with its torque off: the monitor's status READ finds it within 60 ms, writes its last goal
+/// and turns its torque on again, and the robot is lowered (`ServoFault` `TorqueOff`, exit 21).
+#[test]
+fn a_leg_servo_back_with_torque_off_is_turned_on_again_and_the_robot_lowered() {
+    use walker_contract::codes::ServoCheck;
+    let cfg = autostart_config();
+    let ramp = ramp_ticks(&cfg);
+    let mut b = board(&cfg);
+    b.kill_at = Some((4, walk_write(&cfg, 50)));
+    b.revive_at = Some((4, walk_write(&cfg, 51)));
+    let end = run(&mut b, &cfg);
+    let want = StopReason::ServoFault {
+        id: 4,
+        check: ServoCheck::TorqueOff,
+        reading: 0,
+    };
+    assert_eq!(end, RunEnd::Stopped(want));
+    assert_eq!(end.exit_code(), 21);
+    let tr = ticks_of(&b.records());
+    let back = ramp + 50;
+    let stopped = tr.iter().position(|t| t.fault != FaultState::Ok).unwrap();
+    assert!(
+        stopped > back && stopped <= back + 13,
+        "stopped at {stopped}, back at {back}"
+    );
+    // Its goal, then its torque, written to servo 4 alone, once.
+    assert_goal_then_torque_once(&b, 4);
+    assert!(torque_off_sent(&b));
+}
+
+/// With `wait_enable` torque stays off at power-on until a master writes Mode = stand (the
+/// command port answers meanwhile: State = waiting); after a run's stop the port still answers
+/// (State = stopped, Stop Code), a Mode write of stop changes nothing, a new enable starts a
+/// new run (start-up again: torque on), and Mode = torque off while waiting ends
+/// `run_on_enable` with the last run's end.
+#[test]
+fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_stop() {
+    use walker_contract::command_port::{STATE, STOP_CODE};
+    use walker_contract::StopCode;
+    let cfg = Config {
+        wait_enable: true,
+        ..Config::default()
+    };
+    let read = |r: walker_contract::command_port::Reg| {
+        port_packet(dxl::Instruction::Read {
+            addr: r.addr,
+            len: r.len,
+        })
+    };
+    let (enable, off1, again, off2, end) = (100, 600, 1400, 1900, 2700);
+    let script = vec![
+        (10, read(STATE)),
+        (enable, write_mode(1)),
+        (off1, write_mode(0)),
+        (off1 + 700, read(STATE)),
+        (off1 + 701, read(STOP_CODE)),
+        (off1 + 710, write_mode(3)),
+        (off1 + 720, read(STATE)),
+        (again, write_mode(1)),
+        (again + 100, read(STATE)),
+        (off2, write_mode(0)),
+        (end, write_mode(0)),
+    ];
+    let mut b = PortBoard {
+        inner: board(&cfg),
+        script,
+        replies: Vec::new(),
+    };
+    let last = crate::control::run_on_enable(&mut b, &cfg);
+    assert_eq!(last, RunEnd::Stopped(StopReason::Requested));
+    let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    let ok = |d: Vec<u8>| (None, d);
+    assert_eq!(
+        replies,
+        vec![
+            ok(vec![PortState::Waiting.code()]),
+            ok(vec![]),
+            ok(vec![]),
+            ok(vec![PortState::Stopped.code()]),
+            ok(vec![StopCode::Requested.code()]),
+            ok(vec![]),
+            ok(vec![PortState::Stopped.code()]),
+            ok(vec![]),
+            ok(vec![PortState::Starting.code()]),
+            ok(vec![]),
+            ok(vec![]),
+        ]
+    );
+    // Torque on twice, once a run, each after its enable; none before the first.
+    let marks = &b.inner.ticks;
+    let on: Vec<usize> = b
+        .inner
+        .packets
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.op == opcode::WRITE && p.addr == 64 && p.data == [1] && p.id == 1)
+        .map(|(i, _)| marks.iter().filter(|m| m.packets_before <= i).count())
+        .collect();
+    assert_eq!(on.len(), 2, "{on:?}");
+    assert!(on[0] >= enable && on[0] < enable + 5, "{on:?}");
+    assert!(on[1] >= again && on[1] < again + 5, "{on:?}");
+    // Two runs, two stop records, both torque off.
+    let stops = b
+        .inner
+        .records()
+        .iter()
+        .filter(|r| matches!(r, Record::Stop(_)))
+        .count();
+    assert_eq!(stops, 2);
+    assert!(b.inner.servos().all(|d| !d.torque));
+}
+
+/// With `wait_enable` and no master, the board's button is the enable: torque stays off until
+/// its level has differed from the one found at power-on for 50 ms (`BUTTON_HOLD_US`), then
+/// start-up follows at once; a shorter blip is not a press.
+#[test]
+fn the_board_button_is_the_enable_when_held_50_ms() {
+    let cfg = Config {
+        wait_enable: true,
+        ..Config::default()
+    };
+    let mut b = board(&cfg);
+    // A 40 ms blip at 1 s, then pressed at 1.2 s: enabled at 1.25 s.
+    b.button_us = Some([(1_000_000, 1_040_000), (1_200_000, u64::MAX)]);
+    // The run: the ramp, standing, then stop at walk tick 20 (the port stays silent).
+    let cfg = Config {
+        stop_at_tick: Some(20),
+        ..cfg
+    };
+    let first_on = |b: &FakeBoard| {
+        b.packets
+            .iter()
+            .find(|p| p.op == opcode::WRITE && p.addr == 64 && p.data == [1])
+            .map(|p| p.t_us)
+    };
+    // The standby returns after the enable; the run then ends on its own stop.
+    let mut link = crate::control::commanded::CommandLink::new();
+    assert!(crate::control::standby(
+        &mut b,
+        &mut link,
+        PortState::Waiting
+    ));
+    assert_eq!(first_on(&b), None, "no torque while waiting");
+    let t = b.now_us();
+    assert!((1_250_000..1_255_000).contains(&t), "enabled at {t} µs");
+    assert_eq!(
+        crate::control::run_with(&mut b, &cfg, &mut link),
+        RunEnd::Stopped(StopReason::Requested)
+    );
+    let on = first_on(&b).unwrap();
+    // Start-up's probe and set-up first (20 ms on the fake bus), then torque on.
+    assert!(
+        on >= t && on < t + 50_000,
+        "torque on at {on} µs, enabled at {t} µs"
+    );
 }

@@ -16,7 +16,9 @@
 use dxl::instruction::{encode_fast_sync_status, encode_status, opcode, FastSyncPart};
 use dxl::{ErrorCode, Instruction, Packet, ParseError, StatusError, BROADCAST_ID};
 
-use super::device::Device;
+use dxl::table::x_series;
+
+use super::device::{Device, DeviceKind};
 use super::rng::Rng;
 
 /// Fault injection on the bus.
@@ -28,6 +30,56 @@ pub struct BusFaults {
     pub p_corrupt: f64,
     /// IDs of devices that never answer (nor execute).
     pub dead_ids: Vec<u8>,
+    /// Devices that die for a while and come back (a servo browning out).
+    pub outages: Vec<Outage>,
+}
+
+/// A device dead (no answer, no motion: a servo goes limp) from `from_us` until `until_us`
+/// of simulated time; a servo comes back as after a power-on, with its torque off.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Outage {
+    /// Bus id.
+    pub id: u8,
+    /// Start, µs.
+    pub from_us: u64,
+    /// End, µs (`None`: never comes back).
+    pub until_us: Option<u64>,
+}
+
+impl Outage {
+    /// Parses `ID:FROM_S[:FOR_S]` (e.g. `4:6` dead from 6 s on, `4:6:0.2` back at 6.2 s).
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let bad = || format!("{s}: expected ID:FROM_S[:FOR_S], e.g. 4:6:0.2");
+        let parts: Vec<&str> = s.split(':').collect();
+        let secs = |t: &str| -> Result<u64, String> {
+            let v: f64 = t.parse().map_err(|_| bad())?;
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad());
+            }
+            Ok((v * 1e6).round() as u64)
+        };
+        match parts.as_slice() {
+            [id, from] | [id, from, _] => {
+                let id: u8 = id.parse().map_err(|_| bad())?;
+                let from_us = secs(from)?;
+                let until_us = match parts.get(2) {
+                    Some(d) => Some(from_us + secs(d)?),
+                    None => None,
+                };
+                Ok(Outage {
+                    id,
+                    from_us,
+                    until_us,
+                })
+            }
+            _ => Err(bad()),
+        }
+    }
+
+    /// Dead at `t_us`.
+    pub fn dead_at(&self, t_us: u64) -> bool {
+        t_us >= self.from_us && self.until_us.is_none_or(|u| t_us < u)
+    }
 }
 
 /// Bus counters.
@@ -111,6 +163,20 @@ impl DeviceBus {
             d.dead = bus.faults.dead_ids.contains(&d.id);
         }
         bus
+    }
+
+    /// The outages at simulated time `t_us`: a device dies at its outage's start; a servo that
+    /// comes back has its Torque Enable at 0 (its RAM area after a power-on).
+    pub fn apply_outages(&mut self, t_us: u64) {
+        for o in &self.faults.outages {
+            let dead = o.dead_at(t_us) || self.faults.dead_ids.contains(&o.id);
+            if let Some(d) = self.devices.iter_mut().find(|d| d.id == o.id) {
+                if d.dead && !dead && matches!(d.kind, DeviceKind::Servo { .. }) {
+                    d.set(x_series::TORQUE_ENABLE, &[0]);
+                }
+                d.dead = dead;
+            }
+        }
     }
 
     /// Index of the live device with `id`.

@@ -47,7 +47,7 @@ use walker_contract::bus_map::{self as ids, TickMap};
 const TICKS: TickMap = TickMap::reference();
 
 pub use body::{Physics, ServoCmd, Support, TruthSample};
-pub use bus::{BusCounters, BusFaults, DeviceBus, OwnedPacket};
+pub use bus::{BusCounters, BusFaults, DeviceBus, Outage, OwnedPacket};
 pub use device::{Device, DeviceKind};
 pub use dynamixel::{XServoOutput, XServoParams, XServoRegisters};
 pub use mjcf::EnvConfig;
@@ -257,6 +257,12 @@ pub struct SimConfig {
     pub log_truth: Option<PathBuf>,
     /// Period of the truth CSV rows, µs (rounded up to whole physics steps).
     pub log_every_us: u64,
+    /// Lock-step runs: simulated time run on after the firmware's end (its bus closed, the
+    /// servos as it left them: torque off), µs; how the robot ended is in
+    /// [`SimSummary::end`]. 0: none.
+    pub after_end_us: u64,
+    /// The truth CSV of the time after the firmware's end (same columns; `None`: not written).
+    pub after_truth: Option<PathBuf>,
 }
 
 impl Default for SimConfig {
@@ -291,6 +297,8 @@ impl Default for SimConfig {
             fall: FallConfig::default(),
             log_truth: None,
             log_every_us: 1000,
+            after_end_us: 0,
+            after_truth: None,
         }
     }
 }
@@ -402,6 +410,84 @@ pub struct SimSummary {
     pub max_zmp_outside_m: f64,
     /// Rows written to the truth CSV.
     pub truth_rows: u64,
+    /// How the robot ended, [`SimConfig::after_end_us`] after the firmware's end.
+    pub end: Option<EndPose>,
+    /// When a leg servo first had its torque on (the physics step after the write), µs.
+    pub torque_on_us: Option<u64>,
+}
+
+/// How the robot ended, from the truth after the firmware's end ([`EndPose::of`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EndState {
+    /// Upright, the pelvis within 2 cm of the walking height z_c.
+    Standing,
+    /// Upright (trunk within [`FALLEN_TILT_RAD`] of vertical), the pelvis lower: crouched on
+    /// its feet or sitting on its folded legs.
+    Sitting,
+    /// The trunk tilted beyond [`FALLEN_TILT_RAD`]: lying on the ground.
+    Fallen,
+}
+
+/// Trunk tilt from which a robot at rest counts as fallen, rad (45°).
+pub const FALLEN_TILT_RAD: f64 = std::f64::consts::FRAC_PI_4;
+
+impl fmt::Display for EndState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            EndState::Standing => "standing",
+            EndState::Sitting => "sitting",
+            EndState::Fallen => "fallen",
+        })
+    }
+}
+
+/// The robot's pose at the end of the time after the firmware's end.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EndPose {
+    /// Simulated time after the firmware's end, s.
+    pub after_s: f64,
+    /// Pelvis height, m.
+    pub pelvis_z_m: f64,
+    /// Trunk tilt from vertical, rad.
+    pub tilt_rad: f64,
+    /// The verdict.
+    pub state: EndState,
+}
+
+impl EndPose {
+    /// The verdict on a truth sample `after_s` after the firmware's end (walking height `z_c`, m).
+    pub fn of(t: &TruthSample, z_c: f64, after_s: f64) -> Self {
+        let [roll, pitch, _] = t.pelvis_rpy;
+        // The angle between the trunk's z axis and the vertical.
+        let tilt = (roll.cos() * pitch.cos()).clamp(-1.0, 1.0).acos();
+        let pelvis_z_m = t.pelvis[2];
+        let state = if tilt > FALLEN_TILT_RAD {
+            EndState::Fallen
+        } else if pelvis_z_m >= z_c - 0.02 {
+            EndState::Standing
+        } else {
+            EndState::Sitting
+        };
+        EndPose {
+            after_s,
+            pelvis_z_m,
+            tilt_rad: tilt,
+            state,
+        }
+    }
+}
+
+impl fmt::Display for EndPose {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} {:.1} s after the firmware's end (pelvis {:.3} m high, trunk {:.1}° from vertical)",
+            self.state,
+            self.after_s,
+            self.pelvis_z_m,
+            self.tilt_rad.to_degrees()
+        )
+    }
 }
 
 /// A complete packet from the bus decoder.
@@ -524,6 +610,8 @@ pub struct Simulator {
     counter: u16,
     steps: u64,
     bytes_in: u64,
+    /// When a leg servo first had its torque on, µs.
+    torque_on_us: Option<u64>,
 }
 
 impl fmt::Debug for Simulator {
@@ -582,6 +670,7 @@ impl Simulator {
             counter: 0,
             steps: 0,
             bytes_in: 0,
+            torque_on_us: None,
         };
         sim.publish()?;
         Ok(sim)
@@ -614,6 +703,9 @@ impl Simulator {
     pub fn advance_to(&mut self, t_us: u64) -> Result<(), SimError> {
         let dt = self.cfg.physics_dt_us;
         while self.physics.time_us() + dt <= t_us {
+            if !self.cfg.faults.outages.is_empty() {
+                self.bus.apply_outages(self.physics.time_us() + dt);
+            }
             match &mut self.physics {
                 Body::MuJoCo(_) => {
                     let regs = self.servo_registers();
@@ -645,6 +737,9 @@ impl Simulator {
                 }
             }
             self.steps += 1;
+            if self.torque_on_us.is_none() && self.bus.devices.iter().any(|d| d.torque_on()) {
+                self.torque_on_us = Some(self.physics.time_us());
+            }
             self.publish()?;
         }
         Ok(())
@@ -803,6 +898,32 @@ impl Simulator {
         out
     }
 
+    /// Runs [`SimConfig::after_end_us`] on after the firmware's end (the truth rows into
+    /// [`SimConfig::after_truth`]) and says how the robot ended.
+    pub fn after_end(&mut self) -> Result<Option<EndPose>, SimError> {
+        if self.cfg.after_end_us == 0 {
+            return Ok(None);
+        }
+        if let Some(l) = &mut self.log {
+            l.flush()?;
+        }
+        self.log = match &self.cfg.after_truth {
+            Some(p) => Some(truth::TruthLog::create(p)?),
+            None => None,
+        };
+        let end = self.physics.time_us() + self.cfg.after_end_us;
+        self.advance_to(end)?;
+        if let Some(l) = &mut self.log {
+            l.flush()?;
+        }
+        let z_c = gait_core::ForwardWalk::table2().z_c;
+        Ok(Some(EndPose::of(
+            self.physics.truth(),
+            z_c,
+            self.cfg.after_end_us as f64 * 1e-6,
+        )))
+    }
+
     /// The run's summary so far (flushes the truth log).
     pub fn summary(&mut self) -> SimSummary {
         let rows = self.log.as_mut().map_or(0, |l| {
@@ -824,6 +945,8 @@ impl Simulator {
             fallen_at_us: self.physics.fallen_at_us(),
             max_zmp_outside_m: self.physics.max_outside(),
             truth_rows: rows,
+            end: None,
+            torque_on_us: self.torque_on_us,
         }
     }
 }

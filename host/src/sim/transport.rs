@@ -194,8 +194,10 @@ struct Lockstep {
 }
 
 impl Lockstep {
-    /// Reads every byte available now and applies the complete time messages.
-    fn drain(&mut self, sim: &mut Simulator) -> Result<(), SimError> {
+    /// Reads every byte available now and applies the complete time messages, publishing the
+    /// simulated time after each (a firmware that only ticks, with no bus traffic, sends them
+    /// as fast as they are taken: the drain may last, its progress must show).
+    fn drain(&mut self, sim: &mut Simulator, progress: &SimProgress) -> Result<(), SimError> {
         let mut buf = [0u8; 512];
         while self.open {
             match self.stream.read(&mut buf) {
@@ -214,6 +216,7 @@ impl Lockstep {
                             let mut t = [0u8; 8];
                             t.copy_from_slice(&self.frame[1..]);
                             sim.advance_to(u64::from_le_bytes(t))?;
+                            progress.time_us.store(sim.time_us(), Ordering::Relaxed);
                         }
                     }
                 }
@@ -285,7 +288,7 @@ fn serve(
     let mut buf = [0u8; 4096];
     let sync = |sim: &mut Simulator, ls: &mut Option<Lockstep>| -> Result<(), SimError> {
         match ls {
-            Some(l) => l.drain(sim)?,
+            Some(l) => l.drain(sim, progress)?,
             None => sim.advance_to(start.elapsed().as_micros() as u64)?,
         }
         progress.time_us.store(sim.time_us(), Ordering::Relaxed);
@@ -339,6 +342,8 @@ fn serve(
     if let Some(l) = &ls {
         summary.lockstep_messages = l.messages;
         summary.lockstep_errors = l.errors;
+        // The firmware is gone (its bus closed): the robot as it left it, for a while.
+        summary.end = sim.after_end()?;
     }
     Ok(summary)
 }
