@@ -93,7 +93,7 @@ pub enum Action {
     Walk([i16; 3]),
     /// Mode = stop (the port clears the velocity).
     Stop,
-    /// Mode = stand (the enable of a waiting firmware).
+    /// Velocity 0, then Mode = stand (the enable of a waiting firmware).
     Ready,
     /// Mode = torque off.
     TorqueOff,
@@ -177,7 +177,10 @@ pub fn send(link: &mut dyn Link, a: Action) -> Result<(), String> {
             link.write(port::MODE.addr, &[Mode::Walk.code()])
         }
         Action::Stop => link.write(port::MODE.addr, &[Mode::Stop.code()]),
-        Action::Ready => link.write(port::MODE.addr, &[Mode::Stand.code()]),
+        Action::Ready => {
+            link.write(port::VELOCITY_X.addr, &[0; 6])?;
+            link.write(port::MODE.addr, &[Mode::Stand.code()])
+        }
         Action::TorqueOff => link.write(port::MODE.addr, &[Mode::TorqueOff.code()]),
         Action::Quit | Action::Nothing => Ok(()),
     }
