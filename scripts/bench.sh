@@ -586,9 +586,10 @@ talker changes before each of the 5 packets; an AX-12 at Return Delay 0 answers 
 last column adds the M7 control-loop tick's worst case ($(n "$tick_m7_max") instructions) at
 $cpu_mhz MHz assuming one instruction per cycle (≈ $compute_us µs; an estimate, the bus and the
 CPU do not overlap in a blocking loop). Not in the table: the servo monitor's READs
-(\`src/monitor.rs\`), one every 2.5 ms whatever the tick rate — voltage and temperature (14 + 14 B)
-or current (14 + 13 B), ≈ 280 µs at 1 Mbps, ≈ 62 µs at 4.5 Mbps each, plus a turnaround: two on a
-5 ms tick, at most one on a 1 ms tick.
+(\`src/monitor.rs\`), one every 2.5 ms whatever the tick rate — Torque Enable .. Hardware Error
+Status (14 + 18 B, the longest), voltage and temperature (14 + 14 B) or current (14 + 13 B),
+≤ 320 µs at 1 Mbps, ≤ 71 µs at 4.5 Mbps each, plus a turnaround: two on a 5 ms tick, at most
+one on a 1 ms tick.
 
 | bus | bytes on the wire | + allowance | bus time per tick | highest servo rate (bus only) | with the M7 compute |
 | --- | --- | --- | --- | --- | --- |
