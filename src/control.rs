@@ -84,7 +84,9 @@
 //!   turns torque off at once; the others lower the robot to the crouch
 //!   ([`Config::lower_us`], [`Config::crouch_m`]) — operator stops and minor faults after the
 //!   online walk has stopped to standing ([`Config::settle_us`]) — hold it for
-//!   `stopping_ticks`, then torque off and the stop record with the reason.
+//!   `stopping_ticks`, then torque off and the stop record with the reason. An operator's stop
+//!   with [`Config::rest`] ends there instead, resting in the crouch with torque on
+//!   ([`RunEnd::Resting`]); [`standby`] turns torque off on the next Mode = torque off.
 //! * Torque off (every stop, start-up failures included) is confirmed: up to
 //!   [`Config::torque_off_attempts`] rounds of broadcast Torque Enable = 0 and a READ of Torque
 //!   Enable (64) from each servo not yet confirmed at 0; then the servo power is cut
@@ -168,6 +170,9 @@ pub use gait_core::gait::{support_of, SupportCache, Targets, WHOLEBODY_ITERATION
 pub enum RunEnd {
     /// The supervisor stopped (plan done or a fault); torque is off.
     Stopped(StopReason),
+    /// The operator stopped the walk ([`Config::rest`]): the robot rests in the crouch with
+    /// torque on.
+    Resting(StopReason),
     /// A start-up step failed after the probe; torque is off.
     Startup(StartupError),
     /// gait-core rejected the configured walk; the bus was not touched.
@@ -178,7 +183,7 @@ impl RunEnd {
     /// The exit code of this end (the contract's table).
     pub fn exit(&self) -> ExitCode {
         match self {
-            RunEnd::Stopped(r) => r.kind().exit(),
+            RunEnd::Stopped(r) | RunEnd::Resting(r) => r.kind().exit(),
             RunEnd::Startup(_) => ExitCode::StartupFailed,
             RunEnd::Config(_) => ExitCode::ConfigRejected,
         }
@@ -288,17 +293,23 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 /// "Enable"): torque off and the command port answered ([`standby`]) until a master writes
 /// Mode = stand or walk, then a run ([`run_with`], the same port); after its stop, the same
 /// again. Returns the last run's end (or `Requested` before any) when a master writes Mode =
-/// torque off while the firmware waits.
+/// torque off while the firmware waits with torque off (a run that ended resting is
+/// [`RunEnd::Stopped`] then: its torque off was the first of the two writes).
 pub fn run_on_enable<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
     let mut link = commanded::CommandLink::new();
     let mut last = None;
     loop {
         let state = match last {
             None => PortState::Waiting,
+            Some(RunEnd::Resting(_)) => PortState::Resting,
             Some(_) => PortState::Stopped,
         };
-        if !standby(board, &mut link, state) {
-            return last.unwrap_or(RunEnd::Stopped(StopReason::Requested));
+        if !standby(board, cfg, &mut link, state) {
+            return match last {
+                Some(RunEnd::Resting(r)) => RunEnd::Stopped(r),
+                Some(end) => end,
+                None => RunEnd::Stopped(StopReason::Requested),
+            };
         }
         crate::fw_log!(info, "enabled: starting a run");
         last = Some(run_with(board, cfg, &mut link));
@@ -309,18 +320,22 @@ pub fn run_on_enable<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 /// press (the enable), µs.
 pub const BUTTON_HOLD_US: u64 = 50_000;
 
-/// Torque off, the operator's enable awaited: every tick the command port is answered, its
+/// The operator's enable awaited, torque off (or, in `state` [`PortState::Resting`], the
+/// robot resting in the crouch with torque on): every tick the command port is answered, its
 /// State reads `state` (the rest of the status as the last run left it: Stop Code, Fault Kind,
 /// step count) and the watchdog is fed. Mode reads torque off meanwhile: true on a master's
 /// Mode write of stand or walk, or a press of the board's button ([`Board::enable_button`]:
 /// its level other than the one found at the start for [`BUTTON_HOLD_US`]) — the enable;
-/// false on a Mode write of torque off; a write of stop is taken and ignored.
+/// on a Mode write of torque off: resting, torque off (confirmed, servo power cut; State
+/// then 4) and the wait goes on; else false. A write of stop is taken and ignored.
 pub fn standby<B: Board>(
     board: &mut B,
+    cfg: &Config,
     link: &mut commanded::CommandLink,
     state: PortState,
 ) -> bool {
     let mut log = LogWriter::new();
+    let mut resting = state == PortState::Resting;
     link.set_mode(Mode::TorqueOff);
     link.port.table.set_state(state);
     let mut seen = link.port.table.mode_writes();
@@ -347,6 +362,13 @@ pub fn standby<B: Board>(
         seen = link.port.table.mode_writes();
         match link.mode() {
             Mode::Stand | Mode::Walk => return true,
+            Mode::TorqueOff if resting => {
+                crate::fw_log!(info, "torque off: the operator's second torque off");
+                let time = Cell::new(0);
+                torque_off(&mut BoardMaster::new(board, &time, cfg), &mut log, cfg);
+                link.port.table.set_state(PortState::Stopped);
+                resting = false;
+            }
             Mode::TorqueOff => return false,
             Mode::Stop => link.set_mode(Mode::TorqueOff),
         }
@@ -501,7 +523,8 @@ fn start_up<B: Board>(
     }
     let ticks = |us: u32| u16::try_from(cfg.ticks_for_us(us)).unwrap_or(u16::MAX);
     let mut sup = Supervisor::new(cfg.supervisor, SENSOR_IDS)
-        .with_grades(ticks(cfg.settle_us), ticks(cfg.lower_us));
+        .with_grades(ticks(cfg.settle_us), ticks(cfg.lower_us))
+        .with_rest(cfg.rest);
     if let Err(reason) = sup.startup(&critical) {
         crate::fw_log!(
             error,

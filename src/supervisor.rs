@@ -9,8 +9,12 @@
 //!     │                 (the walk runs,                        (the ramp to            (hold the
 //!     ├─Lower──────────▶ stopped by the controller) ──────────▶ the crouch)  ─────────▶ crouch)
 //!     └─Limp (fall, hardware error) ──────────────────────────────────────────────────────────────▶ TorqueOff
+//!                                                                            (an operator's stop with rest: ▶ Resting)
 //! ```
 //!
+//! An operator's stop ([`StopReason::rests`]) with [`Supervisor::with_rest`] ends in `Resting`
+//! instead of `TorqueOff`: the crouch held with torque on, the run over (a limp robot does not
+//! keep a crouch; the operator's second torque off is the control loop's, after the run).
 //! The finished plan (grade `Hold`) holds its final pose, then turns torque off. With
 //! `lower_ticks` = 0 the lowering is skipped (the pose is held, then torque off); with
 //! `settle_ticks` = 0 a `Settle` reason lowers at once. The first stop reason wins and is
@@ -63,6 +67,11 @@ pub enum State {
         /// Why.
         reason: StopReason,
     },
+    /// Resting in the crouch with torque on (final; an operator's stop with `rest`).
+    Resting {
+        /// Why.
+        reason: StopReason,
+    },
 }
 
 /// What the control loop must do this tick.
@@ -77,6 +86,8 @@ pub enum Action {
     HoldPose,
     /// Send the broadcast torque-off now (returned once).
     SendTorqueOff,
+    /// Send the last targets again and end the run with torque on (resting in the crouch).
+    Rest,
     /// Nothing to send.
     Idle,
 }
@@ -106,6 +117,7 @@ pub struct Supervisor<const N: usize> {
     torque_off_sent: bool,
     settle_ticks: u16,
     lower_ticks: u16,
+    rest: bool,
 }
 
 impl<const N: usize> Supervisor<N> {
@@ -121,7 +133,15 @@ impl<const N: usize> Supervisor<N> {
             torque_off_sent: false,
             settle_ticks: 0,
             lower_ticks: 0,
+            rest: false,
         }
+    }
+
+    /// An operator's stop ends resting in the crouch with torque on (`true`) instead of
+    /// torque off.
+    pub fn with_rest(mut self, rest: bool) -> Self {
+        self.rest = rest;
+        self
     }
 
     /// The graded stops' longest walk to a standstill and their lowering, ticks.
@@ -153,7 +173,8 @@ impl<const N: usize> Supervisor<N> {
             State::Settling { reason, .. }
             | State::Lowering { reason, .. }
             | State::Stopping { reason, .. }
-            | State::TorqueOff { reason } => Some(reason),
+            | State::TorqueOff { reason }
+            | State::Resting { reason } => Some(reason),
         }
     }
 
@@ -172,9 +193,10 @@ impl<const N: usize> Supervisor<N> {
         match self.state {
             State::Running if self.any_holding() => crate::record::FaultState::Holding,
             State::Running => crate::record::FaultState::Ok,
-            State::Settling { .. } | State::Lowering { .. } | State::Stopping { .. } => {
-                crate::record::FaultState::Stopping
-            }
+            State::Settling { .. }
+            | State::Lowering { .. }
+            | State::Stopping { .. }
+            | State::Resting { .. } => crate::record::FaultState::Stopping,
             State::TorqueOff { .. } => crate::record::FaultState::TorqueOff,
         }
     }
@@ -229,9 +251,11 @@ impl<const N: usize> Supervisor<N> {
         };
     }
 
-    /// Holding the pose for `ticks` (none: torque off, or the lowering when `lower_next`).
+    /// Holding the pose for `ticks` (none: torque off — resting for an operator's stop with
+    /// `rest` — or the lowering when `lower_next`).
     fn hold(&self, reason: StopReason, ticks: u16, lower_next: bool) -> State {
         match (ticks, lower_next && self.lower_ticks > 0) {
+            (0, false) if self.rest && reason.rests() => State::Resting { reason },
             (0, false) => State::TorqueOff { reason },
             (0, true) => State::Lowering { reason, k: 0 },
             (t, l) => State::Stopping {
@@ -346,6 +370,7 @@ impl<const N: usize> Supervisor<N> {
                 self.state = self.hold(reason, left, lower_next);
                 Action::HoldPose
             }
+            State::Resting { .. } => Action::Rest,
             State::TorqueOff { .. } => {
                 if self.torque_off_sent {
                     Action::Idle
@@ -700,6 +725,49 @@ mod tests {
         assert_eq!(seq, LOWER_HOLD_OFF);
         assert_eq!(s.step(), Action::Idle);
         assert_eq!(s.stop_reason(), Some(StopReason::Requested));
+    }
+
+    #[test]
+    fn with_rest_an_operator_stop_ends_resting_in_the_crouch_and_a_fault_stop_does_not() {
+        let mut s = graded().with_rest(true);
+        s.stop(StopReason::Requested);
+        assert_eq!(s.step(), Action::Run);
+        s.settled();
+        let seq: Vec<Action> = (0..7).map(|_| s.step()).collect();
+        let mut rest = LOWER_HOLD_OFF;
+        rest[6] = Action::Rest;
+        assert_eq!(seq, rest);
+        // Final: resting (torque on) whatever comes after.
+        s.tilt(0.8);
+        assert_eq!(s.step(), Action::Rest);
+        assert_eq!(
+            s.state(),
+            State::Resting {
+                reason: StopReason::Requested
+            }
+        );
+        assert_eq!(s.fault_state(), crate::record::FaultState::Stopping);
+        // A held operator stop rests too; a minor fault and the finished plan turn torque off.
+        let mut h = graded().with_rest(true);
+        h.stop_with_hold(StopReason::Requested, 1);
+        let seq: Vec<Action> = (0..8).map(|_| h.step()).collect();
+        assert_eq!(seq[7], Action::Rest);
+        let stale = StopReason::SensorStale {
+            id: 200,
+            age_ms: 101,
+        };
+        for (reason, settled) in [(stale, true), (StopReason::PlanDone, false)] {
+            let mut f = graded().with_rest(true);
+            if settled {
+                f.stop(reason);
+                f.settled();
+            } else {
+                f.stop_with_hold(reason, 1);
+            }
+            let seq: Vec<Action> = (0..10).map(|_| f.step()).collect();
+            assert!(seq.contains(&Action::SendTorqueOff), "{reason:?}: {seq:?}");
+            assert!(!seq.contains(&Action::Rest), "{reason:?}");
+        }
     }
 
     #[test]

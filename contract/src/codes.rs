@@ -275,6 +275,13 @@ impl StopReason {
         }
     }
 
+    /// An operator's stop (Mode = torque off): with [`crate::Config::rest`] it ends resting
+    /// in the crouch with torque on instead of torque off (a limp robot does not keep a
+    /// crouch); the second torque off is the operator's.
+    pub const fn rests(&self) -> bool {
+        matches!(self, StopReason::Requested)
+    }
+
     /// Wire form (code, id, value) used by the log's stop record ([`StopCode`] for the codes).
     pub fn code(&self) -> (u8, u8, i32) {
         let c = self.kind().code();

@@ -226,6 +226,10 @@ pub enum PortState {
     /// 5: torque off since power-on, waiting for the operator's enable (a Mode write of stand
     /// or walk; `wait_enable`).
     Waiting,
+    /// 6: stopped by the operator, resting in the crouch with torque on (`rest`; see Stop
+    /// Code): a second Mode write of torque off turns torque off (then 4); stand or walk is the
+    /// enable (`wait_enable`).
+    Resting,
 }
 
 impl PortState {
@@ -238,6 +242,7 @@ impl PortState {
             PortState::Stopping => 3,
             PortState::Stopped => 4,
             PortState::Waiting => 5,
+            PortState::Resting => 6,
         }
     }
 
@@ -250,6 +255,7 @@ impl PortState {
             3 => Some(PortState::Stopping),
             4 => Some(PortState::Stopped),
             5 => Some(PortState::Waiting),
+            6 => Some(PortState::Resting),
             _ => None,
         }
     }

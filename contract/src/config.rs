@@ -217,6 +217,10 @@ pub struct Config {
     /// (`true`: the OpenCR build); `false`: the firmware starts at once and its run ends at
     /// the first stop (QEMU's firmware-in-the-loop runs).
     pub wait_enable: bool,
+    /// An operator's stop (Mode = torque off, `stop_at`) ends with the robot resting in the
+    /// crouch, torque on, and a second Mode = torque off turns torque off (`true`); `false`:
+    /// torque off after the crouch's hold, as every other graded stop.
+    pub rest: bool,
 }
 
 impl Config {
@@ -290,6 +294,7 @@ impl Config {
             autostart: false,
             deadman_ms: 500,
             wait_enable: false,
+            rest: true,
         }
     }
 

@@ -1223,6 +1223,15 @@ params! {
         get: |c| { Some(Value::Word(usize::from(c.wait_enable))) },
     },
     {
+        key: "rest",
+        plan_key: None,
+        unit: "",
+        domain: Domain::Word(&["0", "1"]),
+        doc: "1: an operator's stop (Mode = torque off) walks to a standstill, lowers to the crouch and rests there with torque on (State 6); a second Mode = torque off turns torque off; 0: torque off after the crouch's hold (a limp robot does not keep the crouch)",
+        set: |c, v| { c.rest = v as usize == 1 },
+        get: |c| { Some(Value::Word(usize::from(c.rest))) },
+    },
+    {
         key: "deadman_ms",
         plan_key: None,
         unit: "ms",

@@ -567,13 +567,23 @@ pub fn drive(
 }
 
 /// After the script's torque off: a firmware that waits for the enable (`enable_after`) waits
-/// again once stopped; Mode = torque off while it waits ends it.
+/// again once stopped (resting in the crouch after an operator's stop: one more Mode = torque
+/// off turns torque off); Mode = torque off while it waits with torque off ends it.
 fn end_waiting(master: &mut PortMaster, script: &CommandScript) -> Result<(), String> {
     if script.enable_after.is_none() {
         return Ok(());
     }
-    while master.state()? != Some(PortState::Stopped) {
-        std::thread::sleep(Duration::from_millis(20));
+    loop {
+        match master.state()? {
+            Some(PortState::Stopped) => break,
+            Some(PortState::Resting) => {
+                master.write(port::MODE.addr, &[Mode::TorqueOff.code()])?;
+                while master.state()? == Some(PortState::Resting) {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            }
+            _ => std::thread::sleep(Duration::from_millis(20)),
+        }
     }
     master.write(port::MODE.addr, &[Mode::TorqueOff.code()])
 }

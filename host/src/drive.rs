@@ -195,6 +195,7 @@ pub fn status_line(s: &StatusBlock, t: &Teleop) -> String {
         Some(PortState::Stopping) => "stopping",
         Some(PortState::Stopped) => "STOPPED",
         Some(PortState::Waiting) => "WAITING (r: enable)",
+        Some(PortState::Resting) => "RESTING (t: torque off, r: enable)",
         None => "state ?",
     };
     let support = match s.support {
@@ -226,7 +227,8 @@ pub fn status_line(s: &StatusBlock, t: &Teleop) -> String {
 pub enum Ended {
     /// The user quit (Mode = stop sent).
     Quit,
-    /// Torque off was sent.
+    /// Torque off was sent and the firmware then reported State = stopped, or its port closed
+    /// (a run without `wait_enable` ends resting in the crouch: the last status line says).
     TorqueOff,
     /// The firmware reports it stopped (State = stopped).
     Stopped,
@@ -235,7 +237,10 @@ pub enum Ended {
 /// The teleoperation loop: waits up to [`STATUS_EVERY`] for a key (`next_key`), sends what it
 /// asks, and shows the status line (`show`) at least every [`STATUS_EVERY`], each time followed
 /// by a WRITE of Heartbeat (the command deadman's keep-alive). Ends on quit (after sending Mode
-/// = stop), on torque off, or when the firmware reports State = stopped.
+/// = stop) or when the firmware reports State = stopped. Torque off (`t`) does not end it: the
+/// firmware walks to a standstill, lowers the robot and rests in the crouch with torque on
+/// (State = resting); a second `t` turns torque off. After a `t` a port that stops answering
+/// (the firmware's run ended) ends the session too.
 pub fn session(
     link: &mut dyn Link,
     mut next_key: impl FnMut(Duration) -> Result<Option<Key>, String>,
@@ -243,27 +248,49 @@ pub fn session(
 ) -> Result<Ended, String> {
     let mut t = Teleop::default();
     let mut shown: Option<Instant> = None;
+    let mut off_sent = false;
+    let ended = |off_sent: bool, e: String| {
+        if off_sent {
+            Ok(Ended::TorqueOff)
+        } else {
+            Err(e)
+        }
+    };
     loop {
         if shown.is_none_or(|s| s.elapsed() >= STATUS_EVERY) {
-            let st = link.status()?;
+            let st = match link.status() {
+                Ok(st) => st,
+                Err(e) => return ended(off_sent, e),
+            };
             show(&status_line(&st, &t));
             shown = Some(Instant::now());
             if st.state == Some(PortState::Stopped) {
-                return Ok(Ended::Stopped);
+                return Ok(if off_sent {
+                    Ended::TorqueOff
+                } else {
+                    Ended::Stopped
+                });
             }
-            link.write(port::HEARTBEAT.addr, &[0])?;
+            if let Err(e) = link.write(port::HEARTBEAT.addr, &[0]) {
+                return ended(off_sent, e);
+            }
         }
         let Some(k) = next_key(STATUS_EVERY)? else {
             continue;
         };
         let a = t.key(k);
-        send(link, a)?;
+        if let Err(e) = send(link, a) {
+            return ended(off_sent, e);
+        }
         match a {
             Action::Quit => {
                 send(link, Action::Stop)?;
                 return Ok(Ended::Quit);
             }
-            Action::TorqueOff => return Ok(Ended::TorqueOff),
+            Action::TorqueOff => {
+                off_sent = true;
+                shown = None;
+            }
             _ => shown = None,
         }
     }
@@ -277,7 +304,9 @@ pub fn wait_standing(link: &mut dyn Link, limit: Duration) -> Result<StatusBlock
         let st = link.status()?;
         if matches!(
             st.state,
-            Some(PortState::Standing | PortState::Stopped | PortState::Waiting)
+            Some(
+                PortState::Standing | PortState::Stopped | PortState::Waiting | PortState::Resting
+            )
         ) || start.elapsed() >= limit
         {
             return Ok(st);
@@ -287,7 +316,7 @@ pub fn wait_standing(link: &mut dyn Link, limit: Duration) -> Result<StatusBlock
 }
 
 /// The keys, one line (printed before the session).
-pub const HELP: &str = "keys: ↑/w ↓/s forward ±10 mm/s, ←/a →/d turn ±100 mrad/s, q/e side-step ±10 mm/s, space stop, r ready (enable), t torque off, Esc/x/Ctrl-C quit";
+pub const HELP: &str = "keys: ↑/w ↓/s forward ±10 mm/s, ←/a →/d turn ±100 mrad/s, q/e side-step ±10 mm/s, space stop, r ready (enable), t torque off (the robot rests in the crouch; t again: off), Esc/x/Ctrl-C quit";
 
 /// The key of a terminal key event (crossterm), if it is one.
 pub fn key_of(
@@ -682,6 +711,79 @@ mod tests {
             "{beats} in {periods:.1} periods"
         );
         assert_eq!(l.writes.last(), Some(&(port::MODE.addr, vec![3])));
+    }
+
+    /// A firmware that rests on the first torque off and turns torque off on the second.
+    struct RestingLink {
+        inner: TableLink,
+        offs: usize,
+        closed_after: Option<usize>,
+    }
+
+    impl Link for RestingLink {
+        fn write(&mut self, addr: u16, data: &[u8]) -> Result<(), String> {
+            if self.closed_after.is_some_and(|n| self.offs >= n) {
+                return Err("closed".into());
+            }
+            self.inner.write(addr, data)?;
+            if addr == port::MODE.addr && data == [Mode::TorqueOff.code()] {
+                self.offs += 1;
+                let state = if self.offs == 1 {
+                    PortState::Resting
+                } else {
+                    PortState::Stopped
+                };
+                self.inner.table.set_status(&PortStatus {
+                    state,
+                    stop_code: 7,
+                    ..PortStatus::default()
+                });
+            }
+            Ok(())
+        }
+        fn status(&mut self) -> Result<StatusBlock, String> {
+            if self.closed_after.is_some_and(|n| self.offs >= n) {
+                return Err("closed".into());
+            }
+            self.inner.status()
+        }
+    }
+
+    #[test]
+    fn torque_off_rests_first_and_the_second_t_turns_torque_off() {
+        let mut l = RestingLink {
+            inner: link(),
+            offs: 0,
+            closed_after: None,
+        };
+        let mut keys = [Some(Key::TorqueOff), None, Some(Key::TorqueOff), None, None].into_iter();
+        let mut lines = Vec::new();
+        let end = session(
+            &mut l,
+            |_| Ok(keys.next().flatten()),
+            |s| lines.push(s.to_string()),
+        )
+        .unwrap();
+        assert_eq!(end, Ended::TorqueOff);
+        assert_eq!(l.offs, 2);
+        assert!(lines.iter().any(|s| s.starts_with("RESTING")), "{lines:?}");
+        assert!(lines.last().unwrap().starts_with("STOPPED"), "{lines:?}");
+        // A firmware whose run ends at the first (its port closes): the session ends too.
+        let mut l = RestingLink {
+            inner: link(),
+            offs: 0,
+            closed_after: Some(1),
+        };
+        let mut keys = [Some(Key::TorqueOff), None].into_iter();
+        let end = session(&mut l, |_| Ok(keys.next().flatten()), |_| {}).unwrap();
+        assert_eq!(end, Ended::TorqueOff);
+        // Without a torque off a closed port is an error.
+        let mut l = RestingLink {
+            inner: link(),
+            offs: 0,
+            closed_after: Some(0),
+        };
+        assert!(session(&mut l, |_| Ok(None), |_| {}).is_err());
     }
 
     #[test]

@@ -116,7 +116,7 @@ impl<P: TickPath> Controller<'_, P> {
                 bus.board().stage(Stage::Act);
                 self.lower(bus, k, &mut rec);
             }
-            Action::HoldPose => write_goals(bus, &self.last_ticks),
+            Action::HoldPose | Action::Rest => write_goals(bus, &self.last_ticks),
             Action::SendTorqueOff => torque_off(bus, &mut self.log, self.cfg),
             Action::Idle => {}
         }
@@ -383,13 +383,14 @@ impl<P: TickPath> Controller<'_, P> {
             Action::Run if settling => FaultState::Stopping,
             Action::Run if self.sup.any_holding() => FaultState::Holding,
             Action::Run => FaultState::Ok,
-            Action::Lower(_) | Action::HoldPose => FaultState::Stopping,
+            Action::Lower(_) | Action::HoldPose | Action::Rest => FaultState::Stopping,
             Action::SendTorqueOff | Action::Idle => FaultState::TorqueOff,
         };
         let state = match action {
             Action::Run => self.walk.port_state(),
             Action::Lower(_) | Action::HoldPose => PortState::Stopping,
             Action::SendTorqueOff | Action::Idle => PortState::Stopped,
+            Action::Rest => PortState::Resting,
         };
         let online = self.walk.gait.online();
         let steps = online.map_or(self.prev.steps_done, |o| o.steps_done());
@@ -409,9 +410,9 @@ impl<P: TickPath> Controller<'_, P> {
         bus.board().feed();
     }
 
-    /// After torque off: the stop record and the run's end.
+    /// After torque off (or at rest in the crouch): the stop record and the run's end.
     fn end<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>, action: Action) -> Option<RunEnd> {
-        if !matches!(action, Action::SendTorqueOff | Action::Idle) {
+        if !matches!(action, Action::SendTorqueOff | Action::Idle | Action::Rest) {
             return None;
         }
         let reason = self.sup.stop_reason().unwrap_or(StopReason::Requested);
@@ -419,6 +420,10 @@ impl<P: TickPath> Controller<'_, P> {
         crate::fw_log!(info, "stopped: {}", reason);
         if let Some((taken, refused)) = self.path.surveys() {
             crate::fw_log!(info, "odometry: {} surveys, {} refused", taken, refused);
+        }
+        if action == Action::Rest {
+            crate::fw_log!(info, "resting in the crouch with torque on");
+            return Some(RunEnd::Resting(reason));
         }
         Some(RunEnd::Stopped(reason))
     }

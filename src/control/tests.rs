@@ -644,8 +644,15 @@ fn requested_stop_and_arg_error_report() {
     cfg.stop_at_tick = Some(10);
     let mut b = board(&cfg);
     let end = run(&mut b, &cfg);
-    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
+    // An operator's stop rests in the crouch with torque on (`rest`, the default).
+    assert_eq!(end, RunEnd::Resting(StopReason::Requested));
     assert_eq!(end.exit_code(), 17);
+    assert!(!torque_off_sent(&b));
+    assert!(b.servos().all(|d| d.torque));
+    assert!(b.power.is_empty(), "servo power kept");
+    assert!(
+        matches!(b.records().last(), Some(Record::Stop(s)) if s.reason == StopReason::Requested)
+    );
 
     let mut c = autostart_config();
     let e = crate::params::apply(&mut c, b"elf lockstep dt=7").unwrap_err();
@@ -994,8 +1001,9 @@ fn an_out_of_range_reply_is_rejected_and_held() {
 #[test]
 fn the_stop_confirms_torque_off_then_cuts_the_servo_power() {
     // Servo 5 does not let go: every round re-broadcasts the torque off and asks servo 5 again;
-    // after `off_attempts` rounds it is logged and the power is cut anyway.
-    let cfg = cfg_with("elf stop_at=20");
+    // after `off_attempts` rounds it is logged and the power is cut anyway (an operator's stop
+    // without the rest in the crouch).
+    let cfg = cfg_with("elf stop_at=20 rest=0");
     let mut b = board(&cfg);
     b.device_mut(5).unwrap().torque_stuck = true;
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::Requested));
@@ -1633,14 +1641,14 @@ fn run_port_script(
         replies: Vec::new(),
     };
     let end = run(&mut b, cfg);
-    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
+    assert_eq!(end, RunEnd::Resting(StopReason::Requested));
     let replies = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
     (b, replies)
 }
 
 /// Without autostart the robot stands after the ramp and waits; it walks on a velocity
-/// command, stops to standing on Mode = stand, and torque goes off on Mode = torque off
-/// (stop `Requested`). A bad command gets Data Range and changes nothing. The footsteps it
+/// command, stops to standing on Mode = stand, and rests in the crouch (torque on) on Mode =
+/// torque off (stop `Requested`). A bad command gets Data Range and changes nothing. The footsteps it
 /// logs are the generator's for the logged commands (replayed here in f32: identical).
 #[test]
 fn commanded_walk_stands_walks_stops_on_the_port() {
@@ -1689,7 +1697,7 @@ fn commanded_walk_stands_walks_stops_on_the_port() {
             (None, vec![]),
         ]
     );
-    assert!(torque_off_sent(&b.inner));
+    assert!(!torque_off_sent(&b.inner), "resting, torque on");
     assert_goals_in_limits(&b.inner);
 
     // Replay the logged footsteps through the generator with the logged commands.
@@ -2027,7 +2035,7 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
         (first[1] - (1e6 * y).round() as i32).abs() <= 1,
         "{first:?}"
     );
-    assert!(torque_off_sent(&b.inner));
+    assert!(!torque_off_sent(&b.inner), "resting, torque on");
     assert_goals_in_limits(&b.inner);
 }
 
@@ -2036,7 +2044,7 @@ fn step_list_on_the_port_is_walked_in_order_then_the_robot_stands() {
 /// after the last heartbeat the firmware logs `Deadman` (value 500 ms) and the zero command it
 /// took (Mode 3, velocity 0: the host's replay), finishes the step under way, closes the feet
 /// with the generator's stop steps and stands with torque on; Stop Code reads 13, Command Count
-/// did not move. The master's torque off then ends the run.
+/// did not move. The master's torque off then ends the run (resting in the crouch).
 #[test]
 fn a_silent_master_is_stopped_by_the_deadman_to_standing() {
     use walker_contract::command_port::{COMMAND_COUNT, MODE, STATE, STOP_CODE, VELOCITY_X};
@@ -2146,7 +2154,7 @@ fn a_silent_master_is_stopped_by_the_deadman_to_standing() {
         stood_after <= 2 * period_us + period_us / 2,
         "standing {stood_after} µs after the deadman, period {period_us} µs"
     );
-    assert!(torque_off_sent(&b.inner));
+    assert!(!torque_off_sent(&b.inner), "resting, torque on");
     assert_goals_in_limits(&b.inner);
 }
 
@@ -2615,9 +2623,10 @@ fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
 
 /// Mode = 0 (torque off) mid-walk is a graded stop: the online walk finishes its step and
 /// stands (the port's velocity no longer counts), then the robot is lowered to the crouch,
-/// held, and only then is torque off (stop `Requested`).
+/// held, and rests there with torque on (stop `Requested`, `rest`): no torque off, the servo
+/// power kept, the crouch the last goal written.
 #[test]
-fn an_operator_stop_mid_walk_walks_to_standing_then_lowers_then_torque_off() {
+fn an_operator_stop_mid_walk_walks_to_standing_then_lowers_then_rests_with_torque_on() {
     use walker_contract::command_port::VELOCITY_X;
     let cfg = Config::default();
     let ramp = ramp_ticks(&cfg);
@@ -2662,16 +2671,19 @@ fn an_operator_stop_mid_walk_walks_to_standing_then_lowers_then_torque_off() {
     assert!(tr[off_at + 1..lowered_from]
         .iter()
         .all(|t| t.fault == FaultState::Stopping));
-    // Lowering, hold, the torque-off tick.
+    // Lowering, hold, the rest tick (still Stopping: torque on).
     let lower = cfg.ticks_for_us(cfg.lower_us) as usize;
     let stopping = usize::from(cfg.supervisor.stopping_ticks);
     assert_eq!(tr.len() - lowered_from, lower + stopping + 1);
-    // The goals: the standing pose, then the crouch, held until torque off.
+    assert_eq!(tr.last().unwrap().fault, FaultState::Stopping);
+    // The goals: the standing pose, then the crouch, held to the end.
     let goals = &b.inner.goals;
     let at = |k: usize| goals[walk_write(&cfg, 0) - ramp + k - 1];
     assert_crouched(&at(lowered_from - 1), &at(lowered_from + lower));
     assert_eq!(at(lowered_from + lower), *goals.last().unwrap());
-    assert!(torque_off_sent(&b.inner));
+    assert!(!torque_off_sent(&b.inner), "resting, torque on");
+    assert!(b.inner.servos().all(|d| d.torque));
+    assert!(b.inner.power.is_empty(), "servo power kept");
     assert_goals_in_limits(&b.inner);
     // At most the step under way and the closing one began after the stop.
     let mut fl = walker_contract::footstep_log::FootstepLog::new();
@@ -2779,10 +2791,11 @@ fn a_leg_servo_back_with_torque_off_is_turned_on_again_and_the_robot_lowered() {
 }
 
 /// With `wait_enable` torque stays off at power-on until a master writes Mode = stand (the
-/// command port answers meanwhile: State = waiting); after a run's stop the port still answers
-/// (State = stopped, Stop Code), a Mode write of stop changes nothing, a new enable starts a
-/// new run (start-up again: torque on), and Mode = torque off while waiting ends
-/// `run_on_enable` with the last run's end.
+/// command port answers meanwhile: State = waiting); after an operator's stop the robot rests
+/// in the crouch with torque on and the port still answers (State = resting, Stop Code), a
+/// Mode write of stop changes nothing, a new enable starts a new run from the crouch (start-up
+/// again: torque on); after the second run's stop a Mode = torque off turns torque off (State
+/// = stopped) and one more ends `run_on_enable` with the last run's end.
 #[test]
 fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_stop() {
     use walker_contract::command_port::{STATE, STOP_CODE};
@@ -2810,6 +2823,8 @@ fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_sto
         (again + 100, read(STATE)),
         (off2, write_mode(0)),
         (end, write_mode(0)),
+        (end + 10, read(STATE)),
+        (end + 20, write_mode(0)),
     ];
     let mut b = PortBoard {
         inner: board(&cfg),
@@ -2826,15 +2841,36 @@ fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_sto
             ok(vec![PortState::Waiting.code()]),
             ok(vec![]),
             ok(vec![]),
-            ok(vec![PortState::Stopped.code()]),
+            ok(vec![PortState::Resting.code()]),
             ok(vec![StopCode::Requested.code()]),
             ok(vec![]),
-            ok(vec![PortState::Stopped.code()]),
+            ok(vec![PortState::Resting.code()]),
             ok(vec![]),
             ok(vec![PortState::Starting.code()]),
             ok(vec![]),
             ok(vec![]),
+            ok(vec![PortState::Stopped.code()]),
+            ok(vec![]),
         ]
+    );
+    // One torque off: the second Mode = torque off after the second run, none before.
+    let offs: Vec<usize> = b
+        .inner
+        .packets
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.id == 0xFE && p.op == opcode::WRITE && p.addr == 64 && p.data == [0])
+        .map(|(i, _)| {
+            b.inner
+                .ticks
+                .iter()
+                .filter(|m| m.packets_before <= i)
+                .count()
+        })
+        .collect();
+    assert!(
+        !offs.is_empty() && offs.iter().all(|&k| k >= end && k < end + 5),
+        "{offs:?}"
     );
     // Torque on twice, once a run, each after its enable; none before the first.
     let marks = &b.inner.ticks;
@@ -2849,7 +2885,7 @@ fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_sto
     assert_eq!(on.len(), 2, "{on:?}");
     assert!(on[0] >= enable && on[0] < enable + 5, "{on:?}");
     assert!(on[1] >= again && on[1] < again + 5, "{on:?}");
-    // Two runs, two stop records, both torque off.
+    // Two runs, two stop records; torque off at the end.
     let stops = b
         .inner
         .records()
@@ -2887,6 +2923,7 @@ fn the_board_button_is_the_enable_when_held_50_ms() {
     let mut link = crate::control::commanded::CommandLink::new();
     assert!(crate::control::standby(
         &mut b,
+        &cfg,
         &mut link,
         PortState::Waiting
     ));
@@ -2895,7 +2932,7 @@ fn the_board_button_is_the_enable_when_held_50_ms() {
     assert!((1_250_000..1_255_000).contains(&t), "enabled at {t} µs");
     assert_eq!(
         crate::control::run_with(&mut b, &cfg, &mut link),
-        RunEnd::Stopped(StopReason::Requested)
+        RunEnd::Resting(StopReason::Requested)
     );
     let on = first_on(&b).unwrap();
     // Start-up's probe and set-up first (20 ms on the fake bus), then torque on.

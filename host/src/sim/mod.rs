@@ -414,6 +414,9 @@ pub struct SimSummary {
     pub end: Option<EndPose>,
     /// When a leg servo first had its torque on (the physics step after the write), µs.
     pub torque_on_us: Option<u64>,
+    /// When every servo's torque was last found off after it had been on (none while any is
+    /// on), µs.
+    pub torque_off_us: Option<u64>,
 }
 
 /// How the robot ended, from the truth after the firmware's end ([`EndPose::of`]).
@@ -423,7 +426,7 @@ pub enum EndState {
     Standing,
     /// Upright (trunk within [`FALLEN_TILT_RAD`] of vertical), the pelvis lower: crouched on
     /// its feet or sitting on its folded legs.
-    Sitting,
+    Crouched,
     /// The trunk tilted beyond [`FALLEN_TILT_RAD`]: lying on the ground.
     Fallen,
 }
@@ -435,7 +438,7 @@ impl fmt::Display for EndState {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
             EndState::Standing => "standing",
-            EndState::Sitting => "sitting",
+            EndState::Crouched => "crouched",
             EndState::Fallen => "fallen",
         })
     }
@@ -466,7 +469,7 @@ impl EndPose {
         } else if pelvis_z_m >= z_c - 0.02 {
             EndState::Standing
         } else {
-            EndState::Sitting
+            EndState::Crouched
         };
         EndPose {
             after_s,
@@ -612,6 +615,8 @@ pub struct Simulator {
     bytes_in: u64,
     /// When a leg servo first had its torque on, µs.
     torque_on_us: Option<u64>,
+    /// When every servo's torque was last found off after it had been on, µs.
+    torque_off_us: Option<u64>,
 }
 
 impl fmt::Debug for Simulator {
@@ -671,6 +676,7 @@ impl Simulator {
             steps: 0,
             bytes_in: 0,
             torque_on_us: None,
+            torque_off_us: None,
         };
         sim.publish()?;
         Ok(sim)
@@ -737,8 +743,11 @@ impl Simulator {
                 }
             }
             self.steps += 1;
-            if self.torque_on_us.is_none() && self.bus.devices.iter().any(|d| d.torque_on()) {
-                self.torque_on_us = Some(self.physics.time_us());
+            if self.bus.devices.iter().any(|d| d.torque_on()) {
+                self.torque_on_us.get_or_insert(self.physics.time_us());
+                self.torque_off_us = None;
+            } else if self.torque_on_us.is_some() && self.torque_off_us.is_none() {
+                self.torque_off_us = Some(self.physics.time_us());
             }
             self.publish()?;
         }
@@ -947,6 +956,7 @@ impl Simulator {
             truth_rows: rows,
             end: None,
             torque_on_us: self.torque_on_us,
+            torque_off_us: self.torque_off_us,
         }
     }
 }
