@@ -121,6 +121,8 @@ use gait_core::gait::TimingCheck;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::{GaitError, Robot};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
+#[cfg(not(feature = "board-opencm"))]
+use walker_contract::command_port::ParamAccess;
 use walker_contract::command_port::{Mode, PortState};
 use walker_contract::ExitCode;
 
@@ -294,8 +296,10 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 /// Mode = stand or walk, then a run ([`run_with`], the same port); after its stop, the same
 /// again. Returns the last run's end (or `Requested` before any) when a master writes Mode =
 /// torque off while the firmware waits with torque off (a run that ended resting is
-/// [`RunEnd::Stopped`] then: its torque off was the first of the two writes).
-pub fn run_on_enable<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
+/// [`RunEnd::Stopped`] then: its torque off was the first of the two writes). Parameter sets
+/// on the command port while it waits change `cfg` for the next run (`command_port`
+/// "Parameters").
+pub fn run_on_enable<B: Board>(board: &mut B, cfg: &mut Config) -> RunEnd {
     let mut link = commanded::CommandLink::new();
     let mut last = None;
     loop {
@@ -327,10 +331,11 @@ pub const BUTTON_HOLD_US: u64 = 50_000;
 /// Mode write of stand or walk, or a press of the board's button ([`Board::enable_button`]:
 /// its level other than the one found at the start for [`BUTTON_HOLD_US`]) — the enable;
 /// on a Mode write of torque off: resting, torque off (confirmed, servo power cut; State
-/// then 4) and the wait goes on; else false. A write of stop is taken and ignored.
+/// then 4) and the wait goes on; else false. A write of stop is taken and ignored. Parameter
+/// ops are served against `cfg` (sets allowed: no run is going).
 pub fn standby<B: Board>(
     board: &mut B,
-    cfg: &Config,
+    cfg: &mut Config,
     link: &mut commanded::CommandLink,
     state: PortState,
 ) -> bool {
@@ -345,6 +350,9 @@ pub fn standby<B: Board>(
         board.wait_tick();
         board.feed();
         link.poll(board, &mut log);
+        // The OpenCM 9.04 has no command port and no flash for the parameter table's text.
+        #[cfg(not(feature = "board-opencm"))]
+        link.port.table.serve_param(ParamAccess::Settable(cfg));
         let now = board.now_us();
         match (idle, board.enable_button()) {
             (Some(i), Some(level)) if level != i => {

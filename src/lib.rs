@@ -112,7 +112,7 @@ const fn parse_u8(s: &str) -> u8 {
 /// runs [`control::run`] (start-up, walk, stop) — with [`Config::wait_enable`]
 /// [`control::run_on_enable`] (each run on the operator's enable) — and logs how it ended;
 /// the (last) run's end.
-pub fn run_walk<B: board::Board>(board: &mut B, cfg: &Config) -> control::RunEnd {
+pub fn run_walk<B: board::Board>(board: &mut B, cfg: &mut Config) -> control::RunEnd {
     fw_log!(
         info,
         "walker-firmware {=str} on {=str}: tick {=u32} us, bus {=u32} baud, model {=str}, {=usize} steps",

@@ -32,6 +32,12 @@
 //! | 142 | 2 | Walk Velocity Y | R | i16, mm/s |
 //! | 144 | 2 | Walk Yaw Rate | R | i16, mrad/s |
 //! | 146 | 2 | Command Count | R | u16, accepted writes to the command registers (wraps) |
+//! | 160 | 24 | Param Key | RW | a run-time parameter's key (docs/parameters.md), ASCII, NUL-padded |
+//! | 184 | 16 | Param Value | RW | its value as token text (`0.25`, `on`), ASCII, NUL-padded |
+//! | 200 | 1 | Param Op | RW | a write runs it: [`ParamOp`] 1 get, 2 set, 3 get by index |
+//! | 201 | 1 | Param Status | R | [`ParamStatus`] of the last op: 0 done, 1 pending, ≥ 2 refused |
+//! | 202 | 2 | Param Index | RW | u16, the parameter of op 3 (0 ..= Param Count − 1) |
+//! | 204 | 2 | Param Count | R | u16, the number of run-time parameters |
 //!
 //! The velocity ranges are [`gait_core::trajectory::command::CommandLimits::DEFAULT`]'s in the wire's units.
 //!
@@ -51,6 +57,17 @@
 //! * a READ longer than the table: **Data Range**; a packet whose parameters do not fit its
 //!   instruction: **Data Length**; an unknown instruction: **Instruction**.
 //!
+//! # Parameters
+//! Every run-time parameter (the one table, [`crate::params::PARAMS`], with its domains) reads
+//! and writes through the parameter registers: a master writes Param Key, Param Value and Param
+//! Op in one WRITE (160, 41 bytes) — or Param Index and Param Op for op 3 — and reads Param
+//! Status (and Param Key / Value) once it is no longer pending. The firmware serves an op at
+//! its next tick ([`CommandTable::serve_param`]): a get fills Param Value (and, by index,
+//! Param Key) with the value in force; a set parses and range-checks the value as the
+//! semihosting command line does and applies it to the configuration of the next run — only
+//! while no run is going (the firmware waits for the enable, `wait_enable`), else it is refused
+//! ([`ParamStatus::Running`]) and nothing changes.
+//!
 //! Fixed-point units make a non-finite command unrepresentable on the wire; the typed
 //! accessors ([`CommandTable::velocity`]) return finite values in SI units only.
 //!
@@ -68,7 +85,7 @@ pub const MODEL_NUMBER_VALUE: u16 = 0x5A30;
 /// Firmware version byte (the control table's layout version).
 pub const FIRMWARE_VERSION_VALUE: u8 = 1;
 /// Size of the control table, bytes.
-pub const TABLE_LEN: usize = 148;
+pub const TABLE_LEN: usize = 206;
 /// Entries of the step list.
 pub const STEP_LIST_LEN: usize = 8;
 /// Largest |dx|, |dy| (mm) and |dyaw| (mrad) of a step entry.
@@ -136,12 +153,25 @@ pub const WALK_YAW: Reg = reg(144, 2);
 /// Command count (R).
 pub const COMMAND_COUNT: Reg = reg(146, 2);
 
+/// Param Key (RW, ASCII, NUL-padded).
+pub const PARAM_KEY: Reg = reg(160, 24);
+/// Param Value (RW, ASCII token text, NUL-padded).
+pub const PARAM_VALUE: Reg = reg(184, 16);
+/// Param Op (RW, [`ParamOp`]; a write runs it).
+pub const PARAM_OP: Reg = reg(200, 1);
+/// Param Status (R, [`ParamStatus`]).
+pub const PARAM_STATUS: Reg = reg(201, 1);
+/// Param Index (RW, u16; op 3's parameter).
+pub const PARAM_INDEX: Reg = reg(202, 2);
+/// Param Count (R, u16).
+pub const PARAM_COUNT: Reg = reg(204, 2);
+
 /// The status registers as one block, State through Command Count: what a master reads in
 /// one READ ([`StatusBlock::decode`]).
 pub const STATUS_BLOCK: Reg = reg(128, 20);
 
 /// Every register, in address order.
-pub const REGISTERS: [Reg; 22] = [
+pub const REGISTERS: [Reg; 28] = [
     MODEL_NUMBER,
     FIRMWARE_VERSION,
     ID,
@@ -164,12 +194,123 @@ pub const REGISTERS: [Reg; 22] = [
     WALK_VY,
     WALK_YAW,
     COMMAND_COUNT,
+    PARAM_KEY,
+    PARAM_VALUE,
+    PARAM_OP,
+    PARAM_STATUS,
+    PARAM_INDEX,
+    PARAM_COUNT,
 ];
 
 /// The writable registers.
-pub const WRITABLE: [Reg; 6] = [
-    MODE, VELOCITY_X, VELOCITY_Y, YAW_RATE, HEARTBEAT, STEP_ENTRY,
+pub const WRITABLE: [Reg; 10] = [
+    MODE,
+    VELOCITY_X,
+    VELOCITY_Y,
+    YAW_RATE,
+    HEARTBEAT,
+    STEP_ENTRY,
+    PARAM_KEY,
+    PARAM_VALUE,
+    PARAM_OP,
+    PARAM_INDEX,
 ];
+
+/// What a write of Param Op asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamOp {
+    /// 1: the value of Param Key into Param Value.
+    Get,
+    /// 2: Param Value into the parameter of Param Key (between runs only).
+    Set,
+    /// 3: the key and the value of parameter number Param Index.
+    GetByIndex,
+}
+
+impl ParamOp {
+    /// The wire value.
+    pub const fn code(self) -> u8 {
+        match self {
+            ParamOp::Get => 1,
+            ParamOp::Set => 2,
+            ParamOp::GetByIndex => 3,
+        }
+    }
+
+    /// From the wire value.
+    pub const fn from_code(c: u8) -> Option<Self> {
+        match c {
+            1 => Some(ParamOp::Get),
+            2 => Some(ParamOp::Set),
+            3 => Some(ParamOp::GetByIndex),
+            _ => None,
+        }
+    }
+}
+
+/// The outcome of the last parameter op (Param Status).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamStatus {
+    /// 0: done (a get's text is in Param Value; a set is in force for the next run).
+    Done,
+    /// 1: written, not served yet (the firmware serves it at its next tick).
+    Pending,
+    /// 2: no parameter has this key (or Param Index is beyond the last).
+    UnknownKey,
+    /// 3: the value does not parse (number, word) or the text is not ASCII.
+    BadValue,
+    /// 4: the value parses but is outside the parameter's domain.
+    OutOfRange,
+    /// 5: a set while a run is going: refused, nothing changed.
+    Running,
+}
+
+impl ParamStatus {
+    /// The wire value.
+    pub const fn code(self) -> u8 {
+        match self {
+            ParamStatus::Done => 0,
+            ParamStatus::Pending => 1,
+            ParamStatus::UnknownKey => 2,
+            ParamStatus::BadValue => 3,
+            ParamStatus::OutOfRange => 4,
+            ParamStatus::Running => 5,
+        }
+    }
+
+    /// From the wire value.
+    pub const fn from_code(c: u8) -> Option<Self> {
+        match c {
+            0 => Some(ParamStatus::Done),
+            1 => Some(ParamStatus::Pending),
+            2 => Some(ParamStatus::UnknownKey),
+            3 => Some(ParamStatus::BadValue),
+            4 => Some(ParamStatus::OutOfRange),
+            5 => Some(ParamStatus::Running),
+            _ => None,
+        }
+    }
+
+    /// In a few words.
+    pub const fn reason(self) -> &'static str {
+        match self {
+            ParamStatus::Done => "done",
+            ParamStatus::Pending => "pending",
+            ParamStatus::UnknownKey => "unknown key",
+            ParamStatus::BadValue => "bad value",
+            ParamStatus::OutOfRange => "out of range",
+            ParamStatus::Running => "refused while a run is going",
+        }
+    }
+}
+
+/// The configuration a parameter op is served against.
+pub enum ParamAccess<'a> {
+    /// Between runs: sets apply to the next run's configuration.
+    Settable(&'a mut crate::Config),
+    /// A run is going: gets only.
+    ReadOnly(&'a crate::Config),
+}
 
 /// What the higher level asks for (the Mode register).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -415,6 +556,8 @@ pub struct CommandTable {
     deadman: bool,
     /// Accepted writes of Mode (wraps).
     mode_writes: u16,
+    /// A parameter op written and not served yet.
+    param_op: Option<ParamOp>,
 }
 
 impl Default for CommandTable {
@@ -442,7 +585,10 @@ impl CommandTable {
             queued: 0,
             deadman: false,
             mode_writes: 0,
+            param_op: None,
         };
+        let count = u16::try_from(crate::params::PARAMS.len()).unwrap_or(u16::MAX);
+        t.put(PARAM_COUNT, &count.to_le_bytes());
         t.put(MODEL_NUMBER, &MODEL_NUMBER_VALUE.to_le_bytes());
         t.put(FIRMWARE_VERSION, &[FIRMWARE_VERSION_VALUE]);
         t.put(ID, &[PORT_ID]);
@@ -511,6 +657,10 @@ impl CommandTable {
                 }
             }
         }
+        let mut param_op = None;
+        if let Some(&[o]) = covered(PARAM_OP) {
+            param_op = Some(ParamOp::from_code(o).ok_or(ErrorCode::DataRange)?);
+        }
         let mut entry = None;
         if let Some(b) = covered(STEP_ENTRY) {
             entry = Some(StepEntry::from_bytes(b).ok_or(ErrorCode::DataRange)?);
@@ -532,10 +682,104 @@ impl CommandTable {
             self.deadman = false;
             self.mode_writes = self.mode_writes.wrapping_add(1);
         }
+        if param_op.is_some() {
+            self.param_op = param_op;
+            self.put(PARAM_STATUS, &[ParamStatus::Pending.code()]);
+        }
         self.commands = self.commands.wrapping_add(1);
         self.put(COMMAND_COUNT, &self.commands.to_le_bytes());
         self.put_step_list();
         Ok(())
+    }
+
+    /// Serves the parameter op written last, if any, against `cfg` (module docs "Parameters"):
+    /// Param Status, and for a get Param Value (and Param Key), say how it went. Returns the
+    /// status (`None`: no op was pending).
+    pub fn serve_param(&mut self, cfg: ParamAccess<'_>) -> Option<ParamStatus> {
+        let op = self.param_op.take()?;
+        let status = self.param(op, cfg);
+        self.put(PARAM_STATUS, &[status.code()]);
+        Some(status)
+    }
+
+    fn param(&mut self, op: ParamOp, cfg: ParamAccess<'_>) -> ParamStatus {
+        use crate::params::{find, ArgErrorKind, PARAMS};
+        let param = match op {
+            ParamOp::GetByIndex => {
+                let i = usize::from(self.get_u16(PARAM_INDEX));
+                let Some(p) = PARAMS.get(i) else {
+                    return ParamStatus::UnknownKey;
+                };
+                self.put_text(PARAM_KEY, p.key);
+                p
+            }
+            ParamOp::Get | ParamOp::Set => {
+                let Some(key) = self.text(PARAM_KEY) else {
+                    return ParamStatus::BadValue;
+                };
+                let Some(p) = find(key) else {
+                    return ParamStatus::UnknownKey;
+                };
+                p
+            }
+        };
+        let cfg: &crate::Config = match (op, cfg) {
+            (ParamOp::Set, ParamAccess::ReadOnly(_)) => return ParamStatus::Running,
+            (ParamOp::Set, ParamAccess::Settable(c)) => {
+                let Some(v) = self.text(PARAM_VALUE) else {
+                    return ParamStatus::BadValue;
+                };
+                // Parsed (and range-checked) before anything is set: a refused value changes
+                // nothing.
+                return match param.parse(v).and_then(|_| param.apply(c, v)) {
+                    Ok(()) => ParamStatus::Done,
+                    Err(ArgErrorKind::OutOfRange) => ParamStatus::OutOfRange,
+                    Err(ArgErrorKind::UnknownKey) => ParamStatus::UnknownKey,
+                    Err(_) => ParamStatus::BadValue,
+                };
+            }
+            (_, ParamAccess::Settable(c)) => c,
+            (_, ParamAccess::ReadOnly(c)) => c,
+        };
+        let mut text: heapless::String<{ PARAM_VALUE.len as usize }> = heapless::String::new();
+        let written = match param.value(cfg) {
+            Some(v) => param.write_value(v, &mut text),
+            None => Ok(()),
+        };
+        if written.is_err() {
+            // Longer than the register: the text would be cut, so none is given.
+            text.clear();
+        }
+        self.put_text(PARAM_VALUE, &text);
+        ParamStatus::Done
+    }
+
+    /// The ASCII text of a text register up to its first NUL (`None`: not ASCII).
+    fn text(&self, r: Reg) -> Option<&str> {
+        let bytes = self.mem.get(span(r))?;
+        let n = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+        let t = bytes.get(..n)?;
+        if !t.is_ascii() {
+            return None;
+        }
+        core::str::from_utf8(t).ok()
+    }
+
+    /// Writes `t` into a text register, NUL-padded (cut to the register).
+    fn put_text(&mut self, r: Reg, t: &str) {
+        if let Some(m) = self.mem.get_mut(span(r)) {
+            m.fill(0);
+            for (d, b) in m.iter_mut().zip(t.bytes()) {
+                *d = b;
+            }
+        }
+    }
+
+    fn get_u16(&self, r: Reg) -> u16 {
+        match self.mem.get(span(r)) {
+            Some(&[a, b]) => u16::from_le_bytes([a, b]),
+            _ => 0,
+        }
     }
 
     /// The commanded mode.

@@ -176,7 +176,7 @@ fn bad_writes_get_the_protocol_errors_and_change_nothing() {
     assert_eq!(write(&mut p, 100, &[0]), Some(ErrorCode::DataRange));
     assert_eq!(write(&mut p, 400, &[0]), Some(ErrorCode::DataRange));
     // Reads beyond the table.
-    assert_eq!(read(&mut p, 140, 20), Err(ErrorCode::DataRange));
+    assert_eq!(read(&mut p, 200, 20), Err(ErrorCode::DataRange));
     // A READ with a bad parameter length.
     let mut pkt = [0u8; 32];
     let n = dxl::packet::encode(&mut pkt, PORT_ID, dxl::opcode::READ, &[64, 0, 1]).unwrap();
@@ -279,15 +279,12 @@ fn status_registers_read_back_in_wire_units() {
         }
     );
     assert_eq!(StatusBlock::decode(&d[..19]), None);
-    // The block ends where the table does.
+    // The block ends at Command Count; the parameter registers end the table.
     assert_eq!(
         usize::from(STATUS_BLOCK.addr + STATUS_BLOCK.len),
         usize::from(COMMAND_COUNT.addr + COMMAND_COUNT.len)
     );
-    assert_eq!(
-        usize::from(COMMAND_COUNT.addr + COMMAND_COUNT.len),
-        TABLE_LEN
-    );
+    assert_eq!(usize::from(PARAM_COUNT.addr + PARAM_COUNT.len), TABLE_LEN);
 }
 
 #[test]
@@ -474,5 +471,173 @@ proptest! {
     #[test]
     fn milli_i16_agrees_with_the_float_clamp_formula(v in -40.0f32..40.0) {
         prop_assert_eq!(milli_i16(v), milli_reference(v));
+    }
+}
+
+/// One parameter op through the table as a master writes it (key, value, op in one WRITE),
+/// served against `cfg`; the status and Param Value's text.
+fn param_op(
+    t: &mut CommandTable,
+    cfg: ParamAccess<'_>,
+    key: &str,
+    value: &str,
+    op: ParamOp,
+) -> (ParamStatus, String) {
+    let mut data = vec![0u8; 41];
+    data[..key.len()].copy_from_slice(key.as_bytes());
+    data[24..24 + value.len()].copy_from_slice(value.as_bytes());
+    data[40] = op.code();
+    t.write(PARAM_KEY.addr, &data).unwrap();
+    let pending = t.read(PARAM_STATUS.addr, 1).unwrap()[0];
+    assert_eq!(ParamStatus::from_code(pending), Some(ParamStatus::Pending));
+    let s = t.serve_param(cfg).expect("an op was pending");
+    assert_eq!(
+        t.serve_param(ParamAccess::ReadOnly(&walker_contract::Config::default())),
+        None
+    );
+    let read = t.read(PARAM_STATUS.addr, 1).unwrap()[0];
+    assert_eq!(ParamStatus::from_code(read), Some(s));
+    (s, text(t.read(PARAM_VALUE.addr, PARAM_VALUE.len).unwrap()))
+}
+
+fn text(b: &[u8]) -> String {
+    let n = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+    String::from_utf8(b[..n].to_vec()).unwrap()
+}
+
+#[test]
+fn parameters_read_and_write_through_the_port_with_the_tables_checks() {
+    use walker_contract::params::{find, PARAMS};
+    use walker_contract::Config;
+    let mut t = CommandTable::new();
+    let count = t.read(PARAM_COUNT.addr, 2).unwrap();
+    assert_eq!(
+        usize::from(u16::from_le_bytes([count[0], count[1]])),
+        PARAMS.len()
+    );
+    let mut cfg = Config::default();
+    // Get: the default's text, as the parameter writes it.
+    let (s, v) = param_op(
+        &mut t,
+        ParamAccess::ReadOnly(&cfg),
+        "catch_gain",
+        "",
+        ParamOp::Get,
+    );
+    assert_eq!(s, ParamStatus::Done);
+    let p = find("catch_gain").unwrap();
+    let mut want = String::new();
+    p.write_value(p.value(&cfg).unwrap(), &mut want).unwrap();
+    assert_eq!(v, want);
+    // Set between runs: in force; a get reads it back.
+    let (s, _) = param_op(
+        &mut t,
+        ParamAccess::Settable(&mut cfg),
+        "gyro_ankle",
+        "0.04",
+        ParamOp::Set,
+    );
+    assert_eq!(s, ParamStatus::Done);
+    let mut direct = Config::default();
+    walker_contract::params::apply(&mut direct, b"elf gyro_ankle=0.04").unwrap();
+    assert_eq!(format!("{cfg:?}"), format!("{direct:?}"));
+    let (_, v) = param_op(
+        &mut t,
+        ParamAccess::ReadOnly(&cfg),
+        "gyro_ankle",
+        "",
+        ParamOp::Get,
+    );
+    assert_eq!(v, "0.04");
+    // Refusals change nothing: while a run goes, out of range, bad value, unknown key.
+    let before = format!("{cfg:?}");
+    let cases = [
+        ("gyro_ankle", "0.02", ParamStatus::Running, true),
+        ("gyro_ankle", "1e9", ParamStatus::OutOfRange, false),
+        ("gyro_ankle", "fast", ParamStatus::BadValue, false),
+        ("no_such_key", "1", ParamStatus::UnknownKey, false),
+        ("wait_enable", "2", ParamStatus::BadValue, false),
+    ];
+    for (key, value, want, running) in cases {
+        let access = if running {
+            ParamAccess::ReadOnly(&cfg)
+        } else {
+            ParamAccess::Settable(&mut cfg)
+        };
+        let (s, _) = param_op(&mut t, access, key, value, ParamOp::Set);
+        assert_eq!(s, want, "{key}={value}");
+    }
+    assert_eq!(format!("{cfg:?}"), before);
+    // By index: every parameter's key and value, as the table has them.
+    for (i, p) in PARAMS.iter().enumerate() {
+        t.write(PARAM_INDEX.addr, &(i as u16).to_le_bytes())
+            .unwrap();
+        t.write(PARAM_OP.addr, &[ParamOp::GetByIndex.code()])
+            .unwrap();
+        assert_eq!(
+            t.serve_param(ParamAccess::ReadOnly(&cfg)),
+            Some(ParamStatus::Done)
+        );
+        assert_eq!(text(t.read(PARAM_KEY.addr, PARAM_KEY.len).unwrap()), p.key);
+        let mut want = String::new();
+        if let Some(v) = p.value(&cfg) {
+            p.write_value(v, &mut want).unwrap();
+        }
+        assert!(
+            want.len() <= 16,
+            "{} = {want}: longer than Param Value",
+            p.key
+        );
+        assert_eq!(
+            text(t.read(PARAM_VALUE.addr, PARAM_VALUE.len).unwrap()),
+            want,
+            "{}",
+            p.key
+        );
+    }
+    t.write(PARAM_INDEX.addr, &(PARAMS.len() as u16).to_le_bytes())
+        .unwrap();
+    t.write(PARAM_OP.addr, &[ParamOp::GetByIndex.code()])
+        .unwrap();
+    assert_eq!(
+        t.serve_param(ParamAccess::ReadOnly(&cfg)),
+        Some(ParamStatus::UnknownKey)
+    );
+    // An op code outside 1 ..= 3 is Data Range; Param Status and Count are read-only.
+    assert_eq!(
+        t.write(PARAM_OP.addr, &[4]),
+        Err(dxl::instruction::ErrorCode::DataRange)
+    );
+    assert_eq!(
+        t.write(PARAM_STATUS.addr, &[0]),
+        Err(dxl::instruction::ErrorCode::Access)
+    );
+    assert_eq!(
+        t.write(PARAM_COUNT.addr, &[0, 0]),
+        Err(dxl::instruction::ErrorCode::Access)
+    );
+    assert_eq!(t.serve_param(ParamAccess::ReadOnly(&cfg)), None);
+}
+
+proptest! {
+    /// Any value text for any parameter: a set either is refused and changes nothing, or it
+    /// sets exactly what the command line's parser sets for the same token.
+    #[test]
+    fn a_set_over_the_port_equals_the_command_line(i in 0usize..200, value in "[-a-z0-9.e]{0,15}") {
+        use walker_contract::params::PARAMS;
+        use walker_contract::Config;
+        let p = &PARAMS[i % PARAMS.len()];
+        let mut t = CommandTable::new();
+        let mut cfg = Config::default();
+        let (s, _) = param_op(&mut t, ParamAccess::Settable(&mut cfg), p.key, &value, ParamOp::Set);
+        let mut line = Config::default();
+        let token = format!("elf {}={}", p.key, value);
+        let r = walker_contract::params::apply(&mut line, token.as_bytes());
+        prop_assert_eq!(s == ParamStatus::Done, r.is_ok(), "{} -> {:?} / {:?}", token, s, r);
+        if s == ParamStatus::Done {
+            prop_assert_eq!(format!("{cfg:?}"), format!("{line:?}"));
+        } else {
+            prop_assert_eq!(format!("{cfg:?}"), format!("{:?}", Config::default()));
+        }
     }
 }

@@ -137,6 +137,49 @@ pub enum Command {
     /// (`--serial`, the OpenCR's UART connector) or the simulated robot started in the
     /// background (`--sim`: the firmware in QEMU against the MuJoCo robot). host/src/drive.rs.
     Drive(DriveArgs),
+    /// The firmware's run-time parameters over its command port: list, get, set (`key=value`,
+    /// docs/parameters.md).
+    ///
+    /// On a TCP command port (`--connect`) or a serial port (`--serial`). A set is in force for
+    /// the next run and is refused while a run is going: the firmware serves sets while it waits
+    /// for the enable (`wait_enable=1`, the OpenCR build's default). host/src/param.rs.
+    Param(ParamArgs),
+}
+
+/// `walker param`.
+#[derive(Debug, Args)]
+pub struct ParamArgs {
+    /// A command port on TCP, e.g. 127.0.0.1:5770 (`walker fil --command-port 5770`).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub connect: Option<String>,
+    /// A serial port, e.g. /dev/ttyUSB0.
+    #[arg(long, value_name = "DEV")]
+    pub serial: Option<String>,
+    /// Baud rate of --serial.
+    #[arg(long, value_name = "BAUD", default_value_t = 1_000_000)]
+    pub baud: u32,
+    /// What to do.
+    #[command(subcommand)]
+    pub action: ParamAction,
+}
+
+/// `walker param` actions.
+#[derive(Debug, Subcommand)]
+pub enum ParamAction {
+    /// Every parameter as `key=value`, one a line (empty value: not set).
+    List,
+    /// The values of these keys, as `key=value`.
+    Get {
+        /// Keys (docs/parameters.md).
+        #[arg(required = true)]
+        keys: Vec<String>,
+    },
+    /// Sets these `key=value` tokens, in order; stops at the first refused.
+    Set {
+        /// Tokens, e.g. catch_gain=0.5 gyro_ankle=0.04.
+        #[arg(required = true)]
+        tokens: Vec<String>,
+    },
 }
 
 /// `walker export`.
@@ -658,7 +701,42 @@ pub fn run(command: Command) -> Result<(), CliError> {
         Command::Pushes(a) => run_pushes(a),
         Command::Speed(a) => run_speed(a),
         Command::Drive(a) => run_drive(a),
+        Command::Param(a) => run_param(a),
     }
+}
+
+fn run_param(a: ParamArgs) -> Result<(), CliError> {
+    let mut master = match (&a.connect, &a.serial) {
+        (Some(addr), _) => crate::drive::connect(addr, None),
+        (_, Some(dev)) => crate::commands::PortMaster::serial(dev, a.baud),
+        _ => Err("give --connect or --serial".to_string()),
+    }
+    .map_err(|e| CliError::failed(format!("walker param: {e}")))?;
+    let fail = |e: String| CliError::failed(format!("walker param: {e}"));
+    master
+        .wait_ready(crate::drive::CONNECT_WAIT)
+        .map_err(fail)?;
+    match a.action {
+        ParamAction::List => {
+            for (k, v) in crate::param::list(&mut master).map_err(fail)? {
+                println!("{k}={v}");
+            }
+        }
+        ParamAction::Get { keys } => {
+            for k in keys {
+                let v = crate::param::get(&mut master, &k).map_err(fail)?;
+                println!("{k}={v}");
+            }
+        }
+        ParamAction::Set { tokens } => {
+            for t in tokens {
+                let (k, v) = crate::param::split_token(&t).map_err(fail)?;
+                crate::param::set(&mut master, k, v).map_err(fail)?;
+                println!("{k}={v}");
+            }
+        }
+    }
+    Ok(())
 }
 
 /// What `fil`, `beyond` and `sweep` start from: the walk, the simulated robot, the QEMU run

@@ -1566,3 +1566,57 @@ fn power_on_waits_for_the_enable_with_torque_off_on_mujoco() {
         f.footsteps.mismatches
     );
 }
+
+/// Parameters over the QEMU firmware's command port (`walker param`'s functions,
+/// host/src/param.rs): while the firmware waits for the enable (`wait_enable=1`),
+/// `catch_gain` and `gyro_ankle` are set and read back; after the enable the run reads them
+/// (a get during the run answers from the run's configuration) and refuses a set; the
+/// operator's torque off rests the robot, a second turns torque off, a third ends the run.
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn parameters_set_over_the_command_port_are_the_next_runs_on_mujoco() {
+    use walker_contract::command_port::{Mode, PortState, MODE};
+    use walker_host::param;
+    let port_no = walker_host::fil::free_port().unwrap();
+    let opts = FilOptions {
+        elf: elf(),
+        spec: WalkSpec::default(),
+        out_dir: PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("param"),
+        machine: "mps2-an500".into(),
+        timeout: Duration::from_secs(600),
+        sim: SimConfig::default(),
+        extra_tokens: vec!["wait_enable=1".into()],
+    };
+    let _slot = slot(1_000);
+    let run =
+        std::thread::spawn(move || walker_host::fil::run_command_port(&opts, port_no, |_, _| {}));
+    let mut m = walker_host::drive::connect(&format!("127.0.0.1:{port_no}"), None).unwrap();
+    m.wait_ready(Duration::from_secs(120)).unwrap();
+    let wait_for = |m: &mut walker_host::commands::PortMaster, want: PortState| {
+        let start = std::time::Instant::now();
+        while m.state().unwrap() != Some(want) {
+            assert!(start.elapsed() < Duration::from_secs(300), "no {want:?}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait_for(&mut m, PortState::Waiting);
+    assert_ne!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
+    param::set(&mut m, "catch_gain", "0.5").unwrap();
+    param::set(&mut m, "gyro_ankle", "0.04").unwrap();
+    assert_eq!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
+    let e = param::set(&mut m, "gyro_ankle", "7").unwrap_err();
+    assert!(e.contains("out of range"), "{e}");
+    m.write(MODE.addr, &[Mode::Stand.code()]).unwrap();
+    wait_for(&mut m, PortState::Standing);
+    assert_eq!(param::get(&mut m, "gyro_ankle").unwrap(), "0.04");
+    assert_eq!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
+    let e = param::set(&mut m, "catch_gain", "0.3").unwrap_err();
+    assert!(e.contains("refused while a run is going"), "{e}");
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    wait_for(&mut m, PortState::Resting);
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    wait_for(&mut m, PortState::Stopped);
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    let r = run.join().unwrap().expect("run");
+    assert_eq!(r.exit_code, Some(17));
+}

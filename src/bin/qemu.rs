@@ -67,7 +67,7 @@ mod firmware {
             board.exit(ExitCode::ConfigRejected.status())
         }
         defmt::info!("lock-step {=bool}", board.lockstep());
-        let code = walker_firmware::run_walk(&mut board, &cfg).exit_code();
+        let code = walker_firmware::run_walk(&mut board, &mut cfg).exit_code();
         board.exit(code)
     }
 

@@ -20,7 +20,7 @@ pub mod tick_cost;
 #[inline(always)]
 pub fn start<P, B: crate::board::Board>(
     peripherals: Option<P>,
-    cfg: &crate::Config,
+    cfg: &mut crate::Config,
     bring_up: impl FnOnce(P, &crate::Config) -> B,
 ) -> ! {
     let Some(p) = peripherals else {
@@ -40,8 +40,8 @@ macro_rules! stm32_firmware {
     (peripherals: $take:expr, config: $cfg:expr, board: $new:path, panic: $panic:path $(,)?) => {
         #[cortex_m_rt::entry]
         fn main() -> ! {
-            let cfg = $cfg;
-            $crate::boards::start($take, &cfg, $new)
+            let mut cfg = $cfg;
+            $crate::boards::start($take, &mut cfg, $new)
         }
 
         #[panic_handler]
@@ -59,7 +59,7 @@ macro_rules! stm32_firmware {
 /// power-on it does not walk), then idles: torque stays off, the tick keeps running and the
 /// watchdog is fed, so the board does not reset into a new walk.
 #[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
-pub fn run_then_idle<B: crate::board::Board>(board: &mut B, cfg: &crate::Config) -> ! {
+pub fn run_then_idle<B: crate::board::Board>(board: &mut B, cfg: &mut crate::Config) -> ! {
     let end = loop {
         let end = crate::run_walk(board, cfg);
         if !cfg.wait_enable {

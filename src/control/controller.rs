@@ -19,6 +19,8 @@ use gait_core::robot::LEG_JOINTS;
 use gait_core::trajectory::command::WalkCommand;
 use gait_core::trajectory::fixed_sampler::FixedFoot;
 use gait_core::GaitSample;
+#[cfg(not(feature = "board-opencm"))]
+use walker_contract::command_port::ParamAccess;
 use walker_contract::command_port::{Mode, PortState, PortStatus};
 
 use crate::board::{Board, Stage};
@@ -147,6 +149,13 @@ impl<P: TickPath> Controller<'_, P> {
     /// online walk's command.
     fn command<B: Board>(&mut self, board: &mut B) {
         self.link.poll(board, &mut self.log);
+        // A run is going: parameters read, never set (not on the OpenCM 9.04: no command
+        // port, no flash for the parameter table's text).
+        #[cfg(not(feature = "board-opencm"))]
+        self.link
+            .port
+            .table
+            .serve_param(ParamAccess::ReadOnly(self.cfg));
         if self.link.mode() == Mode::TorqueOff {
             self.sup.stop(StopReason::Requested);
         }

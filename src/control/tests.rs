@@ -2800,7 +2800,7 @@ fn a_leg_servo_back_with_torque_off_is_turned_on_again_and_the_robot_lowered() {
 fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_stop() {
     use walker_contract::command_port::{STATE, STOP_CODE};
     use walker_contract::StopCode;
-    let cfg = Config {
+    let mut cfg = Config {
         wait_enable: true,
         ..Config::default()
     };
@@ -2831,7 +2831,7 @@ fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_sto
         script,
         replies: Vec::new(),
     };
-    let last = crate::control::run_on_enable(&mut b, &cfg);
+    let last = crate::control::run_on_enable(&mut b, &mut cfg);
     assert_eq!(last, RunEnd::Stopped(StopReason::Requested));
     let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
     let ok = |d: Vec<u8>| (None, d);
@@ -2896,6 +2896,84 @@ fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_sto
     assert!(b.inner.servos().all(|d| !d.torque));
 }
 
+/// A WRITE of Param Key, Param Value and Param Op (one packet, as a master sends it).
+fn param_packet(key: &str, value: &str, op: walker_contract::command_port::ParamOp) -> Vec<u8> {
+    let mut data = [0u8; 41];
+    data[..key.len()].copy_from_slice(key.as_bytes());
+    data[24..24 + value.len()].copy_from_slice(value.as_bytes());
+    data[40] = op.code();
+    port_packet(dxl::Instruction::Write {
+        addr: walker_contract::command_port::PARAM_KEY.addr,
+        data: &data,
+    })
+}
+
+/// Parameters over the command port: a set while the firmware waits for the enable (`lower`
+/// = 0.5 s) is in force for the run it then starts (its get reads 0.5, its lowering lasts
+/// 100 ticks, not 300); a set during the run is refused (Param Status 5) and changes nothing.
+#[test]
+fn a_parameter_set_while_waiting_is_the_next_runs_and_refused_during_it() {
+    use walker_contract::command_port::{ParamOp, ParamStatus, PARAM_STATUS, PARAM_VALUE};
+    let mut cfg = Config {
+        wait_enable: true,
+        ..Config::default()
+    };
+    let read = |r: walker_contract::command_port::Reg| {
+        port_packet(dxl::Instruction::Read {
+            addr: r.addr,
+            len: r.len,
+        })
+    };
+    let (enable, off) = (100, 600);
+    let script = vec![
+        (10, param_packet("lower", "0.5", ParamOp::Set)),
+        (11, read(PARAM_STATUS)),
+        (enable, write_mode(1)),
+        (enable + 350, param_packet("lower", "", ParamOp::Get)),
+        (enable + 351, read(PARAM_STATUS)),
+        (enable + 352, read(PARAM_VALUE)),
+        (enable + 353, param_packet("lower", "1", ParamOp::Set)),
+        (enable + 354, read(PARAM_STATUS)),
+        (off, write_mode(0)),
+        (off + 700, write_mode(0)),
+        (off + 710, write_mode(0)),
+    ];
+    let mut b = PortBoard {
+        inner: board(&cfg),
+        script,
+        replies: Vec::new(),
+    };
+    let last = crate::control::run_on_enable(&mut b, &mut cfg);
+    assert_eq!(last, RunEnd::Stopped(StopReason::Requested));
+    let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    let ok = |d: Vec<u8>| (None, d);
+    let mut half = b"0.5".to_vec();
+    half.resize(16, 0);
+    assert_eq!(
+        replies,
+        vec![
+            ok(vec![]),
+            ok(vec![ParamStatus::Done.code()]),
+            ok(vec![]),
+            ok(vec![]),
+            ok(vec![ParamStatus::Done.code()]),
+            ok(half),
+            ok(vec![]),
+            ok(vec![ParamStatus::Running.code()]),
+            ok(vec![]),
+            ok(vec![]),
+            ok(vec![]),
+        ]
+    );
+    assert_eq!(cfg.lower_us, 500_000, "the refused set changed nothing");
+    let stopped = ticks_of(&b.inner.records())
+        .iter()
+        .filter(|t| t.phase == LoggedPhase::Stopped)
+        .count();
+    let stopping = usize::from(cfg.supervisor.stopping_ticks);
+    assert_eq!(stopped, 100 + stopping + 1, "lowering, hold, rest");
+}
+
 /// With `wait_enable` and no master, the board's button is the enable: torque stays off until
 /// its level has differed from the one found at power-on for 50 ms (`BUTTON_HOLD_US`), then
 /// start-up follows at once; a shorter blip is not a press.
@@ -2921,9 +2999,10 @@ fn the_board_button_is_the_enable_when_held_50_ms() {
     };
     // The standby returns after the enable; the run then ends on its own stop.
     let mut link = crate::control::commanded::CommandLink::new();
+    let mut waiting_cfg = cfg;
     assert!(crate::control::standby(
         &mut b,
-        &cfg,
+        &mut waiting_cfg,
         &mut link,
         PortState::Waiting
     ));
