@@ -180,6 +180,17 @@ pub enum ParamAction {
         #[arg(required = true)]
         tokens: Vec<String>,
     },
+    /// Sets every parameter a plan file gives (its walk and its `[firmware]` table), checked
+    /// by the firmware's parser first.
+    Load {
+        /// Plan file (TOML, e.g. plans/table2.toml).
+        file: PathBuf,
+    },
+    /// The parameters whose values differ from the defaults (or from a plan file's).
+    Diff {
+        /// Plan file to compare against (default: the firmware's defaults).
+        file: Option<PathBuf>,
+    },
 }
 
 /// `walker export`.
@@ -728,15 +739,46 @@ fn run_param(a: ParamArgs) -> Result<(), CliError> {
                 println!("{k}={v}");
             }
         }
-        ParamAction::Set { tokens } => {
-            for t in tokens {
-                let (k, v) = crate::param::split_token(&t).map_err(fail)?;
-                crate::param::set(&mut master, k, v).map_err(fail)?;
-                println!("{k}={v}");
+        ParamAction::Set { tokens } => set_tokens(&mut master, &tokens).map_err(fail)?,
+        ParamAction::Load { file } => {
+            let tokens = plan_tokens(&file).map_err(fail)?;
+            crate::param::expected(&tokens)
+                .map_err(|e| fail(format!("{}: {e}", file.display())))?;
+            set_tokens(&mut master, &tokens).map_err(fail)?;
+        }
+        ParamAction::Diff { file } => {
+            let tokens = match &file {
+                Some(f) => plan_tokens(f).map_err(fail)?,
+                None => Vec::new(),
+            };
+            let want = crate::param::expected(&tokens).map_err(fail)?;
+            let now = crate::param::list(&mut master).map_err(fail)?;
+            let against = file
+                .as_ref()
+                .map_or("the defaults".to_string(), |f| f.display().to_string());
+            for (k, f, e) in crate::param::diff(&now, &want) {
+                println!("{k}: firmware {f:?}, {against} {e:?}");
             }
         }
     }
     Ok(())
+}
+
+/// Sets `key=value` tokens in order, printing each; stops at the first refused.
+fn set_tokens(master: &mut crate::commands::PortMaster, tokens: &[String]) -> Result<(), String> {
+    for t in tokens {
+        let (k, v) = crate::param::split_token(t)?;
+        crate::param::set(master, k, v)?;
+        println!("{k}={v}");
+    }
+    Ok(())
+}
+
+/// A plan file's firmware tokens (its walk and its `[firmware]` table).
+fn plan_tokens(file: &Path) -> Result<Vec<String>, String> {
+    crate::planfile::load(file)
+        .and_then(|p| p.firmware_tokens())
+        .map_err(|e| format!("{}: {e}", file.display()))
 }
 
 /// What `fil`, `beyond` and `sweep` start from: the walk, the simulated robot, the QEMU run

@@ -122,6 +122,49 @@ pub fn list(link: &mut dyn ParamLink) -> Result<Vec<(String, String)>, String> {
     Ok(out)
 }
 
+/// Every parameter's value text in the configuration of `tokens` applied over the
+/// firmware's defaults (the firmware's parser: a bad token is an error), in the table's order.
+pub fn expected(tokens: &[String]) -> Result<Vec<(String, String)>, String> {
+    let mut cfg = walker_contract::Config::default();
+    let line = format!("walker {}", tokens.join(" "));
+    walker_contract::params::apply(&mut cfg, line.as_bytes()).map_err(|e| e.to_string())?;
+    Ok(walker_contract::params::PARAMS
+        .iter()
+        .map(|p| {
+            let mut v = String::new();
+            if let Some(x) = p.value(&cfg) {
+                let _ = p.write_value(x, &mut v);
+            }
+            (p.key.to_string(), v)
+        })
+        .collect())
+}
+
+/// The keys whose values differ: (key, the firmware's, the expected), in `firmware`'s order;
+/// a key missing on either side counts as differing (an empty value).
+pub fn diff(
+    firmware: &[(String, String)],
+    expected: &[(String, String)],
+) -> Vec<(String, String, String)> {
+    let find = |list: &[(String, String)], k: &str| {
+        list.iter()
+            .find(|(key, _)| key == k)
+            .map_or(String::new(), |(_, v)| v.clone())
+    };
+    let mut keys: Vec<&str> = firmware.iter().map(|(k, _)| k.as_str()).collect();
+    for (k, _) in expected {
+        if !keys.contains(&k.as_str()) {
+            keys.push(k);
+        }
+    }
+    keys.into_iter()
+        .filter_map(|k| {
+            let (f, e) = (find(firmware, k), find(expected, k));
+            (f != e).then(|| (k.to_string(), f, e))
+        })
+        .collect()
+}
+
 /// Splits `key=value`.
 pub fn split_token(t: &str) -> Result<(&str, &str), String> {
     t.split_once('=')
@@ -206,6 +249,15 @@ mod tests {
         assert!(e.contains("refused while a run is going"), "{e}");
         assert_eq!(format!("{:?}", r.cfg), format!("{:?}", Config::default()));
         assert_eq!(split_token("a=b=c").unwrap(), ("a", "b=c"));
+        // Diff: the firmware's list against the defaults and against the tokens it was given.
+        let mut f = firmware(false);
+        set(&mut f, "catch_gain", "0.5").unwrap();
+        let now = list(&mut f).unwrap();
+        let d = diff(&now, &expected(&[]).unwrap());
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert_eq!((d[0].0.as_str(), d[0].1.as_str()), ("catch_gain", "0.5"));
+        assert!(diff(&now, &expected(&["catch_gain=0.5".into()]).unwrap()).is_empty());
+        assert!(expected(&["catch_gain=9".into()]).is_err());
         assert!(split_token("=1").is_err() && split_token("a").is_err());
     }
 }
