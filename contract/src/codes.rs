@@ -282,6 +282,13 @@ impl StopReason {
         matches!(self, StopReason::Requested)
     }
 
+    /// The [`FaultKind::ServoProblem`] fault record's value for this reason: the stop code ·
+    /// 2²⁴ + the low 24 bits of its value.
+    pub fn servo_problem_value(&self) -> i32 {
+        let (code, _, value) = self.code();
+        (i32::from(code) << 24) | (value & 0x00FF_FFFF)
+    }
+
     /// Wire form (code, id, value) used by the log's stop record ([`StopCode`] for the codes).
     pub fn code(&self) -> (u8, u8, i32) {
         let c = self.kind().code();
@@ -397,6 +404,11 @@ pub enum FaultKind {
     /// `deadman_ms`, the walk stops to standing (`id` 0, `value` = ms since the last valid
     /// write); the command port's Stop Code then reads [`StopCode::Deadman`].
     Deadman,
+    /// 18: the servo monitor found a leg servo lost or beyond a limit (`id` = servo, `value` =
+    /// the stop code (14 lost, 11 fault) · 2²⁴ + the stop record's value for it, the low 24
+    /// bits); logged at the finding, whatever stop is already under way (the stop record
+    /// keeps the first reason).
+    ServoProblem,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -440,6 +452,7 @@ impl FaultKind {
             Self::Footstep => 15,
             Self::CatchStep => 16,
             Self::Deadman => 17,
+            Self::ServoProblem => 18,
             Self::Other(c) => c,
         }
     }
@@ -463,6 +476,7 @@ impl FaultKind {
             15 => Self::Footstep,
             16 => Self::CatchStep,
             17 => Self::Deadman,
+            18 => Self::ServoProblem,
             c => Self::Other(c),
         }
     }

@@ -498,6 +498,13 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
         K::Deadman => format!(
             "command deadman: no valid command write for {v} ms in Mode = walk; the walk stops to standing"
         ),
+        K::ServoProblem => {
+            let code = u8::try_from((v >> 24) & 0xFF).unwrap_or(0);
+            match walker_contract::StopReason::from_code(code, id, v & 0x00FF_FFFF) {
+                Some(r) => format!("servo monitor: {}", stop_words(&r)),
+                None => format!("servo monitor: servo {id}, stop code {code}"),
+            }
+        }
         K::Other(c) => format!("fault kind {c} (unknown to this reader): id {id}, value {v}"),
     }
 }
@@ -1559,6 +1566,39 @@ pub fn ranking(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_servo_problem_record_reads_as_its_stop_reason() {
+        use walker_contract::codes::ServoCheck;
+        use walker_contract::record::FaultRecord;
+        use walker_contract::{FaultKind, StopReason};
+        for r in [
+            StopReason::ServoLost { id: 4 },
+            StopReason::ServoFault {
+                id: 7,
+                check: ServoCheck::Temperature,
+                reading: 71,
+            },
+            StopReason::ServoFault {
+                id: 4,
+                check: ServoCheck::TorqueOff,
+                reading: 0,
+            },
+        ] {
+            let (_, id, _) = r.code();
+            let f = FaultRecord {
+                seq: 0,
+                time_us: 0,
+                kind: FaultKind::ServoProblem,
+                id,
+                value: r.servo_problem_value(),
+            };
+            assert_eq!(
+                super::fault_words(&f),
+                format!("servo monitor: {}", super::stop_words(&r))
+            );
+        }
+    }
+
     use super::*;
 
     /// `zmp_response.csv` written with the `csv` crate has the bytes of the hand-made one:

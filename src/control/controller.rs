@@ -353,6 +353,15 @@ impl<P: TickPath> Controller<'_, P> {
         let period = self.cfg.tick_period_us;
         if let Some(reason) = self.monitor.poll(bus, limits, period, &self.last_ticks) {
             crate::fw_log!(error, "servo fault: {}", reason);
+            let (_, id, _) = reason.code();
+            let now = bus.board().now_us();
+            let rec = fault(
+                now,
+                FaultKind::ServoProblem,
+                id,
+                reason.servo_problem_value(),
+            );
+            self.log.write(bus.board(), rec);
             self.sup.stop(reason);
         }
     }

@@ -2754,9 +2754,41 @@ fn a_leg_servo_dying_mid_walk_is_lost_within_50_ms_and_the_robot_lowered() {
         assert_goal_then_torque_once(&b, 4);
         assert!(torque_off_sent(&b));
         assert_goals_in_limits(&b);
+        // The finding is a fault record too: servo 4 lost (stop code 14), then, back limp,
+        // found with its torque off (stop code 11, check 6).
+        let p = faults_of(&recs, FaultKind::ServoProblem);
+        assert_eq!((p[0].id, p[0].value), (4, 14 << 24));
+        assert_eq!(p.len(), 2, "{p:?}");
+        assert_eq!((p[1].id, p[1].value), (4, (11 << 24) | (6 << 16)));
     }
     // Not all found at the same delay: the deaths did fall at different phases.
     assert!(delays.iter().max() > delays.iter().min(), "{delays:?}");
+}
+
+/// A leg servo lost while an operator's stop lowers the robot: the stop keeps its reason
+/// (`Requested`, the robot rests in the crouch) and the finding is in the log as a
+/// `ServoProblem` fault record (servo, stop code 14), within 50 ms of the death.
+#[test]
+fn a_servo_lost_during_an_operator_stop_is_logged() {
+    let cfg = Config {
+        stop_at_tick: Some(40),
+        ..autostart_config()
+    };
+    let mut b = board(&cfg);
+    b.kill_at = Some((4, walk_write(&cfg, 60)));
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Resting(StopReason::Requested));
+    let recs = b.records();
+    assert_eq!(stop_of(&recs), Some(StopReason::Requested));
+    let p = faults_of(&recs, FaultKind::ServoProblem);
+    assert_eq!(p.len(), 1, "{p:?}");
+    assert_eq!((p[0].id, p[0].value), (4, 14 << 24));
+    let died_us = u64::from(ticks_of(&recs)[ramp_ticks(&cfg) + 59].time_us);
+    assert!(
+        u64::from(p[0].time_us) >= died_us && u64::from(p[0].time_us) - died_us <= 50_000,
+        "found at {} µs, died at {died_us} µs",
+        p[0].time_us
+    );
 }
 
 /// A leg servo that browns out for one tick (fewer missed READs than `servo_misses`) comes back
