@@ -147,6 +147,19 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
     fn command_tx(&mut self, bytes: &[u8]) {
         let _ = bytes;
     }
+    /// Reads parameter slot `slot` (0 or 1, [`walker_contract::param_store`]) into `buf`
+    /// ([`walker_contract::param_store::SLOT_LEN`] bytes; a slot never written reads erased,
+    /// `0xFF`); false on a board without a parameter store (the default).
+    fn store_read(&mut self, slot: usize, buf: &mut [u8]) -> bool {
+        let _ = (slot, buf);
+        false
+    }
+    /// Writes `data` as parameter slot `slot` (erase, then program); false if the write failed
+    /// or the board has no parameter store (the default).
+    fn store_write(&mut self, slot: usize, data: &[u8]) -> bool {
+        let _ = (slot, data);
+        false
+    }
     /// The control tick enters `stage` (a profiler's mark: the bench meters each stage of the
     /// real tick). The robot boards ignore it (the default).
     #[inline(always)]

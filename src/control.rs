@@ -155,6 +155,8 @@ mod path;
 mod sense;
 #[cfg(not(feature = "board-opencm"))]
 mod servo_sense;
+#[cfg(not(feature = "board-opencm"))]
+mod store;
 
 use modes::Walk;
 
@@ -301,6 +303,15 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 /// "Parameters").
 pub fn run_on_enable<B: Board>(board: &mut B, cfg: &mut Config) -> RunEnd {
     let mut link = commanded::CommandLink::new();
+    // The saved parameters, loaded once (not on the OpenCM 9.04: no command port to set them,
+    // no flash for the parameter table's text).
+    #[cfg(not(feature = "board-opencm"))]
+    {
+        let found = store::load(board, cfg);
+        crate::fw_log!(info, "saved parameters: {}", found);
+        link.store_note = Some(found);
+        link.log_params = true;
+    }
     let mut last = None;
     loop {
         let state = match last {
@@ -352,7 +363,14 @@ pub fn standby<B: Board>(
         link.poll(board, &mut log);
         // The OpenCM 9.04 has no command port and no flash for the parameter table's text.
         #[cfg(not(feature = "board-opencm"))]
-        link.port.table.serve_param(ParamAccess::Settable(cfg));
+        {
+            link.port.table.serve_param(ParamAccess::Settable(cfg));
+            if link.port.table.take_save() {
+                let saved = store::save(board, cfg);
+                crate::fw_log!(info, "parameters saved: {}", saved);
+                link.port.table.finish_save(saved);
+            }
+        }
         let now = board.now_us();
         match (idle, board.enable_button()) {
             (Some(i), Some(level)) if level != i => {
@@ -391,6 +409,13 @@ pub fn run_with<B: Board>(
 ) -> RunEnd {
     let robot = Robot::reference();
     let mut log = LogWriter::new();
+    // The operator's configuration (before the servo-speed check adjusts the walk), logged
+    // after the start-up record where the runs log their parameters.
+    let given = cfg;
+    let params = ParamNotes {
+        cfg: link.log_params.then_some(given),
+        store: link.store_note.take(),
+    };
     // The watchdog runs from boot: the boards feed it in their wait loops, the dry run every
     // 256 samples, the loop every tick.
     board.start(cfg.watchdog_ms);
@@ -422,7 +447,7 @@ pub fn run_with<B: Board>(
     }
     let time = Cell::new(0);
     let mut bus = BoardMaster::new(board, &time, cfg);
-    let started = match start_up(&mut bus, &mut log, cfg, &boot, &timing) {
+    let started = match start_up(&mut bus, &mut log, cfg, &boot, &timing, &params) {
         Ok(s) => s,
         Err(end) => return end,
     };
@@ -505,12 +530,50 @@ struct Started {
 /// Start-up on the bus: 1. probe (start-up record, boot and timing notes; a missing device the
 /// walk needs stops), 2–4. Return Delay Time, position gains, present pose, goal = present,
 /// torque on. Any failure turns torque off and ends the run.
+/// What a run logs about its parameters after its start-up record.
+struct ParamNotes<'a> {
+    /// The configuration whose parameters that differ from the defaults are logged
+    /// (`ParamValue`), if the run logs them.
+    cfg: Option<&'a Config>,
+    /// The boot's load of the saved parameters (`ParamStore`), once.
+    store: Option<walker_contract::param_store::StoreOutcome>,
+}
+
+/// Logs `notes` ([`FaultKind::ParamStore`], then a [`FaultKind::ParamValue`] per parameter
+/// that differs from the defaults).
+#[cfg(not(feature = "board-opencm"))]
+fn log_param_notes<B: Board>(board: &mut B, log: &mut LogWriter, notes: &ParamNotes<'_>) {
+    const DEFAULTS: Config = Config::default_config();
+    let now = board.now_us();
+    if let Some(s) = notes.store {
+        log.write(
+            board,
+            fault(now, FaultKind::ParamStore, s.code(), s.value()),
+        );
+    }
+    let Some(cfg) = notes.cfg else {
+        return;
+    };
+    for (i, p) in crate::params::PARAMS.iter().enumerate() {
+        let v = p.value(cfg);
+        if v == p.value(&DEFAULTS) {
+            continue;
+        }
+        let (Some(v), Ok(i)) = (v, u8::try_from(i)) else {
+            continue;
+        };
+        let bits = (v.as_f64() as f32).to_bits() as i32;
+        log.write(board, fault(now, FaultKind::ParamValue, i, bits));
+    }
+}
+
 fn start_up<B: Board>(
     bus: &mut BoardMaster<'_, B>,
     log: &mut LogWriter,
     cfg: &Config,
     boot: &Boot,
     timing: &TimingCheck,
+    params: &ParamNotes<'_>,
 ) -> Result<Started, RunEnd> {
     let missing = startup::probe(bus, &DEVICE_IDS, cfg);
     {
@@ -518,7 +581,11 @@ fn start_up<B: Board>(
         let rec = startup_record(&*b, cfg, Some(&missing));
         log.write(b, rec);
         boot.write(b, log);
+        #[cfg(not(feature = "board-opencm"))]
+        log_param_notes(b, log, params);
     }
+    #[cfg(feature = "board-opencm")]
+    let _ = params;
     for (kind, id, value) in timing.notes().into_iter().map(startup::note_record) {
         let now = bus.board().now_us();
         log.write(bus.board(), fault(now, kind, id, value));

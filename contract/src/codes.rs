@@ -409,13 +409,24 @@ pub enum FaultKind {
     /// bits); logged at the finding, whatever stop is already under way (the stop record
     /// keeps the first reason).
     ServoProblem,
+    /// 19: the saved parameters at boot (`id` = [`crate::param_store::StoreOutcome`] code: 0
+    /// loaded, 1 none saved, 2 corrupt, 3 refused by the parser, 4 no store on this board;
+    /// `value` = the loaded slot · 2²⁴ + its sequence number); after the first start-up record
+    /// of a boot with `wait_enable`.
+    ParamStore,
+    /// 20: a parameter of this run that differs from the firmware's default (`id` = its index
+    /// in [`crate::params::PARAMS`], `value` = the f32 bits of the value as the setter takes
+    /// it: the number, or the word's index); after the start-up record of every run with
+    /// `wait_enable`.
+    ParamValue,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
 
 impl FaultKind {
     /// A fault, not an event of the walk nor a notice: false for [`FaultKind::CommandReceived`],
-    /// [`FaultKind::Footstep`], [`FaultKind::CatchStep`], [`FaultKind::ResetCause`] (logged at every boot) and the
+    /// [`FaultKind::Footstep`], [`FaultKind::CatchStep`], [`FaultKind::ResetCause`] (logged at every boot),
+    /// the saved parameters' notices [`FaultKind::ParamStore`] and [`FaultKind::ParamValue`] and the
     /// start-up's plan adjustments [`FaultKind::TimingStretched`] and
     /// [`FaultKind::SwingLowered`] (the servo-speed check made the plan fit; the default plan
     /// is stretched on the reference robot, so the port's Fault Kind would read 7 from boot).
@@ -427,6 +438,8 @@ impl FaultKind {
                 | Self::Footstep
                 | Self::CatchStep
                 | Self::ResetCause
+                | Self::ParamStore
+                | Self::ParamValue
                 | Self::TimingStretched
                 | Self::SwingLowered
         )
@@ -453,6 +466,8 @@ impl FaultKind {
             Self::CatchStep => 16,
             Self::Deadman => 17,
             Self::ServoProblem => 18,
+            Self::ParamStore => 19,
+            Self::ParamValue => 20,
             Self::Other(c) => c,
         }
     }
@@ -477,6 +492,8 @@ impl FaultKind {
             16 => Self::CatchStep,
             17 => Self::Deadman,
             18 => Self::ServoProblem,
+            19 => Self::ParamStore,
+            20 => Self::ParamValue,
             c => Self::Other(c),
         }
     }

@@ -34,7 +34,7 @@
 //! | 146 | 2 | Command Count | R | u16, accepted writes to the command registers (wraps) |
 //! | 160 | 24 | Param Key | RW | a run-time parameter's key (docs/parameters.md), ASCII, NUL-padded |
 //! | 184 | 16 | Param Value | RW | its value as token text (`0.25`, `on`), ASCII, NUL-padded |
-//! | 200 | 1 | Param Op | RW | a write runs it: [`ParamOp`] 1 get, 2 set, 3 get by index |
+//! | 200 | 1 | Param Op | RW | a write runs it: [`ParamOp`] 1 get, 2 set, 3 get by index, 4 save |
 //! | 201 | 1 | Param Status | R | [`ParamStatus`] of the last op: 0 done, 1 pending, ≥ 2 refused |
 //! | 202 | 2 | Param Index | RW | u16, the parameter of op 3 (0 ..= Param Count − 1) |
 //! | 204 | 2 | Param Count | R | u16, the number of run-time parameters |
@@ -66,7 +66,10 @@
 //! Param Key) with the value in force; a set parses and range-checks the value as the
 //! semihosting command line does and applies it to the configuration of the next run — only
 //! while no run is going (the firmware waits for the enable, `wait_enable`), else it is refused
-//! ([`ParamStatus::Running`]) and nothing changes.
+//! ([`ParamStatus::Running`]) and nothing changes. A save (op 4, between runs too) writes the
+//! configuration in force to the board's store ([`crate::param_store`]), loaded at the next
+//! boot: the table only takes the request ([`CommandTable::take_save`]); the firmware answers
+//! it ([`CommandTable::finish_save`]).
 //!
 //! Fixed-point units make a non-finite command unrepresentable on the wire; the typed
 //! accessors ([`CommandTable::velocity`]) return finite values in SI units only.
@@ -225,6 +228,8 @@ pub enum ParamOp {
     Set,
     /// 3: the key and the value of parameter number Param Index.
     GetByIndex,
+    /// 4: the configuration in force into the board's store (between runs only).
+    Save,
 }
 
 impl ParamOp {
@@ -234,6 +239,7 @@ impl ParamOp {
             ParamOp::Get => 1,
             ParamOp::Set => 2,
             ParamOp::GetByIndex => 3,
+            ParamOp::Save => 4,
         }
     }
 
@@ -243,6 +249,7 @@ impl ParamOp {
             1 => Some(ParamOp::Get),
             2 => Some(ParamOp::Set),
             3 => Some(ParamOp::GetByIndex),
+            4 => Some(ParamOp::Save),
             _ => None,
         }
     }
@@ -263,6 +270,8 @@ pub enum ParamStatus {
     OutOfRange,
     /// 5: a set while a run is going: refused, nothing changed.
     Running,
+    /// 6: the save failed (the board has no parameter store, or its write failed).
+    StoreFailed,
 }
 
 impl ParamStatus {
@@ -275,6 +284,7 @@ impl ParamStatus {
             ParamStatus::BadValue => 3,
             ParamStatus::OutOfRange => 4,
             ParamStatus::Running => 5,
+            ParamStatus::StoreFailed => 6,
         }
     }
 
@@ -287,6 +297,7 @@ impl ParamStatus {
             3 => Some(ParamStatus::BadValue),
             4 => Some(ParamStatus::OutOfRange),
             5 => Some(ParamStatus::Running),
+            6 => Some(ParamStatus::StoreFailed),
             _ => None,
         }
     }
@@ -300,6 +311,7 @@ impl ParamStatus {
             ParamStatus::BadValue => "bad value",
             ParamStatus::OutOfRange => "out of range",
             ParamStatus::Running => "refused while a run is going",
+            ParamStatus::StoreFailed => "the store failed",
         }
     }
 }
@@ -558,6 +570,8 @@ pub struct CommandTable {
     mode_writes: u16,
     /// A parameter op written and not served yet.
     param_op: Option<ParamOp>,
+    /// A save taken and not answered yet.
+    save: bool,
 }
 
 impl Default for CommandTable {
@@ -586,6 +600,7 @@ impl CommandTable {
             deadman: false,
             mode_writes: 0,
             param_op: None,
+            save: false,
         };
         let count = u16::try_from(crate::params::PARAMS.len()).unwrap_or(u16::MAX);
         t.put(PARAM_COUNT, &count.to_le_bytes());
@@ -705,6 +720,15 @@ impl CommandTable {
     fn param(&mut self, op: ParamOp, cfg: ParamAccess<'_>) -> ParamStatus {
         use crate::params::{find, ArgErrorKind, PARAMS};
         let param = match op {
+            ParamOp::Save => {
+                return match cfg {
+                    ParamAccess::ReadOnly(_) => ParamStatus::Running,
+                    ParamAccess::Settable(_) => {
+                        self.save = true;
+                        ParamStatus::Pending
+                    }
+                };
+            }
             ParamOp::GetByIndex => {
                 let i = usize::from(self.get_u16(PARAM_INDEX));
                 let Some(p) = PARAMS.get(i) else {
@@ -752,6 +776,22 @@ impl CommandTable {
         }
         self.put_text(PARAM_VALUE, &text);
         ParamStatus::Done
+    }
+
+    /// A save the firmware must run now (taken once; Param Status stays pending until
+    /// [`CommandTable::finish_save`]).
+    pub fn take_save(&mut self) -> bool {
+        core::mem::take(&mut self.save)
+    }
+
+    /// Answers a save: done, or [`ParamStatus::StoreFailed`].
+    pub fn finish_save(&mut self, saved: bool) {
+        let s = if saved {
+            ParamStatus::Done
+        } else {
+            ParamStatus::StoreFailed
+        };
+        self.put(PARAM_STATUS, &[s.code()]);
     }
 
     /// The ASCII text of a text register up to its first NUL (`None`: not ASCII).

@@ -193,6 +193,9 @@ pub struct Config {
     pub fault_nan_tick: Option<u32>,
     /// Fault injection: request a stop at this walk tick.
     pub stop_at_tick: Option<u32>,
+    /// Fault injection (QEMU board): the next parameter save loses power after this many
+    /// bytes of its slot (the firmware exits at once, as at a power cut).
+    pub fault_cut_save: Option<u32>,
     /// Longest time a sensor board may go without a plausible reply before the robot stops
     /// (`SensorStale`), ms.
     pub sensor_stale_ms: u32,
@@ -286,6 +289,7 @@ impl Config {
             arithmetic: Arithmetic::F32,
             fault_nan_tick: None,
             stop_at_tick: None,
+            fault_cut_save: None,
             fault_nan_com_tick: None,
             sensor_stale_ms: 100,
             force_factor: 6.0,

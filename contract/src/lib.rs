@@ -6,6 +6,7 @@
 //! * [`config`]: the firmware's run-time configuration;
 //! * [`params`]: the run-time parameter table (one declaration per key), its parser and the
 //!   docs' table;
+//! * [`param_store`]: the saved parameters (two CRC-checked copies in a board's store);
 //! * [`record`]: the ZMP-response log's wire format, its writer and its decoder.
 //!
 //! `no_std`, allocation-free and panic-free (no unwrap, expect or unchecked indexing outside
@@ -28,6 +29,7 @@ pub mod codes;
 pub mod command_port;
 pub mod config;
 pub mod footstep_log;
+pub mod param_store;
 pub mod params;
 pub mod record;
 

@@ -9,7 +9,8 @@
 //!
 //! Tokens are separated by spaces, tabs or NULs. The first token is skipped when it is not a
 //! `key=value` pair (qemu puts the kernel's file name first); the bare word `lockstep` is
-//! accepted anywhere (the board reads it); any other bare word is an error.
+//! accepted anywhere (the board reads it), as is `store=PATH` ([`STORE_WORD`], the QEMU board's
+//! parameter store); any other bare word is an error.
 //!
 //! Every range is physical: a walk parameter beyond it (`d2=1e38`, `h_z=10`) is refused here,
 //! naming the key, before gait-core sees the plan (gait-core then checks the walk as a whole:
@@ -1055,6 +1056,15 @@ params! {
         get: |c| { c.stop_at_tick.map(Value::Int) },
     },
     {
+        key: "cut_save",
+        plan_key: None,
+        unit: "B",
+        domain: int(0, 4096),
+        doc: "test: the next parameter save loses power after this many bytes of its slot (QEMU board)",
+        set: |c, v| { c.fault_cut_save = Some(v as u32) },
+        get: |c| { c.fault_cut_save.map(Value::Int) },
+    },
+    {
         key: "math",
         plan_key: None,
         unit: "",
@@ -1259,6 +1269,13 @@ pub const CMDLINE_MAX: usize = 1024;
 pub const fn cmdline_fits(kernel_len: usize, append_len: usize) -> bool {
     kernel_len + append_len + 2 <= CMDLINE_MAX
 }
+
+/// The fault-injection parameters (tests only): never saved ([`crate::param_store`]).
+pub const TEST_ONLY: [&str; 4] = ["fault_nan", "fault_nan_com", "stop_at", "cut_save"];
+
+/// A board's word, not a parameter: `store=PATH`, the host file prefix of the QEMU board's
+/// parameter store (`PATH0`, `PATH1`: [`crate::param_store`]'s two slots); [`apply`] skips it.
+pub const STORE_WORD: &str = "store";
 
 /// The parameter of `key`.
 pub fn find(key: &str) -> Option<&'static Param> {
@@ -1573,6 +1590,9 @@ pub fn apply(cfg: &mut Config, cmdline: &[u8]) -> Result<(), ArgError> {
             return Err(error(ArgErrorKind::StrayWord, tok, pos));
         };
         let (key, rest) = tok.split_at(eq);
+        if key == STORE_WORD.as_bytes() {
+            continue; // the board's (the QEMU board's parameter store)
+        }
         let val = rest.get(1..).unwrap_or(&[]);
         let (Ok(k), Ok(v)) = (core::str::from_utf8(key), core::str::from_utf8(val)) else {
             return Err(error(ArgErrorKind::BadValue, key, pos));

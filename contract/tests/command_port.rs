@@ -603,9 +603,9 @@ fn parameters_read_and_write_through_the_port_with_the_tables_checks() {
         t.serve_param(ParamAccess::ReadOnly(&cfg)),
         Some(ParamStatus::UnknownKey)
     );
-    // An op code outside 1 ..= 3 is Data Range; Param Status and Count are read-only.
+    // An op code outside 1 ..= 4 is Data Range; Param Status and Count are read-only.
     assert_eq!(
-        t.write(PARAM_OP.addr, &[4]),
+        t.write(PARAM_OP.addr, &[5]),
         Err(dxl::instruction::ErrorCode::DataRange)
     );
     assert_eq!(

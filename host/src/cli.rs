@@ -186,6 +186,9 @@ pub enum ParamAction {
         /// Plan file (TOML, e.g. plans/table2.toml).
         file: PathBuf,
     },
+    /// Saves the values in force to the board's store: the firmware loads them at its next
+    /// boot (two copies, a power cut loses nothing).
+    Save,
     /// The parameters whose values differ from the defaults (or from a plan file's).
     Diff {
         /// Plan file to compare against (default: the firmware's defaults).
@@ -740,6 +743,10 @@ fn run_param(a: ParamArgs) -> Result<(), CliError> {
             }
         }
         ParamAction::Set { tokens } => set_tokens(&mut master, &tokens).map_err(fail)?,
+        ParamAction::Save => {
+            crate::param::save(&mut master).map_err(fail)?;
+            println!("saved");
+        }
         ParamAction::Load { file } => {
             let tokens = plan_tokens(&file).map_err(fail)?;
             crate::param::expected(&tokens)

@@ -1,8 +1,9 @@
 //! `walker param`: the firmware's run-time parameters over its command port (the parameter
 //! registers of `walker_contract::command_port`, docs/command-port.md "Parameters"): list,
 //! get and set them by key, as `key=value` tokens — the semihosting command line's and the
-//! plan's `[firmware]` table's form. A set is refused while a run is going (the firmware
-//! serves sets only while it waits for the enable, `wait_enable`).
+//! plan's `[firmware]` table's form; save them to the board's store (loaded at its next boot).
+//! A set or a save is refused while a run is going (the firmware serves them only while it
+//! waits for the enable, `wait_enable`).
 
 use std::time::{Duration, Instant};
 
@@ -90,6 +91,15 @@ pub fn set(link: &mut dyn ParamLink, key: &str, value: &str) -> Result<(), Strin
     match run(link, key, value, ParamOp::Set)? {
         ParamStatus::Done => Ok(()),
         s => Err(format!("`{key}={value}`: {}", s.reason())),
+    }
+}
+
+/// Saves the configuration in force to the board's store (loaded at its next boot; between
+/// runs only).
+pub fn save(link: &mut dyn ParamLink) -> Result<(), String> {
+    match run(link, "", "", ParamOp::Save)? {
+        ParamStatus::Done => Ok(()),
+        s => Err(format!("save: {}", s.reason())),
     }
 }
 
@@ -184,6 +194,8 @@ mod tests {
         table: CommandTable,
         cfg: Config,
         running: bool,
+        store_ok: bool,
+        saves: usize,
     }
 
     impl ParamLink for Firmware {
@@ -195,6 +207,10 @@ mod tests {
                 ParamAccess::Settable(&mut self.cfg)
             };
             self.table.serve_param(access);
+            if self.table.take_save() {
+                self.saves += 1;
+                self.table.finish_save(self.store_ok);
+            }
             Ok(())
         }
         fn read(&mut self, addr: u16, len: u16) -> Result<Vec<u8>, String> {
@@ -210,6 +226,8 @@ mod tests {
             table: CommandTable::new(),
             cfg: Config::default(),
             running,
+            store_ok: true,
+            saves: 0,
         }
     }
 
@@ -259,5 +277,16 @@ mod tests {
         assert!(diff(&now, &expected(&["catch_gain=0.5".into()]).unwrap()).is_empty());
         assert!(expected(&["catch_gain=9".into()]).is_err());
         assert!(split_token("=1").is_err() && split_token("a").is_err());
+        // Save: done, refused during a run, or the store's failure.
+        let mut f = firmware(false);
+        save(&mut f).unwrap();
+        assert_eq!(f.saves, 1);
+        f.store_ok = false;
+        assert!(save(&mut f).unwrap_err().contains("the store failed"));
+        let mut r = firmware(true);
+        assert!(save(&mut r)
+            .unwrap_err()
+            .contains("refused while a run is going"));
+        assert_eq!(r.saves, 0);
     }
 }

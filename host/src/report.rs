@@ -498,6 +498,35 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
         K::Deadman => format!(
             "command deadman: no valid command write for {v} ms in Mode = walk; the walk stops to standing"
         ),
+        K::ParamStore => match id {
+            0 => format!(
+                "saved parameters loaded: slot {}, save number {}",
+                v >> 24,
+                v & 0x00FF_FFFF
+            ),
+            1 => "saved parameters: none saved, the defaults".into(),
+            2 => "saved parameters: CORRUPT (no copy decodes), the defaults".into(),
+            3 => "saved parameters: refused by the parser, the defaults".into(),
+            4 => "saved parameters: no store on this board, the defaults".into(),
+            c => format!("saved parameters: outcome {c}"),
+        },
+        K::ParamValue => {
+            let x = f32::from_bits(v as u32);
+            match walker_contract::params::PARAMS.get(usize::from(id)) {
+                Some(p) => {
+                    let mut text = String::new();
+                    let value = match p.domain {
+                        walker_contract::params::Domain::Word(_) => {
+                            walker_contract::params::Value::Word(x as usize)
+                        }
+                        _ => walker_contract::params::Value::Num32(x),
+                    };
+                    let _ = p.write_value(value, &mut text);
+                    format!("parameter {}={text}", p.key)
+                }
+                None => format!("parameter index {id} = {x}"),
+            }
+        }
         K::ServoProblem => {
             let code = u8::try_from((v >> 24) & 0xFF).unwrap_or(0);
             match walker_contract::StopReason::from_code(code, id, v & 0x00FF_FFFF) {

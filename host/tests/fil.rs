@@ -1577,29 +1577,9 @@ fn power_on_waits_for_the_enable_with_torque_off_on_mujoco() {
 fn parameters_set_over_the_command_port_are_the_next_runs_on_mujoco() {
     use walker_contract::command_port::{Mode, PortState, MODE};
     use walker_host::param;
-    let port_no = walker_host::fil::free_port().unwrap();
-    let opts = FilOptions {
-        elf: elf(),
-        spec: WalkSpec::default(),
-        out_dir: PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("param"),
-        machine: "mps2-an500".into(),
-        timeout: Duration::from_secs(600),
-        sim: SimConfig::default(),
-        extra_tokens: vec!["wait_enable=1".into()],
-    };
     let _slot = slot(1_000);
-    let run =
-        std::thread::spawn(move || walker_host::fil::run_command_port(&opts, port_no, |_, _| {}));
-    let mut m = walker_host::drive::connect(&format!("127.0.0.1:{port_no}"), None).unwrap();
-    m.wait_ready(Duration::from_secs(120)).unwrap();
-    let wait_for = |m: &mut walker_host::commands::PortMaster, want: PortState| {
-        let start = std::time::Instant::now();
-        while m.state().unwrap() != Some(want) {
-            assert!(start.elapsed() < Duration::from_secs(300), "no {want:?}");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
-    wait_for(&mut m, PortState::Waiting);
+    let (run, mut m) = port_run("param", &["wait_enable=1".to_string()]);
+    wait_state(&mut m, PortState::Waiting);
     assert_ne!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
     param::set(&mut m, "catch_gain", "0.5").unwrap();
     param::set(&mut m, "gyro_ankle", "0.04").unwrap();
@@ -1607,16 +1587,199 @@ fn parameters_set_over_the_command_port_are_the_next_runs_on_mujoco() {
     let e = param::set(&mut m, "gyro_ankle", "7").unwrap_err();
     assert!(e.contains("out of range"), "{e}");
     m.write(MODE.addr, &[Mode::Stand.code()]).unwrap();
-    wait_for(&mut m, PortState::Standing);
+    wait_state(&mut m, PortState::Standing);
     assert_eq!(param::get(&mut m, "gyro_ankle").unwrap(), "0.04");
     assert_eq!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
     let e = param::set(&mut m, "catch_gain", "0.3").unwrap_err();
     assert!(e.contains("refused while a run is going"), "{e}");
     m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
-    wait_for(&mut m, PortState::Resting);
+    wait_state(&mut m, PortState::Resting);
     m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
-    wait_for(&mut m, PortState::Stopped);
+    wait_state(&mut m, PortState::Stopped);
     m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
     let r = run.join().unwrap().expect("run");
     assert_eq!(r.exit_code, Some(17));
+}
+
+/// A `walker fil --command-port` run of the firmware with `tokens` (its output in
+/// `CARGO_TARGET_TMPDIR/name`), and a master connected to its command port once it answers.
+fn port_run(
+    name: &str,
+    tokens: &[String],
+) -> (
+    std::thread::JoinHandle<Result<FilResult, String>>,
+    walker_host::commands::PortMaster,
+) {
+    let port_no = walker_host::fil::free_port().unwrap();
+    let opts = FilOptions {
+        elf: elf(),
+        spec: WalkSpec::default(),
+        out_dir: PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name),
+        machine: "mps2-an500".into(),
+        timeout: Duration::from_secs(600),
+        sim: SimConfig::default(),
+        extra_tokens: tokens.to_vec(),
+    };
+    let run =
+        std::thread::spawn(move || walker_host::fil::run_command_port(&opts, port_no, |_, _| {}));
+    let mut m = walker_host::drive::connect(&format!("127.0.0.1:{port_no}"), None).unwrap();
+    m.wait_ready(Duration::from_secs(120)).unwrap();
+    (run, m)
+}
+
+/// Polls the port's State until `want` (at most 300 s). The firmware does not answer during
+/// a run's start-up (probe, servo-speed check): a READ that times out is followed by
+/// `wait_ready`, which drains the late replies before the next READ.
+fn wait_state(
+    m: &mut walker_host::commands::PortMaster,
+    want: walker_contract::command_port::PortState,
+) {
+    let start = std::time::Instant::now();
+    loop {
+        match m.state() {
+            Ok(s) if s == Some(want) => return,
+            Ok(_) => std::thread::sleep(Duration::from_millis(20)),
+            Err(_) => m.wait_ready(Duration::from_secs(300)).unwrap(),
+        }
+        assert!(start.elapsed() < Duration::from_secs(300), "no {want:?}");
+    }
+}
+
+/// Enable, stand, then the operator's three torque offs: rest, torque off, the end.
+fn one_run_then_off(m: &mut walker_host::commands::PortMaster) {
+    use walker_contract::command_port::{Mode, PortState, MODE};
+    m.write(MODE.addr, &[Mode::Stand.code()]).unwrap();
+    wait_state(m, PortState::Standing);
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    wait_state(m, PortState::Resting);
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    wait_state(m, PortState::Stopped);
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+}
+
+/// A log's `ParamStore` records (id, value) and `ParamValue` records (key, value).
+type ParamNotes = (Vec<(u8, i32)>, Vec<(String, f32)>);
+
+/// The log's `ParamStore` record (id, value) and `ParamValue` records (key, value).
+fn param_notes(r: &FilResult) -> ParamNotes {
+    use walker_contract::FaultKind;
+    let log = decode_file(&r.log).expect("log");
+    let mut store = Vec::new();
+    let mut values = Vec::new();
+    for rec in &log.events {
+        if let Record::Fault(f) = rec {
+            match f.kind {
+                FaultKind::ParamStore => store.push((f.id, f.value)),
+                FaultKind::ParamValue => values.push((
+                    walker_contract::params::PARAMS[usize::from(f.id)]
+                        .key
+                        .to_string(),
+                    f32::from_bits(f.value as u32),
+                )),
+                _ => {}
+            }
+        }
+    }
+    (store, values)
+}
+
+/// Parameters saved over the QEMU firmware's command port survive a restart: `catch_gain` and
+/// `gyro_ankle` set and saved (`walker param`'s functions) while it waits; the next boot reads
+/// them back and its run's log states them after the start-up record (`ParamStore` loaded,
+/// slot 0, save 1; `ParamValue` records); a damaged store boots with the defaults and says so
+/// (`ParamStore` corrupt).
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn saved_parameters_are_loaded_at_the_next_boot_and_a_corrupt_store_gives_the_defaults_on_mujoco() {
+    use walker_contract::command_port::{Mode, PortState, MODE};
+    use walker_contract::param_store::StoreOutcome;
+    use walker_host::param;
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("param-store");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let prefix = dir.join("slot-");
+    let tokens = vec![
+        "wait_enable=1".to_string(),
+        format!("store={}", prefix.display()),
+    ];
+    let _slot = slot(2_000);
+    // Boot 1: set, save, end.
+    let (run, mut m) = port_run("param-save-1", &tokens);
+    wait_state(&mut m, PortState::Waiting);
+    param::set(&mut m, "catch_gain", "0.5").unwrap();
+    param::set(&mut m, "gyro_ankle", "0.04").unwrap();
+    param::save(&mut m).unwrap();
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    run.join().unwrap().expect("boot 1");
+    assert!(dir.join("slot-0").is_file() && !dir.join("slot-1").exists());
+    // Boot 2: loaded; a run logs them.
+    let (run, mut m) = port_run("param-save-2", &tokens);
+    wait_state(&mut m, PortState::Waiting);
+    assert_eq!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
+    assert_eq!(param::get(&mut m, "gyro_ankle").unwrap(), "0.04");
+    one_run_then_off(&mut m);
+    let r = run.join().unwrap().expect("boot 2");
+    let (store, values) = param_notes(&r);
+    let loaded = StoreOutcome::Loaded { slot: 0, seq: 1 };
+    assert_eq!(store, vec![(loaded.code(), loaded.value())]);
+    assert!(values.contains(&("catch_gain".into(), 0.5)), "{values:?}");
+    assert!(values.contains(&("gyro_ankle".into(), 0.04)), "{values:?}");
+    // Boot 3: the store damaged: the defaults, and the log says so.
+    let mut bytes = std::fs::read(dir.join("slot-0")).unwrap();
+    bytes[20] ^= 0x55;
+    std::fs::write(dir.join("slot-0"), bytes).unwrap();
+    let (run, mut m) = port_run("param-save-3", &tokens);
+    wait_state(&mut m, PortState::Waiting);
+    let default = walker_host::param::expected(&[]).unwrap();
+    let want = &default.iter().find(|(k, _)| k == "catch_gain").unwrap().1;
+    assert_eq!(&param::get(&mut m, "catch_gain").unwrap(), want);
+    one_run_then_off(&mut m);
+    let r = run.join().unwrap().expect("boot 3");
+    let (store, values) = param_notes(&r);
+    assert_eq!(store, vec![(StoreOutcome::Corrupt.code(), 0)]);
+    assert!(!values.iter().any(|(k, _)| k == "catch_gain"), "{values:?}");
+}
+
+/// A power cut in the middle of a save (`cut_save=100`: QEMU exits after 100 bytes of the new
+/// slot, exit 99) loses nothing: the next boot loads the save before it.
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn a_power_cut_during_a_save_loses_nothing_on_mujoco() {
+    use walker_contract::command_port::{Mode, PortState, MODE};
+    use walker_host::param;
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("param-cut");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let prefix = dir.join("slot-");
+    let tokens = vec![
+        "wait_enable=1".to_string(),
+        format!("store={}", prefix.display()),
+    ];
+    let _slot = slot(1_000);
+    let (run, mut m) = port_run("param-cut-1", &tokens);
+    wait_state(&mut m, PortState::Waiting);
+    param::set(&mut m, "catch_gain", "0.5").unwrap();
+    param::save(&mut m).unwrap();
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    run.join().unwrap().expect("boot 1");
+    // Boot 2: a new value; its save is cut.
+    let mut cut = tokens.clone();
+    cut.push("cut_save=100".into());
+    let (run, mut m) = port_run("param-cut-2", &cut);
+    wait_state(&mut m, PortState::Waiting);
+    assert_eq!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
+    param::set(&mut m, "catch_gain", "0.25").unwrap();
+    assert!(
+        param::save(&mut m).is_err(),
+        "the save cannot answer: the power is gone"
+    );
+    let r = run.join().unwrap().expect("boot 2");
+    assert_eq!(r.exit_code, Some(99), "the power cut");
+    assert_eq!(std::fs::metadata(dir.join("slot-1")).unwrap().len(), 100);
+    // Boot 3: the first save.
+    let (run, mut m) = port_run("param-cut-3", &tokens);
+    wait_state(&mut m, PortState::Waiting);
+    assert_eq!(param::get(&mut m, "catch_gain").unwrap(), "0.5");
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    run.join().unwrap().expect("boot 3");
 }

@@ -306,6 +306,106 @@ fn contains_word(hay: &[u8], word: &[u8]) -> bool {
         .any(|w| w == word)
 }
 
+/// Longest path prefix of the parameter store's files, bytes.
+const STORE_PATH_MAX: usize = 200;
+
+/// The value of the first `key=value` token of `key` (the board's words, not parameters).
+fn word_value<'a>(hay: &'a [u8], key: &[u8]) -> Option<&'a [u8]> {
+    hay.split(|&b| b == b' ' || b == b'\t' || b == 0)
+        .find_map(|w| w.strip_prefix(key)?.strip_prefix(b"="))
+}
+
+/// The parameter store on the host through semihosting (`store=PATH` on the command line:
+/// slot `i` is the file `PATH{i}`; none without the word). A slot is written as a whole file
+/// (truncate, then write: the erase and the program of a flash sector); a missing or short
+/// file reads erased (`0xFF`) beyond what it holds.
+struct HostStore {
+    prefix: [u8; STORE_PATH_MAX],
+    len: usize,
+    /// Fault injection: the next write stops after this many bytes and the firmware exits (a
+    /// power cut).
+    cut: Option<u32>,
+}
+
+/// Semihosting SYS_OPEN modes (ARM's semihosting specification, the `fopen` modes).
+const OPEN_RB: usize = 1;
+const OPEN_WB: usize = 5;
+
+impl HostStore {
+    /// The NUL-terminated path of slot `slot` in `buf`; its length without the NUL.
+    fn path(&self, slot: usize, buf: &mut [u8; STORE_PATH_MAX + 2]) -> Option<usize> {
+        let digit = match slot {
+            0 => b'0',
+            1 => b'1',
+            _ => return None,
+        };
+        buf.get_mut(..self.len)?
+            .copy_from_slice(self.prefix.get(..self.len)?);
+        *buf.get_mut(self.len)? = digit;
+        *buf.get_mut(self.len + 1)? = 0;
+        Some(self.len + 1)
+    }
+
+    /// Opens slot `slot`'s file in `mode`; the handle.
+    fn open(&self, slot: usize, mode: usize) -> Option<usize> {
+        let mut p = [0u8; STORE_PATH_MAX + 2];
+        let n = self.path(slot, &mut p)?;
+        let args = [p.as_ptr() as usize, mode, n];
+        // SAFETY: SYS_OPEN (0x01) with its three-word block: a NUL-terminated path that lives
+        // for the call, the mode, the path's length.
+        let h = unsafe { cortex_m_semihosting::syscall(0x01, &args) };
+        (h as isize >= 0).then_some(h)
+    }
+
+    fn close(h: usize) {
+        // SAFETY: SYS_CLOSE (0x02) of a handle SYS_OPEN returned.
+        unsafe {
+            cortex_m_semihosting::syscall1(0x02, h);
+        }
+    }
+
+    fn read(&self, slot: usize, buf: &mut [u8]) -> bool {
+        buf.fill(0xFF);
+        let Some(h) = self.open(slot, OPEN_RB) else {
+            return true; // never written: erased
+        };
+        let args = [h, buf.as_mut_ptr() as usize, buf.len()];
+        // SAFETY: SYS_READ (0x06): handle, a buffer of `len` writable bytes, `len`. The host
+        // writes at most `len` bytes; the rest of a short file's buffer keeps its 0xFF.
+        unsafe {
+            cortex_m_semihosting::syscall(0x06, &args);
+        }
+        Self::close(h);
+        true
+    }
+
+    fn write(&mut self, slot: usize, data: &[u8]) -> bool {
+        let Some(h) = self.open(slot, OPEN_WB) else {
+            return false;
+        };
+        let (n, cut) = match self.cut.take() {
+            Some(c) => ((c as usize).min(data.len()), true),
+            None => (data.len(), false),
+        };
+        let args = [h, data.as_ptr() as usize, n];
+        // SAFETY: SYS_WRITE (0x05): handle, `n` readable bytes of `data`, `n`.
+        let left = unsafe { cortex_m_semihosting::syscall(0x05, &args) };
+        Self::close(h);
+        if cut {
+            defmt::warn!(
+                "power cut after {=usize} bytes of parameter slot {=usize}",
+                n,
+                slot
+            );
+            semihosting_exit(EXIT_POWER_CUT);
+        }
+        left == 0
+    }
+}
+
+/// Exit code of the injected power cut during a parameter save (`cut_save`).
+pub const EXIT_POWER_CUT: i32 = 99;
+
 /// Best-effort torque off from anywhere (panic handler): the broadcast Torque Enable = 0
 /// packet on UART0, with bounded spins so that a stuck UART cannot hang the panic path.
 pub fn panic_torque_off() {
@@ -346,6 +446,8 @@ pub struct QemuBoard {
     cpu_last_us: u32,
     cpu_max_us: u32,
     crash: CrashCell,
+    /// The parameter store on the host (`store=PATH`), if given.
+    store: Option<HostStore>,
     _syst: SYST,
 }
 
@@ -367,10 +469,23 @@ impl QemuBoard {
         ls.init(SYSCLK_HZ / 16);
 
         let mut cmd = [0u8; CMDLINE_MAX];
-        let lockstep = match semihosting_cmdline(&mut cmd) {
-            Some(n) => cmd.get(..n).is_some_and(|c| contains_word(c, b"lockstep")),
-            None => false,
-        };
+        let line = semihosting_cmdline(&mut cmd).and_then(|n| cmd.get(..n));
+        let lockstep = line.is_some_and(|c| contains_word(c, b"lockstep"));
+        let store_word = walker_contract::params::STORE_WORD.as_bytes();
+        let store = line
+            .and_then(|c| word_value(c, store_word))
+            .filter(|p| !p.is_empty() && p.len() <= STORE_PATH_MAX)
+            .map(|p| {
+                let mut prefix = [0u8; STORE_PATH_MAX];
+                if let Some(d) = prefix.get_mut(..p.len()) {
+                    d.copy_from_slice(p);
+                }
+                HostStore {
+                    prefix,
+                    len: p.len(),
+                    cut: cfg.fault_cut_save,
+                }
+            });
 
         let mut b = QemuBoard {
             bus,
@@ -393,6 +508,7 @@ impl QemuBoard {
             cpu_last_us: 0,
             cpu_max_us: 0,
             crash: CrashCell::new(),
+            store,
             _syst: syst,
         };
         b.cpu.resume();
@@ -646,6 +762,20 @@ impl Board for QemuBoard {
             }
         }
         self.cpu.resume();
+    }
+
+    fn store_read(&mut self, slot: usize, buf: &mut [u8]) -> bool {
+        match &self.store {
+            Some(s) => s.read(slot, buf),
+            None => false,
+        }
+    }
+
+    fn store_write(&mut self, slot: usize, data: &[u8]) -> bool {
+        match &mut self.store {
+            Some(s) => s.write(slot, data),
+            None => false,
+        }
     }
 
     fn exit(&mut self, code: i32) -> ! {

@@ -98,6 +98,12 @@ pub struct CommandLink {
     count: u16,
     /// Time of the last valid command write seen (µs, the board's clock).
     last_write_us: u64,
+    /// The runs log their parameters that differ from the defaults after their start-up
+    /// record (`ParamValue` records; [`super::run_on_enable`]'s runs).
+    pub log_params: bool,
+    /// What the boot's load of the saved parameters found, logged (`ParamStore`) after the
+    /// next start-up record.
+    pub store_note: Option<walker_contract::param_store::StoreOutcome>,
 }
 
 impl Default for CommandLink {
@@ -116,6 +122,8 @@ impl CommandLink {
             logged,
             count: 0,
             last_write_us: 0,
+            log_params: false,
+            store_note: None,
         }
     }
 

@@ -1478,6 +1478,10 @@ struct PortBoard {
     inner: FakeBoard,
     script: Vec<(usize, Vec<u8>)>,
     replies: Vec<(usize, Vec<u8>)>,
+    /// The parameter store's two slots (`None`: no store).
+    store: Option<[Vec<u8>; 2]>,
+    /// A power cut after this many bytes of the next slot write (erased, then this prefix).
+    store_cut: Option<usize>,
 }
 
 impl PortBoard {
@@ -1561,6 +1565,32 @@ impl Board for PortBoard {
         let t = self.tick();
         self.replies.push((t, bytes.to_vec()));
     }
+    fn store_read(&mut self, slot: usize, buf: &mut [u8]) -> bool {
+        let Some(store) = &self.store else {
+            return false;
+        };
+        buf.fill(0xFF);
+        let src = &store[slot];
+        let n = src.len().min(buf.len());
+        buf[..n].copy_from_slice(&src[..n]);
+        true
+    }
+    fn store_write(&mut self, slot: usize, data: &[u8]) -> bool {
+        let cut = self.store_cut.take();
+        let Some(store) = &mut self.store else {
+            return false;
+        };
+        match cut {
+            Some(n) => {
+                store[slot] = data[..n.min(data.len())].to_vec();
+                false
+            }
+            None => {
+                store[slot] = data.to_vec();
+                true
+            }
+        }
+    }
 }
 
 fn port_packet(ins: dxl::Instruction<'_>) -> Vec<u8> {
@@ -1639,6 +1669,8 @@ fn run_port_script(
         inner: board(cfg),
         script,
         replies: Vec::new(),
+        store: None,
+        store_cut: None,
     };
     let end = run(&mut b, cfg);
     assert_eq!(end, RunEnd::Resting(StopReason::Requested));
@@ -2167,6 +2199,8 @@ fn the_deadman_does_not_arm_for_the_autostart_plan() {
         inner: board(&cfg),
         script: vec![(10, write_mode(2))],
         replies: Vec::new(),
+        store: None,
+        store_cut: None,
     };
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::PlanDone));
@@ -2862,6 +2896,8 @@ fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_sto
         inner: board(&cfg),
         script,
         replies: Vec::new(),
+        store: None,
+        store_cut: None,
     };
     let last = crate::control::run_on_enable(&mut b, &mut cfg);
     assert_eq!(last, RunEnd::Stopped(StopReason::Requested));
@@ -2974,6 +3010,8 @@ fn a_parameter_set_while_waiting_is_the_next_runs_and_refused_during_it() {
         inner: board(&cfg),
         script,
         replies: Vec::new(),
+        store: None,
+        store_cut: None,
     };
     let last = crate::control::run_on_enable(&mut b, &mut cfg);
     assert_eq!(last, RunEnd::Stopped(StopReason::Requested));
@@ -3004,6 +3042,136 @@ fn a_parameter_set_while_waiting_is_the_next_runs_and_refused_during_it() {
         .count();
     let stopping = usize::from(cfg.supervisor.stopping_ticks);
     assert_eq!(stopped, 100 + stopping + 1, "lowering, hold, rest");
+}
+
+/// The saved parameters across reboots on a board with a store (two slots): a set and a save
+/// while waiting; the next boot loads them (`ParamStore` loaded, slot 0, sequence 1) and its
+/// run logs them after its start-up record (`ParamValue`, the f32 of the value); a save cut by
+/// a power loss after 100 bytes (Param Status 6) loses nothing: the boot after it loads the
+/// first save; both slots damaged: the defaults, and the log says so (`ParamStore` corrupt).
+#[test]
+fn saved_parameters_survive_a_reboot_and_a_cut_save_and_corrupt_ones_give_the_defaults() {
+    use walker_contract::command_port::{ParamOp, ParamStatus, PARAM_STATUS};
+    use walker_contract::param_store::StoreOutcome;
+    let read_status = || {
+        port_packet(dxl::Instruction::Read {
+            addr: PARAM_STATUS.addr,
+            len: 1,
+        })
+    };
+    let boot = |store: [Vec<u8>; 2], cut: Option<usize>, script: Vec<(usize, Vec<u8>)>| {
+        let mut cfg = Config {
+            wait_enable: true,
+            ..Config::default()
+        };
+        let mut b = PortBoard {
+            inner: board(&cfg),
+            script,
+            replies: Vec::new(),
+            store: Some(store),
+            store_cut: cut,
+        };
+        let end = crate::control::run_on_enable(&mut b, &mut cfg);
+        (b, cfg, end)
+    };
+    let index = |key: &str| {
+        crate::params::PARAMS
+            .iter()
+            .position(|p| p.key == key)
+            .unwrap() as u8
+    };
+    let param_values = |b: &PortBoard| -> Vec<(u8, f32)> {
+        faults_of(&b.inner.records(), FaultKind::ParamValue)
+            .iter()
+            .map(|f| (f.id, f32::from_bits(f.value as u32)))
+            .collect()
+    };
+    // Boot 1: set, save, then Mode = torque off while waiting ends it.
+    let (b1, cfg1, _) = boot(
+        [Vec::new(), Vec::new()],
+        None,
+        vec![
+            (10, param_packet("catch_gain", "0.5", ParamOp::Set)),
+            (11, param_packet("gyro_ankle", "0.04", ParamOp::Set)),
+            (12, param_packet("", "", ParamOp::Save)),
+            (14, read_status()),
+            (20, write_mode(0)),
+        ],
+    );
+    assert_eq!(
+        reply_of(&b1.replies[3].1),
+        (None, vec![ParamStatus::Done.code()])
+    );
+    assert_eq!(cfg1.step_adaptation.gain, 0.5);
+    let store = b1.store.clone().unwrap();
+    assert!(
+        !store[0].is_empty() && store[1].is_empty(),
+        "slot 0 written first"
+    );
+    // Boot 2: loaded; its run logs them after the start-up record.
+    let run = vec![
+        (10, write_mode(1)),
+        (400, write_mode(0)),
+        (1100, write_mode(0)),
+        (1110, write_mode(0)),
+    ];
+    let (b2, cfg2, end) = boot(store.clone(), None, run.clone());
+    assert_eq!(end, RunEnd::Stopped(StopReason::Requested));
+    assert_eq!(cfg2.step_adaptation.gain, 0.5);
+    let recs = b2.inner.records();
+    let loaded = faults_of(&recs, FaultKind::ParamStore);
+    let want = StoreOutcome::Loaded { slot: 0, seq: 1 };
+    assert_eq!((loaded[0].id, loaded[0].value), (want.code(), want.value()));
+    let values = param_values(&b2);
+    assert!(values.contains(&(index("catch_gain"), 0.5)), "{values:?}");
+    assert!(values.contains(&(index("gyro_ankle"), 0.04)), "{values:?}");
+    assert!(values.contains(&(index("wait_enable"), 1.0)), "{values:?}");
+    assert_eq!(
+        values.len(),
+        3,
+        "only what differs from the defaults: {values:?}"
+    );
+    // Right after the start-up record (and the boot's reset cause).
+    let start = recs
+        .iter()
+        .position(|r| matches!(r, Record::Startup(_)))
+        .unwrap();
+    assert!(recs[start + 1..start + 6]
+        .iter()
+        .any(|r| matches!(r, Record::Fault(f) if f.kind == FaultKind::ParamStore)));
+    // Boot 3: a new value, its save cut after 100 bytes (slot 1, erased then torn).
+    let (b3, _, _) = boot(
+        store.clone(),
+        Some(100),
+        vec![
+            (10, param_packet("catch_gain", "0.25", ParamOp::Set)),
+            (12, param_packet("", "", ParamOp::Save)),
+            (14, read_status()),
+            (20, write_mode(0)),
+        ],
+    );
+    assert_eq!(
+        reply_of(&b3.replies[2].1),
+        (None, vec![ParamStatus::StoreFailed.code()])
+    );
+    let torn = b3.store.clone().unwrap();
+    assert_eq!(torn[1].len(), 100);
+    // Boot 4: the first save loads.
+    let (b4, cfg4, _) = boot(torn.clone(), None, run.clone());
+    assert_eq!(cfg4.step_adaptation.gain, 0.5);
+    let loaded = faults_of(&b4.inner.records(), FaultKind::ParamStore);
+    assert_eq!((loaded[0].id, loaded[0].value), (want.code(), want.value()));
+    // Boot 5: both slots damaged: the defaults, said so.
+    let mut bad = torn;
+    bad[0][30] ^= 0x5A;
+    let (b5, cfg5, _) = boot(bad, None, run);
+    assert_eq!(
+        cfg5.step_adaptation.gain,
+        Config::default().step_adaptation.gain
+    );
+    let loaded = faults_of(&b5.inner.records(), FaultKind::ParamStore);
+    assert_eq!(loaded[0].id, StoreOutcome::Corrupt.code());
+    assert_eq!(param_values(&b5), vec![(index("wait_enable"), 1.0)]);
 }
 
 /// With `wait_enable` and no master, the board's button is the enable: torque stays off until
