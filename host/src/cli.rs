@@ -137,27 +137,36 @@ pub enum Command {
     /// (`--serial`, the OpenCR's UART connector) or the simulated robot started in the
     /// background (`--sim`: the firmware in QEMU against the MuJoCo robot). host/src/drive.rs.
     Drive(DriveArgs),
-    /// The firmware's run-time parameters over its command port: list, get, set (`key=value`,
-    /// docs/parameters.md).
+    /// The firmware's run-time parameters over its command port: list, get, set, load a plan,
+    /// diff, save (`key=value`, docs/parameters.md).
     ///
     /// On a TCP command port (`--connect`) or a serial port (`--serial`). A set is in force for
-    /// the next run and is refused while a run is going: the firmware serves sets while it waits
-    /// for the enable (`wait_enable=1`, the OpenCR build's default). host/src/param.rs.
+    /// the next run, a save for the next boot; both are refused while a run is going: the
+    /// firmware serves them while it waits for the enable (`wait_enable=1`, the OpenCR build's
+    /// default). host/src/param.rs.
     Param(ParamArgs),
+}
+
+/// The firmware's command port, on TCP or a serial port (`walker drive`, `walker param`).
+#[derive(Debug, Args)]
+pub struct PortArgs {
+    /// A command port on TCP, e.g. 127.0.0.1:5770 (`walker fil --command-port 5770`).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub connect: Option<String>,
+    /// A serial port, e.g. /dev/ttyUSB0 (the OpenCR's UART connector through a USB–TTL adapter).
+    #[arg(long, value_name = "DEV")]
+    pub serial: Option<String>,
+    /// Baud rate of --serial (the firmware's command UART runs at 1 Mbps).
+    #[arg(long, value_name = "BAUD", default_value_t = 1_000_000)]
+    pub baud: u32,
 }
 
 /// `walker param`.
 #[derive(Debug, Args)]
 pub struct ParamArgs {
-    /// A command port on TCP, e.g. 127.0.0.1:5770 (`walker fil --command-port 5770`).
-    #[arg(long, value_name = "HOST:PORT")]
-    pub connect: Option<String>,
-    /// A serial port, e.g. /dev/ttyUSB0.
-    #[arg(long, value_name = "DEV")]
-    pub serial: Option<String>,
-    /// Baud rate of --serial.
-    #[arg(long, value_name = "BAUD", default_value_t = 1_000_000)]
-    pub baud: u32,
+    /// The command port.
+    #[command(flatten)]
+    pub port: PortArgs,
     /// What to do.
     #[command(subcommand)]
     pub action: ParamAction,
@@ -558,15 +567,9 @@ pub struct PushesArgs {
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("port").required(true).args(["connect", "serial", "sim"])))]
 pub struct DriveArgs {
-    /// A command port on TCP, e.g. 127.0.0.1:5770 (`walker fil --command-port 5770`).
-    #[arg(long, value_name = "HOST:PORT")]
-    pub connect: Option<String>,
-    /// A serial port, e.g. /dev/ttyUSB0 (the OpenCR's UART connector through a USB–TTL adapter).
-    #[arg(long, value_name = "DEV")]
-    pub serial: Option<String>,
-    /// Baud rate of --serial (the firmware's command UART runs at 1 Mbps).
-    #[arg(long, value_name = "BAUD", default_value_t = 1_000_000)]
-    pub baud: u32,
+    /// The command port.
+    #[command(flatten)]
+    pub port: PortArgs,
     /// Start the simulated robot in the background (`walker fil --command-port`: the firmware in
     /// QEMU against the MuJoCo robot, its output in --out) and drive it; quitting stops the walk,
     /// turns the torque off (ending the run) and prints the run's figures.
@@ -720,9 +723,9 @@ pub fn run(command: Command) -> Result<(), CliError> {
 }
 
 fn run_param(a: ParamArgs) -> Result<(), CliError> {
-    let mut master = match (&a.connect, &a.serial) {
+    let mut master = match (&a.port.connect, &a.port.serial) {
         (Some(addr), _) => crate::drive::connect(addr, None),
-        (_, Some(dev)) => crate::commands::PortMaster::serial(dev, a.baud),
+        (_, Some(dev)) => crate::commands::PortMaster::serial(dev, a.port.baud),
         _ => Err("give --connect or --serial".to_string()),
     }
     .map_err(|e| CliError::failed(format!("walker param: {e}")))?;
@@ -1920,14 +1923,14 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
         false => None,
     };
     let wait = crate::drive::CONNECT_WAIT.as_secs();
-    let master = match (&a.connect, &a.serial, &mut sim) {
+    let master = match (&a.port.connect, &a.port.serial, &mut sim) {
         (Some(addr), _, _) => {
             eprintln!("walker drive: waiting for the firmware on {addr} (up to {wait} s) …");
             crate::drive::connect(addr, None)
         }
         (_, Some(dev), _) => {
-            eprintln!("walker drive: opening {dev} at {} baud …", a.baud);
-            crate::commands::PortMaster::serial(dev, a.baud)
+            eprintln!("walker drive: opening {dev} at {} baud …", a.port.baud);
+            crate::commands::PortMaster::serial(dev, a.port.baud)
         }
         (_, _, Some(run)) => {
             eprintln!(
@@ -1952,7 +1955,7 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
             return Err(CliError::failed(e));
         }
     };
-    let port_name = match (&a.connect, &a.serial, &sim) {
+    let port_name = match (&a.port.connect, &a.port.serial, &sim) {
         (Some(addr), _, _) => addr.clone(),
         (_, Some(dev), _) => dev.clone(),
         (_, _, Some(run)) => format!("127.0.0.1:{}", run.port),

@@ -1627,6 +1627,20 @@ fn port_run(
     (run, m)
 }
 
+/// A new, empty parameter store in `CARGO_TARGET_TMPDIR/name` (slots `slot-0`, `slot-1`) and
+/// the firmware tokens of a run that waits for the enable and keeps its parameters there.
+fn fresh_store(name: &str) -> (PathBuf, Vec<String>) {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let store = format!(
+        "{}={}",
+        walker_contract::params::STORE_WORD,
+        dir.join("slot-").display()
+    );
+    (dir, vec!["wait_enable=1".to_string(), store])
+}
+
 /// Polls the port's State until `want` (at most 300 s). The firmware does not answer during
 /// a run's start-up (probe, servo-speed check): a READ that times out is followed by
 /// `wait_ready`, which drains the late replies before the next READ.
@@ -1694,14 +1708,7 @@ fn saved_parameters_are_loaded_at_the_next_boot_and_a_corrupt_store_gives_the_de
     use walker_contract::command_port::{Mode, PortState, MODE};
     use walker_contract::param_store::StoreOutcome;
     use walker_host::param;
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("param-store");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let prefix = dir.join("slot-");
-    let tokens = vec![
-        "wait_enable=1".to_string(),
-        format!("store={}", prefix.display()),
-    ];
+    let (dir, tokens) = fresh_store("param-store");
     let _slot = slot(2_000);
     // Boot 1: set, save, end.
     let (run, mut m) = port_run("param-save-1", &tokens);
@@ -1747,14 +1754,7 @@ fn saved_parameters_are_loaded_at_the_next_boot_and_a_corrupt_store_gives_the_de
 fn a_power_cut_during_a_save_loses_nothing_on_mujoco() {
     use walker_contract::command_port::{Mode, PortState, MODE};
     use walker_host::param;
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("param-cut");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let prefix = dir.join("slot-");
-    let tokens = vec![
-        "wait_enable=1".to_string(),
-        format!("store={}", prefix.display()),
-    ];
+    let (dir, tokens) = fresh_store("param-cut");
     let _slot = slot(1_000);
     let (run, mut m) = port_run("param-cut-1", &tokens);
     wait_state(&mut m, PortState::Waiting);
