@@ -219,89 +219,41 @@ pub const WRITABLE: [Reg; 10] = [
     PARAM_INDEX,
 ];
 
-/// What a write of Param Op asks for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ParamOp {
-    /// 1: the value of Param Key into Param Value.
-    Get,
-    /// 2: Param Value into the parameter of Param Key (between runs only).
-    Set,
-    /// 3: the key and the value of parameter number Param Index.
-    GetByIndex,
-    /// 4: the configuration in force into the board's store (between runs only).
-    Save,
-}
-
-impl ParamOp {
-    /// The wire value.
-    pub const fn code(self) -> u8 {
-        match self {
-            ParamOp::Get => 1,
-            ParamOp::Set => 2,
-            ParamOp::GetByIndex => 3,
-            ParamOp::Save => 4,
-        }
-    }
-
-    /// From the wire value.
-    pub const fn from_code(c: u8) -> Option<Self> {
-        match c {
-            1 => Some(ParamOp::Get),
-            2 => Some(ParamOp::Set),
-            3 => Some(ParamOp::GetByIndex),
-            4 => Some(ParamOp::Save),
-            _ => None,
-        }
+crate::codes::wire_codes! {
+    /// What a write of Param Op asks for.
+    pub enum ParamOp {
+        /// The value of Param Key into Param Value.
+        Get = 1,
+        /// Param Value into the parameter of Param Key (between runs only).
+        Set = 2,
+        /// The key and the value of parameter number Param Index.
+        GetByIndex = 3,
+        /// The configuration in force into the board's store (between runs only).
+        Save = 4,
     }
 }
 
-/// The outcome of the last parameter op (Param Status).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ParamStatus {
-    /// 0: done (a get's text is in Param Value; a set is in force for the next run).
-    Done,
-    /// 1: written, not served yet (the firmware serves it at its next tick).
-    Pending,
-    /// 2: no parameter has this key (or Param Index is beyond the last).
-    UnknownKey,
-    /// 3: the value does not parse (number, word) or the text is not ASCII.
-    BadValue,
-    /// 4: the value parses but is outside the parameter's domain.
-    OutOfRange,
-    /// 5: a set while a run is going: refused, nothing changed.
-    Running,
-    /// 6: the save failed (the board has no parameter store, or its write failed).
-    StoreFailed,
+crate::codes::wire_codes! {
+    /// The outcome of the last parameter op (Param Status).
+    pub enum ParamStatus {
+        /// Done (a get's text is in Param Value; a set is in force for the next run).
+        Done = 0,
+        /// Written, not served yet (the firmware serves it at its next tick).
+        Pending = 1,
+        /// No parameter has this key (or Param Index is beyond the last).
+        UnknownKey = 2,
+        /// The value does not parse (number, word) or the text is not ASCII.
+        BadValue = 3,
+        /// The value parses but is outside the parameter's domain.
+        OutOfRange = 4,
+        /// A set while a run is going: refused, nothing changed.
+        Running = 5,
+        /// The save failed (the board has no parameter store, or its write failed).
+        StoreFailed = 6,
+    }
 }
 
 impl ParamStatus {
-    /// The wire value.
-    pub const fn code(self) -> u8 {
-        match self {
-            ParamStatus::Done => 0,
-            ParamStatus::Pending => 1,
-            ParamStatus::UnknownKey => 2,
-            ParamStatus::BadValue => 3,
-            ParamStatus::OutOfRange => 4,
-            ParamStatus::Running => 5,
-            ParamStatus::StoreFailed => 6,
-        }
-    }
-
-    /// From the wire value.
-    pub const fn from_code(c: u8) -> Option<Self> {
-        match c {
-            0 => Some(ParamStatus::Done),
-            1 => Some(ParamStatus::Pending),
-            2 => Some(ParamStatus::UnknownKey),
-            3 => Some(ParamStatus::BadValue),
-            4 => Some(ParamStatus::OutOfRange),
-            5 => Some(ParamStatus::Running),
-            6 => Some(ParamStatus::StoreFailed),
-            _ => None,
-        }
-    }
-
     /// In a few words.
     pub const fn reason(self) -> &'static str {
         match self {
@@ -674,7 +626,7 @@ impl CommandTable {
         }
         let mut param_op = None;
         if let Some(&[o]) = covered(PARAM_OP) {
-            param_op = Some(ParamOp::from_code(o).ok_or(ErrorCode::DataRange)?);
+            param_op = Some(ParamOp::try_from(o).map_err(|_| ErrorCode::DataRange)?);
         }
         let mut entry = None;
         if let Some(b) = covered(STEP_ENTRY) {

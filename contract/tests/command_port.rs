@@ -489,14 +489,17 @@ fn param_op(
     data[40] = op.code();
     t.write(PARAM_KEY.addr, &data).unwrap();
     let pending = t.read(PARAM_STATUS.addr, 1).unwrap()[0];
-    assert_eq!(ParamStatus::from_code(pending), Some(ParamStatus::Pending));
+    assert_eq!(
+        ParamStatus::try_from(pending).ok(),
+        Some(ParamStatus::Pending)
+    );
     let s = t.serve_param(cfg).expect("an op was pending");
     assert_eq!(
         t.serve_param(ParamAccess::ReadOnly(&walker_contract::Config::default())),
         None
     );
     let read = t.read(PARAM_STATUS.addr, 1).unwrap()[0];
-    assert_eq!(ParamStatus::from_code(read), Some(s));
+    assert_eq!(ParamStatus::try_from(read).ok(), Some(s));
     (s, text(t.read(PARAM_VALUE.addr, PARAM_VALUE.len).unwrap()))
 }
 

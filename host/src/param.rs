@@ -57,7 +57,7 @@ fn run(
         let s = link.read(PARAM_STATUS.addr, 1)?;
         let status = s
             .first()
-            .and_then(|&c| ParamStatus::from_code(c))
+            .and_then(|&c| ParamStatus::try_from(c).ok())
             .ok_or_else(|| format!("Param Status {s:?}: not a status"))?;
         if status != ParamStatus::Pending {
             return Ok(status);
@@ -117,7 +117,7 @@ pub fn list(link: &mut dyn ParamLink) -> Result<Vec<(String, String)>, String> {
         let start = Instant::now();
         loop {
             let s = link.read(PARAM_STATUS.addr, 1)?;
-            match s.first().and_then(|&c| ParamStatus::from_code(c)) {
+            match s.first().and_then(|&c| ParamStatus::try_from(c).ok()) {
                 Some(ParamStatus::Pending) if start.elapsed() < OP_WAIT => {
                     std::thread::sleep(Duration::from_millis(5))
                 }

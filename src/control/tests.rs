@@ -1485,6 +1485,17 @@ struct PortBoard {
 }
 
 impl PortBoard {
+    /// A fake robot with `script` on its command port and no parameter store.
+    fn new(cfg: &Config, script: Vec<(usize, Vec<u8>)>) -> Self {
+        PortBoard {
+            inner: board(cfg),
+            script,
+            replies: Vec::new(),
+            store: None,
+            store_cut: None,
+        }
+    }
+
     fn tick(&self) -> usize {
         self.inner.ticks.len()
     }
@@ -2892,13 +2903,7 @@ fn with_wait_enable_torque_waits_for_the_enable_and_the_port_answers_after_a_sto
         (end + 10, read(STATE)),
         (end + 20, write_mode(0)),
     ];
-    let mut b = PortBoard {
-        inner: board(&cfg),
-        script,
-        replies: Vec::new(),
-        store: None,
-        store_cut: None,
-    };
+    let mut b = PortBoard::new(&cfg, script);
     let last = crate::control::run_on_enable(&mut b, &mut cfg);
     assert_eq!(last, RunEnd::Stopped(StopReason::Requested));
     let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
@@ -3006,13 +3011,7 @@ fn a_parameter_set_while_waiting_is_the_next_runs_and_refused_during_it() {
         (off + 700, write_mode(0)),
         (off + 710, write_mode(0)),
     ];
-    let mut b = PortBoard {
-        inner: board(&cfg),
-        script,
-        replies: Vec::new(),
-        store: None,
-        store_cut: None,
-    };
+    let mut b = PortBoard::new(&cfg, script);
     let last = crate::control::run_on_enable(&mut b, &mut cfg);
     assert_eq!(last, RunEnd::Stopped(StopReason::Requested));
     let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
