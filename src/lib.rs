@@ -65,6 +65,7 @@ macro_rules! host_stub {
 pub mod board;
 pub mod bus;
 pub mod control;
+pub mod flash_store;
 pub mod imu;
 pub mod monitor;
 pub mod plausible;

@@ -523,6 +523,15 @@ pub struct SweepArgs {
     /// rows go to OUT/rows.csv for `--merge`.
     #[arg(long, value_name = "K/N", value_parser = crate::sweep::Shard::parse)]
     pub shard: Option<crate::sweep::Shard>,
+    /// Only these cases (names as in the table, comma-separated or repeated), e.g. to walk the
+    /// failing ones again.
+    #[arg(
+        long,
+        value_name = "NAME",
+        value_delimiter = ',',
+        conflicts_with = "merge"
+    )]
+    pub case: Vec<String>,
     /// No walks: the table of the rows.csv of these sweep folders (the shards of one sweep),
     /// written to OUT/sweep.md.
     #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["shard", "jobs"])]
@@ -1679,13 +1688,14 @@ fn run_sweep(a: SweepArgs) -> Result<(), CliError> {
     }
     let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
     let shard = a.shard.unwrap_or(Shard::ALL);
-    let n = sweep::shard_cases(a.family, shard).len();
+    let cases = sweep::shard_cases(a.family, shard, &a.case).map_err(CliError::failed)?;
+    let n = cases.len();
     eprintln!(
         "walker sweep: {plan_name}, {n} firmware-in-the-loop walks (shard {}/{}), {} at a time",
         shard.index, shard.count, a.jobs
     );
     let progress = Progress::stderr(n, "walking");
-    let rows = sweep::run(&opts, a.family, shard, usize::from(a.jobs), &progress)?;
+    let rows = sweep::walk_cases(&opts, &cases, usize::from(a.jobs), &progress)?;
     std::fs::create_dir_all(&out)
         .map_err(|e| CliError::failed(format!("{}: {e}", out.display())))?;
     sweep::write_rows(&out.join("rows.csv"), &rows).map_err(CliError::failed)?;
@@ -1728,7 +1738,8 @@ fn run_ablation(a: SweepArgs) -> Result<(), CliError> {
     if a.merge.is_empty() {
         let (opts, plan_name) = RunSetup::new("sweep", a.run)?.into_fil(out.clone());
         let shard = a.shard.unwrap_or(Shard::ALL);
-        let n = sweep::shard_cases(a.family, shard).len();
+        let cases = sweep::shard_cases(a.family, shard, &a.case).map_err(CliError::failed)?;
+        let n = cases.len();
         eprintln!(
             "walker sweep --ablate: {plan_name}, {} configurations × {n} walks (shard {}/{}), {} at a time",
             configs.len(),
@@ -1742,8 +1753,9 @@ fn run_ablation(a: SweepArgs) -> Result<(), CliError> {
             // Resume: the cases this folder's rows.csv already holds are not walked again.
             let rows_csv = o.out_dir.join("rows.csv");
             let done = sweep::read_rows(&rows_csv).unwrap_or_default();
-            let todo: Vec<sweep::SweepCase> = sweep::shard_cases(a.family, shard)
-                .into_iter()
+            let todo: Vec<sweep::SweepCase> = cases
+                .iter()
+                .copied()
                 .filter(|c| !done.iter().any(|r| r.name == c.name))
                 .collect();
             if !done.is_empty() {

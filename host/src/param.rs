@@ -16,6 +16,10 @@ use crate::commands::PortMaster;
 /// How long an op may stay pending (the firmware serves it at its next tick).
 pub const OP_WAIT: Duration = Duration::from_secs(2);
 
+/// How long a save may stay pending: a flash store erases a sector first (the OpenCR's 256 KiB
+/// sectors take seconds, while which its command port does not answer).
+pub const SAVE_WAIT: Duration = Duration::from_secs(30);
+
 /// The command port as the parameter tool sees it.
 pub trait ParamLink {
     /// WRITE `data` at `addr`, the status checked.
@@ -52,9 +56,23 @@ fn run(
     data[k..k + value.len()].copy_from_slice(value.as_bytes());
     data[k + v] = op.code();
     link.write(PARAM_KEY.addr, &data)?;
+    let wait = if op == ParamOp::Save {
+        SAVE_WAIT
+    } else {
+        OP_WAIT
+    };
     let start = Instant::now();
     loop {
-        let s = link.read(PARAM_STATUS.addr, 1)?;
+        // A read that fails while the op may still be pending is asked again (the board may
+        // be deaf while it serves it).
+        let s = match link.read(PARAM_STATUS.addr, 1) {
+            Ok(s) => s,
+            Err(_) if start.elapsed() < wait => {
+                std::thread::sleep(Duration::from_millis(20));
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
         let status = s
             .first()
             .and_then(|&c| ParamStatus::try_from(c).ok())
@@ -62,11 +80,8 @@ fn run(
         if status != ParamStatus::Pending {
             return Ok(status);
         }
-        if start.elapsed() >= OP_WAIT {
-            return Err(format!(
-                "`{key}`: not served within {} s",
-                OP_WAIT.as_secs()
-            ));
+        if start.elapsed() >= wait {
+            return Err(format!("`{key}`: not served within {} s", wait.as_secs()));
         }
         std::thread::sleep(Duration::from_millis(5));
     }
@@ -196,6 +211,8 @@ mod tests {
         running: bool,
         store_ok: bool,
         saves: usize,
+        /// Status reads left unanswered (a board busy erasing its flash).
+        deaf: usize,
     }
 
     impl ParamLink for Firmware {
@@ -214,6 +231,10 @@ mod tests {
             Ok(())
         }
         fn read(&mut self, addr: u16, len: u16) -> Result<Vec<u8>, String> {
+            if self.deaf > 0 {
+                self.deaf -= 1;
+                return Err("no status packet".into());
+            }
             self.table
                 .read(addr, len)
                 .map(<[u8]>::to_vec)
@@ -228,6 +249,7 @@ mod tests {
             running,
             store_ok: true,
             saves: 0,
+            deaf: 0,
         }
     }
 
@@ -280,7 +302,10 @@ mod tests {
         // Save: done, refused during a run, or the store's failure.
         let mut f = firmware(false);
         save(&mut f).unwrap();
-        assert_eq!(f.saves, 1);
+        // A board deaf for a few reads while it saves (a flash erase) is waited for.
+        f.deaf = 5;
+        save(&mut f).unwrap();
+        assert_eq!((f.saves, f.deaf), (2, 0));
         f.store_ok = false;
         assert!(save(&mut f).unwrap_err().contains("the store failed"));
         let mut r = firmware(true);

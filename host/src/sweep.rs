@@ -413,27 +413,30 @@ impl SweepRow {
     }
 }
 
-/// The cases of `family` in `shard`, in table order.
-pub fn shard_cases(family: Family, shard: Shard) -> Vec<SweepCase> {
-    family
-        .cases()
-        .into_iter()
-        .enumerate()
-        .filter(|(i, _)| shard.has(*i))
-        .map(|(_, c)| c)
-        .collect()
-}
-
-/// Walks the cases of `shard`, `jobs` at a time, and scores them (table order); `progress`
-/// counts the finished walks ([`run_cases`]).
-pub fn run(
-    opts: &FilOptions,
+/// The cases of `family` in `shard`, in table order; with `only` non-empty, just the cases of
+/// those names (an unknown name is an error).
+pub fn shard_cases(
     family: Family,
     shard: Shard,
-    jobs: usize,
-    progress: &Progress,
-) -> Result<Vec<SweepRow>, String> {
-    walk_cases(opts, &shard_cases(family, shard), jobs, progress)
+    only: &[String],
+) -> Result<Vec<SweepCase>, String> {
+    let all = family.cases();
+    if let Some(bad) = only
+        .iter()
+        .find(|n| !all.iter().any(|c| c.name == n.as_str()))
+    {
+        let names: Vec<&str> = all.iter().map(|c| c.name).collect();
+        return Err(format!(
+            "no sweep case '{bad}' in this family (its cases: {})",
+            names.join(", ")
+        ));
+    }
+    Ok(all
+        .into_iter()
+        .enumerate()
+        .filter(|(i, c)| shard.has(*i) && (only.is_empty() || only.iter().any(|n| n == c.name)))
+        .map(|(_, c)| c)
+        .collect())
 }
 
 /// Walks `cases` with `opts`, `jobs` at a time, and scores them (in the order given);
@@ -741,6 +744,25 @@ mod tests {
             assert!(Shard::parse(bad).is_err(), "{bad}");
         }
         assert!((0..n).all(|i| Shard::ALL.has(i)));
+    }
+
+    #[test]
+    fn named_cases_are_walked_in_table_order_and_unknown_names_refused() {
+        let names = |cs: Vec<SweepCase>| cs.iter().map(|c| c.name).collect::<Vec<_>>();
+        let all = shard_cases(Family::Servos, Shard::ALL, &[]).unwrap();
+        assert_eq!(all.len(), servo_cases().len());
+        let only = ["stiff-weak".to_string(), "nominal".to_string()];
+        let two = shard_cases(Family::Servos, Shard::ALL, &only).unwrap();
+        assert_eq!(names(two), ["nominal", "stiff-weak"]);
+        // The shard and the names both filter: case 0 (nominal) is in shard 1/2 only.
+        let half = Shard { index: 2, count: 2 };
+        assert!(shard_cases(Family::Servos, half, &only[1..])
+            .unwrap()
+            .is_empty());
+        let Err(e) = shard_cases(Family::Reference, Shard::ALL, &only) else {
+            panic!("a servo-family case accepted in the reference family");
+        };
+        assert!(e.contains("'stiff-weak'") && e.contains("torque-20"), "{e}");
     }
 
     /// Rows survive the CSV round trip bit for bit, NaN and a fall included, and the merge of

@@ -33,6 +33,8 @@
 use cortex_m_rt as _;
 use defmt_rtt as _;
 use embedded_hal::digital::{ErrorType, OutputPin};
+use embedded_storage::nor_flash as nor;
+use stm32f7xx_hal::flash::Flash;
 use stm32f7xx_hal::gpio::{Output, PushPull, PC9, PF15};
 use stm32f7xx_hal::pac;
 use stm32f7xx_hal::prelude::*;
@@ -42,6 +44,7 @@ use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
 use super::stm32::{self, register_blocks, stm32_board, BusUart, Stm32Bus, Stm32State};
 use crate::board::{Clock, LogRing, Watchdog, TORQUE_OFF_PACKET};
+use crate::flash_store::FlashStore;
 use crate::record::BoardId;
 use crate::Config;
 
@@ -62,6 +65,73 @@ pub const LOG_RING: usize = 1024;
 /// a byte at the slowest rate (9600 baud: 1.04 ms). Beyond it the bus is hung:
 /// [`BusError::Timeout`].
 pub const UART_SPIN_LIMIT: u32 = 1_000_000;
+
+/// The parameter store's region: sectors 6 and 7 of the F746ZG's single-bank flash (256 KiB
+/// each, 0x0808_0000 ..= 0x080F_FFFF, RM0385 "Embedded flash memory"), outside the image:
+/// memory.x ends the OpenCR's FLASH region at 0x0808_0000. Offset from the flash base.
+pub const STORE_OFFSET: u32 = 0x8_0000;
+/// The store region's first sector (slot i is sector 6 + i).
+pub const STORE_FIRST_SECTOR: u8 = 6;
+/// Bytes per store sector.
+pub const STORE_SECTOR_LEN: usize = 256 * 1024;
+/// The flash as the CPU reads it (AXIM).
+const FLASH_AXIM: u32 = 0x0800_0000;
+/// The watchdog's period while the store erases and programs, ms: the CPU fetches nothing
+/// from flash while a sector erases (it stalls until the erase ends, seconds for 256 KiB), so
+/// nothing can feed a 50 ms watchdog meanwhile.
+pub const STORE_WATCHDOG_MS: u32 = 16_000;
+
+/// Sectors 6 and 7 as an `embedded-storage` NOR flash (stm32f7xx-hal 0.8 does not implement
+/// the trait): byte reads through AXIM, sector erase and byte programming (x8 parallelism, any
+/// supply voltage) through the HAL's flash interface, locked again after each operation.
+struct StoreFlash<'a>(&'a mut Flash);
+
+impl nor::ErrorType for StoreFlash<'_> {
+    type Error = nor::NorFlashErrorKind;
+}
+
+impl nor::ReadNorFlash for StoreFlash<'_> {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        nor::check_read(self, offset, bytes.len())?;
+        let base = FLASH_AXIM + STORE_OFFSET + offset;
+        for (addr, b) in (base..).zip(bytes.iter_mut()) {
+            // SAFETY: `check_read` keeps addr inside sectors 6–7 of the F746ZG's flash,
+            // readable memory that no Rust object owns.
+            *b = unsafe { core::ptr::read_volatile(addr as *const u8) };
+        }
+        Ok(())
+    }
+    fn capacity(&self) -> usize {
+        2 * STORE_SECTOR_LEN
+    }
+}
+
+impl nor::NorFlash for StoreFlash<'_> {
+    const WRITE_SIZE: usize = 1;
+    const ERASE_SIZE: usize = STORE_SECTOR_LEN;
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        nor::check_erase(self, from, to)?;
+        let len = STORE_SECTOR_LEN as u32;
+        for k in from / len..to / len {
+            let sector = STORE_FIRST_SECTOR.saturating_add(k as u8);
+            self.0.unlock();
+            let r = self.0.blocking_erase_sector(sector);
+            self.0.lock();
+            r.map_err(|_| nor::NorFlashErrorKind::Other)?;
+        }
+        Ok(())
+    }
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        nor::check_write(self, offset, bytes.len())?;
+        self.0.unlock();
+        let r = self
+            .0
+            .blocking_program((STORE_OFFSET + offset) as usize, bytes);
+        self.0.lock();
+        r.map_err(|_| nor::NorFlashErrorKind::Other)
+    }
+}
 
 /// The Dynamixel direction pin as an `embedded-hal` 1.0 output (stm32f7xx-hal 0.8 pins only
 /// implement embedded-hal 0.2): PC9, high = transmit.
@@ -146,6 +216,9 @@ pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     baud: u32,
     tim: pac::TIM2,
     iwdg: IndependentWatchdog,
+    /// The watchdog's period since [`Watchdog::start`], ms.
+    watchdog_ms: u32,
+    flash: Flash,
     state: Stm32State,
     ring: LogRing<LOG_RING>,
 }
@@ -215,6 +288,8 @@ impl OpenCrBoard<DxlDir> {
             baud: cfg.bus_baud,
             tim,
             iwdg,
+            watchdog_ms: 0,
+            flash: Flash::new(dp.FLASH),
             state: Stm32State::new(cfg, reset_csr),
             ring: LogRing::new(),
         }
@@ -222,6 +297,20 @@ impl OpenCrBoard<DxlDir> {
 }
 
 impl<D: OutputPin> OpenCrBoard<D> {
+    /// A running watchdog's period set to `ms` (the counter reloaded once the new prescaler and
+    /// reload value are in force: IWDG_SR clear, at most 10 ms); nothing when it is not running.
+    fn watchdog_period(&mut self, ms: u32) {
+        if !self.state.watchdog_running {
+            return;
+        }
+        self.iwdg.start(ms.max(1).millis());
+        // SAFETY: a read of IWDG_SR (PVU, RVU: an update of PR or RLR under way).
+        let iwdg = unsafe { &*pac::IWDG::ptr() };
+        let start = self.now_us();
+        while iwdg.sr.read().bits() & 0b11 != 0 && self.now_us() < start + 10_000 {}
+        self.iwdg.feed();
+    }
+
     /// Moves log bytes from the ring to USART6 while its data register is free.
     fn pump_log(&mut self) {
         let u = usart6();
@@ -312,6 +401,7 @@ impl<D: OutputPin> Watchdog for OpenCrBoard<D> {
     fn start(&mut self, timeout_ms: u32) {
         if !self.state.watchdog_running {
             self.iwdg.start(timeout_ms.max(1).millis());
+            self.watchdog_ms = timeout_ms;
             self.state.watchdog_running = true;
         }
     }
@@ -372,6 +462,19 @@ stm32_board! {
                 }
                 u.tdr.write(|w| w.tdr().bits(u16::from(b)));
             }
+        }
+
+        fn store_read(&mut self, slot: usize, buf: &mut [u8]) -> bool {
+            FlashStore::new(StoreFlash(&mut self.flash)).is_some_and(|mut s| s.read(slot, buf))
+        }
+
+        fn store_write(&mut self, slot: usize, data: &[u8]) -> bool {
+            self.watchdog_period(STORE_WATCHDOG_MS);
+            let ok = FlashStore::new(StoreFlash(&mut self.flash))
+                .is_some_and(|mut s| s.write(slot, data));
+            self.watchdog_period(self.watchdog_ms);
+            defmt::info!("parameter store: slot {=usize} written {=bool}", slot, ok);
+            ok
         }
 
         fn exit(&mut self, code: i32) -> ! {
