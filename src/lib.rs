@@ -69,6 +69,7 @@ pub mod flash_store;
 pub mod imu;
 pub mod monitor;
 pub mod plausible;
+pub mod rx_ring;
 pub mod startup;
 pub mod supervisor;
 

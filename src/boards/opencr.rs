@@ -9,7 +9,7 @@
 //! | Dynamixel power switch (FET) | **PF15**, high = on | `BDPIN_DXL_PWR_EN` |
 //! | operator buttons (the enable) | **PC12** and **PG3**, inputs | `BDPIN_PUSH_SW_1`, `BDPIN_PUSH_SW_2` (the variant sources of different core versions swap the two names); either one enables: the standby takes the level found as released, whatever the polarity |
 //! | log UART | **USART6**, PC6 TX / PC7 RX (AF8) at 921 600 baud | Arduino header pins 1 (TX) / 0 (RX), `Serial1`; spare on this robot |
-//! | command port | **USART2**, PD5 TX / PD6 RX (AF7) at [`COMMAND_BAUD`] | the 4-pin "UART" connector of the OpenCR (Arduino `Serial2`, `huart_inst[DRV_UART_NUM_2]` in ROBOTIS' `drv_uart.c`), where ROBOTIS' BT-210/BT-410 modules and a USB–TTL adapter plug in |
+//! | command port | **USART2**, PD5 TX / PD6 RX (AF7) at [`COMMAND_BAUD`], received by DMA1 stream 5 (channel 4) into a [`COMMAND_RX_RING`]-byte ring | the 4-pin "UART" connector of the OpenCR (Arduino `Serial2`, `huart_inst[DRV_UART_NUM_2]` in ROBOTIS' `drv_uart.c`), where ROBOTIS' BT-210/BT-410 modules and a USB–TTL adapter plug in |
 //! | tick and µs clock | TIM2, 32-bit, free-running at 1 MHz | extended to 64 bits in software |
 //! | watchdog | IWDG (LSI ≈ 32 kHz) | started at boot (`control::run`), fed in the bus and tick waits, the dry run and each tick |
 //! | defmt | RTT (probe-rs) | |
@@ -46,6 +46,7 @@ use super::stm32::{self, register_blocks, stm32_board, BusUart, Stm32Bus, Stm32S
 use crate::board::{Clock, LogRing, Watchdog, TORQUE_OFF_PACKET};
 use crate::flash_store::FlashStore;
 use crate::record::BoardId;
+use crate::rx_ring::DmaRxCursor;
 use crate::Config;
 
 /// SYSCLK, Hz.
@@ -56,8 +57,62 @@ pub const HSE_HZ: u32 = 25_000_000;
 pub const LOG_BAUD: u32 = 921_600;
 /// Command port baud rate (USART2; the Dynamixel SDK's usual 1 Mbps).
 pub const COMMAND_BAUD: u32 = 1_000_000;
-/// Bytes read from the command port per tick at most (bounded work; the rest waits).
-pub const COMMAND_RX_PER_TICK: usize = 64;
+/// The command port's receive ring, bytes: DMA1 stream 5 fills it from USART2 without the CPU
+/// (10 ms of bytes at 1 Mbps; the loop reads it every tick, [`crate::rx_ring`]).
+pub const COMMAND_RX_RING: usize = 1024;
+/// DMA1 stream and channel of USART2_RX (RM0385, DMA1 request mapping: stream 5, channel 4).
+const COMMAND_RX_STREAM: usize = 5;
+/// Its channel.
+const COMMAND_RX_CHANNEL: u32 = 4;
+
+/// The ring's bytes. Written only by the DMA (after [`command_rx_dma_up`]), read only by
+/// `command_rx` with volatile loads.
+struct RxRing(core::cell::UnsafeCell<[u8; COMMAND_RX_RING]>);
+
+// SAFETY: the one writer is the DMA stream, the one reader the control loop (volatile loads
+// of single bytes: a byte is never torn).
+unsafe impl Sync for RxRing {}
+
+/// The command port's receive ring (in DTCM with the rest of .bss: the F7's DMAs reach DTCM
+/// through the Cortex-M7's AHB slave port).
+static COMMAND_RX: RxRing = RxRing(core::cell::UnsafeCell::new([0; COMMAND_RX_RING]));
+
+/// Starts DMA1 stream 5 copying every byte USART2 receives into [`COMMAND_RX`] in circular
+/// mode (peripheral to memory, bytes, memory increment, direct mode), and USART2's receive
+/// DMA request with overrun detection off (a byte the DMA was late for is overwritten, not a
+/// stopped receiver). Called once, from `OpenCrBoard::new`, after USART2 is up.
+fn command_rx_dma_up(dma: &pac::DMA1) {
+    // SAFETY: RCC.AHB1ENR read-modify-write (single core, before interrupts are used).
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.ahb1enr.modify(|_, w| w.dma1en().set_bit());
+    let Some(st) = dma.st.get(COMMAND_RX_STREAM) else {
+        return;
+    };
+    // SAFETY (each raw write below): whole-register values of the stream's CR, PAR, M0AR,
+    // NDTR and FCR and of DMA1_HIFCR as RM0385 "DMA controller" defines them; the stream is
+    // disabled (EN = 0) while it is configured.
+    st.cr.write(|w| unsafe { w.bits(0) });
+    let _ = stm32::spin(UART_SPIN_LIMIT, || st.cr.read().bits() & 1 == 0);
+    // Stream 5's flags in HIFCR: CFEIF5 (6), CDMEIF5 (8), CTEIF5 (9), CHTIF5 (10), CTCIF5 (11).
+    dma.hifcr.write(|w| unsafe { w.bits(0x0F40) });
+    let u = usart2();
+    st.par
+        .write(|w| unsafe { w.bits(core::ptr::addr_of!(u.rdr) as u32) });
+    st.m0ar
+        .write(|w| unsafe { w.bits(COMMAND_RX.0.get() as u32) });
+    st.ndtr.write(|w| unsafe { w.bits(COMMAND_RX_RING as u32) });
+    st.fcr.write(|w| unsafe { w.bits(0) });
+    // CHSEL = 4 (bits 25–27), MINC (10), CIRC (8); DIR = 00 (peripheral to memory), PSIZE =
+    // MSIZE = 00 (bytes), priority low.
+    let cr = (COMMAND_RX_CHANNEL << 25) | (1 << 10) | (1 << 8);
+    st.cr.write(|w| unsafe { w.bits(cr) });
+    st.cr.write(|w| unsafe { w.bits(cr | 1) });
+    // USART2: OVRDIS (CR3 bit 12, writable only with UE = 0) and DMAR (CR3 bit 6).
+    u.cr1.modify(|_, w| w.ue().clear_bit());
+    u.cr3
+        .modify(|r, w| unsafe { w.bits(r.bits() | (1 << 12) | (1 << 6)) });
+    u.cr1.modify(|_, w| w.ue().set_bit());
+}
 /// Log ring buffer size, bytes (≈ 25 tick records).
 pub const LOG_RING: usize = 1024;
 /// Longest busy-wait on a bus UART flag (TXE, TC), loop iterations: one iteration is a few
@@ -219,6 +274,8 @@ pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     /// The watchdog's period since [`Watchdog::start`], ms.
     watchdog_ms: u32,
     flash: Flash,
+    /// Where the loop stopped reading the command port's receive ring.
+    command_rx: DmaRxCursor<COMMAND_RX_RING>,
     state: Stm32State,
     ring: LogRing<LOG_RING>,
 }
@@ -267,6 +324,7 @@ impl OpenCrBoard<DxlDir> {
             gpiod.pd6.into_alternate::<7>(),
         );
         uart_up(dp.USART2, cmd_pins, &clocks, COMMAND_BAUD);
+        command_rx_dma_up(&dp.DMA1);
 
         // TIM2: 32-bit free-running µs counter. APB1 timers run at 2 × PCLK1.
         // SAFETY: enabling the TIM2 clock in RCC.APB1ENR (read-modify-write, single core,
@@ -290,6 +348,7 @@ impl OpenCrBoard<DxlDir> {
             iwdg,
             watchdog_ms: 0,
             flash: Flash::new(dp.FLASH),
+            command_rx: DmaRxCursor::new(),
             state: Stm32State::new(cfg, reset_csr),
             ring: LogRing::new(),
         }
@@ -431,17 +490,24 @@ stm32_board! {
         }
 
         fn command_rx(&mut self, buf: &mut [u8]) -> usize {
-            let u = usart2();
-            let _ = Usart(u).clear_errors(&u.isr.read());
-            let mut n = 0;
-            for slot in buf.iter_mut().take(COMMAND_RX_PER_TICK) {
-                if !u.isr.read().rxne().bit_is_set() {
-                    break;
-                }
-                *slot = (u.rdr.read().rdr().bits() & 0xFF) as u8;
-                n += 1;
-            }
-            n
+            // SAFETY: a read of DMA1 stream 5's NDTR (the stream belongs to the command port).
+            let dma = unsafe { &*pac::DMA1::ptr() };
+            let remaining = dma
+                .st
+                .get(COMMAND_RX_STREAM)
+                .map_or(usize::MAX, |st| (st.ndtr.read().bits() & 0xFFFF) as usize);
+            // The bytes before the DMA's position are written before NDTR moved past them.
+            core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::Acquire);
+            let ring = COMMAND_RX.0.get() as *const u8;
+            self.command_rx.take(
+                remaining,
+                |i| {
+                    // SAFETY: i < COMMAND_RX_RING (the cursor's invariant); a volatile byte
+                    // load of memory only the DMA writes.
+                    unsafe { core::ptr::read_volatile(ring.add(i.min(COMMAND_RX_RING - 1))) }
+                },
+                buf,
+            )
         }
 
         fn enable_button(&mut self) -> Option<bool> {
