@@ -382,6 +382,15 @@ impl PortMaster {
         self.stream
             .write_all(buf.get(..n).unwrap_or(&[]))
             .map_err(|e| format!("command port: {e}"))?;
+        // The data length an OK status of this instruction carries: an OK status of another
+        // length is the late reply to an earlier instruction (one sent again after its
+        // timeout) and is skipped, not taken for this one's.
+        let expect = match ins {
+            Instruction::Ping => Some(3),
+            Instruction::Read { len, .. } => Some(usize::from(len)),
+            Instruction::Write { .. } => Some(0),
+            _ => None,
+        };
         let start = Instant::now();
         let mut byte = [0u8; 1];
         while start.elapsed() < self.timeout {
@@ -390,7 +399,11 @@ impl PortMaster {
                 Ok(_) => {
                     if let Some(Ok(p)) = self.decoder.push(byte[0]) {
                         let s = Status::from_packet(&p).map_err(|e| format!("{e:?}"))?;
-                        return Ok((s.error.code, s.data.to_vec()));
+                        let late =
+                            s.error.code.is_none() && expect.is_some_and(|n| n != s.data.len());
+                        if !late {
+                            return Ok((s.error.code, s.data.to_vec()));
+                        }
                     }
                 }
                 Err(e)
@@ -734,6 +747,63 @@ pub fn replay_footsteps(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A stream whose reads give `rx` (then time out) and whose writes are dropped.
+    struct Scripted {
+        rx: std::collections::VecDeque<u8>,
+    }
+
+    impl Read for Scripted {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            match (self.rx.pop_front(), buf.first_mut()) {
+                (Some(b), Some(slot)) => {
+                    *slot = b;
+                    Ok(1)
+                }
+                _ => Err(std::io::ErrorKind::TimedOut.into()),
+            }
+        }
+    }
+
+    impl Write for Scripted {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// A late reply (the status of a WRITE sent again after its timeout) waiting on the line
+    /// is not taken for the next READ's, nor a late READ reply for a WRITE's; an error status
+    /// (no data) is still the READ's answer.
+    #[test]
+    fn a_late_reply_of_another_length_is_not_taken_for_this_instructions() {
+        let status = |error: dxl::StatusError, data: &[u8]| {
+            let mut b = [0u8; 64];
+            let n = dxl::instruction::encode_status(&mut b, PORT_ID, error, data).unwrap();
+            b[..n].to_vec()
+        };
+        let ok = dxl::StatusError::OK;
+        let master = |bytes: Vec<u8>| {
+            let mut m = PortMaster::on(Box::new(Scripted { rx: bytes.into() }));
+            m.timeout = Duration::from_millis(200);
+            m
+        };
+        let mut m = master([status(ok, &[]), status(ok, &[7])].concat());
+        assert_eq!(m.read(201, 1), Ok(vec![7]));
+        let mut m = master([status(ok, &[1, 2]), status(ok, &[])].concat());
+        assert_eq!(m.write(200, &[1]), Ok(()));
+        let range = dxl::StatusError {
+            alert: false,
+            code: Some(ErrorCode::DataRange),
+        };
+        let mut m = master(status(range, &[]));
+        assert!(m.read(201, 1).unwrap_err().contains("DataRange"));
+        // Only late replies: no answer at all.
+        let mut m = master(status(ok, &[]));
+        assert!(m.read(201, 1).unwrap_err().contains("no reply"));
+    }
 
     /// Every shipped file in plans/ loads as what its name says: `commands-*.toml` a command
     /// script whose velocities fit the port, `run-*.toml` a run configuration (its own
