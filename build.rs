@@ -12,7 +12,8 @@
 //!   `DEFINED(_walker_qemu_mps2)`, and this script passes `--defsym=_walker_qemu_mps2=1` for
 //!   `board-qemu`; likewise `--defsym=_walker_opencm=1` selects the ROBOTIS OpenCM 9.04's
 //!   layout for `board-opencm` (FLASH 0x0800_3000 114 KiB after ROBOTIS' bootloader, RAM
-//!   20 KiB). The chosen layout is still copied to OUT_DIR (`memory.x`, first on the
+//!   20 KiB), and `--defsym=_walker_opencr_boot=1` the OpenCR's after ROBOTIS' USB bootloader
+//!   for `opencr-bootloader` (FLASH 0x0804_0000, 256 KiB: sector 5). The chosen layout is still copied to OUT_DIR (`memory.x`, first on the
 //!   search path) for builds whose linker runs elsewhere, and the mps2 one is written there
 //!   as `memory-qemu-mps2.x` for reference.
 use std::env;
@@ -82,6 +83,9 @@ fn main() {
     }
     if opencm {
         println!("cargo:rustc-link-arg-bins=--defsym=_walker_opencm=1");
+    }
+    if env::var_os("CARGO_FEATURE_OPENCR_BOOTLOADER").is_some() {
+        println!("cargo:rustc-link-arg-bins=--defsym=_walker_opencr_boot=1");
     }
 
     if qemu || opencr || opencm {

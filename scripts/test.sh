@@ -64,6 +64,9 @@ cargo clippy --release --no-deps --no-default-features --features board-qemu,fix
 cargo build --release --no-default-features --features board-qemu,fixed-gait --bin qemu
 cp "$target/thumbv7em-none-eabihf/release/qemu" "$target/thumbv7em-none-eabihf/release/qemu-fixed"
 cargo build --release --no-default-features --features board-qemu --bin qemu
+# The OpenCR image for ROBOTIS' USB bootloader (`walker flash`): sector 5 only, kept as opencr-boot.
+cargo build --release --no-default-features --features board-opencr,opencr-bootloader --bin opencr
+cp "$target/thumbv7em-none-eabihf/release/opencr" "$target/thumbv7em-none-eabihf/release/opencr-boot"
 cargo build --release --no-default-features --features board-opencr --bin opencr
 # The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
 # ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3).
@@ -73,11 +76,12 @@ cargo build "${m3[@]}" --features board-opencm --bin opencm
 cargo clippy "${m3[@]}" --no-deps --features board-qemu,fixed-gait --bins -- -D warnings
 cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
 
-step "firmware sizes: flash and static RAM of every board build (the FPU-less M3 board, OpenCM 9.04: ≤ 112 KiB flash, ≤ 16 KiB RAM)"
+step "firmware sizes: flash and static RAM of every board build (the FPU-less M3 board, OpenCM 9.04: ≤ 112 KiB flash, ≤ 16 KiB RAM; the OpenCR image for its bootloader ≤ 256 KiB)"
 python3 scripts/sizes.py \
     "$target/thumbv7em-none-eabihf/release/qemu" \
     "$target/thumbv7em-none-eabihf/release/qemu-fixed" \
     "$target/thumbv7em-none-eabihf/release/opencr" \
+    --limit 256:320 "$target/thumbv7em-none-eabihf/release/opencr-boot" \
     "$target/thumbv7m-none-eabi/release-m3/qemu" \
     --limit 112:16 "$target/thumbv7m-none-eabi/release-m3/opencm"
 # The limit check itself must be able to fail: the qemu ELF is far over 1 KiB of flash.
