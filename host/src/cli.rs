@@ -145,6 +145,47 @@ pub enum Command {
     /// firmware serves them while it waits for the enable (`wait_enable=1`, the OpenCR build's
     /// default). host/src/param.rs.
     Param(ParamArgs),
+    /// Flash a firmware image onto the OpenCR 1.0 through ROBOTIS' USB bootloader (no probe).
+    ///
+    /// Speaks the bootloader's protocol (ROBOTIS' opencr_ld: MAVLink v1 messages over the
+    /// board's USB CDC port): board name and version, erase of the sectors the image covers
+    /// from sector 5 (0x0804_0000), 16 KiB blocks in 128-byte packets, the bootloader's CRC,
+    /// a byte-for-byte read-back, the jump to the firmware. The walker firmware has no USB
+    /// stack: hold the push switch SW2 while pressing RESET to stay in the bootloader
+    /// (docs/boards.md). host/src/opencr_boot.rs.
+    Flash(FlashArgs),
+}
+
+/// `walker flash`.
+#[derive(Debug, Args)]
+pub struct FlashArgs {
+    /// The OpenCR's USB port (its CDC ACM device: /dev/ttyACM0, /dev/cu.usbmodem…, COM5).
+    #[arg(long, value_name = "DEV")]
+    pub serial: String,
+    /// Firmware image: an ELF (its loadable bytes from 0x0804_0000) or a raw binary for 0x0804_0000.
+    #[arg(value_name = "IMAGE")]
+    pub image: PathBuf,
+    /// Stay in the bootloader after the checks (do not start the firmware).
+    #[arg(long)]
+    pub no_jump: bool,
+    /// Largest image accepted, KiB (256: sector 5 only; a larger image erases sector 6, the saved parameters' first slot).
+    #[arg(long, value_name = "KIB", default_value_t = 256,
+          value_parser = clap::value_parser!(u32).range(1..=768))]
+    pub limit_kib: u32,
+    /// Baud rate the port is opened at (the board's USB CDC port ignores it).
+    #[arg(long, value_name = "BAUD", default_value_t = 115_200,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub baud: u32,
+    /// Skip the 1200-baud touch (open at 1200, send "OpenCR 5555AAAA", close, wait 1.5 s) that resets an Arduino sketch into the bootloader.
+    #[arg(long)]
+    pub no_touch: bool,
+    /// Skip the byte-for-byte read-back (the bootloader's own CRC misses over 40 % of single-bit errors).
+    #[arg(long)]
+    pub no_read_back: bool,
+    /// Block size, KiB: 16 fills the bootloader's buffer; ROBOTIS' opencr_ld sends 8.
+    #[arg(long, value_name = "KIB", default_value_t = 16,
+          value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub block_kib: u32,
 }
 
 /// The firmware's command port, on TCP or a serial port (`walker drive`, `walker param`).
@@ -728,7 +769,136 @@ pub fn run(command: Command) -> Result<(), CliError> {
         Command::Speed(a) => run_speed(a),
         Command::Drive(a) => run_drive(a),
         Command::Param(a) => run_param(a),
+        Command::Flash(a) => run_flash(a),
     }
+}
+
+/// How long `walker flash` tries to open the port (after the touch: the board re-enumerates).
+const FLASH_OPEN_WAIT: Duration = Duration::from_secs(5);
+
+fn run_flash(a: FlashArgs) -> Result<(), CliError> {
+    use crate::opencr_boot as boot;
+    let fail = |e: String| CliError::failed(format!("walker flash: {e}"));
+    let shown = a.image.display().to_string();
+    let bytes = match std::fs::read(&a.image) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(fail(format!("image {shown} not found")))
+        }
+        Err(e) => return Err(fail(format!("cannot read {shown}: {e}"))),
+    };
+    let (image, kind) = boot::load_image(&bytes).map_err(|e| fail(format!("{shown}: {e}")))?;
+    let limit = a.limit_kib as usize * 1024;
+    // Checked here too (the client checks again) so that nothing touches the port.
+    if image.len() > limit {
+        return Err(fail(format!(
+            "{shown}: the image is {} B ({:.1} KiB), over --limit-kib {} (nothing was sent)",
+            image.len(),
+            image.len() as f64 / 1024.0,
+            a.limit_kib
+        )));
+    }
+    boot::check_vector_table(&image).map_err(|e| fail(format!("{shown}: {e}")))?;
+    println!(
+        "{shown}: {kind}, {} B ({:.1} KiB) for 0x{:08X}, limit {} KiB",
+        image.len(),
+        image.len() as f64 / 1024.0,
+        boot::FW_BASE,
+        a.limit_kib
+    );
+    if !a.no_touch {
+        println!("1200-baud touch on {}", a.serial);
+        boot::touch_1200(&a.serial).map_err(fail)?;
+    }
+    let port = boot::open_port(&a.serial, a.baud, FLASH_OPEN_WAIT).map_err(fail)?;
+    let opts = boot::FlashOptions {
+        limit,
+        block_len: a.block_kib as usize * 1024,
+        jump: !a.no_jump,
+        read_back: !a.no_read_back,
+        ..boot::FlashOptions::default()
+    };
+    let mut client = boot::Bootloader::new(port, opts);
+    let mut bar: Option<(Progress, &str)> = None;
+    let mut on_stage = |s: boot::Stage| match s {
+        boot::Stage::Connected {
+            board_name,
+            version,
+            revision,
+        } => println!(
+            "board {board_name:?}, bootloader version 0x{version:08X} revision 0x{revision:08X}"
+        ),
+        boot::Stage::Erasing { sectors } => println!(
+            "erasing {sectors} sector(s) of 256 KiB from 0x{:08X}",
+            boot::FW_BASE
+        ),
+        boot::Stage::Writing { done, total } | boot::Stage::Reading { done, total } => {
+            let label = match s {
+                boot::Stage::Writing { .. } => "KiB written",
+                _ => "KiB read back",
+            };
+            if bar.as_ref().is_none_or(|(_, l)| *l != label) {
+                bar = Some((Progress::stderr(total.div_ceil(1024), "flashing"), label));
+            }
+            if let Some((p, l)) = &bar {
+                p.position(done.div_ceil(1024), l);
+            }
+        }
+        boot::Stage::Verifying => {
+            bar = None;
+            println!("checking the board's CRC");
+        }
+        boot::Stage::Jumping => {
+            bar = None;
+            println!("starting the firmware");
+        }
+    };
+    let r = client.flash(&image, &mut on_stage).map_err(|e| {
+        match e.starts_with("read_board_name") {
+            true => fail(format!(
+            "{e}: is the board in its bootloader? (hold the push switch SW2 while pressing RESET)"
+        )),
+            false => fail(e),
+        }
+    })?;
+    let secs = |d: Duration| format!("{:.1} s", d.as_secs_f64());
+    println!(
+        "wrote {} B ({} B image + {} B of 0xFF padding) in {} block(s) of {} KiB; erase {}, write {}, read-back {}, total {}",
+        r.written_len,
+        r.image_len,
+        r.written_len - r.image_len,
+        r.blocks,
+        a.block_kib,
+        secs(r.erase_time),
+        secs(r.write_time),
+        if r.read_back { secs(r.read_time) } else { "skipped".into() },
+        secs(r.total_time)
+    );
+    println!(
+        "CRC 0x{:08X} (image) = 0x{:08X} (board){}",
+        r.crc,
+        r.board_crc,
+        if r.read_back {
+            ", read back byte for byte"
+        } else {
+            ""
+        }
+    );
+    if r.retries > 0 || r.stray_frames > 0 {
+        println!(
+            "{} command(s) sent again after a lost answer, {} stray frame(s) skipped",
+            r.retries, r.stray_frames
+        );
+    }
+    println!(
+        "{}",
+        if r.jumped {
+            "firmware started"
+        } else {
+            "left in the bootloader (--no-jump)"
+        }
+    );
+    Ok(())
 }
 
 fn run_param(a: ParamArgs) -> Result<(), CliError> {

@@ -1514,3 +1514,62 @@ fn sdk_example_uses_the_contract_registers() {
     // The bad velocity the test sends is out of range.
     assert!(300 > port::VELOCITY_RANGE[0].1 && -300 < port::VELOCITY_RANGE[0].0);
 }
+
+/// `walker flash` refuses what it can before it touches the port: a missing image, one over
+/// the limit, one not linked for 0x0804_0000, bad option values.
+#[test]
+fn flash_refuses_before_touching_the_port() {
+    let dir = tmp("flash");
+    let port = "/dev/ttyDOESNOTEXIST";
+    let err = |o: &Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    let o = walker(&["flash", "--serial", port, "/nonexistent/opencr.bin"]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(
+        err(&o).contains("/nonexistent/opencr.bin not found"),
+        "{}",
+        err(&o)
+    );
+    // A vector table for 0x0804_0000, then filler up to 256 KiB + 1.
+    let mut image = [0x2005_0000u32.to_le_bytes(), 0x0804_0101u32.to_le_bytes()].concat();
+    image.resize(256 * 1024 + 1, 0x5A);
+    let big = dir.join("big.bin");
+    std::fs::write(&big, &image).unwrap();
+    let o = walker(&["flash", "--serial", port, s(&big)]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(
+        err(&o).contains("over --limit-kib 256 (nothing was sent)") && !err(&o).contains(port),
+        "{}",
+        err(&o)
+    );
+    // Within a larger limit it goes as far as the port (the 1200-baud touch opens it).
+    let o = walker(&["flash", "--serial", port, "--limit-kib", "512", s(&big)]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(
+        err(&o).contains(&format!("serial port {port} not found")),
+        "{}",
+        err(&o)
+    );
+    // An image linked for 0x0800_0000 (reset vector 0x080001C9).
+    image[4..8].copy_from_slice(&0x0800_01C9u32.to_le_bytes());
+    image.truncate(4096);
+    let wrong = dir.join("wrong.bin");
+    std::fs::write(&wrong, &image).unwrap();
+    let o = walker(&["flash", "--serial", port, s(&wrong)]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(err(&o).contains("reset vector 0x080001C9"), "{}", err(&o));
+    // Usage errors.
+    for args in [
+        &["flash", s(&big)][..],
+        &["flash", "--serial", port],
+        &["flash", "--serial", port, "--limit-kib", "0", s(&big)],
+        &["flash", "--serial", port, "--limit-kib", "769", s(&big)],
+        &["flash", "--serial", port, "--block-kib", "17", s(&big)],
+        &["flash", "--serial", port, "--baud", "0", s(&big)],
+    ] {
+        let o = walker(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", err(&o));
+    }
+    let o = walker(&["flash", "--help"]);
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("Usage: walker flash"));
+}
