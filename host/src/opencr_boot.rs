@@ -136,9 +136,9 @@ pub mod msg {
     pub const FLASH_FW_ERASE: MessageSpec = m(158, 13, 13, "flash_fw_erase");
     /// Compares the CRC of `length` bytes from 0x0804_0000 with `crc`.
     pub const FLASH_FW_VERIFY: MessageSpec = m(159, 17, 31, "flash_fw_verify");
-    /// A packet of flash read back (unused here).
+    /// A packet of flash read back (the answer to a read block).
     pub const FLASH_FW_READ_PACKET: MessageSpec = m(160, 134, 9, "flash_fw_read_packet");
-    /// Asks for flash to be read back (unused here).
+    /// Asks for flash to be read back, 128 bytes at a time (the read-back check).
     pub const FLASH_FW_READ_BLOCK: MessageSpec = m(161, 7, 131, "flash_fw_read_block");
     /// Starts the firmware at 0x0804_0000 if its first word is programmed.
     pub const JUMP_TO_FW: MessageSpec = m(162, 9, 37, "jump_to_fw");
