@@ -12,6 +12,15 @@
 //! simulator) and `boards::opencr::OpenCrBoard` (STM32F746, real time). Both exist only for the
 //! bare-metal ARM target; the host tests use the fakes in this module's tests.
 
+/// The command port's line rate, bit/s (the Dynamixel SDK's usual 1 Mbps): the OpenCR's
+/// USART2, the OpenCM 9.04's USART3 and QEMU's model of the port.
+pub const COMMAND_BAUD: u32 = 1_000_000;
+/// The command port's receive ring, bytes: on the OpenCR DMA1 stream 5 fills it from USART2
+/// without the CPU, and QEMU's board models the same ring ([`crate::rx_ring::LineRx`]); 10 ms
+/// of bytes at 1 Mbps, the loop reads it every tick ([`crate::rx_ring`]). (The OpenCM 9.04's
+/// ring is smaller: its RAM.)
+pub const COMMAND_RX_RING: usize = 1024;
+
 /// Error of a bus transport operation (not a protocol error: CRC and status errors are the
 /// Dynamixel driver's business).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -123,6 +123,8 @@ use gait_core::{GaitError, Robot};
 use walker_contract::bus_map::{self as ids, DEVICE_IDS};
 #[cfg(not(feature = "board-opencm"))]
 use walker_contract::command_port::ParamAccess;
+#[cfg(feature = "board-opencm")]
+use walker_contract::command_port::ParamStatus;
 use walker_contract::command_port::{Mode, PortState};
 use walker_contract::ExitCode;
 
@@ -303,8 +305,8 @@ pub fn run<B: Board>(board: &mut B, cfg: &Config) -> RunEnd {
 /// "Parameters").
 pub fn run_on_enable<B: Board>(board: &mut B, cfg: &mut Config) -> RunEnd {
     let mut link = commanded::CommandLink::new();
-    // The saved parameters, loaded once (not on the OpenCM 9.04: no command port to set them,
-    // no flash for the parameter table's text).
+    // The saved parameters, loaded once (not on the OpenCM 9.04: no flash for the parameter
+    // table and a store).
     #[cfg(not(feature = "board-opencm"))]
     {
         let found = store::load(board, cfg);
@@ -343,7 +345,8 @@ pub const BUTTON_HOLD_US: u64 = 50_000;
 /// its level other than the one found at the start for [`BUTTON_HOLD_US`]) — the enable;
 /// on a Mode write of torque off: resting, torque off (confirmed, servo power cut; State
 /// then 4) and the wait goes on; else false. A write of stop is taken and ignored. Parameter
-/// ops are served against `cfg` (sets allowed: no run is going).
+/// ops are served against `cfg` (sets allowed: no run is going; the OpenCM 9.04 answers them
+/// "not in this board's build", [`walker_contract::command_port::ParamStatus::Unsupported`]).
 pub fn standby<B: Board>(
     board: &mut B,
     cfg: &mut Config,
@@ -361,7 +364,7 @@ pub fn standby<B: Board>(
         board.wait_tick();
         board.feed();
         link.poll(board, &mut log);
-        // The OpenCM 9.04 has no command port and no flash for the parameter table's text.
+        // Parameter ops: served, a save written to the board's store.
         #[cfg(not(feature = "board-opencm"))]
         {
             link.port.table.serve_param(ParamAccess::Settable(cfg));
@@ -371,6 +374,11 @@ pub fn standby<B: Board>(
                 link.port.table.finish_save(saved);
             }
         }
+        // The OpenCM 9.04's flash holds neither the parameter table nor a store (≈ 36 KB that
+        // its 114 KiB do not have): an op is answered "not in this board's build", never left
+        // pending.
+        #[cfg(feature = "board-opencm")]
+        link.port.table.answer_param(ParamStatus::Unsupported);
         let now = board.now_us();
         match (idle, board.enable_button()) {
             (Some(i), Some(level)) if level != i => {

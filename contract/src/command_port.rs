@@ -35,7 +35,7 @@
 //! | 160 | 24 | Param Key | RW | a run-time parameter's key (docs/parameters.md), ASCII, NUL-padded |
 //! | 184 | 16 | Param Value | RW | its value as token text (`0.25`, `on`), ASCII, NUL-padded |
 //! | 200 | 1 | Param Op | RW | a write runs it: [`ParamOp`] 1 get, 2 set, 3 get by index, 4 save |
-//! | 201 | 1 | Param Status | R | [`ParamStatus`] of the last op: 0 done, 1 pending, ≥ 2 refused |
+//! | 201 | 1 | Param Status | R | [`ParamStatus`] of the last op: 0 done, 1 pending, 2 unknown key, 3 bad value, 4 out of range, 5 refused while a run is going, 6 the store failed, 7 not in this board's build |
 //! | 202 | 2 | Param Index | RW | u16, the parameter of op 3 (0 ..= Param Count − 1) |
 //! | 204 | 2 | Param Count | R | u16, the number of run-time parameters |
 //!
@@ -69,7 +69,9 @@
 //! ([`ParamStatus::Running`]) and nothing changes. A save (op 4, between runs too) writes the
 //! configuration in force to the board's store ([`crate::param_store`]), loaded at the next
 //! boot: the table only takes the request ([`CommandTable::take_save`]); the firmware answers
-//! it ([`CommandTable::finish_save`]).
+//! it ([`CommandTable::finish_save`]). A build without the parameters (the OpenCM 9.04's: no
+//! flash for them) answers every op with [`ParamStatus::Unsupported`]
+//! ([`CommandTable::answer_param`]) and changes nothing.
 //!
 //! Fixed-point units make a non-finite command unrepresentable on the wire; the typed
 //! accessors ([`CommandTable::velocity`]) return finite values in SI units only.
@@ -250,6 +252,9 @@ crate::codes::wire_codes! {
         Running = 5,
         /// The save failed (the board has no parameter store, or its write failed).
         StoreFailed = 6,
+        /// Not in this board's build: the firmware answers every parameter op with it and
+        /// changes nothing (the OpenCM 9.04: no flash for the parameter table and the store).
+        Unsupported = 7,
     }
 }
 
@@ -264,6 +269,7 @@ impl ParamStatus {
             ParamStatus::OutOfRange => "out of range",
             ParamStatus::Running => "refused while a run is going",
             ParamStatus::StoreFailed => "the store failed",
+            ParamStatus::Unsupported => "not in this board's build",
         }
     }
 }
@@ -728,6 +734,15 @@ impl CommandTable {
         }
         self.put_text(PARAM_VALUE, &text);
         ParamStatus::Done
+    }
+
+    /// Answers the parameter op written last, if any, with `status` without serving it (Param
+    /// Key and Param Value untouched): a build without the parameters answers
+    /// [`ParamStatus::Unsupported`]. Returns the status (`None`: no op was pending).
+    pub fn answer_param(&mut self, status: ParamStatus) -> Option<ParamStatus> {
+        self.param_op.take()?;
+        self.put(PARAM_STATUS, &[status.code()]);
+        Some(status)
     }
 
     /// A save the firmware must run now (taken once; Param Status stays pending until

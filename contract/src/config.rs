@@ -217,8 +217,8 @@ pub struct Config {
     pub deadman_ms: u32,
     /// Torque stays off until the operator's enable (a Mode write of stand or walk on the
     /// command port) at power-on and after every stop, the command port answering meanwhile
-    /// (`true`: the OpenCR build); `false`: the firmware starts at once and its run ends at
-    /// the first stop (QEMU's firmware-in-the-loop runs).
+    /// (`true`: the OpenCR and OpenCM 9.04 builds); `false`: the firmware starts at once and
+    /// its run ends at the first stop (QEMU's firmware-in-the-loop runs).
     pub wait_enable: bool,
     /// An operator's stop (Mode = torque off, `stop_at`) ends with the robot resting in the
     /// crouch, torque on, and a second Mode = torque off turns torque off (`true`); `false`:

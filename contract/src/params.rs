@@ -201,6 +201,15 @@ fn us_secs(us: u32) -> f64 {
     f64::from(us) / 1e6
 }
 
+/// `text` on the host; empty in the firmware (the docs are the host's: flash).
+const fn target_text(text: &'static str) -> &'static str {
+    if cfg!(target_os = "none") {
+        ""
+    } else {
+        text
+    }
+}
+
 const fn range(min: f64, max: f64) -> Domain {
     Domain::Num {
         min,
@@ -245,7 +254,7 @@ macro_rules! params {
             plan_key: $plan,
             unit: $unit,
             domain: $dom,
-            doc: $doc,
+            doc: target_text($doc),
             get: |$g| $get,
         }),*];
 
@@ -1228,7 +1237,7 @@ params! {
         plan_key: None,
         unit: "",
         domain: Domain::Word(&["0", "1"]),
-        doc: "1: torque stays off until a Mode write of stand or walk on the command port, at power-on and after every stop (the OpenCR build's default); 0: start at once, the run ends at the first stop",
+        doc: "1: torque stays off until a Mode write of stand or walk on the command port, at power-on and after every stop (the default of the OpenCR and OpenCM builds); 0: start at once, the run ends at the first stop",
         set: |c, v| { c.wait_enable = v as usize == 1 },
         get: |c| { Some(Value::Word(usize::from(c.wait_enable))) },
     },

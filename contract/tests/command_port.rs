@@ -622,6 +622,57 @@ fn parameters_read_and_write_through_the_port_with_the_tables_checks() {
     assert_eq!(t.serve_param(ParamAccess::ReadOnly(&cfg)), None);
 }
 
+#[test]
+fn a_build_without_parameters_answers_a_pending_op_unsupported_once_and_touches_nothing() {
+    let mut t = CommandTable::new();
+    // Nothing pending: no answer, Param Status as it was.
+    assert_eq!(t.answer_param(ParamStatus::Unsupported), None);
+    assert_eq!(
+        t.read(PARAM_STATUS.addr, 1).unwrap(),
+        [ParamStatus::Done.code()]
+    );
+    for op in ParamOp::ALL {
+        let mut data = vec![0u8; 41];
+        data[..10].copy_from_slice(b"catch_gain");
+        data[24..27].copy_from_slice(b"0.5");
+        data[40] = op.code();
+        t.write(PARAM_KEY.addr, &data).unwrap();
+        assert_eq!(
+            t.read(PARAM_STATUS.addr, 1).unwrap(),
+            [ParamStatus::Pending.code()]
+        );
+        assert_eq!(
+            t.answer_param(ParamStatus::Unsupported),
+            Some(ParamStatus::Unsupported),
+            "{op:?}"
+        );
+        assert_eq!(
+            t.read(PARAM_STATUS.addr, 1).unwrap(),
+            [ParamStatus::Unsupported.code()]
+        );
+        // Param Key and Param Value as the master wrote them.
+        assert_eq!(
+            text(t.read(PARAM_KEY.addr, PARAM_KEY.len).unwrap()),
+            "catch_gain"
+        );
+        assert_eq!(
+            text(t.read(PARAM_VALUE.addr, PARAM_VALUE.len).unwrap()),
+            "0.5"
+        );
+        // Answered once: no second answer, nothing left to serve, no save taken.
+        assert_eq!(t.answer_param(ParamStatus::Unsupported), None);
+        assert_eq!(
+            t.serve_param(ParamAccess::ReadOnly(&walker_contract::Config::default())),
+            None
+        );
+        assert!(!t.take_save());
+    }
+    assert_eq!(
+        ParamStatus::try_from(7).map(ParamStatus::reason),
+        Ok("not in this board's build")
+    );
+}
+
 proptest! {
     /// Any value text for any parameter: a set either is refused and changes nothing, or it
     /// sets exactly what the command line's parser sets for the same token.

@@ -143,49 +143,68 @@ pub enum Command {
     /// On a TCP command port (`--connect`) or a serial port (`--serial`). A set is in force for
     /// the next run, a save for the next boot; both are refused while a run is going: the
     /// firmware serves them while it waits for the enable (`wait_enable=1`, the OpenCR build's
-    /// default). host/src/param.rs.
+    /// default; the OpenCM 9.04 build answers "not in this board's build"). host/src/param.rs.
     Param(ParamArgs),
-    /// Flash a firmware image onto the OpenCR 1.0 through ROBOTIS' USB bootloader (no probe).
+    /// Flash a firmware image through ROBOTIS' USB bootloader (no probe): the OpenCR 1.0
+    /// (default) or the OpenCM 9.04 (`--board opencm`).
     ///
-    /// Speaks the bootloader's protocol (ROBOTIS' opencr_ld: MAVLink v1 messages over the
-    /// board's USB CDC port): board name and version, erase of the sectors the image covers
+    /// OpenCR: speaks its bootloader's protocol (ROBOTIS' opencr_ld: MAVLink v1 messages over
+    /// the board's USB CDC port): board name and version, erase of the sectors the image covers
     /// from sector 5 (0x0804_0000), 16 KiB blocks in 128-byte packets, the bootloader's CRC,
     /// a byte-for-byte read-back, the jump to the firmware. The walker firmware has no USB
     /// stack: hold the push switch SW2 while pressing RESET to stay in the bootloader
     /// (docs/boards.md). host/src/opencr_boot.rs.
+    ///
+    /// OpenCM 9.04: speaks its bootloader's protocol (ROBOTIS' opencm9.04_ld: text commands
+    /// over the USB CDC port): AT&NAME, AT&LD (erases 0x0800_3000..0x0801_F800), the image in
+    /// 64-byte packets and its 8-bit sum, the bootloader's verdict, AT&GO. Hold the USER
+    /// button while plugging the USB cable in to stay in the bootloader (docs/boards.md).
+    /// host/src/opencm_boot.rs.
     Flash(FlashArgs),
+}
+
+/// The board `walker flash` talks to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FlashBoard {
+    /// ROBOTIS OpenCR 1.0 (STM32F746): images for 0x0804_0000 (feature opencr-bootloader).
+    Opencr,
+    /// ROBOTIS OpenCM 9.04 (STM32F103CB): images for 0x0800_3000 (feature board-opencm).
+    Opencm,
 }
 
 /// `walker flash`.
 #[derive(Debug, Args)]
 pub struct FlashArgs {
-    /// The OpenCR's USB port (its CDC ACM device: /dev/ttyACM0, /dev/cu.usbmodem…, COM5).
+    /// The board, and so its bootloader's protocol.
+    #[arg(long, value_enum, default_value_t = FlashBoard::Opencr)]
+    pub board: FlashBoard,
+    /// The board's USB port (its CDC ACM device: /dev/ttyACM0, /dev/cu.usbmodem…, COM5).
     #[arg(long, value_name = "DEV")]
     pub serial: String,
-    /// Firmware image: an ELF (its loadable bytes from 0x0804_0000) or a raw binary for 0x0804_0000.
+    /// Firmware image: an ELF (its loadable bytes from the bootloader's start address: 0x0804_0000 OpenCR, 0x0800_3000 OpenCM) or a raw binary for that address.
     #[arg(value_name = "IMAGE")]
     pub image: PathBuf,
     /// Stay in the bootloader after the checks (do not start the firmware).
     #[arg(long)]
     pub no_jump: bool,
-    /// Largest image accepted, KiB (256: sector 5 only; a larger image erases sector 6, the saved parameters' first slot).
-    #[arg(long, value_name = "KIB", default_value_t = 256,
+    /// Largest image accepted, KiB. OpenCR: 256 by default (sector 5 only; a larger image erases sector 6, the saved parameters' first slot), up to 768. OpenCM: 114 by default and at most (the region the bootloader erases).
+    #[arg(long, value_name = "KIB",
           value_parser = clap::value_parser!(u32).range(1..=768))]
-    pub limit_kib: u32,
-    /// Baud rate the port is opened at (the board's USB CDC port ignores it).
+    pub limit_kib: Option<u32>,
+    /// Baud rate the port is opened at (the boards' USB CDC ports ignore it).
     #[arg(long, value_name = "BAUD", default_value_t = 115_200,
           value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: u32,
-    /// Skip the 1200-baud touch (open at 1200, send "OpenCR 5555AAAA", close, wait 1.5 s) that resets an Arduino sketch into the bootloader.
+    /// Skip the reset request that sends an Arduino sketch into the bootloader (OpenCR: open at 1200 baud, send "OpenCR 5555AAAA", close, wait 1.5 s; OpenCM: open at 1200 baud, send "CM9X", close, wait 1 s).
     #[arg(long)]
     pub no_touch: bool,
-    /// Skip the byte-for-byte read-back (the bootloader's own CRC misses over 40 % of single-bit errors).
+    /// OpenCR only: skip the byte-for-byte read-back (the bootloader's own CRC misses over 40 % of single-bit errors).
     #[arg(long)]
     pub no_read_back: bool,
-    /// Block size, KiB: 16 fills the bootloader's buffer; ROBOTIS' opencr_ld sends 8.
-    #[arg(long, value_name = "KIB", default_value_t = 16,
+    /// OpenCR only: block size, KiB (default 16, which fills the bootloader's buffer; ROBOTIS' opencr_ld sends 8).
+    #[arg(long, value_name = "KIB",
           value_parser = clap::value_parser!(u32).range(1..=16))]
-    pub block_kib: u32,
+    pub block_kib: Option<u32>,
 }
 
 /// The firmware's command port, on TCP or a serial port (`walker drive`, `walker param`).
@@ -777,25 +796,41 @@ pub fn run(command: Command) -> Result<(), CliError> {
 const FLASH_OPEN_WAIT: Duration = Duration::from_secs(5);
 
 fn run_flash(a: FlashArgs) -> Result<(), CliError> {
+    match a.board {
+        FlashBoard::Opencr => run_flash_opencr(a),
+        FlashBoard::Opencm => run_flash_opencm(a),
+    }
+}
+
+/// The image file's bytes, or why not.
+fn read_flash_image(a: &FlashArgs) -> Result<Vec<u8>, CliError> {
+    let fail = |e: String| CliError::failed(format!("walker flash: {e}"));
+    let shown = a.image.display();
+    match std::fs::read(&a.image) {
+        Ok(b) => Ok(b),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            Err(fail(format!("image {shown} not found")))
+        }
+        Err(e) => Err(fail(format!("cannot read {shown}: {e}"))),
+    }
+}
+
+fn run_flash_opencr(a: FlashArgs) -> Result<(), CliError> {
     use crate::opencr_boot as boot;
     let fail = |e: String| CliError::failed(format!("walker flash: {e}"));
     let shown = a.image.display().to_string();
-    let bytes = match std::fs::read(&a.image) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(fail(format!("image {shown} not found")))
-        }
-        Err(e) => return Err(fail(format!("cannot read {shown}: {e}"))),
-    };
+    let bytes = read_flash_image(&a)?;
     let (image, kind) = boot::load_image(&bytes).map_err(|e| fail(format!("{shown}: {e}")))?;
-    let limit = a.limit_kib as usize * 1024;
+    let limit_kib = a.limit_kib.unwrap_or(256);
+    let block_kib = a.block_kib.unwrap_or(16);
+    let limit = limit_kib as usize * 1024;
     // Checked here too (the client checks again) so that nothing touches the port.
     if image.len() > limit {
         return Err(fail(format!(
             "{shown}: the image is {} B ({:.1} KiB), over --limit-kib {} (nothing was sent)",
             image.len(),
             image.len() as f64 / 1024.0,
-            a.limit_kib
+            limit_kib
         )));
     }
     boot::check_vector_table(&image).map_err(|e| fail(format!("{shown}: {e}")))?;
@@ -804,7 +839,7 @@ fn run_flash(a: FlashArgs) -> Result<(), CliError> {
         image.len(),
         image.len() as f64 / 1024.0,
         boot::FW_BASE,
-        a.limit_kib
+        limit_kib
     );
     if !a.no_touch {
         println!("1200-baud touch on {}", a.serial);
@@ -813,7 +848,7 @@ fn run_flash(a: FlashArgs) -> Result<(), CliError> {
     let port = boot::open_port(&a.serial, a.baud, FLASH_OPEN_WAIT).map_err(fail)?;
     let opts = boot::FlashOptions {
         limit,
-        block_len: a.block_kib as usize * 1024,
+        block_len: block_kib as usize * 1024,
         jump: !a.no_jump,
         read_back: !a.no_read_back,
         ..boot::FlashOptions::default()
@@ -868,7 +903,7 @@ fn run_flash(a: FlashArgs) -> Result<(), CliError> {
         r.image_len,
         r.written_len - r.image_len,
         r.blocks,
-        a.block_kib,
+        block_kib,
         secs(r.erase_time),
         secs(r.write_time),
         if r.read_back { secs(r.read_time) } else { "skipped".into() },
@@ -899,6 +934,123 @@ fn run_flash(a: FlashArgs) -> Result<(), CliError> {
         }
     );
     Ok(())
+}
+
+fn run_flash_opencm(a: FlashArgs) -> Result<(), CliError> {
+    use crate::opencm_boot as boot;
+    let fail = |e: String| CliError::failed(format!("walker flash: {e}"));
+    for (given, opt) in [
+        (a.no_read_back, "--no-read-back"),
+        (a.block_kib.is_some(), "--block-kib"),
+    ] {
+        if given {
+            return Err(CliError::usage(format!(
+                "walker flash --board opencm: {opt} is an OpenCR option (the OpenCM 9.04's bootloader has no read command and takes the image in 64-byte USB packets)"
+            )));
+        }
+    }
+    let max_kib = (boot::APP_REGION / 1024) as u32;
+    let limit_kib = a.limit_kib.unwrap_or(max_kib);
+    if limit_kib > max_kib {
+        return Err(CliError::usage(format!(
+            "walker flash --board opencm: --limit-kib {limit_kib} is over the {max_kib} KiB the bootloader erases (0x{:08X}..0x{:08X}; the last 2 KiB of flash keep its control table)",
+            boot::APP_BASE,
+            boot::RESERVED_BASE
+        )));
+    }
+    let shown = a.image.display().to_string();
+    let bytes = read_flash_image(&a)?;
+    let (image, kind) = boot::load_image(&bytes).map_err(|e| fail(format!("{shown}: {e}")))?;
+    let limit = limit_kib as usize * 1024;
+    // Checked here too (the client checks again) so that nothing touches the port.
+    if boot::sendable(&image).len() > limit {
+        return Err(fail(format!(
+            "{shown}: the image is {} B ({:.1} KiB), over --limit-kib {limit_kib} (nothing was sent)",
+            image.len(),
+            image.len() as f64 / 1024.0,
+        )));
+    }
+    boot::check_vector_table(&image).map_err(|e| fail(format!("{shown}: {e}")))?;
+    println!(
+        "{shown}: {kind}, {} B ({:.1} KiB) for 0x{:08X}, limit {limit_kib} KiB",
+        image.len(),
+        image.len() as f64 / 1024.0,
+        boot::APP_BASE,
+    );
+    if !a.no_touch {
+        println!("reset request on {} (1200 baud, \"CM9X\")", a.serial);
+        boot::request_bootloader(&a.serial).map_err(fail)?;
+    }
+    let port = flash_open_port(&a.serial, a.baud)?;
+    let opts = boot::FlashOptions {
+        limit,
+        jump: !a.no_jump,
+        ..boot::FlashOptions::default()
+    };
+    let mut client = boot::Bootloader::new(port, opts);
+    let mut on_stage = |s: boot::Stage| match s {
+        boot::Stage::Connected { board_name } => println!("board {board_name:?}"),
+        boot::Stage::Erasing { attempt } => println!(
+            "erasing {} pages of 1 KiB from 0x{:08X}{}",
+            boot::ERASED_PAGES,
+            boot::APP_BASE,
+            if attempt > 1 {
+                format!(" (download {attempt})")
+            } else {
+                String::new()
+            }
+        ),
+        boot::Stage::Writing { done, .. } => println!("sent {done} B and the checksum byte"),
+        boot::Stage::Checking => println!("waiting for the bootloader's checksum verdict"),
+        boot::Stage::Jumping => println!("starting the firmware (AT&GO)"),
+    };
+    let r = client.flash(&image, &mut on_stage).map_err(|e| {
+        match e.starts_with("AT&NAME: no answer") {
+            true => fail(format!(
+                "{e}: is the board in its bootloader? (hold the USER button while plugging the USB cable in)"
+            )),
+            false => fail(e),
+        }
+    })?;
+    let secs = |d: Duration| format!("{:.1} s", d.as_secs_f64());
+    println!(
+        "sent {} B ({} B image{}); checksum 0x{:02X} accepted (\"Success..\"); erase {}, write {}, total {}",
+        r.sent_len,
+        r.image_len,
+        if r.sent_len > r.image_len {
+            " + one 0xFF byte: its checksum was the bootloader's wildcard '*'"
+        } else {
+            ""
+        },
+        r.checksum,
+        secs(r.erase_time),
+        secs(r.write_time),
+        secs(r.total_time)
+    );
+    if r.retries > 0 {
+        println!(
+            "{} query or download(s) repeated after a lost answer or \"Fail..\"",
+            r.retries
+        );
+    }
+    for line in &r.other_lines {
+        println!("bootloader said: {line:?}");
+    }
+    println!(
+        "{}",
+        if r.jumped {
+            "firmware started"
+        } else {
+            "left in the bootloader (--no-jump)"
+        }
+    );
+    Ok(())
+}
+
+/// Opens the bootloader's port as `walker flash` does for both boards.
+fn flash_open_port(dev: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, CliError> {
+    crate::opencr_boot::open_port(dev, baud, FLASH_OPEN_WAIT)
+        .map_err(|e| CliError::failed(format!("walker flash: {e}")))
 }
 
 fn run_param(a: ParamArgs) -> Result<(), CliError> {

@@ -425,6 +425,57 @@ impl PortMaster {
         }
     }
 
+    /// WRITEs sent one every `every` without waiting for their statuses (a master streaming
+    /// commands at a fixed rate); the statuses are read as they come, and for up to
+    /// [`PortMaster::timeout`] after the last send. Returns how many came back OK (an error
+    /// status ends it with the write's index).
+    pub fn write_paced(
+        &mut self,
+        writes: &[(u16, &[u8])],
+        every: Duration,
+    ) -> Result<usize, String> {
+        let start = Instant::now();
+        let mut ok = 0;
+        let mut byte = [0u8; 1];
+        let mut packet = [0u8; 600];
+        for (k, &(addr, data)) in writes.iter().enumerate() {
+            let n = Instruction::Write { addr, data }
+                .encode(&mut packet, PORT_ID)
+                .map_err(|e| format!("{e:?}"))?;
+            self.stream
+                .write_all(packet.get(..n).unwrap_or(&[]))
+                .map_err(|e| format!("command port: {e}"))?;
+            let due = start + every * (k as u32 + 1);
+            let last = k + 1 == writes.len();
+            let until = if last {
+                Instant::now() + self.timeout
+            } else {
+                due
+            };
+            while Instant::now() < until && !(last && ok == writes.len()) {
+                match self.stream.read(&mut byte) {
+                    Ok(0) => return Err("command port closed".into()),
+                    Ok(_) => {
+                        if let Some(Ok(p)) = self.decoder.push(byte[0]) {
+                            let s = Status::from_packet(&p).map_err(|e| format!("{e:?}"))?;
+                            if let Some(e) = s.error.code {
+                                return Err(format!("command port: paced WRITE {k}: {e:?}"));
+                            }
+                            ok += 1;
+                        }
+                    }
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                        ) => {}
+                    Err(e) => return Err(format!("command port: {e}")),
+                }
+            }
+        }
+        Ok(ok)
+    }
+
     /// The State register.
     pub fn state(&mut self) -> Result<Option<PortState>, String> {
         let (e, d) = self.transact(Instruction::Read {
@@ -772,6 +823,81 @@ mod tests {
         fn flush(&mut self) -> std::io::Result<()> {
             Ok(())
         }
+    }
+
+    /// A port that answers every packet written to it with a status of `error`, and notes
+    /// when each came.
+    struct Answering {
+        rx: std::collections::VecDeque<u8>,
+        error: dxl::StatusError,
+        sent: std::sync::Arc<std::sync::Mutex<Vec<Instant>>>,
+    }
+
+    impl Read for Answering {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            match (self.rx.pop_front(), buf.first_mut()) {
+                (Some(b), Some(slot)) => {
+                    *slot = b;
+                    Ok(1)
+                }
+                _ => {
+                    std::thread::sleep(Duration::from_millis(1));
+                    Err(std::io::ErrorKind::TimedOut.into())
+                }
+            }
+        }
+    }
+
+    impl Write for Answering {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.sent.lock().unwrap().push(Instant::now());
+            let mut b = [0u8; 32];
+            let n = dxl::instruction::encode_status(&mut b, PORT_ID, self.error, &[]).unwrap();
+            self.rx.extend(&b[..n]);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// Paced WRITEs go out one every period, without waiting for their statuses, and every
+    /// OK status is counted; an error status ends the stream with the write's index.
+    #[test]
+    fn paced_writes_go_out_at_their_rate_and_count_the_statuses() {
+        let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut m = PortMaster::on(Box::new(Answering {
+            rx: Default::default(),
+            error: dxl::StatusError::OK,
+            sent: sent.clone(),
+        }));
+        m.timeout = Duration::from_millis(300);
+        let data = 7i16.to_le_bytes();
+        let writes: Vec<(u16, &[u8])> = (0..20)
+            .map(|_| (port::VELOCITY_X.addr, &data[..]))
+            .collect();
+        assert_eq!(
+            m.write_paced(&writes, Duration::from_millis(10)).unwrap(),
+            20
+        );
+        let t = sent.lock().unwrap().clone();
+        assert_eq!(t.len(), 20);
+        for w in t.windows(2) {
+            let gap = w[1] - w[0];
+            assert!(gap >= Duration::from_millis(9), "{gap:?}");
+        }
+        let mut m = PortMaster::on(Box::new(Answering {
+            rx: Default::default(),
+            error: dxl::StatusError {
+                alert: false,
+                code: Some(ErrorCode::DataRange),
+            },
+            sent,
+        }));
+        let e = m
+            .write_paced(&writes, Duration::from_millis(1))
+            .unwrap_err();
+        assert!(e.contains("paced WRITE 0: DataRange"), "{e}");
     }
 
     /// A late reply (the status of a WRITE sent again after its timeout) waiting on the line

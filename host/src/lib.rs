@@ -10,6 +10,7 @@ pub mod drive;
 pub mod export;
 pub mod fil;
 pub mod mcap_export;
+pub mod opencm_boot;
 pub mod opencr_boot;
 pub mod param;
 pub mod planfile;

@@ -1229,8 +1229,22 @@ impl<P: Read + Write> Bootloader<P> {
 /// The bytes to flash from a file: an ELF's loadable bytes for 0x0804_0000 ([`image_from_elf`])
 /// or the file itself (a raw binary for 0x0804_0000); with a description of which.
 pub fn load_image(bytes: &[u8]) -> Result<(Vec<u8>, String), String> {
+    load_image_at(bytes, FW_BASE, FW_REGION, LINK_HINT)
+}
+
+/// What an image not linked for the OpenCR's bootloader is told to do.
+const LINK_HINT: &str = "link the image for the bootloader (feature opencr-bootloader)";
+
+/// [`load_image`] for a bootloader whose region is `base..base + region`; `hint` ends the
+/// error about a segment outside it (how to link the image).
+pub fn load_image_at(
+    bytes: &[u8],
+    base: u32,
+    region: usize,
+    hint: &str,
+) -> Result<(Vec<u8>, String), String> {
     if bytes.starts_with(b"\x7fELF") {
-        let (image, segments) = image_from_elf(bytes)?;
+        let (image, segments) = image_from_elf_at(bytes, base, region, hint)?;
         Ok((image, format!("ELF, {segments} loadable segment(s)")))
     } else {
         Ok((bytes.to_vec(), "raw binary".into()))
@@ -1242,12 +1256,23 @@ pub fn load_image(bytes: &[u8]) -> Result<(Vec<u8>, String), String> {
 /// A segment with file bytes outside the bootloader's region is an error (an image linked
 /// for 0x0800_0000, or one with initialised data not in flash).
 pub fn image_from_elf(bytes: &[u8]) -> Result<(Vec<u8>, usize), String> {
+    image_from_elf_at(bytes, FW_BASE, FW_REGION, LINK_HINT)
+}
+
+/// [`image_from_elf`] for a bootloader whose region is `base..base + region`; `hint` ends the
+/// error about a segment outside it.
+pub fn image_from_elf_at(
+    bytes: &[u8],
+    base: u32,
+    region: usize,
+    hint: &str,
+) -> Result<(Vec<u8>, usize), String> {
     use object::read::elf::{ElfFile32, ProgramHeader};
     let elf = ElfFile32::<object::Endianness>::parse(bytes)
         .map_err(|e| format!("not a 32-bit ELF: {e}"))?;
     let endian = elf.endian();
-    let base = u64::from(FW_BASE);
-    let end_max = base + FW_REGION as u64;
+    let base = u64::from(base);
+    let end_max = base + region as u64;
     let mut pieces: Vec<(usize, &[u8])> = Vec::new();
     for ph in elf.elf_program_headers() {
         if ph.p_type(endian) != object::elf::PT_LOAD {
@@ -1261,7 +1286,7 @@ pub fn image_from_elf(bytes: &[u8]) -> Result<(Vec<u8>, usize), String> {
         let end = addr + size;
         if addr < base || end > end_max {
             return Err(format!(
-                "a loadable segment is at 0x{addr:08X}..0x{end:08X}, outside the bootloader's region 0x{base:08X}..0x{end_max:08X}: link the image for the bootloader (feature opencr-bootloader)"
+                "a loadable segment is at 0x{addr:08X}..0x{end:08X}, outside the bootloader's region 0x{base:08X}..0x{end_max:08X}: {hint}"
             ));
         }
         let data = ph
@@ -1324,21 +1349,53 @@ pub fn open_port(
 /// Checks that `image` starts with a Cortex-M vector table for 0x0804_0000: an initial stack
 /// pointer in the STM32F746's SRAM and a Thumb reset vector inside the image.
 pub fn check_vector_table(image: &[u8]) -> Result<(), String> {
+    check_vector_table_at(
+        image,
+        &VectorTable {
+            base: FW_BASE,
+            sram: 0x2000_0000..=0x2005_0000,
+            chip: "STM32F746",
+            hint: "link it for the bootloader at 0x0804_0000 (feature opencr-bootloader)",
+        },
+    )
+}
+
+/// What [`check_vector_table_at`] expects of an image's vector table.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct VectorTable {
+    /// The address the image is programmed at (and the bootloader starts it from).
+    pub base: u32,
+    /// Where an initial stack pointer may point (the chip's SRAM, its end included).
+    pub sram: std::ops::RangeInclusive<u32>,
+    /// The chip's name, for the messages.
+    pub chip: &'static str,
+    /// How to link an image whose reset vector is outside it.
+    pub hint: &'static str,
+}
+
+/// Checks that `image` starts with a Cortex-M vector table for `want.base`: an initial stack
+/// pointer in `want.sram` and a Thumb reset vector inside the image.
+pub fn check_vector_table_at(image: &[u8], want: &VectorTable) -> Result<(), String> {
     if image.len() < 8 {
         return Err(format!("{} B is shorter than a vector table", image.len()));
     }
     let sp = u32_at(image, 0);
     let reset = u32_at(image, 4);
-    let end = FW_BASE as u64 + image.len() as u64;
+    let base = want.base;
+    let end = base as u64 + image.len() as u64;
     let target = u64::from(reset & !1);
-    if reset & 1 == 0 || target < u64::from(FW_BASE) || target >= end {
+    if reset & 1 == 0 || target < u64::from(base) || target >= end {
         return Err(format!(
-            "reset vector 0x{reset:08X} is not a Thumb address inside the image (0x{FW_BASE:08X}..0x{end:08X}): link it for the bootloader at 0x0804_0000 (feature opencr-bootloader)"
+            "reset vector 0x{reset:08X} is not a Thumb address inside the image (0x{base:08X}..0x{end:08X}): {}",
+            want.hint
         ));
     }
-    if !(0x2000_0000..=0x2005_0000).contains(&sp) {
+    if !want.sram.contains(&sp) {
         return Err(format!(
-            "initial stack pointer 0x{sp:08X} is not in the STM32F746's SRAM (0x20000000..0x20050000)"
+            "initial stack pointer 0x{sp:08X} is not in the {}'s SRAM (0x{:08X}..0x{:08X})",
+            want.chip,
+            want.sram.start(),
+            want.sram.end()
         ));
     }
     Ok(())

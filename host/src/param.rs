@@ -137,7 +137,14 @@ pub fn list(link: &mut dyn ParamLink) -> Result<Vec<(String, String)>, String> {
                     std::thread::sleep(Duration::from_millis(5))
                 }
                 Some(ParamStatus::Done) => break,
-                other => return Err(format!("parameter {i}: {other:?}")),
+                Some(ParamStatus::Pending) => {
+                    return Err(format!(
+                        "parameter {i}: not served within {} s",
+                        OP_WAIT.as_secs()
+                    ))
+                }
+                Some(other) => return Err(format!("parameter {i}: {}", other.reason())),
+                None => return Err(format!("parameter {i}: Param Status {s:?}: not a status")),
             }
         }
         let key = text(&link.read(PARAM_KEY.addr, PARAM_KEY.len)?);
@@ -213,11 +220,17 @@ mod tests {
         saves: usize,
         /// Status reads left unanswered (a board busy erasing its flash).
         deaf: usize,
+        /// A build without the parameters (the OpenCM 9.04's): every op answered unsupported.
+        unsupported: bool,
     }
 
     impl ParamLink for Firmware {
         fn write(&mut self, addr: u16, data: &[u8]) -> Result<(), String> {
             self.table.write(addr, data).map_err(|e| format!("{e:?}"))?;
+            if self.unsupported {
+                self.table.answer_param(ParamStatus::Unsupported);
+                return Ok(());
+            }
             let access = if self.running {
                 ParamAccess::ReadOnly(&self.cfg)
             } else {
@@ -250,7 +263,25 @@ mod tests {
             store_ok: true,
             saves: 0,
             deaf: 0,
+            unsupported: false,
         }
+    }
+
+    #[test]
+    fn a_build_without_parameters_says_so_for_every_op() {
+        let mut f = firmware(false);
+        f.unsupported = true;
+        let why = "not in this board's build";
+        let e = get(&mut f, "catch_gain").unwrap_err();
+        assert!(e.contains(why), "{e}");
+        let e = set(&mut f, "catch_gain", "0.5").unwrap_err();
+        assert!(e.contains(why), "{e}");
+        let e = save(&mut f).unwrap_err();
+        assert!(e.contains(why), "{e}");
+        let e = list(&mut f).unwrap_err();
+        assert_eq!(e, format!("parameter 0: {why}"));
+        assert_eq!(format!("{:?}", f.cfg), format!("{:?}", Config::default()));
+        assert_eq!(f.saves, 0);
     }
 
     #[test]

@@ -1573,3 +1573,81 @@ fn flash_refuses_before_touching_the_port() {
     assert!(o.status.success());
     assert!(String::from_utf8_lossy(&o.stdout).contains("Usage: walker flash"));
 }
+
+/// `walker flash --board opencm` refuses what it can before it touches the port: a missing
+/// image, one over the 114 KiB the bootloader erases, one not linked for 0x0800_3000, the
+/// OpenCR-only options.
+#[test]
+fn flash_opencm_refuses_before_touching_the_port() {
+    let dir = tmp("flash-opencm");
+    let port = "/dev/ttyDOESNOTEXIST";
+    let err = |o: &Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    let cm = |rest: &[&str]| {
+        let mut args = vec!["flash", "--board", "opencm", "--serial", port];
+        args.extend_from_slice(rest);
+        walker(&args)
+    };
+    let o = cm(&["/nonexistent/opencm"]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(
+        err(&o).contains("/nonexistent/opencm not found"),
+        "{}",
+        err(&o)
+    );
+    // A vector table for 0x0800_3000, then filler up to 114 KiB + 1.
+    let mut image = [0x2000_5000u32.to_le_bytes(), 0x0800_3101u32.to_le_bytes()].concat();
+    image.resize(114 * 1024 + 1, 0x5A);
+    let big = dir.join("big.bin");
+    std::fs::write(&big, &image).unwrap();
+    let o = cm(&[s(&big)]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(
+        err(&o).contains("over --limit-kib 114 (nothing was sent)") && !err(&o).contains(port),
+        "{}",
+        err(&o)
+    );
+    // Within the limit it goes as far as the port (the reset request opens it).
+    image.truncate(100 * 1024);
+    let fits = dir.join("fits.bin");
+    std::fs::write(&fits, &image).unwrap();
+    let o = cm(&[s(&fits)]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(
+        err(&o).contains(&format!("serial port {port} not found")),
+        "{}",
+        err(&o)
+    );
+    let o = cm(&["--limit-kib", "64", s(&fits)]);
+    assert!(err(&o).contains("over --limit-kib 64"), "{}", err(&o));
+    // An OpenCR image (reset vector in sector 5) and an ELF linked for 0x0800_0000.
+    image[4..8].copy_from_slice(&0x0804_0101u32.to_le_bytes());
+    let opencr = dir.join("opencr.bin");
+    std::fs::write(&opencr, &image).unwrap();
+    let o = cm(&[s(&opencr)]);
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert!(
+        err(&o).contains("reset vector 0x08040101") && err(&o).contains("board-opencm"),
+        "{}",
+        err(&o)
+    );
+    // Usage errors: the OpenCR-only options, a limit over the erased region.
+    for (args, says) in [
+        (
+            &["--no-read-back", s(&fits)][..],
+            "--no-read-back is an OpenCR option",
+        ),
+        (
+            &["--block-kib", "8", s(&fits)][..],
+            "--block-kib is an OpenCR option",
+        ),
+        (&["--limit-kib", "115", s(&fits)][..], "over the 114 KiB"),
+    ] {
+        let o = cm(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", err(&o));
+        assert!(err(&o).contains(says), "{args:?}: {}", err(&o));
+    }
+    let o = walker(&["flash", "--board", "opencx", "--serial", port, s(&fits)]);
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    let o = walker(&["flash", "--help"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("opencm"));
+}

@@ -1601,6 +1601,59 @@ fn parameters_set_over_the_command_port_are_the_next_runs_on_mujoco() {
     assert_eq!(r.exit_code, Some(17));
 }
 
+/// The QEMU firmware's command port at its line's real byte timing (1 Mbps into the OpenCR's
+/// 1 KiB receive ring, the QEMU board's model): 100 Velocity X writes sent at 100 Hz, none
+/// waiting for its status, are all answered OK and counted (Command Count), the last value is
+/// the one in force, the log notes the values in the order sent, and no byte was lost.
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn a_hundred_commands_at_100_hz_are_all_applied_on_mujoco() {
+    use walker_contract::codes::{CommandField, FaultKind};
+    use walker_contract::command_port::{Mode, PortState, COMMAND_COUNT, MODE, VELOCITY_X};
+    let _slot = slot(500);
+    let (run, mut m) = port_run("commands-100hz", &["wait_enable=1".to_string()]);
+    wait_state(&mut m, PortState::Waiting);
+    let count = |m: &mut walker_host::commands::PortMaster| {
+        let d = m.read(COMMAND_COUNT.addr, COMMAND_COUNT.len).unwrap();
+        u16::from_le_bytes([d[0], d[1]])
+    };
+    let before = count(&mut m);
+    let values: Vec<[u8; 2]> = (1..=100i16).map(|k| (2 * k).to_le_bytes()).collect();
+    let writes: Vec<(u16, &[u8])> = values.iter().map(|v| (VELOCITY_X.addr, &v[..])).collect();
+    let answered = m.write_paced(&writes, Duration::from_millis(10)).unwrap();
+    assert_eq!(answered, 100);
+    assert_eq!(count(&mut m).wrapping_sub(before), 100);
+    let vx = m.read(VELOCITY_X.addr, 2).unwrap();
+    assert_eq!(i16::from_le_bytes([vx[0], vx[1]]), 200);
+    m.write(MODE.addr, &[Mode::TorqueOff.code()]).unwrap();
+    let r = run.join().unwrap().expect("run");
+    // The log's Velocity X notes (one per tick in which it changed): rising, ending at 200.
+    let log = decode_file(&r.log).expect("log");
+    let noted: Vec<i32> = log
+        .events
+        .iter()
+        .filter_map(|rec| match rec {
+            Record::Fault(f)
+                if f.kind == FaultKind::CommandReceived
+                    && f.id == CommandField::VelocityX.code() =>
+            {
+                Some(f.value)
+            }
+            _ => None,
+        })
+        .collect();
+    assert!(!noted.is_empty());
+    assert!(noted.windows(2).all(|w| w[0] < w[1]), "{noted:?}");
+    assert_eq!(noted.last(), Some(&200));
+    let fw = r.firmware_log.expect("firmware log");
+    let lost: Vec<_> = fw
+        .lines
+        .iter()
+        .filter(|l| l.text.contains("bytes lost"))
+        .collect();
+    assert!(lost.is_empty(), "{lost:?}");
+}
+
 /// A `walker fil --command-port` run of the firmware with `tokens` (its output in
 /// `CARGO_TARGET_TMPDIR/name`), and a master connected to its command port once it answers.
 fn port_run(

@@ -52,12 +52,12 @@ macro_rules! stm32_firmware {
 }
 
 /// The main of a real robot controller after its board is up: logs the start-up line, then
-/// with [`crate::Config::wait_enable`] (the OpenCR build) waits for the operator's enable on
-/// the command port before every run and answers the port between runs, for ever
-/// ([`crate::control::run_on_enable`]); without it (the OpenCM 9.04: no command port) runs
+/// with [`crate::Config::wait_enable`] (the OpenCR and OpenCM 9.04 builds) waits for the
+/// operator's enable (on the command port or the board's button) before every run and answers
+/// the port between runs, for ever ([`crate::control::run_on_enable`]); without it runs
 /// [`crate::control::run`] once (probe, torque on, ramp, walk, stop; after any reset but a
-/// power-on it does not walk), then idles: torque stays off, the tick keeps running and the
-/// watchdog is fed, so the board does not reset into a new walk.
+/// power-on it does not walk). When the run or the wait ends it idles: torque stays off, the
+/// tick keeps running and the watchdog is fed, so the board does not reset into a new walk.
 #[cfg(any(feature = "board-opencr", feature = "board-opencm"))]
 pub fn run_then_idle<B: crate::board::Board>(board: &mut B, cfg: &mut crate::Config) -> ! {
     let end = loop {

@@ -10,6 +10,9 @@
 //! | Dynamixel TTL bus | **USART1 remapped**, PB6 TX / PB7 RX | `variant.cpp` pins 29 "DXL TXD" / 30 "DXL RXD"; `hw/driver/drv_uart.c`: USART1 in DXL mode uses `__HAL_AFIO_REMAP_USART1_ENABLE` on PB6/PB7; the Arduino `Serial1` (Dynamixel2Arduino README: OpenCM9.04 → `Serial1`, direction pin 28) |
 //! | bus direction (TX enable) | **PB5**, high = transmit | `variant.cpp` pin 28 "DXL DIR" |
 //! | log UART | **USART2**, PA2 TX / PA3 RX at 921 600 baud | `drv_uart.c` (USART2 on PA2/PA3), `variant.cpp` pins 4/5; the Arduino `Serial2` |
+//! | command port | **USART3**, PB10 TX / PB11 RX at [`COMMAND_BAUD`], 8N1 | `variant.cpp` pins 24 "UART3_TXD" / 25 "UART3_RXD"; `chip.h`: `BOARD_USART3_TX_PIN 24 //D24 (PB10)`, `BOARD_USART3_RX_PIN 25 //D25 (PB11)`; `drv_uart.c`: `huart_inst[DRV_UART_NUM_3]` = USART3, PB10 `GPIO_MODE_AF_PP`, PB11 `GPIO_MODE_INPUT` with the pull-up of the struct; the Arduino `Serial3` (`UARTClass Serial3(DRV_UART_NUM_3, …)` in `variant.cpp`), spare on this robot |
+//! | command port reception | **DMA1 channel 3** (USART3_RX, RM0008 Table 78), circular, into a [`COMMAND_RX_RING`]-byte ring | `drv_uart.c`: "USART3 - RX : DMA1, Channel 3", `DMA_CIRCULAR` into a 256-byte buffer read by CNDTR, as here |
+//! | operator button (the enable) | **PC15**, input with pull-down (pressed = high) | `chip.h`: `BOARD_BUTTON_PIN 23 //PC15`; `variant.cpp` pin 23 "USER_BUTTON"; ROBOTIS' examples (`02_Digital/c_Button`) read it as `INPUT_PULLDOWN`, high while pressed; [`Board::enable_button`](crate::board::Board::enable_button) gives the raw level; PC15 is also OSC32_OUT, a GPIO while the LSE is off (this firmware never starts it) |
 //! | Dynamixel power switch | **none** the MCU can drive | the 3-pin TTL ports take the board's supply through its slide switch; [`Board::servo_power`](crate::board::Board::servo_power) logs the request only |
 //! | application flash | 0x0800_3000, 114 KiB | `bsp/opencm/ldscript/opencm_flash.ld` (the first 12 KiB hold ROBOTIS' USB bootloader) |
 //! | RAM | 0x2000_0000, 20 KiB | same linker script |
@@ -26,6 +29,20 @@
 //! SYSCLK = HCLK = PCLK2 = 72 MHz, PCLK1 = 36 MHz (APB1 timers at 72 MHz). USART1 (APB2) with
 //! oversampling 16: BRR = 72 MHz ÷ baud ≥ 16, so the bus runs at 1, 2, 3 and 4.5 Mbps exactly
 //! (4.5 Mbps is the F103's fastest). USART2 (APB1): 36 MHz ÷ 921 600 → BRR 39 (+0.16 %).
+//! USART3 (APB1): 36 MHz ÷ 1 Mbps → BRR 36 (2.25, exact).
+//!
+//! # Command port
+//! USART3 receives without the CPU: each byte's DMA request moves it into the ring
+//! `COMMAND_RX` (DMA1 channel 3, circular), and
+//! [`Board::command_rx`](crate::board::Board::command_rx) takes what arrived since its last
+//! call by the channel's CNDTR ([`crate::rx_ring::DmaRxCursor`]). The
+//! F103's USART has no overrun disable (OVRDIS): on an overrun (a byte came while RXNE was
+//! still set: the DMA was late) ORE is set and "any data received during overrun is lost"
+//! (RM0008 §27.3.3 "Overrun error"; in practice the receiver raises no RXNE, hence no DMA
+//! request, while ORE is set) until ORE is cleared by a read of SR then of DR (§27.6.1).
+//! `command_rx` does that, once, when SR shows ORE: reception stalls for at most one tick,
+//! the bytes lost with it fail their packet's CRC and the master asks again. Replies go out
+//! byte by byte on TXE, each wait bounded ([`UART_SPIN_LIMIT`]).
 //!
 //! # Timing
 //! [`TickTimer::wait_tick`](crate::board::TickTimer::wait_tick) busy-waits on the µs counter until `k · period` (deadlines never
@@ -35,7 +52,8 @@
 //! # Exit and panic
 //! [`Board::exit`](crate::board::Board::exit) and the panic handler send the broadcast torque-off packet and reset the
 //! MCU (after a reset but a power-on the firmware does not walk). There is no power switch to
-//! cut as a backup.
+//! cut as a backup. The panic's log line has its location and a plain message, not a
+//! formatted one ([`panic_reset`]: flash).
 
 // Link the runtime and the defmt global logger (RTT) into every binary using this board.
 use cortex_m_rt as _;
@@ -43,8 +61,9 @@ use defmt_rtt as _;
 use stm32f1::stm32f103 as pac;
 
 use super::stm32::{self, register_blocks, stm32_board, BusUart, Stm32Bus, Stm32State};
-use crate::board::{BusError, Clock, LogRing, Watchdog, TORQUE_OFF_PACKET};
+use crate::board::{BusError, Clock, CrashCode, LogRing, Watchdog, TORQUE_OFF_PACKET};
 use crate::record::BoardId;
+use crate::rx_ring::DmaRxCursor;
 use crate::Config;
 
 /// SYSCLK (= HCLK = PCLK2, the bus UART's clock), Hz.
@@ -62,6 +81,19 @@ pub const LOG_RING: usize = 1024;
 pub const UART_SPIN_LIMIT: u32 = 300_000;
 /// Bus direction pin: PB5 (Arduino pin 28, "DXL DIR").
 pub const BUS_DIR_PIN: u32 = 5;
+/// Command port baud rate (USART3: BRR 36 exactly).
+pub use crate::board::COMMAND_BAUD;
+/// The command port's receive ring, bytes: DMA1 channel 3 fills it from USART3 without the CPU.
+/// 256 bytes are 2.56 ms of an unbroken 1 Mbps line, less than a 5 ms tick, but a Dynamixel
+/// master sends its next instruction only after the reply to the last (or its timeout), and
+/// the port's instructions are short (its longest WRITE, Param Key + Value + Op, is 53 bytes
+/// on the wire): what waits between two reads is one instruction, or a few repeats of one
+/// while the loop is busy elsewhere, well within the ring and within the loop's
+/// [`RX_PER_TICK`](crate::control::commanded::RX_PER_TICK) = 64 bytes a tick. The board's
+/// 20 KiB of RAM beside the worst-case stack leave no room for the OpenCR's 1 KiB.
+pub const COMMAND_RX_RING: usize = 256;
+/// The button's pin on GPIOC: PC15 (Arduino pin 23, `BOARD_BUTTON_PIN`).
+pub const BUTTON_PIN: u32 = 15;
 
 // RM0008 register bits.
 const RCC_CR_HSEON: u32 = 1 << 16;
@@ -72,10 +104,12 @@ const RCC_CR_PLLRDY: u32 = 1 << 25;
 const RCC_CFGR_72MHZ: u32 = 0b10 | (0b100 << 8) | (1 << 16) | (0b0111 << 18);
 const RCC_CFGR_SWS_PLL: u32 = 0b10 << 2;
 const RCC_CSR_RMVF: u32 = 1 << 24;
-/// APB2ENR: AFIO, IOPA, IOPB, USART1.
-const RCC_APB2_ENABLE: u32 = 1 | (1 << 2) | (1 << 3) | (1 << 14);
-/// APB1ENR: TIM2, TIM3, USART2.
-const RCC_APB1_ENABLE: u32 = 1 | (1 << 1) | (1 << 17);
+/// APB2ENR: AFIO, IOPA, IOPB, IOPC, USART1.
+const RCC_APB2_ENABLE: u32 = 1 | (1 << 2) | (1 << 3) | (1 << 4) | (1 << 14);
+/// APB1ENR: TIM2, TIM3, USART2, USART3.
+const RCC_APB1_ENABLE: u32 = 1 | (1 << 1) | (1 << 17) | (1 << 18);
+/// AHBENR: DMA1.
+const RCC_AHB_DMA1: u32 = 1;
 /// FLASH_ACR: 2 wait states (48 < SYSCLK ≤ 72 MHz), prefetch on.
 const FLASH_ACR_72MHZ: u32 = 0b010 | (1 << 4);
 const AFIO_MAPR_USART1_REMAP: u32 = 1 << 2;
@@ -88,6 +122,14 @@ const USART_SR_TXE: u32 = 1 << 7;
 /// CR1: UE, TE, RE (8N1, oversampling 16).
 const USART_CR1_ON: u32 = (1 << 13) | (1 << 3) | (1 << 2);
 const USART_CR1_UE: u32 = 1 << 13;
+/// CR3: DMAR (a DMA request for each received byte).
+const USART_CR3_DMAR: u32 = 1 << 6;
+/// DMA CCR: MINC (7), CIRC (5); DIR = 0 (peripheral to memory), PSIZE = MSIZE = 00 (bytes),
+/// PL = 00 (low), no interrupts.
+const DMA_CCR_RX: u32 = (1 << 7) | (1 << 5);
+const DMA_CCR_EN: u32 = 1;
+/// DMA IFCR: channel 3's CGIF3, CTCIF3, CHTIF3, CTEIF3 (bits 8–11).
+const DMA_IFCR_CH3: u32 = 0xF << 8;
 const IWDG_KEY_UNLOCK: u32 = 0x5555;
 const IWDG_KEY_START: u32 = 0xCCCC;
 const IWDG_KEY_FEED: u32 = 0xAAAA;
@@ -106,6 +148,40 @@ register_blocks! {
     fn usart2() -> pac::usart1::RegisterBlock = pac::USART2;
     /// GPIOB: only BSRR (atomic single-pin set/reset) is written after `new`.
     fn gpiob() -> pac::gpioa::RegisterBlock = pac::GPIOB;
+    /// The command port USART3 (owned by the board after `new`; its DR is DMA1 channel 3's
+    /// source).
+    fn usart3() -> pac::usart1::RegisterBlock = pac::USART3;
+    /// DMA1: channel 3 belongs to the command port; only its CNDTR is read after `new`.
+    fn dma1() -> pac::dma1::RegisterBlock = pac::DMA1;
+    /// GPIOC: only IDR (the button, PC15) is read after `new`.
+    fn gpioc() -> pac::gpioa::RegisterBlock = pac::GPIOC;
+}
+
+/// The command port's receive ring (in .bss; the F103's DMA reaches all of its SRAM).
+static COMMAND_RX: stm32::DmaRing<COMMAND_RX_RING> = stm32::DmaRing::new();
+
+/// Starts DMA1 channel 3 (USART3_RX's, RM0008 Table 78) copying every byte USART3 receives
+/// into [`COMMAND_RX`] in circular mode, then USART3 at [`COMMAND_BAUD`] with its receive DMA
+/// request (DMAR) before its receiver, so that no byte arrives before the channel takes it.
+/// Called once, from `OpenCmBoard::new`, with the DMA1 and USART3 clocks on.
+fn command_rx_dma_up(dma: &pac::DMA1, usart: &pac::USART3) {
+    let ch = &dma.ch3;
+    // SAFETY (each raw write below): whole-register values of the channel's CCR, CPAR, CMAR and
+    // CNDTR, of DMA_IFCR and of USART3's BRR, CR3 and CR1 as RM0008 §13.4 and §27.6 define
+    // them; the channel is disabled (EN = 0) while it is configured.
+    ch.cr.write(|w| unsafe { w.bits(0) });
+    dma.ifcr.write(|w| unsafe { w.bits(DMA_IFCR_CH3) });
+    ch.par
+        .write(|w| unsafe { w.bits(core::ptr::addr_of!(usart.dr) as u32) });
+    ch.mar.write(|w| unsafe { w.bits(COMMAND_RX.address()) });
+    ch.ndtr.write(|w| unsafe { w.bits(COMMAND_RX_RING as u32) });
+    ch.cr.write(|w| unsafe { w.bits(DMA_CCR_RX) });
+    ch.cr.write(|w| unsafe { w.bits(DMA_CCR_RX | DMA_CCR_EN) });
+    usart
+        .brr
+        .write(|w| unsafe { w.bits(PCLK1_HZ / COMMAND_BAUD) });
+    usart.cr3.write(|w| unsafe { w.bits(USART_CR3_DMAR) });
+    usart.cr1.write(|w| unsafe { w.bits(USART_CR1_ON) });
 }
 
 /// The bus UART's BRR for `baud` (72 MHz ÷ baud, oversampling 16), if it is in 16..=0xFFFF.
@@ -142,9 +218,16 @@ pub fn panic_torque_off() {
 }
 
 /// Panic path of the OpenCM binary: log, record the panic in no-init RAM, torque off, reset
-/// (the next boot logs the record and does not walk).
+/// (the next boot logs the record and does not walk). The log has the panic's location and
+/// its message when that is a plain string, not a formatted one: formatting it would link
+/// `core::fmt`'s machinery, ≈ 1.3 KB of the board's flash.
 pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
-    stm32::panic_reset(info, panic_torque_off)
+    let message = info.message().as_str().unwrap_or("");
+    let (file, line) = info.location().map_or(("", 0), |l| (l.file(), l.line()));
+    defmt::error!("panic: {=str} at {=str}:{=u32}", message, file, line);
+    stm32::crash_cell().record(CrashCode::Panic);
+    panic_torque_off();
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// The OpenCM 9.04 board.
@@ -153,6 +236,8 @@ pub struct OpenCmBoard {
     tim_high: pac::TIM3,
     iwdg: pac::IWDG,
     baud: u32,
+    /// Where the loop stopped reading the command port's receive ring.
+    command_rx: DmaRxCursor<COMMAND_RX_RING>,
     state: Stm32State,
     ring: LogRing<LOG_RING>,
 }
@@ -160,7 +245,9 @@ pub struct OpenCmBoard {
 impl OpenCmBoard {
     /// Brings the board up: 72 MHz from the 8 MHz crystal, USART1 (remapped to PB6/PB7) bus
     /// at `cfg.bus_baud` (1 Mbps when the rate cannot be generated), PB5 direction low, USART2
-    /// log at [`LOG_BAUD`], TIM2 → TIM3 as a 32-bit 1 MHz counter. The watchdog is not started.
+    /// log at [`LOG_BAUD`], the USART3 command port at [`COMMAND_BAUD`] received by DMA1
+    /// channel 3, the button PC15 an input, TIM2 → TIM3 as a 32-bit 1 MHz counter. The
+    /// watchdog is not started.
     pub fn new(dp: pac::Peripherals, cfg: &Config) -> Self {
         let rcc = &dp.RCC;
         // The reset flags first, then clear them (RMVF) so that the next boot sees its own.
@@ -190,6 +277,8 @@ impl OpenCmBoard {
             .modify(|r, w| unsafe { w.bits(r.bits() | RCC_APB2_ENABLE) });
         rcc.apb1enr
             .modify(|r, w| unsafe { w.bits(r.bits() | RCC_APB1_ENABLE) });
+        rcc.ahbenr
+            .modify(|r, w| unsafe { w.bits(r.bits() | RCC_AHB_DMA1) });
 
         // USART1 on PB6/PB7 (remap), SWJ configuration untouched.
         dp.AFIO
@@ -206,6 +295,19 @@ impl OpenCmBoard {
         dp.GPIOA
             .crl
             .modify(|r, w| unsafe { w.bits((r.bits() & 0xFFFF_00FF) | (0xB << 8) | (0x4 << 12)) });
+        // GPIOB CRH: PB10 alternate push-pull 50 MHz (0xB), PB11 input with pull-up (0x8, ODR11
+        // = 1: the line idles high with nothing plugged in, as ROBOTIS configures it).
+        dp.GPIOB.bsrr.write(|w| unsafe { w.bits(1 << 11) });
+        dp.GPIOB
+            .crh
+            .modify(|r, w| unsafe { w.bits((r.bits() & 0xFFFF_00FF) | (0xB << 8) | (0x8 << 12)) });
+        // GPIOC CRH: PC15 input with pull-down (0x8, ODR15 = 0): the button reads high pressed.
+        dp.GPIOC
+            .bsrr
+            .write(|w| unsafe { w.bits(1 << (BUTTON_PIN + 16)) });
+        dp.GPIOC
+            .crh
+            .modify(|r, w| unsafe { w.bits((r.bits() & 0x0FFF_FFFF) | (0x8 << 28)) });
 
         let baud = if bus_brr(cfg.bus_baud).is_some() {
             cfg.bus_baud
@@ -219,6 +321,7 @@ impl OpenCmBoard {
             .brr
             .write(|w| unsafe { w.bits(PCLK1_HZ / LOG_BAUD) });
         dp.USART2.cr1.write(|w| unsafe { w.bits(USART_CR1_ON) });
+        command_rx_dma_up(&dp.DMA1, &dp.USART3);
 
         // TIM2: 72 MHz ÷ 72 = 1 MHz, update event as TRGO (CR2.MMS = 010); TIM3 counts TIM2's
         // update events (SMCR: TS = ITR1 = TIM2, SMS = external clock mode 1).
@@ -240,6 +343,7 @@ impl OpenCmBoard {
             tim_high: dp.TIM3,
             iwdg: dp.IWDG,
             baud,
+            command_rx: DmaRxCursor::new(),
             state: Stm32State::new(cfg, reset_csr),
             ring: LogRing::new(),
         }
@@ -375,6 +479,33 @@ stm32_board! {
                 "servo power {=bool} requested: the OpenCM 9.04 has no switch for it",
                 on
             );
+        }
+
+        fn command_rx(&mut self, buf: &mut [u8]) -> usize {
+            // An overrun stops reception until SR then DR are read (module docs "Command
+            // port"); the DR read may take one byte from the DMA, lost with the overrun's.
+            let u = usart3();
+            if u.sr.read().bits() & USART_SR_ORE != 0 {
+                let _ = u.dr.read().bits();
+            }
+            let remaining = (dma1().ch3.ndtr.read().bits() & 0xFFFF) as usize;
+            COMMAND_RX.take(&mut self.command_rx, remaining, buf)
+        }
+
+        fn enable_button(&mut self) -> Option<bool> {
+            Some(gpioc().idr.read().bits() & (1 << BUTTON_PIN) != 0)
+        }
+
+        fn command_tx(&mut self, bytes: &[u8]) {
+            // 10 µs a byte at 1 Mbps, each wait bounded.
+            let u = usart3();
+            for &b in bytes {
+                if spin(|| u.sr.read().bits() & USART_SR_TXE != 0).is_err() {
+                    return;
+                }
+                // SAFETY: DR takes any 9-bit value; a byte is one.
+                u.dr.write(|w| unsafe { w.bits(u32::from(b)) });
+            }
         }
 
         fn exit(&mut self, code: i32) -> ! {

@@ -55,27 +55,15 @@ pub const SYSCLK_HZ: u32 = 216_000_000;
 pub const HSE_HZ: u32 = 25_000_000;
 /// Log UART baud rate.
 pub const LOG_BAUD: u32 = 921_600;
-/// Command port baud rate (USART2; the Dynamixel SDK's usual 1 Mbps).
-pub const COMMAND_BAUD: u32 = 1_000_000;
-/// The command port's receive ring, bytes: DMA1 stream 5 fills it from USART2 without the CPU
-/// (10 ms of bytes at 1 Mbps; the loop reads it every tick, [`crate::rx_ring`]).
-pub const COMMAND_RX_RING: usize = 1024;
+pub use crate::board::{COMMAND_BAUD, COMMAND_RX_RING};
 /// DMA1 stream and channel of USART2_RX (RM0385, DMA1 request mapping: stream 5, channel 4).
 const COMMAND_RX_STREAM: usize = 5;
 /// Its channel.
 const COMMAND_RX_CHANNEL: u32 = 4;
 
-/// The ring's bytes. Written only by the DMA (after [`command_rx_dma_up`]), read only by
-/// `command_rx` with volatile loads.
-struct RxRing(core::cell::UnsafeCell<[u8; COMMAND_RX_RING]>);
-
-// SAFETY: the one writer is the DMA stream, the one reader the control loop (volatile loads
-// of single bytes: a byte is never torn).
-unsafe impl Sync for RxRing {}
-
 /// The command port's receive ring (in DTCM with the rest of .bss: the F7's DMAs reach DTCM
 /// through the Cortex-M7's AHB slave port).
-static COMMAND_RX: RxRing = RxRing(core::cell::UnsafeCell::new([0; COMMAND_RX_RING]));
+static COMMAND_RX: stm32::DmaRing<COMMAND_RX_RING> = stm32::DmaRing::new();
 
 /// Starts DMA1 stream 5 copying every byte USART2 receives into [`COMMAND_RX`] in circular
 /// mode (peripheral to memory, bytes, memory increment, direct mode), and USART2's receive
@@ -98,8 +86,7 @@ fn command_rx_dma_up(dma: &pac::DMA1) {
     let u = usart2();
     st.par
         .write(|w| unsafe { w.bits(core::ptr::addr_of!(u.rdr) as u32) });
-    st.m0ar
-        .write(|w| unsafe { w.bits(COMMAND_RX.0.get() as u32) });
+    st.m0ar.write(|w| unsafe { w.bits(COMMAND_RX.address()) });
     st.ndtr.write(|w| unsafe { w.bits(COMMAND_RX_RING as u32) });
     st.fcr.write(|w| unsafe { w.bits(0) });
     // CHSEL = 4 (bits 25–27), MINC (10), CIRC (8); DIR = 00 (peripheral to memory), PSIZE =
@@ -496,18 +483,7 @@ stm32_board! {
                 .st
                 .get(COMMAND_RX_STREAM)
                 .map_or(usize::MAX, |st| (st.ndtr.read().bits() & 0xFFFF) as usize);
-            // The bytes before the DMA's position are written before NDTR moved past them.
-            core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::Acquire);
-            let ring = COMMAND_RX.0.get() as *const u8;
-            self.command_rx.take(
-                remaining,
-                |i| {
-                    // SAFETY: i < COMMAND_RX_RING (the cursor's invariant); a volatile byte
-                    // load of memory only the DMA writes.
-                    unsafe { core::ptr::read_volatile(ring.add(i.min(COMMAND_RX_RING - 1))) }
-                },
-                buf,
-            )
+            COMMAND_RX.take(&mut self.command_rx, remaining, buf)
         }
 
         fn enable_button(&mut self) -> Option<bool> {

@@ -9,6 +9,13 @@
 //! | UART2 | 0x4000_6000 | the lock-step channel (TCP to the simulator) |
 //! | UART3 | 0x4000_7000 | the command port ([`walker_contract::command_port`]; `-serial tcp:…` from the host, or absent) |
 //!
+//! The command port is the OpenCR's in time: bytes reach the firmware no faster than its line
+//! carries them ([`COMMAND_BAUD`], 10 bits a byte) into a ring of the OpenCR's size
+//! ([`COMMAND_RX_RING`]), and bytes that find the ring full are lost and logged
+//! ([`crate::rx_ring::LineRx`]: qemu's character device would otherwise hold the sender back,
+//! hiding a reader too slow for the real line); each reply holds the loop for its bytes' line
+//! time, as the OpenCR's transmit loop does.
+//!
 //! CMSDK APB UART registers: DATA 0x00, STATE 0x04 (bit 0 TX full, bit 1 RX full), CTRL 0x08
 //! (bit 0 TX enable, bit 1 RX enable), BAUDDIV 0x10 (≥ 16, 25 MHz clock). defmt goes out over
 //! semihosting (stdout of qemu), the exit code through semihosting SYS_EXIT_EXTENDED.
@@ -41,6 +48,7 @@
 //! * modelled bus time: 10 bits per byte at the configured baud (default 1 Mbps) for every byte
 //!   sent and every byte received, plus the servo Return Delay Time before the first byte of
 //!   each reply ([`crate::Config::return_delay_us`]);
+//! * the command port's replies: 10 bits per byte at [`COMMAND_BAUD`];
 //! * a timeout: a read past the announced reply jumps to the driver's deadline;
 //! * the compute time per tick, charged when the tick's work ends (at
 //!   [`TickTimer::wait_tick`]): by default the instructions per tick that `scripts/bench.sh`
@@ -77,9 +85,10 @@ use defmt_semihosting as _;
 
 use crate::board::{
     Board, BusError, Clock, CrashCell, CrashCode, LineTime, LogSink, ResetCause, ServoBus, Tick,
-    TickSchedule, TickTimer, Watchdog, TORQUE_OFF_PACKET,
+    TickSchedule, TickTimer, Watchdog, COMMAND_BAUD, COMMAND_RX_RING, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
+use crate::rx_ring::{self, LineRx};
 use crate::Config;
 
 /// CMSDK UART0 (servo bus).
@@ -90,8 +99,6 @@ pub const UART1_BASE: usize = 0x4000_5000;
 pub const UART2_BASE: usize = 0x4000_6000;
 /// CMSDK UART3 (command port).
 pub const UART3_BASE: usize = 0x4000_7000;
-/// Bytes read from the command port per tick at most (bounded work; the rest waits).
-pub const COMMAND_RX_PER_TICK: usize = 64;
 /// UART / SysTick clock of the mps2 boards, Hz.
 pub const SYSCLK_HZ: u32 = 25_000_000;
 /// Instructions per control tick charged as compute time for `cfg`: the bench's worst case
@@ -430,6 +437,8 @@ pub struct QemuBoard {
     log: Uart,
     lockstep_uart: Uart,
     command: Uart,
+    /// The command port in time: the OpenCR's line rate and receive ring.
+    command_line: LineRx<COMMAND_RX_RING>,
     lockstep: bool,
     line: LineTime,
     return_delay_ns: u64,
@@ -463,7 +472,7 @@ impl QemuBoard {
         let log = Uart { base: UART1_BASE };
         let ls = Uart { base: UART2_BASE };
         let command = Uart { base: UART3_BASE };
-        command.init(1_000_000);
+        command.init(COMMAND_BAUD);
         bus.init(cfg.bus_baud);
         log.init(921_600);
         ls.init(SYSCLK_HZ / 16);
@@ -492,6 +501,7 @@ impl QemuBoard {
             log,
             lockstep_uart: ls,
             command,
+            command_line: LineRx::new(COMMAND_BAUD),
             lockstep,
             line: LineTime { baud: cfg.bus_baud },
             return_delay_ns: u64::from(cfg.return_delay_us) * 1000,
@@ -743,15 +753,19 @@ impl Board for QemuBoard {
     }
 
     fn command_rx(&mut self, buf: &mut [u8]) -> usize {
-        let mut n = 0;
-        for slot in buf.iter_mut().take(COMMAND_RX_PER_TICK) {
-            if !self.command.rx_full() {
-                break;
-            }
-            *slot = (self.command.read(DATA) & 0xFF) as u8;
-            n += 1;
+        let now = self.now_us();
+        let uart = self.command;
+        let lost = self.command_line.lost();
+        self.command_line.arrive(now, || {
+            uart.rx_full().then(|| (uart.read(DATA) & 0xFF) as u8)
+        });
+        if self.command_line.lost() != lost {
+            defmt::warn!(
+                "command port: {=u32} bytes lost to a full receive ring",
+                self.command_line.lost()
+            );
         }
-        n
+        self.command_line.read(buf)
     }
 
     fn command_tx(&mut self, bytes: &[u8]) {
@@ -762,6 +776,9 @@ impl Board for QemuBoard {
             }
         }
         self.cpu.resume();
+        // The real board's transmitter holds the loop for the bytes' line time.
+        let bits = rx_ring::BITS_PER_BYTE * bytes.len() as u64;
+        self.virt_ns += bits * 1_000_000_000 / u64::from(COMMAND_BAUD);
     }
 
     fn store_read(&mut self, slot: usize, buf: &mut [u8]) -> bool {

@@ -50,7 +50,9 @@ pub(crate) use register_blocks;
 /// `torque_off` (bounded, from anywhere), reset (the next boot logs the record and does not
 /// walk).
 // Inline: the board's panic handler is this (no call through a pointer for `torque_off`).
+// The OpenCM 9.04 has its own, without `core::fmt` (flash).
 #[inline(always)]
+#[cfg_attr(feature = "board-opencm", allow(dead_code))]
 pub(crate) fn panic_reset(info: &core::panic::PanicInfo, torque_off: impl FnOnce()) -> ! {
     defmt::error!("panic: {}", defmt::Display2Format(info));
     crash_cell().record(CrashCode::Panic);
@@ -339,3 +341,48 @@ macro_rules! stm32_board {
     };
 }
 pub(crate) use stm32_board;
+
+/// A command port's receive ring that a DMA stream (channel) fills in circular mode: its bytes,
+/// written only by the DMA once the board has started it, read only through
+/// [`DmaRing::take`] with volatile loads ([`crate::rx_ring::DmaRxCursor`] keeps the reader's
+/// place).
+pub(crate) struct DmaRing<const N: usize>(core::cell::UnsafeCell<[u8; N]>);
+
+// SAFETY: the one writer is the DMA, the one reader the control loop (volatile loads of single
+// bytes: a byte is never torn).
+unsafe impl<const N: usize> Sync for DmaRing<N> {}
+
+impl<const N: usize> DmaRing<N> {
+    /// A zeroed ring (a static in .bss).
+    pub(crate) const fn new() -> Self {
+        DmaRing(core::cell::UnsafeCell::new([0; N]))
+    }
+
+    /// Its address, the DMA's memory address register's value.
+    pub(crate) fn address(&self) -> u32 {
+        self.0.get() as u32
+    }
+
+    /// Copies the bytes the DMA wrote since `cursor`'s last call into `out`; how many.
+    /// `remaining` is the stream's remaining-transfer count (NDTR / CNDTR), read by the caller
+    /// just before.
+    pub(crate) fn take(
+        &self,
+        cursor: &mut crate::rx_ring::DmaRxCursor<N>,
+        remaining: usize,
+        out: &mut [u8],
+    ) -> usize {
+        // The bytes before the DMA's position are written before the count moved past them.
+        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::Acquire);
+        let ring = self.0.get() as *const u8;
+        cursor.take(
+            remaining,
+            |i| {
+                // SAFETY: i < N (the cursor's invariant, clamped again); a volatile byte load
+                // of memory only the DMA writes.
+                unsafe { core::ptr::read_volatile(ring.add(i.min(N.saturating_sub(1)))) }
+            },
+            out,
+        )
+    }
+}

@@ -149,13 +149,18 @@ impl<P: TickPath> Controller<'_, P> {
     /// online walk's command.
     fn command<B: Board>(&mut self, board: &mut B) {
         self.link.poll(board, &mut self.log);
-        // A run is going: parameters read, never set (not on the OpenCM 9.04: no command
-        // port, no flash for the parameter table's text).
+        // A run is going: parameters read, never set (the OpenCM 9.04's build has no
+        // parameter table: its flash).
         #[cfg(not(feature = "board-opencm"))]
         self.link
             .port
             .table
             .serve_param(ParamAccess::ReadOnly(self.cfg));
+        #[cfg(feature = "board-opencm")]
+        self.link
+            .port
+            .table
+            .answer_param(walker_contract::command_port::ParamStatus::Unsupported);
         if self.link.mode() == Mode::TorqueOff {
             self.sup.stop(StopReason::Requested);
         }
