@@ -203,6 +203,14 @@ pub struct TruthSample {
     /// Each sole's point on the ground and heading in the world (left, right): x, y (m), yaw
     /// (rad) — where the feet really are, in the air or on the ground.
     pub soles: [[f64; 3]; 2],
+    /// Each sole's roll and pitch in the world (left, right; rad, ZYX angles): a sole flat on
+    /// the ground reads 0, one rocking on its heel or toe its pitch. 0 in the kinematic model.
+    pub sole_tilt: [[f64; 2]; 2],
+    /// Each sole point's height above the floor (left, right; m): 0 on the ground, the swing
+    /// foot's lift in the air. 0 in the kinematic model.
+    pub sole_z: [f64; 2],
+    /// Joint positions, rad (left leg then right leg, the simulator's joint coordinates).
+    pub joint_position: [f64; 12],
 }
 
 /// One joint's torque line for a physics step: `τ = rest + m_kk·q̈` with the other joints'
@@ -589,6 +597,9 @@ impl Physics {
             sole_wrench: [[0.0; 6]; 2],
             other_contact: false,
             soles: c.feet.map(|f| [f.xy[0], f.xy[1], f.yaw]),
+            sole_tilt: [[0.0; 2]; 2],
+            sole_z: [0.0; 2],
+            joint_position: self.q,
         }
     }
 

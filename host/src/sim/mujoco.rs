@@ -478,6 +478,8 @@ impl MjBody {
         let mut forces = [[0.0; 4]; 2];
         let mut contact = [false; 2];
         let mut places = [Place::<f64>::new(0.0, 0.0, 0.0); 2];
+        let mut sole_tilt = [[0.0; 2]; 2];
+        let mut sole_z = [0.0; 2];
         for s in 0..2 {
             let m = &site_m[ids.sole_sites[s]];
             let f_local = rot_t(m, [wrench[s][0], wrench[s][1], wrench[s][2]]);
@@ -485,7 +487,10 @@ impl MjBody {
             forces[s] = load_cells(f_local[2], m_local[0], m_local[1], &cells);
             contact[s] = wrench[s][2] > 1.0;
             let p = sites[ids.sole_sites[s]];
-            places[s] = Place::new(p[0], p[1], rpy(m)[2]);
+            let [roll, pitch, yaw] = rpy(m);
+            places[s] = Place::new(p[0], p[1], yaw);
+            sole_tilt[s] = [roll, pitch];
+            sole_z[s] = p[2];
         }
         let poly = match contact {
             [true, true] => SupportPolygon::double(&places[0], &places[1], &self.robot).ok(),
@@ -543,6 +548,9 @@ impl MjBody {
             sole_wrench: wrench,
             other_contact,
             soles: places.map(|p| [p.x, p.y, p.yaw]),
+            sole_tilt,
+            sole_z,
+            joint_position: self.q,
         }
     }
 }

@@ -15,7 +15,11 @@
 //! 0/1), `l_f{x,y,z}_n, l_m{x,y,z}_nm, r_f{x,y,z}_n, r_m{x,y,z}_nm` (each sole's contact wrench
 //! in the world frame about its sole point; 0 in the kinematic model), `other_contact` (a robot
 //! part other than a sole touches the ground, 0/1), `l_x_m, l_y_m, l_yaw_rad, r_x_m, r_y_m,
-//! r_yaw_rad` (each sole point's place on the ground and heading, world frame). With the MuJoCo robot `zmp_x_m, zmp_y_m` is
+//! r_yaw_rad` (each sole point's place on the ground and heading, world frame), `l_roll_rad,
+//! l_pitch_rad, r_roll_rad, r_pitch_rad` (each sole's tilt: 0 flat, a pitch when it rocks on
+//! its heel or toe; 0 in the kinematic model), `l_z_m, r_z_m` (each sole point's height: the
+//! swing foot's lift; 0 in the kinematic model), `q_1_rad..q_12_rad` (joint positions by servo
+//! ID, the simulator's joint coordinates). With the MuJoCo robot `zmp_x_m, zmp_y_m` is
 //! the true centre of pressure of the contact forces and `fz_n` their vertical sum.
 //! [`crate::report::read_truth`] is the one reader.
 
@@ -32,7 +36,8 @@ gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,acc_x_m_s2,acc_y_m_s2,acc_z_m_s2,tau_nm,f
 qd_1_rad_s,qd_2_rad_s,qd_3_rad_s,qd_4_rad_s,qd_5_rad_s,qd_6_rad_s,qd_7_rad_s,qd_8_rad_s,qd_9_rad_s,qd_10_rad_s,qd_11_rad_s,qd_12_rad_s,\
 tq_1_nm,tq_2_nm,tq_3_nm,tq_4_nm,tq_5_nm,tq_6_nm,tq_7_nm,tq_8_nm,tq_9_nm,tq_10_nm,tq_11_nm,tq_12_nm,tq_limited,\
 l_contact,r_contact,l_fx_n,l_fy_n,l_fz_n,l_mx_nm,l_my_nm,l_mz_nm,r_fx_n,r_fy_n,r_fz_n,r_mx_nm,r_my_nm,r_mz_nm,other_contact,\
-l_x_m,l_y_m,l_yaw_rad,r_x_m,r_y_m,r_yaw_rad";
+l_x_m,l_y_m,l_yaw_rad,r_x_m,r_y_m,r_yaw_rad,l_roll_rad,l_pitch_rad,r_roll_rad,r_pitch_rad,l_z_m,r_z_m,\
+q_1_rad,q_2_rad,q_3_rad,q_4_rad,q_5_rad,q_6_rad,q_7_rad,q_8_rad,q_9_rad,q_10_rad,q_11_rad,q_12_rad";
 
 /// The truth column of joint `id`'s speed (rad/s).
 pub fn joint_speed_column(id: usize) -> String {
@@ -92,8 +97,12 @@ impl TruthLog {
             num(w, *v, 4)?;
         }
         w.write_field(u8::from(t.other_contact).to_string())?;
-        for v in t.soles.iter().flatten() {
+        let tilt = t.sole_tilt.iter().flatten();
+        for v in t.soles.iter().flatten().chain(tilt).chain(&t.sole_z) {
             num(w, *v, 6)?;
+        }
+        for v in &t.joint_position {
+            num(w, *v, 5)?;
         }
         w.write_record(None::<&[u8]>)?;
         self.rows += 1;
@@ -135,6 +144,9 @@ mod tests {
         t.joint_speed[3] = -1.234567;
         t.sole_wrench[1][2] = 20.12345;
         t.soles[0] = [0.1, 0.045, -0.01];
+        t.sole_tilt[1] = [0.002, -0.05];
+        t.sole_z[0] = 0.03;
+        t.joint_position[4] = -0.123456;
         let n = crate::report::csv_number;
         let mut fields = vec![format!("{:.6}", 1.234567)];
         fields.extend([t.zmp[0], t.zmp[1], t.fz].map(|v| n(v, 6)));
@@ -148,6 +160,9 @@ mod tests {
         fields.extend(t.sole_wrench.iter().flatten().map(|v| n(*v, 4)));
         fields.push("1".into());
         fields.extend(t.soles.iter().flatten().map(|v| n(*v, 6)));
+        fields.extend(["0.000000", "0.000000", "0.002000", "-0.050000"].map(String::from));
+        fields.extend(["0.030000", "0.000000"].map(String::from));
+        fields.extend(t.joint_position.map(|v| n(v, 5)));
         let expect = format!("{HEADER}\n{}\n", fields.join(","));
         assert_eq!(fields.len(), HEADER.split(',').count());
         let path = std::env::temp_dir().join(format!("walker-truth-{}.csv", std::process::id()));
