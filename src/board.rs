@@ -459,6 +459,11 @@ impl LineTime {
         let baud = u64::from(self.baud.max(1));
         (bytes as u64).saturating_mul(10_000_000_000) / baud
     }
+
+    /// Whole bytes the line carries in `us` microseconds.
+    pub fn bytes_in_us(&self, us: u64) -> u64 {
+        us.saturating_mul(u64::from(self.baud)) / 10_000_000
+    }
 }
 
 #[cfg(test)]

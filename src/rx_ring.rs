@@ -48,8 +48,7 @@ impl<const N: usize> DmaRxCursor<N> {
     }
 }
 
-/// Bits on the line per byte (8N1: start, 8 data, stop).
-pub const BITS_PER_BYTE: u64 = 10;
+use crate::board::LineTime;
 
 /// A UART receiver in time (module docs): the line delivers at most `baud / 10` bytes per
 /// second into a ring of `N` bytes that the firmware reads; arrivals beyond a full ring are
@@ -57,7 +56,7 @@ pub const BITS_PER_BYTE: u64 = 10;
 #[derive(Debug)]
 pub struct LineRx<const N: usize> {
     ring: heapless::Deque<u8, N>,
-    baud: u32,
+    line: LineTime,
     /// Since when the line has been busy without a break (the last time the sender had
     /// nothing), µs.
     busy_since_us: u64,
@@ -75,7 +74,7 @@ impl<const N: usize> LineRx<N> {
     pub const fn new(baud: u32) -> Self {
         LineRx {
             ring: heapless::Deque::new(),
-            baud,
+            line: LineTime { baud },
             busy_since_us: 0,
             carried: 0,
             lost: 0,
@@ -87,9 +86,12 @@ impl<const N: usize> LineRx<N> {
     /// the ring full are lost ([`LineRx::lost`]). At most [`LineRx::MAX_ARRIVALS`] bytes per
     /// call; the rest stay with the sender.
     pub fn arrive(&mut self, now_us: u64, mut next: impl FnMut() -> Option<u8>) {
-        let elapsed = now_us.saturating_sub(self.busy_since_us);
-        let line = elapsed.saturating_mul(u64::from(self.baud)) / (BITS_PER_BYTE * 1_000_000);
-        let credit = line.saturating_sub(self.carried).min(Self::MAX_ARRIVALS);
+        let line_bytes = self
+            .line
+            .bytes_in_us(now_us.saturating_sub(self.busy_since_us));
+        let credit = line_bytes
+            .saturating_sub(self.carried)
+            .min(Self::MAX_ARRIVALS);
         for _ in 0..credit {
             let Some(b) = next() else {
                 self.busy_since_us = now_us;

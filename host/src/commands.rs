@@ -251,6 +251,9 @@ pub trait PortStream: Read + Write + Send {}
 
 impl<T: Read + Write + Send> PortStream for T {}
 
+/// A status from the port: its error code (`None`: OK) and data.
+type PortStatus = (Option<ErrorCode>, Vec<u8>);
+
 /// A Dynamixel master on the command port's byte stream.
 pub struct PortMaster {
     stream: Box<dyn PortStream>,
@@ -375,13 +378,7 @@ impl PortMaster {
         &mut self,
         ins: Instruction<'_>,
     ) -> Result<(Option<ErrorCode>, Vec<u8>), String> {
-        let mut buf = [0u8; 600];
-        let n = ins
-            .encode(&mut buf, PORT_ID)
-            .map_err(|e| format!("{e:?}"))?;
-        self.stream
-            .write_all(buf.get(..n).unwrap_or(&[]))
-            .map_err(|e| format!("command port: {e}"))?;
+        self.send(ins)?;
         // The data length an OK status of this instruction carries: an OK status of another
         // length is the late reply to an earlier instruction (one sent again after its
         // timeout) and is skipped, not taken for this one's.
@@ -392,29 +389,51 @@ impl PortMaster {
             _ => None,
         };
         let start = Instant::now();
-        let mut byte = [0u8; 1];
         while start.elapsed() < self.timeout {
-            match self.stream.read(&mut byte) {
-                Ok(0) => return Err("command port closed".into()),
-                Ok(_) => {
-                    if let Some(Ok(p)) = self.decoder.push(byte[0]) {
-                        let s = Status::from_packet(&p).map_err(|e| format!("{e:?}"))?;
-                        let late =
-                            s.error.code.is_none() && expect.is_some_and(|n| n != s.data.len());
-                        if !late {
-                            return Ok((s.error.code, s.data.to_vec()));
-                        }
-                    }
+            if let Some((code, data)) = self.read_status()? {
+                let late = code.is_none() && expect.is_some_and(|n| n != data.len());
+                if !late {
+                    return Ok((code, data));
                 }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                    ) => {}
-                Err(e) => return Err(format!("command port: {e}")),
             }
         }
         Err("command port: no reply".into())
+    }
+
+    /// Encodes `ins` for the port and writes it.
+    fn send(&mut self, ins: Instruction<'_>) -> Result<(), String> {
+        let mut buf = [0u8; 600];
+        let n = ins
+            .encode(&mut buf, PORT_ID)
+            .map_err(|e| format!("{e:?}"))?;
+        self.stream
+            .write_all(buf.get(..n).unwrap_or(&[]))
+            .map_err(|e| format!("command port: {e}"))
+    }
+
+    /// Reads one byte (or times out: the stream's short read timeout) into the decoder; the
+    /// status it completes, if any: (error code, data).
+    fn read_status(&mut self) -> Result<Option<PortStatus>, String> {
+        let mut byte = [0u8; 1];
+        match self.stream.read(&mut byte) {
+            Ok(0) => Err("command port closed".into()),
+            Ok(_) => match self.decoder.push(byte[0]) {
+                Some(Ok(p)) => {
+                    let s = Status::from_packet(&p).map_err(|e| format!("{e:?}"))?;
+                    Ok(Some((s.error.code, s.data.to_vec())))
+                }
+                _ => Ok(None),
+            },
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                Ok(None)
+            }
+            Err(e) => Err(format!("command port: {e}")),
+        }
     }
 
     /// WRITE, the status checked.
@@ -436,15 +455,8 @@ impl PortMaster {
     ) -> Result<usize, String> {
         let start = Instant::now();
         let mut ok = 0;
-        let mut byte = [0u8; 1];
-        let mut packet = [0u8; 600];
         for (k, &(addr, data)) in writes.iter().enumerate() {
-            let n = Instruction::Write { addr, data }
-                .encode(&mut packet, PORT_ID)
-                .map_err(|e| format!("{e:?}"))?;
-            self.stream
-                .write_all(packet.get(..n).unwrap_or(&[]))
-                .map_err(|e| format!("command port: {e}"))?;
+            self.send(Instruction::Write { addr, data })?;
             let due = start + every * (k as u32 + 1);
             let last = k + 1 == writes.len();
             let until = if last {
@@ -453,23 +465,12 @@ impl PortMaster {
                 due
             };
             while Instant::now() < until && !(last && ok == writes.len()) {
-                match self.stream.read(&mut byte) {
-                    Ok(0) => return Err("command port closed".into()),
-                    Ok(_) => {
-                        if let Some(Ok(p)) = self.decoder.push(byte[0]) {
-                            let s = Status::from_packet(&p).map_err(|e| format!("{e:?}"))?;
-                            if let Some(e) = s.error.code {
-                                return Err(format!("command port: paced WRITE {k}: {e:?}"));
-                            }
-                            ok += 1;
-                        }
+                match self.read_status()? {
+                    Some((Some(e), _)) => {
+                        return Err(format!("command port: paced WRITE {k}: {e:?}"))
                     }
-                    Err(e)
-                        if matches!(
-                            e.kind(),
-                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                        ) => {}
-                    Err(e) => return Err(format!("command port: {e}")),
+                    Some((None, _)) => ok += 1,
+                    None => {}
                 }
             }
         }

@@ -88,7 +88,7 @@ use crate::board::{
     TickSchedule, TickTimer, Watchdog, COMMAND_BAUD, COMMAND_RX_RING, TORQUE_OFF_PACKET,
 };
 use crate::record::BoardId;
-use crate::rx_ring::{self, LineRx};
+use crate::rx_ring::LineRx;
 use crate::Config;
 
 /// CMSDK UART0 (servo bus).
@@ -777,8 +777,7 @@ impl Board for QemuBoard {
         }
         self.cpu.resume();
         // The real board's transmitter holds the loop for the bytes' line time.
-        let bits = rx_ring::BITS_PER_BYTE * bytes.len() as u64;
-        self.virt_ns += bits * 1_000_000_000 / u64::from(COMMAND_BAUD);
+        self.virt_ns += LineTime { baud: COMMAND_BAUD }.bytes_ns(bytes.len());
     }
 
     fn store_read(&mut self, slot: usize, buf: &mut [u8]) -> bool {
