@@ -1259,6 +1259,24 @@ params! {
         set: |c, v| { c.deadman_ms = v as u32 },
         get: |c| { Some(Value::Int(c.deadman_ms)) },
     },
+    {
+        key: "catch_level_joints",
+        plan_key: None,
+        unit: "1",
+        domain: range(0.0, 1.5),
+        doc: "catching step: swing sole levelling gain on the swing leg's hip pitch and knee lag, their Present Position minus their targets (A10; 0 = off, no position reads)",
+        set: |c, v| { c.step_adaptation.level_joints = v as f32 },
+        get: |c| { Some(Value::Num32(c.step_adaptation.level_joints)) },
+    },
+    {
+        key: "catch_hold_lag",
+        plan_key: None,
+        unit: "m",
+        domain: range(0.0, 0.05),
+        doc: "catching step: the plan's clock also holds in the landing while the swing sole, by forward kinematics of the Present Position, is farther than this from where its targets put it (A11; 0 = off, no position reads)",
+        set: |c, v| { c.step_adaptation.hold_lag_m = v as f32 },
+        get: |c| { Some(Value::Num32(c.step_adaptation.hold_lag_m)) },
+    },
 }
 
 /// Key index meaning "not a known key".
@@ -2060,14 +2078,20 @@ mod tests {
         // The last key of the table (the bit set's far end) and the first.
         let last = KEYS[KEYS.len() - 1];
         let first = KEYS[0];
-        let line = format!("elf {first}=lipm {last}=500 {first}=dlipm");
+        // A value in the last key's domain: its upper bound, or its first word.
+        let in_domain = match PARAMS[PARAMS.len() - 1].domain {
+            Domain::Num { max, .. } => max.to_string(),
+            Domain::Int { max, .. } => max.to_string(),
+            Domain::Word(words) => words[0].to_string(),
+        };
+        let line = format!("elf {first}=lipm {last}={in_domain} {first}=dlipm");
         let e = parse(&line).unwrap_err();
         assert_eq!(
             (e.kind, e.key(), e.key_index),
             (ArgErrorKind::Repeated, first, 0)
         );
         // Different keys are not repeats; an unknown key twice is an unknown key.
-        assert!(parse(&format!("elf {first}=lipm {last}=500")).is_ok());
+        assert!(parse(&format!("elf {first}=lipm {last}={in_domain}")).is_ok());
         let e = parse("elf stepz=1 stepz=2").unwrap_err();
         assert_eq!(e.kind, ArgErrorKind::UnknownKey);
         // Every key once: accepted.

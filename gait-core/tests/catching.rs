@@ -281,10 +281,14 @@ proptest! {
             level_ramp_s: vals[11],
             hold_max_s: vals[3],
             hold_settle_s: vals[6],
+            level_joints: vals[1],
+            hold_lag_m: vals[2],
         };
         let mut a = StepAdapter::new(&cfg, &Robot::reference(), z_c, dt);
         for s in [single_left(), sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.01])] {
             for _ in 0..5 {
+                a.set_joint_lag([vals[4], vals[5]]);
+                a.set_swing_lag_m(vals[7]);
                 let asked = a.update(&s, Some([0.3, -0.4]), Some([2.0, -3.0]), NO_LOAD);
                 prop_assert!(asked.iter().all(|v| v.is_finite()));
             }
@@ -594,7 +598,13 @@ fn the_clock_hold_alone_waits_for_a_travelling_foot_within_its_budget() {
     };
     let single = SupportPhase::Single(Side::Left);
     let low = 0.5 * HOLD_HEIGHT_M;
-    let foot = |z_m: f32, gap_m: f32| Some(SwingFoot { z_m, gap_m });
+    let foot = |z_m: f32, gap_m: f32| {
+        Some(SwingFoot {
+            z_m,
+            gap_m,
+            lag_m: f32::NAN,
+        })
+    };
     let mut h = ClockHold::new(&cfg, DT);
     let held = |h: &mut ClockHold, phase, swing| {
         h.update(phase, swing);
@@ -629,4 +639,126 @@ fn the_clock_hold_alone_waits_for_a_travelling_foot_within_its_budget() {
     off.update(single, foot(low, 0.01));
     off.update(single, foot(0.5 * low, 0.01));
     assert!(!off.wants_hold());
+}
+
+#[test]
+fn the_swing_legs_measured_lag_turns_its_ankle_by_minus_k_times_the_lag() {
+    // The levelling on the joints' lag alone (k_q = 0.5), the trunk upright.
+    let cfg = StepAdaptation {
+        level_joints: 0.5,
+        ..levelling(0.0, 0.0)
+    };
+    let mut a = adapter(cfg);
+    let ramp_ticks = (cfg.level_ramp_s / DT).round() as usize;
+    let lag = 0.08f32;
+    for i in 2..=30 {
+        // The right leg swings; a NaN for the stance leg (not read) changes nothing.
+        a.set_joint_lag([f32::NAN, lag]);
+        tilted(&mut a, [0.0, 0.0], [0.0, 0.0]);
+        let w = (i as f32 / ramp_ticks as f32).min(1.0);
+        let [left, right] = a.sole_level();
+        assert!(close(right, [-0.5 * w * lag, 0.0]), "{i}: {right:?}");
+        assert_eq!(left, [0.0; 2]);
+    }
+    // An unread tick holds the last lag.
+    a.set_joint_lag([f32::NAN; 2]);
+    tilted(&mut a, [0.0, 0.0], [0.0, 0.0]);
+    assert!(close(a.sole_level()[1], [-0.5 * lag, 0.0]));
+    // A lag beyond the bound is clamped.
+    a.set_joint_lag([0.0, 10.0]);
+    tilted(&mut a, [0.0, 0.0], [0.0, 0.0]);
+    assert_eq!(a.sole_level()[1], [-MAX_LEVEL_RAD, 0.0]);
+    // Touchdown: ramped out, and the leg's lag forgotten once the weight is 0.
+    let ds = sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.0]);
+    for _ in 0..=ramp_ticks {
+        a.update(&ds, Some([0.0; 2]), Some([0.0; 2]), NO_LOAD);
+    }
+    assert_eq!(a.sole_level(), [[0.0; 2]; 2]);
+    tilted(&mut a, [0.0, 0.0], [0.0, 0.0]);
+    assert_eq!(a.sole_level()[1], [0.0; 2], "the old lag came back");
+    // Off (k_q = 0, the default): the same lag leaves the ankles alone.
+    let mut off = adapter(StepAdaptation {
+        level_joints: 0.0,
+        ..levelling(0.0, 0.0)
+    });
+    off.set_joint_lag([lag, lag]);
+    tilted(&mut off, [0.0, 0.0], [0.0, 0.0]);
+    assert_eq!(off.sole_level(), [[0.0; 2]; 2]);
+}
+
+#[test]
+fn the_clock_holds_while_the_measured_swing_sole_lags_its_targets() {
+    use gait_core::feedback::hold::{ClockHold, SwingFoot};
+    let tol = 0.003f32;
+    let cfg = StepAdaptation {
+        hold_max_s: 3.0 * DT,
+        hold_settle_s: 0.0,
+        hold_lag_m: tol,
+        ..StepAdaptation::DEFAULT
+    };
+    let single = SupportPhase::Single(Side::Left);
+    let low = 0.5 * HOLD_HEIGHT_M;
+    let foot = |z_m: f32, lag_m: f32| {
+        Some(SwingFoot {
+            z_m,
+            gap_m: 0.0,
+            lag_m,
+        })
+    };
+    let mut h = ClockHold::new(&cfg, DT);
+    let held = |h: &mut ClockHold, swing| {
+        h.update(single, swing);
+        h.wants_hold()
+    };
+    // High in the swing: no hold however far behind.
+    assert!(!held(&mut h, foot(2.0 * HOLD_HEIGHT_M, 0.02)));
+    // Descending below z_h: held while the lag is over the tolerance, not at or under it, not
+    // when unmeasured; three ticks of budget.
+    assert!(held(&mut h, foot(low, 2.0 * tol)));
+    assert!(!held(&mut h, foot(low, tol)));
+    assert!(!held(&mut h, foot(low, f32::NAN)));
+    assert!(held(&mut h, foot(low, 2.0 * tol)));
+    assert!(held(&mut h, foot(low, 2.0 * tol)));
+    assert!(!held(&mut h, foot(low, 2.0 * tol)), "over the budget");
+    // Off (tolerance 0): the same lag never holds.
+    let mut off = ClockHold::new(
+        &StepAdaptation {
+            hold_lag_m: 0.0,
+            ..cfg
+        },
+        DT,
+    );
+    off.update(single, foot(2.0 * low, 0.02));
+    off.update(single, foot(low, 0.02));
+    assert!(!off.wants_hold());
+}
+
+#[test]
+fn the_adapter_holds_on_the_measured_lag_without_a_catch_until_the_foot_carries_load() {
+    let cfg = StepAdaptation {
+        gain: 0.0,
+        hold_lag_m: 0.003,
+        ..StepAdaptation::DEFAULT
+    };
+    let mut a = adapter(cfg);
+    // single_left(): the right foot swings; its planned height set low and descending.
+    let mut s = single_left();
+    s.feet[1].z = 0.008;
+    a.set_swing_lag_m(0.01);
+    a.update(&s, Some([0.0; 2]), Some([0.0; 2]), NO_LOAD);
+    s.feet[1].z = 0.006;
+    a.update(&s, Some([0.0; 2]), Some([0.0; 2]), NO_LOAD);
+    assert!(
+        a.wants_hold(),
+        "a lagging swing sole in the landing holds the clock"
+    );
+    // The swing foot carries half the weight: landed, no hold.
+    let half = 0.5 * weight_n();
+    a.update(&s, Some([0.0; 2]), Some([0.0; 2]), [half, half]);
+    assert!(!a.wants_hold());
+    // Not measured: no hold.
+    s.feet[1].z = 0.004;
+    a.set_swing_lag_m(f32::NAN);
+    a.update(&s, Some([0.0; 2]), Some([0.0; 2]), NO_LOAD);
+    assert!(!a.wants_hold());
 }

@@ -146,7 +146,14 @@ impl<'r> F32Path<'r> {
                 compliance: cfg.compliance,
             },
             gyro: cfg.gyro_feedback,
-            servo_sense: ServoSense::new(&cfg.deflection, cfg.sole_poses_measured, robot, dt_s),
+            servo_sense: ServoSense::new(
+                &cfg.deflection,
+                cfg.sole_poses_measured,
+                cfg.step_adaptation.level_joints > 0.0,
+                cfg.step_adaptation.hold_lag_m > 0.0,
+                robot,
+                dt_s,
+            ),
             map,
         }
     }
@@ -161,7 +168,13 @@ impl TickPath for F32Path<'_> {
     ) {
         if let Some(d) = self.servo_sense.as_mut() {
             let [l, r] = &previous.feet;
-            let landed = d.read(bus, self.map, &[l.sole_place(), r.sole_place()]);
+            let swing = match previous.phase {
+                gait_core::SupportPhase::Single(stance) => Some(stance.other()),
+                _ => None,
+            };
+            let landed = d.read(bus, self.map, &[l.sole_place(), r.sole_place()], swing);
+            self.catching.adapter.set_joint_lag(d.swing_lag());
+            self.catching.adapter.set_swing_lag_m(d.sole_lag_m());
             // The online walk's position hold (P1): where the new foot landed off its plan.
             if let (Some((side, offset)), Some(o)) = (landed, walk.gait.online_mut()) {
                 o.set_landing_offset(side, offset);

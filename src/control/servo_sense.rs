@@ -1,11 +1,13 @@
 //! The servos' Present Position and what the f32 path makes of it: the servo deflection
-//! feedback ([`gait_core::feedback::deflection`]) and the leg odometry ([`gait_core::measure::odometry`]).
+//! feedback ([`gait_core::feedback::deflection`]), the leg odometry
+//! ([`gait_core::measure::odometry`]) and the swing leg's pitch lag for the sole's levelling
+//! ([`gait_core::feedback::level`], e_q of (A10)).
 
 use dxl::table::x_series;
 use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::feedback::{JointCorrection, JointInput, Measured};
 use gait_core::measure::odometry::SurveyedSole;
-use gait_core::robot::LEG_JOINTS;
+use gait_core::robot::{ANKLE_PITCH, JOINTS_PER_LEG, LEG_JOINTS};
 use gait_core::{Robot, Side};
 use walker_contract::bus_map as ids;
 
@@ -17,8 +19,9 @@ use crate::supervisor::JointMap;
 /// deflection feedback ([`gait_core::feedback::deflection`], `deflection_ki`: its joints read in one BULK
 /// READ every tick, the targets of the last walking tick before the correction (D1)) and the leg
 /// odometry ([`gait_core::measure::odometry`], `sole_poses=measured`: once a step, the stance leg's six
-/// on the tick after a survey falls due, the new leg's six on the next, O3′). Built only while
-/// one of them acts.
+/// on the tick after a survey falls due, the new leg's six on the next, O3′) and the swing
+/// leg's pitch lag (`catch_level_joints`: its hip pitch and knee every tick of a single
+/// support). Built only while one of them acts.
 pub(super) struct ServoSense {
     deflection: Option<gait_core::feedback::deflection::DeflectionFeedback>,
     /// The deflection feedback's joints.
@@ -33,7 +36,25 @@ pub(super) struct ServoSense {
     present: [f32; LEG_JOINTS],
     /// The targets q* of the last walking tick before the correction, and that tick.
     sent: Option<(u32, [f32; LEG_JOINTS])>,
+    /// The swing leg's pitch lag is measured (the levelling's e_q).
+    swing_lag: bool,
+    /// The IK's joint targets of the last walking tick, rad (NaN before the first).
+    last_ik: [f32; LEG_JOINTS],
+    /// The joint targets sent on the last walking tick (every correction), rad.
+    last_goal: [f32; LEG_JOINTS],
+    /// This tick's pitch lag e_q per leg (left, right), rad (NaN where not measured).
+    lag: [f32; 2],
+    /// The legs' kinematics for the swing sole's measured lag (the clock hold's landing
+    /// condition), while it acts.
+    landing: Option<gait_core::kinematics::leg::LegKinematics<f32>>,
+    /// This tick's swing sole distance from where its targets put it, m (NaN: not measured).
+    sole_lag_m: f32,
 }
+
+/// Index of `hip_pitch` within a leg's joints.
+const HIP_PITCH: usize = 2;
+/// Index of `knee` within a leg's joints.
+const KNEE: usize = 3;
 
 /// The leg odometry's firmware side: its state, the legs' FK and the survey's two reads.
 struct Odometry {
@@ -63,11 +84,14 @@ enum Survey {
 }
 
 impl ServoSense {
-    /// The deflection feedback of `cfg` at tick period `dt_s` and the odometry when `odometry`;
-    /// `None` while neither acts.
+    /// The deflection feedback of `cfg` at tick period `dt_s`, the odometry when `odometry`,
+    /// the swing leg's pitch lag when `swing_lag` and the swing sole's measured lag when
+    /// `landing`; `None` while none acts.
     pub(super) fn new(
         cfg: &gait_core::feedback::deflection::DeflectionConfig,
         odometry: bool,
+        swing_lag: bool,
+        landing: bool,
         robot: &Robot,
         dt_s: f32,
     ) -> Option<Self> {
@@ -81,7 +105,7 @@ impl ServoSense {
             stage: Survey::Idle,
             ik: [f32::NAN; LEG_JOINTS],
         });
-        if deflection.is_none() && odometry.is_none() {
+        if deflection.is_none() && odometry.is_none() && !swing_lag && !landing {
             return None;
         }
         Some(ServoSense {
@@ -94,35 +118,60 @@ impl ServoSense {
             results: [Ok(()); LEG_JOINTS],
             present: [f32::NAN; LEG_JOINTS],
             sent: None,
+            swing_lag,
+            last_ik: [f32::NAN; LEG_JOINTS],
+            last_goal: [f32::NAN; LEG_JOINTS],
+            lag: [f32::NAN; 2],
+            landing: landing.then(|| gait_core::kinematics::leg::LegKinematics::new(robot)),
+            sole_lag_m: f32::NAN,
         })
     }
 
     /// ONE BULK READ of the Present Positions this tick needs (rad; NaN for a reply that
-    /// failed) — the deflection feedback's joints, and a survey's leg (odometry O3′: the stance
+    /// failed) — the deflection feedback's joints, a survey's leg (odometry O3′: the stance
     /// leg, then the new one on the next tick, which takes the survey against the plan's places
-    /// of the feet `planned`). Returns a survey taken: the new foot and its surveyed place minus
-    /// the planned one (m, x and y; for the online walk's position hold).
+    /// of the feet `planned`) and the `swing` leg's hip pitch and knee (its pitch lag). Returns
+    /// a survey taken: the new foot and its surveyed place minus the planned one (m, x and y;
+    /// for the online walk's position hold).
     pub(super) fn read<B: Board>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         map: &JointMap,
         planned: &[gait_core::Place<f32>; 2],
+        swing: Option<Side>,
     ) -> Option<(Side, [f32; 2])> {
         self.present = [f32::NAN; LEG_JOINTS];
+        self.lag = [f32::NAN; 2];
+        self.sole_lag_m = f32::NAN;
         let leg = match self.odometry.as_ref().map(|o| o.stage) {
             Some(Survey::Stance(s)) => Some(s),
             Some(Survey::New { stance, .. }) => Some(stance.other()),
             _ => None,
         };
         let deflection = self.deflection.is_some();
-        if leg.is_none() && !deflection {
+        let whole_swing = self.landing.is_some();
+        let swing = swing.filter(|_| self.swing_lag || whole_swing);
+        if leg.is_none() && !deflection && swing.is_none() {
             return None;
         }
-        let in_leg = |j: usize| leg.is_some_and(|s| (j < LEG_JOINTS / 2) == (s == Side::Left));
+        let side_of = |j: usize| {
+            if j < JOINTS_PER_LEG {
+                Side::Left
+            } else {
+                Side::Right
+            }
+        };
+        let in_leg = |j: usize| leg == Some(side_of(j));
+        let in_swing = |j: usize| {
+            swing == Some(side_of(j))
+                && (whole_swing || matches!(j % JOINTS_PER_LEG, HIP_PITCH | KNEE | ANKLE_PITCH))
+        };
         self.reqs.clear();
         self.joints.clear();
         let f = x_series::PRESENT_POSITION;
-        for j in (0..LEG_JOINTS).filter(|&j| in_leg(j) || (deflection && self.mask.contains(j))) {
+        for j in (0..LEG_JOINTS)
+            .filter(|&j| in_leg(j) || in_swing(j) || (deflection && self.mask.contains(j)))
+        {
             if let Some(id) = ids::servo_id(j) {
                 // At most LEG_JOINTS entries: cannot fail.
                 let _ = self.reqs.push(BulkReadRequest {
@@ -148,6 +197,41 @@ impl ServoSense {
                             .rad_f32(j, i32::from_le_bytes([*b0, *b1, *b2, *b3]));
                     }
                 }
+            }
+        }
+        if let Some(side) = swing {
+            let base = if side == Side::Left {
+                0
+            } else {
+                JOINTS_PER_LEG
+            };
+            let off = |j: usize, of: &[f32; LEG_JOINTS]| {
+                let (p, t) = (self.present.get(base + j), of.get(base + j));
+                p.zip(t).map_or(f32::NAN, |(p, t)| p - t)
+            };
+            if let Some(l) = self.lag.get_mut(usize::from(side == Side::Right)) {
+                *l = off(HIP_PITCH, &self.last_ik)
+                    + off(KNEE, &self.last_ik)
+                    + off(ANKLE_PITCH, &self.last_goal);
+            }
+            if let (Some(kin), Some(q), Some(goal)) = (
+                self.landing.as_ref(),
+                self.present.get(base..base + JOINTS_PER_LEG),
+                self.last_goal.get(base..base + JOINTS_PER_LEG),
+            ) {
+                let pelvis = gait_core::kinematics::leg::Pose::level(0.0, 0.0, 0.0, 0.0);
+                let leg = |v: &[f32]| {
+                    let mut a = [f32::NAN; JOINTS_PER_LEG];
+                    a.iter_mut().zip(v).for_each(|(a, v)| *a = *v);
+                    kin.fk(side, &pelvis, &a).position()
+                };
+                let (at, to) = (leg(q), leg(goal));
+                // NaN (a joint unread) propagates: no hold on it.
+                self.sole_lag_m = at
+                    .iter()
+                    .zip(to)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, |m: f32, d| if d > m || d.is_nan() { d } else { m });
             }
         }
         let o = self.odometry.as_mut()?;
@@ -183,6 +267,9 @@ impl ServoSense {
     /// The IK's joint targets of this walking tick (rad), for the survey's reads (O3′): kept
     /// only while a survey is under way (the next tick reads a leg).
     pub(super) fn note_ik(&mut self, q: &[f32; LEG_JOINTS]) {
+        if self.swing_lag {
+            self.last_ik = *q;
+        }
         if let Some(o) = self
             .odometry
             .as_mut()
@@ -227,6 +314,18 @@ impl ServoSense {
         }
     }
 
+    /// This tick's swing pitch lag e_q per leg (left, right; the levelling's (A10)), rad: NaN
+    /// where not measured.
+    pub(super) fn swing_lag(&self) -> [f32; 2] {
+        self.lag
+    }
+
+    /// This tick's swing sole distance from where its targets put it (the clock hold's
+    /// landing condition, A11), m: NaN when not measured.
+    pub(super) fn sole_lag_m(&self) -> f32 {
+        self.sole_lag_m
+    }
+
     /// Odometry surveys taken and refused.
     pub(super) fn surveys(&self) -> (u16, u16) {
         self.odometry.as_ref().map_or((0, 0), |o| o.legs.counts())
@@ -242,5 +341,8 @@ impl JointCorrection for ServoSense {
         q: &mut [f32; LEG_JOINTS],
     ) {
         self.apply(input.walk_tick, input.phase, q);
+        if self.swing_lag || self.landing.is_some() {
+            self.last_goal = *q;
+        }
     }
 }

@@ -2424,13 +2424,7 @@ fn the_deflection_feedback_drives_sagging_stance_knees_to_their_targets() {
     assert_eq!(off.deflection.ki, 0.0, "off by default");
     // Both knees (IDs 4 and 10) stand 30 ticks (≈ 0.046 rad) short of their goals.
     let sag = 30;
-    let sagging = |cfg: &Config| {
-        let mut b = board(cfg);
-        for d in b.devices.iter_mut().filter(|d| d.id == 4 || d.id == 10) {
-            d.sag = sag;
-        }
-        b
-    };
+    let sagging = |cfg: &Config| sagging_board(cfg, [4, 10], sag);
     let mut plain = board(&off);
     let mut a = sagging(&off);
     let mut b = sagging(&on);
@@ -2488,6 +2482,15 @@ fn sag_deltas(a: &FakeBoard, b: &FakeBoard, j: usize, sag: i32) -> Vec<i32> {
     d
 }
 
+/// The fake robot of `cfg` with the servos `ids` standing `sag` ticks short of their goals.
+fn sagging_board(cfg: &Config, ids: [u8; 2], sag: i32) -> FakeBoard {
+    let mut b = board(cfg);
+    for d in b.devices.iter_mut().filter(|d| ids.contains(&d.id)) {
+        d.sag = sag;
+    }
+    b
+}
+
 /// Joint `j`'s goal in run `b` minus its goal in run `a`, tick by tick (ticks).
 fn goal_deltas(a: &FakeBoard, b: &FakeBoard, j: usize) -> Vec<i32> {
     a.goals
@@ -2507,13 +2510,7 @@ fn the_deflection_feedback_on_the_roll_joints_drives_only_them() {
     let on =
         cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 deflection_ki=10 deflection_joints=roll");
     let sag = 30;
-    let sagging = |cfg: &Config| {
-        let mut b = board(cfg);
-        for d in b.devices.iter_mut().filter(|d| d.id == 2 || d.id == 8) {
-            d.sag = sag;
-        }
-        b
-    };
+    let sagging = |cfg: &Config| sagging_board(cfg, [2, 8], sag);
     let (mut a, mut b) = (sagging(&off), sagging(&on));
     for (x, cfg) in [(&mut a, &off), (&mut b, &on)] {
         assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
@@ -3217,5 +3214,74 @@ fn the_board_button_is_the_enable_when_held_50_ms() {
     assert!(
         on >= t && on < t + 50_000,
         "torque on at {on} µs, enabled at {t} µs"
+    );
+}
+
+/// The swing sole's levelling on the joints' lag (`catch_level_joints`, gait-core `level`
+/// A10): fake knees (IDs 4 and 10) that stand 30 ticks short of their goals. Against the same
+/// run without it: only the ankle pitches change, each by k_q = 0.5 of the knee's lag (15
+/// ticks at full weight, the ankle itself following), and only while its leg swings; the
+/// Present Positions are read only when it is on.
+#[test]
+fn a_lagging_swing_knee_turns_only_that_legs_ankle_by_half_its_lag() {
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_level_joints=0.5");
+    assert_eq!(off.step_adaptation.level_joints, 0.0, "off by default");
+    let sag = 30;
+    let sagging = |cfg: &Config| sagging_board(cfg, [4, 10], sag);
+    let (mut a, mut b) = (sagging(&off), sagging(&on));
+    for (x, cfg) in [(&mut a, &off), (&mut b, &on)] {
+        assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
+    }
+    let reads = |x: &FakeBoard| x.count(opcode::BULK_READ);
+    assert!(
+        reads(&b) > reads(&a) + 500,
+        "{} against {}",
+        reads(&b),
+        reads(&a)
+    );
+    assert_eq!(a.goals.len(), b.goals.len(), "no clock hold");
+    for ankle in [4usize, 10] {
+        let d = goal_deltas(&a, &b, ankle);
+        let peak = d.iter().map(|v| v.abs()).max().unwrap_or(0);
+        assert!(
+            (14..=16).contains(&peak),
+            "ankle {ankle}: peak {peak} ticks"
+        );
+        // Ramped in and out over 0.1 s (0.75 ticks a tick) plus a tick of rounding each side.
+        for w in d.windows(2) {
+            assert!((w[1] - w[0]).abs() <= 3, "ankle {ankle}: {w:?}");
+        }
+    }
+    // The two ankles never turn together (one leg swings at a time), and nothing else moves.
+    for (ga, gb) in a.goals.iter().zip(&b.goals) {
+        assert!(ga[4] == gb[4] || ga[10] == gb[10], "{ga:?} {gb:?}");
+        for j in [0usize, 1, 2, 3, 5, 6, 7, 8, 9, 11] {
+            assert_eq!(ga[j], gb[j], "joint {j}");
+        }
+    }
+}
+
+/// The clock hold on the swing sole's measured lag (`catch_hold_lag`, gait-core `hold` A11):
+/// with the knees 30 ticks (≈ 0.046 rad) short of their goals the swing sole stands ≈ 5 mm from
+/// where its targets put it, beyond 3 mm: the plan's clock holds in every landing, at most
+/// 0.15 s (30 ticks) a single support. Without the lag the same configuration never holds.
+#[test]
+fn a_lagging_swing_leg_holds_the_clock_in_each_landing_within_the_budget() {
+    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_hold_lag=0.003");
+    let walk = |cfg: &Config, sag: i32| {
+        let mut b = sagging_board(cfg, [4, 10], sag);
+        assert_eq!(run(&mut b, cfg), RunEnd::Stopped(StopReason::PlanDone));
+        b.goals.len()
+    };
+    let plain = walk(&off, 30);
+    assert_eq!(walk(&on, 0), walk(&off, 0), "no lag, no hold");
+    let held = walk(&on, 30);
+    let steps = off.walk.steps;
+    assert!(held > plain + 10 * steps, "{held} goals against {plain}");
+    assert!(
+        held <= plain + 30 * (steps + 1),
+        "{held} goals against {plain}"
     );
 }

@@ -97,6 +97,9 @@ pub struct StepAdaptation {
     /// Gain k_φ of the swing sole's levelling on the trunk's roll off its baseline (A10;
     /// 0 = off, 1 = level).
     pub level_roll: f32,
+    /// Gain k_q of the swing sole's levelling on the swing leg's measured hip-pitch and knee
+    /// lag (A10; 0 = off, 1 = level; needs the servos' Present Position).
+    pub level_joints: f32,
     /// Time T_r over which the levelling ramps in after lift-off and out after touchdown, s
     /// (A10).
     pub level_ramp_s: f32,
@@ -106,6 +109,10 @@ pub struct StepAdaptation {
     /// Time the held clock waits after the swing foot's offset arrived (the servos' lag), s
     /// (A11).
     pub hold_settle_s: f32,
+    /// Distance of the measured swing sole from where its targets put it beyond which the
+    /// clock holds in the landing (A11, the servos' lag), m (0 = off; needs the servos' Present
+    /// Position).
+    pub hold_lag_m: f32,
 }
 
 impl StepAdaptation {
@@ -114,6 +121,7 @@ impl StepAdaptation {
         gain: 0.0,
         level_pitch: 0.0,
         level_roll: 0.0,
+        level_joints: 0.0,
         ..StepAdaptation::DEFAULT
     };
 
@@ -136,9 +144,11 @@ impl StepAdaptation {
         touchdown_share: 0.2,
         level_pitch: 1.0,
         level_roll: 1.0,
+        level_joints: 0.0,
         level_ramp_s: 0.1,
         hold_max_s: 0.15,
         hold_settle_s: 0.1,
+        hold_lag_m: 0.0,
     };
 
     /// Whether the step adaptation runs (finite positive gain).
@@ -148,7 +158,7 @@ impl StepAdaptation {
 
     /// Whether the swing sole's levelling runs (a finite positive gain on pitch or roll).
     pub fn is_levelling(&self) -> bool {
-        [self.level_pitch, self.level_roll]
+        [self.level_pitch, self.level_roll, self.level_joints]
             .iter()
             .any(|k| k.is_finite() && *k > 0.0)
     }
@@ -168,9 +178,11 @@ impl StepAdaptation {
             gain: limit(self.gain),
             level_pitch: limit(self.level_pitch),
             level_roll: limit(self.level_roll),
+            level_joints: limit(self.level_joints),
             level_ramp_s: limit(self.level_ramp_s),
             hold_max_s: limit(self.hold_max_s),
             hold_settle_s: limit(self.hold_settle_s),
+            hold_lag_m: limit(self.hold_lag_m),
             ..*self
         }
     }
@@ -409,7 +421,11 @@ impl CatchingStep {
                     (t[0] - d[0]).abs().max((t[1] - d[1]).abs())
                 }
             };
-            SwingFoot { z_m, gap_m }
+            SwingFoot {
+                z_m,
+                gap_m,
+                lag_m: f32::NAN,
+            }
         });
         (asked, swing)
     }
@@ -435,6 +451,9 @@ pub struct StepAdapter {
     catch: CatchingStep,
     level: SoleLevel,
     hold: ClockHold,
+    /// The swing sole's measured distance from where its targets put it, m (NaN: not
+    /// measured).
+    swing_lag_m: f32,
 }
 
 impl StepAdapter {
@@ -450,9 +469,11 @@ impl StepAdapter {
                 gain: 0.0,
                 level_pitch: 0.0,
                 level_roll: 0.0,
+                level_joints: 0.0,
                 level_ramp_s: 0.0,
                 hold_max_s: 0.0,
                 hold_settle_s: 0.0,
+                hold_lag_m: 0.0,
                 ..*cfg
             }
         };
@@ -460,7 +481,14 @@ impl StepAdapter {
             catch: CatchingStep::new(&cfg, robot, z_c, dt_s),
             level: SoleLevel::new(&cfg, dt_s),
             hold: ClockHold::new(&cfg, dt_s),
+            swing_lag_m: f32::NAN,
         }
+    }
+
+    /// The swing sole's measured distance from where its targets put it this tick, m (NaN
+    /// when not measured): the clock hold's landing condition (A11).
+    pub fn set_swing_lag_m(&mut self, lag_m: f32) {
+        self.swing_lag_m = lag_m;
     }
 
     /// Whether the plan's clock should stand still for the next tick (A11): the caught swing
@@ -473,6 +501,13 @@ impl StepAdapter {
     /// the right leg, rad, each within ±[`crate::feedback::level::MAX_LEVEL_RAD`].
     pub fn sole_level(&self) -> [[f32; 2]; 2] {
         self.level.corrections()
+    }
+
+    /// The swing legs' measured pitch lag for the levelling (A10): per leg (left, right), the
+    /// Present Position minus the target of the hip pitch plus the knee, rad (NaN when not
+    /// measured: the last one holds).
+    pub fn set_joint_lag(&mut self, lag: [f32; 2]) {
+        self.level.set_joint_lag(lag);
     }
 
     /// Adds the levelling (A10) to the joint targets `q` (left leg then right leg, rad).
@@ -526,8 +561,41 @@ impl StepAdapter {
         let deviation = self.catch.observe(roll_pitch, rates);
         self.level.update(deviation, sample.phase);
         let (asked, swing) = self.catch.step(sample, loads_n);
+        let swing = self.with_lag(swing, sample, loads_n);
         self.hold.update(sample.phase, swing);
         asked
+    }
+
+    /// The swing foot for the clock hold with the measured lag: the catch's (or, in a single
+    /// support without a catch, the plan's sole height and no offset gap) while the swing foot
+    /// carries less than the touchdown load.
+    fn with_lag(
+        &self,
+        swing: Option<SwingFoot>,
+        sample: &GaitSample<f32>,
+        loads_n: [f32; 2],
+    ) -> Option<SwingFoot> {
+        let lag_m = self.swing_lag_m;
+        if !lag_m.is_finite() {
+            return swing;
+        }
+        if let Some(foot) = swing {
+            return Some(SwingFoot { lag_m, ..foot });
+        }
+        let SupportPhase::Single(stance) = sample.phase else {
+            return None;
+        };
+        let (z_m, load) = match stance {
+            Side::Left => (sample.feet[1].z, loads_n[1]),
+            Side::Right => (sample.feet[0].z, loads_n[0]),
+        };
+        // An unmeasured (NaN) load has not landed.
+        let landed = load > self.catch.touchdown_n;
+        (!landed).then_some(SwingFoot {
+            z_m,
+            gap_m: 0.0,
+            lag_m,
+        })
     }
 
     /// (A6) on a sample: the feet by their offsets, the CoM and the ZMP reference by the body's.

@@ -1,6 +1,6 @@
-//! The clock hold: the landing waits for the caught foot ([`ClockHold`]; part of the step
-//! adaptation, [`crate::feedback::catch::StepAdapter`], which feeds it the swing foot of the
-//! catching step).
+//! The clock hold: the landing waits for the caught foot and for the servos ([`ClockHold`];
+//! part of the step adaptation, [`crate::feedback::catch::StepAdapter`], which feeds it the
+//! swing foot of the catching step and the swing sole's measured lag).
 //!
 //! # Law
 //! The servos lag ≈ 0.1 s, so a catch asked late in a swing is not where the plan sets the
@@ -8,13 +8,19 @@
 //! same sample again) for the next tick while
 //!
 //! ```text
-//!   z_swing < z_h  and  ( |d*_swing − d_swing|∞ > ε  or  0 < t_arrived < T_s )  and  held < H  (A11)
+//!   z_swing < z_h  and  ( |d*_swing − d_swing|∞ > ε  or  0 < t_arrived < T_s  or  ℓ > ℓ_max )
+//!                  and  held < H                                                      (A11)
+//!   ℓ = |FK(q̂_swing) − FK(q^s_swing)|∞       the swing sole's measured lag
 //! ```
 //!
 //! (the planned swing sole below z_h = [`HOLD_HEIGHT_M`] and not rising — no hold at lift-off —,
 //! the swing foot's offset more than ε = [`HOLD_GAP_M`] from (A5) of [`crate::feedback::catch`] or, having moved in this
-//! single support, arrived less than the settling time T_s ago); the budget is per single
-//! support and refills outside single support. A swing that carries the touchdown load
+//! single support, arrived less than the settling time T_s ago) or the swing sole, by the
+//! forward kinematics of the servos' Present Position q̂ against that of the targets q^s they
+//! were sent (pelvis frame), more than ℓ_max from where its targets put it (`hold_lag_m`; 0 =
+//! off, and an unmeasured ℓ never holds): a servo that lags sets the foot down short and late,
+//! so the plan waits for it. The budget is per single support and refills outside single
+//! support. A swing that carries the touchdown load
 //! never holds. The clock only stands still: a shorter swing would need the CoM re-planned,
 //! which the precomputed TLIPFM segments cannot do mid-step.
 
@@ -49,6 +55,9 @@ pub struct SwingFoot {
     pub z_m: f32,
     /// The swing foot's offset's distance from its target |d*_swing − d_swing|∞, m.
     pub gap_m: f32,
+    /// The swing sole's measured distance from where its targets put it (forward kinematics
+    /// of the Present Position against that of the targets, |·|∞), m (NaN: not measured).
+    pub lag_m: f32,
 }
 
 /// The clock hold's state (A11): the budget left in this single support and the swing foot's
@@ -69,6 +78,8 @@ pub struct ClockHold {
     moving: bool,
     /// The swing sole's planned height at the last update, m (NaN outside single support).
     swing_z: f32,
+    /// Measured lag beyond which the landing waits, m (0: off).
+    lag_tol_m: f32,
 }
 
 impl ClockHold {
@@ -86,6 +97,7 @@ impl ClockHold {
             hold: false,
             moving: false,
             swing_z: f32::NAN,
+            lag_tol_m: if ok { cfg.hold_lag_m } else { 0.0 },
         }
     }
 
@@ -106,16 +118,24 @@ impl ClockHold {
             self.moving = false;
             self.swing_z = f32::NAN;
         }
-        let Some(SwingFoot { z_m: z, gap_m: gap }) = swing else {
+        let Some(SwingFoot {
+            z_m: z,
+            gap_m: gap,
+            lag_m,
+        }) = swing
+        else {
             return;
         };
+        // NaN compares false: an unmeasured lag never holds.
+        let lagging = self.lag_tol_m > 0.0 && lag_m > self.lag_tol_m;
         if gap > HOLD_GAP_M {
             self.moving = true;
             self.settled = 0;
         } else {
             self.settled = self.settled.saturating_add(1);
         }
-        let waiting = gap > HOLD_GAP_M || (self.moving && self.settled < self.settle_ticks);
+        let waiting =
+            gap > HOLD_GAP_M || (self.moving && self.settled < self.settle_ticks) || lagging;
         // Descending or held (not rising: no hold at lift-off); NaN compares false.
         let landing = z < HOLD_HEIGHT_M && z <= self.swing_z;
         self.swing_z = z;

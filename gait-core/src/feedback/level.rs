@@ -10,13 +10,23 @@
 //! turn the sole back by the trunk's deviation:
 //!
 //! ```text
-//!   Δq_ankle_pitch = −k_θ·w·(θ − θ̄),   Δq_ankle_roll = −k_φ·w·(φ − φ̄),
+//!   Δq_ankle_pitch = −w·(k_θ·(θ − θ̄) + k_q·e_q),   Δq_ankle_roll = −k_φ·w·(φ − φ̄),
+//!   e_q = (q̂_hp − q*_hp) + (q̂_k − q*_k) + (q̂_ap − q^s_ap)     the swing leg's pitch lag
 //!   |Δq| ≤ Δq_max ([`MAX_LEVEL_RAD`])                                                 (A10)
 //!   w ← w ± dt/T_r toward 1 on the swing leg, toward 0 on a leg on the ground
 //! ```
 //!
 //! The three pitch joints are parallel, so the sole's pitch in the world is θ + q_hp + q_k +
-//! q_ap and k_θ = 1 levels it exactly; the ankle roll turns the sole about the same axis as the
+//! q_ap and k_θ = 1 levels it exactly for joints that follow their targets. Servos that lag
+//! their targets turn the sole by the sum of their lags (the firmware's `catch_level_joints`):
+//! e_q takes the Present Position q̂ (read at the start of a tick) of the hip pitch and the knee
+//! against their targets q* of the tick before (the IK's, before any correction: the plan's
+//! sole) and the ankle's against the target q^s it was sent (its own lag, this correction
+//! included). Equal lags of the three parallel joints cancel (their targets sum to the sole's
+//! pitch); what is left turns the sole. The ankle term closes a loop through that servo with a
+//! tick's delay, e(k) ≈ e_o − k_q·e(k − 1): it converges for k_q < 1 (at k_q = 1 it rings).
+//! A missing reading holds the last e_q of that leg; it is forgotten once the leg is on the
+//! ground. the ankle roll turns the sole about the same axis as the
 //! trunk's roll up to the hip's pitch in between (small in a swing), so k_φ = 1 levels it to
 //! first order. w ramps the correction in over T_r after lift-off and out over T_r after
 //! touchdown (continuous joint targets; a foot on the ground keeps the plan's ankle). A
@@ -36,6 +46,10 @@ pub const MAX_LEVEL_RAD: f32 = 0.3;
 pub struct SoleLevel {
     /// Gains k_θ, k_φ on the trunk's pitch and roll deviation.
     gains: [f32; 2],
+    /// Gain k_q on the swing leg's measured pitch lag e_q.
+    k_joints: f32,
+    /// The measured pitch lag e_q per leg (left, right), rad.
+    lag: [f32; 2],
     /// The per-tick weight step dt/T_r.
     step: f32,
     /// The weight w per leg (left, right), 0..1.
@@ -58,6 +72,8 @@ impl SoleLevel {
             } else {
                 [0.0; 2]
             },
+            k_joints: if ok { cfg.level_joints } else { 0.0 },
+            lag: [0.0; 2],
             // A ramp shorter than a tick: w jumps (at most one tick's step of 1).
             step: if ok && cfg.level_ramp_s > dt_s {
                 dt_s / cfg.level_ramp_s
@@ -70,9 +86,22 @@ impl SoleLevel {
         }
     }
 
-    /// Whether the levelling runs (a finite positive gain on pitch or roll).
+    /// Whether the levelling runs (a finite positive gain on pitch, roll or the joints' lag).
     pub fn is_on(&self) -> bool {
-        self.gains.iter().any(|k| k.is_finite() && *k > 0.0)
+        self.gains
+            .iter()
+            .chain([&self.k_joints])
+            .any(|k| k.is_finite() && *k > 0.0)
+    }
+
+    /// The swing legs' measured pitch lag e_q (left, right), rad; a non-finite one keeps the
+    /// leg's last.
+    pub fn set_joint_lag(&mut self, lag: [f32; 2]) {
+        for (l, v) in self.lag.iter_mut().zip(lag) {
+            if v.is_finite() {
+                *l = v;
+            }
+        }
     }
 
     /// One tick: the trunk's `deviation` from its baseline (pitch, roll), rad (`None` when
@@ -88,16 +117,25 @@ impl SoleLevel {
         };
         let [dev_pitch, dev_roll] = self.dev;
         let [k_pitch, k_roll] = self.gains;
+        let k_joints = self.k_joints;
         let step = self.step;
-        for ((w, c), side) in self
+        for (((w, c), lag), side) in self
             .w
             .iter_mut()
             .zip(self.level.iter_mut())
+            .zip(self.lag.iter_mut())
             .zip([Side::Left, Side::Right])
         {
-            let target = if swing == Some(side) { 1.0 } else { 0.0 };
+            let swinging = swing == Some(side);
+            let target = if swinging { 1.0 } else { 0.0 };
             *w += (target - *w).clamp(-step, step);
-            let v = [-k_pitch * *w * dev_pitch, -k_roll * *w * dev_roll];
+            if !swinging && *w <= 0.0 {
+                *lag = 0.0;
+            }
+            let v = [
+                -k_pitch * *w * dev_pitch - k_joints * *w * *lag,
+                -k_roll * *w * dev_roll,
+            ];
             *c = if v.iter().all(|x| x.is_finite()) {
                 v.map(|x| x.clamp(-MAX_LEVEL_RAD, MAX_LEVEL_RAD))
             } else {
