@@ -877,15 +877,16 @@ mod tests {
         let writes: Vec<(u16, &[u8])> = (0..20)
             .map(|_| (port::VELOCITY_X.addr, &data[..]))
             .collect();
-        assert_eq!(
-            m.write_paced(&writes, Duration::from_millis(10)).unwrap(),
-            20
-        );
+        let period = Duration::from_millis(10);
+        let before = Instant::now();
+        assert_eq!(m.write_paced(&writes, period).unwrap(), 20);
         let t = sent.lock().unwrap().clone();
         assert_eq!(t.len(), 20);
-        for w in t.windows(2) {
-            let gap = w[1] - w[0];
-            assert!(gap >= Duration::from_millis(9), "{gap:?}");
+        // Never ahead of the schedule (write k not before k periods from the start; a loaded
+        // machine only delays them, so this holds at any load).
+        for (k, at) in t.iter().enumerate() {
+            let earliest = before + period * k as u32;
+            assert!(*at >= earliest, "write {k} {:?} early", earliest - *at);
         }
         let mut m = PortMaster::on(Box::new(Answering {
             rx: Default::default(),
