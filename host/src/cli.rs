@@ -572,8 +572,8 @@ pub struct SweepArgs {
     #[arg(long, value_name = "DIR", default_value = "out/sweep")]
     pub out: PathBuf,
     /// The robot family walked: the reference robot's (11 cases) or the servos a robot of this
-    /// class really has (20 cases: stall torque, speed, gains, supply, masses, trunk CoM,
-    /// friction, sensor and Present Position latency).
+    /// class really has (21 cases: stall torque, speed, gains, supply, masses, trunk CoM,
+    /// friction, sensor and Present Position latency, gear backlash).
     #[arg(long, value_enum, default_value_t = crate::sweep::Family::Reference)]
     pub family: crate::sweep::Family,
     /// Walks at a time (each a QEMU process and a simulator thread).

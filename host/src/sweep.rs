@@ -83,9 +83,9 @@ impl Family {
 /// The servo family: the nominal run and one servo, supply, body or floor change per case, to
 /// the ends of the ranges a robot of this class meets (a 3S battery near empty, a warm motor, a
 /// different servo model: `stiff-weak` is a position servo whose stiffness stays the nominal
-/// one while its torque tops out at 3.0 N·m, as a fixed-kp actuator with a torque limit). Gear
-/// backlash is not modelled by the simulator and not in it.
-pub fn servo_cases() -> [SweepCase; 20] {
+/// one while its torque tops out at 3.0 N·m, as a fixed-kp actuator with a torque limit; gear
+/// backlash as the play of [`crate::sim::dynamixel`]).
+pub fn servo_cases() -> [SweepCase; 21] {
     fn c(name: &'static str, what: &'static str, apply: fn(&mut SimConfig)) -> SweepCase {
         SweepCase { name, what, apply }
     }
@@ -173,6 +173,9 @@ pub fn servo_cases() -> [SweepCase; 20] {
             "servos' Present Position 10 ms late",
             |s| s.noise.position_latency_us += 10_000,
         ),
+        c("backlash0.5", "gear backlash 0.5° at every joint", |s| {
+            s.xservo.backlash = 0.5f64.to_radians()
+        }),
     ]
 }
 
@@ -598,6 +601,11 @@ mod tests {
                 c.name
             );
             assert!(s.noise.position_latency_us <= 10_000, "{}", c.name);
+            assert!(
+                (0.0..=0.5f64.to_radians() + 1e-12).contains(&x.backlash),
+                "{}",
+                c.name
+            );
             assert!(s.env.trunk_com_dx_m.abs() <= 0.01 + 1e-12, "{}", c.name);
             s.validate().unwrap_or_else(|e| panic!("{}: {e}", c.name));
         }

@@ -24,6 +24,23 @@
 //! through the gear (armature) are joint properties of the MuJoCo model, where the physics
 //! integrates them exactly. Present Current is `τ_m/τ_s·I_stall` (output-torque equivalent).
 //!
+//! Gear backlash (`backlash`, the play b of the gear train at the output, rad; 0 = none, the
+//! model above exactly): the encoder reads the output shaft, as on the X series, and the motor
+//! side is a second angle m (output units) with the rotor's reflected inertia J = `armature`.
+//! While the motor presses on one flank (m = q ± b/2 and τ_m pushes into it) the gear is
+//! engaged: the output gets τ_m as above and m rides on q. Otherwise the output gets no torque
+//! and the motor turns freely across the play until it meets a flank,
+//!
+//! ```text
+//! J·m̈ = τ_s·(V/V_n)·u − (τ_s/ω_0)·ṁ,    m − q ∈ [−b/2, b/2]
+//! ```
+//!
+//! (semi-implicit Euler per control period on ṁ and the gap m − q; meeting a flank takes the
+//! output's speed). A load
+//! that reverses thus leaves the joint limp until the motor has crossed the play, and the
+//! output wanders within it — lost motion and the delay it brings; the joint keeps its
+//! armature in the MuJoCo model (the rotor's inertia moves with the output when engaged).
+//!
 //! The profile (Profile Velocity / Profile Acceleration non-zero) is the e-manual's
 //! velocity-based trapezoid, simplified to a desired position that chases Goal Position with
 //! `|v| ≤ v_profile` and `|a| ≤ a_profile`, braking so that it stops at the goal
@@ -70,6 +87,8 @@ pub struct XServoParams {
     /// Factor on the drive's P, I and D gains against the registers (1: the datasheet servo;
     /// the robustness sweep varies it to stand for servos tuned or built differently).
     pub gain_scale: f64,
+    /// Play of the gear train at the output, rad (0: none).
+    pub backlash: f64,
 }
 
 impl XServoParams {
@@ -84,6 +103,7 @@ impl XServoParams {
         gear_damping: 0.233,
         friction_loss: 0.03,
         gain_scale: 1.0,
+        backlash: 0.0,
     };
 
     /// Back-EMF damping `τ_s/ω_0`, N·m·s/rad.
@@ -101,7 +121,12 @@ impl XServoParams {
             self.supply_voltage,
             self.gain_scale,
         ];
-        let non_neg = [self.armature, self.gear_damping, self.friction_loss];
+        let non_neg = [
+            self.armature,
+            self.gear_damping,
+            self.friction_loss,
+            self.backlash,
+        ];
         pos.iter().all(|v| v.is_finite() && *v > 0.0)
             && non_neg.iter().all(|v| v.is_finite() && *v >= 0.0)
     }
@@ -170,6 +195,20 @@ pub struct XServo {
     last_error: f64,
     /// Whether the last period had torque on.
     was_on: bool,
+    /// The motor side behind the gear's play (only with backlash).
+    motor: Option<MotorSide>,
+}
+
+/// The motor side of a gear train with play: where it stands in the play and its speed, in
+/// output units.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct MotorSide {
+    /// m − q, rad (within ±b/2).
+    gap: f64,
+    /// Speed ṁ, rad/s.
+    md: f64,
+    /// The flank it presses on: +1 (m = q + b/2), −1 (m = q − b/2), 0 free in the play.
+    flank: f64,
 }
 
 /// The encoder's reading of joint angle `q`: whole ticks (the contract's rad ↔ tick map; the
@@ -222,13 +261,65 @@ impl XServo {
         }
         let u = pwm / f64::from(x_series::PWM_FULL_SCALE);
         let v = params.supply_voltage / params.nominal_voltage;
-        let torque = params.stall_torque * v * u - params.back_emf_damping() * qd;
+        let torque = if params.backlash > 0.0 {
+            self.through_play(params, params.stall_torque * v * u, qd, dt)
+        } else {
+            params.stall_torque * v * u - params.back_emf_damping() * qd
+        };
         XServoOutput {
             torque,
             pwm: pwm.round() as i16,
             current: torque / params.stall_torque * params.stall_current,
             saturated,
         }
+    }
+
+    /// The torque at the output through the gear's play (module doc) for the motor's drive
+    /// torque `drive` (before the back-EMF) this period, the output at speed `qd`.
+    fn through_play(&mut self, params: &XServoParams, drive: f64, qd: f64, dt: f64) -> f64 {
+        let half = 0.5 * params.backlash;
+        let k_e = params.back_emf_damping();
+        let engaged = drive - k_e * qd;
+        let state = self.motor.get_or_insert(MotorSide {
+            gap: 0.0,
+            md: qd,
+            flank: 0.0,
+        });
+        if state.flank != 0.0 {
+            if state.flank * engaged > 0.0 {
+                // Pressing on its flank: the motor rides on the output.
+                state.md = qd;
+                return engaged;
+            }
+            // The drive turned away from the flank: free from it at the output's speed.
+            state.flank = 0.0;
+            state.md = qd;
+        }
+        // Free: the rotor alone across the play (the output moves on meanwhile), until it
+        // meets a flank.
+        let j = params.armature.max(1e-6);
+        let md = state.md + dt * (drive - k_e * state.md) / j;
+        let gap = state.gap + dt * (md - qd);
+        *state = if gap >= half {
+            MotorSide {
+                gap: half,
+                md: qd,
+                flank: 1.0,
+            }
+        } else if gap <= -half {
+            MotorSide {
+                gap: -half,
+                md: qd,
+                flank: -1.0,
+            }
+        } else {
+            MotorSide {
+                gap,
+                md,
+                flank: 0.0,
+            }
+        };
+        0.0
     }
 
     /// Moves the desired position one period along the profile towards the goal.
@@ -334,5 +425,95 @@ mod tests {
             last_v = v;
         }
         assert_eq!(s.desired, 3048.0);
+    }
+
+    /// Gear backlash: the output held still at the centre, the goal 100 ticks ahead. The motor
+    /// first crosses half the play with the output limp, then the output gets the drive's
+    /// torque; with the goal reversed the output is limp again while the motor crosses the whole
+    /// play. Crossing times against the rotor's free acceleration from rest, s = τ·t²/(2J)
+    /// (the back-EMF only slows it: at most half as long again).
+    #[test]
+    fn backlash_leaves_the_output_limp_while_the_motor_crosses_the_play() {
+        let (mut p, mut s, mut r) = powered_at_centre();
+        let b = 0.5f64.to_radians();
+        p.backlash = b;
+        let dt = 1e-3;
+        let q = TickMap::reference().rad_f64(0, 2048);
+        let limp_run = |s: &mut XServo, r: &XServoRegisters| {
+            let mut n = 0;
+            loop {
+                let out = s.update(&p, r, q, 0.0, dt);
+                if out.torque != 0.0 {
+                    return (n, out.torque);
+                }
+                n += 1;
+                assert!(n < 1000, "never engaged");
+            }
+        };
+        let free_time = |play: f64, torque: f64| (2.0 * play * p.armature / torque.abs()).sqrt();
+        // Without play: the torque at once.
+        let mut plain = XServo::default();
+        r.goal = 2148;
+        let stiff = plain
+            .update(&XServoParams::XM430_W350, &r, q, 0.0, dt)
+            .torque;
+        assert!(stiff > 2.0, "{stiff}");
+        let (n, torque) = limp_run(&mut s, &r);
+        assert!((torque - stiff).abs() < 1e-9, "{torque} against {stiff}");
+        let t = free_time(b / 2.0, stiff) / dt;
+        assert!(
+            n as f64 >= t.floor() && n as f64 <= 1.5 * t + 2.0,
+            "{n} ticks, free {t:.1}"
+        );
+        // Engaged: it stays so while the drive pushes the same way.
+        for _ in 0..10 {
+            assert!((s.update(&p, &r, q, 0.0, dt).torque - stiff).abs() < 1e-9);
+        }
+        // Reversed: limp across the whole play, then the reversed torque.
+        r.goal = 1948;
+        let (n, torque) = limp_run(&mut s, &r);
+        assert!((torque + stiff).abs() < 1e-9, "{torque}");
+        let t = free_time(b, stiff) / dt;
+        assert!(
+            n as f64 >= t.floor() && n as f64 <= 1.5 * t + 2.0,
+            "{n} ticks, free {t:.1}"
+        );
+    }
+
+    /// Gear backlash under a load that overruns the goal: a pendulum (1 N·m of gravity at 1 rad,
+    /// 0.01 kg·m² plus the armature, the gear's viscous friction) whose goal ramps 0.5 rad in
+    /// 0.5 s. With 0.5° of play it still comes to rest at its goal, within the half play plus
+    /// its sag under the load (sin 0.5 N·m at 18.9 N·m/rad ≈ 0.025 rad), as without play.
+    #[test]
+    fn a_servo_with_play_still_brakes_an_overrunning_load_to_its_goal() {
+        let map = TickMap::reference();
+        let rest = |backlash_deg: f64| {
+            let p = XServoParams {
+                backlash: backlash_deg.to_radians(),
+                ..XServoParams::XM430_W350
+            };
+            let mut s = XServo::default();
+            let mut r = XServoRegisters::defaults(2048);
+            r.torque_on = true;
+            let q0 = map.rad_f64(0, 2048);
+            let (mut q, mut qd) = (q0, 0.0);
+            let dt = 1e-3;
+            for k in 0..3000 {
+                let t = f64::from(k) * dt;
+                r.goal = map.tick_f64(0, q0 + 0.5 * (t / 0.5).min(1.0));
+                let out = s.update(&p, &r, q, qd, dt);
+                let tau = out.torque + (q - q0).sin() - p.gear_damping * qd;
+                qd += dt * tau / (0.01 + p.armature);
+                q += dt * qd;
+            }
+            (q - q0 - 0.5, qd)
+        };
+        let (e0, _) = rest(0.0);
+        let (e, qd) = rest(0.5);
+        assert!(e0.abs() < 0.03, "without play: {e0}");
+        assert!(
+            e.abs() < 0.25f64.to_radians() + 0.03 && qd.abs() < 0.05,
+            "with play: {e} rad off, {qd} rad/s"
+        );
     }
 }
