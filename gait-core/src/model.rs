@@ -14,7 +14,7 @@
 //!   M_u at (x, z_c + l_u), thigh m_t at (3x/4, 3z_c/4), calf + sole m_c at (x/4, z_c/4):
 //!   `C_τ² = M_u z_c + M_u l_u + 9 m_t z_c/16 + m_c z_c/16`,
 //!   `T_TF² = C_τ² / ((M_u + 3 m_t/4 + m_c/4) g)`.
-//! * **DLIPM** (ref [26] of seed 000, not in the seeds; our reading, per the errata): the upper
+//! * **DLIPM** (ref \[26\] of seed 000, not in the seeds; our reading, per the errata): the upper
 //!   body M_u as one mass at the CoM point (x, z_c), the whole support leg m_l = m_t + m_c as one
 //!   mass at its midpoint (x/2, z_c/2): `C² = M_u z_c + m_l z_c/4`, `T² = C² / ((M_u + m_l/2) g)`.
 //! * **LIPM**: the whole robot M as one mass at (x, z_c): `C² = M z_c`, `T² = z_c / g`.

@@ -15,6 +15,10 @@ use crate::error::GaitError;
 pub const JOINTS_PER_LEG: usize = 6;
 /// Number of leg joints of the robot (left leg then right leg).
 pub const LEG_JOINTS: usize = 2 * JOINTS_PER_LEG;
+/// Index of `hip_pitch` within a leg's joints.
+pub const HIP_PITCH: usize = 2;
+/// Index of `knee` within a leg's joints.
+pub const KNEE: usize = 3;
 /// Index of `ankle_pitch` within a leg's joints.
 pub const ANKLE_PITCH: usize = 4;
 /// Index of `ankle_roll` within a leg's joints.

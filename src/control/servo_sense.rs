@@ -1,13 +1,14 @@
 //! The servos' Present Position and what the f32 path makes of it: the servo deflection
 //! feedback ([`gait_core::feedback::deflection`]), the leg odometry
-//! ([`gait_core::measure::odometry`]) and the swing leg's pitch lag for the sole's levelling
-//! ([`gait_core::feedback::level`], e_q of (A10)).
+//! ([`gait_core::measure::odometry`]), the swing leg's pitch lag for the sole's levelling
+//! ([`gait_core::feedback::level`], e_q of (A10)) and the swing sole's lag for the clock hold's
+//! landing condition ([`gait_core::feedback::hold`], ℓ of (A11)).
 
 use dxl::table::x_series;
 use dxl::{BulkReadRequest, DeviceResult};
 use gait_core::feedback::{JointCorrection, JointInput, Measured};
 use gait_core::measure::odometry::SurveyedSole;
-use gait_core::robot::{ANKLE_PITCH, JOINTS_PER_LEG, LEG_JOINTS};
+use gait_core::robot::{ANKLE_PITCH, HIP_PITCH, JOINTS_PER_LEG, KNEE, LEG_JOINTS};
 use gait_core::{Robot, Side};
 use walker_contract::bus_map as ids;
 
@@ -19,9 +20,10 @@ use crate::supervisor::JointMap;
 /// deflection feedback ([`gait_core::feedback::deflection`], `deflection_ki`: its joints read in one BULK
 /// READ every tick, the targets of the last walking tick before the correction (D1)) and the leg
 /// odometry ([`gait_core::measure::odometry`], `sole_poses=measured`: once a step, the stance leg's six
-/// on the tick after a survey falls due, the new leg's six on the next, O3′) and the swing
-/// leg's pitch lag (`catch_level_joints`: its hip pitch and knee every tick of a single
-/// support). Built only while one of them acts.
+/// on the tick after a survey falls due, the new leg's six on the next, O3′), the swing leg's
+/// pitch lag (`catch_level_joints`: its three pitch servos every tick of a single support) and
+/// the swing sole's lag (`catch_hold_lag`: its six servos every tick of a single support).
+/// Built only while one of them acts.
 pub(super) struct ServoSense {
     deflection: Option<gait_core::feedback::deflection::DeflectionFeedback>,
     /// The deflection feedback's joints.
@@ -50,11 +52,6 @@ pub(super) struct ServoSense {
     /// This tick's swing sole distance from where its targets put it, m (NaN: not measured).
     sole_lag_m: f32,
 }
-
-/// Index of `hip_pitch` within a leg's joints.
-const HIP_PITCH: usize = 2;
-/// Index of `knee` within a leg's joints.
-const KNEE: usize = 3;
 
 /// The leg odometry's firmware side: its state, the legs' FK and the survey's two reads.
 struct Odometry {
@@ -130,9 +127,9 @@ impl ServoSense {
     /// ONE BULK READ of the Present Positions this tick needs (rad; NaN for a reply that
     /// failed) — the deflection feedback's joints, a survey's leg (odometry O3′: the stance
     /// leg, then the new one on the next tick, which takes the survey against the plan's places
-    /// of the feet `planned`) and the `swing` leg's hip pitch and knee (its pitch lag). Returns
-    /// a survey taken: the new foot and its surveyed place minus the planned one (m, x and y;
-    /// for the online walk's position hold).
+    /// of the feet `planned`) and the `swing` leg's pitch servos (its pitch lag; all six for the
+    /// swing sole's lag). Returns a survey taken: the new foot and its surveyed place minus the
+    /// planned one (m, x and y; for the online walk's position hold).
     pub(super) fn read<B: Board>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,

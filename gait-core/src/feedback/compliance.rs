@@ -307,7 +307,7 @@ fn origin_of(j: usize) -> usize {
 }
 
 /// The servos' predicted sag under the gait's loads, fed forward (gait-core
-/// [`crate::compliance`] C3) as a joint correction.
+/// [`crate::feedback::compliance`] C3) as a joint correction.
 #[derive(Clone, Debug)]
 pub struct SagFeedForward {
     /// The loads' model.

@@ -101,7 +101,7 @@ impl FootForceState {
     }
 }
 
-/// The foot force difference control (gait-core [`crate::balance`] F1–F4) as a sample
+/// The foot force difference control (gait-core [`crate::feedback::fdc`] F1–F4) as a sample
 /// correction: the soles' heights from the loads answering the previous sample.
 #[derive(Clone, Copy, Debug)]
 pub struct FootForceCorrection {

@@ -13,16 +13,16 @@
 //!   ℓ = |FK(q̂_swing) − FK(q^s_swing)|∞       the swing sole's measured lag
 //! ```
 //!
-//! (the planned swing sole below z_h = [`HOLD_HEIGHT_M`] and not rising — no hold at lift-off —,
-//! the swing foot's offset more than ε = [`HOLD_GAP_M`] from (A5) of [`crate::feedback::catch`] or, having moved in this
-//! single support, arrived less than the settling time T_s ago) or the swing sole, by the
-//! forward kinematics of the servos' Present Position q̂ against that of the targets q^s they
-//! were sent (pelvis frame), more than ℓ_max from where its targets put it (`hold_lag_m`; 0 =
-//! off, and an unmeasured ℓ never holds): a servo that lags sets the foot down short and late,
-//! so the plan waits for it. The budget is per single support and refills outside single
-//! support. A swing that carries the touchdown load
-//! never holds. The clock only stands still: a shorter swing would need the CoM re-planned,
-//! which the precomputed TLIPFM segments cannot do mid-step.
+//! (the planned swing sole below z_h = [`HOLD_HEIGHT_M`] and not rising — no hold at
+//! lift-off —, the swing foot's offset more than ε = [`HOLD_GAP_M`] from (A5) of
+//! [`crate::feedback::catch`] or, having moved in this single support, arrived less than the
+//! settling time T_s ago) or the swing sole, by the forward kinematics of the servos' Present
+//! Position q̂ against that of the targets q^s they were sent (pelvis frame), more than ℓ_max
+//! from where its targets put it (`hold_lag_m`; 0 = off, and an unmeasured ℓ never holds): a
+//! servo that lags sets the foot down short and late, so the plan waits for it. The budget is
+//! per single support and refills outside single support. A swing that carries the touchdown
+//! load never holds. The clock only stands still: a shorter swing would need the CoM
+//! re-planned, which the precomputed TLIPFM segments cannot do mid-step.
 
 use crate::feedback::catch::StepAdaptation;
 use crate::trajectory::sampler::SupportPhase;

@@ -1,6 +1,6 @@
 //! The swing sole kept level: the swing leg's ankles turn the sole back by the trunk's
-//! deviation from its attitude baseline ([`SoleLevel`]; part of the step adaptation,
-//! [`crate::feedback::catch::StepAdapter`]).
+//! deviation from its attitude baseline and by the swing leg's measured lag ([`SoleLevel`];
+//! part of the step adaptation, [`crate::feedback::catch::StepAdapter`]).
 //!
 //! # Law
 //! The IK puts both soles parallel to the pelvis (level for an upright trunk). A trunk turned
@@ -17,22 +17,23 @@
 //! ```
 //!
 //! The three pitch joints are parallel, so the sole's pitch in the world is θ + q_hp + q_k +
-//! q_ap and k_θ = 1 levels it exactly for joints that follow their targets. Servos that lag
-//! their targets turn the sole by the sum of their lags (the firmware's `catch_level_joints`):
-//! e_q takes the Present Position q̂ (read at the start of a tick) of the hip pitch and the knee
-//! against their targets q* of the tick before (the IK's, before any correction: the plan's
-//! sole) and the ankle's against the target q^s it was sent (its own lag, this correction
-//! included). Equal lags of the three parallel joints cancel (their targets sum to the sole's
-//! pitch); what is left turns the sole. The ankle term closes a loop through that servo with a
-//! tick's delay, e(k) ≈ e_o − k_q·e(k − 1): it converges for k_q < 1 (at k_q = 1 it rings).
-//! A missing reading holds the last e_q of that leg; it is forgotten once the leg is on the
-//! ground. the ankle roll turns the sole about the same axis as the
-//! trunk's roll up to the hip's pitch in between (small in a swing), so k_φ = 1 levels it to
-//! first order. w ramps the correction in over T_r after lift-off and out over T_r after
-//! touchdown (continuous joint targets; a foot on the ground keeps the plan's ankle). A
-//! missing attitude holds the last deviation while w ramps. The levelling runs with the
-//! catching step off (`gain` = 0) too, on the same baseline
-//! ((A2) of [`crate::feedback::catch`], which feeds it the deviation).
+//! q_ap and k_θ = 1 levels it exactly for joints that follow their targets; the ankle roll
+//! turns the sole about the same axis as the trunk's roll up to the hip's pitch in between
+//! (small in a swing), so k_φ = 1 levels it to first order. w ramps the correction in over T_r
+//! after lift-off and out over T_r after touchdown (continuous joint targets; a foot on the
+//! ground keeps the plan's ankle). A missing attitude holds the last deviation while w ramps.
+//! The levelling runs with the catching step off (`gain` = 0) too, on the same baseline ((A2)
+//! of [`crate::feedback::catch`], which feeds it the deviation).
+//!
+//! Servos that lag their targets turn the sole by the sum of their lags (k_q, the firmware's
+//! `catch_level_joints`; 0 by default): e_q takes the Present Position q̂ (read at the start of
+//! a tick) of the hip pitch and the knee against their targets q* of the tick before (the IK's,
+//! before any correction: the plan's sole) and the ankle's against the target q^s it was sent
+//! (its own lag, this correction included). Equal lags of the three parallel joints cancel
+//! (their targets sum to the sole's pitch); what is left turns the sole. The ankle term closes
+//! a loop through that servo with a tick's delay, e(k) ≈ e_o − k_q·e(k − 1): it converges for
+//! k_q < 1 (at k_q = 1 it rings). A missing reading holds the last e_q of that leg; it is
+//! forgotten once the leg is on the ground.
 
 use crate::feedback::catch::StepAdaptation;
 use crate::robot::{Side, ANKLE_PITCH, ANKLE_ROLL, JOINTS_PER_LEG, LEG_JOINTS};

@@ -315,7 +315,7 @@ fn limit_norm<R: Real>(v: [R; 2], max: R) -> [R; 2] {
 /// the previous sample's reference, inside that sample's support polygon (cached).
 #[derive(Clone, Debug)]
 pub struct StabilizerCorrection<'r> {
-    /// The stabilizer (gait-core [`crate::stabilizer`]).
+    /// The stabilizer (gait-core [`crate::feedback::stabilizer`]).
     pub stabilizer: Stabilizer<f32>,
     on: bool,
     support: SupportCache,

@@ -139,7 +139,7 @@ impl FixedIkReport {
 // ---------------------------------------------------------------------------------------------
 // Primitives.
 
-/// Floor of the square root of `n`, exact: [`isqrt32`] for 32-bit operands, [`isqrt_wide`]
+/// Floor of the square root of `n`, exact: `isqrt32` for 32-bit operands, `isqrt_wide`
 /// above (no 64-bit division, no float).
 pub fn isqrt(n: u64) -> u64 {
     let Ok(small) = u32::try_from(n) else {

@@ -244,7 +244,7 @@ fn integrate(times: &[f64], values: &[f64], cs: &[(f64, f64)], w: f64, period: f
 }
 
 /// Exact Fourier coefficients (a_k, b_k) = (2/P)∫ p·(cos, sin)(2πkt/P) dt of the piecewise-linear
-/// curve through `(times[j], values[j])`, integrated over [times[0], times[last]] (one period);
+/// curve through `(times[j], values[j])`, integrated over `[times[0], times[last]]` (one period);
 /// `None` for mismatched lengths, fewer than two knots or a non-positive period.
 pub fn fourier_coefficients(
     times: &[f64],
