@@ -1264,7 +1264,7 @@ params! {
         plan_key: None,
         unit: "1",
         domain: range(0.0, 1.5),
-        doc: "catching step: swing sole levelling gain on the swing leg's hip pitch and knee lag, their Present Position minus their targets (A10; 0 = off, no position reads)",
+        doc: "catching step: swing sole levelling gain on the swing leg's pitch lag, the hip pitch's and knee's Present Position against their IK targets and the ankle's against its own (A10; 0 = off, no position reads; keep < 1)",
         set: |c, v| { c.step_adaptation.level_joints = v as f32 },
         get: |c| { Some(Value::Num32(c.step_adaptation.level_joints)) },
     },

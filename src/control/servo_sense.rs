@@ -206,23 +206,26 @@ impl ServoSense {
                 let (p, t) = (self.present.get(base + j), of.get(base + j));
                 p.zip(t).map_or(f32::NAN, |(p, t)| p - t)
             };
-            if let Some(l) = self.lag.get_mut(usize::from(side == Side::Right)) {
+            if let Some(l) = self
+                .lag
+                .get_mut(usize::from(side == Side::Right))
+                .filter(|_| self.swing_lag)
+            {
                 *l = off(HIP_PITCH, &self.last_ik)
                     + off(KNEE, &self.last_ik)
                     + off(ANKLE_PITCH, &self.last_goal);
             }
+            let leg = |of: &[f32; LEG_JOINTS]| -> Option<[f32; JOINTS_PER_LEG]> {
+                of.get(base..base + JOINTS_PER_LEG)?.try_into().ok()
+            };
             if let (Some(kin), Some(q), Some(goal)) = (
                 self.landing.as_ref(),
-                self.present.get(base..base + JOINTS_PER_LEG),
-                self.last_goal.get(base..base + JOINTS_PER_LEG),
+                leg(&self.present),
+                leg(&self.last_goal),
             ) {
                 let pelvis = gait_core::kinematics::leg::Pose::level(0.0, 0.0, 0.0, 0.0);
-                let leg = |v: &[f32]| {
-                    let mut a = [f32::NAN; JOINTS_PER_LEG];
-                    a.iter_mut().zip(v).for_each(|(a, v)| *a = *v);
-                    kin.fk(side, &pelvis, &a).position()
-                };
-                let (at, to) = (leg(q), leg(goal));
+                let at = kin.fk(side, &pelvis, &q).position();
+                let to = kin.fk(side, &pelvis, &goal).position();
                 // NaN (a joint unread) propagates: no hold on it.
                 self.sole_lag_m = at
                     .iter()

@@ -97,8 +97,8 @@ pub struct StepAdaptation {
     /// Gain k_φ of the swing sole's levelling on the trunk's roll off its baseline (A10;
     /// 0 = off, 1 = level).
     pub level_roll: f32,
-    /// Gain k_q of the swing sole's levelling on the swing leg's measured hip-pitch and knee
-    /// lag (A10; 0 = off, 1 = level; needs the servos' Present Position).
+    /// Gain k_q of the swing sole's levelling on the swing leg's measured pitch lag e_q (A10;
+    /// 0 = off; < 1, see [`crate::feedback::level`]; needs the servos' Present Position).
     pub level_joints: f32,
     /// Time T_r over which the levelling ramps in after lift-off and out after touchdown, s
     /// (A10).
@@ -156,7 +156,8 @@ impl StepAdaptation {
         self.gain.is_finite() && self.gain > 0.0
     }
 
-    /// Whether the swing sole's levelling runs (a finite positive gain on pitch or roll).
+    /// Whether the swing sole's levelling runs (a finite positive gain on pitch, roll or the
+    /// joints' lag).
     pub fn is_levelling(&self) -> bool {
         [self.level_pitch, self.level_roll, self.level_joints]
             .iter()
@@ -503,9 +504,8 @@ impl StepAdapter {
         self.level.corrections()
     }
 
-    /// The swing legs' measured pitch lag for the levelling (A10): per leg (left, right), the
-    /// Present Position minus the target of the hip pitch plus the knee, rad (NaN when not
-    /// measured: the last one holds).
+    /// The swing legs' measured pitch lag e_q for the levelling (A10): per leg (left, right),
+    /// rad (NaN when not measured: the last one holds).
     pub fn set_joint_lag(&mut self, lag: [f32; 2]) {
         self.level.set_joint_lag(lag);
     }
