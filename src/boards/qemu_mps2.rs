@@ -73,7 +73,9 @@
 //! Transmit spins on UART0 are bounded ([`UART_SPIN_LIMIT`]: `send` fails with
 //! `BusError::Timeout`). The lock-step reads (reply announcements and announced reply bytes)
 //! block on purpose: the simulator always answers, and a host that is gone ends the run through
-//! the host's QEMU timeout (`walker fil --timeout`).
+//! the host's QEMU timeout (`walker fil --timeout`). A blocking read sleeps (WFI) on the UART's
+//! receive interrupt rather than polling, so that QEMU's vCPU leaves the host's cores to the
+//! simulator while it computes the answer.
 
 use core::ptr::{read_volatile, write_volatile};
 
@@ -144,13 +146,24 @@ const DATA: usize = 0x00;
 const STATE: usize = 0x04;
 const CTRL: usize = 0x08;
 const BAUDDIV: usize = 0x10;
+const INTCLEAR: usize = 0x0C;
 const STATE_TX_FULL: u32 = 1;
 const STATE_RX_FULL: u32 = 2;
+const CTRL_TX_RX_ENABLE: u32 = 0b11;
+const CTRL_RX_INTEN: u32 = 1 << 3;
+const INT_RX: u32 = 1 << 1;
+/// NVIC Interrupt Set-Enable, Clear-Enable and Clear-Pending registers of IRQs 0–31.
+const NVIC_ISER0: usize = 0xE000_E100;
+const NVIC_ICER0: usize = 0xE000_E180;
+const NVIC_ICPR0: usize = 0xE000_E280;
 
-/// One CMSDK APB UART, polled.
+/// One CMSDK APB UART, polled; a blocking read sleeps on its receive interrupt.
 #[derive(Clone, Copy)]
 struct Uart {
     base: usize,
+    /// The UART's receive interrupt line on the mps2 boards' NVIC (QEMU `hw/arm/mps2.c`:
+    /// UART0–3 RX on IRQ 0, 2, 4, 18).
+    rx_irq: u8,
 }
 
 impl Uart {
@@ -169,7 +182,7 @@ impl Uart {
     fn init(self, baud: u32) {
         let div = (SYSCLK_HZ / baud.max(1)).max(16);
         self.write(BAUDDIV, div);
-        self.write(CTRL, 0b11);
+        self.write(CTRL, CTRL_TX_RX_ENABLE);
     }
     fn tx_full(self) -> bool {
         self.read(STATE) & STATE_TX_FULL != 0
@@ -194,8 +207,34 @@ impl Uart {
         true
     }
     fn get(self) -> u8 {
-        while !self.rx_full() {}
+        if !self.rx_full() {
+            self.sleep_until_rx();
+        }
         (self.read(DATA) & 0xFF) as u8
+    }
+
+    /// Waits for a received byte with the core asleep (WFI), so that QEMU's vCPU does not spin
+    /// while the simulator computes its answer. With interrupts masked (PRIMASK) the receive
+    /// interrupt only wakes the core, no handler runs; it is armed (UART and NVIC) for this
+    /// wait only and cleared (UART, NVIC enable and pending) before the mask is lifted, so no
+    /// interrupt is ever taken. The flag is tested after arming: a byte that came earlier ends
+    /// the wait at once, a later one raises the interrupt.
+    fn sleep_until_rx(self) {
+        let bit = 1u32 << (self.rx_irq & 31);
+        cortex_m::interrupt::free(|_| {
+            // SAFETY: NVIC registers of the Cortex-M system control space (32-bit, write-one
+            // to set/clear): enables, then disables and unpends this UART's line only.
+            let nvic = |reg: usize| unsafe { write_volatile(reg as *mut u32, bit) };
+            self.write(CTRL, CTRL_TX_RX_ENABLE | CTRL_RX_INTEN);
+            nvic(NVIC_ISER0);
+            while !self.rx_full() {
+                cortex_m::asm::wfi();
+            }
+            self.write(CTRL, CTRL_TX_RX_ENABLE);
+            self.write(INTCLEAR, INT_RX);
+            nvic(NVIC_ICER0);
+            nvic(NVIC_ICPR0);
+        });
     }
 }
 
@@ -416,7 +455,10 @@ pub const EXIT_POWER_CUT: i32 = 99;
 /// Best-effort torque off from anywhere (panic handler): the broadcast Torque Enable = 0
 /// packet on UART0, with bounded spins so that a stuck UART cannot hang the panic path.
 pub fn panic_torque_off() {
-    let bus = Uart { base: UART0_BASE };
+    let bus = Uart {
+        base: UART0_BASE,
+        rx_irq: 0,
+    };
     for &b in TORQUE_OFF_PACKET.iter() {
         if !bus.put_bounded(b) {
             return;
@@ -468,10 +510,22 @@ impl QemuBoard {
         syst.clear_current();
         syst.enable_counter();
 
-        let bus = Uart { base: UART0_BASE };
-        let log = Uart { base: UART1_BASE };
-        let ls = Uart { base: UART2_BASE };
-        let command = Uart { base: UART3_BASE };
+        let bus = Uart {
+            base: UART0_BASE,
+            rx_irq: 0,
+        };
+        let log = Uart {
+            base: UART1_BASE,
+            rx_irq: 2,
+        };
+        let ls = Uart {
+            base: UART2_BASE,
+            rx_irq: 4,
+        };
+        let command = Uart {
+            base: UART3_BASE,
+            rx_irq: 18,
+        };
         command.init(COMMAND_BAUD);
         bus.init(cfg.bus_baud);
         log.init(921_600);
