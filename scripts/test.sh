@@ -52,8 +52,9 @@ cargo test --target host-tuple -p gait-core --no-default-features --lib without_
 # The control loop with the fixed-point path (`math=fixed`, feature fixed-gait) against f32.
 cargo test --target host-tuple -p walker-firmware --features fixed-gait --lib -- control::tests::fixed control::stage_tests::the_fixed_path
 
-step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (release)"
-DXL_FUZZ_CASES=10000000 cargo test --release --target host-tuple -p dxl --test props fuzz_streams
+step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (one shard per core)"
+# The test build of the step before (no release build of the test's dependencies just for it).
+DXL_FUZZ_CASES=10000000 cargo test --target host-tuple -p dxl --test props fuzz_streams
 
 step "firmware: clippy and release builds for both boards"
 cargo clippy --release --no-deps --no-default-features --features board-qemu,fake-robot --bins -- -D warnings

@@ -1,8 +1,8 @@
 //! Property tests and the long-running fuzz loop.
 //!
 //! The proptest cases honour `PROPTEST_CASES` (default 256). `fuzz_streams` runs
-//! `DXL_FUZZ_CASES` random, mutated and junk-between-packets streams (default 20 000); CI runs
-//! it with 1 000 000 in release mode: `DXL_FUZZ_CASES=1000000 cargo test --release --target
+//! `DXL_FUZZ_CASES` random, mutated and junk-between-packets streams (default 20 000), one shard
+//! per core; `scripts/test.sh` runs 10 000 000: `DXL_FUZZ_CASES=10000000 cargo test --target
 //! host-tuple -p dxl --test props fuzz_streams`.
 //!
 //! The central property: in a stream of intact packets with junk between them (random bytes,
@@ -525,14 +525,27 @@ fn fuzz_streams() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(20_000);
-    let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+    // One shard per core, each its own random sequence; shard k runs cases k, k + n, k + 2n, …
+    // so that the mix of stream kinds (by case number) is the same whatever the core count.
+    let shards = std::thread::available_parallelism().map_or(1, |n| n.get().min(8)) as u64;
+    std::thread::scope(|scope| {
+        for k in 0..shards {
+            scope.spawn(move || fuzz_shard(k, shards, cases));
+        }
+    });
+}
+
+/// The cases `first, first + step, …` below `cases` of [`fuzz_streams`], on the random sequence
+/// of shard `first`.
+fn fuzz_shard(first: u64, step: u64, cases: u64) {
+    let mut rng = XorShift(0x9E37_79B9_7F4A_7C15 ^ first.wrapping_mul(0xD1B5_4A32_D192_ED03));
     let mut dec = Decoder::<CAP>::new();
     let mut raw_dec = Decoder::<CAP>::new();
     raw_dec.set_stuffing(false);
     let mut buf = [0u8; 2 * CAP + 16];
     let mut params = Vec::with_capacity(CAP);
     let mut stream = Vec::with_capacity(4 * CAP);
-    for case in 0..cases {
+    for case in (first..cases).step_by(step.max(1) as usize) {
         stream.clear();
         match case % 10 {
             0 => {
