@@ -18,6 +18,9 @@
 #                    table's first machine for the ELF's target directory, e.g.
 #                    thumbv7m-none-eabi → an385; a machine that cannot run that target: exit 2)
 #   --timeout S      wall-clock limit in seconds (default: $WALKER_QEMU_TIMEOUT or 600; 0 = none)
+#   --no-icount      without `-icount shift=0` (1 instruction = 1 virtual ns): for runs that do
+#                    not read QEMU's clock, as the lock-step runs (docs/lockstep.md), whose host
+#                    time it saves
 #   --raw            QEMU's stdout (semihosting) as it is, no defmt decoding; the script execs
 #                    QEMU, so the caller's child process is QEMU itself (killing it stops QEMU)
 #   --unchecked      skip the command-line length check (to test the firmware's own refusal)
@@ -36,12 +39,12 @@
 # raw frames are saved next to the ELF (ELF.defmt) and decoded after the run by the `walker`
 # binary when one is built (`walker capture --defmt ELF.defmt --elf ELF` → ELF.defmt.log),
 # else a one-line hint is printed.
-# Run-to-run determinism: -icount shift=0 (1 instruction = 1 virtual ns) and the firmware's
-# virtual clock (see src/boards/qemu_mps2.rs and docs/lockstep.md).
+# Run-to-run determinism: the firmware's virtual clock (see src/boards/qemu_mps2.rs and
+# docs/lockstep.md); -icount shift=0 (1 instruction = 1 virtual ns) unless --no-icount.
 set -u
 
 if [ $# -lt 1 ]; then
-    echo "usage: $0 ELF [--bus SPEC] [--log SPEC] [--lockstep SPEC] [--command SPEC] [--machine M] [--timeout S] [--raw] [--unchecked] [qemu args...]" >&2
+    echo "usage: $0 ELF [--bus SPEC] [--log SPEC] [--lockstep SPEC] [--command SPEC] [--machine M] [--timeout S] [--no-icount] [--raw] [--unchecked] [qemu args...]" >&2
     exit 2
 fi
 elf=$1
@@ -63,6 +66,7 @@ command_port=${WALKER_COMMAND:-null}
 machine=${WALKER_QEMU_MACHINE:-}
 timeout_s=${WALKER_QEMU_TIMEOUT:-600}
 raw=0
+icount=(-icount shift=0)
 checked=1
 extra=()
 while [ $# -gt 0 ]; do
@@ -74,6 +78,7 @@ while [ $# -gt 0 ]; do
         --machine) machine=$2; shift 2 ;;
         --timeout) timeout_s=$2; shift 2 ;;
         --raw) raw=1; shift ;;
+        --no-icount) icount=(); shift ;;
         --unchecked) checked=0; shift ;;
         *) extra+=("$1"); shift ;;
     esac
@@ -122,7 +127,7 @@ fi
 cmd=(qemu-system-arm -M "$machine" -nographic -monitor none
     -serial "$bus" -serial "$log" -serial "$lockstep" -serial "$command_port"
     -semihosting-config enable=on,target=native
-    -icount shift=0
+    "${icount[@]}"
     -kernel "$elf" "${append[@]}" "${extra[@]}")
 
 # QEMU hands the firmware "ELF -append-text" + NUL through semihosting and refuses when that is

@@ -1,7 +1,8 @@
 //! The firmware's QEMU runs, as the host starts them. The QEMU command line has one definition,
 //! `scripts/qemu-run.sh` (machine, `-nographic -monitor none`, the three UARTs, semihosting,
 //! `-icount shift=0`, the semihosting command-line check); the host runs that script in its raw
-//! mode (QEMU's stdout as it is, the script execs QEMU). The machines are the table
+//! mode (QEMU's stdout as it is, the script execs QEMU), a lock-step run without `-icount`
+//! (the firmware's clock is its modelled one, docs/lockstep.md). The machines are the table
 //! `scripts/qemu-machines.txt` (machine, core, the Rust target whose ELFs it runs by default),
 //! read here and by the script.
 
@@ -106,6 +107,7 @@ pub struct Serials {
 
 /// The command that runs `elf` on `machine` with `serials` and the semihosting command line
 /// `append`, without a wall-clock limit (the caller keeps it); QEMU's stdout is the child's.
+/// With a lock-step channel QEMU runs without `-icount`: nothing reads its clock.
 pub fn command(elf: &Path, machine: &str, serials: &Serials, append: &str) -> Command {
     let mut c = Command::new("bash");
     c.arg(RUN_SCRIPT)
@@ -113,7 +115,7 @@ pub fn command(elf: &Path, machine: &str, serials: &Serials, append: &str) -> Co
         .args(["--raw", "--timeout", "0", "--machine", machine])
         .args(["--bus", &serials.bus, "--log", &serials.log]);
     if let Some(l) = &serials.lockstep {
-        c.args(["--lockstep", l]);
+        c.args(["--lockstep", l, "--no-icount"]);
     }
     if let Some(p) = &serials.command {
         c.args(["--command", p]);

@@ -5,7 +5,7 @@
 //! `WALKER_QEMU_ELF=target/thumbv7em-none-eabihf/release/qemu cargo test --release
 //!  --target host-tuple -p walker-host --test fil -- --ignored --test-threads 64`.
 //!
-//! Each run is a QEMU process and a simulation in lock-step on virtual time (`-icount`, the
+//! Each run is a QEMU process and a simulation in lock-step on virtual time (the
 //! firmware's virtual clock): how many run side by side changes their wall time, not one
 //! figure. At most `WALKER_FIL_JOBS` runs (default: the machine's cores) run at a time, the
 //! longest planned walk first ([`slot`]); the tests themselves may all start at once, and a

@@ -44,10 +44,10 @@ mod firmware {
         if args.is_err() {
             cfg = Config::default();
         }
-        let Some(cp) = cortex_m::Peripherals::take() else {
+        let Some(_core) = cortex_m::Peripherals::take() else {
             qemu_mps2::semihosting_exit(ExitCode::ConfigRejected.status());
         };
-        let mut board = QemuBoard::new(cp.SYST, &cfg);
+        let mut board = QemuBoard::new(&cfg);
         if read.is_none() {
             defmt::error!(
                 "command line refused by QEMU (longer than {=usize} bytes)",

@@ -58,11 +58,11 @@
 //! * [`TickTimer::wait_tick`] jumping to the next deadline `k · period` (an overrun when it is
 //!   already past; deadlines never drift).
 //!
-//! Why a per-build constant and not the time measured while running: SysTick under `-icount shift=0` counts one step per 40
-//! instructions, and where the count boundaries fall relative to the code depends on how many
-//! instructions the blocking UART spins took — which depends on host speed. A measured compute
-//! time would differ by ±1 count between runs and break bit-for-bit determinism. The CPU time
-//! *is* measured (SysTick, spins excluded) for diagnostics only: [`QemuBoard::cpu_us`].
+//! Why a per-build constant and not the time measured while running: the CPU time QEMU gives
+//! depends on how it runs (with `-icount` on the instructions the blocking waits took, without
+//! it on the host), so a measured compute time would break bit-for-bit determinism. QEMU's own
+//! clock is not read: the lock-step runs go without `-icount` (`scripts/qemu-run.sh
+//! --no-icount`), which only costs the host time.
 //!
 //! # Watchdog
 //! A virtual watchdog, started at boot: once started, a tick that begins more than the timeout
@@ -79,7 +79,6 @@
 
 use core::ptr::{read_volatile, write_volatile};
 
-use cortex_m::peripheral::{syst::SystClkSource, SYST};
 // Link the runtime (vector table, reset handler) and the defmt global logger into every
 // binary that uses this board, the on-target tests included.
 use cortex_m_rt as _;
@@ -157,6 +156,11 @@ const NVIC_ISER0: usize = 0xE000_E100;
 const NVIC_ICER0: usize = 0xE000_E180;
 const NVIC_ICPR0: usize = 0xE000_E280;
 
+/// Polls of the receive flag before a read of a byte already on its way sleeps: more keep a lone
+/// run's bytes flowing (QEMU hands them over one at a time), fewer leave the cores to the
+/// simulators when runs share them (CHANGELOG: the measured trade).
+const RX_POLLS_SOON: u32 = 256;
+
 /// One CMSDK APB UART, polled; a blocking read sleeps on its receive interrupt.
 #[derive(Clone, Copy)]
 struct Uart {
@@ -206,8 +210,17 @@ impl Uart {
         self.write(DATA, u32::from(b));
         true
     }
+    /// A byte the host has yet to compute: sleeps at once while there is none.
     fn get(self) -> u8 {
-        if !self.rx_full() {
+        self.get_after_polls(0)
+    }
+    /// A byte already on its way (announced reply bytes, the rest of an announcement): polls
+    /// [`RX_POLLS_SOON`] times before sleeping, as QEMU hands a UART one byte at a time.
+    fn get_soon(self) -> u8 {
+        self.get_after_polls(RX_POLLS_SOON)
+    }
+    fn get_after_polls(self, polls: u32) -> u8 {
+        if !(0..=polls).any(|_| self.rx_full()) {
             self.sleep_until_rx();
         }
         (self.read(DATA) & 0xFF) as u8
@@ -235,32 +248,6 @@ impl Uart {
             nvic(NVIC_ICER0);
             nvic(NVIC_ICPR0);
         });
-    }
-}
-
-/// SysTick as a free-running 24-bit down counter at 25 MHz: CPU time excluding UART spins.
-struct CpuMeter {
-    mark: u32,
-    counts: u64,
-}
-
-impl CpuMeter {
-    fn now() -> u32 {
-        SYST::get_current()
-    }
-    fn resume(&mut self) {
-        self.mark = Self::now();
-    }
-    fn pause(&mut self) {
-        let n = Self::now();
-        self.counts += u64::from(self.mark.wrapping_sub(n) & 0x00FF_FFFF);
-        self.mark = n;
-    }
-    fn take_us(&mut self) -> u32 {
-        self.pause();
-        let us = self.counts / u64::from(SYSCLK_HZ / 1_000_000);
-        self.counts = 0;
-        us.min(u64::from(u32::MAX)) as u32
     }
 }
 
@@ -493,23 +480,14 @@ pub struct QemuBoard {
     schedule: TickSchedule,
     watchdog_ms: Option<u32>,
     last_feed_ns: u64,
-    cpu: CpuMeter,
-    cpu_last_us: u32,
-    cpu_max_us: u32,
     crash: CrashCell,
     /// The parameter store on the host (`store=PATH`), if given.
     store: Option<HostStore>,
-    _syst: SYST,
 }
 
 impl QemuBoard {
-    /// Sets up the UARTs and SysTick; reads the semihosting command line for `lockstep`.
-    pub fn new(mut syst: SYST, cfg: &Config) -> Self {
-        syst.set_clock_source(SystClkSource::Core);
-        syst.set_reload(0x00FF_FFFF);
-        syst.clear_current();
-        syst.enable_counter();
-
+    /// Sets up the UARTs; reads the semihosting command line for `lockstep`.
+    pub fn new(cfg: &Config) -> Self {
         let bus = Uart {
             base: UART0_BASE,
             rx_irq: 0,
@@ -550,7 +528,7 @@ impl QemuBoard {
                 }
             });
 
-        let mut b = QemuBoard {
+        QemuBoard {
             bus,
             log,
             lockstep_uart: ls,
@@ -568,15 +546,9 @@ impl QemuBoard {
             schedule: TickSchedule::new(cfg.tick_period_us),
             watchdog_ms: None,
             last_feed_ns: 0,
-            cpu: CpuMeter { mark: 0, counts: 0 },
-            cpu_last_us: 0,
-            cpu_max_us: 0,
             crash: CrashCell::new(),
             store,
-            _syst: syst,
-        };
-        b.cpu.resume();
-        b
+        }
     }
 
     /// True when the lock-step channel is in use.
@@ -594,12 +566,6 @@ impl QemuBoard {
         self.lockstep_errors
     }
 
-    /// Measured CPU time (SysTick, UART spins excluded) of the last tick and the maximum, µs.
-    /// Diagnostics only: not deterministic to the microsecond, never used for the clock.
-    pub fn cpu_us(&self) -> (u32, u32) {
-        (self.cpu_last_us, self.cpu_max_us)
-    }
-
     fn now_us_inner(&self) -> u64 {
         self.virt_ns / 1000
     }
@@ -614,17 +580,14 @@ impl QemuBoard {
             return;
         }
         self.last_sync_us = Some(now);
-        self.cpu.pause();
         self.lockstep_uart.put(LOCKSTEP_TIME);
         for b in now.to_le_bytes() {
             self.lockstep_uart.put(b);
         }
-        self.cpu.resume();
     }
 
     /// Reads one reply announcement from UART2.
     fn read_announcement(&mut self) -> usize {
-        self.cpu.pause();
         loop {
             let b = self.lockstep_uart.get();
             if b == LOCKSTEP_REPLY {
@@ -632,17 +595,14 @@ impl QemuBoard {
             }
             self.lockstep_errors = self.lockstep_errors.saturating_add(1);
         }
-        let lo = self.lockstep_uart.get();
-        let hi = self.lockstep_uart.get();
-        self.cpu.resume();
+        let lo = self.lockstep_uart.get_soon();
+        let hi = self.lockstep_uart.get_soon();
         usize::from(u16::from_le_bytes([lo, hi]))
     }
 
-    /// Writes raw bytes on UART0 (bounded spins, excluded from the CPU meter).
+    /// Writes raw bytes on UART0 (bounded spins).
     fn bus_write(&mut self, bytes: &[u8]) -> Result<(), BusError> {
-        self.cpu.pause();
         let ok = bytes.iter().all(|&b| self.bus.put_bounded(b));
-        self.cpu.resume();
         if ok {
             Ok(())
         } else {
@@ -669,11 +629,9 @@ impl ServoBus for QemuBoard {
         }
         // Unread reply bytes of the previous packet are known to come: drain them.
         if self.pending_reply > 0 {
-            self.cpu.pause();
             for _ in 0..self.pending_reply {
-                let _ = self.bus.get();
+                let _ = self.bus.get_soon();
             }
-            self.cpu.resume();
             self.pending_reply = 0;
         }
         self.sync_time();
@@ -696,11 +654,9 @@ impl ServoBus for QemuBoard {
                 self.virt_ns += self.return_delay_ns;
                 self.reply_started = true;
             }
-            self.cpu.pause();
             for slot in buf.iter_mut().take(n) {
-                *slot = self.bus.get();
+                *slot = self.bus.get_soon();
             }
-            self.cpu.resume();
             self.pending_reply -= n;
             self.virt_ns += self.line.bytes_ns(n);
         }
@@ -747,9 +703,6 @@ impl TickTimer for QemuBoard {
             self.virt_ns = self.virt_ns.max(t * 1000);
         }
         self.check_watchdog();
-        let cpu = self.cpu.take_us();
-        self.cpu_last_us = cpu;
-        self.cpu_max_us = self.cpu_max_us.max(cpu);
         self.sync_time();
         plan.tick
     }
@@ -761,11 +714,9 @@ impl TickTimer for QemuBoard {
 
 impl LogSink for QemuBoard {
     fn write_log(&mut self, bytes: &[u8]) {
-        self.cpu.pause();
         for &b in bytes {
             self.log.put(b);
         }
-        self.cpu.resume();
     }
 }
 
@@ -784,9 +735,7 @@ impl Board for QemuBoard {
     const ID: BoardId = BoardId::QemuMps2;
 
     fn torque_off_best_effort(&mut self) {
-        self.cpu.pause();
         panic_torque_off();
-        self.cpu.resume();
     }
 
     fn reset_cause(&self) -> (ResetCause, u32) {
@@ -823,13 +772,11 @@ impl Board for QemuBoard {
     }
 
     fn command_tx(&mut self, bytes: &[u8]) {
-        self.cpu.pause();
         for &b in bytes {
             if !self.command.put_bounded(b) {
                 break;
             }
         }
-        self.cpu.resume();
         // The real board's transmitter holds the loop for the bytes' line time.
         self.virt_ns += LineTime { baud: COMMAND_BAUD }.bytes_ns(bytes.len());
     }
