@@ -74,8 +74,8 @@
 //! `BusError::Timeout`). The lock-step reads (reply announcements and announced reply bytes)
 //! block on purpose: the simulator always answers, and a host that is gone ends the run through
 //! the host's QEMU timeout (`walker fil --timeout`). A blocking read sleeps (WFI) on the UART's
-//! receive interrupt rather than polling, so that QEMU's vCPU leaves the host's cores to the
-//! simulator while it computes the answer.
+//! receive interrupt, so that QEMU's vCPU leaves the host's cores to the simulator while it
+//! computes the answer; bytes already on their way are polled [`RX_POLLS_SOON`] times first.
 
 use core::ptr::{read_volatile, write_volatile};
 
