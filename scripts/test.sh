@@ -42,9 +42,6 @@ cargo clippy -p gait-core --features fixed-engine -- -D warnings
 # As the OpenCM 9.04 build has it: without the Fourier CoM.
 cargo clippy -p gait-core --no-default-features --features fixed-engine -- -D warnings
 
-step "gait-core builds for the target"
-cargo build -p gait-core --target thumbv7em-none-eabihf
-
 step "host tests"
 cargo test --target host-tuple --workspace
 # gait-core as the OpenCM 9.04 build has it (no Fourier CoM): that method refused.
@@ -56,7 +53,24 @@ step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (o
 # The test build of the step before (no release build of the test's dependencies just for it).
 DXL_FUZZ_CASES=10000000 cargo test --target host-tuple -p dxl --test props fuzz_streams
 
-step "firmware: clippy and release builds for both boards"
+step "firmware: clippy and release builds for all boards"
+# The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
+# ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3). They
+# run beside the M7 builds (cargo locks each target and profile directory on its own, and a
+# fat-LTO link leaves the other core idle); their output follows the M7 builds'.
+m3_builds() {
+    set -e
+    local m3=(--profile release-m3 --target thumbv7m-none-eabi --no-default-features)
+    cargo clippy "${m3[@]}" --no-deps --features board-opencm --bins -- -D warnings
+    cargo build "${m3[@]}" --features board-opencm --bin opencm
+    cargo clippy "${m3[@]}" --no-deps --features board-qemu,fixed-gait --bins -- -D warnings
+    cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
+}
+mkdir -p "$target"
+m3_builds >"$target/m3-builds.log" 2>&1 &
+m3_pid=$!
+# An M7 build that fails ends the script: the M3 builds with it.
+trap 'kill "$m3_pid" 2>/dev/null || true' EXIT
 cargo clippy --release --no-deps --no-default-features --features board-qemu,fake-robot --bins -- -D warnings
 cargo clippy --release --no-deps --no-default-features --features board-opencr --bins -- -D warnings
 # The fixed-point gait (`math=fixed`) is a build feature (≈ 17 KB of flash): its ELF is kept as
@@ -69,13 +83,15 @@ cargo build --release --no-default-features --features board-qemu --bin qemu
 cargo build --release --no-default-features --features board-opencr,opencr-bootloader --bin opencr
 cp "$target/thumbv7em-none-eabihf/release/opencr" "$target/thumbv7em-none-eabihf/release/opencr-boot"
 cargo build --release --no-default-features --features board-opencr --bin opencr
-# The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
-# ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3).
-m3=(--profile release-m3 --target thumbv7m-none-eabi --no-default-features)
-cargo clippy "${m3[@]}" --no-deps --features board-opencm --bins -- -D warnings
-cargo build "${m3[@]}" --features board-opencm --bin opencm
-cargo clippy "${m3[@]}" --no-deps --features board-qemu,fixed-gait --bins -- -D warnings
-cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
+m3_status=0
+wait "$m3_pid" || m3_status=$?
+trap - EXIT
+echo "-- the Cortex-M3 builds:"
+cat "$target/m3-builds.log"
+if [ "$m3_status" != 0 ]; then
+    echo "the Cortex-M3 builds failed (exit $m3_status)" >&2
+    exit 1
+fi
 
 step "firmware sizes: flash and static RAM of every board build (the FPU-less M3 board, OpenCM 9.04: ≤ 112 KiB flash, ≤ 16 KiB RAM; the OpenCR image for its bootloader ≤ 256 KiB)"
 python3 scripts/sizes.py \
@@ -144,12 +160,13 @@ render_py=$(bash scripts/render-setup.sh | tail -n 1)
 # The firmware-in-the-loop walks (host/tests/fil.rs): each a QEMU process and a simulation in
 # lock-step on virtual time, so that their figures do not depend on the host's load; they run
 # side by side, WALKER_FIL_JOBS at a time (default: the cores), the longest first. `slow`: the
-# full-walk suite, run with --full (CI): the 1 kHz walks (five times the ticks of a 200 Hz one),
-# the M3 fixed-point Table 2 against the M7's, the Fourier CoM walks and the idealised goal
-# walks; the everyday walks cover the same firmware paths on shorter or fewer walks.
+# full-walk suite, run with --full (CI): the 1 kHz walks (five times the ticks a second of a
+# 200 Hz one), the M3 fixed-point Table 2 against the M7's, the Fourier CoM walks, the idealised
+# goal walks and the MCAP export; the everyday walks cover the same firmware paths on shorter or
+# fewer walks.
 slow=(
-    table2_at_1_khz_and_4_5_mbps_has_no_overrun_on_the_m7
-    table2_at_1_khz_and_4_5_mbps_has_no_overrun_on_the_m3_fixed_point
+    four_steps_at_1_khz_and_4_5_mbps_have_no_overrun_on_the_m7
+    four_steps_at_1_khz_and_4_5_mbps_have_no_overrun_on_the_m3_fixed_point
     m3_fixed_point_walks_table2_and_agrees_with_the_m7_f32_walk
     fourier_com_walks_on_the_mujoco_robot
     compensation_and_feedback_meet_the_goal_under_xm430_limits_in_the_idealised_model

@@ -75,7 +75,7 @@
 //! block on purpose: the simulator always answers, and a host that is gone ends the run through
 //! the host's QEMU timeout (`walker fil --timeout`). A blocking read sleeps (WFI) on the UART's
 //! receive interrupt, so that QEMU's vCPU leaves the host's cores to the simulator while it
-//! computes the answer; bytes already on their way are polled [`RX_POLLS_SOON`] times first.
+//! computes the answer (and, when runs share the host's cores, the other runs' simulators).
 
 use core::ptr::{read_volatile, write_volatile};
 
@@ -92,14 +92,6 @@ use crate::record::BoardId;
 use crate::rx_ring::LineRx;
 use crate::Config;
 
-/// CMSDK UART0 (servo bus).
-pub const UART0_BASE: usize = 0x4000_4000;
-/// CMSDK UART1 (log).
-pub const UART1_BASE: usize = 0x4000_5000;
-/// CMSDK UART2 (lock-step).
-pub const UART2_BASE: usize = 0x4000_6000;
-/// CMSDK UART3 (command port).
-pub const UART3_BASE: usize = 0x4000_7000;
 /// UART / SysTick clock of the mps2 boards, Hz.
 pub const SYSCLK_HZ: u32 = 25_000_000;
 /// Instructions per control tick charged as compute time for `cfg`: the bench's worst case
@@ -156,19 +148,37 @@ const NVIC_ISER0: usize = 0xE000_E100;
 const NVIC_ICER0: usize = 0xE000_E180;
 const NVIC_ICPR0: usize = 0xE000_E280;
 
-/// Polls of the receive flag before a read of a byte already on its way sleeps: more keep a lone
-/// run's bytes flowing (QEMU hands them over one at a time), fewer leave the cores to the
-/// simulators when runs share them (CHANGELOG: the measured trade).
-const RX_POLLS_SOON: u32 = 256;
-
 /// One CMSDK APB UART, polled; a blocking read sleeps on its receive interrupt.
 #[derive(Clone, Copy)]
 struct Uart {
+    /// The UART's register block in the mps2 memory map.
     base: usize,
-    /// The UART's receive interrupt line on the mps2 boards' NVIC (QEMU `hw/arm/mps2.c`:
-    /// UART0–3 RX on IRQ 0, 2, 4, 18).
+    /// The UART's receive interrupt line on the mps2 boards' NVIC.
     rx_irq: u8,
 }
+
+// The mps2 boards' CMSDK UARTs: register blocks and receive interrupt lines (QEMU
+// `hw/arm/mps2.c`: UART0–3 RX on IRQ 0, 2, 4, 18).
+/// CMSDK UART0: the servo bus.
+const UART0: Uart = Uart {
+    base: 0x4000_4000,
+    rx_irq: 0,
+};
+/// CMSDK UART1: the log.
+const UART1: Uart = Uart {
+    base: 0x4000_5000,
+    rx_irq: 2,
+};
+/// CMSDK UART2: the lock-step channel.
+const UART2: Uart = Uart {
+    base: 0x4000_6000,
+    rx_irq: 4,
+};
+/// CMSDK UART3: the command port.
+const UART3: Uart = Uart {
+    base: 0x4000_7000,
+    rx_irq: 18,
+};
 
 impl Uart {
     fn reg(self, off: usize) -> *mut u32 {
@@ -210,17 +220,10 @@ impl Uart {
         self.write(DATA, u32::from(b));
         true
     }
-    /// A byte the host has yet to compute: sleeps at once while there is none.
+    /// The next received byte: at once if one is waiting, else with the core asleep until one
+    /// comes (QEMU hands a UART one byte at a time).
     fn get(self) -> u8 {
-        self.get_after_polls(0)
-    }
-    /// A byte already on its way (announced reply bytes, the rest of an announcement): polls
-    /// [`RX_POLLS_SOON`] times before sleeping, as QEMU hands a UART one byte at a time.
-    fn get_soon(self) -> u8 {
-        self.get_after_polls(RX_POLLS_SOON)
-    }
-    fn get_after_polls(self, polls: u32) -> u8 {
-        if !(0..=polls).any(|_| self.rx_full()) {
+        if !self.rx_full() {
             self.sleep_until_rx();
         }
         (self.read(DATA) & 0xFF) as u8
@@ -442,12 +445,8 @@ pub const EXIT_POWER_CUT: i32 = 99;
 /// Best-effort torque off from anywhere (panic handler): the broadcast Torque Enable = 0
 /// packet on UART0, with bounded spins so that a stuck UART cannot hang the panic path.
 pub fn panic_torque_off() {
-    let bus = Uart {
-        base: UART0_BASE,
-        rx_irq: 0,
-    };
     for &b in TORQUE_OFF_PACKET.iter() {
-        if !bus.put_bounded(b) {
+        if !UART0.put_bounded(b) {
             return;
         }
     }
@@ -488,22 +487,7 @@ pub struct QemuBoard {
 impl QemuBoard {
     /// Sets up the UARTs; reads the semihosting command line for `lockstep`.
     pub fn new(cfg: &Config) -> Self {
-        let bus = Uart {
-            base: UART0_BASE,
-            rx_irq: 0,
-        };
-        let log = Uart {
-            base: UART1_BASE,
-            rx_irq: 2,
-        };
-        let ls = Uart {
-            base: UART2_BASE,
-            rx_irq: 4,
-        };
-        let command = Uart {
-            base: UART3_BASE,
-            rx_irq: 18,
-        };
+        let (bus, log, ls, command) = (UART0, UART1, UART2, UART3);
         command.init(COMMAND_BAUD);
         bus.init(cfg.bus_baud);
         log.init(921_600);
@@ -595,8 +579,8 @@ impl QemuBoard {
             }
             self.lockstep_errors = self.lockstep_errors.saturating_add(1);
         }
-        let lo = self.lockstep_uart.get_soon();
-        let hi = self.lockstep_uart.get_soon();
+        let lo = self.lockstep_uart.get();
+        let hi = self.lockstep_uart.get();
         usize::from(u16::from_le_bytes([lo, hi]))
     }
 
@@ -630,7 +614,7 @@ impl ServoBus for QemuBoard {
         // Unread reply bytes of the previous packet are known to come: drain them.
         if self.pending_reply > 0 {
             for _ in 0..self.pending_reply {
-                let _ = self.bus.get_soon();
+                let _ = self.bus.get();
             }
             self.pending_reply = 0;
         }
@@ -655,7 +639,7 @@ impl ServoBus for QemuBoard {
                 self.reply_started = true;
             }
             for slot in buf.iter_mut().take(n) {
-                *slot = self.bus.get_soon();
+                *slot = self.bus.get();
             }
             self.pending_reply -= n;
             self.virt_ns += self.line.bytes_ns(n);
