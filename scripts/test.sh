@@ -30,11 +30,23 @@ step() {
     last=$SECONDS
 }
 
+# Host-target cargo with clippy: clippy-driver is the workspace crates' compiler, as `cargo clippy`
+# runs it (its lints, -D warnings), but compiling them for real, so that the dependencies are
+# compiled once for the tests rather than also checked for a separate clippy run. Every host
+# cargo call below goes through it: the same compiler for the same crates, no rebuild between
+# the steps.
+clippy_driver="$(rustc --print sysroot)/bin/clippy-driver"
+if [ ! -x "$clippy_driver" ]; then
+    echo "clippy-driver not found at $clippy_driver (rustup component add clippy)" >&2
+    exit 1
+fi
+host_cargo() {
+    RUSTC_WORKSPACE_WRAPPER="$clippy_driver" \
+        CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__" cargo "$@"
+}
+
 step "cargo fmt --check"
 cargo fmt --all --check
-
-step "clippy (host)"
-cargo clippy --target host-tuple --workspace --all-targets -- -D warnings
 
 step "clippy (thumbv7em-none-eabihf, no_std crates)"
 cargo clippy -p gait-core -p dxl -p walker-contract -- -D warnings
@@ -42,35 +54,19 @@ cargo clippy -p gait-core --features fixed-engine -- -D warnings
 # As the OpenCM 9.04 build has it: without the Fourier CoM.
 cargo clippy -p gait-core --no-default-features --features fixed-engine -- -D warnings
 
-step "host tests"
-cargo test --target host-tuple --workspace
+step "clippy (host: every workspace crate and target, as compiled for the tests) and host tests"
+host_cargo test --target host-tuple --workspace --all-targets --no-run
+host_cargo test --target host-tuple --workspace
 # gait-core as the OpenCM 9.04 build has it (no Fourier CoM): that method refused.
-cargo test --target host-tuple -p gait-core --no-default-features --lib without_fourier_com
+host_cargo test --target host-tuple -p gait-core --no-default-features --lib without_fourier_com
 # The control loop with the fixed-point path (`math=fixed`, feature fixed-gait) against f32.
-cargo test --target host-tuple -p walker-firmware --features fixed-gait --lib -- control::tests::fixed control::stage_tests::the_fixed_path
+host_cargo test --target host-tuple -p walker-firmware --features fixed-gait --lib -- control::tests::fixed control::stage_tests::the_fixed_path
 
 step "Dynamixel codec: 10^7 random, mutated and junk-interleaved byte streams (one shard per core)"
 # The test build of the step before (no release build of the test's dependencies just for it).
-DXL_FUZZ_CASES=10000000 cargo test --target host-tuple -p dxl --test props fuzz_streams
+DXL_FUZZ_CASES=10000000 host_cargo test --target host-tuple -p dxl --test props fuzz_streams
 
 step "firmware: clippy and release builds for all boards"
-# The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
-# ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3). They
-# run beside the M7 builds (cargo locks each target and profile directory on its own, and a
-# fat-LTO link leaves the other core idle); their output follows the M7 builds'.
-m3_builds() {
-    set -e
-    local m3=(--profile release-m3 --target thumbv7m-none-eabi --no-default-features)
-    cargo clippy "${m3[@]}" --no-deps --features board-opencm --bins -- -D warnings
-    cargo build "${m3[@]}" --features board-opencm --bin opencm
-    cargo clippy "${m3[@]}" --no-deps --features board-qemu,fixed-gait --bins -- -D warnings
-    cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
-}
-mkdir -p "$target"
-m3_builds >"$target/m3-builds.log" 2>&1 &
-m3_pid=$!
-# An M7 build that fails ends the script: the M3 builds with it.
-trap 'kill "$m3_pid" 2>/dev/null || true' EXIT
 cargo clippy --release --no-deps --no-default-features --features board-qemu,fake-robot --bins -- -D warnings
 cargo clippy --release --no-deps --no-default-features --features board-opencr --bins -- -D warnings
 # The fixed-point gait (`math=fixed`) is a build feature (≈ 17 KB of flash): its ELF is kept as
@@ -83,15 +79,13 @@ cargo build --release --no-default-features --features board-qemu --bin qemu
 cargo build --release --no-default-features --features board-opencr,opencr-bootloader --bin opencr
 cp "$target/thumbv7em-none-eabihf/release/opencr" "$target/thumbv7em-none-eabihf/release/opencr-boot"
 cargo build --release --no-default-features --features board-opencr --bin opencr
-m3_status=0
-wait "$m3_pid" || m3_status=$?
-trap - EXIT
-echo "-- the Cortex-M3 builds:"
-cat "$target/m3-builds.log"
-if [ "$m3_status" != 0 ]; then
-    echo "the Cortex-M3 builds failed (exit $m3_status)" >&2
-    exit 1
-fi
+# The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
+# ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3).
+m3=(--profile release-m3 --target thumbv7m-none-eabi --no-default-features)
+cargo clippy "${m3[@]}" --no-deps --features board-opencm --bins -- -D warnings
+cargo build "${m3[@]}" --features board-opencm --bin opencm
+cargo clippy "${m3[@]}" --no-deps --features board-qemu,fixed-gait --bins -- -D warnings
+cargo build "${m3[@]}" --features board-qemu,fixed-gait --bin qemu
 
 step "firmware sizes: flash and static RAM of every board build (the FPU-less M3 board, OpenCM 9.04: ≤ 112 KiB flash, ≤ 16 KiB RAM; the OpenCR image for its bootloader ≤ 256 KiB)"
 python3 scripts/sizes.py \
@@ -183,6 +177,6 @@ step "firmware in the loop: walks in QEMU against the MuJoCo robot (determinism,
 WALKER_QEMU_ELF="$target/thumbv7em-none-eabihf/release/qemu" \
 WALKER_QEMU_FIXED_ELF="$target/thumbv7em-none-eabihf/release/qemu-fixed" \
 WALKER_QEMU_M3_ELF="$target/thumbv7m-none-eabi/release-m3/qemu" \
-    cargo test --target host-tuple --workspace --test fil -- "${fil_args[@]}"
+    host_cargo test --target host-tuple --workspace --test fil -- "${fil_args[@]}"
 
 printf '\n(%ds)\nall checks passed in %dm%02ds\n' $((SECONDS - last)) $((SECONDS / 60)) $((SECONDS % 60))
