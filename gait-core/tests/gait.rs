@@ -192,9 +192,13 @@ fn table2_timeline_and_zmp_knots_match_eqs_10_11() {
         let mid_ssp = at(base + 0.5 * (walk.t1 + walk.t2));
         let support = if py > 0.0 { Side::Left } else { Side::Right };
         assert_eq!(mid_ssp.phase, SupportPhase::Single(support));
+        let swing = if py > 0.0 { Side::Right } else { Side::Left };
+        assert_eq!(mid_ssp.phase.swing(), Some(swing));
         assert_eq!(at(base + 0.05).phase, SupportPhase::Double);
+        assert_eq!(at(base + 0.05).phase.swing(), None);
     }
     assert_eq!(samples[0].phase, SupportPhase::Standing);
+    assert_eq!(samples[0].phase.swing(), None);
     // 14 steps of 0.64 s = 8.96 s of walking (seed 000 Figs. 14-16).
     let walking = samples
         .iter()

@@ -63,10 +63,7 @@ impl Catching {
         phase: gait_core::SupportPhase,
         asked: [f32; 2],
     ) {
-        let swing = match phase {
-            gait_core::SupportPhase::Single(stance) => Some(stance.other()),
-            _ => None,
-        };
+        let swing = phase.swing();
         if swing != self.swing {
             if let Some(side) = self.swing.filter(|_| self.largest != [0.0; 2]) {
                 let now = board.now_us();
@@ -168,10 +165,7 @@ impl TickPath for F32Path<'_> {
     ) {
         if let Some(d) = self.servo_sense.as_mut() {
             let [l, r] = &previous.feet;
-            let swing = match previous.phase {
-                gait_core::SupportPhase::Single(stance) => Some(stance.other()),
-                _ => None,
-            };
+            let swing = previous.phase.swing();
             let landed = d.read(bus, self.map, &[l.sole_place(), r.sole_place()], swing);
             self.catching.adapter.set_joint_lag(d.swing_lag());
             self.catching.adapter.set_swing_lag_m(d.sole_lag_m());

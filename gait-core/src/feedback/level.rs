@@ -112,10 +112,7 @@ impl SoleLevel {
         if let Some(dev) = deviation {
             self.dev = dev;
         }
-        let swing = match phase {
-            SupportPhase::Single(stance) => Some(stance.other()),
-            _ => None,
-        };
+        let swing = phase.swing();
         let [dev_pitch, dev_roll] = self.dev;
         let [k_pitch, k_roll] = self.gains;
         let k_joints = self.k_joints;

@@ -34,6 +34,16 @@ pub enum SupportPhase {
     Single(Side),
 }
 
+impl SupportPhase {
+    /// The swinging foot: the one not in support in single support, none otherwise.
+    pub fn swing(self) -> Option<Side> {
+        match self {
+            SupportPhase::Single(stance) => Some(stance.other()),
+            SupportPhase::Standing | SupportPhase::Double => None,
+        }
+    }
+}
+
 /// One sample of the gait.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GaitSample<R> {
