@@ -23,6 +23,7 @@
 //! | 22 | not walking after a reset other than power-on (brown-out, watchdog, software/panic, pin) |
 //! | 24 | a leg servo lost while running (no reply to `servo_misses` monitor READs in a row) |
 //! | 20 | start-up step failed after the probe (Return Delay Time, positions, torque) |
+//! | 25 | the simulator is gone (QEMU board: its lock-step pipe closed) |
 //! | 101 | panic |
 //!
 //! i.e. 10 + the stop record's reason code for supervisor stops (a finished plan is 0). Stop
@@ -639,6 +640,8 @@ wire_codes! {
         NotPowerOn = 22,
         /// A leg servo lost while running.
         ServoLost = 24,
+        /// The simulator is gone (QEMU board: its lock-step pipe closed).
+        SimulatorGone = 25,
         /// Panic.
         Panic = 101,
     }
@@ -668,6 +671,7 @@ impl ExitCode {
             ExitCode::NotPowerOn => "reset other than power-on: not walking",
             ExitCode::ServoLost => "leg servo lost",
             ExitCode::StartupFailed => "start-up step failed",
+            ExitCode::SimulatorGone => "simulator gone",
             ExitCode::Panic => "panic",
         }
     }

@@ -4,6 +4,7 @@
 //! * [`command_port`]: the command port (the firmware as a Dynamixel device: control table, packet handling);
 //! * [`codes`]: stop reasons, fault kinds and exit codes with explicit numeric values;
 //! * [`config`]: the firmware's run-time configuration;
+//! * [`lockstep`]: the lock-step protocol of the QEMU board and the simulator;
 //! * [`params`]: the run-time parameter table (one declaration per key), its parser and the
 //!   docs' table;
 //! * [`param_store`]: the saved parameters (two CRC-checked copies in a board's store);
@@ -29,6 +30,7 @@ pub mod codes;
 pub mod command_port;
 pub mod config;
 pub mod footstep_log;
+pub mod lockstep;
 pub mod param_store;
 pub mod params;
 pub mod record;

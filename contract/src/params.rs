@@ -8,9 +8,10 @@
 //! Parsed without allocation; the first bad token is reported with its key.
 //!
 //! Tokens are separated by spaces, tabs or NULs. The first token is skipped when it is not a
-//! `key=value` pair (qemu puts the kernel's file name first); the bare word `lockstep` is
-//! accepted anywhere (the board reads it), as is `store=PATH` ([`STORE_WORD`], the QEMU board's
-//! parameter store); any other bare word is an error.
+//! `key=value` pair (qemu puts the kernel's file name first); the bare words `lockstep` and
+//! `realtime` ([`REALTIME_WORD`]) are accepted anywhere (the board reads them), as are `store=PATH` ([`STORE_WORD`], the QEMU board's
+//! parameter store) and `lockstep=PREFIX` ([`crate::lockstep::PIPE_WORD`], its lock-step
+//! pipes); any other bare word is an error.
 //!
 //! Every range is physical: a walk parameter beyond it (`d2=1e38`, `h_z=10`) is refused here,
 //! naming the key, before gait-core sees the plan (gait-core then checks the walk as a whole:
@@ -1304,6 +1305,11 @@ pub const TEST_ONLY: [&str; 4] = ["fault_nan", "fault_nan_com", "stop_at", "cut_
 /// parameter store (`PATH0`, `PATH1`: [`crate::param_store`]'s two slots); [`apply`] skips it.
 pub const STORE_WORD: &str = "store";
 
+/// A board's word, not a parameter: `realtime`, the QEMU board holds its virtual time back to
+/// the host's wall clock (for a master on the wall clock on the command port); [`apply`] skips
+/// it.
+pub const REALTIME_WORD: &str = "realtime";
+
 /// The parameter of `key`.
 pub fn find(key: &str) -> Option<&'static Param> {
     PARAMS.iter().find(|p| p.key == key)
@@ -1611,14 +1617,14 @@ pub fn apply(cfg: &mut Config, cmdline: &[u8]) -> Result<(), ArgError> {
     let mut seen = Seen::default();
     for (pos, tok) in tokens.enumerate() {
         let Some(eq) = tok.iter().position(|&b| b == b'=') else {
-            if tok == b"lockstep" || pos == 0 {
-                continue; // the board's word, or the program name
+            if tok == b"lockstep" || tok == REALTIME_WORD.as_bytes() || pos == 0 {
+                continue; // the board's words, or the program name
             }
             return Err(error(ArgErrorKind::StrayWord, tok, pos));
         };
         let (key, rest) = tok.split_at(eq);
-        if key == STORE_WORD.as_bytes() {
-            continue; // the board's (the QEMU board's parameter store)
+        if key == STORE_WORD.as_bytes() || key == crate::lockstep::PIPE_WORD.as_bytes() {
+            continue; // the board's (the QEMU board's parameter store, its lock-step pipes)
         }
         let val = rest.get(1..).unwrap_or(&[]);
         let (Ok(k), Ok(v)) = (core::str::from_utf8(key), core::str::from_utf8(val)) else {
@@ -1735,6 +1741,12 @@ mod tests {
             parse("target/thumbv7em-none-eabihf/release/qemu lockstep\0"),
             Ok(Config::default())
         );
+        // The board's words with a value: skipped, not parameters.
+        assert_eq!(
+            parse("elf lockstep=/tmp/walker-ls-1 store=/tmp/s realtime dt=0.01"),
+            parse("elf dt=0.01")
+        );
+        assert_ne!(parse("elf dt=0.01"), Ok(Config::default()));
     }
 
     #[test]

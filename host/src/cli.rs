@@ -1662,7 +1662,9 @@ fn run_simulate(a: SimulateArgs) -> Result<(), CliError> {
     // The addresses bound (with `--port 0`: the port the system chose, never 0).
     eprintln!(
         "simulated robot on {} (lock-step {}); {}",
-        handle.bus_addr(),
+        handle
+            .bus_addr()
+            .map_or("the lock-step pipes".to_string(), |a| a.to_string()),
         handle
             .lockstep_addr()
             .map_or("off".to_string(), |a| a.to_string()),

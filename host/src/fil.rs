@@ -32,7 +32,9 @@ pub struct FilOptions {
     pub machine: String,
     /// Wall-clock limit, s.
     pub timeout: Duration,
-    /// The simulator's configuration (ports are chosen here).
+    /// The simulator's configuration (its ports and pipes are chosen here). The lock-step
+    /// transport is the pipes (docs/lockstep.md); a `lockstep_port` (any) asks for the UARTs
+    /// over TCP instead.
     pub sim: SimConfig,
     /// Extra `key=value` tokens for the firmware.
     pub extra_tokens: Vec<String>,
@@ -260,6 +262,22 @@ pub fn run_command_port(
 /// `Requested`).
 pub const END_BY_COMMAND: i32 = walker_contract::codes::ExitCode::Requested.code() as i32;
 
+/// A fresh path prefix for a run's lock-step pipes in the temporary directory (unique per
+/// process and run; at most [`walker_contract::lockstep::PREFIX_MAX`] bytes).
+fn lockstep_pipe_prefix() -> Result<PathBuf, String> {
+    static RUNS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let p = std::env::temp_dir().join(format!("walker-ls-{}-{n}", std::process::id()));
+    if p.as_os_str().len() > walker_contract::lockstep::PREFIX_MAX {
+        return Err(format!(
+            "lock-step pipes: {} is over {} bytes (set a shorter TMPDIR)",
+            p.display(),
+            walker_contract::lockstep::PREFIX_MAX
+        ));
+    }
+    Ok(p)
+}
+
 /// A free TCP port on 127.0.0.1 (bound, read and released: another process may take it before
 /// QEMU binds it, then QEMU fails to start and says so).
 pub fn free_port() -> Result<u16, String> {
@@ -293,7 +311,32 @@ fn run_inner(
 ) -> Result<(FilResult, DriveOutcome), String> {
     // Checked before anything starts: the firmware's own parser, then the firmware's buffer.
     check_tokens(&opts.spec, &opts.extra_tokens)?;
-    let tokens = qemu_append(opts)?;
+    // The lock-step transport: the pipes, unless the simulator's configuration asks for the
+    // UARTs (a lock-step TCP port).
+    let pipes = match opts.sim.lockstep_port {
+        Some(_) => None,
+        None => Some(lockstep_pipe_prefix()?),
+    };
+    // A master on the wall clock (a person, the ROBOTIS SDK) on the command port: the
+    // firmware holds its virtual time back to the wall clock, so that the walk does not outrun
+    // the master's heartbeats.
+    let mut tokens = qemu_append(opts)?;
+    if let PortDriver::External(_) = port {
+        tokens = format!("{tokens} {}", walker_contract::params::REALTIME_WORD);
+    }
+    if let Some(p) = &pipes {
+        tokens = format!(
+            "{tokens} {}={}",
+            walker_contract::lockstep::PIPE_WORD,
+            p.display()
+        );
+    }
+    if !walker_contract::params::cmdline_fits(opts.elf.as_os_str().len(), tokens.len()) {
+        return Err(format!(
+            "the firmware command line with the board's words ({tokens}) is over the firmware's {}-byte semihosting buffer: use a shorter TMPDIR or ELF path",
+            walker_contract::params::CMDLINE_MAX
+        ));
+    }
     crate::qemu::check_machine(&opts.elf, &opts.machine)?;
     which("qemu-system-arm").ok_or_else(|| {
         "qemu-system-arm not found: install it with `sudo apt-get install -y qemu-system-arm`"
@@ -313,17 +356,19 @@ fn run_inner(
     let _ = std::fs::remove_file(&log);
 
     let mut cfg = opts.sim.clone();
-    cfg.port = 0;
-    cfg.lockstep_port = Some(0);
+    let uarts = pipes.is_none();
+    if uarts {
+        cfg.port = 0;
+        cfg.lockstep_port = Some(0);
+    }
+    cfg.lockstep_pipe = pipes;
     cfg.connect = false;
     cfg.log_truth = Some(truth.clone());
     cfg.after_end_us = AFTER_END_US;
     cfg.after_truth = Some(opts.out_dir.join("truth-after.csv"));
     let handle = sim::spawn(cfg).map_err(|e| format!("simulator: {e}"))?;
-    let bus = handle.bus_addr();
-    let lockstep = handle
-        .lockstep_addr()
-        .ok_or("simulator: no lock-step socket")?;
+    let tcp = |a: Option<std::net::SocketAddr>| a.map(|a| format!("tcp:{a},nodelay=on"));
+    let (bus_serial, lockstep_serial) = (tcp(handle.bus_addr()), tcp(handle.lockstep_addr()));
     let defmt_file =
         std::fs::File::create(&defmt).map_err(|e| format!("{}: {e}", defmt.display()))?;
     // The command port (UART3): a socket the host owns, QEMU connects to it.
@@ -342,10 +387,12 @@ fn run_inner(
         (None, _) => "null".to_string(),
     };
     let started = Instant::now();
+    // Over the pipes (`lockstep=PREFIX`) UART0 and UART2 are unconnected.
     let serials = crate::qemu::Serials {
-        bus: format!("tcp:{bus},nodelay=on"),
+        bus: bus_serial.unwrap_or_else(|| "null".into()),
         log: format!("file:{}", log.display()),
-        lockstep: Some(format!("tcp:{lockstep},nodelay=on")),
+        lockstep: lockstep_serial,
+        lockstep_pipes: !uarts,
         command: Some(port_serial),
     };
     let mut child = crate::qemu::command(&opts.elf, &opts.machine, &serials, &tokens)

@@ -101,13 +101,15 @@ pub struct Serials {
     pub log: String,
     /// UART2, the lock-step channel (turns lock-step on in the firmware), if any.
     pub lockstep: Option<String>,
+    /// Lock-step over the host's pipes (the word `lockstep=PREFIX` in the command line).
+    pub lockstep_pipes: bool,
     /// UART3, the command port (the firmware as a Dynamixel device), if any.
     pub command: Option<String>,
 }
 
 /// The command that runs `elf` on `machine` with `serials` and the semihosting command line
 /// `append`, without a wall-clock limit (the caller keeps it); QEMU's stdout is the child's.
-/// With a lock-step channel QEMU runs without `-icount`: nothing reads its clock.
+/// With lock-step (either transport) QEMU runs without `-icount`: nothing reads its clock.
 pub fn command(elf: &Path, machine: &str, serials: &Serials, append: &str) -> Command {
     let mut c = Command::new("bash");
     c.arg(RUN_SCRIPT)
@@ -115,7 +117,10 @@ pub fn command(elf: &Path, machine: &str, serials: &Serials, append: &str) -> Co
         .args(["--raw", "--timeout", "0", "--machine", machine])
         .args(["--bus", &serials.bus, "--log", &serials.log]);
     if let Some(l) = &serials.lockstep {
-        c.args(["--lockstep", l, "--no-icount"]);
+        c.args(["--lockstep", l]);
+    }
+    if serials.lockstep.is_some() || serials.lockstep_pipes {
+        c.arg("--no-icount");
     }
     if let Some(p) = &serials.command {
         c.args(["--command", p]);

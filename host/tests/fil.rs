@@ -232,10 +232,15 @@ fn compute_time_follows_the_core_clock() {
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn short_walk_completes_and_is_deterministic() {
     let spec = short_walk(4);
-    // Side by side: the lock-step runs do not depend on the host's load.
+    // Side by side: the lock-step runs depend neither on the host's load nor on the transport
+    // (run b over the UARTs and TCP, a over the pipes).
+    let over_uarts = SimConfig {
+        lockstep_port: Some(0),
+        ..seeded(7)
+    };
     let ((a, log_a), (b, log_b)) = both(
         || fil("det-a", spec.clone(), seeded(7), &[]),
-        || fil("det-b", spec.clone(), seeded(7), &[]),
+        || fil("det-b", spec.clone(), over_uarts, &[]),
     );
     assert_eq!(a.exit_code, Some(0));
     assert_eq!(stop_reason(&log_a), Some(StopReason::PlanDone));
@@ -258,6 +263,8 @@ fn short_walk_completes_and_is_deterministic() {
         "truth differs"
     );
     assert_eq!(log_a.ticks.len(), log_b.ticks.len());
+    assert_eq!(a.sim.lockstep_messages, b.sim.lockstep_messages);
+    assert_eq!((a.sim.lockstep_errors, b.sim.lockstep_errors), (0, 0));
     // The walk actually moved the robot forward: the CoM ends 3·S_L ahead.
     let last = log_a.ticks.last().unwrap();
     let com_x = last.com[0] as f64 * 1e-5;
@@ -747,9 +754,8 @@ fn fixed_point_path_walks_and_agrees_with_f32() {
         model: walker_host::planfile::ModelName::Lipm,
         ..short_walk(4)
     };
-    // τ = J·φ̈ comes from each run's own IMU (the two bodies move a little differently): a
-    // 1 mHz φ̈ filter keeps it near 0 in both, so that only the arithmetic differs.
-    const NO_TAU: &str = "imu_cutoff=0.001";
+    // τ = J·φ̈ comes from each run's own IMU (the two bodies move a little differently):
+    // NO_TAU keeps it near 0 in both, so that only the arithmetic differs.
     // The idealised body has no servo compliance: the feed-forward of a predicted sag (the
     // default 0.15 on the pitch joints) would only tilt it forward until it falls.
     const NO_COMPLIANCE: [&str; 2] = ["compliance_roll=0", "compliance_pitch=0"];
@@ -853,7 +859,6 @@ fn fourier_com_walks_on_the_mujoco_robot() {
     let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let spec = walker_host::planfile::load(&root.join("plans/table2-fourier.toml")).unwrap();
     assert_eq!(spec.com, ComName::Fourier);
-    const NO_TAU: &str = "imu_cutoff=0.001";
     let cfg_of = |spec: &WalkSpec, extra: &[&str]| {
         let mut tokens = walker_host::fil::firmware_tokens(spec).unwrap();
         tokens.extend(extra.iter().map(|t| t.to_string()));

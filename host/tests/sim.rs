@@ -412,7 +412,7 @@ impl Client {
             ..cfg
         })
         .unwrap();
-        let bus = TcpStream::connect(h.bus_addr()).unwrap();
+        let bus = TcpStream::connect(h.bus_addr().unwrap()).unwrap();
         let ls = TcpStream::connect(h.lockstep_addr().unwrap()).unwrap();
         for s in [&bus, &ls] {
             s.set_nodelay(true).unwrap();
@@ -597,13 +597,121 @@ fn tcp_bus_conversation_with_lockstep() {
     assert_eq!(s.lockstep_errors, 0);
 }
 
-fn tcp_session(seed: u64) -> Vec<u8> {
+/// A lock-step master on the simulator's pipes (`SimConfig::lockstep_pipe`), as the QEMU board
+/// with `lockstep=PREFIX` is.
+struct PipeClient {
+    to_sim: std::fs::File,
+    to_fw: std::fs::File,
+    log: Vec<u8>,
+}
+
+impl PipeClient {
+    fn connect(cfg: SimConfig, name: &str) -> (PipeClient, walker_host::sim::SimHandle) {
+        let prefix =
+            std::env::temp_dir().join(format!("walker-sim-test-{}-{name}", std::process::id()));
+        let h = spawn(SimConfig {
+            lockstep_pipe: Some(prefix.clone()),
+            ..cfg
+        })
+        .unwrap();
+        assert!(h.bus_addr().is_none());
+        let path = |s: &str| {
+            let mut p = prefix.as_os_str().to_owned();
+            p.push(s);
+            std::path::PathBuf::from(p)
+        };
+        // The board's order: its write end, then its read end.
+        let to_sim = std::fs::OpenOptions::new()
+            .write(true)
+            .open(path("-to-sim"))
+            .unwrap();
+        let to_fw = std::fs::File::open(path("-to-fw")).unwrap();
+        (
+            PipeClient {
+                to_sim,
+                to_fw,
+                log: Vec::new(),
+            },
+            h,
+        )
+    }
+}
+
+/// What a lock-step session needs of its master.
+trait LockstepMaster {
+    /// Sends a time frame.
+    fn time(&mut self, t_us: u64);
+    /// Sends one instruction; returns its announced reply bytes, logging announcement and reply.
+    fn send(&mut self, pkt: &[u8]) -> Vec<u8>;
+    /// The announcements and replies so far.
+    fn take_log(&mut self) -> Vec<u8>;
+}
+
+impl LockstepMaster for Client {
+    fn time(&mut self, t_us: u64) {
+        Client::time(self, t_us)
+    }
+    fn send(&mut self, pkt: &[u8]) -> Vec<u8> {
+        Client::send(self, pkt)
+    }
+    fn take_log(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.log)
+    }
+}
+
+impl LockstepMaster for PipeClient {
+    fn time(&mut self, t_us: u64) {
+        let mut m = vec![0x5A];
+        m.extend_from_slice(&t_us.to_le_bytes());
+        self.to_sim.write_all(&m).unwrap();
+    }
+    fn send(&mut self, pkt: &[u8]) -> Vec<u8> {
+        let mut m = vec![0x50];
+        m.extend_from_slice(&(pkt.len() as u16).to_le_bytes());
+        m.extend_from_slice(pkt);
+        self.to_sim.write_all(&m).unwrap();
+        let mut ack = [0u8; 3];
+        self.to_fw.read_exact(&mut ack).unwrap();
+        assert_eq!(ack[0], 0xA5);
+        let n = usize::from(u16::from_le_bytes([ack[1], ack[2]]));
+        let mut reply = vec![0u8; n];
+        self.to_fw.read_exact(&mut reply).unwrap();
+        self.log.extend_from_slice(&ack);
+        self.log.extend_from_slice(&reply);
+        reply
+    }
+    fn take_log(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.log)
+    }
+}
+
+fn session_config(seed: u64) -> SimConfig {
     let mut cfg = SimConfig { seed, ..kin() };
     cfg.faults.p_drop = 0.1;
     cfg.faults.p_corrupt = 0.1;
     cfg.noise.force_std_n = 0.2;
     cfg.noise.accel_std_m_s2 = 0.05;
-    let (mut c, h) = Client::connect(cfg);
+    cfg
+}
+
+fn tcp_session(seed: u64) -> Vec<u8> {
+    let (c, h) = Client::connect(session_config(seed));
+    let log = session(c);
+    let s = h.join().unwrap();
+    assert_eq!(s.lockstep_messages, 201);
+    log
+}
+
+/// The session of [`tcp_session`] on the pipes: (announcements and replies, the summary).
+fn pipe_session(seed: u64, name: &str) -> (Vec<u8>, walker_host::sim::SimSummary) {
+    let (c, h) = PipeClient::connect(session_config(seed), name);
+    let log = session(c);
+    (log, h.join().unwrap())
+}
+
+/// Torque on, then 100 rounds of a goal SYNC WRITE and a BULK READ 10 ms apart; the master is
+/// dropped at the end (its end of the connection closed).
+fn session(mut c: impl LockstepMaster) -> Vec<u8> {
     let mut buf = [0u8; 128];
     let on: Vec<(u8, &[u8])> = (1..=12u8).map(|id| (id, &[1u8][..])).collect();
     c.time(0);
@@ -636,10 +744,32 @@ fn tcp_session(seed: u64) -> Vec<u8> {
         .unwrap();
         c.send(&buf[..n]);
     }
-    let log = std::mem::take(&mut c.log);
-    drop(c);
-    h.join().unwrap();
-    log
+    c.take_log()
+}
+
+#[test]
+fn pipe_runs_answer_as_tcp_runs_do() {
+    let tcp = tcp_session(99);
+    let (pipes, summary) = pipe_session(99, "a");
+    assert!(pipes.len() > 1000);
+    assert_eq!(pipes, tcp);
+    assert!(summary.lockstep);
+    assert_eq!(summary.lockstep_messages, 201);
+    assert_eq!(summary.lockstep_errors, 0);
+    // The last time frame is 1.0003 s: whole 1 ms physics steps up to it.
+    assert_eq!(summary.sim_time_us, 1_000_000);
+    // The simulator removed the pipes' names once the master had opened them.
+    let left = std::fs::read_dir(std::env::temp_dir())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| {
+            e.file_name()
+                .to_string_lossy()
+                .starts_with(&format!("walker-sim-test-{}-a", std::process::id()))
+        })
+        .count();
+    assert_eq!(left, 0);
+    assert_ne!(pipe_session(100, "b").0, pipes);
 }
 
 #[test]
@@ -823,7 +953,7 @@ fn read_statuses(bus: &mut TcpStream, count: usize) -> Vec<(u8, u8, Vec<u8>)> {
 #[test]
 fn free_running_follows_wall_clock() {
     let h = spawn(SimConfig { port: 0, ..kin() }).unwrap();
-    let mut bus = TcpStream::connect(h.bus_addr()).unwrap();
+    let mut bus = TcpStream::connect(h.bus_addr().unwrap()).unwrap();
     bus.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
     bus.write_all(&ping(12)).unwrap();
     assert_eq!(read_statuses(&mut bus, 1)[0].0, 12);

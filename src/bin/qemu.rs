@@ -66,7 +66,11 @@ mod firmware {
             control::report_arg_error(&mut board, &cfg, &e);
             board.exit(ExitCode::ConfigRejected.status())
         }
-        defmt::info!("lock-step {=bool}", board.lockstep());
+        defmt::info!(
+            "lock-step {=bool} (over the host's pipes: {=bool})",
+            board.lockstep(),
+            board.lockstep_pipe()
+        );
         let code = walker_firmware::run_walk(&mut board, &mut cfg).exit_code();
         board.exit(code)
     }

@@ -6,7 +6,7 @@
 //! | --- | --- | --- |
 //! | UART0 | 0x4000_4000 | the servo bus (`-serial tcp:127.0.0.1:PORT,nodelay=on` to the simulator; `null` = unconnected) |
 //! | UART1 | 0x4000_5000 | the binary ZMP-response log ([`crate::record`]; to a file or TCP) |
-//! | UART2 | 0x4000_6000 | the lock-step channel (TCP to the simulator) |
+//! | UART2 | 0x4000_6000 | the lock-step channel (TCP to the simulator; unused with the pipes) |
 //! | UART3 | 0x4000_7000 | the command port ([`walker_contract::command_port`]; `-serial tcp:…` from the host, or absent) |
 //!
 //! The command port is the OpenCR's in time: bytes reach the firmware no faster than its line
@@ -23,8 +23,18 @@
 //!
 //! # Lock-step protocol (firmware side; the simulator implements the other end exactly)
 //! Lock-step is on when the semihosting command line (qemu `-append`) contains the word
-//! `lockstep` (`scripts/qemu-run.sh --lockstep SPEC` adds it). Without it the bus is treated
-//! as unconnected: packets are written to UART0 and every read times out at once.
+//! `lockstep` (`scripts/qemu-run.sh --lockstep SPEC` adds it: the UART transport below) or
+//! `lockstep=PREFIX` (`walker fil`: the pipe transport, [`walker_contract::lockstep`]). Without
+//! either the bus is treated as unconnected: packets are written to UART0 and every read times
+//! out at once.
+//!
+//! * **Pipe transport**: the same frames and the bus packets on two named pipes the host
+//!   creates, `PREFIX-to-sim` (time frames, then `0x50`, u16 LE length and the packet) and
+//!   `PREFIX-to-fw` (`0xA5`, the count, then the reply bytes), opened with semihosting
+//!   SYS_OPEN at start-up. A packet with its time frame is one SYS_WRITE, an announcement with
+//!   its reply usually one SYS_READ: QEMU makes one host call where the UARTs wake its vCPU for
+//!   every byte. The virtual clock counts the same bytes either way, so a run's figures do not
+//!   depend on the transport. The rest of this section describes the UART transport.
 //!
 //! * **Time frames, firmware → simulator on UART2**: `0x5A` followed by the board's virtual
 //!   time as u64 little-endian microseconds (9 bytes). Sent at the start of every control tick
@@ -64,6 +74,13 @@
 //! clock is not read: the lock-step runs go without `-icount` (`scripts/qemu-run.sh
 //! --no-icount`), which only costs the host time.
 //!
+//! # Real time (`realtime`)
+//! With the word `realtime` each tick ends no earlier on QEMU's host clock (semihosting
+//! SYS_ELAPSED) than its virtual time: the core sleeps in WFI, woken each millisecond by
+//! SysTick and by each command-port byte (interrupts masked), taking the command port's bytes
+//! as they come, until the host clock has caught up. For a master on the wall clock on the
+//! command port; the virtual clock is not changed by the wait.
+//!
 //! # Watchdog
 //! A virtual watchdog, started at boot: once started, a tick that begins more than the timeout
 //! (virtual time) after the last feed (each tick, and each bus receive wait) sends torque off,
@@ -78,6 +95,9 @@
 //! computes the answer (and, when runs share the host's cores, the other runs' simulators).
 
 use core::ptr::{read_volatile, write_volatile};
+use core::sync::atomic::{AtomicUsize, Ordering};
+
+use walker_contract::lockstep;
 
 // Link the runtime (vector table, reset handler) and the defmt global logger into every
 // binary that uses this board, the on-target tests included.
@@ -124,10 +144,9 @@ pub fn compute_ns(cfg: &Config) -> u64 {
 pub const EXIT_WATCHDOG: i32 = walker_contract::ExitCode::Watchdog.status();
 /// Exit code after a panic.
 pub const EXIT_PANIC: i32 = walker_contract::ExitCode::Panic.status();
-/// Lock-step time frame marker (firmware → simulator).
-pub const LOCKSTEP_TIME: u8 = 0x5A;
-/// Lock-step reply announcement marker (simulator → firmware).
-pub const LOCKSTEP_REPLY: u8 = 0xA5;
+
+/// Command-port bytes the board holds while asleep in `realtime` ([`QemuBoard`]).
+pub const COMMAND_HELD: usize = 1024;
 
 /// Longest spin on a full UART transmit buffer, iterations (the bus `send` fails with
 /// [`BusError::Timeout`] beyond it; a chardev drains a byte in far fewer).
@@ -143,6 +162,15 @@ const STATE_RX_FULL: u32 = 2;
 const CTRL_TX_RX_ENABLE: u32 = 0b11;
 const CTRL_RX_INTEN: u32 = 1 << 3;
 const INT_RX: u32 = 1 << 1;
+/// SysTick control and status, reload value and current value registers; the Interrupt
+/// Control and State Register, and its bit that clears a pending SysTick.
+const SYST_CSR: usize = 0xE000_E010;
+const SYST_RVR: usize = 0xE000_E014;
+const SYST_CVR: usize = 0xE000_E018;
+const ICSR: usize = 0xE000_ED04;
+const ICSR_PENDSTCLR: u32 = 1 << 25;
+/// SysTick enabled, its exception made pending at each wrap, on the core clock.
+const SYST_ON_PENDING_CORE_CLOCK: u32 = 0b111;
 /// NVIC Interrupt Set-Enable, Clear-Enable and Clear-Pending registers of IRQs 0–31.
 const NVIC_ISER0: usize = 0xE000_E100;
 const NVIC_ICER0: usize = 0xE000_E180;
@@ -266,6 +294,27 @@ pub fn semihosting_exit(code: i32) -> ! {
     }
 }
 
+/// QEMU's host clock since it started, in its ticks (semihosting SYS_ELAPSED; `None` when
+/// the host does not give it).
+fn host_elapsed_ticks() -> Option<u64> {
+    let mut block: [usize; 2] = [0, 0];
+    let p = block.as_mut_ptr();
+    // SAFETY: 0x30 = SYS_ELAPSED: the host writes the 64-bit tick count into the two words
+    // (low, high) of the block, passed by raw pointer and read back volatile.
+    let (r, lo, hi) = unsafe {
+        let r = cortex_m_semihosting::syscall1(0x30, p as usize);
+        (r, read_volatile(p), read_volatile(p.add(1)))
+    };
+    (r == 0).then_some((hi as u64) << 32 | lo as u64)
+}
+
+/// The host clock's ticks per second (semihosting SYS_TICKFREQ; `None` when not given).
+fn host_tick_hz() -> Option<u64> {
+    // SAFETY: 0x31 = SYS_TICKFREQ takes no argument and returns the tick rate (−1: none).
+    let hz = unsafe { cortex_m_semihosting::syscall1(0x31, 0) };
+    (hz as isize > 0).then_some(hz as u64)
+}
+
 /// Bytes below the stack pointer at boot that [`paint_stack`] fills with [`STACK_PAINT`]: far
 /// more than any QEMU build's worst case (`scripts/stack-depth.py`: ≈ 27 KB), far less than the
 /// board's 4 MiB of RAM.
@@ -386,18 +435,7 @@ impl HostStore {
     fn open(&self, slot: usize, mode: usize) -> Option<usize> {
         let mut p = [0u8; STORE_PATH_MAX + 2];
         let n = self.path(slot, &mut p)?;
-        let args = [p.as_ptr() as usize, mode, n];
-        // SAFETY: SYS_OPEN (0x01) with its three-word block: a NUL-terminated path that lives
-        // for the call, the mode, the path's length.
-        let h = unsafe { cortex_m_semihosting::syscall(0x01, &args) };
-        (h as isize >= 0).then_some(h)
-    }
-
-    fn close(h: usize) {
-        // SAFETY: SYS_CLOSE (0x02) of a handle SYS_OPEN returned.
-        unsafe {
-            cortex_m_semihosting::syscall1(0x02, h);
-        }
+        sys_open(p.get(..=n)?, mode)
     }
 
     fn read(&self, slot: usize, buf: &mut [u8]) -> bool {
@@ -405,13 +443,9 @@ impl HostStore {
         let Some(h) = self.open(slot, OPEN_RB) else {
             return true; // never written: erased
         };
-        let args = [h, buf.as_mut_ptr() as usize, buf.len()];
-        // SAFETY: SYS_READ (0x06): handle, a buffer of `len` writable bytes, `len`. The host
-        // writes at most `len` bytes; the rest of a short file's buffer keeps its 0xFF.
-        unsafe {
-            cortex_m_semihosting::syscall(0x06, &args);
-        }
-        Self::close(h);
+        // The host writes at most `len` bytes; the rest of a short file's buffer keeps its 0xFF.
+        let _ = sys_read(h, buf);
+        sys_close(h);
         true
     }
 
@@ -423,10 +457,8 @@ impl HostStore {
             Some(c) => ((c as usize).min(data.len()), true),
             None => (data.len(), false),
         };
-        let args = [h, data.as_ptr() as usize, n];
-        // SAFETY: SYS_WRITE (0x05): handle, `n` readable bytes of `data`, `n`.
-        let left = unsafe { cortex_m_semihosting::syscall(0x05, &args) };
-        Self::close(h);
+        let done = sys_write(h, data.get(..n).unwrap_or(data));
+        sys_close(h);
         if cut {
             defmt::warn!(
                 "power cut after {=usize} bytes of parameter slot {=usize}",
@@ -435,7 +467,151 @@ impl HostStore {
             );
             semihosting_exit(EXIT_POWER_CUT);
         }
-        left == 0
+        done
+    }
+}
+
+/// Semihosting SYS_OPEN of the NUL-terminated `path` in `mode`; the handle.
+fn sys_open(path: &[u8], mode: usize) -> Option<usize> {
+    if path.last() != Some(&0) {
+        return None;
+    }
+    let args = [path.as_ptr() as usize, mode, path.len() - 1];
+    // SAFETY: SYS_OPEN (0x01) with its three-word block: a NUL-terminated path that lives for
+    // the call, the mode, the path's length without the NUL.
+    let h = unsafe { cortex_m_semihosting::syscall(0x01, &args) };
+    (h as isize >= 0).then_some(h)
+}
+
+/// Semihosting SYS_CLOSE of a handle [`sys_open`] returned.
+fn sys_close(h: usize) {
+    // SAFETY: SYS_CLOSE (0x02) of a handle SYS_OPEN returned.
+    unsafe {
+        cortex_m_semihosting::syscall1(0x02, h);
+    }
+}
+
+/// Semihosting SYS_WRITE of all of `data` to handle `h`; false when the host wrote less.
+fn sys_write(h: usize, data: &[u8]) -> bool {
+    let args = [h, data.as_ptr() as usize, data.len()];
+    // SAFETY: SYS_WRITE (0x05): handle, `len` readable bytes of `data`, `len`; it returns the
+    // count of bytes not written.
+    let left = unsafe { cortex_m_semihosting::syscall(0x05, &args) };
+    left == 0
+}
+
+/// Semihosting SYS_READ into `buf` from handle `h` (one host `read`: on a pipe, what is there,
+/// waiting for at least a byte); the count read (0 at the end of the file), `None` on an error.
+fn sys_read(h: usize, buf: &mut [u8]) -> Option<usize> {
+    let len = buf.len();
+    let args = [h, buf.as_mut_ptr() as usize, len];
+    // SAFETY: SYS_READ (0x06): handle, a buffer of `len` writable bytes, `len`. The host writes
+    // at most `len` bytes and returns the count it did not read.
+    let left = unsafe { cortex_m_semihosting::syscall(0x06, &args) };
+    (left <= len).then(|| len - left)
+}
+
+/// Bytes of the lock-step pipe's receive buffer: an announcement and a reply this long come in
+/// one host call, a longer reply in more.
+const PIPE_RX: usize = 512;
+/// Bytes of the lock-step pipe's transmit buffer: a time frame, a packet header and a packet
+/// this long go out in one host call, a longer packet in more.
+const PIPE_TX: usize = 512;
+/// [`PIPE_TO_SIM`] when no pipe is open.
+const NO_HANDLE: usize = usize::MAX;
+/// The handle of the open `PREFIX-to-sim` pipe, for the panic path's torque off.
+static PIPE_TO_SIM: AtomicUsize = AtomicUsize::new(NO_HANDLE);
+
+/// The lock-step pipes on the host (`lockstep=PREFIX`: [`walker_contract::lockstep`]).
+struct HostPipe {
+    to_sim: usize,
+    to_fw: usize,
+    rx: [u8; PIPE_RX],
+    rx_at: usize,
+    rx_len: usize,
+    tx: [u8; PIPE_TX],
+    tx_len: usize,
+}
+
+impl HostPipe {
+    /// Opens `prefix` + `-to-sim` for writing, then `prefix` + `-to-fw` for reading (the
+    /// order the simulator expects; each open returns once the host holds the other end).
+    fn open(prefix: &[u8]) -> Option<Self> {
+        let path = |suffix: &str| {
+            let mut p = [0u8; lockstep::PREFIX_MAX + 16];
+            let n = prefix.len() + suffix.len();
+            p.get_mut(..prefix.len())?.copy_from_slice(prefix);
+            p.get_mut(prefix.len()..n)?
+                .copy_from_slice(suffix.as_bytes());
+            Some((p, n + 1))
+        };
+        let (p, n) = path(lockstep::TO_SIM_SUFFIX)?;
+        let to_sim = sys_open(p.get(..n)?, OPEN_WB)?;
+        let (p, n) = path(lockstep::TO_FIRMWARE_SUFFIX)?;
+        let Some(to_fw) = p.get(..n).and_then(|p| sys_open(p, OPEN_RB)) else {
+            sys_close(to_sim);
+            return None;
+        };
+        PIPE_TO_SIM.store(to_sim, Ordering::Relaxed);
+        Some(HostPipe {
+            to_sim,
+            to_fw,
+            rx: [0; PIPE_RX],
+            rx_at: 0,
+            rx_len: 0,
+            tx: [0; PIPE_TX],
+            tx_len: 0,
+        })
+    }
+
+    /// Adds `bytes` to the transmit buffer (writing it out whenever it fills).
+    fn queue(&mut self, mut bytes: &[u8]) {
+        while !bytes.is_empty() {
+            let room = PIPE_TX - self.tx_len;
+            if room == 0 {
+                self.flush();
+                continue;
+            }
+            let (now, later) = bytes.split_at(room.min(bytes.len()));
+            if let Some(d) = self.tx.get_mut(self.tx_len..self.tx_len + now.len()) {
+                d.copy_from_slice(now);
+            }
+            self.tx_len += now.len();
+            bytes = later;
+        }
+    }
+
+    /// Writes the transmit buffer out.
+    fn flush(&mut self) {
+        let n = self.tx_len;
+        self.tx_len = 0;
+        if n > 0 && !sys_write(self.to_sim, self.tx.get(..n).unwrap_or(&[])) {
+            Self::closed();
+        }
+    }
+
+    /// The simulator is gone (a host call failed, or it closed its end): in lock-step nothing
+    /// moves the robot any more, and a firmware left running would tick on through reply
+    /// timeouts with nobody to stop QEMU. It exits ([`walker_contract::ExitCode::SimulatorGone`]).
+    fn closed() -> ! {
+        defmt::error!("lock-step pipe closed: the simulator is gone");
+        semihosting_exit(walker_contract::ExitCode::SimulatorGone.status())
+    }
+
+    /// The next byte from the simulator (waiting for it).
+    fn byte(&mut self) -> u8 {
+        if self.rx_at >= self.rx_len {
+            match sys_read(self.to_fw, &mut self.rx) {
+                Some(n) if n > 0 => {
+                    self.rx_at = 0;
+                    self.rx_len = n;
+                }
+                _ => Self::closed(),
+            }
+        }
+        let b = self.rx.get(self.rx_at).copied().unwrap_or(0);
+        self.rx_at += 1;
+        b
     }
 }
 
@@ -443,8 +619,15 @@ impl HostStore {
 pub const EXIT_POWER_CUT: i32 = 99;
 
 /// Best-effort torque off from anywhere (panic handler): the broadcast Torque Enable = 0
-/// packet on UART0, with bounded spins so that a stuck UART cannot hang the panic path.
+/// packet on the lock-step pipe when one is open, else on UART0 with bounded spins so that a
+/// stuck UART cannot hang the panic path.
 pub fn panic_torque_off() {
+    let h = PIPE_TO_SIM.load(Ordering::Relaxed);
+    if h != NO_HANDLE {
+        let len = u16::try_from(TORQUE_OFF_PACKET.len()).unwrap_or(u16::MAX);
+        let _ = sys_write(h, &lockstep::packet_header(len)) && sys_write(h, &TORQUE_OFF_PACKET);
+        return;
+    }
     for &b in TORQUE_OFF_PACKET.iter() {
         if !UART0.put_bounded(b) {
             return;
@@ -467,6 +650,9 @@ pub struct QemuBoard {
     command: Uart,
     /// The command port in time: the OpenCR's line rate and receive ring.
     command_line: LineRx<COMMAND_RX_RING>,
+    /// Command-port bytes taken from the UART while asleep (`realtime`), not yet arrived in
+    /// [`Self::command_line`]: the host socket's buffer, which QEMU's one-byte UART cannot be.
+    command_held: heapless::Deque<u8, COMMAND_HELD>,
     lockstep: bool,
     line: LineTime,
     return_delay_ns: u64,
@@ -482,10 +668,17 @@ pub struct QemuBoard {
     crash: CrashCell,
     /// The parameter store on the host (`store=PATH`), if given.
     store: Option<HostStore>,
+    /// The lock-step pipes (`lockstep=PREFIX`), if given: the bus and the lock-step frames
+    /// go through them instead of UART0 and UART2.
+    pipe: Option<HostPipe>,
+    /// `realtime`: the host clock's tick rate; each tick ends no earlier on QEMU's host clock
+    /// than its virtual time.
+    realtime_hz: Option<u64>,
 }
 
 impl QemuBoard {
-    /// Sets up the UARTs; reads the semihosting command line for `lockstep`.
+    /// Sets up the UARTs; reads the semihosting command line for `lockstep`, `lockstep=PREFIX`
+    /// (opening the pipes) and `store=PATH`.
     pub fn new(cfg: &Config) -> Self {
         let (bus, log, ls, command) = (UART0, UART1, UART2, UART3);
         command.init(COMMAND_BAUD);
@@ -495,7 +688,37 @@ impl QemuBoard {
 
         let mut cmd = [0u8; CMDLINE_MAX];
         let line = semihosting_cmdline(&mut cmd).and_then(|n| cmd.get(..n));
-        let lockstep = line.is_some_and(|c| contains_word(c, b"lockstep"));
+        let pipe = match line.and_then(|c| word_value(c, lockstep::PIPE_WORD.as_bytes())) {
+            Some(prefix) => match prefix
+                .len()
+                .le(&lockstep::PREFIX_MAX)
+                .then(|| HostPipe::open(prefix))
+                .flatten()
+            {
+                Some(p) => Some(p),
+                None => {
+                    defmt::error!(
+                        "lock-step pipes {=[u8]:a} not opened",
+                        prefix
+                            .get(..prefix.len().min(lockstep::PREFIX_MAX))
+                            .unwrap_or(&[])
+                    );
+                    semihosting_exit(walker_contract::ExitCode::ConfigRejected.status())
+                }
+            },
+            None => None,
+        };
+        let lockstep = pipe.is_some() || line.is_some_and(|c| contains_word(c, b"lockstep"));
+        let realtime_word = walker_contract::params::REALTIME_WORD.as_bytes();
+        let realtime_hz = if line.is_some_and(|c| contains_word(c, realtime_word)) {
+            let hz = host_tick_hz().filter(|_| host_elapsed_ticks().is_some());
+            if hz.is_none() {
+                defmt::warn!("realtime: the host gives no clock (SYS_ELAPSED): not paced");
+            }
+            hz
+        } else {
+            None
+        };
         let store_word = walker_contract::params::STORE_WORD.as_bytes();
         let store = line
             .and_then(|c| word_value(c, store_word))
@@ -518,6 +741,7 @@ impl QemuBoard {
             lockstep_uart: ls,
             command,
             command_line: LineRx::new(COMMAND_BAUD),
+            command_held: heapless::Deque::new(),
             lockstep,
             line: LineTime { baud: cfg.bus_baud },
             return_delay_ns: u64::from(cfg.return_delay_us) * 1000,
@@ -532,12 +756,19 @@ impl QemuBoard {
             last_feed_ns: 0,
             crash: CrashCell::new(),
             store,
+            pipe,
+            realtime_hz,
         }
     }
 
     /// True when the lock-step channel is in use.
     pub fn lockstep(&self) -> bool {
         self.lockstep
+    }
+
+    /// True when lock-step goes over the host's pipes (`lockstep=PREFIX`).
+    pub fn lockstep_pipe(&self) -> bool {
+        self.pipe.is_some()
     }
 
     /// The compute time charged per tick, ns ([`compute_ns`] of the configuration).
@@ -554,8 +785,9 @@ impl QemuBoard {
         self.virt_ns / 1000
     }
 
-    /// Sends a time frame on UART2 if the time changed since the last one.
-    fn sync_time(&mut self) {
+    /// Sends a time frame if the time changed since the last one: on UART2, or queued on the
+    /// pipe (written out at once unless a packet follows: `then_packet`).
+    fn sync_time(&mut self, then_packet: bool) {
         if !self.lockstep {
             return;
         }
@@ -564,24 +796,36 @@ impl QemuBoard {
             return;
         }
         self.last_sync_us = Some(now);
-        self.lockstep_uart.put(LOCKSTEP_TIME);
-        for b in now.to_le_bytes() {
-            self.lockstep_uart.put(b);
+        let frame = lockstep::time_frame(now);
+        match &mut self.pipe {
+            Some(p) => {
+                p.queue(&frame);
+                if !then_packet {
+                    p.flush();
+                }
+            }
+            None => frame.iter().for_each(|&b| self.lockstep_uart.put(b)),
         }
     }
 
-    /// Reads one reply announcement from UART2.
+    /// The next byte of the simulator's side: from the pipe, else from `uart` (UART0 for
+    /// reply bytes, UART2 for announcements).
+    fn lockstep_byte(&mut self, uart: Uart) -> u8 {
+        match &mut self.pipe {
+            Some(p) => p.byte(),
+            None => uart.get(),
+        }
+    }
+
+    /// Reads one reply announcement.
     fn read_announcement(&mut self) -> usize {
-        loop {
-            let b = self.lockstep_uart.get();
-            if b == LOCKSTEP_REPLY {
-                break;
-            }
+        let ls = self.lockstep_uart;
+        while self.lockstep_byte(ls) != lockstep::REPLY {
             self.lockstep_errors = self.lockstep_errors.saturating_add(1);
         }
-        let lo = self.lockstep_uart.get();
-        let hi = self.lockstep_uart.get();
-        usize::from(u16::from_le_bytes([lo, hi]))
+        let lo = self.lockstep_byte(ls);
+        let hi = self.lockstep_byte(ls);
+        lockstep::header_count(lo, hi)
     }
 
     /// Writes raw bytes on UART0 (bounded spins).
@@ -592,6 +836,78 @@ impl QemuBoard {
         } else {
             Err(BusError::Timeout)
         }
+    }
+
+    /// Lets the command port's bytes arrive in the line model's ring (at the present virtual
+    /// time; see [`LineRx::arrive`]): first those held while asleep, then what the UART holds;
+    /// warns about bytes lost to a full ring.
+    fn take_command_bytes(&mut self) {
+        let now = self.now_us();
+        let uart = self.command;
+        let lost = self.command_line.lost();
+        let held = &mut self.command_held;
+        self.command_line.arrive(now, || {
+            held.pop_front()
+                .or_else(|| uart.rx_full().then(|| (uart.read(DATA) & 0xFF) as u8))
+        });
+        if self.command_line.lost() != lost {
+            defmt::warn!(
+                "command port: {=u32} bytes lost to a full receive ring",
+                self.command_line.lost()
+            );
+        }
+    }
+
+    /// Sleeps (WFI) until QEMU's host clock (ticks at `tick_hz`) reaches the virtual time,
+    /// holding the command port's bytes as they come ([`COMMAND_HELD`]; they arrive in the
+    /// line model at the next tick, as if they had waited in the host's socket): SysTick at
+    /// 1 ms and the command UART's receive interrupt wake the core, with interrupts masked so
+    /// that no handler runs (both armed for this wait only, their pending state cleared after
+    /// each wake-up and at the end). QEMU's main loop, which hands the UART its bytes one at a
+    /// time, runs meanwhile.
+    fn sleep_until_host_clock(&mut self, tick_hz: u64) {
+        let due = u128::from(self.virt_ns) * u128::from(tick_hz) / 1_000_000_000;
+        let uart = self.command;
+        let bit = 1u32 << (uart.rx_irq & 31);
+        let reg = |a: usize| a as *mut u32;
+        cortex_m::interrupt::free(|_| {
+            // SAFETY: SysTick, ICSR and NVIC registers of the Cortex-M system control space
+            // (32-bit; write-one to set/clear); nothing else on this board uses SysTick, and
+            // only this UART's line is enabled, then disabled and unpended.
+            let arm = |on: bool| unsafe {
+                write_volatile(reg(SYST_RVR), SYSCLK_HZ / 1000 - 1);
+                write_volatile(reg(SYST_CVR), 0);
+                write_volatile(
+                    reg(SYST_CSR),
+                    if on { SYST_ON_PENDING_CORE_CLOCK } else { 0 },
+                );
+                write_volatile(reg(if on { NVIC_ISER0 } else { NVIC_ICER0 }), bit);
+            };
+            // SAFETY: as above.
+            let clear = || unsafe {
+                write_volatile(reg(ICSR), ICSR_PENDSTCLR);
+                write_volatile(reg(NVIC_ICPR0), bit);
+            };
+            uart.write(CTRL, CTRL_TX_RX_ENABLE | CTRL_RX_INTEN);
+            arm(true);
+            loop {
+                while !self.command_held.is_full() && uart.rx_full() {
+                    let _ = self.command_held.push_back((uart.read(DATA) & 0xFF) as u8);
+                }
+                uart.write(INTCLEAR, INT_RX);
+                clear();
+                if host_elapsed_ticks().is_none_or(|t| u128::from(t) >= due) {
+                    break;
+                }
+                if !uart.rx_full() || self.command_held.is_full() {
+                    cortex_m::asm::wfi();
+                }
+            }
+            uart.write(CTRL, CTRL_TX_RX_ENABLE);
+            uart.write(INTCLEAR, INT_RX);
+            arm(false);
+            clear();
+        });
     }
 
     fn check_watchdog(&mut self) {
@@ -612,14 +928,21 @@ impl ServoBus for QemuBoard {
             return Err(BusError::TooLong);
         }
         // Unread reply bytes of the previous packet are known to come: drain them.
-        if self.pending_reply > 0 {
-            for _ in 0..self.pending_reply {
-                let _ = self.bus.get();
-            }
-            self.pending_reply = 0;
+        let bus = self.bus;
+        for _ in 0..self.pending_reply {
+            let _ = self.lockstep_byte(bus);
         }
-        self.sync_time();
-        self.bus_write(packet)?;
+        self.pending_reply = 0;
+        self.sync_time(true);
+        match &mut self.pipe {
+            Some(p) => {
+                let len = u16::try_from(packet.len()).map_err(|_| BusError::TooLong)?;
+                p.queue(&lockstep::packet_header(len));
+                p.queue(packet);
+                p.flush();
+            }
+            None => self.bus_write(packet)?,
+        }
         self.virt_ns += self.line.bytes_ns(packet.len());
         self.reply_started = false;
         self.pending_reply = if self.lockstep {
@@ -638,8 +961,9 @@ impl ServoBus for QemuBoard {
                 self.virt_ns += self.return_delay_ns;
                 self.reply_started = true;
             }
+            let bus = self.bus;
             for slot in buf.iter_mut().take(n) {
-                *slot = self.bus.get();
+                *slot = self.lockstep_byte(bus);
             }
             self.pending_reply -= n;
             self.virt_ns += self.line.bytes_ns(n);
@@ -686,8 +1010,11 @@ impl TickTimer for QemuBoard {
         if let Some(t) = plan.wait_until_us {
             self.virt_ns = self.virt_ns.max(t * 1000);
         }
+        if let Some(hz) = self.realtime_hz {
+            self.sleep_until_host_clock(hz);
+        }
         self.check_watchdog();
-        self.sync_time();
+        self.sync_time(false);
         plan.tick
     }
 
@@ -719,7 +1046,12 @@ impl Board for QemuBoard {
     const ID: BoardId = BoardId::QemuMps2;
 
     fn torque_off_best_effort(&mut self) {
-        panic_torque_off();
+        if self.pipe.is_some() {
+            // Through the bus transport, so that its announcement is read like any other.
+            let _ = self.send(&TORQUE_OFF_PACKET);
+        } else {
+            panic_torque_off();
+        }
     }
 
     fn reset_cause(&self) -> (ResetCause, u32) {
@@ -740,18 +1072,7 @@ impl Board for QemuBoard {
     }
 
     fn command_rx(&mut self, buf: &mut [u8]) -> usize {
-        let now = self.now_us();
-        let uart = self.command;
-        let lost = self.command_line.lost();
-        self.command_line.arrive(now, || {
-            uart.rx_full().then(|| (uart.read(DATA) & 0xFF) as u8)
-        });
-        if self.command_line.lost() != lost {
-            defmt::warn!(
-                "command port: {=u32} bytes lost to a full receive ring",
-                self.command_line.lost()
-            );
-        }
+        self.take_command_bytes();
         self.command_line.read(buf)
     }
 

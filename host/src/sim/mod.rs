@@ -216,8 +216,13 @@ pub struct SimConfig {
     pub qpos_out: Option<PathBuf>,
     /// Bus TCP port on 127.0.0.1 (0 = any free port; see [`SimHandle::bus_addr`]).
     pub port: u16,
-    /// Lock-step channel TCP port (`None`: free-running on the wall clock).
+    /// Lock-step channel TCP port (`None`: free-running on the wall clock, unless
+    /// [`Self::lockstep_pipe`]).
     pub lockstep_port: Option<u16>,
+    /// Lock-step over two named pipes at this path prefix instead of TCP, the bus inside them
+    /// ([`transport`]; the firmware's word `lockstep=PREFIX`): created by [`spawn`], removed
+    /// once the firmware has opened them. Overrides [`Self::port`] and [`Self::lockstep_port`].
+    pub lockstep_pipe: Option<PathBuf>,
     /// `false` (default): listen and accept one connection per channel (QEMU with
     /// `-serial tcp:127.0.0.1:PORT,nodelay=on`); `true`: connect to a listening peer
     /// (QEMU with `-serial tcp:127.0.0.1:PORT,server=on,wait=off`), retrying.
@@ -279,6 +284,7 @@ impl Default for SimConfig {
             qpos_out: None,
             port: 5760,
             lockstep_port: None,
+            lockstep_pipe: None,
             connect: false,
             connect_timeout: Duration::from_secs(30),
             seed: 0,
@@ -947,7 +953,7 @@ impl Simulator {
             physics_steps: self.steps,
             bus: self.bus.counters,
             bytes_in: self.bytes_in,
-            lockstep: self.cfg.lockstep_port.is_some(),
+            lockstep: self.cfg.lockstep_port.is_some() || self.cfg.lockstep_pipe.is_some(),
             lockstep_messages: 0,
             lockstep_errors: 0,
             fall_started_us: self.physics.fall_started_us(),

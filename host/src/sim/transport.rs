@@ -1,4 +1,5 @@
-//! TCP endpoints of the simulator and the lock-step protocol.
+//! Endpoints of the simulator (TCP, or the lock-step pipes) and the lock-step protocol
+//! ([`walker_contract::lockstep`]).
 //!
 //! # Endpoints
 //!
@@ -30,6 +31,17 @@
 //! applied first (on loopback TCP the sender's bytes are queued at the receiver when its write
 //! returns, and QEMU writes the UARTs in guest program order). Without a lock-step channel the
 //! physics follows the wall clock since the bus connection.
+//!
+//! # Lock-step pipes ([`SimConfig::lockstep_pipe`], `walker fil`)
+//!
+//! The same protocol with the bus inside it, on two named pipes the simulator creates at
+//! `PREFIX-to-sim` and `PREFIX-to-fw` (the firmware's word `lockstep=PREFIX`): one ordered
+//! stream of time frames and packet frames (`0x50`, u16 LE length, one instruction packet) in,
+//! and for every packet frame `0xA5`, the count and the reply bytes out. The simulator opens
+//! its ends before QEMU starts (its read end non-blocking, its write end read-write, so that
+//! neither open waits), waits for the firmware to open its ends, then reads blocking (the
+//! firmware's exit, QEMU closing its end, ends the run) and removes the two names at the
+//! firmware's first frame.
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::{Ipv4Addr, SocketAddr, TcpListener, TcpStream};
@@ -39,11 +51,12 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::{SimConfig, SimError, SimSummary, Simulator};
+use walker_contract::lockstep;
 
 /// First byte of a lock-step time message (firmware → simulator).
-pub const LOCKSTEP_TIME: u8 = 0x5A;
+pub const LOCKSTEP_TIME: u8 = lockstep::TIME;
 /// First byte of a lock-step byte count (simulator → firmware).
-pub const LOCKSTEP_ACK: u8 = 0xA5;
+pub const LOCKSTEP_ACK: u8 = lockstep::REPLY;
 
 /// Live progress of a running simulator (read it from any thread).
 #[derive(Debug, Default)]
@@ -66,7 +79,7 @@ enum Endpoint {
 /// A simulator running on its own thread.
 #[derive(Debug)]
 pub struct SimHandle {
-    bus_addr: SocketAddr,
+    bus_addr: Option<SocketAddr>,
     lockstep_addr: Option<SocketAddr>,
     progress: Arc<SimProgress>,
     stop: Arc<AtomicBool>,
@@ -74,8 +87,9 @@ pub struct SimHandle {
 }
 
 impl SimHandle {
-    /// The bus address (the bound one when listening, useful with port 0).
-    pub fn bus_addr(&self) -> SocketAddr {
+    /// The bus address (the bound one when listening, useful with port 0); `None` with the
+    /// lock-step pipes (the bus is inside them).
+    pub fn bus_addr(&self) -> Option<SocketAddr> {
         self.bus_addr
     }
 
@@ -121,16 +135,28 @@ fn endpoint(cfg: &SimConfig, port: u16) -> Result<(Endpoint, SocketAddr), SimErr
     }
 }
 
-/// Binds the sockets (listen mode), opens the truth log and starts the simulator thread.
+/// Binds the sockets (listen mode) or creates the lock-step pipes, opens the truth log and
+/// starts the simulator thread.
 pub fn spawn(config: SimConfig) -> Result<SimHandle, SimError> {
     config.validate()?;
-    let (bus_ep, bus_addr) = endpoint(&config, config.port)?;
-    let (ls_ep, lockstep_addr) = match config.lockstep_port {
-        Some(p) => {
-            let (e, a) = endpoint(&config, p)?;
-            (Some(e), Some(a))
+    // The simulator's ends: the pipes, or the bus socket and the lock-step socket.
+    enum Wiring {
+        Pipes(Pipes),
+        Tcp(Endpoint, Option<Endpoint>),
+    }
+    let (wiring, bus_addr, lockstep_addr) = match &config.lockstep_pipe {
+        Some(prefix) => (Wiring::Pipes(Pipes::create(prefix)?), None, None),
+        None => {
+            let (bus_ep, bus_addr) = endpoint(&config, config.port)?;
+            let (ls_ep, lockstep_addr) = match config.lockstep_port {
+                Some(p) => {
+                    let (e, a) = endpoint(&config, p)?;
+                    (Some(e), Some(a))
+                }
+                None => (None, None),
+            };
+            (Wiring::Tcp(bus_ep, ls_ep), Some(bus_addr), lockstep_addr)
         }
-        None => (None, None),
     };
     let sim = Simulator::new(&config)?;
     let progress = Arc::new(SimProgress::default());
@@ -138,7 +164,10 @@ pub fn spawn(config: SimConfig) -> Result<SimHandle, SimError> {
     let (p2, s2) = (Arc::clone(&progress), Arc::clone(&stop));
     let thread = std::thread::Builder::new()
         .name("walker-sim".into())
-        .spawn(move || serve(sim, bus_ep, ls_ep, config, &p2, &s2))?;
+        .spawn(move || match wiring {
+            Wiring::Pipes(pipes) => serve_pipes(sim, pipes, config, &p2, &s2),
+            Wiring::Tcp(bus_ep, ls_ep) => serve(sim, bus_ep, ls_ep, config, &p2, &s2),
+        })?;
     Ok(SimHandle {
         bus_addr,
         lockstep_addr,
@@ -345,5 +374,186 @@ fn serve(
         // The firmware is gone (its bus closed): the robot as it left it, for a while.
         summary.end = sim.after_end()?;
     }
+    Ok(summary)
+}
+
+/// The simulator's ends of the lock-step pipes.
+struct Pipes {
+    /// `PREFIX-to-sim`, read (non-blocking until the firmware has opened its end).
+    to_sim: std::fs::File,
+    /// `PREFIX-to-fw`, written (opened read-write: the open does not wait for a reader).
+    to_fw: std::fs::File,
+    /// The two names, removed once the firmware's first frame came (it has opened both ends
+    /// then), else when the run ends.
+    paths: [std::path::PathBuf; 2],
+}
+
+impl Pipes {
+    /// Creates the two named pipes at `prefix` (replacing stale ones) and opens the
+    /// simulator's ends.
+    fn create(prefix: &std::path::Path) -> Result<Pipes, SimError> {
+        use std::os::unix::ffi::OsStrExt;
+        use std::os::unix::fs::OpenOptionsExt;
+        let name = |suffix: &str| {
+            let mut p = prefix.as_os_str().to_owned();
+            p.push(suffix);
+            std::path::PathBuf::from(p)
+        };
+        let paths = [
+            name(lockstep::TO_SIM_SUFFIX),
+            name(lockstep::TO_FIRMWARE_SUFFIX),
+        ];
+        for p in &paths {
+            let _ = std::fs::remove_file(p);
+            let c = std::ffi::CString::new(p.as_os_str().as_bytes())
+                .map_err(|_| SimError::Config(format!("{}: a NUL in the path", p.display())))?;
+            // SAFETY: mkfifo with a NUL-terminated path that lives for the call.
+            if unsafe { libc::mkfifo(c.as_ptr(), 0o600) } != 0 {
+                let e = std::io::Error::last_os_error();
+                return Err(SimError::Config(format!("mkfifo {}: {e}", p.display())));
+            }
+        }
+        let to_sim = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(&paths[0])?;
+        let to_fw = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&paths[1])?;
+        Ok(Pipes {
+            to_sim,
+            to_fw,
+            paths,
+        })
+    }
+
+    /// Waits until the firmware has opened its write end (a non-blocking read then no longer
+    /// finds the end of the file), then makes reads blocking; returns the bytes that read
+    /// already took.
+    fn establish(&mut self, deadline: Instant, stop: &AtomicBool) -> Result<Vec<u8>, SimError> {
+        use std::os::unix::io::AsRawFd;
+        let mut buf = [0u8; 4096];
+        let early = loop {
+            match self.to_sim.read(&mut buf) {
+                // No writer yet.
+                Ok(0) => {}
+                Ok(n) => break buf[..n].to_vec(),
+                Err(e) if e.kind() == ErrorKind::WouldBlock => break Vec::new(),
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => return Err(e.into()),
+            }
+            if stop.load(Ordering::SeqCst) || Instant::now() > deadline {
+                return Err(SimError::Timeout(
+                    "the firmware did not open the lock-step pipes".into(),
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        };
+        let fd = self.to_sim.as_raw_fd();
+        // SAFETY: fcntl on a descriptor this struct owns; only O_NONBLOCK is cleared.
+        let ok = unsafe {
+            let flags = libc::fcntl(fd, libc::F_GETFL);
+            flags >= 0 && libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK) == 0
+        };
+        if !ok {
+            return Err(std::io::Error::last_os_error().into());
+        }
+        Ok(early)
+    }
+
+    fn remove_names(&self) {
+        for p in &self.paths {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+}
+
+impl Drop for Pipes {
+    fn drop(&mut self) {
+        self.remove_names();
+    }
+}
+
+/// Serves the firmware over the lock-step pipes until it closes its end (or a stop between
+/// frames); see the module docs.
+fn serve_pipes(
+    mut sim: Simulator,
+    mut pipes: Pipes,
+    cfg: SimConfig,
+    progress: &SimProgress,
+    stop: &AtomicBool,
+) -> Result<SimSummary, SimError> {
+    let early = pipes.establish(Instant::now() + cfg.connect_timeout, stop)?;
+    progress.connected.store(true, Ordering::SeqCst);
+    let mut input =
+        std::io::BufReader::with_capacity(1 << 16, early.as_slice().chain(&pipes.to_sim));
+    let (mut messages, mut errors) = (0u64, 0u64);
+    let mut packet = Vec::with_capacity(1024);
+    let mut out = Vec::with_capacity(1024);
+    let publish = |sim: &Simulator| {
+        progress.time_us.store(sim.time_us(), Ordering::Relaxed);
+        progress
+            .falling
+            .store(sim.physics.fall_started_us().is_some(), Ordering::Relaxed);
+        progress
+            .instructions
+            .store(sim.bus.counters.instructions, Ordering::Relaxed);
+    };
+    let mut marker = [0u8; 1];
+    let mut first = true;
+    while !stop.load(Ordering::SeqCst) {
+        match input.read_exact(&mut marker) {
+            Ok(()) => {}
+            Err(e) if e.kind() == ErrorKind::UnexpectedEof => break,
+            Err(e) => return Err(e.into()),
+        }
+        if std::mem::take(&mut first) {
+            pipes.remove_names();
+        }
+        match marker[0] {
+            lockstep::TIME => {
+                let mut t = [0u8; 8];
+                if input.read_exact(&mut t).is_err() {
+                    break;
+                }
+                messages += 1;
+                sim.advance_to(u64::from_le_bytes(t))?;
+            }
+            lockstep::PACKET => {
+                let mut len = [0u8; 2];
+                if input.read_exact(&mut len).is_err() {
+                    break;
+                }
+                packet.resize(lockstep::header_count(len[0], len[1]), 0);
+                if input.read_exact(&mut packet).is_err() {
+                    break;
+                }
+                // Every instruction the frame completes is answered; the frame gets one
+                // announcement of all their reply bytes (0: none).
+                out.clear();
+                out.extend_from_slice(&[0; lockstep::HEADER_LEN]);
+                for &b in &packet {
+                    if let Some(inc) = sim.push_byte(b) {
+                        if let Some(reply) = sim.respond(&inc) {
+                            out.extend_from_slice(&reply);
+                        }
+                    }
+                }
+                let header = lockstep::reply_header(out.len() - lockstep::HEADER_LEN);
+                out[..lockstep::HEADER_LEN].copy_from_slice(&header);
+                if pipes.to_fw.write_all(&out).is_err() {
+                    break;
+                }
+            }
+            _ => errors += 1,
+        }
+        publish(&sim);
+    }
+    let mut summary = sim.summary();
+    summary.lockstep_messages = messages;
+    summary.lockstep_errors = errors;
+    // The firmware is gone (its pipe closed): the robot as it left it, for a while.
+    summary.end = sim.after_end()?;
     Ok(summary)
 }
