@@ -802,6 +802,43 @@ fn run_flash(a: FlashArgs) -> Result<(), CliError> {
     }
 }
 
+/// Before anything touches the port (the bootloader client checks again): refuses an image
+/// whose `sent` bytes are over `--limit-kib` or whose vector table is wrong (`vectors`), then
+/// says what will be flashed where.
+fn announce_flash_image(
+    shown: &str,
+    kind: &dyn std::fmt::Display,
+    image: &[u8],
+    sent: usize,
+    limit_kib: u32,
+    base: u32,
+    vectors: Result<(), String>,
+) -> Result<(), CliError> {
+    let fail = |e: String| CliError::failed(format!("walker flash: {shown}: {e}"));
+    let kib = image.len() as f64 / 1024.0;
+    if sent > limit_kib as usize * 1024 {
+        return Err(fail(format!(
+            "the image is {} B ({kib:.1} KiB), over --limit-kib {limit_kib} (nothing was sent)",
+            image.len()
+        )));
+    }
+    vectors.map_err(fail)?;
+    println!(
+        "{shown}: {kind}, {} B ({kib:.1} KiB) for 0x{base:08X}, limit {limit_kib} KiB",
+        image.len()
+    );
+    Ok(())
+}
+
+/// How a flash ended: the firmware started, or left in the bootloader (`--no-jump`).
+fn flash_ending(jumped: bool) -> &'static str {
+    if jumped {
+        "firmware started"
+    } else {
+        "left in the bootloader (--no-jump)"
+    }
+}
+
 /// The image file's bytes, or why not.
 fn read_flash_image(a: &FlashArgs) -> Result<Vec<u8>, CliError> {
     let fail = |e: String| CliError::failed(format!("walker flash: {e}"));
@@ -824,23 +861,16 @@ fn run_flash_opencr(a: FlashArgs) -> Result<(), CliError> {
     let limit_kib = a.limit_kib.unwrap_or(256);
     let block_kib = a.block_kib.unwrap_or(16);
     let limit = limit_kib as usize * 1024;
-    // Checked here too (the client checks again) so that nothing touches the port.
-    if image.len() > limit {
-        return Err(fail(format!(
-            "{shown}: the image is {} B ({:.1} KiB), over --limit-kib {} (nothing was sent)",
-            image.len(),
-            image.len() as f64 / 1024.0,
-            limit_kib
-        )));
-    }
-    boot::check_vector_table(&image).map_err(|e| fail(format!("{shown}: {e}")))?;
-    println!(
-        "{shown}: {kind}, {} B ({:.1} KiB) for 0x{:08X}, limit {} KiB",
+    let vectors = boot::check_vector_table(&image);
+    announce_flash_image(
+        &shown,
+        &kind,
+        &image,
         image.len(),
-        image.len() as f64 / 1024.0,
+        limit_kib,
         boot::FW_BASE,
-        limit_kib
-    );
+        vectors,
+    )?;
     if !a.no_touch {
         println!("1200-baud touch on {}", a.serial);
         boot::touch_1200(&a.serial).map_err(fail)?;
@@ -925,14 +955,7 @@ fn run_flash_opencr(a: FlashArgs) -> Result<(), CliError> {
             r.retries, r.stray_frames
         );
     }
-    println!(
-        "{}",
-        if r.jumped {
-            "firmware started"
-        } else {
-            "left in the bootloader (--no-jump)"
-        }
-    );
+    println!("{}", flash_ending(r.jumped));
     Ok(())
 }
 
@@ -962,21 +985,17 @@ fn run_flash_opencm(a: FlashArgs) -> Result<(), CliError> {
     let bytes = read_flash_image(&a)?;
     let (image, kind) = boot::load_image(&bytes).map_err(|e| fail(format!("{shown}: {e}")))?;
     let limit = limit_kib as usize * 1024;
-    // Checked here too (the client checks again) so that nothing touches the port.
-    if boot::sendable(&image).len() > limit {
-        return Err(fail(format!(
-            "{shown}: the image is {} B ({:.1} KiB), over --limit-kib {limit_kib} (nothing was sent)",
-            image.len(),
-            image.len() as f64 / 1024.0,
-        )));
-    }
-    boot::check_vector_table(&image).map_err(|e| fail(format!("{shown}: {e}")))?;
-    println!(
-        "{shown}: {kind}, {} B ({:.1} KiB) for 0x{:08X}, limit {limit_kib} KiB",
-        image.len(),
-        image.len() as f64 / 1024.0,
+    let vectors = boot::check_vector_table(&image);
+    let sent = boot::sendable(&image).len();
+    announce_flash_image(
+        &shown,
+        &kind,
+        &image,
+        sent,
+        limit_kib,
         boot::APP_BASE,
-    );
+        vectors,
+    )?;
     if !a.no_touch {
         println!("reset request on {} (1200 baud, \"CM9X\")", a.serial);
         boot::request_bootloader(&a.serial).map_err(fail)?;
@@ -1036,14 +1055,7 @@ fn run_flash_opencm(a: FlashArgs) -> Result<(), CliError> {
     for line in &r.other_lines {
         println!("bootloader said: {line:?}");
     }
-    println!(
-        "{}",
-        if r.jumped {
-            "firmware started"
-        } else {
-            "left in the bootloader (--no-jump)"
-        }
-    );
+    println!("{}", flash_ending(r.jumped));
     Ok(())
 }
 
