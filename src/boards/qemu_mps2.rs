@@ -417,25 +417,15 @@ const OPEN_RB: usize = 1;
 const OPEN_WB: usize = 5;
 
 impl HostStore {
-    /// The NUL-terminated path of slot `slot` in `buf`; its length without the NUL.
-    fn path(&self, slot: usize, buf: &mut [u8; STORE_PATH_MAX + 2]) -> Option<usize> {
+    /// Opens slot `slot`'s file (`PATH0`, `PATH1`) in `mode`; the handle.
+    fn open(&self, slot: usize, mode: usize) -> Option<usize> {
         let digit = match slot {
-            0 => b'0',
-            1 => b'1',
+            0 => b"0",
+            1 => b"1",
             _ => return None,
         };
-        buf.get_mut(..self.len)?
-            .copy_from_slice(self.prefix.get(..self.len)?);
-        *buf.get_mut(self.len)? = digit;
-        *buf.get_mut(self.len + 1)? = 0;
-        Some(self.len + 1)
-    }
-
-    /// Opens slot `slot`'s file in `mode`; the handle.
-    fn open(&self, slot: usize, mode: usize) -> Option<usize> {
-        let mut p = [0u8; STORE_PATH_MAX + 2];
-        let n = self.path(slot, &mut p)?;
-        sys_open(p.get(..=n)?, mode)
+        let (p, n) = host_path(self.prefix.get(..self.len)?, digit)?;
+        sys_open(p.get(..n)?, mode)
     }
 
     fn read(&self, slot: usize, buf: &mut [u8]) -> bool {
@@ -469,6 +459,21 @@ impl HostStore {
         }
         done
     }
+}
+
+/// Longest host path the board opens, with its NUL: a prefix of up to
+/// [`lockstep::PREFIX_MAX`] (and [`STORE_PATH_MAX`]) bytes and a short suffix.
+const HOST_PATH_MAX: usize = lockstep::PREFIX_MAX + 16;
+
+/// `prefix`, `suffix` and a NUL in a buffer, and their length with the NUL (`None` when over
+/// [`HOST_PATH_MAX`]).
+fn host_path(prefix: &[u8], suffix: &[u8]) -> Option<([u8; HOST_PATH_MAX], usize)> {
+    let mut p = [0u8; HOST_PATH_MAX];
+    let n = prefix.len() + suffix.len();
+    p.get_mut(..prefix.len())?.copy_from_slice(prefix);
+    p.get_mut(prefix.len()..n)?.copy_from_slice(suffix);
+    *p.get_mut(n)? = 0;
+    Some((p, n + 1))
 }
 
 /// Semihosting SYS_OPEN of the NUL-terminated `path` in `mode`; the handle.
@@ -537,17 +542,9 @@ impl HostPipe {
     /// Opens `prefix` + `-to-sim` for writing, then `prefix` + `-to-fw` for reading (the
     /// order the simulator expects; each open returns once the host holds the other end).
     fn open(prefix: &[u8]) -> Option<Self> {
-        let path = |suffix: &str| {
-            let mut p = [0u8; lockstep::PREFIX_MAX + 16];
-            let n = prefix.len() + suffix.len();
-            p.get_mut(..prefix.len())?.copy_from_slice(prefix);
-            p.get_mut(prefix.len()..n)?
-                .copy_from_slice(suffix.as_bytes());
-            Some((p, n + 1))
-        };
-        let (p, n) = path(lockstep::TO_SIM_SUFFIX)?;
+        let (p, n) = host_path(prefix, lockstep::TO_SIM_SUFFIX.as_bytes())?;
         let to_sim = sys_open(p.get(..n)?, OPEN_WB)?;
-        let (p, n) = path(lockstep::TO_FIRMWARE_SUFFIX)?;
+        let (p, n) = host_path(prefix, lockstep::TO_FIRMWARE_SUFFIX.as_bytes())?;
         let Some(to_fw) = p.get(..n).and_then(|p| sys_open(p, OPEN_RB)) else {
             sys_close(to_sim);
             return None;

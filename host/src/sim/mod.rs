@@ -53,7 +53,7 @@ pub use dynamixel::{XServoOutput, XServoParams, XServoRegisters};
 pub use mjcf::EnvConfig;
 pub use mujoco::{MjBody, Push};
 pub use servo::ServoTorque;
-pub use transport::{run, spawn, SimHandle, SimProgress, LOCKSTEP_ACK, LOCKSTEP_TIME};
+pub use transport::{run, spawn, SimHandle, SimProgress};
 
 /// Fault injection on the bus (drops, corruption, dead devices); forced falls are in
 /// [`FallConfig`].

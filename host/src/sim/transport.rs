@@ -17,11 +17,11 @@
 //!
 //! # Lock-step channel (fixed protocol)
 //!
-//! * firmware → simulator: [`LOCKSTEP_TIME`] (`0x5A`) + u64 little-endian virtual time in µs
+//! * firmware → simulator: [`lockstep::TIME`] (`0x5A`) + u64 little-endian virtual time in µs
 //!   (9 bytes), at the start of every control tick and before bus bursts. The simulator runs
 //!   its physics up to that time (whole physics steps; never backwards; no wall clock).
 //! * simulator → firmware: after reading one complete instruction packet from the bus and
-//!   writing its whole reply, [`LOCKSTEP_ACK`] (`0xA5`), `n_lo`, `n_hi` = the number of bytes
+//!   writing its whole reply, [`lockstep::REPLY`] (`0xA5`), `n_lo`, `n_hi` = the number of bytes
 //!   written on the bus for that instruction (0 for a broadcast SYNC WRITE, a dropped reply, a
 //!   dead device, a packet with a bad CRC). Status packets on the bus are not instructions and
 //!   are not acknowledged.
@@ -52,11 +52,6 @@ use std::time::{Duration, Instant};
 
 use super::{SimConfig, SimError, SimSummary, Simulator};
 use walker_contract::lockstep;
-
-/// First byte of a lock-step time message (firmware → simulator).
-pub const LOCKSTEP_TIME: u8 = lockstep::TIME;
-/// First byte of a lock-step byte count (simulator → firmware).
-pub const LOCKSTEP_ACK: u8 = lockstep::REPLY;
 
 /// Live progress of a running simulator (read it from any thread).
 #[derive(Debug, Default)]
@@ -233,7 +228,7 @@ impl Lockstep {
                 Ok(0) => self.open = false,
                 Ok(n) => {
                     for &b in &buf[..n] {
-                        if self.len == 0 && b != LOCKSTEP_TIME {
+                        if self.len == 0 && b != lockstep::TIME {
                             self.errors += 1;
                             continue;
                         }
@@ -261,8 +256,7 @@ impl Lockstep {
         if !self.open {
             return Ok(());
         }
-        let [lo, hi] = u16::try_from(n).unwrap_or(u16::MAX).to_le_bytes();
-        let msg = [LOCKSTEP_ACK, lo, hi];
+        let msg = lockstep::reply_header(n);
         let mut done = 0;
         while done < msg.len() {
             match self.stream.write(&msg[done..]) {
