@@ -40,6 +40,8 @@ if [ "${SKIP_WALKS:-0}" != 1 ]; then
         shift
         echo
         echo "== $dir: walker $*"
+        # Fresh: `walker sweep --ablate` resumes from the rows an earlier run left there.
+        rm -rf "${out:?}/$dir"
         "$walker" "$@" --out "$out/$dir" || echo "   (walker exited with $?; its report is kept)"
     }
     jobs=$(nproc 2>/dev/null || echo 1)

@@ -396,10 +396,11 @@ pub enum FaultKind {
     /// an explicit step's travel, mm, mm, mrad); once at start `id` = 0: the online walk's step
     /// period, µs.
     Footstep,
-    /// 16: the catching step moved the landing place of a swing foot (two records at the end
-    /// of that single support: `id` = side (1 left, 2 right) · 16 + component (0 forward, 1
-    /// leftward, trunk frame), `value` = the largest move asked in that swing, µm; gait-core
-    /// `feedback::catch` A3–A4). An event of the walk, not a fault.
+    /// 16: the catching step or the landing hold moved the landing place of a swing foot
+    /// (records at the end of that single support: `id` = side (1 left, 2 right) · 16 +
+    /// component; components 0 forward and 1 leftward, trunk frame: the largest catch asked in
+    /// that swing, gait-core `feedback::catch` A3–A4; component 2: the landing hold's move
+    /// along the stance foot's heading, A9; `value` µm). An event of the walk, not a fault.
     CatchStep,
     /// 17: the command deadman fired: in Mode = walk no valid command write came for
     /// `deadman_ms`, the walk stops to standing (`id` 0, `value` = ms since the last valid

@@ -1278,6 +1278,24 @@ params! {
         set: |c, v| { c.step_adaptation.hold_lag_m = v as f32 },
         get: |c| { Some(Value::Num32(c.step_adaptation.hold_lag_m)) },
     },
+    {
+        key: "landing_gain",
+        plan_key: None,
+        unit: "1/step",
+        domain: range(0.0, 1.0),
+        doc: "plan walk: landing hold, share of the feet's midpoint's surveyed distance (along the stance heading) from where the plan and the catches put it that the next landing place corrects (gait-core catch A8-A9, needs sole_poses=measured; 0 = off; the online walk: position_gain)",
+        set: |c, v| { c.step_adaptation.landing_gain = v as f32 },
+        get: |c| { Some(Value::Num32(c.step_adaptation.landing_gain)) },
+    },
+    {
+        key: "landing_ramp",
+        plan_key: None,
+        unit: "s",
+        domain: range(0.0, 1.0),
+        doc: "plan walk: landing hold, time over which its move enters the swing foot's landing place after lift-off (gait-core catch A9)",
+        set: |c, v| { c.step_adaptation.landing_ramp_s = v as f32 },
+        get: |c| { Some(Value::Num32(c.step_adaptation.landing_ramp_s)) },
+    },
 }
 
 /// Key index meaning "not a known key".

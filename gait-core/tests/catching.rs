@@ -283,12 +283,15 @@ proptest! {
             hold_settle_s: vals[6],
             level_joints: vals[1],
             hold_lag_m: vals[2],
+            landing_gain: vals[9],
+            landing_ramp_s: vals[10],
         };
         let mut a = StepAdapter::new(&cfg, &Robot::reference(), z_c, dt);
         for s in [single_left(), sample(SupportPhase::Double, Some(Side::Left), [0.0, 0.01])] {
             for _ in 0..5 {
                 a.set_joint_lag([vals[4], vals[5]]);
                 a.set_swing_lag_m(vals[7]);
+                a.set_landing(Side::Left, [vals[8], vals[11]]);
                 let asked = a.update(&s, Some([0.3, -0.4]), Some([2.0, -3.0]), NO_LOAD);
                 prop_assert!(asked.iter().all(|v| v.is_finite()));
             }
@@ -296,6 +299,7 @@ proptest! {
         for d in a.foot_offsets().iter().chain([&a.body_offset()]) {
             prop_assert!(d.iter().all(|v| v.is_finite() && v.abs() <= MAX_OFFSET_M));
         }
+        prop_assert!(a.landing_body_shift().iter().all(|v| v.is_finite()));
         for c in a.sole_level() {
             prop_assert!(c.iter().all(|v| v.is_finite() && v.abs() <= MAX_LEVEL_RAD));
         }

@@ -32,7 +32,7 @@ pub struct Feature {
 }
 
 /// The defaults' features the ablation switches off one at a time.
-pub const FEATURES: [Feature; 6] = [
+pub const FEATURES: [Feature; 7] = [
     Feature {
         name: "gyro",
         what: "gyro damping at the stance ankles and hips",
@@ -57,6 +57,11 @@ pub const FEATURES: [Feature; 6] = [
         name: "level",
         what: "swing sole levelling",
         off: &["catch_level_pitch=0", "catch_level_roll=0"],
+    },
+    Feature {
+        name: "landing",
+        what: "landing hold on the leg odometry",
+        off: &["landing_gain=0"],
     },
     Feature {
         name: "stretch",

@@ -102,6 +102,7 @@ pub const OPEN_LOOP: &[&str] = &[
     "catch_gain=0",
     "catch_level_pitch=0",
     "catch_level_roll=0",
+    "landing_gain=0",
 ];
 
 /// The tail of [`OPEN_LOOP`] from the switch `first` on: the parts not added yet when the
@@ -120,7 +121,7 @@ fn still_off_from(first: &str) -> &'static [&'static str] {
 /// handling (the feed-forward of their sag and the roll servos' Position I Gain), the catching
 /// step, the swing sole kept level (this run is the firmware's default), whole-body
 /// compensation of the swing leg, the DCM/ZMP stabilizer.
-pub fn ablation() -> [Variant; 10] {
+pub fn ablation() -> [Variant; 11] {
     let v = |name, model, compensation, stabilizer, tokens| Variant {
         name,
         model,
@@ -163,7 +164,14 @@ pub fn ablation() -> [Variant; 10] {
             false,
             still_off_from("catch_level_pitch=0"),
         ),
-        v("+sole levelling (default)", Tlipfm, Plain, false, &[]),
+        v(
+            "+sole levelling",
+            Tlipfm,
+            Plain,
+            false,
+            still_off_from("landing_gain=0"),
+        ),
+        v("+landing hold (default)", Tlipfm, Plain, false, &[]),
         v("+wholebody", Tlipfm, Wholebody, false, &[]),
         v("+stabilizer", Tlipfm, Wholebody, true, &[]),
     ]
@@ -951,18 +959,19 @@ pub(crate) mod tests {
                 c.compliance.roll > 0.0,
                 c.step_adaptation.is_on(),
                 c.step_adaptation.is_levelling(),
+                c.step_adaptation.landing_gain > 0.0,
                 c.compensation == walker_contract::config::Compensation::WholeBody,
                 c.stabilizer_on,
             ]
         };
         for c in &cfgs[..3] {
-            assert_eq!(parts(c), [false; 7]);
+            assert_eq!(parts(c), [false; 8]);
         }
         for w in cfgs[2..].windows(2) {
             let (a, b) = (parts(&w[0]), parts(&w[1]));
-            let added: Vec<usize> = (0..7).filter(|&i| b[i] && !a[i]).collect();
+            let added: Vec<usize> = (0..8).filter(|&i| b[i] && !a[i]).collect();
             assert_eq!(added.len(), 1, "{a:?} -> {b:?}");
-            assert!((0..7).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
+            assert!((0..8).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
         }
         let default_run = ablation()
             .iter()
@@ -970,7 +979,10 @@ pub(crate) mod tests {
             .unwrap();
         let base = firmware_config(&fil::firmware_tokens(&spec).unwrap()).unwrap();
         assert_eq!(parts(&cfgs[default_run]), parts(&base));
-        assert_eq!(parts(&base), [true, true, true, true, true, false, false]);
+        assert_eq!(
+            parts(&base),
+            [true, true, true, true, true, true, false, false]
+        );
     }
 
     #[test]

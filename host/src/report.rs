@@ -485,16 +485,20 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
                 c => format!("footstep: component {c}, value {v}"),
             }
         }
-        K::CatchStep => format!(
-            "catching step moved the {} foot's landing {} by up to {:.1} mm",
-            match id >> 4 {
+        K::CatchStep => {
+            let side = match id >> 4 {
                 1 => "left",
                 2 => "right",
                 _ => "?",
-            },
-            if id & 0xF == 0 { "forward" } else { "leftward" },
-            f64::from(v) * 1e-3
-        ),
+            };
+            let mm = f64::from(v) * 1e-3;
+            match id & 0xF {
+                0 => format!("catching step moved the {side} foot's landing forward by up to {mm:.1} mm"),
+                1 => format!("catching step moved the {side} foot's landing leftward by up to {mm:.1} mm"),
+                2 => format!("landing hold moved the {side} foot's landing along the stance heading by {mm:.1} mm"),
+                c => format!("catching step: the {side} foot, component {c}, {mm:.1} mm"),
+            }
+        }
         K::Deadman => format!(
             "command deadman: no valid command write for {v} ms in Mode = walk; the walk stops to standing"
         ),

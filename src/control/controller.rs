@@ -302,7 +302,7 @@ impl<P: TickPath> Controller<'_, P> {
                 rec.com = [pos_of_fx(f.com[0]), pos_of_fx(f.com[1])];
             }
             None => {
-                let ([zx, zy], [cx, cy, _]) = (present.zmp, present.com);
+                let ([zx, zy], [cx, cy]) = self.logged_reference(present);
                 rec.set_zmp_ref_m(zx, zy);
                 rec.set_com_m(cx + com_shift[0], cy + com_shift[1]);
             }
@@ -311,6 +311,14 @@ impl<P: TickPath> Controller<'_, P> {
         self.prev_feet_fx = present_fx.map(|f| f.feet);
         self.prev = *present;
         true
+    }
+
+    /// The ZMP reference and the CoM (x, y; m) of the moved sample `s` in the world the leg
+    /// odometry estimates, as the log carries them (the landing hold's share taken out).
+    fn logged_reference(&self, s: &GaitSample<f32>) -> ([f32; 2], [f32; 2]) {
+        let [wx, wy] = self.path.reference_shift();
+        let ([zx, zy], [cx, cy, _]) = (s.zmp, s.com);
+        ([zx - wx, zy - wy], [cx - wx, cy - wy])
     }
 
     /// Act: the goal through the joint limits to servo ticks (a non-finite target holds the
@@ -329,7 +337,7 @@ impl<P: TickPath> Controller<'_, P> {
         let ticks = match checked {
             None => {
                 // The log shows the last finite sample.
-                let ([zx, zy], [cx, cy, _]) = (self.prev.zmp, self.prev.com);
+                let ([zx, zy], [cx, cy]) = self.logged_reference(&self.prev);
                 rec.set_zmp_ref_m(zx, zy);
                 rec.set_com_m(cx, cy);
                 rec.phase = LoggedPhase::Stopped;
@@ -382,7 +390,7 @@ impl<P: TickPath> Controller<'_, P> {
         rec: &mut TickRecord,
     ) {
         if action != Action::Run {
-            let ([zx, zy], [cx, cy, _]) = (self.prev.zmp, self.prev.com);
+            let ([zx, zy], [cx, cy]) = self.logged_reference(&self.prev);
             rec.set_zmp_ref_m(zx, zy);
             rec.set_com_m(cx, cy);
             rec.phase = match self.sup.stop_reason() {

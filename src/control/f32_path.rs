@@ -34,16 +34,18 @@ fn reading(f: &Option<FootForces>) -> ForceReading<f32> {
     ForceReading::new(f.map_or([f32::NAN; 4], |f| f.forces_mn.map(|v| v as f32 * 1e-3)))
 }
 
-/// The catching step (gait-core `feedback::catch` A1–A7) as the first sample correction, with its
-/// log: the largest landing move asked during one single support, written as two `CatchStep`
-/// records when that single support ends. Its state also keeps the swing sole level (A10:
-/// a joint correction) and holds the walk's clock (A11).
+/// The catching step (gait-core `feedback::catch` A1–A7) and the landing hold (A8–A9) as the
+/// first sample correction, with its log: the largest landing move asked during one single
+/// support and the landing hold's move, written as `CatchStep` records (components 0, 1 and 2)
+/// when that single support ends. Its state also keeps the swing sole level (A10: a joint
+/// correction) and holds the walk's clock (A11).
 pub(super) struct Catching {
     adapter: StepAdapter,
     /// The swing foot of the single support being noted.
     swing: Option<Side>,
-    /// Its largest move asked (forward, leftward; trunk frame), m.
-    largest: [f32; 2],
+    /// Its largest move asked (forward, leftward; trunk frame) and the landing hold's move
+    /// (along the stance foot's heading), m.
+    largest: [f32; 3],
 }
 
 impl Catching {
@@ -51,11 +53,12 @@ impl Catching {
         Catching {
             adapter,
             swing: None,
-            largest: [0.0; 2],
+            largest: [0.0; 3],
         }
     }
 
-    /// Notes this tick's move `asked` in `phase`; logs the swing's largest when it ends.
+    /// Notes this tick's catch `asked` and the landing hold's move in `phase`; logs the swing's
+    /// when it ends (the catch's two components when it caught, the hold's when it moved).
     fn note<B: Board>(
         &mut self,
         board: &mut B,
@@ -65,10 +68,17 @@ impl Catching {
     ) {
         let swing = phase.swing();
         if swing != self.swing {
-            if let Some(side) = self.swing.filter(|_| self.largest != [0.0; 2]) {
+            if let Some(side) = self.swing {
                 let now = board.now_us();
                 let side_code: u8 = if side == Side::Left { 1 } else { 2 };
-                for (component, v) in (0u8..).zip(self.largest) {
+                let [x, y, landing] = self.largest;
+                let caught = (x != 0.0 || y != 0.0).then_some([(0u8, x), (1, y)]);
+                let held = (landing != 0.0).then_some([(2u8, landing)]);
+                for (component, v) in caught
+                    .into_iter()
+                    .flatten()
+                    .chain(held.into_iter().flatten())
+                {
                     // |v| ≤ the limits (< 0.1 m): the µm fit an i32.
                     let um = gait_core::maths::fastmath::round_i32(v * 1e6);
                     let rec = fault(now, FaultKind::CatchStep, side_code * 16 + component, um);
@@ -76,12 +86,15 @@ impl Catching {
                 }
             }
             self.swing = swing;
-            self.largest = [0.0; 2];
+            self.largest = [0.0; 3];
         }
         for (l, a) in self.largest.iter_mut().zip(asked) {
             if a.abs() > l.abs() {
                 *l = a;
             }
+        }
+        if let Some((_, forward)) = self.adapter.landing_move_forward() {
+            self.largest[2] = forward;
         }
     }
 
@@ -169,9 +182,13 @@ impl TickPath for F32Path<'_> {
             let landed = d.read(bus, self.map, &[l.sole_place(), r.sole_place()], swing);
             self.catching.adapter.set_joint_lag(d.swing_lag());
             self.catching.adapter.set_swing_lag_m(d.sole_lag_m());
-            // The online walk's position hold (P1): where the new foot landed off its plan.
-            if let (Some((side, offset)), Some(o)) = (landed, walk.gait.online_mut()) {
-                o.set_landing_offset(side, offset);
+            // Where the new foot landed off its targets: the online walk's position hold (P1),
+            // a plan's landing hold (A8).
+            if let Some((side, offset)) = landed {
+                match walk.gait.online_mut() {
+                    Some(o) => o.set_landing_offset(side, offset),
+                    None => self.catching.adapter.set_landing(side, offset),
+                }
             }
         }
     }
@@ -275,6 +292,10 @@ impl TickPath for F32Path<'_> {
     fn apply_samples(&self, sample: &mut GaitSample<f32>) {
         // (A6): the feet by their offsets, the CoM and the ZMP reference by the body's.
         self.catching.adapter.apply(sample);
+    }
+
+    fn reference_shift(&self) -> [f32; 2] {
+        self.catching.adapter.landing_body_shift()
     }
 
     fn joints(&mut self, targets: &Targets, m: &Measured<'_>, ik: &IkRequest<'_>, goal: &mut Goal) {

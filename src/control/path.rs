@@ -140,6 +140,12 @@ pub(super) trait TickPath {
     /// The sample corrections' moves on a copy of a sample, in this path's order.
     fn apply_samples(&self, _sample: &mut GaitSample<f32>) {}
 
+    /// How far the frame the moved samples command the joints in stands from the world the
+    /// robot's references are logged in (the landing hold's share of the body's offset), m.
+    fn reference_shift(&self) -> [f32; 2] {
+        [0.0; 2]
+    }
+
     /// The IK and the joint corrections, in this path's order.
     fn joints(
         &mut self,

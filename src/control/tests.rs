@@ -1328,8 +1328,8 @@ fn a_plan_too_long_to_check_is_refused_before_the_bus() {
 /// walks command the same plan.
 #[test]
 fn servo_lead_sends_the_targets_of_lead_ticks_later_and_logs_the_present_reference() {
-    let base = cfg_with("gyro_ankle=0 gyro_hip=0");
-    let lead = cfg_with("gyro_ankle=0 gyro_hip=0 servo_lead=0.1");
+    let base = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0");
+    let lead = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 servo_lead=0.1");
     assert_eq!(lead.lead_ticks(), 20);
     let (mut a, mut b) = (
         board(&base).with_imu_rate(0.0),
@@ -1427,9 +1427,10 @@ fn position_i_gains_are_written_before_torque_on() {
 /// way) by the saturation (the model asks ≈ 0.1 rad there).
 #[test]
 fn compliance_moves_only_the_roll_targets_within_its_bound() {
-    let off = cfg_with("gyro_ankle=0 gyro_hip=0 compliance_roll=0 compliance_pitch=0");
+    let off =
+        cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 compliance_roll=0 compliance_pitch=0");
     let on = cfg_with(
-        "gyro_ankle=0 gyro_hip=0 compliance_roll=1 compliance_pitch=0 compliance_max=0.05",
+        "landing_gain=0 gyro_ankle=0 gyro_hip=0 compliance_roll=1 compliance_pitch=0 compliance_max=0.05",
     );
     let (mut a, mut b) = (
         board(&off).with_imu_rate(0.0),
@@ -2284,8 +2285,9 @@ fn assert_nothing_moved_before_the_tip(
 #[test]
 fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
     use gait_core::Side;
-    let on = cfg_with("gyro_ankle=0 gyro_hip=0");
-    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    // The landing hold off: the catch alone.
+    let on = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0");
+    let off = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
     let sa = on.step_adaptation;
     assert!(sa.gain > 0.0, "the catching step is on by default");
     let (a, b, plain_records, from_us) = tipped_in_a_left_swing(&off, &on);
@@ -2316,14 +2318,7 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
     let first = first.expect("the catch changed the goals");
     assert_nothing_moved_before_the_tip(first, a.goals.len(), &tr, from_us);
     // The log: the swing's largest move.
-    let catches: Vec<(u8, i32)> = b
-        .records()
-        .iter()
-        .filter_map(|r| match r {
-            Record::Fault(f) if f.kind == FaultKind::CatchStep => Some((f.id, f.value)),
-            _ => None,
-        })
-        .collect();
+    let catches = catch_steps(&b);
     assert_eq!(catches.len(), 2, "{catches:?}");
     let max_um = (sa.max_x_m * 1e6).round() as i32;
     assert_eq!(catches[0].0, 16);
@@ -2345,9 +2340,9 @@ fn a_backward_tip_in_a_swing_moves_that_landing_back_within_reach() {
 #[test]
 fn a_backward_tip_in_a_swing_turns_only_the_swing_ankle_back_to_level() {
     use gait_core::feedback::level::MAX_LEVEL_RAD;
-    let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
     let off =
-        cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_level_pitch=0 catch_level_roll=0");
+        cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_level_pitch=0 catch_level_roll=0");
     let sa = on.step_adaptation;
     assert!(
         sa.level_pitch == 1.0 && sa.level_roll == 1.0,
@@ -2419,8 +2414,8 @@ fn a_backward_tip_in_a_swing_turns_only_the_swing_ankle_back_to_level() {
 
 #[test]
 fn the_deflection_feedback_drives_sagging_stance_knees_to_their_targets() {
-    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
-    let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 deflection_ki=10");
+    let off = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0 deflection_ki=10");
     assert_eq!(off.deflection.ki, 0.0, "off by default");
     // Both knees (IDs 4 and 10) stand 30 ticks (≈ 0.046 rad) short of their goals.
     let sag = 30;
@@ -2506,9 +2501,9 @@ fn goal_deltas(a: &FakeBoard, b: &FakeBoard, j: usize) -> Vec<i32> {
 /// yaws keep the goals they have with the feedback off.
 #[test]
 fn the_deflection_feedback_on_the_roll_joints_drives_only_them() {
-    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let off = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
     let on =
-        cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 deflection_ki=10 deflection_joints=roll");
+        cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0 deflection_ki=10 deflection_joints=roll");
     let sag = 30;
     let sagging = |cfg: &Config| sagging_board(cfg, [2, 8], sag);
     let (mut a, mut b) = (sagging(&off), sagging(&on));
@@ -2530,6 +2525,116 @@ fn the_deflection_feedback_on_the_roll_joints_drives_only_them() {
     }
 }
 
+/// The odometry tests' tokens: no feed-forward, no feedback, the landing hold off.
+const ODOMETRY_ONLY: &str = "compliance_roll=0 compliance_pitch=0 gyro_ankle=0 gyro_hip=0 \
+     catch_gain=0 catch_level_pitch=0 catch_level_roll=0 landing_gain=0";
+
+/// The left hip pitch's and ankle pitch's sag in the odometry tests, ticks.
+const ODOMETRY_SAG: i32 = 20;
+
+/// A fake robot whose left hip pitch (ID 3) sags by [`ODOMETRY_SAG`] and left ankle pitch (ID 5)
+/// by its opposite: the left sole lands off its targets, level.
+fn sagging_left_leg(cfg: &Config) -> FakeBoard {
+    let mut b = board(cfg);
+    for d in b.devices.iter_mut() {
+        match d.id {
+            3 => d.sag = ODOMETRY_SAG,
+            5 => d.sag = -ODOMETRY_SAG,
+            _ => {}
+        }
+    }
+    b
+}
+
+/// The `CatchStep` records of a run: (id, value).
+fn catch_steps(b: &FakeBoard) -> Vec<(u8, i32)> {
+    b.records()
+        .iter()
+        .filter_map(|r| match r {
+            Record::Fault(f) if f.kind == walker_contract::record::FaultKind::CatchStep => {
+                Some((f.id, f.value))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// The landing hold (gait-core `feedback::catch` A8–A9) on the robot whose left leg sags: the
+/// goals are those of the run without it until the first survey finds the left foot off its
+/// place. The sagging leg lands its own foot long and, as the stance leg, the right foot
+/// short (the pelvis leans back over it), by v = 4–8 mm (the sag's 20 ticks at the sole, as
+/// the odometry test measures them): an error that alternates between the feet. With k = 1
+/// the feet's midpoint (A9) asks −v/2 of the third landing (the first with both feet
+/// surveyed: the left), −v/4 of the fourth, then ever less (v/8, 3v/16, v/32, …: the
+/// recurrence e′ = e_s − (e_s + e_swing)/2 ± v walked by hand) as the feet settle v/2 either
+/// side of the plan: one `CatchStep` record, component 2, per moving swing. The references the
+/// log carries (the odometry's world) stay the plan's, to the log's 10 µm.
+#[test]
+fn the_landing_hold_moves_each_next_landing_by_the_surveyed_distance() {
+    let off = cfg_with(ODOMETRY_ONLY);
+    let on = Config {
+        step_adaptation: gait_core::feedback::catch::StepAdaptation {
+            landing_gain: 1.0,
+            ..off.step_adaptation
+        },
+        ..off
+    };
+    assert_eq!(
+        gait_core::feedback::catch::StepAdaptation::DEFAULT.landing_gain,
+        1.0,
+        "on by default"
+    );
+    let (mut a, mut b) = (sagging_left_leg(&off), sagging_left_leg(&on));
+    for (x, cfg) in [(&mut a, &off), (&mut b, &on)] {
+        assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
+    }
+    let surveying = |p: &Pkt| p.op == opcode::BULK_READ && p.tx_bytes == 40;
+    let ticks = per_tick(&b);
+    let first_survey = (1..ticks.len())
+        .find(|&k| ticks[k].iter().any(surveying) && ticks[k - 1].iter().any(surveying))
+        .expect("a survey");
+    let first_diff = a
+        .goals
+        .iter()
+        .zip(&b.goals)
+        .position(|(x, y)| x != y)
+        .expect("the hold moves the goals");
+    assert!(first_diff > first_survey, "{first_diff} {first_survey}");
+    let moves = catch_steps(&b);
+    assert!(moves.len() >= 8, "{moves:?}");
+    assert!(moves.iter().all(|m| m.0 == 16 + 2 || m.0 == 2 * 16 + 2));
+    // The third landing (left) by −v/2, the fourth (right) by −v/4.
+    let (first, second) = (moves[0], moves[1]);
+    assert!(
+        first.0 == 16 + 2 && (-4_000..=-2_000).contains(&first.1),
+        "{moves:?}"
+    );
+    assert!(
+        second.0 == 2 * 16 + 2 && (2 * second.1 - first.1).abs() < 300,
+        "{moves:?}"
+    );
+    // Then ever less: the feet settle either side of the plan.
+    assert!(
+        moves[2..].iter().all(|m| m.1.abs() <= second.1.abs() + 100),
+        "{moves:?}"
+    );
+    let last = moves[moves.len() - 1].1;
+    assert!(last.abs() < first.1.abs() / 8, "{moves:?}");
+    assert!(catch_steps(&a).is_empty());
+    let (ra, rb) = (ticks_of(&a.records()), ticks_of(&b.records()));
+    assert_eq!(ra.len(), rb.len());
+    for (k, (x, y)) in ra.iter().zip(&rb).enumerate() {
+        for (p, q) in x
+            .zmp_ref
+            .iter()
+            .chain(&x.com)
+            .zip(y.zmp_ref.iter().chain(&y.com))
+        {
+            assert!((p - q).abs() <= 1, "record {k}: {x:?} {y:?}");
+        }
+    }
+}
+
 /// The leg odometry (`sole_poses=measured`, gait-core `odometry`) on a fake robot whose left
 /// hip pitch stands 20 ticks short of its goal and whose left ankle pitch 20 ticks beyond it (the
 /// sole stays level, so the fake's feet stay a consistent world): each left landing's survey
@@ -2541,29 +2646,16 @@ fn the_deflection_feedback_on_the_roll_joints_drives_only_them() {
 fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
     // No feed-forwards and no feedback: the fake's attitude follows its joints, so the gyro
     // feedback would move the goals apart from the IK's (the survey carries the new leg back
-    // by the IK's change over a tick, O3′).
-    let on = cfg_with(
-        "compliance_roll=0 compliance_pitch=0 gyro_ankle=0 gyro_hip=0 catch_gain=0 \
-         catch_level_pitch=0 catch_level_roll=0",
-    );
+    // by the IK's change over a tick, O3′); the landing hold off (it would move them by the
+    // surveys: the next test).
+    let on = cfg_with(ODOMETRY_ONLY);
     assert!(on.sole_poses_measured, "on by default");
     let off = Config {
         sole_poses_measured: false,
         ..on
     };
-    let sag = 20;
-    let sagging = |cfg: &Config| {
-        let mut b = board(cfg);
-        // ID 3: the left hip pitch, ID 5: the left ankle pitch.
-        for d in b.devices.iter_mut() {
-            match d.id {
-                3 => d.sag = sag,
-                5 => d.sag = -sag,
-                _ => {}
-            }
-        }
-        b
-    };
+    let sag = ODOMETRY_SAG;
+    let sagging = sagging_left_leg;
     let (mut a, mut b) = (sagging(&off), sagging(&on));
     for (x, cfg) in [(&mut a, &off), (&mut b, &on)] {
         assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
@@ -3224,8 +3316,8 @@ fn the_board_button_is_the_enable_when_held_50_ms() {
 /// Present Positions are read only when it is on.
 #[test]
 fn a_lagging_swing_knee_turns_only_that_legs_ankle_by_half_its_lag() {
-    let off = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0");
-    let on = cfg_with("gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_level_joints=0.5");
+    let off = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0");
+    let on = cfg_with("landing_gain=0 gyro_ankle=0 gyro_hip=0 catch_gain=0 catch_level_joints=0.5");
     assert_eq!(off.step_adaptation.level_joints, 0.0, "off by default");
     let sag = 30;
     let sagging = |cfg: &Config| sagging_board(cfg, [4, 10], sag);

@@ -51,6 +51,45 @@
 //! further, which is what absorbs the push. Every offset moves toward its target at most
 //! v_max·dt per axis per tick (continuous joint targets), and |d| ≤ [`MAX_OFFSET_M`].
 //!
+//! # Landing where the plan puts the feet
+//! A foot lands where the servos put it, not where its targets do: a leg that yields or lags
+//! sets every step down a little long or short (more so the weaker, slower or stiffer the
+//! servos), and over a walk the robot drifts from its plan. The leg odometry's survey of each
+//! landing ([`crate::measure::odometry`]) gives ε_n, the new foot's surveyed place minus the place
+//! its offset d_n put it (plan frame). Each foot keeps its distance from where the plan and the
+//! catches want it,
+//!
+//! ```text
+//!   e_n = d_n + ε_n − c_n          c: the catches' share of the offsets                   (A8)
+//!   c_swing ← c_s + R(ψ_s)·Δ_b     along with (A5)
+//! ```
+//!
+//! and in single support on s (both feet surveyed since they last landed) the swing foot's
+//! landing place moves along the stance foot's heading ψ_s by the share k_l of the feet's
+//! midpoint's distance,
+//!
+//! ```text
+//!   ē = (e_s + e_swing)/2        e_swing: where the swing foot stood until it lifted
+//!   u = h·clamp(−k_l·(h·ē), ±u_max),   h = (cos ψ_s, sin ψ_s)
+//!   d*_swing = d_s + R(ψ_s)·Δ_b + u                 (in place of (A5))                    (A9)
+//! ```
+//!
+//! (u_max = [`MAX_LANDING_SHIFT_M`]; the body follows by (A7)). Along h, a step that lands δ
+//! off its targets leaves e_swing′ = e_s + u + δ: a δ repeated on every step (both feet long or
+//! short, a servo's stiffness or lag) leaves e = δ/k_l, whatever the number of steps (k_l = 1:
+//! the last step's δ alone), where without (A9) the δ add up. A δ that alternates between the
+//! feet (one leg weaker than the other, or a trunk turned from the plan: the step width, turned,
+//! puts one foot ahead and the other behind) leaves the midpoint where it is and asks no move:
+//! the midpoint is where the robot stands, each foot alone is not. u enters the landing place
+//! over T_u after lift-off (`landing_ramp_s`: the lifting foot is not slid along the floor).
+//! Sideways the landing stays the plan's: the step width sets the lateral sway the plan's ZMP
+//! was made for, and an inward move could bring the feet together. u is taken once per single
+//! support; a foot's e is dropped when it lifts (a refused survey leaves no correction until
+//! both feet are surveyed again). The online walk corrects its own footsteps instead
+//! ([`crate::trajectory::online`], P1–P2) and does not feed (A8). The references the firmware
+//! logs are in the odometry's world: the sample's minus the hold's share of the body offset
+//! ([`CatchingStep::landing_body_shift`]).
+//!
 //! A missing or non-finite attitude or gyro sample gives e = 0 (no catch, offsets hold;
 //! non-finite inputs never reach the state). g, the weight and every per-tick
 //! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
@@ -65,6 +104,9 @@ use crate::trajectory::sampler::{GaitSample, SupportPhase};
 
 /// Largest offset of a foot or of the body from the plan, m (the offsets are clamped to it).
 pub const MAX_OFFSET_M: f32 = 2.0;
+
+/// Largest move u of one landing place by the landing hold (A9), per axis, m.
+pub const MAX_LANDING_SHIFT_M: f32 = 0.02;
 
 /// Gains and limits of the step adaptation: the catching step (module docs (A1)–(A7)), the
 /// swing sole's levelling ([`crate::feedback::level`], (A10)) and the clock hold
@@ -113,15 +155,23 @@ pub struct StepAdaptation {
     /// clock holds in the landing (A11, the servos' lag), m (0 = off; needs the servos' Present
     /// Position).
     pub hold_lag_m: f32,
+    /// Gain k_l of the landing hold: the share of the stance foot's surveyed distance from
+    /// where it should stand that the next landing place corrects (A8)–(A9; 0 = off; needs
+    /// the leg odometry's surveys).
+    pub landing_gain: f32,
+    /// Time over which the landing hold's move u enters the swing foot's landing place after
+    /// lift-off, s (A9).
+    pub landing_ramp_s: f32,
 }
 
 impl StepAdaptation {
-    /// Off (gain 0, no levelling), with the default limits.
+    /// Off (gain 0, no levelling, no landing hold), with the default limits.
     pub const OFF: StepAdaptation = StepAdaptation {
         gain: 0.0,
         level_pitch: 0.0,
         level_roll: 0.0,
         level_joints: 0.0,
+        landing_gain: 0.0,
         ..StepAdaptation::DEFAULT
     };
 
@@ -149,6 +199,8 @@ impl StepAdaptation {
         hold_max_s: 0.15,
         hold_settle_s: 0.1,
         hold_lag_m: 0.0,
+        landing_gain: 1.0,
+        landing_ramp_s: 0.2,
     };
 
     /// Whether the step adaptation runs (finite positive gain).
@@ -184,6 +236,8 @@ impl StepAdaptation {
             hold_max_s: limit(self.hold_max_s),
             hold_settle_s: limit(self.hold_settle_s),
             hold_lag_m: limit(self.hold_lag_m),
+            landing_gain: limit(self.landing_gain),
+            landing_ramp_s: limit(self.landing_ramp_s),
             ..*self
         }
     }
@@ -193,6 +247,19 @@ impl StepAdaptation {
 /// step adaptation (finite and positive).
 fn valid(z_c: f32, dt_s: f32, g: f32) -> bool {
     z_c.is_finite() && z_c > 0.0 && dt_s.is_finite() && dt_s > 0.0 && g > 0.0
+}
+
+/// The landing hold's move of one single support (A9).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LandingShift {
+    /// The swing foot.
+    swing: Side,
+    /// Its move along the stance foot's heading, m.
+    forward: f32,
+    /// u, plan frame, m.
+    u: [f32; 2],
+    /// The share of u entered so far (ramp).
+    share: f32,
 }
 
 /// The catching step's state (A1)–(A7): the attitude baseline, the capture-point error and the
@@ -222,6 +289,19 @@ pub struct CatchingStep {
     feet: [[f32; 2]; 2],
     /// Offset of the body (CoM and ZMP reference), plan frame, m.
     body: [f32; 2],
+    /// Gain k_l of the landing hold (A9); 0 when off.
+    landing_gain: f32,
+    /// The catches' share c of the left and right foot's offset (A8), plan frame, m.
+    caught: [[f32; 2]; 2],
+    /// Each foot's surveyed distance e from where it should stand (A8), plan frame, m; `None`
+    /// until surveyed since it landed.
+    landing_error: [Option<[f32; 2]>; 2],
+    /// The landing hold's move (A9) of this single support.
+    landing_shift: Option<LandingShift>,
+    /// The share of u one tick adds while it enters (dt / T_u; 1 = at once).
+    landing_ramp: f32,
+    /// The catches' share of the body's offset ((A7) on `caught`), plan frame, m.
+    caught_body: [f32; 2],
 }
 
 impl CatchingStep {
@@ -259,12 +339,101 @@ impl CatchingStep {
             error: [0.0; 2],
             feet: [[0.0; 2]; 2],
             body: [0.0; 2],
+            landing_gain: if ok { cfg.landing_gain } else { 0.0 },
+            caught: [[0.0; 2]; 2],
+            landing_error: [None; 2],
+            landing_shift: None,
+            landing_ramp: if ok && cfg.landing_ramp_s > dt_s {
+                dt_s / cfg.landing_ramp_s
+            } else {
+                1.0
+            },
+            caught_body: [0.0; 2],
         }
     }
 
-    /// Whether the catching step runs (finite positive gain).
+    /// The landing hold's share of the body's offset (A8)–(A9), plan frame, m: how far the
+    /// frame the joints are commanded in stands from the world the leg odometry estimates (the
+    /// robot's references in that world are the shifted sample's minus this).
+    pub fn landing_body_shift(&self) -> [f32; 2] {
+        [
+            self.body[0] - self.caught_body[0],
+            self.body[1] - self.caught_body[1],
+        ]
+    }
+
+    /// Whether the catching step or the landing hold runs (a finite positive gain).
     pub fn is_on(&self) -> bool {
-        self.gain.is_finite() && self.gain > 0.0
+        [self.gain, self.landing_gain]
+            .iter()
+            .any(|k| k.is_finite() && *k > 0.0)
+    }
+
+    /// The survey of a landing (A8): foot `side` stands `surveyed` (surveyed place minus the
+    /// place its offset put it, plan frame, m) off. Ignored with the landing hold off or when
+    /// not finite.
+    pub fn set_landing(&mut self, side: Side, surveyed: [f32; 2]) {
+        if !(self.landing_gain > 0.0 && surveyed.iter().all(|v| v.is_finite())) {
+            return;
+        }
+        let (d, c, e) = match side {
+            Side::Left => (self.feet[0], self.caught[0], &mut self.landing_error[0]),
+            Side::Right => (self.feet[1], self.caught[1], &mut self.landing_error[1]),
+        };
+        *e = Some([d[0] + surveyed[0] - c[0], d[1] + surveyed[1] - c[1]]);
+    }
+
+    /// The landing errors e of the left and right foot (A8), plan frame, m (`None`: not
+    /// surveyed since it landed).
+    pub fn landing_errors(&self) -> [Option<[f32; 2]>; 2] {
+        self.landing_error
+    }
+
+    /// (A9): the landing hold's move u for the swing foot `swing` off the stance foot of heading
+    /// `stance_yaw` (rad), taken once per single support.
+    fn landing_move(&mut self, swing: Side, stance_yaw: f32) -> [f32; 2] {
+        if let Some(l) = self.landing_shift.as_mut().filter(|l| l.swing == swing) {
+            l.share = (l.share + self.landing_ramp).min(1.0);
+            return [l.u[0] * l.share, l.u[1] * l.share];
+        }
+        let stance = swing.other();
+        let (e_stance, e_swing) = match stance {
+            Side::Left => (self.landing_error[0], &mut self.landing_error[1]),
+            Side::Right => (self.landing_error[1], &mut self.landing_error[0]),
+        };
+        // The swing foot's distance is where it stood until now; stale once it lifts.
+        let e_swing = e_swing.take();
+        let (forward, u) = match (e_stance, e_swing) {
+            (Some(a), Some(b)) if self.landing_gain > 0.0 => {
+                // The feet's midpoint, along the stance foot's heading only.
+                let (ex, ey) = (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]));
+                let (sn, cs) = crate::maths::fastmath::sin_cos(stance_yaw);
+                let m = MAX_LANDING_SHIFT_M;
+                let forward = (-self.landing_gain * (cs * ex + sn * ey)).clamp(-m, m);
+                let u = [cs * forward, sn * forward];
+                if u.iter().all(|v| v.is_finite()) {
+                    (forward, u)
+                } else {
+                    (0.0, [0.0; 2])
+                }
+            }
+            _ => (0.0, [0.0; 2]),
+        };
+        let share = self.landing_ramp.min(1.0);
+        self.landing_shift = Some(LandingShift {
+            swing,
+            forward,
+            u,
+            share,
+        });
+        [u[0] * share, u[1] * share]
+    }
+
+    /// The landing hold's move of the present single support (A9): the swing foot and its
+    /// whole move along the stance foot's heading, m (before the ramp); `None` outside single
+    /// support or with the hold off.
+    pub fn landing_move_forward(&self) -> Option<(Side, f32)> {
+        self.landing_shift.map(|l| (l.swing, l.forward))
     }
 
     /// The capture-point error of the last update (A1), trunk frame (x forward, y left), m.
@@ -342,15 +511,35 @@ impl CatchingStep {
     ) -> ([f32; 2], Option<SwingFoot>) {
         let finite = |v: &[f32; 2]| v[0].is_finite() && v[1].is_finite();
         let m = self.deadband_m;
-        // Inside the deadband with every offset at 0 nothing moves: the common tick ends here.
-        if self.error[0].abs() <= m[0] && self.error[1].abs() <= m[1] && !self.is_shifting() {
+        // (A9): the landing hold's move of this single support.
+        let u = match sample.phase {
+            SupportPhase::Single(stance) if self.landing_gain > 0.0 => {
+                let stance_yaw = match stance {
+                    Side::Left => sample.feet[0].yaw,
+                    Side::Right => sample.feet[1].yaw,
+                };
+                self.landing_move(stance.other(), stance_yaw)
+            }
+            _ => {
+                self.landing_shift = None;
+                [0.0; 2]
+            }
+        };
+        // Inside the deadband with every offset at 0 and no landing move nothing moves: the
+        // common tick ends here.
+        if self.error[0].abs() <= m[0]
+            && self.error[1].abs() <= m[1]
+            && !self.is_shifting()
+            && u == [0.0; 2]
+        {
             return ([0.0; 2], None);
         }
         let mut asked = [0.0; 2];
         let mut targets = self.feet;
+        let mut caught_targets = self.caught;
         // (A11): the swing side and its planned sole height, while it has not landed.
         let mut swing_hold: Option<(Side, f32)> = None;
-        let body_target = match (sample.phase, sample.support_foot) {
+        let (body_target, caught_body_target) = match (sample.phase, sample.support_foot) {
             (SupportPhase::Single(stance), _) => {
                 let swing = stance.other();
                 // (A3), (A4)
@@ -362,9 +551,9 @@ impl CatchingStep {
                     * (sigma * k * dz(self.error[1], m[1])).clamp(-self.max_in_m, self.max_out_m);
                 asked = [dx, dy];
                 // Constant indices (the left foot first): checked at compile time.
-                let (ds, swing_load, stance_yaw) = match stance {
-                    Side::Left => (self.feet[0], loads_n[1], sample.feet[0].yaw),
-                    Side::Right => (self.feet[1], loads_n[0], sample.feet[1].yaw),
+                let (ds, cs, swing_load, stance_yaw) = match stance {
+                    Side::Left => (self.feet[0], self.caught[0], loads_n[1], sample.feet[0].yaw),
+                    Side::Right => (self.feet[1], self.caught[1], loads_n[0], sample.feet[1].yaw),
                 };
                 let landed = swing_load > self.touchdown_n;
                 let swing_z = match swing {
@@ -383,9 +572,13 @@ impl CatchingStep {
                     };
                     let [tl, tr] = &mut targets;
                     let t = if swing == Side::Left { tl } else { tr };
-                    *t = [ds[0] + px, ds[1] + py];
+                    *t = [ds[0] + px + u[0], ds[1] + py + u[1]];
+                    // (A8): the catches' share follows the catch alone.
+                    let [cl, cr] = &mut caught_targets;
+                    let c = if swing == Side::Left { cl } else { cr };
+                    *c = [cs[0] + px, cs[1] + py];
                 }
-                ds
+                (ds, cs)
             }
             _ => {
                 // (A7): the reference ZMP's place between the feet.
@@ -397,9 +590,11 @@ impl CatchingStep {
                 } else {
                     0.5
                 };
-                let [dl, dr] = self.feet;
                 let a = if alpha.is_finite() { alpha } else { 0.5 };
-                [a * dl[0] + (1.0 - a) * dr[0], a * dl[1] + (1.0 - a) * dr[1]]
+                let blend = |[dl, dr]: [[f32; 2]; 2]| {
+                    [a * dl[0] + (1.0 - a) * dr[0], a * dl[1] + (1.0 - a) * dr[1]]
+                };
+                (blend(self.feet), blend(self.caught))
             }
         };
         let toward = |d: [f32; 2], t: [f32; 2], step: f32| {
@@ -412,8 +607,17 @@ impl CatchingStep {
                 *d = toward(*d, t, self.steps[0]);
             }
         }
+        // Moved as the feet are: without a landing hold the same numbers.
+        for (c, t) in self.caught.iter_mut().zip(caught_targets) {
+            if finite(&t) {
+                *c = toward(*c, t, self.steps[0]);
+            }
+        }
         if finite(&body_target) {
             self.body = toward(self.body, body_target, self.steps[1]);
+        }
+        if finite(&caught_body_target) {
+            self.caught_body = toward(self.caught_body, caught_body_target, self.steps[1]);
         }
         // (A11): how far the swing foot's offset still is from its target (|·|∞).
         let swing = swing_hold.map(|(swing, z_m)| {
@@ -475,6 +679,7 @@ impl StepAdapter {
                 hold_max_s: 0.0,
                 hold_settle_s: 0.0,
                 hold_lag_m: 0.0,
+                landing_gain: 0.0,
                 ..*cfg
             }
         };
@@ -490,6 +695,30 @@ impl StepAdapter {
     /// when not measured): the clock hold's landing condition (A11).
     pub fn set_swing_lag_m(&mut self, lag_m: f32) {
         self.swing_lag_m = lag_m;
+    }
+
+    /// The survey of a landing for the landing hold (A8): foot `side` stands `surveyed`
+    /// (surveyed place minus the place its offset put it, plan frame, m) off.
+    pub fn set_landing(&mut self, side: Side, surveyed: [f32; 2]) {
+        self.catch.set_landing(side, surveyed);
+    }
+
+    /// The landing errors e of the left and right foot (A8), plan frame, m (`None`: not
+    /// surveyed since it landed).
+    pub fn landing_errors(&self) -> [Option<[f32; 2]>; 2] {
+        self.catch.landing_errors()
+    }
+
+    /// The landing hold's move of the present single support (A9)
+    /// ([`CatchingStep::landing_move_forward`]).
+    pub fn landing_move_forward(&self) -> Option<(Side, f32)> {
+        self.catch.landing_move_forward()
+    }
+
+    /// The landing hold's share of the body's offset (A8)–(A9), plan frame, m
+    /// ([`CatchingStep::landing_body_shift`]).
+    pub fn landing_body_shift(&self) -> [f32; 2] {
+        self.catch.landing_body_shift()
     }
 
     /// Whether the plan's clock should stand still for the next tick (A11): the caught swing
@@ -515,7 +744,7 @@ impl StepAdapter {
         self.level.apply(q);
     }
 
-    /// Whether it runs (the catching step or the levelling).
+    /// Whether it runs (the catching step, the landing hold or the levelling).
     pub fn is_on(&self) -> bool {
         self.catch.is_on() || self.level.is_on()
     }
