@@ -317,11 +317,14 @@ fn run_inner(
         Some(_) => None,
         None => Some(lockstep_pipe_prefix()?),
     };
-    // A master on the wall clock (a person, the ROBOTIS SDK) on the command port: the
-    // firmware holds its virtual time back to the wall clock, so that the walk does not outrun
-    // the master's heartbeats.
+    // A master on the command port: the firmware holds its virtual time back to the wall
+    // clock. A master on the wall clock (a person, the ROBOTIS SDK) must not be outrun by the
+    // walk (its heartbeats); and every master's bytes reach the firmware's UART through QEMU's
+    // main loop, which a firmware blocked in the lock-step pipes' semihosting reads (QEMU's
+    // global lock held) starves: unpaced, the host's own command scripts found the port
+    // unanswered for minutes now and then.
     let mut tokens = qemu_append(opts)?;
-    if let PortDriver::External(_) = port {
+    if matches!(port, PortDriver::External(_) | PortDriver::Script(_)) {
         tokens = format!("{tokens} {}", walker_contract::params::REALTIME_WORD);
     }
     if let Some(p) = &pipes {
@@ -483,7 +486,15 @@ fn run_inner(
     };
     quit.store(true, std::sync::atomic::Ordering::Relaxed);
     if let Some(d) = driver {
-        drove = Some(d.join().unwrap_or_else(|_| Err("driver panicked".into())));
+        // QEMU has ended: a driver that failed meanwhile (the port closed under it) failed
+        // because the firmware ended under the script, as above.
+        drove = Some(match d.join() {
+            Ok(Err(e)) if !e.contains("aborted") => Err(format!(
+                "aborted: the firmware ended (exit code {exit_code:?}) under the script ({e})"
+            )),
+            Ok(r) => r,
+            Err(_) => Err("driver panicked".into()),
+        });
     }
     let summary = handle.join().map_err(|e| format!("simulator: {e}"))?;
     Ok((
