@@ -105,7 +105,7 @@ use crate::trajectory::sampler::{GaitSample, SupportPhase};
 /// Largest offset of a foot or of the body from the plan, m (the offsets are clamped to it).
 pub const MAX_OFFSET_M: f32 = 2.0;
 
-/// Largest move u of one landing place by the landing hold (A9), per axis, m.
+/// Largest move u of one landing place by the landing hold (A9), along the stance heading, m.
 pub const MAX_LANDING_SHIFT_M: f32 = 0.02;
 
 /// Gains and limits of the step adaptation: the catching step (module docs (A1)–(A7)), the
@@ -155,7 +155,7 @@ pub struct StepAdaptation {
     /// clock holds in the landing (A11, the servos' lag), m (0 = off; needs the servos' Present
     /// Position).
     pub hold_lag_m: f32,
-    /// Gain k_l of the landing hold: the share of the stance foot's surveyed distance from
+    /// Gain k_l of the landing hold: the share of the feet's midpoint's surveyed distance from
     /// where it should stand that the next landing place corrects (A8)–(A9; 0 = off; needs
     /// the leg odometry's surveys).
     pub landing_gain: f32,
