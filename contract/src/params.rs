@@ -8,10 +8,10 @@
 //! Parsed without allocation; the first bad token is reported with its key.
 //!
 //! Tokens are separated by spaces, tabs or NULs. The first token is skipped when it is not a
-//! `key=value` pair (qemu puts the kernel's file name first); the bare words `lockstep` and
-//! `realtime` ([`REALTIME_WORD`]) are accepted anywhere (the board reads them), as are `store=PATH` ([`STORE_WORD`], the QEMU board's
-//! parameter store) and `lockstep=PREFIX` ([`crate::lockstep::PIPE_WORD`], its lock-step
-//! pipes); any other bare word is an error.
+//! `key=value` pair (qemu puts the kernel's file name first); the bare words `lockstep`
+//! ([`crate::lockstep::PIPE_WORD`]) and `realtime` ([`REALTIME_WORD`]) are accepted anywhere
+//! (the board reads them), as are `store=PATH` ([`STORE_WORD`], the QEMU board's parameter
+//! store) and `lockstep=PREFIX` (its lock-step pipes); any other bare word is an error.
 //!
 //! Every range is physical: a walk parameter beyond it (`d2=1e38`, `h_z=10`) is refused here,
 //! naming the key, before gait-core sees the plan (gait-core then checks the walk as a whole:
@@ -1324,8 +1324,8 @@ pub const TEST_ONLY: [&str; 4] = ["fault_nan", "fault_nan_com", "stop_at", "cut_
 pub const STORE_WORD: &str = "store";
 
 /// A board's word, not a parameter: `realtime`, the QEMU board holds its virtual time back to
-/// the host's wall clock (for a master on the wall clock on the command port); [`apply`] skips
-/// it.
+/// the host's wall clock (for any master on the command port; docs/lockstep.md); [`apply`]
+/// skips it.
 pub const REALTIME_WORD: &str = "realtime";
 
 /// The parameter of `key`.
@@ -1635,7 +1635,10 @@ pub fn apply(cfg: &mut Config, cmdline: &[u8]) -> Result<(), ArgError> {
     let mut seen = Seen::default();
     for (pos, tok) in tokens.enumerate() {
         let Some(eq) = tok.iter().position(|&b| b == b'=') else {
-            if tok == b"lockstep" || tok == REALTIME_WORD.as_bytes() || pos == 0 {
+            if tok == crate::lockstep::PIPE_WORD.as_bytes()
+                || tok == REALTIME_WORD.as_bytes()
+                || pos == 0
+            {
                 continue; // the board's words, or the program name
             }
             return Err(error(ArgErrorKind::StrayWord, tok, pos));

@@ -155,14 +155,24 @@ fn the_references_shift_is_the_holds_share_of_the_body() {
     assert_eq!(off.body_offset(), [0.0; 2]);
 }
 
+/// One double-support tick (heading `yaw`) with the left foot surveyed `e_left` off and the
+/// right one `e_right`; the sample of the single support on the left foot that follows.
+fn surveyed_then_left_stance(
+    a: &mut StepAdapter,
+    e_left: [f32; 2],
+    e_right: [f32; 2],
+    yaw: f32,
+) -> GaitSample<f32> {
+    tick(a, &sample(SupportPhase::Double, Some(Side::Right), 1, yaw));
+    a.set_landing(Side::Right, e_right);
+    a.set_landing(Side::Left, e_left);
+    sample(SupportPhase::Single(Side::Left), Some(Side::Left), 2, yaw)
+}
+
 /// Single support on the left foot (heading `yaw`) after both feet were surveyed `e` off: the
 /// right foot's offset after `ticks` ticks.
 fn swing_offset_after(a: &mut StepAdapter, e: [f32; 2], yaw: f32, ticks: usize) -> [f32; 2] {
-    let double = sample(SupportPhase::Double, Some(Side::Right), 1, yaw);
-    tick(a, &double);
-    a.set_landing(Side::Right, e);
-    a.set_landing(Side::Left, e);
-    let single = sample(SupportPhase::Single(Side::Left), Some(Side::Left), 2, yaw);
+    let single = surveyed_then_left_stance(a, e, e, yaw);
     for _ in 0..ticks {
         tick(a, &single);
     }
@@ -174,19 +184,13 @@ fn swing_offset_after(a: &mut StepAdapter, e: [f32; 2], yaw: f32, ticks: usize) 
 #[test]
 fn the_move_follows_the_feet_midpoint() {
     let mut a = adapter(1.0, 0.0);
-    let double = sample(SupportPhase::Double, Some(Side::Right), 1, 0.0);
-    tick(&mut a, &double);
-    a.set_landing(Side::Right, [-0.006, 0.0]);
-    a.set_landing(Side::Left, [0.006, 0.0]);
-    let single = sample(SupportPhase::Single(Side::Left), Some(Side::Left), 2, 0.0);
+    let single = surveyed_then_left_stance(&mut a, [0.006, 0.0], [-0.006, 0.0], 0.0);
     for _ in 0..20 {
         tick(&mut a, &single);
     }
     assert_eq!(a.foot_offsets(), [[0.0; 2]; 2]);
     let mut a = adapter(1.0, 0.0);
-    tick(&mut a, &double);
-    a.set_landing(Side::Right, [0.0, 0.0]);
-    a.set_landing(Side::Left, [0.006, 0.0]);
+    let single = surveyed_then_left_stance(&mut a, [0.006, 0.0], [0.0, 0.0], 0.0);
     for _ in 0..20 {
         tick(&mut a, &single);
     }
@@ -216,11 +220,7 @@ fn the_move_enters_over_the_ramp() {
     let ramp_ticks = (ramp_s / DT) as usize;
     let mut a = adapter(1.0, ramp_s);
     let mut last = 0.0f32;
-    let double = sample(SupportPhase::Double, Some(Side::Right), 1, 0.0);
-    tick(&mut a, &double);
-    a.set_landing(Side::Right, [e, 0.0]);
-    a.set_landing(Side::Left, [e, 0.0]);
-    let single = sample(SupportPhase::Single(Side::Left), Some(Side::Left), 2, 0.0);
+    let single = surveyed_then_left_stance(&mut a, [e, 0.0], [e, 0.0], 0.0);
     for k in 1..=ramp_ticks + 10 {
         tick(&mut a, &single);
         let x = a.foot_offsets()[1][0];

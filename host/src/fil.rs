@@ -321,8 +321,7 @@ fn run_inner(
     // clock. A master on the wall clock (a person, the ROBOTIS SDK) must not be outrun by the
     // walk (its heartbeats); and every master's bytes reach the firmware's UART through QEMU's
     // main loop, which a firmware blocked in the lock-step pipes' semihosting reads (QEMU's
-    // global lock held) starves: unpaced, the host's own command scripts found the port
-    // unanswered for minutes now and then.
+    // global lock held) starves: the sleep lets the main loop run (docs/lockstep.md).
     let mut tokens = qemu_append(opts)?;
     if matches!(port, PortDriver::External(_) | PortDriver::Script(_)) {
         tokens = format!("{tokens} {}", walker_contract::params::REALTIME_WORD);
@@ -447,9 +446,7 @@ fn run_inner(
                     }
                 };
                 if let Some(code) = ended {
-                    drove = Some(Err(format!(
-                        "aborted: the firmware ended (exit code {code:?}) under the script ({e})"
-                    )));
+                    drove = Some(Err(aborted_under_script(code, e)));
                     break code;
                 }
                 let _ = child.kill();
@@ -489,9 +486,7 @@ fn run_inner(
         // QEMU has ended: a driver that failed meanwhile (the port closed under it) failed
         // because the firmware ended under the script, as above.
         drove = Some(match d.join() {
-            Ok(Err(e)) if !e.contains("aborted") => Err(format!(
-                "aborted: the firmware ended (exit code {exit_code:?}) under the script ({e})"
-            )),
+            Ok(Err(e)) if !e.contains("aborted") => Err(aborted_under_script(exit_code, &e)),
             Ok(r) => r,
             Err(_) => Err("driver panicked".into()),
         });
@@ -508,6 +503,12 @@ fn run_inner(
         },
         drove,
     ))
+}
+
+/// A command driver's error `e` when the firmware ended (exit `code`) under its script: the
+/// script counts as aborted (a fall ends the firmware first).
+fn aborted_under_script(code: Option<i32>, e: &str) -> String {
+    format!("aborted: the firmware ended (exit code {code:?}) under the script ({e})")
 }
 
 /// QEMU's chardev of a command port listening on `127.0.0.1:port`: QEMU is the server, does not

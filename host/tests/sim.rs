@@ -437,15 +437,7 @@ impl Client {
     /// Sends one instruction; returns the reply bytes announced on the lock-step channel.
     fn send(&mut self, pkt: &[u8]) -> Vec<u8> {
         self.bus.write_all(pkt).unwrap();
-        let mut ack = [0u8; 3];
-        self.ls.read_exact(&mut ack).unwrap();
-        assert_eq!(ack[0], 0xA5);
-        let n = usize::from(u16::from_le_bytes([ack[1], ack[2]]));
-        let mut reply = vec![0u8; n];
-        self.bus.read_exact(&mut reply).unwrap();
-        self.log.extend_from_slice(&ack);
-        self.log.extend_from_slice(&reply);
-        reply
+        announced_reply(&mut self.ls, &mut self.bus, &mut self.log)
     }
 
     fn read(&mut self, id: u8, addr: u16, len: u16) -> Vec<u8> {
@@ -670,15 +662,9 @@ impl LockstepMaster for PipeClient {
         m.extend_from_slice(&(pkt.len() as u16).to_le_bytes());
         m.extend_from_slice(pkt);
         self.to_sim.write_all(&m).unwrap();
-        let mut ack = [0u8; 3];
-        self.to_fw.read_exact(&mut ack).unwrap();
-        assert_eq!(ack[0], 0xA5);
-        let n = usize::from(u16::from_le_bytes([ack[1], ack[2]]));
-        let mut reply = vec![0u8; n];
-        self.to_fw.read_exact(&mut reply).unwrap();
-        self.log.extend_from_slice(&ack);
-        self.log.extend_from_slice(&reply);
-        reply
+        // Announcement and reply on the one pipe (`Read` for `&File`).
+        let (mut ann, mut data) = (&self.to_fw, &self.to_fw);
+        announced_reply(&mut ann, &mut data, &mut self.log)
     }
     fn take_log(&mut self) -> Vec<u8> {
         std::mem::take(&mut self.log)
@@ -934,6 +920,20 @@ fn zmp_outside_support_starts_a_fall() {
         t.com,
         t.pelvis_rpy
     );
+}
+
+/// Reads one reply announcement (`0xA5`, u16 LE count) from `ann` and the reply's bytes from
+/// `data`, both noted in `log`; the reply.
+fn announced_reply(ann: &mut impl Read, data: &mut impl Read, log: &mut Vec<u8>) -> Vec<u8> {
+    let mut ack = [0u8; 3];
+    ann.read_exact(&mut ack).unwrap();
+    assert_eq!(ack[0], 0xA5);
+    let n = usize::from(u16::from_le_bytes([ack[1], ack[2]]));
+    let mut reply = vec![0u8; n];
+    data.read_exact(&mut reply).unwrap();
+    log.extend_from_slice(&ack);
+    log.extend_from_slice(&reply);
+    reply
 }
 
 fn read_statuses(bus: &mut TcpStream, count: usize) -> Vec<(u8, u8, Vec<u8>)> {

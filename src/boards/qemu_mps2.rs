@@ -78,8 +78,10 @@
 //! With the word `realtime` each tick ends no earlier on QEMU's host clock (semihosting
 //! SYS_ELAPSED) than its virtual time: the core sleeps in WFI, woken each millisecond by
 //! SysTick and by each command-port byte (interrupts masked), taking the command port's bytes
-//! as they come, until the host clock has caught up. For a master on the wall clock on the
-//! command port; the virtual clock is not changed by the wait.
+//! as they come, until the host clock has caught up. For any master on the command port (a
+//! wall-clock master's heartbeats; the port's bytes, which QEMU's main loop delivers, starve
+//! while the core blocks in the lock-step pipes' reads); the virtual clock is not changed by the
+//! wait.
 //!
 //! # Watchdog
 //! A virtual watchdog, started at boot: once started, a tick that begins more than the timeout
@@ -705,7 +707,8 @@ impl QemuBoard {
             },
             None => None,
         };
-        let lockstep = pipe.is_some() || line.is_some_and(|c| contains_word(c, b"lockstep"));
+        let lockstep = pipe.is_some()
+            || line.is_some_and(|c| contains_word(c, lockstep::PIPE_WORD.as_bytes()));
         let realtime_word = walker_contract::params::REALTIME_WORD.as_bytes();
         let realtime_hz = if line.is_some_and(|c| contains_word(c, realtime_word)) {
             let hz = host_tick_hz().filter(|_| host_elapsed_ticks().is_some());

@@ -94,8 +94,9 @@
 //! non-finite inputs never reach the state). g, the weight and every per-tick
 //! factor (the baseline's k = dt/(T_b + dt), the offsets' steps v_max·dt) come from the robot
 //! and the tick period once, in [`CatchingStep::new`]. Cost without a push: the error (A1), the
-//! baseline (A2), the levelling (A10) and the deadband test, then an early return (the control
-//! tick's cost is in BENCHMARKS.md).
+//! baseline (A2), the levelling (A10), the landing hold's move (A9: computed once a single
+//! support) and the deadband test, then an early return while no offset and no landing move is
+//! pending (the control tick's cost is in BENCHMARKS.md).
 
 use crate::feedback::hold::{ClockHold, SwingFoot};
 use crate::feedback::level::SoleLevel;

@@ -66,6 +66,17 @@ pub struct SimProgress {
     pub falling: AtomicBool,
 }
 
+impl SimProgress {
+    /// Publishes the simulator's time, fall and instruction count.
+    fn publish(&self, sim: &Simulator) {
+        self.time_us.store(sim.time_us(), Ordering::Relaxed);
+        self.falling
+            .store(sim.physics.fall_started_us().is_some(), Ordering::Relaxed);
+        self.instructions
+            .store(sim.bus.counters.instructions, Ordering::Relaxed);
+    }
+}
+
 enum Endpoint {
     Listen(TcpListener),
     Connect(SocketAddr),
@@ -314,10 +325,7 @@ fn serve(
             Some(l) => l.drain(sim, progress)?,
             None => sim.advance_to(start.elapsed().as_micros() as u64)?,
         }
-        progress.time_us.store(sim.time_us(), Ordering::Relaxed);
-        progress
-            .falling
-            .store(sim.physics.fall_started_us().is_some(), Ordering::Relaxed);
+        progress.publish(sim);
         Ok(())
     };
     while !stop.load(Ordering::SeqCst) {
@@ -335,9 +343,7 @@ fn serve(
                             l.ack(reply.len())?;
                         }
                     }
-                    progress
-                        .instructions
-                        .store(sim.bus.counters.instructions, Ordering::Relaxed);
+                    progress.publish(&sim);
                 }
             }
             Err(e)
@@ -485,15 +491,6 @@ fn serve_pipes(
     let (mut messages, mut errors) = (0u64, 0u64);
     let mut packet = Vec::with_capacity(1024);
     let mut out = Vec::with_capacity(1024);
-    let publish = |sim: &Simulator| {
-        progress.time_us.store(sim.time_us(), Ordering::Relaxed);
-        progress
-            .falling
-            .store(sim.physics.fall_started_us().is_some(), Ordering::Relaxed);
-        progress
-            .instructions
-            .store(sim.bus.counters.instructions, Ordering::Relaxed);
-    };
     let mut marker = [0u8; 1];
     let mut first = true;
     while !stop.load(Ordering::SeqCst) {
@@ -542,7 +539,7 @@ fn serve_pipes(
             }
             _ => errors += 1,
         }
-        publish(&sim);
+        progress.publish(&sim);
     }
     let mut summary = sim.summary();
     summary.lockstep_messages = messages;
