@@ -110,14 +110,15 @@ for what, how, name in rows:
     summary.append("| " + " | ".join([what, how] + nominal(name)) + " |")
 
 def worst(name):
-    """README row of a sweep's worst case (a fall first, then the shortest walk): its name and
-    the row's cells as `nominal` gives them."""
+    """README row of a sweep's worst case (a fall or stop first, then the most goals missed,
+    then the largest distance error): its name and the row's cells as `nominal` gives them."""
     best = None
     for line in table(read(f"{out}/{name}/sweep.md"))[2:]:
         c = cells(line)
         m = re.match(r"([-0-9.]+) / ([0-9.]+) m", c[3])
         share = float(m.group(1)) / float(m.group(2)) if m else float("-inf")
-        key = (c[2] == "0", share)
+        missed = 0 if c[7] == "none" else len(c[7].split(";"))
+        key = (c[2] == "0", -missed, -abs(share - 1.0))
         if best is None or key < best[0]:
             best = (key, c)
     if best is None:

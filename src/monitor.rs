@@ -71,6 +71,8 @@ pub struct ServoMonitor {
     next: usize,
     credit_us: u32,
     misses: [u8; LEG_JOINTS],
+    /// The last Present Input Voltage read, 0.1 V (0: none yet).
+    supply_dv: u16,
 }
 
 /// What one READ of a servo answered.
@@ -136,7 +138,13 @@ impl ServoMonitor {
             next: 0,
             credit_us: 0,
             misses: [0; LEG_JOINTS],
+            supply_dv: 0,
         }
+    }
+
+    /// The leg servos' supply: the last Present Input Voltage read (0.1 V; 0 before the first).
+    pub fn supply_dv(&self) -> u16 {
+        self.supply_dv
     }
 
     /// One tick of `period_us`: the READs that fell due (one every [`READ_EVERY_US`], at most
@@ -211,6 +219,9 @@ impl ServoMonitor {
         };
         *misses = 0;
         self.next = (k + 1) % ROUND;
+        if let ServoHealth::Supply { voltage_dv, .. } = health {
+            self.supply_dv = voltage_dv;
+        }
         let found = check(id, &health, lim);
         if let Some(StopReason::ServoFault {
             check: ServoCheck::TorqueOff,

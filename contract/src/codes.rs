@@ -421,6 +421,11 @@ pub enum FaultKind {
     /// it: the number, or the word's index); after the start-up record of every run with
     /// `wait_enable`.
     ParamValue,
+    /// 21: the servo survey's result, once standing before the first step
+    /// (`gait_core::measure::stiffness`): `id` 0 the leg servos' stiffness measured, `value`
+    /// mN·m/rad (0: too little load to tell); `id` 1 the deflection feedback's gain it set
+    /// (gait-core `feedback::deflection` D6), `value` 1/1000 s⁻¹. A notice, not a fault.
+    ServoSurvey,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -442,6 +447,7 @@ impl FaultKind {
                 | Self::ResetCause
                 | Self::ParamStore
                 | Self::ParamValue
+                | Self::ServoSurvey
                 | Self::TimingStretched
                 | Self::SwingLowered
         )
@@ -470,6 +476,7 @@ impl FaultKind {
             Self::ServoProblem => 18,
             Self::ParamStore => 19,
             Self::ParamValue => 20,
+            Self::ServoSurvey => 21,
             Self::Other(c) => c,
         }
     }
@@ -496,6 +503,7 @@ impl FaultKind {
             18 => Self::ServoProblem,
             19 => Self::ParamStore,
             20 => Self::ParamValue,
+            21 => Self::ServoSurvey,
             c => Self::Other(c),
         }
     }

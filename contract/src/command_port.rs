@@ -157,6 +157,10 @@ pub const WALK_VY: Reg = reg(142, 2);
 pub const WALK_YAW: Reg = reg(144, 2);
 /// Command count (R).
 pub const COMMAND_COUNT: Reg = reg(146, 2);
+/// Servo stiffness, 0.01 N·m/rad (R; the servo survey's, at the present supply; 0 not measured).
+pub const SERVO_STIFFNESS: Reg = reg(148, 2);
+/// Supply voltage, 0.1 V (R; the leg servos' Present Input Voltage last read; 0 none yet).
+pub const SUPPLY_VOLTAGE: Reg = reg(150, 2);
 
 /// Param Key (RW, ASCII, NUL-padded).
 pub const PARAM_KEY: Reg = reg(160, 24);
@@ -171,12 +175,12 @@ pub const PARAM_INDEX: Reg = reg(202, 2);
 /// Param Count (R, u16).
 pub const PARAM_COUNT: Reg = reg(204, 2);
 
-/// The status registers as one block, State through Command Count: what a master reads in
-/// one READ ([`StatusBlock::decode`]).
-pub const STATUS_BLOCK: Reg = reg(128, 20);
+/// The status registers as one block, State through Supply Voltage: what a master reads in one
+/// READ ([`StatusBlock::decode`]).
+pub const STATUS_BLOCK: Reg = reg(128, 24);
 
 /// Every register, in address order.
-pub const REGISTERS: [Reg; 28] = [
+pub const REGISTERS: [Reg; 30] = [
     MODEL_NUMBER,
     FIRMWARE_VERSION,
     ID,
@@ -199,6 +203,8 @@ pub const REGISTERS: [Reg; 28] = [
     WALK_VY,
     WALK_YAW,
     COMMAND_COUNT,
+    SERVO_STIFFNESS,
+    SUPPLY_VOLTAGE,
     PARAM_KEY,
     PARAM_VALUE,
     PARAM_OP,
@@ -434,6 +440,12 @@ pub struct PortStatus {
     pub walk_velocity: [f32; 3],
     /// Explicit steps the walk took from the step list and has not stepped yet.
     pub queued: usize,
+    /// The leg servos' stiffness the servo survey measured, at the present supply, in the
+    /// register's unit 0.01 N·m/rad (0: not measured).
+    pub servo_stiffness_cnm: u16,
+    /// The leg servos' supply voltage last read, in their Present Input Voltage's unit 0.1 V
+    /// (0: none read yet).
+    pub supply_dv: u16,
 }
 
 /// The status block as a master reads it ([`STATUS_BLOCK`]), in wire units.
@@ -457,6 +469,10 @@ pub struct StatusBlock {
     pub walk_velocity: [i16; 3],
     /// Accepted command writes (wraps).
     pub command_count: u16,
+    /// The servo survey's stiffness, 0.01 N·m/rad (0: not measured).
+    pub servo_stiffness: u16,
+    /// The supply voltage, 0.1 V (0: not read yet).
+    pub supply_dv: u16,
 }
 
 impl StatusBlock {
@@ -481,6 +497,8 @@ impl StatusBlock {
             step_list: u8_of(STEP_LIST)?,
             walk_velocity: [i16_of(WALK_VX)?, i16_of(WALK_VY)?, i16_of(WALK_YAW)?],
             command_count: u16_of(COMMAND_COUNT)?,
+            servo_stiffness: u16_of(SERVO_STIFFNESS)?,
+            supply_dv: u16_of(SUPPLY_VOLTAGE)?,
         })
     }
 }
@@ -894,6 +912,8 @@ impl CommandTable {
         self.put(WALK_VX, &milli_i16(vx).to_le_bytes());
         self.put(WALK_VY, &milli_i16(vy).to_le_bytes());
         self.put(WALK_YAW, &milli_i16(w).to_le_bytes());
+        self.put(SERVO_STIFFNESS, &s.servo_stiffness_cnm.to_le_bytes());
+        self.put(SUPPLY_VOLTAGE, &s.supply_dv.to_le_bytes());
         self.queued = u8::try_from(s.queued).unwrap_or(u8::MAX);
         self.put_step_list();
     }

@@ -281,7 +281,7 @@ impl Config {
             compliance: gait_core::feedback::compliance::Compliance::DEFAULT,
             foot_force: gait_core::feedback::fdc::FootForceControl::OFF,
             step_adaptation: gait_core::feedback::catch::StepAdaptation::DEFAULT,
-            deflection: gait_core::feedback::deflection::DeflectionConfig::OFF,
+            deflection: gait_core::feedback::deflection::DeflectionConfig::DEFAULT,
             sole_poses_measured: true,
             heading_gain: DEFAULT_HEADING_GAIN,
             position_gain: 0.5,

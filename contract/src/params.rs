@@ -1296,6 +1296,24 @@ params! {
         set: |c, v| { c.step_adaptation.landing_ramp_s = v as f32 },
         get: |c| { Some(Value::Num32(c.step_adaptation.landing_ramp_s)) },
     },
+    {
+        key: "deflection_soft",
+        plan_key: None,
+        unit: "1/s",
+        domain: range(0.0, 50.0),
+        doc: "servo deflection feedback: integral gain added per unit of the leg servos' softness measured standing before the first step (gait-core deflection D6, stiffness K3; 0 = none; the survey runs while this or gyro_follow is on)",
+        set: |c, v| { c.deflection.soft_ki = v as f32 },
+        get: |c| { Some(Value::Num32(c.deflection.soft_ki)) },
+    },
+    {
+        key: "gyro_follow",
+        plan_key: None,
+        unit: "",
+        domain: Domain::Word(&["0", "1"]),
+        doc: "1 (default): the gyro damping's gains × K_n/K̂ when the servo survey measures the leg servos stiffer than servo_stiffness (gait-core gyro G3); 0: the gains as set",
+        set: |c, v| { c.gyro_feedback.follow_stiffness = v as usize == 1 },
+        get: |c| { Some(Value::Word(usize::from(c.gyro_feedback.follow_stiffness))) },
+    },
 }
 
 /// Key index meaning "not a known key".

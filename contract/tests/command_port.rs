@@ -243,8 +243,10 @@ fn status_registers_read_back_in_wire_units() {
         fault_kind: 3,
         walk_velocity: [0.05, 0.0, -0.2],
         queued: 3,
+        servo_stiffness_cnm: 1133,
+        supply_dv: 119,
     });
-    let d = read(&mut p, STATE.addr, 20).unwrap();
+    let d = read(&mut p, STATE.addr, 24).unwrap();
     // Step List Length: none in the port, 3 taken by the walk.
     assert_eq!(d[11], 3);
     assert_eq!(d[0], 2);
@@ -256,6 +258,9 @@ fn status_registers_read_back_in_wire_units() {
     assert_eq!(d[10], 3);
     assert_eq!(i16::from_le_bytes([d[12], d[13]]), 50);
     assert_eq!(i16::from_le_bytes([d[16], d[17]]), -200);
+    // Servo Stiffness 0.01 N·m/rad, Supply Voltage 0.1 V.
+    assert_eq!(u16::from_le_bytes([d[20], d[21]]), 1133);
+    assert_eq!(u16::from_le_bytes([d[22], d[23]]), 119);
     assert_eq!(p.table.state(), PortState::Walking);
     // The master's decoder reads the same block back.
     let b = StatusBlock::decode(
@@ -276,13 +281,15 @@ fn status_registers_read_back_in_wire_units() {
             step_list: 3,
             walk_velocity: [50, 0, -200],
             command_count: 0,
+            servo_stiffness: 1133,
+            supply_dv: 119,
         }
     );
-    assert_eq!(StatusBlock::decode(&d[..19]), None);
-    // The block ends at Command Count; the parameter registers end the table.
+    assert_eq!(StatusBlock::decode(&d[..23]), None);
+    // The block ends at Supply Voltage; the parameter registers end the table.
     assert_eq!(
         usize::from(STATUS_BLOCK.addr + STATUS_BLOCK.len),
-        usize::from(COMMAND_COUNT.addr + COMMAND_COUNT.len)
+        usize::from(SUPPLY_VOLTAGE.addr + SUPPLY_VOLTAGE.len)
     );
     assert_eq!(usize::from(PARAM_COUNT.addr + PARAM_COUNT.len), TABLE_LEN);
 }
@@ -337,6 +344,7 @@ proptest! {
     fn the_status_block_decodes_what_was_published(
         state in 0u8..5, support in 0u8..3, steps: u16, zmp in proptest::option::of([-3000i16..3000, -3000i16..3000]),
         stop: u8, fault: u8, queued in 0usize..9, v in [-200i16..=200, -100i16..=100, -600i16..=600],
+        stiffness: u16, supply: u16,
     ) {
         let mut t = CommandTable::new();
         let m = |x: i16| f32::from(x) / 1000.0;
@@ -349,6 +357,8 @@ proptest! {
             fault_kind: fault,
             walk_velocity: v.map(m),
             queued,
+            servo_stiffness_cnm: stiffness,
+            supply_dv: supply,
         });
         let b = StatusBlock::decode(t.read(STATUS_BLOCK.addr, STATUS_BLOCK.len).unwrap()).unwrap();
         prop_assert_eq!(b.state, PortState::from_code(state));
@@ -359,6 +369,8 @@ proptest! {
         prop_assert_eq!(usize::from(b.step_list), queued);
         prop_assert_eq!(b.walk_velocity, v);
         prop_assert_eq!(b.command_count, 0);
+        prop_assert_eq!(b.servo_stiffness, stiffness);
+        prop_assert_eq!(b.supply_dv, supply);
     }
 
     /// Any write: either accepted (and then every written register holds a value in its

@@ -204,7 +204,7 @@ proptest! {
             1..40,
         ),
     ) {
-        let cfg = DeflectionConfig { ki, max_rad, leak_s, joints: JointSet([true; 6]) };
+        let cfg = DeflectionConfig { ki, max_rad, leak_s, joints: JointSet([true; 6]), soft_ki: 0.0 };
         let mut fb = DeflectionFeedback::new(&cfg, dt);
         let bound = if max_rad.is_finite() && max_rad > 0.0 {
             max_rad.min(MAX_CORRECTION_RAD as f32)

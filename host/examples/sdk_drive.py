@@ -47,8 +47,8 @@ ADDR_VELOCITY_X = 66  # then Velocity Y (68) and Yaw Rate (70): i16 mm/s, mm/s, 
 ADDR_HEARTBEAT = 72  # any value: a valid command write that changes no command
 HEARTBEAT_S = 0.1  # how often a walking master writes it (well under the 500 ms deadman)
 STOP_CODE_DEADMAN = 13  # Stop Code after the command deadman stopped the walk
-ADDR_STATUS = 128  # State; the status block runs to Command Count (146, 2 bytes)
-STATUS_LEN = 20
+ADDR_STATUS = 128  # State; the status block runs to Supply Voltage (150, 2 bytes)
+STATUS_LEN = 24
 ADDR_STEP_COUNT = 130
 ADDR_COMMAND_COUNT = 146
 VELOCITY_X_MAX = 200  # mm/s
@@ -111,6 +111,7 @@ def decode_status(d):
         "stop_code": d[9], "fault": d[10], "list_len": d[11],
         "walk_vx": s16(u16(12)), "walk_vy": s16(u16(14)), "walk_vyaw": s16(u16(16)),
         "commands": u16(18),
+        "servo_stiffness_nm_per_rad": u16(20) / 100.0, "supply_v": u16(22) / 10.0,
     }
 
 

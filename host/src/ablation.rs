@@ -32,7 +32,7 @@ pub struct Feature {
 }
 
 /// The defaults' features the ablation switches off one at a time.
-pub const FEATURES: [Feature; 7] = [
+pub const FEATURES: [Feature; 9] = [
     Feature {
         name: "gyro",
         what: "gyro damping at the stance ankles and hips",
@@ -62,6 +62,16 @@ pub const FEATURES: [Feature; 7] = [
         name: "landing",
         what: "landing hold on the leg odometry",
         off: &["landing_gain=0"],
+    },
+    Feature {
+        name: "survey",
+        what: "deflection integral from the servo survey's softness",
+        off: &["deflection_soft=0"],
+    },
+    Feature {
+        name: "gyro-follow",
+        what: "gyro gains scaled down on servos the survey reads stiff",
+        off: &["gyro_follow=0"],
     },
     Feature {
         name: "stretch",

@@ -88,7 +88,8 @@ pub fn variants() -> [Variant; 6] {
 }
 
 /// The firmware's feedback switched off: no gyro damping, no compliance feed-forward and the
-/// servos' factory Position I Gain, no catching step, no swing sole levelling (the paper's open
+/// servos' factory Position I Gain, no catching step, no swing sole levelling, no landing hold, no
+/// deflection integral from the servo survey (the paper's open
 /// loop, as in `plans/table2-paper.toml` but at the plan's timing; `walker fil --open-loop`).
 /// In the ablation's order: each part's switches after those of the part added before it, so
 /// that the ablation's runs are its tails ([`still_off_from`]).
@@ -103,6 +104,7 @@ pub const OPEN_LOOP: &[&str] = &[
     "catch_level_pitch=0",
     "catch_level_roll=0",
     "landing_gain=0",
+    "deflection_soft=0",
 ];
 
 /// The tail of [`OPEN_LOOP`] from the switch `first` on: the parts not added yet when the
@@ -119,9 +121,10 @@ fn still_off_from(first: &str) -> &'static [&'static str] {
 /// open loop, then TLIPFM with each part of the closed loop added in turn — gyro damping at
 /// the ankles, at the hips (the gains are the firmware's defaults), the servos' compliance
 /// handling (the feed-forward of their sag and the roll servos' Position I Gain), the catching
-/// step, the swing sole kept level (this run is the firmware's default), whole-body
-/// compensation of the swing leg, the DCM/ZMP stabilizer.
-pub fn ablation() -> [Variant; 11] {
+/// step, the swing sole kept level, the landing hold on the leg odometry, the deflection
+/// integral from the servo survey (this run is the firmware's default), whole-body compensation
+/// of the swing leg, the DCM/ZMP stabilizer.
+pub fn ablation() -> [Variant; 12] {
     let v = |name, model, compensation, stabilizer, tokens| Variant {
         name,
         model,
@@ -171,7 +174,14 @@ pub fn ablation() -> [Variant; 11] {
             false,
             still_off_from("landing_gain=0"),
         ),
-        v("+landing hold (default)", Tlipfm, Plain, false, &[]),
+        v(
+            "+landing hold",
+            Tlipfm,
+            Plain,
+            false,
+            still_off_from("deflection_soft=0"),
+        ),
+        v("+servo survey (default)", Tlipfm, Plain, false, &[]),
         v("+wholebody", Tlipfm, Wholebody, false, &[]),
         v("+stabilizer", Tlipfm, Wholebody, true, &[]),
     ]
@@ -960,18 +970,19 @@ pub(crate) mod tests {
                 c.step_adaptation.is_on(),
                 c.step_adaptation.is_levelling(),
                 c.step_adaptation.landing_gain > 0.0,
+                c.deflection.soft_ki > 0.0,
                 c.compensation == walker_contract::config::Compensation::WholeBody,
                 c.stabilizer_on,
             ]
         };
         for c in &cfgs[..3] {
-            assert_eq!(parts(c), [false; 8]);
+            assert_eq!(parts(c), [false; 9]);
         }
         for w in cfgs[2..].windows(2) {
             let (a, b) = (parts(&w[0]), parts(&w[1]));
-            let added: Vec<usize> = (0..8).filter(|&i| b[i] && !a[i]).collect();
+            let added: Vec<usize> = (0..9).filter(|&i| b[i] && !a[i]).collect();
             assert_eq!(added.len(), 1, "{a:?} -> {b:?}");
-            assert!((0..8).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
+            assert!((0..9).all(|i| !a[i] || b[i]), "{a:?} -> {b:?}");
         }
         let default_run = ablation()
             .iter()
@@ -981,7 +992,7 @@ pub(crate) mod tests {
         assert_eq!(parts(&cfgs[default_run]), parts(&base));
         assert_eq!(
             parts(&base),
-            [true, true, true, true, true, true, false, false]
+            [true, true, true, true, true, true, true, false, false]
         );
     }
 

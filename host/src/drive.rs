@@ -213,6 +213,15 @@ pub fn status_line(s: &StatusBlock, t: &Teleop) -> String {
         "{state:<8} support {support:<5} steps {:>4} | cmd {cx:+4} {cy:+4} mm/s {cw:+4} mrad/s | walk {wx:+4} {wy:+4} {ww:+4} | {zmp}",
         s.step_count
     );
+    if s.supply_dv != 0 {
+        line += &format!(" | supply {:.1} V", f64::from(s.supply_dv) * 0.1);
+    }
+    if s.servo_stiffness != 0 {
+        line += &format!(
+            " | servos {:.1} N·m/rad",
+            f64::from(s.servo_stiffness) * 0.01
+        );
+    }
     if s.stop_code != 0 {
         line += &format!(" | stop code {}", s.stop_code);
     }
@@ -810,6 +819,8 @@ mod tests {
             zmp_mm: Some([15, -3]),
             walk_velocity: [40, 0, -50],
             fault_kind: 7,
+            servo_stiffness: 1133,
+            supply_dv: 119,
             ..StatusBlock::default()
         };
         let line = status_line(
@@ -820,7 +831,7 @@ mod tests {
         );
         assert_eq!(
             line,
-            "walking  support left  steps   12 | cmd  +50   +0 mm/s -100 mrad/s | walk  +40   +0  -50 | ZMP ( +15,   -3) mm | last fault 7"
+            "walking  support left  steps   12 | cmd  +50   +0 mm/s -100 mrad/s | walk  +40   +0  -50 | ZMP ( +15,   -3) mm | supply 11.9 V | servos 11.3 N·m/rad | last fault 7"
         );
     }
 }

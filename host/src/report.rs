@@ -538,6 +538,18 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
                 None => format!("servo monitor: servo {id}, stop code {code}"),
             }
         }
+        K::ServoSurvey => match id {
+            0 if v == 0 => "servo survey: too little load standing to measure the servos' stiffness".into(),
+            0 => format!(
+                "servo survey: leg servos' stiffness {:.2} N·m/rad",
+                f64::from(v) * 1e-3
+            ),
+            1 => format!(
+                "servo survey: deflection feedback gain {:.2} 1/s",
+                f64::from(v) * 1e-3
+            ),
+            c => format!("servo survey: component {c}, value {v}"),
+        },
         K::Other(c) => format!("fault kind {c} (unknown to this reader): id {id}, value {v}"),
     }
 }

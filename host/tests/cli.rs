@@ -1456,9 +1456,13 @@ fn sdk_example_uses_the_contract_registers() {
     for (name, addr) in regs {
         assert_eq!(c(name), i64::from(addr), "{name}");
     }
-    // The status block: State to the end of Command Count, the registers in the order decoded.
-    let end = port::COMMAND_COUNT.addr + port::COMMAND_COUNT.len;
+    // The status block: State to the end of Supply Voltage, the registers in the order decoded.
+    let end = port::SUPPLY_VOLTAGE.addr + port::SUPPLY_VOLTAGE.len;
     assert_eq!(c("STATUS_LEN"), i64::from(end - port::STATE.addr));
+    assert_eq!(
+        (port::STATUS_BLOCK.addr, port::STATUS_BLOCK.len),
+        (port::STATE.addr, end - port::STATE.addr)
+    );
     let decoded = [
         (port::STATE, 0),
         (port::SUPPORT_FOOT, 1),
@@ -1473,6 +1477,8 @@ fn sdk_example_uses_the_contract_registers() {
         (port::WALK_VY, 14),
         (port::WALK_YAW, 16),
         (port::COMMAND_COUNT, 18),
+        (port::SERVO_STIFFNESS, 20),
+        (port::SUPPLY_VOLTAGE, 22),
     ];
     for (r, off) in decoded {
         assert_eq!(

@@ -220,6 +220,25 @@ fn assert_ends_where_caught(w: &walker_host::fil::WalkFigures, log: &DecodedLog)
     );
 }
 
+/// The servo survey's two records (`ServoSurvey`): the leg servos' stiffness measured standing
+/// (N·m/rad) and the deflection feedback's gain it set (1/s).
+fn servo_survey(log: &DecodedLog) -> (f64, f64) {
+    let component = |c: u8| {
+        let found = log.events.iter().filter_map(|e| match e {
+            Record::Fault(f)
+                if f.kind == walker_contract::record::FaultKind::ServoSurvey && f.id == c =>
+            {
+                Some(f64::from(f.value) * 1e-3)
+            }
+            _ => None,
+        });
+        let all: Vec<f64> = found.collect();
+        assert_eq!(all.len(), 1, "one survey record {c}: {all:?}");
+        all[0]
+    };
+    (component(0), component(1))
+}
+
 /// The run ended in a fall: exit 13, and the simulator saw the robot fall.
 fn assert_fell(r: &FilResult, log: &DecodedLog) {
     assert_eq!(r.exit_code, Some(13), "{:?}", log.events);
@@ -295,6 +314,12 @@ fn short_walk_completes_and_is_deterministic() {
     assert_eq!(log_a.ticks.len(), log_b.ticks.len());
     assert_eq!(a.sim.lockstep_messages, b.sim.lockstep_messages);
     assert_eq!((a.sim.lockstep_errors, b.sim.lockstep_errors), (0, 0));
+    // The servo survey standing in the lead-in: the simulated XM430's stiffness (18.9 N·m/rad,
+    // host/src/sim/dynamixel.rs) within the survey's error (the gears' friction reads it
+    // stiffer), too stiff for the deflection integral.
+    let (k, ki) = servo_survey(&log_a);
+    assert!((15.0..24.0).contains(&k), "stiffness {k} N·m/rad");
+    assert_eq!(ki, 0.0);
     // The walk actually moved the robot forward: the CoM ends 3·S_L ahead.
     let last = log_a.ticks.last().unwrap();
     let com_x = last.com[0] as f64 * 1e-5;
@@ -650,6 +675,42 @@ fn table2_completes_with_twenty_percent_reply_loss() {
     let (r, log) = fil("drop20", spec.clone(), sim, &["feasibility=off"]);
     assert!(r.sim.bus.dropped > 500, "{:?}", r.sim.bus);
     walked_the_plan(&r, &log, &spec);
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn the_servo_survey_finds_soft_servos_and_its_deflection_integral_keeps_them_walking() {
+    // Servos at 0.6 of their drive gains: K = 0.6 · 18.9 = 11.3 N·m/rad, about the reference
+    // robot's M·g·z_c (10.5 N·m/rad), so a stance ankle cannot hold the body by its spring.
+    // Table 2 at the default timing: the survey reads them soft, the deflection integral
+    // (gait-core deflection D6) keeps the stance leg on its targets and the walk completes;
+    // with `deflection_soft=0` (the survey only measures) the robot falls backwards.
+    let mut sim = seeded(0);
+    sim.xservo.gain_scale = 0.6;
+    let spec = WalkSpec::default();
+    let ((r, log), (r_off, log_off)) = both(
+        || fil("survey-soft", spec.clone(), sim.clone(), &[]),
+        || {
+            fil(
+                "survey-soft-off",
+                spec.clone(),
+                sim.clone(),
+                &["deflection_soft=0"],
+            )
+        },
+    );
+    let w = walked_the_plan(&r, &log, &spec);
+    assert!(w.walked > 0.95 * w.planned, "{}", w.line());
+    let (k, ki) = servo_survey(&log);
+    assert!((7.0..14.0).contains(&k), "stiffness {k} N·m/rad");
+    // (D6) with the default soft_ki 4/s: k_i = 4·(18.875/K̂ − 1).
+    let want = 4.0 * (18.875 / k - 1.0);
+    assert!((ki - want).abs() < 0.01, "k_i {ki} vs {want}");
+    assert!(ki > 1.0, "k_i {ki}");
+    let (k_off, ki_off) = servo_survey(&log_off);
+    assert!((k_off - k).abs() < 0.2 * k, "{k_off} vs {k}");
+    assert_eq!(ki_off, 0.0);
+    assert_fell(&r_off, &log_off);
 }
 
 #[test]

@@ -423,6 +423,10 @@ impl<P: TickPath> Controller<'_, P> {
             Action::SendTorqueOff | Action::Idle => PortState::Stopped,
             Action::Rest => PortState::Resting,
         };
+        let supply_dv = self.monitor.supply_dv();
+        if supply_dv > 0 {
+            self.path.supply(supply_dv);
+        }
         let online = self.walk.gait.online();
         let steps = online.map_or(self.prev.steps_done, |o| o.steps_done());
         self.link.publish(&PortStatus {
@@ -434,6 +438,8 @@ impl<P: TickPath> Controller<'_, P> {
             fault_kind: self.log.last_fault(),
             walk_velocity: online.map_or([0.0; 3], |o| o.velocity()),
             queued: online.map_or(0, |o| o.queued()),
+            servo_stiffness_cnm: self.path.servo_stiffness_cnm(),
+            supply_dv,
         });
         rec.bus = bus.counters();
         rec.overruns = u16::try_from(bus.board().overruns()).unwrap_or(u16::MAX);

@@ -121,6 +121,48 @@ impl JointCorrection for Catching {
     }
 }
 
+/// The servo survey's records (`ServoSurvey`): component 0 the stiffness measured (mN·m/rad;
+/// 0: none), component 1 the deflection feedback's gain it set (1/1000 s⁻¹), component 2 the
+/// supply it was measured at (mV; 0: none read yet).
+fn survey_records<B: Board>(
+    board: &mut B,
+    log: &mut LogWriter,
+    note: &super::servo_sense::SurveyNote,
+) {
+    let now = board.now_us();
+    let k = note.stiffness.map_or(0.0, |s| s.k);
+    let volts = if note.volts.is_finite() {
+        note.volts
+    } else {
+        0.0
+    };
+    for (component, v) in [(0u8, k), (1, note.ki), (2, volts)] {
+        // k ≤ 1000 N·m/rad, k_i ≤ 150/s, the supply's 0.1 V in a u16: the thousandths fit an
+        // i32.
+        let milli = gait_core::maths::fastmath::round_i32(v * 1e3);
+        log.write(board, fault(now, FaultKind::ServoSurvey, component, milli));
+    }
+}
+
+/// Whether one of the servo survey's uses is on: the deflection integral from the softness
+/// (`deflection_soft` > 0) or the gyro damping's gains following the stiffness.
+fn survey_wanted(cfg: &Config) -> bool {
+    let g = &cfg.gyro_feedback;
+    cfg.deflection.soft_ki > 0.0 || (g.follow_stiffness && (g.ankle != 0.0 || g.hip != 0.0))
+}
+
+impl F32Path<'_> {
+    /// The gyro damping's gains for the servo survey's stiffness at the present supply (G3);
+    /// the configured ones before the survey.
+    fn follow_survey(&mut self) {
+        if let Some(k) = self.servo_sense.stiffness() {
+            self.gyro = self
+                .gyro_configured
+                .for_stiffness(self.sag.compliance.stiffness, k);
+        }
+    }
+}
+
 /// The f32 path: every feedback.
 pub(super) struct F32Path<'r> {
     dt_s: f32,
@@ -132,9 +174,13 @@ pub(super) struct F32Path<'r> {
     stabilizer: StabilizerCorrection<'r>,
     foot_force: FootForceCorrection,
     sag: SagFeedForward,
+    /// The gyro damping as configured, and as it acts (its gains follow the servo survey's
+    /// stiffness, gait-core gyro G3).
+    gyro_configured: GyroFeedback,
     gyro: GyroFeedback,
-    /// The servos' Present Position: the deflection feedback and the leg odometry.
-    servo_sense: Option<ServoSense>,
+    /// The servos' Present Position: the deflection feedback, the leg odometry, the swing's
+    /// lags and the servo survey (no reads while none of them wants one).
+    servo_sense: ServoSense,
     map: &'r JointMap,
 }
 
@@ -155,9 +201,12 @@ impl<'r> F32Path<'r> {
                 load: LoadModel::new(robot),
                 compliance: cfg.compliance,
             },
+            gyro_configured: cfg.gyro_feedback,
             gyro: cfg.gyro_feedback,
             servo_sense: ServoSense::new(
                 &cfg.deflection,
+                cfg.compliance.stiffness,
+                survey_wanted(cfg),
                 cfg.sole_poses_measured,
                 cfg.step_adaptation.level_joints > 0.0,
                 cfg.step_adaptation.hold_lag_m > 0.0,
@@ -176,19 +225,22 @@ impl TickPath for F32Path<'_> {
         previous: &GaitSample<f32>,
         walk: &mut Walk,
     ) {
-        if let Some(d) = self.servo_sense.as_mut() {
-            let [l, r] = &previous.feet;
-            let swing = previous.phase.swing();
-            let landed = d.read(bus, self.map, &[l.sole_place(), r.sole_place()], swing);
-            self.catching.adapter.set_joint_lag(d.swing_lag());
-            self.catching.adapter.set_swing_lag_m(d.sole_lag_m());
-            // Where the new foot landed off its targets: the online walk's position hold (P1),
-            // a plan's landing hold (A8).
-            if let Some((side, offset)) = landed {
-                match walk.gait.online_mut() {
-                    Some(o) => o.set_landing_offset(side, offset),
-                    None => self.catching.adapter.set_landing(side, offset),
-                }
+        let d = &mut self.servo_sense;
+        let [l, r] = &previous.feet;
+        let landed = d.read(
+            bus,
+            self.map,
+            &[l.sole_place(), r.sole_place()],
+            previous.phase,
+        );
+        self.catching.adapter.set_joint_lag(d.swing_lag());
+        self.catching.adapter.set_swing_lag_m(d.sole_lag_m());
+        // Where the new foot landed off its targets: the online walk's position hold (P1), a
+        // plan's landing hold (A8).
+        if let Some((side, offset)) = landed {
+            match walk.gait.online_mut() {
+                Some(o) => o.set_landing_offset(side, offset),
+                None => self.catching.adapter.set_landing(side, offset),
             }
         }
     }
@@ -249,26 +301,16 @@ impl TickPath for F32Path<'_> {
     ) -> MeasuredZmp {
         let [fl, fr] = feet;
         let [pl, pr] = &previous.feet;
-        let m = match self.servo_sense.as_ref() {
-            Some(d) => {
-                let [l, r] = d.feet([pl.sole_place(), pr.sole_place()]);
-                self.zmp_meter
-                    .zmp((&l, &reading(fl)), (&r, &reading(fr)))
-                    .zmp
-            }
-            None => {
-                self.zmp_meter
-                    .zmp((pl, &reading(fl)), (pr, &reading(fr)))
-                    .zmp
-            }
-        };
+        let [l, r] = self.servo_sense.feet([pl.sole_place(), pr.sole_place()]);
+        let m = self
+            .zmp_meter
+            .zmp((&l, &reading(fl)), (&r, &reading(fr)))
+            .zmp;
         MeasuredZmp { m, fx: None }
     }
 
     fn follow(&mut self, phase: gait_core::SupportPhase, loads: [f32; 2]) {
-        if let Some(d) = self.servo_sense.as_mut() {
-            d.follow(phase, loads);
-        }
+        self.servo_sense.follow(phase, loads);
     }
 
     fn wants_hold(&self) -> bool {
@@ -283,6 +325,10 @@ impl TickPath for F32Path<'_> {
         present: &GaitSample<f32>,
         offsets: &mut IkOffsets,
     ) -> bool {
+        if let Some(note) = self.servo_sense.take_survey_note() {
+            survey_records(board, log, &note);
+            self.follow_survey();
+        }
         self.catching.update(board, log, m, present);
         self.stabilizer.update(m, present, offsets);
         self.foot_force.update(m, present, offsets);
@@ -306,19 +352,27 @@ impl TickPath for F32Path<'_> {
             com_shift: ik.com_shift,
             walk_tick: ik.walk_tick,
         };
-        if let Some(d) = self.servo_sense.as_mut() {
-            d.note_ik(&q);
-        }
+        self.servo_sense.note_ik(&q);
         self.sag.correct_joints(m, &input, &mut q);
         self.gyro.correct_joints(m, &input, &mut q);
         self.catching.correct_joints(m, &input, &mut q);
-        if let Some(d) = self.servo_sense.as_mut() {
-            d.correct_joints(m, &input, &mut q);
-        }
+        self.servo_sense.correct_joints(m, &input, &mut q);
         *goal = Goal::Rad(q);
     }
 
     fn surveys(&self) -> Option<(u16, u16)> {
-        self.servo_sense.as_ref().map(ServoSense::surveys)
+        self.servo_sense.surveys()
+    }
+
+    fn supply(&mut self, dv: u16) {
+        self.servo_sense.supply(f32::from(dv) * 0.1);
+        self.follow_survey();
+    }
+
+    fn servo_stiffness_cnm(&self) -> u16 {
+        // Saturating float-to-int conversion (K ≤ 1000 N·m/rad: at most 100,000 → 65,535).
+        self.servo_sense
+            .stiffness()
+            .map_or(0, |k| (k * 100.0 + 0.5) as u16)
     }
 }

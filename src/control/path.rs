@@ -159,6 +159,16 @@ pub(super) trait TickPath {
     fn surveys(&self) -> Option<(u16, u16)> {
         None
     }
+
+    /// The leg servos' supply voltage last read (0.1 V, > 0): the servo survey's stiffness
+    /// follows it.
+    fn supply(&mut self, _dv: u16) {}
+
+    /// The leg servos' stiffness the servo survey measured, at the present supply, in
+    /// 0.01 N·m/rad (0: no survey, or not yet).
+    fn servo_stiffness_cnm(&self) -> u16 {
+        0
+    }
 }
 
 /// The f32 IK of `ik` (soles lifted by `sole_dz` when it is not 0): the targets and the sample

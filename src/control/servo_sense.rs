@@ -2,12 +2,17 @@
 //! feedback ([`gait_core::feedback::deflection`]), the leg odometry
 //! ([`gait_core::measure::odometry`]), the swing leg's pitch lag for the sole's levelling
 //! ([`gait_core::feedback::level`], e_q of (A10)) and the swing sole's lag for the clock hold's
-//! landing condition ([`gait_core::feedback::hold`], ℓ of (A11)).
+//! landing condition ([`gait_core::feedback::hold`], ℓ of (A11)); the servo survey of the leg
+//! servos' stiffness while the robot stands ([`gait_core::measure::stiffness`]), which sets the
+//! deflection feedback's gain (D6).
 
 use dxl::table::x_series;
 use dxl::{BulkReadRequest, DeviceResult};
+use gait_core::feedback::compliance::LoadModel;
+use gait_core::feedback::deflection::{DeflectionConfig, DeflectionFeedback};
 use gait_core::feedback::{JointCorrection, JointInput, Measured};
 use gait_core::measure::odometry::SurveyedSole;
+use gait_core::measure::stiffness::{Stiffness, StiffnessSurvey};
 use gait_core::robot::{ANKLE_PITCH, HIP_PITCH, JOINTS_PER_LEG, KNEE, LEG_JOINTS};
 use gait_core::{Robot, Side};
 use walker_contract::bus_map as ids;
@@ -22,10 +27,30 @@ use crate::supervisor::JointMap;
 /// odometry ([`gait_core::measure::odometry`], `sole_poses=measured`: once a step, the stance leg's six
 /// on the tick after a survey falls due, the new leg's six on the next, O3′), the swing leg's
 /// pitch lag (`catch_level_joints`: its three pitch servos every tick of a single support) and
-/// the swing sole's lag (`catch_hold_lag`: its six servos every tick of a single support).
-/// Built only while one of them acts.
+/// the swing sole's lag (`catch_hold_lag`: its six servos every tick of a single support), and
+/// the servo survey (the six pitch servos every standing tick until its window closes).
 pub(super) struct ServoSense {
-    deflection: Option<gait_core::feedback::deflection::DeflectionFeedback>,
+    /// The deflection feedback, while it acts or the survey may turn it on.
+    deflection: Option<DeflectionFeedback>,
+    /// Its configuration (the survey's gain rule D6).
+    deflection_cfg: DeflectionConfig,
+    /// The servo survey and the load model its torques come from.
+    survey: StiffnessSurvey,
+    load: LoadModel,
+    /// The datasheet stiffness K_n the survey's softness is taken against, N·m/rad.
+    k_nominal: f32,
+    /// The survey's result, once its window closed, for the log (taken once).
+    survey_note: Option<SurveyNote>,
+    /// The tick period, s.
+    dt_s: f32,
+    /// The walking tick whose goals `last_goal` holds.
+    goal_tick: Option<u32>,
+    /// The leg servos' supply last read, V (NaN: none yet).
+    supply_v: f32,
+    /// The survey's stiffness and the supply it was measured at (V; NaN: unknown), once taken.
+    surveyed: Option<(Stiffness, f32)>,
+    /// The supply the deflection gain was last set for, V.
+    gain_v: f32,
     /// The deflection feedback's joints.
     mask: gait_core::feedback::deflection::JointSet,
     odometry: Option<Odometry>,
@@ -51,6 +76,23 @@ pub(super) struct ServoSense {
     landing: Option<gait_core::kinematics::leg::LegKinematics<f32>>,
     /// This tick's swing sole distance from where its targets put it, m (NaN: not measured).
     sole_lag_m: f32,
+}
+
+/// The supply change that sets the deflection gain again after the survey, V (the servos'
+/// Present Input Voltage is in 0.1 V).
+const SUPPLY_STEP_V: f32 = 0.099;
+
+/// What the servo survey found and what it set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct SurveyNote {
+    /// The measured stiffness (None: too little load to tell, or no standing).
+    pub stiffness: Option<Stiffness>,
+    /// The softness σ it gives (K3; 0 without a result).
+    pub softness: f32,
+    /// The deflection feedback's gain k_i it gives (D6), 1/s.
+    pub ki: f32,
+    /// The supply it was measured at, V (NaN: none read yet).
+    pub volts: f32,
 }
 
 /// The leg odometry's firmware side: its state, the legs' FK and the survey's two reads.
@@ -81,19 +123,24 @@ enum Survey {
 }
 
 impl ServoSense {
-    /// The deflection feedback of `cfg` at tick period `dt_s`, the odometry when `odometry`,
-    /// the swing leg's pitch lag when `swing_lag` and the swing sole's measured lag when
-    /// `landing`; `None` while none acts.
+    /// The deflection feedback of `cfg` at tick period `dt_s` (its gain raised by the servo
+    /// survey's softness against the datasheet stiffness `k_nominal`, N·m/rad), the servo
+    /// survey when `survey` (one of its uses is on), the odometry when `odometry`, the swing
+    /// leg's pitch lag when `swing_lag` and the swing sole's measured lag when `landing`.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
-        cfg: &gait_core::feedback::deflection::DeflectionConfig,
+        cfg: &DeflectionConfig,
+        k_nominal: f32,
+        survey: bool,
         odometry: bool,
         swing_lag: bool,
         landing: bool,
         robot: &Robot,
         dt_s: f32,
-    ) -> Option<Self> {
-        let feedback = gait_core::feedback::deflection::DeflectionFeedback::new(cfg, dt_s);
-        let deflection = feedback.is_on().then_some(feedback);
+    ) -> Self {
+        let feedback = DeflectionFeedback::new(cfg, dt_s);
+        let may_act = cfg.is_on() || (survey && cfg.ki_for(1.0) > 0.0);
+        let deflection = may_act.then_some(feedback);
         let odometry = odometry.then(|| Odometry {
             legs: gait_core::measure::odometry::LegOdometry::new(
                 &gait_core::measure::odometry::OdometryLimits::DEFAULT,
@@ -102,11 +149,26 @@ impl ServoSense {
             stage: Survey::Idle,
             ik: [f32::NAN; LEG_JOINTS],
         });
-        if deflection.is_none() && odometry.is_none() && !swing_lag && !landing {
-            return None;
-        }
-        Some(ServoSense {
+        ServoSense {
             deflection,
+            deflection_cfg: *cfg,
+            survey: if survey {
+                StiffnessSurvey::new(
+                    gait_core::measure::stiffness::SETTLE_S,
+                    gait_core::measure::stiffness::SPAN_S,
+                    dt_s,
+                )
+            } else {
+                StiffnessSurvey::off()
+            },
+            load: LoadModel::new(robot),
+            k_nominal,
+            survey_note: None,
+            dt_s,
+            goal_tick: None,
+            supply_v: f32::NAN,
+            surveyed: None,
+            gain_v: f32::NAN,
             mask: cfg.joints,
             odometry,
             reqs: heapless::Vec::new(),
@@ -121,22 +183,24 @@ impl ServoSense {
             lag: [f32::NAN; 2],
             landing: landing.then(|| gait_core::kinematics::leg::LegKinematics::new(robot)),
             sole_lag_m: f32::NAN,
-        })
+        }
     }
 
     /// ONE BULK READ of the Present Positions this tick needs (rad; NaN for a reply that
     /// failed) — the deflection feedback's joints, a survey's leg (odometry O3′: the stance
     /// leg, then the new one on the next tick, which takes the survey against the plan's places
-    /// of the feet `planned`) and the `swing` leg's pitch servos (its pitch lag; all six for the
-    /// swing sole's lag). Returns a survey taken: the new foot and its surveyed place minus the
-    /// planned one (m, x and y; for the online walk's position hold).
+    /// of the feet `planned`), the `swing` leg's pitch servos (its pitch lag; all six for the
+    /// swing sole's lag) and, while the servo survey's window is open and the last sample's
+    /// `phase` stands, the pitch servos. Returns a survey taken: the new foot and its surveyed
+    /// place minus the planned one (m, x and y; for the online walk's position hold).
     pub(super) fn read<B: Board>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         map: &JointMap,
         planned: &[gait_core::Place<f32>; 2],
-        swing: Option<Side>,
+        phase: gait_core::SupportPhase,
     ) -> Option<(Side, [f32; 2])> {
+        let swing = phase.swing();
         self.present = [f32::NAN; LEG_JOINTS];
         self.lag = [f32::NAN; 2];
         self.sole_lag_m = f32::NAN;
@@ -145,10 +209,12 @@ impl ServoSense {
             Some(Survey::New { stance, .. }) => Some(stance.other()),
             _ => None,
         };
-        let deflection = self.deflection.is_some();
+        let deflection = self.deflection.as_ref().is_some_and(|d| d.is_on());
+        // Not on the ramp's ticks (no walking tick's goals to compare with yet).
+        let surveying = self.goal_tick.is_some() && self.survey.wants(phase);
         let whole_swing = self.landing.is_some();
         let swing = swing.filter(|_| self.swing_lag || whole_swing);
-        if leg.is_none() && !deflection && swing.is_none() {
+        if leg.is_none() && !deflection && !surveying && swing.is_none() {
             return None;
         }
         let side_of = |j: usize| {
@@ -166,9 +232,13 @@ impl ServoSense {
         self.reqs.clear();
         self.joints.clear();
         let f = x_series::PRESENT_POSITION;
-        for j in (0..LEG_JOINTS)
-            .filter(|&j| in_leg(j) || in_swing(j) || (deflection && self.mask.contains(j)))
-        {
+        let pitch = |j: usize| matches!(j % JOINTS_PER_LEG, HIP_PITCH | KNEE | ANKLE_PITCH);
+        for j in (0..LEG_JOINTS).filter(|&j| {
+            in_leg(j)
+                || in_swing(j)
+                || (deflection && self.mask.contains(j))
+                || (surveying && pitch(j))
+        }) {
             if let Some(id) = ids::servo_id(j) {
                 // At most LEG_JOINTS entries: cannot fail.
                 let _ = self.reqs.push(BulkReadRequest {
@@ -292,6 +362,83 @@ impl ServoSense {
         feedback.apply(q);
     }
 
+    /// The servo survey (K1)-(K2) on walking tick `k` in `phase`, the sample `input`: the goals
+    /// of tick k − 1 against this tick's Present Positions, the torques the load model gives
+    /// for the targets `q`; when its window closes, the deflection feedback's gain (D6).
+    fn survey(&mut self, input: &JointInput<'_>, q: &[f32; LEG_JOINTS]) {
+        if self.survey.is_done()
+            || self.goal_tick.map(|t| t.wrapping_add(1)) != Some(input.walk_tick)
+        {
+            return;
+        }
+        let tau = if input.phase == gait_core::SupportPhase::Standing {
+            self.load.joint_torques(input.loaded, input.com_shift, q)
+        } else {
+            [0.0; LEG_JOINTS]
+        };
+        let Some(found) = self
+            .survey
+            .add(input.phase, &self.last_goal, &self.present, &tau)
+        else {
+            return;
+        };
+        self.surveyed = found.map(|k| (k, self.supply_v));
+        let (softness, ki) = self.set_gain();
+        self.survey_note = Some(SurveyNote {
+            stiffness: found,
+            softness,
+            ki,
+            volts: self.supply_v,
+        });
+    }
+
+    /// (K3) and (D6) for the survey's stiffness at the present supply: the softness and the
+    /// deflection feedback's gain set (0 when the feedback cannot act).
+    fn set_gain(&mut self) -> (f32, f32) {
+        let softness = self.stiffness().map_or(0.0, |k| {
+            Stiffness { k, samples: 0 }.softness(self.k_nominal)
+        });
+        let ki = self.deflection_cfg.ki_for(softness);
+        self.gain_v = self.supply_v;
+        match self.deflection.as_mut() {
+            Some(d) => {
+                d.set_gain(ki, self.dt_s);
+                (softness, ki)
+            }
+            None => (softness, 0.0),
+        }
+    }
+
+    /// The survey's stiffness at the present supply (the drive's torque, so its K, follows the
+    /// supply), N·m/rad; None before the survey or without its result.
+    pub(super) fn stiffness(&self) -> Option<f32> {
+        self.surveyed
+            .map(|(k, at_v)| k.at_supply(self.supply_v, at_v).k)
+    }
+
+    /// The leg servos' supply last read (V): after the survey a change of 0.1 V or more sets
+    /// the deflection feedback's gain again for the stiffness at that supply (battery sag).
+    pub(super) fn supply(&mut self, volts: f32) {
+        if !(volts.is_finite() && volts > 0.0) {
+            return;
+        }
+        self.supply_v = volts;
+        // A survey taken before any reading: measured at the first supply read.
+        if let Some((_, at_v)) = self.surveyed.as_mut().filter(|(_, v)| v.is_nan()) {
+            *at_v = volts;
+        }
+        // A NaN `gain_v` (the survey before any reading) counts as changed.
+        let unchanged = (volts - self.gain_v).abs() < SUPPLY_STEP_V;
+        if self.surveyed.is_some() && !unchanged {
+            self.set_gain();
+        }
+    }
+
+    /// The servo survey's result, once, when its window has closed.
+    pub(super) fn take_survey_note(&mut self) -> Option<SurveyNote> {
+        self.survey_note.take()
+    }
+
     /// The soles' places for the measured ZMP when the plan puts the feet at `planned`
     /// (odometry O2; the plan's own with `sole_poses=planned`).
     pub(super) fn feet(&self, planned: [gait_core::Place<f32>; 2]) -> [SurveyedSole<f32>; 2] {
@@ -326,9 +473,9 @@ impl ServoSense {
         self.sole_lag_m
     }
 
-    /// Odometry surveys taken and refused.
-    pub(super) fn surveys(&self) -> (u16, u16) {
-        self.odometry.as_ref().map_or((0, 0), |o| o.legs.counts())
+    /// Odometry surveys taken and refused, while the odometry runs.
+    pub(super) fn surveys(&self) -> Option<(u16, u16)> {
+        self.odometry.as_ref().map(|o| o.legs.counts())
     }
 }
 
@@ -340,9 +487,96 @@ impl JointCorrection for ServoSense {
         input: &JointInput<'_>,
         q: &mut [f32; LEG_JOINTS],
     ) {
+        self.survey(input, q);
         self.apply(input.walk_tick, input.phase, q);
-        if self.swing_lag || self.landing.is_some() {
+        if self.swing_lag || self.landing.is_some() || !self.survey.is_done() {
             self.last_goal = *q;
+            self.goal_tick = Some(input.walk_tick);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The servo sense of the deflection configuration `cfg` against the XM430's datasheet
+    /// stiffness, with the survey when `survey` and nothing else, at 200 Hz.
+    fn build(cfg: &DeflectionConfig, survey: bool) -> ServoSense {
+        ServoSense::new(
+            cfg,
+            18.875,
+            survey,
+            false,
+            false,
+            false,
+            &Robot::reference(),
+            0.005,
+        )
+    }
+
+    /// A survey at 12 V that found the servos at their datasheet stiffness (σ = 0: the
+    /// deflection feedback off); then the battery sags.
+    fn surveyed_at_12_v(k: f32) -> ServoSense {
+        let mut s = build(&DeflectionConfig::DEFAULT, true);
+        s.supply(12.0);
+        s.surveyed = Some((Stiffness { k, samples: 60 }, 12.0));
+        s.set_gain();
+        s
+    }
+
+    #[test]
+    fn the_stiffness_and_the_deflection_gain_follow_the_supply() {
+        let mut s = surveyed_at_12_v(18.875);
+        assert_eq!(s.stiffness(), Some(18.875));
+        assert!(!s.deflection.as_ref().is_some_and(|d| d.is_on()));
+        // 10.5 V: K = 18.875·10.5/12 = 16.52, σ = 12/10.5 − 1 = 1/7, k_i = 4/7 per s.
+        s.supply(10.5);
+        let k = s.stiffness().unwrap();
+        assert!((k - 16.515_625).abs() < 1e-3, "{k}");
+        let d = s.deflection.as_ref().unwrap();
+        assert!(d.is_on());
+        let (softness, ki) = s.set_gain();
+        assert!((softness - 1.0 / 7.0).abs() < 1e-4, "{softness}");
+        assert!((ki - 4.0 / 7.0).abs() < 1e-4, "{ki}");
+        // Back to 12 V: off again; readings that are no voltage change nothing.
+        s.supply(12.0);
+        assert!(!s.deflection.as_ref().unwrap().is_on());
+        for bad in [f32::NAN, 0.0, -3.0, f32::INFINITY] {
+            s.supply(bad);
+            assert_eq!(s.stiffness(), Some(18.875));
+        }
+        // A change below 0.1 V keeps the gain set for the last one.
+        s.supply(11.95);
+        assert_eq!(s.gain_v, 12.0);
+    }
+
+    #[test]
+    fn without_a_survey_result_the_supply_sets_nothing() {
+        let cfg = DeflectionConfig::DEFAULT;
+        let mut s = build(&cfg, true);
+        s.supply(10.0);
+        assert_eq!(s.stiffness(), None);
+        assert!(!s.deflection.as_ref().unwrap().is_on());
+        // The deflection feedback is not even built when neither k_i nor soft_ki can act, nor
+        // when no survey runs; no survey, no reads for it.
+        assert!(build(&DeflectionConfig::OFF, true).deflection.is_none());
+        let unsurveyed = build(&cfg, false);
+        assert!(unsurveyed.deflection.is_none());
+        assert!(!unsurveyed.survey.wants(gait_core::SupportPhase::Standing));
+        assert!(unsurveyed.survey.is_done());
+        // A survey taken before the first supply reading counts as measured at that reading.
+        let mut early = build(&cfg, true);
+        early.surveyed = Some((
+            Stiffness {
+                k: 18.875,
+                samples: 60,
+            },
+            f32::NAN,
+        ));
+        early.supply(11.0);
+        assert_eq!(early.stiffness(), Some(18.875));
+        early.supply(9.625);
+        assert!((early.stiffness().unwrap() - 16.515_625).abs() < 1e-3);
     }
 }

@@ -148,11 +148,15 @@ fn table2_walk_runs_to_plan_done() {
     assert_eq!(ticks.len(), ramp + walk + plan_end_ticks(&cfg) + 1);
     // The leg odometry's survey (`sole_poses=measured`, the default): one more BULK READ of one
     // leg's six Present Positions (10 + 6 × 5 bytes out, 6 × 15 in) on two consecutive ticks of
-    // each landing's double support — 14 landings.
+    // each landing's double support — 14 landings. Before them the servo survey's window reads
+    // the six pitch servos (the same bytes) on every tick of its 0.6 s, 0.3 s into the lead-in.
     let surveying = |p: &Pkt| p.op == opcode::BULK_READ && p.tx_bytes == 40;
-    let survey_ticks: Vec<usize> = (0..ticks.len())
+    let reads: Vec<usize> = (0..ticks.len())
         .filter(|&k| ticks[k].iter().any(surveying))
         .collect();
+    let window = (ramp + 61..ramp + 181).collect::<Vec<_>>();
+    assert_eq!(reads[..window.len()], window[..], "{reads:?}");
+    let survey_ticks = &reads[window.len()..];
     assert_eq!(survey_ticks.len(), 2 * 14, "{survey_ticks:?}");
     for pair in survey_ticks.chunks(2) {
         assert_eq!(pair[1], pair[0] + 1, "{survey_ticks:?}");
@@ -929,12 +933,14 @@ fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
 
     // With a (too) long hold, the staleness bound stops: 100 ms after the last accepted
     // sample, i.e. on the 21st frozen tick at 5 ms (age 21 × 5 = 105 ms > 100 ms; the 20th
-    // is exactly 100 ms old), which starts the stop sequence in the same tick.
+    // is exactly 100 ms old), which starts the stop sequence in the same tick. From walk tick
+    // 200: after the servo survey's window (walk ticks 60–180 of the lead-in), whose reads
+    // come before the check in a tick and would make the 20th tick's age 101 ms.
     let mut cfg = autostart_config();
     cfg.supervisor.hold_ticks = 65_535;
     let ramp = ramp_ticks(&cfg);
     let mut b = board(&cfg);
-    b.freeze_at = Some((111, walk_write(&cfg, 50)));
+    b.freeze_at = Some((111, walk_write(&cfg, 200)));
     let end = run(&mut b, &cfg);
     assert_eq!(
         end,
@@ -957,7 +963,7 @@ fn a_frozen_sensor_counter_is_a_missing_reply_then_stale() {
         .iter()
         .position(|t| t.fault == FaultState::Holding)
         .unwrap();
-    assert_eq!(first_hold, ramp + 50);
+    assert_eq!(first_hold, ramp + 200);
     let stopping = tr
         .iter()
         .position(|t| t.fault == FaultState::Stopping)
@@ -2527,7 +2533,7 @@ fn the_deflection_feedback_on_the_roll_joints_drives_only_them() {
 
 /// The odometry tests' tokens: no feed-forward, no feedback, the landing hold off.
 const ODOMETRY_ONLY: &str = "compliance_roll=0 compliance_pitch=0 gyro_ankle=0 gyro_hip=0 \
-     catch_gain=0 catch_level_pitch=0 catch_level_roll=0 landing_gain=0";
+     catch_gain=0 catch_level_pitch=0 catch_level_roll=0 landing_gain=0 deflection_soft=0";
 
 /// The left hip pitch's and ankle pitch's sag in the odometry tests, ticks.
 const ODOMETRY_SAG: i32 = 20;
@@ -2661,11 +2667,15 @@ fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
         assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
     }
     assert_eq!(a.goals, b.goals, "the odometry does not move the targets");
-    // The survey ticks (the second BULK READ of one leg's six Present Positions).
+    // The survey ticks (the second BULK READ of one leg's six Present Positions), after the
+    // servo survey's window (the six pitch servos, the same bytes, 0.3–0.9 s into the lead-in).
     let surveying = |p: &Pkt| p.op == opcode::BULK_READ && p.tx_bytes == 40;
     let ticks = per_tick(&b);
-    assert!(!per_tick(&a).iter().any(|pk| pk.iter().any(surveying)));
-    let second_reads: Vec<usize> = (1..ticks.len())
+    let after_window = ramp_ticks(&on) + 181;
+    assert!(!per_tick(&a)[after_window..]
+        .iter()
+        .any(|pk| pk.iter().any(surveying)));
+    let second_reads: Vec<usize> = (after_window..ticks.len())
         .filter(|&k| ticks[k].iter().any(surveying) && ticks[k - 1].iter().any(surveying))
         .collect();
     assert_eq!(second_reads.len(), 14, "{second_reads:?}");
@@ -3376,4 +3386,86 @@ fn a_lagging_swing_leg_holds_the_clock_in_each_landing_within_the_budget() {
         held <= plain + 30 * (steps + 1),
         "{held} goals against {plain}"
     );
+}
+
+/// The servo survey (gait-core `measure::stiffness` K1–K3) on a fake robot whose six pitch
+/// servos sag as springs of K = 11 N·m/rad under the standing load the load model gives (their
+/// sag in whole ticks): standing after the ramp, the survey's record gives K̂ within the ticks'
+/// rounding of K, the deflection gain (D6) 4·(18.875/K̂ − 1) and the supply (the fake's 12.0 V);
+/// the command port's Servo Stiffness and Supply Voltage registers read the same.
+#[test]
+fn the_servo_survey_measures_the_pitch_servos_spring_standing() {
+    use gait_core::feedback::compliance::LoadModel;
+    use gait_core::robot::{ANKLE_PITCH, HIP_PITCH, JOINTS_PER_LEG, KNEE};
+    use walker_contract::command_port::{SERVO_STIFFNESS, SUPPLY_VOLTAGE};
+    let cfg = Config::default();
+    let robot = Robot::reference();
+    let map = JointMap::from_robot(&robot);
+    let mut online = commanded::online_walk(&cfg, &robot).unwrap();
+    let standing = online.tick();
+    assert_eq!(standing.phase, gait_core::SupportPhase::Standing);
+    let q = Targets::new(&robot, cfg.compensation)
+        .joints(&standing, [0.0; 2])
+        .0;
+    let tau = LoadModel::new(&robot).joint_torques(&standing, [0.0; 2], &q);
+    let k = 11.0f32;
+    let ramp = ramp_ticks(&cfg);
+    let read = |r: walker_contract::command_port::Reg| {
+        port_packet(dxl::Instruction::Read {
+            addr: r.addr,
+            len: r.len,
+        })
+    };
+    let at = ramp + 250;
+    let mut script = vec![
+        (at, read(SERVO_STIFFNESS)),
+        (at + 1, read(SUPPLY_VOLTAGE)),
+        (at + 10, write_mode(0)),
+    ];
+    script.extend(heartbeats(ramp + 10, at + 10));
+    let mut b = PortBoard::new(&cfg, script);
+    let mut knee_sag = 0;
+    for leg in 0..2 {
+        for j in [HIP_PITCH, KNEE, ANKLE_PITCH].map(|j| leg * JOINTS_PER_LEG + j) {
+            let sag = map.ticks.tick_f32(j, q[j]) - map.ticks.tick_f32(j, q[j] - tau[j] / k);
+            let id = walker_contract::bus_map::servo_id(j).unwrap();
+            let d = b.inner.devices.iter_mut().find(|d| d.id == id).unwrap();
+            d.sag = sag;
+            if j % JOINTS_PER_LEG == KNEE {
+                knee_sag = sag.abs();
+            }
+        }
+    }
+    assert!(knee_sag >= 10, "the knees sag measurably: {knee_sag} ticks");
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Resting(StopReason::Requested));
+    let survey: Vec<(u8, i32)> = b
+        .inner
+        .records()
+        .iter()
+        .filter_map(|r| match r {
+            Record::Fault(f) if f.kind == walker_contract::record::FaultKind::ServoSurvey => {
+                Some((f.id, f.value))
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(survey.len(), 3, "{survey:?}");
+    let k_hat = survey[0].1 as f32 * 1e-3;
+    assert_eq!(survey[0].0, 0);
+    assert!((k_hat - k).abs() < 0.06 * k, "K̂ {k_hat} vs {k}");
+    let want_ki = 4.0 * (18.875 / k_hat - 1.0);
+    assert_eq!(survey[1].0, 1);
+    assert!(
+        (survey[1].1 as f32 * 1e-3 - want_ki).abs() < 0.002,
+        "{survey:?} vs {want_ki}"
+    );
+    assert_eq!(survey[2], (2, 12_000));
+    let replies: Vec<_> = b.replies.iter().map(|(_, r)| reply_of(r)).collect();
+    let stiffness_cnm = u16::from_le_bytes([replies[0].1[0], replies[0].1[1]]);
+    assert!(
+        (i32::from(stiffness_cnm) - (k_hat * 100.0).round() as i32).abs() <= 1,
+        "{replies:?} vs {k_hat}"
+    );
+    assert_eq!(replies[1], (None, 120u16.to_le_bytes().to_vec()));
 }

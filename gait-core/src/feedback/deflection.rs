@@ -17,7 +17,16 @@
 //!   c_j ← c_j·(1 − Δt/T_l)                 j in the swing leg                             (D3)
 //!   c_j   held                              double support, standing                      (D4)
 //!   q_j = q*_j + c_j                        the target sent                               (D5)
+//!   k_i = k_i,0 + k_σ·σ                     σ the servos' measured softness                (D6)
 //! ```
+//!
+//! (D6): a position servo softer than the gravity pulling the robot over its ankles cannot hold
+//! a single support by its own spring (the XM430's 19 N·m/rad is about twice the reference
+//! robot's M·g·z_c; at 60 % of it the stance ankle yields and the robot falls backwards), and a
+//! stiff one needs no integral, where the integral's lag only costs heading. So the firmware's
+//! servo survey ([`crate::measure::stiffness`], standing before the first step) measures the
+//! softness σ = K_n/K̂ − 1 and the gain grows with it from the configured k_i,0 (0 by
+//! default).
 //!
 //! (D2) is an integral on the loaded leg only: a swinging leg's error is the servos' lag, not a
 //! sag, and integrating it winds up (the servos' own Position I Gain does, `servo_i_pitch`); in
@@ -73,6 +82,9 @@ pub struct DeflectionConfig {
     pub leak_s: f32,
     /// The joints that act.
     pub joints: JointSet,
+    /// Gain per unit of the servos' measured softness σ ([`crate::measure::stiffness`] K3),
+    /// 1/s: the firmware's servo survey raises k_i by `soft_ki·σ` (D6); 0: it does not.
+    pub soft_ki: f32,
 }
 
 impl DeflectionConfig {
@@ -82,7 +94,28 @@ impl DeflectionConfig {
         max_rad: 0.1,
         leak_s: 0.1,
         joints: JointSet::PITCH,
+        soft_ki: 0.0,
     };
+
+    /// The firmware's default: no integral on servos as stiff as their datasheet says, and
+    /// `soft_ki` 4/s per unit of softness, so a servo at 60 % of its datasheet's stiffness
+    /// (σ = 0.67) gets k_i ≈ 2.7/s (D6). How it was chosen: `docs/beyond.md`, "The servo
+    /// survey".
+    pub const DEFAULT: DeflectionConfig = DeflectionConfig {
+        soft_ki: 4.0,
+        ..Self::OFF
+    };
+
+    /// The integral gain for the servos' softness σ (D6): `k_i + soft_ki·σ`, 1/s (k_i alone for
+    /// a non-finite or negative σ or `soft_ki`).
+    pub fn ki_for(&self, softness: f32) -> f32 {
+        let extra = self.soft_ki * softness;
+        if extra.is_finite() && extra > 0.0 {
+            self.ki + extra
+        } else {
+            self.ki
+        }
+    }
 
     /// Whether the feedback acts (k_i > 0 and finite).
     pub fn is_on(&self) -> bool {
@@ -129,6 +162,17 @@ impl DeflectionFeedback {
             joints: cfg.joints,
             correction: [0.0; 2 * PER_LEG],
         }
+    }
+
+    /// Sets the integral gain to `ki` (1/s) at tick period `dt_s` (s), as [`Self::new`] does;
+    /// the corrections stay.
+    pub fn set_gain(&mut self, ki: f32, dt_s: f32) {
+        let gain = ki * dt_s;
+        self.gain = if gain.is_finite() && gain > 0.0 && dt_s > 0.0 {
+            gain
+        } else {
+            0.0
+        };
     }
 
     /// Whether it acts (a positive gain and limit).

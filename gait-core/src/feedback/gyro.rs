@@ -19,11 +19,29 @@
 //! lag. The swing leg is left alone (it would only move the foot in the air). Gains in seconds
 //! (rad of joint per rad/s of trunk rate); 0 turns a term off. A missing or non-finite gyro
 //! sample gives no correction.
+//!
+//! # The servos' stiffness
+//! Δq acts through the position servo's spring: the damping torque per rad/s of trunk rate is
+//! K·k. Servos stiffer than their datasheet (the firmware's servo survey measures K̂,
+//! [`crate::measure::stiffness`]) would damp harder than the gains were chosen for and turn the
+//! robot's steps into yaw, so with `follow_stiffness` both gains are scaled to keep the
+//! datasheet servo's damping torque, down to half the configured gains:
+//!
+//! ```text
+//! k ← k·clamp(K_n/K̂, 1/2, 1)                                                        (G3)
+//! ```
+//!
+//! Softer servos keep the configured gains: the sweep of the servo family found scaling them up
+//! no better (`docs/beyond.md`, "The servo survey"). The floor keeps the damping when K̂ reads
+//! far above the datasheet (the survey's error: a CoM off the model reads the ankles stiff).
 
 use super::{JointCorrection, JointInput, Measured};
 use crate::robot::Side;
 use crate::robot::LEG_JOINTS;
 use crate::trajectory::sampler::SupportPhase;
+
+/// The smallest share of the configured gains (G3) leaves.
+pub const MIN_STIFFNESS_SCALE: f32 = 0.5;
 
 /// Gyro feedback gains and limit.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,6 +52,8 @@ pub struct GyroFeedback {
     pub hip: f32,
     /// Largest correction of one joint, rad.
     pub max_rad: f32,
+    /// Whether the gains follow the servos' measured stiffness (G3).
+    pub follow_stiffness: bool,
 }
 
 impl GyroFeedback {
@@ -44,6 +64,7 @@ impl GyroFeedback {
         ankle: 0.1,
         hip: 0.1,
         max_rad: 0.1,
+        follow_stiffness: true,
     };
 
     /// No feedback.
@@ -51,7 +72,24 @@ impl GyroFeedback {
         ankle: 0.0,
         hip: 0.0,
         max_rad: 0.1,
+        follow_stiffness: false,
     };
+
+    /// These gains for servos of measured stiffness `k_measured` against the datasheet's
+    /// `k_nominal` (N·m/rad): (G3) with `follow_stiffness`, at least [`MIN_STIFFNESS_SCALE`]
+    /// of them; unchanged without it, or for a stiffness that is not a positive finite number.
+    pub fn for_stiffness(&self, k_nominal: f32, k_measured: f32) -> GyroFeedback {
+        let f = k_nominal / k_measured;
+        if !(self.follow_stiffness && f.is_finite() && f > 0.0 && k_nominal > 0.0) {
+            return *self;
+        }
+        let f = libm::fmaxf(libm::fminf(f, 1.0), MIN_STIFFNESS_SCALE);
+        GyroFeedback {
+            ankle: self.ankle * f,
+            hip: self.hip * f,
+            ..*self
+        }
+    }
 
     /// Adds the feedback for trunk rates `gyro` = [ω_x, ω_y] to the 12 joint targets `q` (left
     /// leg then right leg, joint order) of the legs on the ground in `phase`.
@@ -189,11 +227,37 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_gains_follow_a_stiffer_servo_and_keep_a_softer_ones() {
+        let g = GyroFeedback::DEFAULT;
+        // 1.4 × the datasheet: both gains × 1/1.4 (G3); the limit stays.
+        let s = g.for_stiffness(18.875, 1.4 * 18.875);
+        assert!((s.ankle - 0.1 / 1.4).abs() < 1e-7 && (s.hip - 0.1 / 1.4).abs() < 1e-7);
+        assert_eq!(s.max_rad, g.max_rad);
+        // Far stiffer: half the gains at least.
+        let s = g.for_stiffness(18.875, 1000.0);
+        assert_eq!((s.ankle, s.hip), (0.05, 0.05));
+        // Softer, or as stiff: unchanged.
+        assert_eq!(g.for_stiffness(18.875, 9.0), g);
+        assert_eq!(g.for_stiffness(18.875, 18.875), g);
+        // Off, or no stiffness to follow: unchanged.
+        let off = GyroFeedback {
+            follow_stiffness: false,
+            ..g
+        };
+        assert_eq!(off.for_stiffness(18.875, 40.0), off);
+        for k in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(g.for_stiffness(18.875, k), g, "{k}");
+        }
+        assert_eq!(g.for_stiffness(f32::NAN, 40.0), g);
+    }
+
+    #[test]
     fn fixed_point_feedback_matches_the_f32_law() {
         let g = GyroFeedback {
             ankle: 0.1,
             hip: 0.05,
             max_rad: 0.02,
+            follow_stiffness: false,
         };
         let x = FixedGyroFeedback::new(&g);
         for phase in [
@@ -227,6 +291,7 @@ mod tests {
             ankle: 0.1,
             hip: 0.05,
             max_rad: 0.02,
+            follow_stiffness: false,
         };
         let mut q = [0.0f32; 12];
         g.apply(&mut q, SupportPhase::Single(Side::Left), Some([0.1, 0.1]));
