@@ -1489,6 +1489,8 @@ struct PortBoard {
     store: Option<[Vec<u8>; 2]>,
     /// A power cut after this many bytes of the next slot write (erased, then this prefix).
     store_cut: Option<usize>,
+    /// From this control tick on, every servo's Present Input Voltage (0.1 V): a battery sag.
+    supply_at: Option<(usize, u16)>,
 }
 
 impl PortBoard {
@@ -1500,6 +1502,7 @@ impl PortBoard {
             replies: Vec::new(),
             store: None,
             store_cut: None,
+            supply_at: None,
         }
     }
 
@@ -1532,6 +1535,11 @@ impl crate::board::TickTimer for PortBoard {
         self.inner.period_us()
     }
     fn wait_tick(&mut self) -> crate::board::Tick {
+        if let Some((_, dv)) = self.supply_at.filter(|&(at, _)| at == self.tick()) {
+            for d in self.inner.devices.iter_mut() {
+                d.voltage_dv = dv;
+            }
+        }
         self.inner.wait_tick()
     }
     fn overruns(&self) -> u32 {
@@ -1689,6 +1697,7 @@ fn run_port_script(
         replies: Vec::new(),
         store: None,
         store_cut: None,
+        supply_at: None,
     };
     let end = run(&mut b, cfg);
     assert_eq!(end, RunEnd::Resting(StopReason::Requested));
@@ -2219,6 +2228,7 @@ fn the_deadman_does_not_arm_for_the_autostart_plan() {
         replies: Vec::new(),
         store: None,
         store_cut: None,
+        supply_at: None,
     };
     let end = run(&mut b, &cfg);
     assert_eq!(end, RunEnd::Stopped(StopReason::PlanDone));
@@ -3168,6 +3178,7 @@ fn saved_parameters_survive_a_reboot_and_a_cut_save_and_corrupt_ones_give_the_de
             replies: Vec::new(),
             store: Some(store),
             store_cut: cut,
+            supply_at: None,
         };
         let end = crate::control::run_on_enable(&mut b, &mut cfg);
         (b, cfg, end)
@@ -3392,7 +3403,9 @@ fn a_lagging_swing_leg_holds_the_clock_in_each_landing_within_the_budget() {
 /// servos sag as springs of K = 11 N·m/rad under the standing load the load model gives (their
 /// sag in whole ticks): standing after the ramp, the survey's record gives K̂ within the ticks'
 /// rounding of K, the deflection gain (D6) 4·(18.875/K̂ − 1) and the supply (the fake's 12.0 V);
-/// the command port's Servo Stiffness and Supply Voltage registers read the same.
+/// the command port's Servo Stiffness and Supply Voltage registers read the same. Then the
+/// battery sags to 10.5 V: the servo monitor reads it within a round (120 ms) and the Servo
+/// Stiffness register follows it, K̂·10.5/12.
 #[test]
 fn the_servo_survey_measures_the_pitch_servos_spring_standing() {
     use gait_core::feedback::compliance::LoadModel;
@@ -3417,13 +3430,18 @@ fn the_servo_survey_measures_the_pitch_servos_spring_standing() {
         })
     };
     let at = ramp + 250;
+    let sag_at = at + 20;
+    let after = sag_at + 60;
     let mut script = vec![
         (at, read(SERVO_STIFFNESS)),
         (at + 1, read(SUPPLY_VOLTAGE)),
-        (at + 10, write_mode(0)),
+        (after, read(SERVO_STIFFNESS)),
+        (after + 1, read(SUPPLY_VOLTAGE)),
+        (after + 10, write_mode(0)),
     ];
-    script.extend(heartbeats(ramp + 10, at + 10));
+    script.extend(heartbeats(ramp + 10, after + 10));
     let mut b = PortBoard::new(&cfg, script);
+    b.supply_at = Some((sag_at, 105));
     let mut knee_sag = 0;
     for leg in 0..2 {
         for j in [HIP_PITCH, KNEE, ANKLE_PITCH].map(|j| leg * JOINTS_PER_LEG + j) {
@@ -3468,4 +3486,11 @@ fn the_servo_survey_measures_the_pitch_servos_spring_standing() {
         "{replies:?} vs {k_hat}"
     );
     assert_eq!(replies[1], (None, 120u16.to_le_bytes().to_vec()));
+    let sagged_cnm = u16::from_le_bytes([replies[2].1[0], replies[2].1[1]]);
+    let want = k_hat * 100.0 * 10.5 / 12.0;
+    assert!(
+        (f32::from(sagged_cnm) - want).abs() <= 1.5,
+        "{sagged_cnm} vs {want}"
+    );
+    assert_eq!(replies[3], (None, 105u16.to_le_bytes().to_vec()));
 }
