@@ -365,8 +365,9 @@ impl TickPath for F32Path<'_> {
     }
 
     fn supply(&mut self, dv: u16) {
-        self.servo_sense.supply(f32::from(dv) * 0.1);
-        self.follow_survey();
+        if self.servo_sense.supply(f32::from(dv) * 0.1) {
+            self.follow_survey();
+        }
     }
 
     fn servo_stiffness_cnm(&self) -> u16 {

@@ -87,8 +87,6 @@ const SUPPLY_STEP_V: f32 = 0.099;
 pub(super) struct SurveyNote {
     /// The measured stiffness (None: too little load to tell, or no standing).
     pub stiffness: Option<Stiffness>,
-    /// The softness σ it gives (K3; 0 without a result).
-    pub softness: f32,
     /// The deflection feedback's gain k_i it gives (D6), 1/s.
     pub ki: f32,
     /// The supply it was measured at, V (NaN: none read yet).
@@ -225,14 +223,11 @@ impl ServoSense {
             }
         };
         let in_leg = |j: usize| leg == Some(side_of(j));
-        let in_swing = |j: usize| {
-            swing == Some(side_of(j))
-                && (whole_swing || matches!(j % JOINTS_PER_LEG, HIP_PITCH | KNEE | ANKLE_PITCH))
-        };
+        let pitch = |j: usize| matches!(j % JOINTS_PER_LEG, HIP_PITCH | KNEE | ANKLE_PITCH);
+        let in_swing = |j: usize| swing == Some(side_of(j)) && (whole_swing || pitch(j));
         self.reqs.clear();
         self.joints.clear();
         let f = x_series::PRESENT_POSITION;
-        let pitch = |j: usize| matches!(j % JOINTS_PER_LEG, HIP_PITCH | KNEE | ANKLE_PITCH);
         for j in (0..LEG_JOINTS).filter(|&j| {
             in_leg(j)
                 || in_swing(j)
@@ -371,7 +366,8 @@ impl ServoSense {
         {
             return;
         }
-        let tau = if input.phase == gait_core::SupportPhase::Standing {
+        // The torques only on the window's ticks (the settling and a step only count).
+        let tau = if self.survey.wants(input.phase) {
             self.load.joint_torques(input.loaded, input.com_shift, q)
         } else {
             [0.0; LEG_JOINTS]
@@ -383,10 +379,9 @@ impl ServoSense {
             return;
         };
         self.surveyed = found.map(|k| (k, self.supply_v));
-        let (softness, ki) = self.set_gain();
+        let (_, ki) = self.set_gain();
         self.survey_note = Some(SurveyNote {
             stiffness: found,
-            softness,
             ki,
             volts: self.supply_v,
         });
@@ -395,9 +390,9 @@ impl ServoSense {
     /// (K3) and (D6) for the survey's stiffness at the present supply: the softness and the
     /// deflection feedback's gain set (0 when the feedback cannot act).
     fn set_gain(&mut self) -> (f32, f32) {
-        let softness = self.stiffness().map_or(0.0, |k| {
-            Stiffness { k, samples: 0 }.softness(self.k_nominal)
-        });
+        let softness = self
+            .surveyed_now()
+            .map_or(0.0, |s| s.softness(self.k_nominal));
         let ki = self.deflection_cfg.ki_for(softness);
         self.gain_v = self.supply_v;
         match self.deflection.as_mut() {
@@ -409,18 +404,25 @@ impl ServoSense {
         }
     }
 
-    /// The survey's stiffness at the present supply (the drive's torque, so its K, follows the
-    /// supply), N·m/rad; None before the survey or without its result.
-    pub(super) fn stiffness(&self) -> Option<f32> {
+    /// The survey's result at the present supply (the drive's torque, so its K, follows the
+    /// supply); None before the survey or without its result.
+    fn surveyed_now(&self) -> Option<Stiffness> {
         self.surveyed
-            .map(|(k, at_v)| k.at_supply(self.supply_v, at_v).k)
+            .map(|(k, at_v)| k.at_supply(self.supply_v, at_v))
+    }
+
+    /// The survey's stiffness at the present supply, N·m/rad; None before the survey or without
+    /// its result.
+    pub(super) fn stiffness(&self) -> Option<f32> {
+        self.surveyed_now().map(|s| s.k)
     }
 
     /// The leg servos' supply last read (V): after the survey a change of 0.1 V or more sets
-    /// the deflection feedback's gain again for the stiffness at that supply (battery sag).
-    pub(super) fn supply(&mut self, volts: f32) {
+    /// the deflection feedback's gain again for the stiffness at that supply (battery sag);
+    /// returns whether it did (what follows the stiffness follows it then).
+    pub(super) fn supply(&mut self, volts: f32) -> bool {
         if !(volts.is_finite() && volts > 0.0) {
-            return;
+            return false;
         }
         self.supply_v = volts;
         // A survey taken before any reading: measured at the first supply read.
@@ -429,9 +431,11 @@ impl ServoSense {
         }
         // A NaN `gain_v` (the survey before any reading) counts as changed.
         let unchanged = (volts - self.gain_v).abs() < SUPPLY_STEP_V;
-        if self.surveyed.is_some() && !unchanged {
+        let again = self.surveyed.is_some() && !unchanged;
+        if again {
             self.set_gain();
         }
+        again
     }
 
     /// The servo survey's result, once, when its window has closed.
@@ -531,7 +535,7 @@ mod tests {
         assert_eq!(s.stiffness(), Some(18.875));
         assert!(!s.deflection.as_ref().is_some_and(|d| d.is_on()));
         // 10.5 V: K = 18.875·10.5/12 = 16.52, σ = 12/10.5 − 1 = 1/7, k_i = 4/7 per s.
-        s.supply(10.5);
+        assert!(s.supply(10.5), "a 1.5 V sag sets the gain again");
         let k = s.stiffness().unwrap();
         assert!((k - 16.515_625).abs() < 1e-3, "{k}");
         let d = s.deflection.as_ref().unwrap();
@@ -543,11 +547,11 @@ mod tests {
         s.supply(12.0);
         assert!(!s.deflection.as_ref().unwrap().is_on());
         for bad in [f32::NAN, 0.0, -3.0, f32::INFINITY] {
-            s.supply(bad);
+            assert!(!s.supply(bad));
             assert_eq!(s.stiffness(), Some(18.875));
         }
         // A change below 0.1 V keeps the gain set for the last one.
-        s.supply(11.95);
+        assert!(!s.supply(11.95));
         assert_eq!(s.gain_v, 12.0);
     }
 
@@ -555,7 +559,7 @@ mod tests {
     fn without_a_survey_result_the_supply_sets_nothing() {
         let cfg = DeflectionConfig::DEFAULT;
         let mut s = build(&cfg, true);
-        s.supply(10.0);
+        assert!(!s.supply(10.0), "no survey result: nothing to set");
         assert_eq!(s.stiffness(), None);
         assert!(!s.deflection.as_ref().unwrap().is_on());
         // The deflection feedback is not even built when neither k_i nor soft_ki can act, nor
