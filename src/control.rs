@@ -409,13 +409,17 @@ pub fn standby<B: Board>(
     }
 }
 
+/// The robot the firmware walks.
+const REFERENCE_ROBOT: Robot = Robot::reference();
+
 /// [`run`] with the command port `link` (kept by [`run_on_enable`] across runs).
 pub fn run_with<B: Board>(
     board: &mut B,
     cfg: &Config,
     link: &mut commanded::CommandLink,
 ) -> RunEnd {
-    let robot = Robot::reference();
+    // A reference to the one copy in flash (a copy here would sit in this frame all run).
+    let robot: &Robot = &REFERENCE_ROBOT;
     let mut log = LogWriter::new();
     // The operator's configuration (before the servo-speed check adjusts the walk), logged
     // after the start-up record where the runs log their parameters.
@@ -432,13 +436,13 @@ pub fn run_with<B: Board>(
     if boot.cause != ResetCause::PowerOn {
         return not_power_on(board, cfg, &boot, &mut log);
     }
-    let targets = gait_core::gait::Targets::new(&robot, cfg.compensation);
+    let targets = gait_core::gait::Targets::new(robot, cfg.compensation);
     // The walk (≈ 10 KB) is built where it lives, never moved: its storage lends its engine to
     // the servo-speed check (a dry run that adjusts the walk before anything moves), then
     // holds the gait (BENCHMARKS.md "RAM").
     let mut walk = Walk::idle();
     let timing = match walk.scratch() {
-        Some(s) => startup::servo_timing_in(cfg, &robot, &targets, &mut || board.feed(), s),
+        Some(s) => startup::servo_timing_in(cfg, robot, &targets, &mut || board.feed(), s),
         None => Err(GaitError::NotBuiltIn),
     };
     let timing = match timing {
@@ -450,7 +454,7 @@ pub fn run_with<B: Board>(
         ..*cfg
     };
     // Without autostart the robot stands up and walks on command (the online walk).
-    if let Err(e) = walk.build(cfg, &robot) {
+    if let Err(e) = walk.build(cfg, robot) {
         return rejected_walk(board, cfg, &boot, &mut log, e);
     }
     let time = Cell::new(0);
@@ -459,10 +463,10 @@ pub fn run_with<B: Board>(
         Ok(s) => s,
         Err(end) => return end,
     };
-    let map = JointMap::from_robot(&robot);
+    let map = JointMap::from_robot(robot);
     let parts = Parts {
         cfg,
-        robot: &robot,
+        robot,
         targets: &targets,
         map: &map,
     };
@@ -471,7 +475,7 @@ pub fn run_with<B: Board>(
     #[cfg(feature = "board-opencm")]
     {
         walk_on(&mut bus, log, &parts, &mut walk, link, started, |_| {
-            fixed_path::FixedPath::new(cfg, &robot)
+            fixed_path::FixedPath::new(cfg, robot)
         })
     }
     #[cfg(not(feature = "board-opencm"))]
@@ -479,11 +483,11 @@ pub fn run_with<B: Board>(
         #[cfg(feature = "fixed-gait")]
         if cfg.arithmetic == gait_core::gait::Arithmetic::Fixed {
             return walk_on(&mut bus, log, &parts, &mut walk, link, started, |_| {
-                fixed_path::FixedPath::new(cfg, &robot)
+                fixed_path::FixedPath::new(cfg, robot)
             });
         }
         walk_on(&mut bus, log, &parts, &mut walk, link, started, |z_c| {
-            f32_path::F32Path::new(cfg, &robot, &map, z_c)
+            f32_path::F32Path::new(cfg, robot, &map, z_c)
         })
     }
 }

@@ -1,39 +1,57 @@
 //! The robot's servo bus as both ends see it: device IDs, joint order and names, and the ONE
 //! joint-angle ↔ servo-tick map.
 //!
-//! # IDs (`shared/reference-robot.md`)
-//! Left leg 1–6, right leg 7–12, each in the joint order `hip_yaw`, `hip_roll`, `hip_pitch`,
+//! # IDs
+//! The robot description's bus ([`gait_core::robot::BusDescription`]) is the one place the IDs
+//! are written; the constants here are the reference robot's (`shared/reference-robot.md`):
+//! left leg 1–6, right leg 7–12, each in the joint order `hip_yaw`, `hip_roll`, `hip_pitch`,
 //! `knee`, `ankle_pitch`, `ankle_roll` ([`JOINT_NAMES`]); foot sensor boards 111 (left) and 112
-//! (right); the waist IMU board 200. Joint index j (0..12) ↔ servo ID j + 1.
+//! (right); the waist IMU board 200.
 //!
 //! # rad ↔ tick ([`TickMap`])
 //! `tick = zero_tick + round(sign_j · q · ticks_per_rad)` and
 //! `q = sign_j · (tick − zero_tick) / ticks_per_rad`, with `ticks_per_rad = ticks_per_turn / 2π`
 //! (4096 / 2π ≈ 651.9 on X-series servos, `zero_tick` = 2048 = 0 rad) and `sign_j` = ±1 the
-//! mounting of joint j (all +1 on the reference robot). The firmware works in f32
+//! mounting of joint j (the description's `mounting`: all +1 on the reference robot). The firmware works in f32
 //! ([`TickMap::tick_f32`], [`TickMap::rad_f32`]), the simulator in f64 ([`TickMap::tick_f64`],
 //! [`TickMap::rad_f64`]), the fixed-point pipeline in I16F16 bits ([`TickMap::tick_fx`]); the
 //! four are the same map in three number types.
 
+use gait_core::robot::{BusDescription, ImuPlace};
 pub use gait_core::robot::{JOINTS_PER_LEG, JOINT_NAMES, LEG_JOINTS};
 use gait_core::Robot;
 
-/// Left-leg servos in joint order (see [`JOINT_NAMES`]).
-pub const LEFT_LEG: [u8; JOINTS_PER_LEG] = [1, 2, 3, 4, 5, 6];
-/// Right-leg servos in joint order.
-pub const RIGHT_LEG: [u8; JOINTS_PER_LEG] = [7, 8, 9, 10, 11, 12];
+/// The reference robot's bus.
+const BUS: BusDescription = Robot::reference().bus;
+
 /// All twelve leg servos, left then right (joint index j ↔ `LEGS[j]`).
-pub const LEGS: [u8; LEG_JOINTS] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
+pub const LEGS: [u8; LEG_JOINTS] = BUS.legs;
+/// Left-leg servos in joint order (see [`JOINT_NAMES`]).
+pub const LEFT_LEG: [u8; JOINTS_PER_LEG] = [LEGS[0], LEGS[1], LEGS[2], LEGS[3], LEGS[4], LEGS[5]];
+/// Right-leg servos in joint order.
+pub const RIGHT_LEG: [u8; JOINTS_PER_LEG] =
+    [LEGS[6], LEGS[7], LEGS[8], LEGS[9], LEGS[10], LEGS[11]];
+/// The foot sensor boards (left, right).
+const FEET: [u8; 2] = match BUS.foot_boards {
+    Some(f) => f,
+    None => [0, 0],
+};
 /// Left foot sensor board.
-pub const FOOT_LEFT: u8 = 111;
+pub const FOOT_LEFT: u8 = FEET[0];
 /// Right foot sensor board.
-pub const FOOT_RIGHT: u8 = 112;
+pub const FOOT_RIGHT: u8 = FEET[1];
 /// Waist IMU board.
-pub const IMU: u8 = 200;
+pub const IMU: u8 = match BUS.imu {
+    ImuPlace::Bus(id) => id,
+    ImuPlace::Board => 0,
+};
 /// Devices read every control tick, in bulk-read order.
 pub const SENSOR_IDS: [u8; 3] = [FOOT_LEFT, FOOT_RIGHT, IMU];
 /// Every device on the bus: the legs, the foot boards, the IMU.
-pub const DEVICE_IDS: [u8; 15] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 111, 112, 200];
+pub const DEVICE_IDS: [u8; 15] = [
+    LEGS[0], LEGS[1], LEGS[2], LEGS[3], LEGS[4], LEGS[5], LEGS[6], LEGS[7], LEGS[8], LEGS[9],
+    LEGS[10], LEGS[11], FOOT_LEFT, FOOT_RIGHT, IMU,
+];
 
 /// The servos' encoder facts (X-series control table): ticks per turn, 0 rad tick, extended
 /// position range.
@@ -72,21 +90,21 @@ impl Default for TickMap {
 }
 
 impl TickMap {
-    /// The reference robot's map: 4096 ticks per turn, 2048 = 0 rad, every sign +1.
+    /// The reference robot's map: 4096 ticks per turn, 2048 = 0 rad, its mounting signs.
     pub const fn reference() -> Self {
         TickMap {
             zero_tick: ZERO_TICK,
             ticks_per_turn: TICKS_PER_TURN,
-            sign: [1; LEG_JOINTS],
+            sign: Robot::reference().mounting,
         }
     }
 
-    /// From a robot description's servo data (all signs +1: the mounting is not described).
+    /// From a robot description's servo data and mounting signs.
     pub fn from_robot(robot: &Robot) -> Self {
         TickMap {
             zero_tick: robot.servo.zero_tick,
             ticks_per_turn: i32::try_from(robot.servo.ticks_per_turn).unwrap_or(TICKS_PER_TURN),
-            sign: [1; LEG_JOINTS],
+            sign: robot.mounting,
         }
     }
 

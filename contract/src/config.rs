@@ -239,14 +239,14 @@ impl Config {
         }
     }
 
-    /// Defaults: 200 Hz tick, 1 Mbps bus, Return Delay Time 0, 50 ms watchdog, TLIPFM,
+    /// Defaults: 200 Hz tick, the reference robot's bus speed (1 Mbps), Return Delay Time 0, 50 ms watchdog, TLIPFM,
     /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
     /// compensation, stabilizer off, gyro balance feedback on (k_a 0.1 s, k_h 0.05 s), 8 start-up
     /// attempts, servo-speed feasibility by stretching the timing, factory servo gains.
     pub const fn default_config() -> Self {
         Config {
             tick_period_us: 5_000,
-            bus_baud: 1_000_000,
+            bus_baud: gait_core::Robot::reference().bus.baud,
             return_delay_us: 0,
             watchdog_ms: 50,
             supervisor: SupervisorConfig::default_limits(),

@@ -45,11 +45,14 @@ pub enum GaitError {
     /// The servo-speed check's dry run would exceed its work budget (the plan is too long to
     /// be checked at start-up: fewer steps, shorter phases or a longer dt).
     DryRunTooLong,
+    /// The robot description's bus or mounting is inconsistent (an ID used twice or out of
+    /// range, a mounting sign other than ±1, a zero baud rate).
+    BadRobotDescription,
 }
 
 impl GaitError {
     /// Every error, in the order of its code.
-    pub const ALL: [GaitError; 20] = [
+    pub const ALL: [GaitError; 21] = [
         GaitError::NonFinite,
         GaitError::NonPositiveMass,
         GaitError::NonPositiveLength,
@@ -70,6 +73,7 @@ impl GaitError {
         GaitError::NotBuiltIn,
         GaitError::NotPeriodicWalk,
         GaitError::DryRunTooLong,
+        GaitError::BadRobotDescription,
     ];
 
     /// The wire code (the firmware's `ConfigRejected` fault record carries it), one explicit
@@ -96,6 +100,7 @@ impl GaitError {
             GaitError::NotBuiltIn => 17,
             GaitError::NotPeriodicWalk => 18,
             GaitError::DryRunTooLong => 19,
+            GaitError::BadRobotDescription => 20,
         }
     }
 }
@@ -125,6 +130,7 @@ impl TryFrom<u8> for GaitError {
             17 => GaitError::NotBuiltIn,
             18 => GaitError::NotPeriodicWalk,
             19 => GaitError::DryRunTooLong,
+            20 => GaitError::BadRobotDescription,
             other => return Err(other),
         })
     }
@@ -156,6 +162,9 @@ impl core::fmt::Display for GaitError {
             }
             GaitError::DryRunTooLong => {
                 "the plan is too long for the start-up servo-speed check's work budget"
+            }
+            GaitError::BadRobotDescription => {
+                "the robot description's bus IDs, mounting signs or baud rate are inconsistent"
             }
         };
         f.write_str(s)

@@ -1,7 +1,11 @@
-//! The robot description: masses, geometry, joint limits and servo limits in one value.
+//! The robot description: masses, geometry, joint limits and signs, servo limits and the bus
+//! (servo IDs, sensors, held servos) in one value.
 //!
-//! [`Robot::reference`] is the TKU-X class robot of `shared/reference-robot.md` (masses from
-//! seed 000 Table 1; geometry assumed there). Every other module takes its numbers from a
+//! Two robots are described, each in its own module and nowhere else: [`Robot::reference`]
+//! ([`tku_x`]) is the TKU-X class robot of `shared/reference-robot.md` (masses from seed 000
+//! Table 1; geometry assumed there), [`Robot::op3`] ([`op3`]) the ROBOTIS OP3 (MuJoCo
+//! Menagerie's `robotis_op3/op3.xml`, ROBOTIS-OP3's `op3_manager/config/OP3.robot`).
+//! [`Robot::by_name`] selects one by name. Every other module takes its numbers from a
 //! `Robot`, never from literals.
 //!
 //! Frames: world x forward, y left, z up. Joint order per leg: `hip_yaw` (z), `hip_roll` (x),
@@ -10,6 +14,9 @@
 //! frame at the zero pose (knee flexion > 0).
 
 use crate::error::GaitError;
+
+pub mod op3;
+pub mod tku_x;
 
 /// Number of joints of one leg.
 pub const JOINTS_PER_LEG: usize = 6;
@@ -39,6 +46,37 @@ pub const JOINT_NAMES: [&str; LEG_JOINTS] = [
     "r_ankle_pitch",
     "r_ankle_roll",
 ];
+
+/// The joint limits of the walking workspace, left leg, joint order (both described robots;
+/// the mechanical ranges are wider): positive roll moves the left foot outward (+y).
+pub const WALKING_LIMITS: [JointLimit; JOINTS_PER_LEG] = [
+    JointLimit {
+        min: -0.9,
+        max: 0.9,
+    }, // hip_yaw
+    JointLimit {
+        min: -0.5,
+        max: 0.7,
+    }, // hip_roll
+    JointLimit {
+        min: -1.9,
+        max: 0.9,
+    }, // hip_pitch
+    JointLimit { min: 0.0, max: 2.5 }, // knee
+    JointLimit {
+        min: -1.3,
+        max: 1.1,
+    }, // ankle_pitch
+    JointLimit {
+        min: -0.7,
+        max: 0.5,
+    }, // ankle_roll
+];
+
+/// Every described robot.
+pub const ROBOTS: [Robot; 2] = [tku_x::TKU_X, op3::OP3];
+/// The names [`Robot::by_name`] takes.
+pub const ROBOT_NAMES: [&str; 2] = [tku_x::TKU_X.name, op3::OP3.name];
 
 /// Which leg / foot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -116,6 +154,9 @@ pub struct Masses {
     pub sole_height: f64,
     /// Upper-body rotational inertia J about the pitch axis, kg·m² (τ = J·φ̈, seed 000 eq 1).
     pub upper_body_inertia: f64,
+    /// Forward offset of the upper-body mass from the pelvis point P, pelvis frame, m (the
+    /// whole-body compensation puts it there; the pendulum models keep it over P).
+    pub upper_body_forward: f64,
 }
 
 impl Masses {
@@ -144,11 +185,18 @@ pub struct Geometry {
     pub calf: f64,
     /// Height of the ankle joint above the sole, m.
     pub ankle_height: f64,
-    /// Sole length (x), centred under the ankle, m.
+    /// The sole point S (the foot's reference point: the centre of the sole rectangle, on the
+    /// ground) from the ankle's ground projection, foot frame: (forward, outward), m; the
+    /// outward offset is +y on the left foot and −y on the right.
+    pub sole_offset: [f64; 2],
+    /// Height of the hip yaw joint above the hip point (where the roll and pitch axes meet),
+    /// m: the yaw axis is vertical through the hip point, so only the body's shape needs it.
+    pub hip_yaw_height: f64,
+    /// Sole length (x), centred on the sole point, m.
     pub sole_length: f64,
-    /// Sole width (y), centred under the ankle, m.
+    /// Sole width (y), centred on the sole point, m.
     pub sole_width: f64,
-    /// Force sensor positions (x, y) relative to the ankle's ground projection, foot frame, m.
+    /// Force sensor positions (x, y) relative to the sole point, foot frame, m.
     /// Order: front-left, front-right, rear-left, rear-right.
     pub force_sensors: [[f64; 2]; 4],
 }
@@ -171,9 +219,48 @@ pub struct ServoLimits {
     pub zero_tick: i32,
 }
 
+/// Where the robot's IMU (gyro and accelerometer) is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImuPlace {
+    /// A Dynamixel 2.0 device on the servo bus with this ID (a waist sensor board).
+    Bus(u8),
+    /// On the controller board itself (the OpenCR's IMU).
+    Board,
+}
+
+/// A servo that is not a leg joint and is held at one angle while the robot walks (arms,
+/// head): torque on, that pose, monitored like the legs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeldServo {
+    /// Joint name in logs.
+    pub name: &'static str,
+    /// Dynamixel ID.
+    pub id: u8,
+    /// The held angle in the servo's own direction, rad (tick = zero tick + angle · ticks/rad).
+    pub angle: f64,
+}
+
+/// The robot's servo bus: speed, who is on it and what each ID is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BusDescription {
+    /// Baud rate, bit/s.
+    pub baud: u32,
+    /// Leg servo IDs in joint order, left leg then right leg ([`JOINT_NAMES`]).
+    pub legs: [u8; LEG_JOINTS],
+    /// The foot sensor boards (left, right), each reporting four forces; `None` when the robot
+    /// has no foot sensors.
+    pub foot_boards: Option<[u8; 2]>,
+    /// Where the IMU is.
+    pub imu: ImuPlace,
+    /// The other servos, held at a pose.
+    pub held: &'static [HeldServo],
+}
+
 /// The robot description: everything the gait, the kinematics and the simulator need.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Robot {
+    /// The robot's name as [`Robot::by_name`] takes it.
+    pub name: &'static str,
     /// Masses and their positions.
     pub masses: Masses,
     /// Leg and foot geometry.
@@ -183,6 +270,12 @@ pub struct Robot {
     pub joint_limits: [JointLimit; JOINTS_PER_LEG],
     /// Servo limits.
     pub servo: ServoLimits,
+    /// Mounting of each leg joint's servo, left leg then right leg: +1 when the joint's
+    /// positive direction (right-hand rule about +x, +y or +z of the pelvis frame at the zero
+    /// pose) is the servo's positive direction, −1 when it is the opposite.
+    pub mounting: [i8; LEG_JOINTS],
+    /// The servo bus.
+    pub bus: BusDescription,
     /// Gravity g, m/s².
     pub gravity: f64,
 }
@@ -194,63 +287,19 @@ impl Default for Robot {
 }
 
 impl Robot {
-    /// The reference robot of `shared/reference-robot.md`.
+    /// The reference robot of `shared/reference-robot.md` (TKU-X class).
     pub const fn reference() -> Robot {
-        Robot {
-            masses: Masses {
-                upper_body: 3.05,
-                upper_body_height: 0.09,
-                thigh: 0.20,
-                calf: 0.50,
-                sole: 0.25,
-                sole_height: 0.015,
-                upper_body_inertia: 0.026,
-            },
-            geometry: Geometry {
-                hip_offset_y: 0.045,
-                thigh: 0.100,
-                calf: 0.100,
-                ankle_height: 0.030,
-                sole_length: 0.100,
-                sole_width: 0.060,
-                force_sensors: [
-                    [0.040, 0.025],
-                    [0.040, -0.025],
-                    [-0.040, 0.025],
-                    [-0.040, -0.025],
-                ],
-            },
-            // Left-leg limits; positive roll moves the left foot outward (+y).
-            joint_limits: [
-                JointLimit {
-                    min: -0.9,
-                    max: 0.9,
-                }, // hip_yaw
-                JointLimit {
-                    min: -0.5,
-                    max: 0.7,
-                }, // hip_roll
-                JointLimit {
-                    min: -1.9,
-                    max: 0.9,
-                }, // hip_pitch
-                JointLimit { min: 0.0, max: 2.5 }, // knee
-                JointLimit {
-                    min: -1.3,
-                    max: 1.1,
-                }, // ankle_pitch
-                JointLimit {
-                    min: -0.7,
-                    max: 0.5,
-                }, // ankle_roll
-            ],
-            servo: ServoLimits {
-                max_speed: 4.8,
-                ticks_per_turn: 4096,
-                zero_tick: 2048,
-            },
-            gravity: 9.80665,
-        }
+        tku_x::TKU_X
+    }
+
+    /// The ROBOTIS OP3.
+    pub const fn op3() -> Robot {
+        op3::OP3
+    }
+
+    /// The described robot called `name` ([`ROBOT_NAMES`]), `None` for another name.
+    pub fn by_name(name: &str) -> Option<Robot> {
+        ROBOTS.iter().find(|r| r.name == name).copied()
     }
 
     /// Limits of joint `j` (0..6, joint order) of leg `side`. The right leg mirrors the left
@@ -282,10 +331,14 @@ impl Robot {
             m.sole,
             m.sole_height,
             m.upper_body_inertia,
+            m.upper_body_forward,
             g.hip_offset_y,
             g.thigh,
             g.calf,
             g.ankle_height,
+            g.sole_offset[0],
+            g.sole_offset[1],
+            g.hip_yaw_height,
             g.sole_length,
             g.sole_width,
             self.servo.max_speed,
@@ -320,5 +373,46 @@ impl Robot {
             return Err(GaitError::BadJointLimit);
         }
         Ok(())
+    }
+
+    /// Checks the bus and the mounting: every ID used once and a valid Dynamixel ID
+    /// (0..=252), every mounting sign ±1, a baud rate above 0. ([`Robot::validate`] checks
+    /// what the gait and the kinematics read; this, what the bus and the tick map read.)
+    pub fn validate_bus(&self) -> Result<(), GaitError> {
+        if self.mounting.iter().any(|&s| s != 1 && s != -1)
+            || self.bus.baud == 0
+            || !self.bus_ids_unique()
+        {
+            return Err(GaitError::BadRobotDescription);
+        }
+        Ok(())
+    }
+
+    /// Every device ID on the bus: legs, foot boards, a bus IMU, held servos (in that order);
+    /// calls `f` with each.
+    pub fn for_each_bus_id(&self, mut f: impl FnMut(u8)) {
+        let b = &self.bus;
+        b.legs.iter().for_each(|&id| f(id));
+        if let Some(feet) = b.foot_boards {
+            feet.iter().for_each(|&id| f(id));
+        }
+        if let ImuPlace::Bus(id) = b.imu {
+            f(id);
+        }
+        b.held.iter().for_each(|h| f(h.id));
+    }
+
+    /// True when no two devices share an ID and none is the broadcast ID 254 or above 252.
+    pub fn bus_ids_unique(&self) -> bool {
+        let mut seen = [false; 256];
+        let mut ok = true;
+        self.for_each_bus_id(|id| {
+            let slot = seen.get_mut(usize::from(id));
+            match slot {
+                Some(s) if !*s && id <= 252 => *s = true,
+                _ => ok = false,
+            }
+        });
+        ok
     }
 }

@@ -197,7 +197,7 @@ fn atan2_matches_f64_over_dense_grid() {
 /// 0.16–0.225 m, each foot ±0.06 m (x) and ±0.04 m (y) around the point under its nominal hip
 /// (in the pelvis heading), up to 0.03 m off the ground, yaw ±0.4 (pelvis) and ±0.4 relative
 /// (foot), roll and pitch ±0.15 for all three (or 0 when `level`).
-fn workspace(rng: &mut TestRng, level: bool) -> ([f64; 6], [f64; 6], [f64; 6]) {
+fn workspace(robot: &Robot, rng: &mut TestRng, level: bool) -> ([f64; 6], [f64; 6], [f64; 6]) {
     let t = |rng: &mut TestRng| {
         if level {
             0.0
@@ -217,7 +217,7 @@ fn workspace(rng: &mut TestRng, level: bool) -> ([f64; 6], [f64; 6], [f64; 6]) {
     let foot = |sigma: f64, rng: &mut TestRng| {
         let (lx, ly) = (
             rng.random_range(-0.06..0.06),
-            sigma * ROBOT.geometry.hip_offset_y + rng.random_range(-0.04..0.04),
+            sigma * robot.geometry.hip_offset_y + rng.random_range(-0.04..0.04),
         );
         [
             p[0] + c * lx - s * ly,
@@ -234,13 +234,13 @@ fn workspace(rng: &mut TestRng, level: bool) -> ([f64; 6], [f64; 6], [f64; 6]) {
 }
 
 /// (worst joint error vs f64 IK, worst FK position error, worst FK rotation error, cases used).
-fn compare_with_f64(level: bool, cases: usize, seed: u64) -> (f64, f64, f64, usize) {
-    let kin = FixedLegKinematics::new(&ROBOT);
-    let k64 = LegKinematics::<f64>::new(&ROBOT);
+fn compare_with_f64(robot: &Robot, level: bool, cases: usize, seed: u64) -> (f64, f64, f64, usize) {
+    let kin = FixedLegKinematics::new(robot);
+    let k64 = LegKinematics::<f64>::new(robot);
     let mut rng = seeded(seed);
     let (mut worst_q, mut worst_p, mut worst_r, mut used) = (0.0f64, 0.0f64, 0.0f64, 0);
     for _ in 0..cases {
-        let (p, l, r) = workspace(&mut rng, level);
+        let (p, l, r) = workspace(robot, &mut rng, level);
         let (fp, fl, fr) = (fixed_pose(p), fixed_pose(l), fixed_pose(r));
         // The f64 IK gets exactly the fixed-point targets.
         let (pp, lp, rp) = (to_pose(&fp), to_pose(&fl), to_pose(&fr));
@@ -278,15 +278,18 @@ fn compare_with_f64(level: bool, cases: usize, seed: u64) -> (f64, f64, f64, usi
 
 #[test]
 fn fixed_ik_matches_f64_ik_on_random_reachable_targets() {
-    for (level, seed) in [(true, 7u64), (false, 11u64)] {
-        let (q, p, r, used) = compare_with_f64(level, 30_000, seed);
-        println!(
-            "{} targets, {used} reachable: joints within {q:.2e} rad of the f64 IK, \
-             FK(f64) of the fixed angles within {p:.2e} m / {r:.2e} (rotation entries)",
-            if level { "level" } else { "tilted" }
-        );
-        assert!(used > 20_000, "too few reachable cases: {used}");
-        assert!(q < 2e-4 && p < 5e-4);
+    for robot in gait_core::robot::ROBOTS {
+        for (level, seed) in [(true, 7u64), (false, 11u64)] {
+            let (q, p, r, used) = compare_with_f64(&robot, level, 30_000, seed);
+            println!(
+                "{}: {} targets, {used} reachable: joints within {q:.2e} rad of the f64 IK, \
+                 FK(f64) of the fixed angles within {p:.2e} m / {r:.2e} (rotation entries)",
+                robot.name,
+                if level { "level" } else { "tilted" }
+            );
+            assert!(used > 20_000, "too few reachable cases: {used}");
+            assert!(q < 2e-4 && p < 5e-4);
+        }
     }
 }
 

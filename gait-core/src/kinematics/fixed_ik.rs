@@ -488,6 +488,44 @@ fn limit(v: Fx, lim: &[Fx; 2], bit: u8, flags: &mut u8) -> Fx {
 // ---------------------------------------------------------------------------------------------
 // The IK.
 
+/// An angle limit (rad) as I16F16 bits rounded inward (`up`: toward +∞, for a lower limit),
+/// saturating; 0 for a non-finite limit. One out-of-line copy: it takes f64 rounding, a library
+/// call on FPU-less cores.
+#[inline(never)]
+fn rad_bits_inward(v: f64, up: bool) -> i32 {
+    if !v.is_finite() {
+        return 0;
+    }
+    let m = i32::MAX as f64;
+    let s = v * 65536.0;
+    let r = if up { libm::ceil(s) } else { libm::floor(s) };
+    r.clamp(-m, m) as i32
+}
+
+/// cos x for x in [0, π] (a knee limit; x clamped to it, NaN taken as 0), f64, within 1e-15 of
+/// libm's:
+/// cos x = −cos(π − x) beyond π/2, then the Taylor series to x²⁰/20! (< 1e-18 on [0, π/2]).
+/// Not `libm::cos`: its full argument reduction (never needed here) is ≈ 2.5 KB of flash on the
+/// FPU-less M3, where this runs once.
+fn cos_half_turn(x: f64) -> f64 {
+    use core::f64::consts::{FRAC_PI_2, PI};
+    let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, PI) };
+    let (x, sign) = if x > FRAC_PI_2 {
+        (PI - x, -1.0)
+    } else {
+        (x, 1.0)
+    };
+    let x2 = x * x;
+    // Horner from the x²⁰ term down: 1 − x²/2!·(1 − x²/(3·4)·(1 − …)).
+    let mut sum = 1.0;
+    let mut k = 20.0;
+    while k > 0.0 {
+        sum = 1.0 - x2 / (k * (k - 1.0)) * sum;
+        k -= 2.0;
+    }
+    sign * sum
+}
+
 /// Longest link length accepted (m): keeps every product of the knee step inside `i64`.
 const MAX_LINK: f64 = 0.5;
 
@@ -497,6 +535,8 @@ pub struct FixedLegKinematics {
     /// Hip offset and ankle height, 2⁻³⁰ m.
     hip_offset_y: i64,
     ankle_height: i64,
+    /// The sole point's (forward, outward) offset from the ankle's ground projection, 2⁻³⁰ m.
+    sole_offset: [i64; 2],
     /// (L1 + L2)², (L1 − L2)², 4·L2², 2⁻⁶⁰ m².
     sum2: i64,
     diff2: i64,
@@ -528,12 +568,20 @@ impl FixedLegKinematics {
                 0.0
             }
         };
+        // A signed offset, limited to ±0.5 m as the lengths are.
+        let offset = |v: f64| -> f64 {
+            if v.is_finite() {
+                v.clamp(-MAX_LINK, MAX_LINK)
+            } else {
+                0.0
+            }
+        };
         let (l1, l2) = (len(g.thigh), len(g.calf));
         let p30 = |v: f64| bits(v, 30, 1 << 62);
         let (t, c) = (p30(l1), p30(l2));
         let knee = robot.joint_limit(Side::Left, 3);
         let reach = |q: f64| -> f64 {
-            let d2 = l1 * l1 + l2 * l2 + 2.0 * l1 * l2 * libm::cos(q);
+            let d2 = l1 * l1 + l2 * l2 + 2.0 * l1 * l2 * cos_half_turn(q);
             if d2 > 0.0 {
                 libm::sqrt(d2)
             } else {
@@ -549,25 +597,19 @@ impl FixedLegKinematics {
         let d_max = reach(kmin.max(KNEE_MIN_BEND));
         let d_min = reach(kmax.min(core::f64::consts::PI)).max((l1 - l2).abs());
         let lim = |side: Side| -> [[Fx; 2]; JOINTS_PER_LEG] {
-            core::array::from_fn(|j| {
+            let mut out = [[Fx::ZERO; 2]; JOINTS_PER_LEG];
+            for (j, o) in out.iter_mut().enumerate() {
                 let l = robot.joint_limit(side, j);
-                let m = i32::MAX as f64;
-                let lo = if l.min.is_finite() {
-                    libm::ceil(l.min * 65536.0).clamp(-m, m) as i32
-                } else {
-                    0
-                };
-                let hi = if l.max.is_finite() {
-                    libm::floor(l.max * 65536.0).clamp(-m, m) as i32
-                } else {
-                    0
-                };
-                [Fx::from_bits(lo), Fx::from_bits(hi.max(lo))]
-            })
+                let lo = rad_bits_inward(l.min, true);
+                let hi = rad_bits_inward(l.max, false);
+                *o = [Fx::from_bits(lo), Fx::from_bits(hi.max(lo))];
+            }
+            out
         };
         FixedLegKinematics {
             hip_offset_y: p30(len(g.hip_offset_y)),
             ankle_height: p30(len(g.ankle_height)),
+            sole_offset: [p30(offset(g.sole_offset[0])), p30(offset(g.sole_offset[1]))],
             sum2: (t + c) * (t + c),
             diff2: (t - c) * (t - c),
             four_calf2: 4 * c * c,
@@ -631,20 +673,30 @@ impl FixedLegKinematics {
     ) -> LegOut {
         let lims = self.limits(side);
         let rf = rot_cols(foot);
-        let hip = match side {
-            Side::Left => self.hip_offset_y,
-            Side::Right => -self.hip_offset_y,
+        let (hip, outward) = match side {
+            Side::Left => (self.hip_offset_y, self.sole_offset[1]),
+            Side::Right => (-self.hip_offset_y, -self.sole_offset[1]),
         };
+        let forward = self.sole_offset[0];
 
-        // d = H − A = (P − S) + σd·R_P·e_y − h·R_F·e_z in 2⁻³⁰ m: |P − S| ≤ 2000 m → < 2⁴²,
-        // the offsets < 2²⁹.
+        // d = H − A = (P − S) + σd·R_P·e_y − h·R_F·e_z + o_x·R_F·e_x + σo_y·R_F·e_y in 2⁻³⁰ m:
+        // |P − S| ≤ 2000 m → < 2⁴², the offsets < 2²⁹.
         let ps = [
             pelvis.x.to_bits() as i64 - foot.x.to_bits() as i64,
             pelvis.y.to_bits() as i64 - foot.y.to_bits() as i64,
             pelvis.z.to_bits() as i64 - foot.z.to_bits() as i64,
         ];
+        // The sole point's offset only where there is one (six 64-bit products saved a leg on
+        // FPU-less cores for a sole under the ankle; the sum is the same either way).
+        let offset = forward != 0 || outward != 0;
         let d: V3 = core::array::from_fn(|i| {
-            (ps[i] << 14) + ((hip * rp[1][i]) >> 30) - ((self.ankle_height * rf[2][i]) >> 30)
+            let d =
+                (ps[i] << 14) + ((hip * rp[1][i]) >> 30) - ((self.ankle_height * rf[2][i]) >> 30);
+            if offset {
+                d + ((forward * rf[0][i]) >> 30) + ((outward * rf[1][i]) >> 30)
+            } else {
+                d
+            }
         });
         // Scale down by 2^k so that every component is ≤ 2³⁰ (1 m): then r = R_Fᵀ·d and |r|²
         // stay below 3·2⁶⁰.
@@ -834,6 +886,35 @@ mod tests {
                 mul30(cp, cr),
             ],
         ]
+    }
+
+    #[test]
+    fn cos_half_turn_is_libm_cos_on_zero_to_pi() {
+        for i in 0..=10_000 {
+            let x = core::f64::consts::PI * f64::from(i) / 10_000.0;
+            let (got, want) = (cos_half_turn(x), libm::cos(x));
+            assert!((got - want).abs() < 1e-15, "{x}: {got} vs {want}");
+        }
+        assert_eq!(cos_half_turn(0.0), 1.0);
+        assert_eq!(cos_half_turn(-1.0), 1.0);
+        assert_eq!(cos_half_turn(f64::NAN), 1.0);
+        assert_eq!(cos_half_turn(9.0), -1.0);
+        // The described robots' reach bounds come out to the same 2⁻³⁰ m bits either way.
+        for robot in crate::robot::ROBOTS {
+            let g = &robot.geometry;
+            let knee = robot.joint_limit(Side::Left, 3);
+            for q in [knee.min.max(KNEE_MIN_BEND), knee.max] {
+                let d = |c: f64| {
+                    libm::sqrt(g.thigh * g.thigh + g.calf * g.calf + 2.0 * g.thigh * g.calf * c)
+                };
+                assert_eq!(
+                    bits(d(cos_half_turn(q)), 30, 1 << 62),
+                    bits(d(libm::cos(q)), 30, 1 << 62),
+                    "{}: knee {q}",
+                    robot.name
+                );
+            }
+        }
     }
 
     #[test]

@@ -13,7 +13,8 @@
 //! Joint order per leg: q0 hip_yaw (z), q1 hip_roll (x), q2 hip_pitch (y), q3 knee (y),
 //! q4 ankle_pitch (y), q5 ankle_roll (x). Zero = straight leg, sole flat; positive = right-hand
 //! rule (knee flexion > 0; a crouch is q2 < 0, q3 > 0, q4 < 0). With σ = +1 (left) / −1
-//! (right), thigh L1, calf L2, ankle height h, hip offset d and e_z = (0, 0, 1):
+//! (right), thigh L1, calf L2, ankle height h, hip offset d, the sole point's offset
+//! o = (o_x, σ·o_y, −h) from the ankle in the foot frame and e_z = (0, 0, 1):
 //!
 //! ```text
 //! R_P  = R(pelvis)                         P = pelvis position
@@ -23,17 +24,18 @@
 //! R_C  = R_T·Ry(q3)                        calf frame
 //! A    = K − L2·R_C·e_z                    ankle (both ankle axes intersect)
 //! R_F  = R_C·Ry(q4)·Rx(q5)                 foot frame
-//! S    = A − h·R_F·e_z                     sole point (foot pose position)
+//! S    = A + R_F·o                         sole point (foot pose position)
 //! ```
 //!
 //! Mass points: thigh (H + K)/2, calf (K + A)/2, sole S + h_s·R_F·e_z (h_s = sole mass height).
+//! On the reference robot o = (0, 0, −h): the sole point is under the ankle.
 //!
 //! # Inverse kinematics (closed form)
 //!
 //! Given the pelvis pose (R_P, P) and the foot pose (R_F, S):
 //!
 //! ```text
-//! A = S + h·R_F·e_z,   H = P + R_P·(0, σd, 0),   r = R_Fᵀ·(H − A)   (hip seen from the ankle)
+//! A = S − R_F·o,   H = P + R_P·(0, σd, 0),   r = R_Fᵀ·(H − A)   (hip seen from the ankle)
 //! ```
 //!
 //! From the chain, `r = Rx(−q5)·Ry(−q4)·v` with `v = Ry(−q3)·(0,0,L1) + (0,0,L2)
@@ -239,6 +241,8 @@ pub struct LegKinematics<R> {
     thigh: R,
     calf: R,
     ankle_height: R,
+    /// The sole point's (forward, outward) offset from the ankle's ground projection.
+    sole_offset: [R; 2],
     sole_mass_height: R,
     d_min: R,
     d_max: R,
@@ -391,6 +395,7 @@ impl<R: Real> LegKinematics<R> {
             thigh: R::of(l1),
             calf: R::of(l2),
             ankle_height: R::of(g.ankle_height),
+            sole_offset: [R::of(g.sole_offset[0]), R::of(g.sole_offset[1])],
             sole_mass_height: R::of(robot.masses.sole_height),
             d_min: R::of(d_min),
             d_max: R::of(d_max),
@@ -456,7 +461,9 @@ impl<R: Real> LegKinematics<R> {
         let ankle = axpy(&knee, -self.calf, &rc[2]);
         let r_pitch = post_ry(&rc, sin_cos_real(q[4]));
         let rf = post_rx(&r_pitch, sin_cos_real(q[5]));
-        let sole = axpy(&ankle, -self.ankle_height, &rf[2]);
+        let below = axpy(&ankle, -self.ankle_height, &rf[2]);
+        let ahead = axpy(&below, self.sole_offset[0], &rf[0]);
+        let sole = axpy(&ahead, sigma * self.sole_offset[1], &rf[1]);
         let axes = [rp[2], r_yaw[0], r_roll[1], rt[1], rc[1], r_pitch[0]];
         ([hip, knee, ankle, sole], rf, axes)
     }
@@ -581,7 +588,10 @@ impl<R: Real> LegKinematics<R> {
             R::of(side.sign()) * self.hip_offset_y,
             &rp[1],
         );
-        let ankle = axpy(&foot.position(), self.ankle_height, &rf[2]);
+        let sigma = R::of(side.sign());
+        let above = axpy(&foot.position(), self.ankle_height, &rf[2]);
+        let behind = axpy(&above, -self.sole_offset[0], &rf[0]);
+        let ankle = axpy(&behind, -(sigma * self.sole_offset[1]), &rf[1]);
         let d = [hip[0] - ankle[0], hip[1] - ankle[1], hip[2] - ankle[2]];
         let mut r = [dot(&rf[0], &d), dot(&rf[1], &d), dot(&rf[2], &d)];
 

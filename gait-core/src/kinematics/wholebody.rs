@@ -8,11 +8,12 @@
 //! whole-body CoM:
 //!
 //! ```text
-//!   c_wb(P) = ( M_u·(P + l_u·e_z) + Σ_legs Σ_links m_i·r_i(P, feet) ) / M        (W1)
+//!   c_wb(P) = ( M_u·(P + R_P·(f_u, 0, l_u)) + Σ_legs Σ_links m_i·r_i(P, feet) ) / M  (W1)
 //!   P_{k+1} = P_k + G·(c* − c_wb(P_k))_xy,  G = M / (M_u + 2·(¾·m_t + ¼·m_calf))    (W2)
 //! ```
 //!
-//! r_i are the link mass points from the leg IK/FK for pelvis P and the planned feet. Moving the
+//! r_i are the link mass points from the leg IK/FK for pelvis P and the planned feet, f_u the
+//! upper body's forward offset (`upper_body_forward`: 0 on the reference robot). Moving the
 //! pelvis by δ moves c_wb by about δ/G ≈ 0.73·δ (G from the mass fractions), so each
 //! fixed-point step (W2) shrinks the error by an order of magnitude or more;
 //! [`WholeBody::pelvis_for_com`] takes a fixed number of steps (bounded cost: `iterations` + 1
@@ -42,6 +43,7 @@ pub struct WholeBody<R> {
     kin: LegKinematics<R>,
     upper_body: R,
     upper_body_height: R,
+    upper_body_forward: R,
     thigh: R,
     calf: R,
     sole: R,
@@ -72,6 +74,7 @@ impl<R: Real> WholeBody<R> {
             kin: LegKinematics::new(robot),
             upper_body: R::of(m.upper_body),
             upper_body_height: R::of(m.upper_body_height),
+            upper_body_forward: R::of(m.upper_body_forward),
             thigh: R::of(m.thigh),
             calf: R::of(m.calf),
             sole: R::of(m.sole),
@@ -93,12 +96,12 @@ impl<R: Real> WholeBody<R> {
     /// body, then thigh, calf, sole of the left and of the right leg.
     pub fn mass_points(&self, pelvis: &Pose<R>, q: &[R; LEG_JOINTS]) -> [(R, [R; 3]); MASS_POINTS] {
         let rot = pelvis.rotation();
-        let up = self.upper_body_height;
-        // The upper-body mass sits l_u above P along the pelvis z axis.
+        let (up, fwd) = (self.upper_body_height, self.upper_body_forward);
+        // The upper-body mass sits l_u above P along the pelvis z axis and f_u along its x axis.
         let ub = [
-            pelvis.x + rot[0][2] * up,
-            pelvis.y + rot[1][2] * up,
-            pelvis.z + rot[2][2] * up,
+            pelvis.x + rot[0][0] * fwd + rot[0][2] * up,
+            pelvis.y + rot[1][0] * fwd + rot[1][2] * up,
+            pelvis.z + rot[2][0] * fwd + rot[2][2] * up,
         ];
         let mut out = [(self.upper_body, ub); MASS_POINTS];
         for (i, side) in [Side::Left, Side::Right].into_iter().enumerate() {

@@ -1,0 +1,132 @@
+//! The ROBOTIS OP3: twenty XM430-W350 servos on a 2 Mbps Dynamixel 2.0 bus, an OpenCR 1.0
+//! board with its own IMU, no foot sensors.
+//!
+//! # Sources
+//! - MuJoCo Menagerie `robotis_op3/op3.xml` (Apache-2.0): the link frames, joint axes, masses
+//!   and inertias, the foot boxes.
+//! - ROBOTIS-OP3 `op3_manager/config/OP3.robot`: the IDs (legs 7–18, right before left; arms
+//!   1–6; head 19–20) and the bus speed (2,000,000 bit/s).
+//!
+//! # Geometry (from op3.xml's body positions, zero pose, left leg; m)
+//! In `body_link`'s frame the hip yaw joint is at (0, 0.035, 0), the roll link 0.024 behind
+//! and 0.0285 below it, the pitch link 0.0241 ahead of that and 0.019 outward: the roll axis
+//! (x) and the pitch axis (y) meet at the hip point H = (0.0001, 0.035, −0.0285), 0.1 mm ahead
+//! of the yaw axis (neglected: the yaw axis is taken through H). The pelvis point P is the
+//! midpoint of the two hip points, so `hip_offset_y` = 0.035 and `hip_yaw_height` = 0.0285.
+//! Knee 0.11015 below H (`thigh`), ankle pitch 0.11 below the knee (`calf`); the ankle roll
+//! link sits 0.0241 behind and 0.019 inward of the ankle pitch link, so the ankle axes meet
+//! under H. The foot boxes (in the ankle roll link: centres (0.024, 0.013, −0.0265) and
+//! (0.024, 0.0125, −0.0265), half-sizes (0.0635, 0.028, 0.004) and (0.057, 0.039, 0.004))
+//! put the ground 0.0305 below the ankle (`ankle_height`) and the soles' centres 0.0001
+//! behind and 0.0125–0.013 outward of it. The sole rectangle is the wider box,
+//! 0.114 × 0.078 m, centred 0.0001 behind and 0.0125 outward of the ankle (`sole_offset`);
+//! the narrower box reaches 6.5 mm further ahead and behind (support left out, on the safe
+//! side).
+//!
+//! # Masses (op3.xml's inertials; arms held down, see [`OP3`]`.bus.held`)
+//! The pendulum models carry three masses per leg and the upper body. The hip yaw and roll
+//! links (0.01181 + 0.17886 kg, their servos at the hip) barely move with the leg and count in
+//! the upper body with the trunk (1.34928), the head (0.01176 + 0.13631) and the arms
+//! (2 × (0.01176 + 0.17758 + 0.04127)): M_u = 2.33991 kg, its CoM 0.0801 above P and 0.0113
+//! behind it, J_yy = 0.0113 kg·m² about it. Thigh = the hip pitch link, 0.11543 kg; calf = the
+//! knee link, 0.04015 kg; sole = the ankle pitch and roll links, 0.2482 kg, 0.0315 above the
+//! ground. Whole robot 3.14747 kg.
+//!
+//! # Joint signs (op3.xml's axes)
+//! Left: hip yaw −z, hip roll −x, hip pitch +y, knee +y, ankle pitch −y, ankle roll +x; the
+//! right leg's pitch axes are the opposite (hip pitch −y, knee −y, ankle pitch +y).
+//!
+//! # Limits and servos (assumed)
+//! The joint limits are the walking workspace ([`WALKING_LIMITS`]); the servos are
+//! XM430-W350 at 12 V (no-load 4.8 rad/s, 4096 ticks per turn, 2048 = 0 rad).
+
+use super::{
+    BusDescription, Geometry, HeldServo, ImuPlace, Masses, Robot, ServoLimits, WALKING_LIMITS,
+};
+
+/// The arm and head servos, held while walking: arms hanging 0.27 rad out from the body
+/// (shoulder roll ±1.3 rad from op3.xml's T-pose), elbows straight, head straight ahead.
+const HELD: [HeldServo; 8] = [
+    HeldServo {
+        name: "r_sho_pitch",
+        id: 1,
+        angle: 0.0,
+    },
+    HeldServo {
+        name: "l_sho_pitch",
+        id: 2,
+        angle: 0.0,
+    },
+    HeldServo {
+        name: "r_sho_roll",
+        id: 3,
+        angle: -1.3,
+    },
+    HeldServo {
+        name: "l_sho_roll",
+        id: 4,
+        angle: 1.3,
+    },
+    HeldServo {
+        name: "r_el",
+        id: 5,
+        angle: 0.0,
+    },
+    HeldServo {
+        name: "l_el",
+        id: 6,
+        angle: 0.0,
+    },
+    HeldServo {
+        name: "head_pan",
+        id: 19,
+        angle: 0.0,
+    },
+    HeldServo {
+        name: "head_tilt",
+        id: 20,
+        angle: 0.0,
+    },
+];
+
+/// The ROBOTIS OP3.
+pub const OP3: Robot = Robot {
+    name: "op3",
+    masses: Masses {
+        upper_body: 2.33991,
+        upper_body_height: 0.0801,
+        thigh: 0.11543,
+        calf: 0.04015,
+        sole: 0.2482,
+        sole_height: 0.0315,
+        upper_body_inertia: 0.0113,
+        upper_body_forward: -0.0113,
+    },
+    geometry: Geometry {
+        hip_offset_y: 0.035,
+        thigh: 0.11015,
+        calf: 0.11,
+        ankle_height: 0.0305,
+        sole_offset: [-0.0001, 0.0125],
+        hip_yaw_height: 0.0285,
+        sole_length: 0.114,
+        sole_width: 0.078,
+        // No foot sensors (`bus.foot_boards` is `None`): nothing reads these.
+        force_sensors: [[0.0; 2]; 4],
+    },
+    joint_limits: WALKING_LIMITS,
+    servo: ServoLimits {
+        max_speed: 4.8,
+        ticks_per_turn: 4096,
+        zero_tick: 2048,
+    },
+    mounting: [-1, -1, 1, 1, -1, 1, -1, -1, -1, -1, 1, 1],
+    bus: BusDescription {
+        baud: 2_000_000,
+        legs: [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17],
+        foot_boards: None,
+        imu: ImuPlace::Board,
+        held: &HELD,
+    },
+    gravity: 9.80665,
+};
