@@ -240,6 +240,18 @@ pub struct HeldServo {
     pub angle: f64,
 }
 
+/// The upper body's collision shape (the simulator's fall detection and video): two boxes
+/// and a head sphere, in the pelvis frame from P, m.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyShape {
+    /// The pelvis box: half sizes, centre.
+    pub pelvis: [[f64; 3]; 2],
+    /// The trunk box: half sizes, centre.
+    pub trunk: [[f64; 3]; 2],
+    /// The head sphere: radius, centre height above P.
+    pub head: [f64; 2],
+}
+
 /// The robot's servo bus: speed, who is on it and what each ID is.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BusDescription {
@@ -276,6 +288,8 @@ pub struct Robot {
     pub mounting: [i8; LEG_JOINTS],
     /// The servo bus.
     pub bus: BusDescription,
+    /// The upper body's collision shape.
+    pub shape: &'static BodyShape,
     /// Gravity g, m/s².
     pub gravity: f64,
 }

@@ -324,10 +324,17 @@ fn rand_suffix() -> u64 {
 #[test]
 fn the_mujoco_model_is_the_robot_description() {
     // One source: MuJoCo's kinematics of the generated model put each sole exactly where
-    // gait-core's forward kinematics does, for joint angles across the limits.
+    // gait-core's forward kinematics does, for joint angles across the limits, on every
+    // described robot (the OP3's FK is checked against Menagerie's op3.xml in gait-core's
+    // tests/robots.rs, so its MuJoCo model is too).
+    for robot in gait_core::robot::ROBOTS {
+        model_is_the_description(robot);
+    }
+}
+
+fn model_is_the_description(robot: gait_core::Robot) {
     use gait_core::kinematics::leg::{leg_fk, Pose};
-    use gait_core::{Robot, Side};
-    let robot = Robot::reference();
+    use gait_core::Side;
     let mut rng = 12345u64;
     let mut uniform = || {
         rng = rng
@@ -347,6 +354,7 @@ fn the_mujoco_model_is_the_robot_description() {
                 start_lift_m: 1.0,
                 ..Default::default()
             },
+            robot,
             ..SimConfig::default()
         };
         let mut sim = Simulator::new(&cfg).unwrap();
@@ -360,7 +368,11 @@ fn the_mujoco_model_is_the_robot_description() {
             let (sp, sr) = body.sole_sites()[k];
             let d =
                 ((sp[0] - fk.x).powi(2) + (sp[1] - fk.y).powi(2) + (sp[2] - fk.z).powi(2)).sqrt();
-            assert!(d < 1e-9, "{side:?} sole {sp:?} vs FK {fk:?}");
+            assert!(
+                d < 1e-9,
+                "{}: {side:?} sole {sp:?} vs FK {fk:?}",
+                robot.name
+            );
             let rf = fk.rotation();
             for i in 0..3 {
                 for j in 0..3 {
@@ -393,4 +405,92 @@ fn the_trunk_com_offset_moves_the_whole_body_com_by_its_mass_share() {
     let mut cfg = SimConfig::default();
     cfg.env.trunk_com_dx_m = 0.06;
     assert!(cfg.validate().is_err());
+}
+
+#[test]
+fn the_op3_stands_on_its_own_bus_map_and_mounting_signs() {
+    // The OP3 in MuJoCo: its servos are found at OP3.robot's IDs (legs 7–18, arms 1–6, head
+    // 19–20), no foot boards and no bus IMU; goals written through its tick map (several
+    // mounting signs −1) hold a crouch: it stands, its weight on its soles, its torso upright,
+    // and every joint at its goal within the servos' steady sag.
+    use gait_core::robot::LEG_JOINTS;
+    use gait_core::Robot;
+    let robot = Robot::op3();
+    let leg = [0.0, 0.0, -0.35, 0.7, -0.35, 0.0];
+    let mut q = [0.0; LEG_JOINTS];
+    q[..6].copy_from_slice(&leg);
+    q[6..].copy_from_slice(&leg);
+    let cfg = SimConfig {
+        robot,
+        initial_q: q,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulator::new(&cfg).unwrap();
+    let ids: Vec<u8> = sim.bus.devices.iter().map(|d| d.id).collect();
+    assert_eq!(
+        ids,
+        [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17, 1, 2, 3, 4, 5, 6, 19, 20]
+    );
+    let map = TickMap::from_robot(&robot);
+    let goals: Vec<Vec<u8>> = (0..LEG_JOINTS)
+        .map(|j| map.tick_f64(j, q[j]).to_le_bytes().to_vec())
+        .collect();
+    let legs = robot.bus.legs;
+    write_all(&mut sim, x_series::GOAL_POSITION, &legs, &goals);
+    write_all(
+        &mut sim,
+        x_series::TORQUE_ENABLE,
+        &legs,
+        &vec![vec![1u8]; 12],
+    );
+    let held: Vec<u8> = robot.bus.held.iter().map(|h| h.id).collect();
+    let held_goals: Vec<Vec<u8>> = robot
+        .bus
+        .held
+        .iter()
+        .map(|h| {
+            TickMap::reference()
+                .tick_f64(0, h.angle)
+                .to_le_bytes()
+                .to_vec()
+        })
+        .collect();
+    write_all(&mut sim, x_series::GOAL_POSITION, &held, &held_goals);
+    write_all(
+        &mut sim,
+        x_series::TORQUE_ENABLE,
+        &held,
+        &vec![vec![1u8]; held.len()],
+    );
+    sim.advance_to(2_000_000).unwrap();
+    let t = *sim.physics.truth();
+    assert!(
+        !t.falling && sim.physics.fall_started_us().is_none(),
+        "{t:?}"
+    );
+    assert_eq!(t.sole_contact, [true, true]);
+    let mass = robot.masses.total();
+    assert!(
+        (t.fz - mass * G).abs() < 0.01 * mass * G,
+        "soles carry {} N of {} N",
+        t.fz,
+        mass * G
+    );
+    let body = sim.physics.mujoco().unwrap();
+    let (_, r) = body.torso();
+    assert!(r[8] > 0.99, "torso tilted: R_zz = {}", r[8]);
+    // Each joint near its goal: a sign error would drive it the other way, to a limit.
+    for (j, (got, want)) in body.q().iter().zip(q).enumerate() {
+        assert!((got - want).abs() < 0.05, "joint {j}: {got} vs goal {want}");
+    }
+    // The held servos stand at their goals, read back through the bus tables.
+    for (d, h) in sim.bus.devices[12..].iter().zip(robot.bus.held) {
+        let tick = d.get_i32(x_series::PRESENT_POSITION);
+        assert_eq!(
+            tick,
+            TickMap::reference().tick_f64(0, h.angle),
+            "{}",
+            h.name
+        );
+    }
 }

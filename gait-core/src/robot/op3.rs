@@ -36,12 +36,17 @@
 //! Left: hip yaw −z, hip roll −x, hip pitch +y, knee +y, ankle pitch −y, ankle roll +x; the
 //! right leg's pitch axes are the opposite (hip pitch −y, knee −y, ankle pitch +y).
 //!
+//! # Shape (assumed: boxes around op3.xml's body and head meshes, by eye)
+//! Pelvis box 0.08 × 0.12 × 0.04 m from P up, trunk box 0.09 × 0.12 × 0.14 m (0.04–0.18 m above
+//! P, 1 cm behind it), head sphere r 0.045 m at 0.22 m.
+//!
 //! # Limits and servos (assumed)
 //! The joint limits are the walking workspace ([`WALKING_LIMITS`]); the servos are
 //! XM430-W350 at 12 V (no-load 4.8 rad/s, 4096 ticks per turn, 2048 = 0 rad).
 
 use super::{
-    BusDescription, Geometry, HeldServo, ImuPlace, Masses, Robot, ServoLimits, WALKING_LIMITS,
+    BodyShape, BusDescription, Geometry, HeldServo, ImuPlace, Masses, Robot, ServoLimits,
+    WALKING_LIMITS,
 };
 
 /// The arm and head servos, held while walking: arms hanging 0.27 rad out from the body
@@ -127,6 +132,11 @@ pub const OP3: Robot = Robot {
         foot_boards: None,
         imu: ImuPlace::Board,
         held: &HELD,
+    },
+    shape: &BodyShape {
+        pelvis: [[0.04, 0.06, 0.02], [0.0, 0.0, 0.02]],
+        trunk: [[0.045, 0.06, 0.07], [-0.01, 0.0, 0.11]],
+        head: [0.045, 0.22],
     },
     gravity: 9.80665,
 };

@@ -10,9 +10,11 @@
 //! | masses | M_u 3.05 kg at l_u 0.09 m; thigh 0.20, calf 0.50, sole 0.25 kg (0.015 m up) |
 //! | bus | 1 Mbps; legs 1–6 (left), 7–12 (right); foot boards 111, 112; IMU board 200 |
 //! | mounting | every joint +1 |
+//! | shape (assumed) | pelvis box 0.07 × 0.14 × 0.04 m, trunk box 0.09 × 0.16 × 0.2 m (0.03–0.23 m above P), head r 0.045 m at 0.29 m |
 
 use super::{
-    BusDescription, Geometry, ImuPlace, Masses, Robot, ServoLimits, LEG_JOINTS, WALKING_LIMITS,
+    BodyShape, BusDescription, Geometry, ImuPlace, Masses, Robot, ServoLimits, LEG_JOINTS,
+    WALKING_LIMITS,
 };
 
 /// The TKU-X class reference robot.
@@ -57,6 +59,11 @@ pub const TKU_X: Robot = Robot {
         foot_boards: Some([111, 112]),
         imu: ImuPlace::Bus(200),
         held: &[],
+    },
+    shape: &BodyShape {
+        pelvis: [[0.035, 0.07, 0.02], [0.0, 0.0, 0.005]],
+        trunk: [[0.045, 0.08, 0.1], [0.0, 0.0, 0.13]],
+        head: [0.045, 0.29],
     },
     gravity: 9.80665,
 };

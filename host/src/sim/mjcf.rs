@@ -4,16 +4,19 @@
 //! # Bodies (world x forward, y left, z up; `σ` = +1 left, −1 right)
 //!
 //! * `torso`, on a free joint, origin at the pelvis point P: the upper body's mass M_u at
-//!   (0, 0, l_u) with the pitch inertia J of the reference robot; roll inertia J and yaw
-//!   inertia J/2 are assumptions (the seed gives only J). Site `imu` at P (gyro and
-//!   accelerometer). Collision boxes for the trunk and the head (a fall is a torso contact).
+//!   (f_u, 0, l_u) (its forward offset and height) with the pitch inertia J of the description;
+//!   roll inertia J and yaw inertia J/2 are assumptions (the seed gives only J). Site `imu` at
+//!   P (gyro and accelerometer). Collision boxes for the pelvis and the trunk and a sphere for
+//!   the head, from the description's [`gait_core::robot::BodyShape`] (a fall is a torso
+//!   contact).
 //! * `{l,r}_thigh` at the hip (0, σ·d, 0) with the joints `hip_yaw` (z), `hip_roll` (x),
 //!   `hip_pitch` (y) in that order (MuJoCo composes a body's joints in order, giving
 //!   `Rz(q0)·Rx(q1)·Ry(q2)` of [`gait_core::kinematics::leg`]); mass m_t at (0, 0, −L1/2).
 //! * `{l,r}_calf` at (0, 0, −L1), joint `knee` (y); mass of the calf at (0, 0, −L2/2).
 //! * `{l,r}_foot` at the ankle (0, 0, −L2), joints `ankle_pitch` (y), `ankle_roll` (x); the sole
-//!   mass `masses.sole_height` above the sole; the sole box `{l,r}_sole` (length × width of the
-//!   reference robot, 10 mm thick, bottom at the sole point h below the ankle) with rubber-like
+//!   mass `masses.sole_height` above the sole point; the sole box `{l,r}_sole` (the
+//!   description's length × width, 10 mm thick, centred on the sole point
+//!   S = (o_x, σ·o_y, −h) from the ankle, its bottom at S) with rubber-like
 //!   contact (`solref` 4 ms, critically damped, as MuJoCo Menagerie's ROBOTIS OP3 feet; friction
 //!   from [`EnvConfig::floor_friction`]); site `{l,r}_sole` at the sole point.
 //!
@@ -46,13 +49,25 @@ pub const SOLE_THICKNESS: f64 = 0.010;
 pub const LINK_RADIUS: f64 = 0.018;
 /// A leg link's capsule starts and ends this far inside its joints, m.
 pub const LINK_INSET: f64 = 0.012;
-/// The torso's collision boxes (name, half sizes, centre from P), m.
-pub const TORSO_BOXES: [(&str, [f64; 3], [f64; 3]); 2] = [
-    ("pelvis", [0.035, 0.07, 0.02], [0.0, 0.0, 0.005]),
-    ("trunk", [0.045, 0.08, 0.1], [0.0, 0.0, 0.13]),
-];
-/// The head sphere (radius, centre height above P), m.
-pub const HEAD: (f64, f64) = (0.045, 0.29);
+/// The torso's collision boxes of `robot` (name, half sizes, centre from P), m.
+pub fn torso_boxes(robot: &Robot) -> [(&'static str, [f64; 3], [f64; 3]); 2] {
+    let s = robot.shape;
+    [
+        ("pelvis", s.pelvis[0], s.pelvis[1]),
+        ("trunk", s.trunk[0], s.trunk[1]),
+    ]
+}
+
+/// The sole point S of leg `sigma` (+1 left, −1 right) from its ankle, foot frame, m.
+pub fn sole_point(robot: &Robot, sigma: f64) -> [f64; 3] {
+    let g = robot.geometry;
+    // `+ 0.0`: a zero offset prints as 0, not −0, on the right leg.
+    [
+        g.sole_offset[0],
+        sigma * g.sole_offset[1] + 0.0,
+        -g.ankle_height,
+    ]
+}
 
 /// The environment the robot walks in.
 #[derive(Clone, Debug, PartialEq)]
@@ -202,7 +217,7 @@ pub fn model_xml(
     let ms = env.mass_scale;
     let z0 = standing_height(robot, q0) + env.start_lift_m;
     let mut x = String::new();
-    let _ = writeln!(x, "<mujoco model=\"walker-reference-robot\">");
+    let _ = writeln!(x, "<mujoco model=\"walker-{}\">", robot.name);
     let _ = writeln!(x, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
     let _ = writeln!(
         x,
@@ -270,12 +285,16 @@ pub fn model_xml(
     inertial(
         &mut x,
         "      ",
-        [env.trunk_com_dx_m, 0.0, m.upper_body_height],
+        [
+            m.upper_body_forward + env.trunk_com_dx_m,
+            0.0,
+            m.upper_body_height,
+        ],
         m.upper_body * ms,
         [j, j, 0.5 * j],
     );
     x.push_str("      <site name=\"imu\" pos=\"0 0 0\" size=\"0.01\"/>\n");
-    for (name, h, p) in TORSO_BOXES {
+    for (name, h, p) in torso_boxes(robot) {
         let _ = writeln!(
             x,
             "      <geom name=\"{name}\" type=\"box\" size=\"{} {} {}\" pos=\"{} {} {}\" material=\"body\"/>",
@@ -285,7 +304,7 @@ pub fn model_xml(
     let _ = writeln!(
         x,
         "      <geom name=\"head\" type=\"sphere\" size=\"{}\" pos=\"0 0 {}\" material=\"body\"/>",
-        HEAD.0, HEAD.1
+        robot.shape.head[0], robot.shape.head[1]
     );
     x.push_str("      <camera name=\"track\" mode=\"trackcom\" pos=\"0.55 -0.75 0.25\" xyaxes=\"0.81 0.59 0 -0.2 0.28 0.94\"/>\n");
     if env.payload_kg > 0.0 {
@@ -342,25 +361,28 @@ pub fn model_xml(
         );
         joint(&mut x, "            ", 4, "0 1 0");
         joint(&mut x, "            ", 5, "1 0 0");
+        let sp = sole_point(robot, sigma);
         inertial(
             &mut x,
             "            ",
-            [0.0, 0.0, -(g.ankle_height - m.sole_height)],
+            [sp[0], sp[1], -(g.ankle_height - m.sole_height)],
             m.sole * ms,
             box_inertia(m.sole * ms, g.sole_length, g.sole_width, 0.02),
         );
         let _ = writeln!(
             x,
-            "            <geom name=\"{pfx}_sole\" type=\"box\" size=\"{} {} {}\" pos=\"0 0 {}\" material=\"sole\" solref=\"0.004 1\" friction=\"{mu} 0.005 0.0001\" condim=\"4\"/>",
+            "            <geom name=\"{pfx}_sole\" type=\"box\" size=\"{} {} {}\" pos=\"{} {} {}\" material=\"sole\" solref=\"0.004 1\" friction=\"{mu} 0.005 0.0001\" condim=\"4\"/>",
             g.sole_length / 2.0,
             g.sole_width / 2.0,
             SOLE_THICKNESS / 2.0,
+            sp[0],
+            sp[1],
             -g.ankle_height + SOLE_THICKNESS / 2.0
         );
         let _ = writeln!(
             x,
-            "            <site name=\"{pfx}_sole\" pos=\"0 0 {}\" size=\"0.005\"/>",
-            -g.ankle_height
+            "            <site name=\"{pfx}_sole\" pos=\"{} {} {}\" size=\"0.005\"/>",
+            sp[0], sp[1], sp[2]
         );
         x.push_str("          </body>\n        </body>\n      </body>\n");
     }

@@ -1,9 +1,11 @@
 //! The simulated robot on the servo bus.
 //!
-//! A kid-size humanoid ([`gait_core::Robot::reference`] by default) whose 12 leg servos
-//! (IDs 1–6 left leg, 7–12 right leg), two foot force-sensor boards (111 left, 112 right) and
-//! IMU board (200) answer Dynamixel Protocol 2.0 instructions over TCP, with the control tables
-//! of `dxl::table`. The body ([`Body`]) is, by default, MuJoCo in full dynamics ([`mujoco`]:
+//! A kid-size humanoid ([`gait_core::Robot::reference`] by default) whose devices, as its
+//! description's bus lists them ([`gait_core::robot::BusDescription`]: the 12 leg servos, the
+//! foot force-sensor boards and the IMU board where it has them, the held arm and head servos),
+//! answer Dynamixel Protocol 2.0 instructions over TCP, with the control tables of `dxl::table`
+//! and the description's rad ↔ tick map (its mounting signs). A held servo is not in the
+//! physics: with torque on it stands at its Goal Position. The body ([`Body`]) is, by default, MuJoCo in full dynamics ([`mujoco`]:
 //! the MJCF of [`mjcf`] generated from the robot description, X-series servo models of
 //! [`dynamixel`], load cells from the soles' contact wrenches, the IMU from MuJoCo sensors,
 //! falls as the physics makes them); [`PhysicsModel::Kinematic`] selects the idealised
@@ -40,11 +42,9 @@ use std::time::Duration;
 
 use dxl::table::{foot::FootForces, imu::ImuSample, x_series};
 use dxl::{DecodeError, Decoder};
+use gait_core::robot::ImuPlace;
 use gait_core::Robot;
-use walker_contract::bus_map::{self as ids, TickMap};
-
-/// The servos' rad ↔ tick map (the contract's one definition).
-const TICKS: TickMap = TickMap::reference();
+use walker_contract::bus_map::TickMap;
 
 pub use body::{Physics, ServoCmd, Support, TruthSample};
 pub use bus::{BusCounters, BusFaults, DeviceBus, Outage, OwnedPacket};
@@ -623,6 +623,12 @@ pub struct Simulator {
     torque_on_us: Option<u64>,
     /// When every servo's torque was last found off after it had been on, µs.
     torque_off_us: Option<u64>,
+    /// The robot's rad ↔ tick map (the contract's one definition, the description's signs).
+    ticks: TickMap,
+    /// Where the foot boards and the bus IMU are in [`DeviceBus::devices`] (after the 12 leg
+    /// servos), when the robot has them.
+    foot_index: Option<[usize; 2]>,
+    imu_index: Option<usize>,
 }
 
 impl fmt::Debug for Simulator {
@@ -634,23 +640,41 @@ impl fmt::Debug for Simulator {
     }
 }
 
-/// Index of the foot boards and the IMU in [`DeviceBus::devices`] (after the 12 servos).
-const FOOT_INDEX: [usize; 2] = [12, 13];
-const IMU_INDEX: usize = 14;
+/// The leg servos come first in [`DeviceBus::devices`], in joint order.
+const LEG_SERVOS: usize = gait_core::robot::LEG_JOINTS;
 
 impl Simulator {
     /// A simulator at time 0 (opens the truth CSV if asked).
     pub fn new(cfg: &SimConfig) -> Result<Self, SimError> {
         cfg.validate()?;
         let physics = Body::new(cfg)?;
-        let mut devices: Vec<Device> = ids::LEGS
+        let bus = cfg.robot.bus;
+        let ticks = TickMap::from_robot(&cfg.robot);
+        let mut devices: Vec<Device> = bus
+            .legs
             .iter()
             .enumerate()
-            .map(|(j, &id)| Device::servo(id, j, TICKS.tick_f64(j, physics.q()[j])))
+            .map(|(j, &id)| Device::servo(id, j, ticks.tick_f64(j, physics.q()[j])))
             .collect();
-        devices.push(Device::foot(ids::FOOT_LEFT, 0));
-        devices.push(Device::foot(ids::FOOT_RIGHT, 1));
-        devices.push(Device::imu(ids::IMU));
+        let foot_index = bus.foot_boards.map(|feet| {
+            let first = devices.len();
+            for (side, id) in feet.into_iter().enumerate() {
+                devices.push(Device::foot(id, side));
+            }
+            [first, first + 1]
+        });
+        let imu_index = match bus.imu {
+            ImuPlace::Bus(id) => {
+                devices.push(Device::imu(id));
+                Some(devices.len() - 1)
+            }
+            ImuPlace::Board => None,
+        };
+        for (k, h) in bus.held.iter().enumerate() {
+            // Joint index past the legs; the servo's own direction (no mounting sign).
+            let tick = TickMap::reference().tick_f64(0, h.angle);
+            devices.push(Device::servo(h.id, LEG_SERVOS + k, tick));
+        }
         let bus = DeviceBus::new(devices, cfg.faults.clone(), rng::Rng::new(cfg.seed, 1));
         let log = match &cfg.log_truth {
             Some(p) => Some(truth::TruthLog::create(p)?),
@@ -683,6 +707,9 @@ impl Simulator {
             bytes_in: 0,
             torque_on_us: None,
             torque_off_us: None,
+            ticks,
+            foot_index,
+            imu_index,
         };
         sim.publish()?;
         Ok(sim)
@@ -739,7 +766,7 @@ impl Simulator {
                         }
                         ServoCmd {
                             goal: (d.torque_on() && !d.dead)
-                                .then(|| TICKS.rad_f64(j, d.get_i32(x_series::GOAL_POSITION))),
+                                .then(|| self.ticks.rad_f64(j, d.get_i32(x_series::GOAL_POSITION))),
                             speed_limit: limit,
                         }
                     });
@@ -788,9 +815,11 @@ impl Simulator {
                 Body::Kinematic(_) => XServoOutput::default(),
             };
             let d = &mut self.bus.devices[j];
-            let ticks = TICKS.tick_f64(j, q);
+            let ticks = self.ticks.tick_f64(j, q);
             d.set_i32(x_series::PRESENT_POSITION, ticks);
-            let rpm = qd * 60.0 / std::f64::consts::TAU;
+            // The servo's own direction: the mounting sign (±1, exact).
+            let sign = f64::from(self.ticks.sign.get(j).copied().unwrap_or(1));
+            let rpm = sign * qd * 60.0 / std::f64::consts::TAU;
             d.set_i32(
                 x_series::PRESENT_VELOCITY,
                 (rpm / f64::from(x_series::VELOCITY_UNIT_RPM)).round() as i32,
@@ -854,10 +883,25 @@ impl Simulator {
             }
         }
         if let Some((_, feet, imu)) = out {
-            for (index, s) in FOOT_INDEX.into_iter().zip(feet) {
-                self.bus.devices[index].set(dxl::table::foot::SAMPLE, &s.to_bytes());
+            if let Some(index) = self.foot_index {
+                for (i, s) in index.into_iter().zip(feet) {
+                    self.bus.devices[i].set(dxl::table::foot::SAMPLE, &s.to_bytes());
+                }
             }
-            self.bus.devices[IMU_INDEX].set(dxl::table::imu::SAMPLE, &imu.to_bytes());
+            if let Some(i) = self.imu_index {
+                self.bus.devices[i].set(dxl::table::imu::SAMPLE, &imu.to_bytes());
+            }
+        }
+        // Held servos: at their goal while torque is on.
+        for d in self.bus.devices.iter_mut().skip(LEG_SERVOS) {
+            if matches!(d.kind, DeviceKind::Servo { .. }) && d.torque_on() {
+                let goal = d.get_i32(x_series::GOAL_POSITION);
+                d.set_i32(x_series::PRESENT_POSITION, goal);
+                d.set(
+                    x_series::PRESENT_INPUT_VOLTAGE,
+                    &((volts * 10.0).round() as u16).to_le_bytes(),
+                );
+            }
         }
         if let Some(log) = &mut self.log {
             if t.t_us >= self.next_log_us {

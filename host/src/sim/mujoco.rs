@@ -290,7 +290,8 @@ impl MjBody {
         &self.qd
     }
 
-    /// The servos' last outputs (torque, PWM, current).
+    /// The servos' last outputs (torque, PWM, current), each in its servo's own direction (the
+    /// joint's times its mounting sign).
     pub fn outputs(&self) -> &[XServoOutput; 12] {
         &self.outputs
     }
@@ -389,8 +390,11 @@ impl MjBody {
                 torque_on: r.torque_on && regs[j].is_some(),
                 ..r
             };
-            self.outputs[j] = self.servos[j].update(&self.params, &on, q[j], qd[j], dt);
-            self.data.ctrl_mut()[j] = self.outputs[j].torque;
+            // The servo works in its own direction: the joint's times its mounting sign.
+            let sign = f64::from(self.robot.mounting.get(j).copied().unwrap_or(1));
+            self.outputs[j] =
+                self.servos[j].update(&self.params, &on, sign * q[j], sign * qd[j], dt);
+            self.data.ctrl_mut()[j] = sign * self.outputs[j].torque;
         }
         if self.held && all_on {
             self.release();
@@ -520,7 +524,8 @@ impl MjBody {
         let mut limited = 0u16;
         let mut torque = [0.0; 12];
         for (j, o) in self.outputs.iter().enumerate() {
-            torque[j] = o.torque;
+            let sign = f64::from(self.robot.mounting.get(j).copied().unwrap_or(1));
+            torque[j] = sign * o.torque;
             if o.saturated {
                 limited |= 1 << j;
             }

@@ -14,7 +14,7 @@
 //! | `s_knee` | `s_thigh` → `s_calf` | (0, 0, −L1) | y |
 //! | `s_ankle_pitch` | `s_calf` → `s_ankle_link` | (0, 0, −L2) | y |
 //! | `s_ankle_roll` | `s_ankle_link` → `s_foot` | 0 | x |
-//! | `s_sole_fixed` (fixed) | `s_foot` → `s_sole` | (0, 0, −h) | — |
+//! | `s_sole_fixed` (fixed) | `s_foot` → `s_sole` | (o_x, σ·o_y, −h) | — |
 //!
 //! (`s` = `l` or `r`; joint names and order are [`gait_core::robot::JOINT_NAMES`].) The joint
 //! angles rotate the child about the axis by the right-hand rule, so the chain is the one of
@@ -26,7 +26,7 @@ use std::fmt::Write as _;
 use gait_core::robot::{JOINTS_PER_LEG, JOINT_NAMES, LEG_JOINTS};
 use gait_core::{Robot, Side};
 
-use super::mjcf::{HEAD, LINK_INSET, LINK_RADIUS, SOLE_THICKNESS, TORSO_BOXES};
+use super::mjcf::{sole_point, torso_boxes, LINK_INSET, LINK_RADIUS, SOLE_THICKNESS};
 
 /// The root link (the pelvis point P).
 pub const ROOT: &str = "pelvis";
@@ -87,7 +87,7 @@ pub fn tree(robot: &Robot) -> Vec<TreeJoint> {
             name: format!("{s}_sole_fixed"),
             parent: links[6].clone(),
             child: links[7].clone(),
-            origin: [0.0, 0.0, -g.ankle_height],
+            origin: sole_point(robot, side.sign()),
             axis: None,
         });
     }
@@ -139,7 +139,11 @@ fn v3(v: [f64; 3]) -> String {
 pub fn urdf(robot: &Robot, stall_torque_nm: f64) -> String {
     let g = robot.geometry;
     let mut x = String::new();
-    x.push_str("<?xml version=\"1.0\"?>\n<robot name=\"walker-reference-robot\">\n");
+    let _ = writeln!(
+        x,
+        "<?xml version=\"1.0\"?>\n<robot name=\"walker-{}\">",
+        robot.name
+    );
     for (name, rgba) in [
         ("body", "0.25 0.3 0.38 1"),
         ("link", "0.85 0.55 0.2 1"),
@@ -158,14 +162,14 @@ pub fn urdf(robot: &Robot, stall_torque_nm: f64) -> String {
         );
     };
     let _ = writeln!(x, "  <link name=\"{ROOT}\">");
-    for (_, h, p) in TORSO_BOXES {
+    for (_, h, p) in torso_boxes(robot) {
         let size = v3([2.0 * h[0], 2.0 * h[1], 2.0 * h[2]]);
         visual(&mut x, p, format!("<box size=\"{size}\"/>"), "body");
     }
     visual(
         &mut x,
-        [0.0, 0.0, HEAD.1],
-        format!("<sphere radius=\"{}\"/>", HEAD.0),
+        [0.0, 0.0, robot.shape.head[1]],
+        format!("<sphere radius=\"{}\"/>", robot.shape.head[0]),
         "body",
     );
     x.push_str("  </link>\n");
@@ -186,9 +190,11 @@ pub fn urdf(robot: &Robot, stall_torque_nm: f64) -> String {
         } else if j.child.ends_with("_calf") {
             rod(&mut x, g.calf);
         } else if j.child.ends_with("_foot") {
+            let sigma = if j.child.starts_with('l') { 1.0 } else { -1.0 };
+            let sp = sole_point(robot, sigma);
             visual(
                 &mut x,
-                [0.0, 0.0, -g.ankle_height + SOLE_THICKNESS / 2.0],
+                [sp[0], sp[1], -g.ankle_height + SOLE_THICKNESS / 2.0],
                 format!(
                     "<box size=\"{}\"/>",
                     v3([g.sole_length, g.sole_width, SOLE_THICKNESS])
@@ -275,7 +281,12 @@ mod tests {
     /// the foot (position and rotation), for a bent, twisted pose of both legs.
     #[test]
     fn transforms_compose_to_the_feet_of_gait_core_fk() {
-        let robot = Robot::reference();
+        for robot in gait_core::robot::ROBOTS {
+            transforms_are_fk(robot);
+        }
+    }
+
+    fn transforms_are_fk(robot: Robot) {
         let q: [f64; LEG_JOINTS] = [
             0.1, 0.05, -0.4, 0.8, -0.35, -0.04, -0.12, -0.06, -0.3, 0.7, -0.42, 0.08,
         ];
@@ -297,7 +308,11 @@ mod tests {
             let (p, r) = frames[&format!("{s}_sole")];
             let want = foot.rotation();
             for i in 0..3 {
-                assert!((p[i] - foot.position()[i]).abs() < 1e-12, "{s}: {p:?}");
+                assert!(
+                    (p[i] - foot.position()[i]).abs() < 1e-12,
+                    "{} {s}: {p:?}",
+                    robot.name
+                );
                 for j in 0..3 {
                     assert!(
                         (r[i][j] - want[i][j]).abs() < 1e-12,
