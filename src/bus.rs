@@ -33,6 +33,7 @@ use embedded_io::ErrorKind;
 use crate::board::{BusError, Clock, ServoBus};
 use crate::record::BusCounters;
 use crate::Config;
+use gait_core::robot::BusDescription;
 
 /// Default longest wait for one reply byte, µs.
 pub use walker_contract::config::DEFAULT_READ_POLL_US;
@@ -151,6 +152,8 @@ pub type BusMaster<'b, B> = Master<Link<'b, B>, NoDir, LinkClock<'b>, PACKET_BUF
 /// The Dynamixel master bound to a board for the whole run (see the module docs).
 pub struct BoardMaster<'b, B: ServoBus + Clock> {
     master: BusMaster<'b, B>,
+    /// Who is on the bus: the configured robot's description.
+    devices: &'static BusDescription,
 }
 
 impl<'b, B: ServoBus + Clock> BoardMaster<'b, B> {
@@ -168,7 +171,15 @@ impl<'b, B: ServoBus + Clock> BoardMaster<'b, B> {
         };
         let mut master = Master::new(link, NoDir, LinkClock(time));
         master.set_timeout_us(u64::from(cfg.reply_timeout_us.max(1)));
-        BoardMaster { master }
+        BoardMaster {
+            master,
+            devices: &cfg.robot.bus,
+        }
+    }
+
+    /// The devices on this bus (the configured robot's IDs).
+    pub fn devices(&self) -> &'static BusDescription {
+        self.devices
     }
 
     /// The master, ready for one transaction (the clock is re-read from the board).

@@ -120,7 +120,7 @@ use core::cell::Cell;
 use gait_core::gait::TimingCheck;
 use gait_core::robot::LEG_JOINTS;
 use gait_core::{GaitError, Robot};
-use walker_contract::bus_map::{self as ids, DEVICE_IDS};
+use walker_contract::bus_map;
 #[cfg(not(feature = "board-opencm"))]
 use walker_contract::command_port::ParamAccess;
 #[cfg(feature = "board-opencm")]
@@ -165,7 +165,6 @@ use modes::Walk;
 pub use walker_contract::config::{Compensation, Feasibility, MAX_LEAD_TICKS, MAX_STEPS};
 /// The sampler type of the firmware.
 pub type GaitSampler = gait_core::trajectory::fourier_walk::WalkSampler<f32, MAX_STEPS>;
-pub use walker_contract::bus_map::SENSOR_IDS;
 /// Fault-record id of a plan rejected by gait-core.
 pub const PLAN_REJECTED_ID: u8 = 0xFE;
 
@@ -409,8 +408,12 @@ pub fn standby<B: Board>(
     }
 }
 
-/// The robot the firmware walks.
-const REFERENCE_ROBOT: Robot = Robot::reference();
+/// The robot of a real board's build: its flash holds the walk's set-up for this one robot,
+/// folded by the compiler from its description (for all of them it would not fit the OpenCM
+/// 9.04's 114 KiB nor the OpenCR bootloader's 256 KiB region). QEMU builds walk any described
+/// robot (`robot=`).
+#[cfg(any(feature = "board-opencm", feature = "board-opencr"))]
+const BUILD_ROBOT: Robot = Robot::reference();
 
 /// [`run`] with the command port `link` (kept by [`run_on_enable`] across runs).
 pub fn run_with<B: Board>(
@@ -418,8 +421,12 @@ pub fn run_with<B: Board>(
     cfg: &Config,
     link: &mut commanded::CommandLink,
 ) -> RunEnd {
-    // A reference to the one copy in flash (a copy here would sit in this frame all run).
-    let robot: &Robot = &REFERENCE_ROBOT;
+    // The configured robot: a reference to its description in flash (a copy here would sit in
+    // this frame all run); a real board's build walks its own robot ([`BUILD_ROBOT`]).
+    #[cfg(not(any(feature = "board-opencm", feature = "board-opencr")))]
+    let robot: &Robot = cfg.robot;
+    #[cfg(any(feature = "board-opencm", feature = "board-opencr"))]
+    let robot: &Robot = &BUILD_ROBOT;
     let mut log = LogWriter::new();
     // The operator's configuration (before the servo-speed check adjusts the walk), logged
     // after the start-up record where the runs log their parameters.
@@ -435,6 +442,10 @@ pub fn run_with<B: Board>(
     let boot = Boot::read(board);
     if boot.cause != ResetCause::PowerOn {
         return not_power_on(board, cfg, &boot, &mut log);
+    }
+    // A real board's build refuses another robot before the bus is touched.
+    if cfg.robot.name != robot.name {
+        return rejected_walk(board, cfg, &boot, &mut log, GaitError::BadRobotDescription);
     }
     let targets = gait_core::gait::Targets::new(robot, cfg.compensation);
     // The walk (≈ 10 KB) is built where it lives, never moved: its storage lends its engine to
@@ -589,7 +600,8 @@ fn start_up<B: Board>(
     timing: &TimingCheck,
     params: &ParamNotes<'_>,
 ) -> Result<Started, RunEnd> {
-    let missing = startup::probe(bus, &DEVICE_IDS, cfg);
+    let devices = bus_map::device_ids(bus.devices());
+    let missing = startup::probe(bus, &devices, cfg);
     {
         let b = bus.board();
         let rec = startup_record(&*b, cfg, Some(&missing));
@@ -606,12 +618,13 @@ fn start_up<B: Board>(
     }
     let mut critical: heapless::Vec<u8, { crate::record::MAX_MISSING }> = heapless::Vec::new();
     for &id in missing.iter() {
-        if cfg.feet_required || !is_foot(id) {
+        if cfg.feet_required || !bus_map::is_foot(bus.devices(), id) {
             let _ = critical.push(id);
         }
     }
     let ticks = |us: u32| u16::try_from(cfg.ticks_for_us(us)).unwrap_or(u16::MAX);
-    let mut sup = Supervisor::new(cfg.supervisor, SENSOR_IDS)
+    let sensors = bus_map::sensor_slots(bus.devices()).map(|s| s.unwrap_or(bus_map::NOT_ON_BUS));
+    let mut sup = Supervisor::new(cfg.supervisor, sensors)
         .with_grades(ticks(cfg.settle_us), ticks(cfg.lower_us))
         .with_rest(cfg.rest);
     if let Err(reason) = sup.startup(&critical) {
@@ -625,8 +638,8 @@ fn start_up<B: Board>(
         write_stop(bus, log, reason);
         return Err(RunEnd::Stopped(reason));
     }
-    let mut present_ids: heapless::Vec<u8, 15> = heapless::Vec::new();
-    for &id in DEVICE_IDS.iter() {
+    let mut present_ids: heapless::Vec<u8, { bus_map::MAX_DEVICES }> = heapless::Vec::new();
+    for &id in devices.iter() {
         if !missing.contains(&id) {
             let _ = present_ids.push(id);
         }
@@ -699,6 +712,7 @@ fn walk_on<B: Board, P: TickPath>(
         walk,
         path: make_path(first.com[2]),
         sense: Sense::new(
+            bus_map::sensor_slots(bus.devices()),
             &missing,
             Plausibility::<3>::new(cfg, weight_n, bus.board().now_us()),
         ),
@@ -745,10 +759,6 @@ fn walk_on<B: Board, P: TickPath>(
             return end;
         }
     }
-}
-
-fn is_foot(id: u8) -> bool {
-    id == ids::FOOT_LEFT || id == ids::FOOT_RIGHT
 }
 
 #[cfg(test)]

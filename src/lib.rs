@@ -159,7 +159,7 @@ pub fn startup_record<B: board::Board>(
         fw: FW_VERSION,
         tick_period_us: cfg.tick_period_us,
         bus_baud: board.baud(),
-        device_count: bus_map::DEVICE_IDS.len() as u8,
+        device_count: bus_map::device_ids(&cfg.robot.bus).len() as u8,
         probed: missing.is_some(),
         missing: list,
     })

@@ -37,7 +37,6 @@
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
-use walker_contract::bus_map as ids;
 use walker_contract::codes::ServoCheck;
 use walker_contract::config::ServoLimits;
 
@@ -178,7 +177,7 @@ impl ServoMonitor {
     ) -> Option<StopReason> {
         let k = self.next % ROUND;
         let j = k % LEG_JOINTS;
-        let id = *ids::LEGS.get(j)?;
+        let id = *bus.devices().legs.get(j)?;
         let health = match k / LEG_JOINTS {
             1 => {
                 let mut b = [0u8; SUPPLY_LEN];

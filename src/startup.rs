@@ -33,7 +33,7 @@
 //! `StartupFailed`, exit code 20).
 
 use dxl::table::x_series;
-use walker_contract::bus_map as ids;
+use walker_contract::bus_map::{TickMap, MAX_HELD};
 
 use crate::board::{Clock, ServoBus};
 use crate::bus::BoardMaster;
@@ -218,7 +218,7 @@ pub fn set_position_gains<B: ServoBus + Clock>(
     let addr = x_series::POSITION_I_GAIN.addr;
     let n = cfg.startup_attempts;
     let mut written = 0u8;
-    for (j, &id) in ids::LEGS.iter().enumerate() {
+    for (j, &id) in bus.devices().legs.iter().enumerate() {
         let Some(gain) = position_i_gain(cfg, j).filter(|g| *g > 0) else {
             continue;
         };
@@ -242,6 +242,7 @@ pub fn read_positions<B: ServoBus + Clock>(
     cfg: &Config,
 ) -> Result<[i32; LEG_JOINTS], StartupError> {
     let f = x_series::PRESENT_POSITION;
+    let legs = bus.devices().legs;
     let mut ticks = [0i32; LEG_JOINTS];
     let mut done = [false; LEG_JOINTS];
     let mut last_error = dxl::Error::Timeout;
@@ -249,7 +250,7 @@ pub fn read_positions<B: ServoBus + Clock>(
         // The servos still to read, in bus order.
         let mut ids: heapless::Vec<u8, LEG_JOINTS> = heapless::Vec::new();
         let mut slots: heapless::Vec<usize, LEG_JOINTS> = heapless::Vec::new();
-        for (j, (&id, &ok)) in ids::LEGS.iter().zip(done.iter()).enumerate() {
+        for (j, (&id, &ok)) in legs.iter().zip(done.iter()).enumerate() {
             if !ok {
                 let _ = ids.push(id);
                 let _ = slots.push(j);
@@ -284,29 +285,47 @@ pub fn read_positions<B: ServoBus + Clock>(
         None => Ok(ticks),
         Some(j) => Err(StartupError {
             step: StartupStep::ReadPositions,
-            id: ids::LEGS.get(j).copied().unwrap_or(0),
+            id: legs.get(j).copied().unwrap_or(0),
             error: Some(last_error),
         }),
     }
 }
 
-/// WRITE Torque Enable = 1 to each leg servo (status checked).
+/// WRITE Torque Enable = 1 to each leg servo, then each held servo (arms, head) gets its
+/// pose: Profile Velocity [`HELD_PROFILE_VELOCITY`] (a slow move there), Goal Position its
+/// held angle, Torque Enable = 1 (every write's status checked).
 pub fn enable_torque<B: ServoBus + Clock>(
     bus: &mut BoardMaster<'_, B>,
     cfg: &Config,
 ) -> Result<(), StartupError> {
     let addr = x_series::TORQUE_ENABLE.addr;
-    for &id in ids::LEGS.iter() {
-        retry(cfg.startup_attempts, || bus.master().write(id, addr, &[1])).map_err(|e| {
+    let devices = bus.devices();
+    let write = |bus: &mut BoardMaster<'_, B>, id: u8, addr: u16, data: &[u8]| {
+        retry(cfg.startup_attempts, || bus.master().write(id, addr, data)).map_err(|e| {
             StartupError {
                 step: StartupStep::TorqueEnable,
                 id,
                 error: Some(e),
             }
-        })?;
+        })
+    };
+    for &id in devices.legs.iter() {
+        write(bus, id, addr, &[1])?;
+    }
+    let ticks = TickMap::from_robot(cfg.robot);
+    for h in devices.held.iter().take(MAX_HELD) {
+        let profile = HELD_PROFILE_VELOCITY.to_le_bytes();
+        write(bus, h.id, x_series::PROFILE_VELOCITY.addr, &profile)?;
+        let goal = ticks.servo_tick_f32(h.angle as f32).to_le_bytes();
+        write(bus, h.id, x_series::GOAL_POSITION.addr, &goal)?;
+        write(bus, h.id, addr, &[1])?;
     }
     Ok(())
 }
+
+/// Profile Velocity of the held servos (0.229 rpm units: 20 ≈ 0.48 rad/s), so that an arm
+/// far from its pose at start-up moves there slowly.
+pub const HELD_PROFILE_VELOCITY: u32 = 20;
 
 /// Minimum-jerk blend `s(u) = 10u³ − 15u⁴ + 6u⁵` for `u` clamped to [0, 1]: s(0) = 0,
 /// s(1) = 1, zero velocity and acceleration at both ends (NaN counts as 0).
@@ -355,6 +374,7 @@ mod tests {
     use crate::fake_robot::trace::FakeBoard;
     use core::cell::Cell;
     use dxl::opcode;
+    use walker_contract::bus_map as ids;
 
     #[test]
     fn min_jerk_profile() {

@@ -57,6 +57,60 @@ pub const DEVICE_IDS: [u8; 15] = [
 /// position range.
 pub use dxl::table::x_series::{CENTER_TICK as ZERO_TICK, MAX_EXTENDED_TICKS, TICKS_PER_TURN};
 
+/// An ID no device answers to (255: not a Dynamixel device ID): a sensor slot the robot does
+/// not have, for tables indexed by slot.
+pub const NOT_ON_BUS: u8 = 0xFF;
+/// Most held servos (arms, head) the firmware drives; a description with more is refused
+/// ([`bus_fits`]).
+pub const MAX_HELD: usize = 8;
+/// Sensor slots of the tick's BULK READ: the left and right foot boards and a bus IMU.
+pub const SENSOR_SLOTS: usize = 3;
+/// Most devices on a described bus: the legs, the sensor slots, the held servos.
+pub const MAX_DEVICES: usize = LEG_JOINTS + SENSOR_SLOTS + MAX_HELD;
+
+/// True when the firmware can drive `bus`: at most [`MAX_HELD`] held servos.
+pub fn bus_fits(bus: &BusDescription) -> bool {
+    bus.held.len() <= MAX_HELD
+}
+
+/// The sensor slots of `bus`: left foot board, right foot board, bus IMU; `None` where the
+/// robot has none (no foot boards; the IMU on the controller board).
+pub fn sensor_slots(bus: &BusDescription) -> [Option<u8>; SENSOR_SLOTS] {
+    let [l, r] = match bus.foot_boards {
+        Some([l, r]) => [Some(l), Some(r)],
+        None => [None, None],
+    };
+    let imu = match bus.imu {
+        ImuPlace::Bus(id) => Some(id),
+        ImuPlace::Board => None,
+    };
+    [l, r, imu]
+}
+
+/// Every device of `bus` in probe order: the legs (joint order), the sensors, the held servos
+/// (at most [`MAX_HELD`]).
+pub fn device_ids(bus: &BusDescription) -> heapless::Vec<u8, MAX_DEVICES> {
+    let mut out = heapless::Vec::new();
+    let sensors = sensor_slots(bus);
+    let held = bus.held.iter().take(MAX_HELD).map(|h| h.id);
+    for id in bus
+        .legs
+        .iter()
+        .copied()
+        .chain(sensors.into_iter().flatten())
+        .chain(held)
+    {
+        // At most MAX_DEVICES by construction.
+        let _ = out.push(id);
+    }
+    out
+}
+
+/// True when `id` is one of `bus`'s foot boards.
+pub fn is_foot(bus: &BusDescription, id: u8) -> bool {
+    bus.foot_boards.is_some_and(|f| f.contains(&id))
+}
+
 /// The servo ID of joint `j` (0..12), `None` beyond.
 pub fn servo_id(j: usize) -> Option<u8> {
     LEGS.get(j).copied()
@@ -133,6 +187,15 @@ impl TickMap {
             .saturating_add(gait_core::maths::fastmath::round_i32(t))
     }
 
+    /// The tick of a servo that is not a leg joint (no mounting sign: its own direction) at
+    /// `rad` (f32, finite).
+    pub fn servo_tick_f32(&self, rad: f32) -> i32 {
+        self.zero_tick
+            .saturating_add(gait_core::maths::fastmath::round_i32(
+                rad * self.ticks_per_rad_f32(),
+            ))
+    }
+
     /// The joint angle (rad, f32) of joint `j` at `tick`.
     pub fn rad_f32(&self, j: usize, tick: i32) -> f32 {
         self.sign_of(j) * (tick.saturating_sub(self.zero_tick)) as f32 / self.ticks_per_rad_f32()
@@ -197,6 +260,22 @@ mod tests {
         assert_eq!(joint_of(IMU), None);
         assert_eq!(joint_name(3), "l_knee");
         assert_eq!(joint_name(12), "?");
+    }
+
+    #[test]
+    fn each_robots_devices_from_its_description() {
+        let t = Robot::reference();
+        assert_eq!(device_ids(&t.bus), DEVICE_IDS);
+        assert_eq!(sensor_slots(&t.bus), SENSOR_IDS.map(Some));
+        assert!(is_foot(&t.bus, 111) && is_foot(&t.bus, 112) && !is_foot(&t.bus, 200));
+        let o = Robot::op3();
+        assert_eq!(sensor_slots(&o.bus), [None; 3]);
+        assert_eq!(
+            device_ids(&o.bus),
+            [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17, 1, 2, 3, 4, 5, 6, 19, 20]
+        );
+        assert!(!is_foot(&o.bus, 19));
+        assert!(bus_fits(&o.bus) && bus_fits(&t.bus));
     }
 
     #[test]

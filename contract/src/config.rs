@@ -86,6 +86,9 @@ impl ServoLimits {
     }
 }
 
+/// The robot a configuration walks unless told otherwise.
+const REFERENCE_ROBOT: gait_core::Robot = gait_core::Robot::reference();
+
 /// Default heading-hold gain of the online walk (share of the heading error turned back per step).
 pub const DEFAULT_HEADING_GAIN: f32 = 0.5;
 
@@ -94,6 +97,8 @@ pub const DEFAULT_HEADING_GAIN: f32 = 0.5;
 /// board the configuration is compiled in.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
+    /// The robot walked: its description (geometry, masses, bus IDs, mounting signs).
+    pub robot: &'static gait_core::Robot,
     /// Control tick period = gait sample time dt, µs (1000 ..= 20000).
     pub tick_period_us: u32,
     /// Servo bus baud rate, bit/s.
@@ -239,14 +244,15 @@ impl Config {
         }
     }
 
-    /// Defaults: 200 Hz tick, the reference robot's bus speed (1 Mbps), Return Delay Time 0, 50 ms watchdog, TLIPFM,
+    /// Defaults: the reference robot at its bus speed (1 Mbps), 200 Hz tick, Return Delay Time 0, 50 ms watchdog, TLIPFM,
     /// Table 2 walk, 1 ms reply timeout, 1.5 s ramp, 1 s final hold, 2 N minimum load, no
     /// compensation, stabilizer off, gyro balance feedback on (k_a 0.1 s, k_h 0.05 s), 8 start-up
     /// attempts, servo-speed feasibility by stretching the timing, factory servo gains.
     pub const fn default_config() -> Self {
         Config {
+            robot: &REFERENCE_ROBOT,
             tick_period_us: 5_000,
-            bus_baud: gait_core::Robot::reference().bus.baud,
+            bus_baud: REFERENCE_ROBOT.bus.baud,
             return_delay_us: 0,
             watchdog_ms: 50,
             supervisor: SupervisorConfig::default_limits(),

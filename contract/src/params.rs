@@ -1314,6 +1314,25 @@ params! {
         set: |c, v| { c.gyro_feedback.follow_stiffness = v as usize == 1 },
         get: |c| { Some(Value::Word(usize::from(c.gyro_feedback.follow_stiffness))) },
     },
+    {
+        key: "robot",
+        plan_key: None,
+        unit: "",
+        domain: Domain::Word(&gait_core::robot::ROBOT_NAMES),
+        doc: "the robot walked, by its description (gait-core `robot/`): tku-x (the reference robot) or op3 (ROBOTIS OP3); sets baud to the robot's (a later baud= overrides it)",
+        set: |c, v| {
+            if let Some(r) = gait_core::robot::ROBOTS.get(v as usize) {
+                c.robot = r;
+                c.bus_baud = r.bus.baud;
+            }
+        },
+        get: |c| {
+            gait_core::robot::ROBOT_NAMES
+                .iter()
+                .position(|&n| n == c.robot.name)
+                .map(Value::Word)
+        },
+    },
 }
 
 /// Key index meaning "not a known key".

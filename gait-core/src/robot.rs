@@ -73,8 +73,8 @@ pub const WALKING_LIMITS: [JointLimit; JOINTS_PER_LEG] = [
     }, // ankle_roll
 ];
 
-/// Every described robot.
-pub const ROBOTS: [Robot; 2] = [tku_x::TKU_X, op3::OP3];
+/// Every described robot (one copy in flash: a configuration refers to one of them).
+pub static ROBOTS: [Robot; 2] = [tku_x::TKU_X, op3::OP3];
 /// The names [`Robot::by_name`] takes.
 pub const ROBOT_NAMES: [&str; 2] = [tku_x::TKU_X.name, op3::OP3.name];
 
@@ -312,8 +312,8 @@ impl Robot {
     }
 
     /// The described robot called `name` ([`ROBOT_NAMES`]), `None` for another name.
-    pub fn by_name(name: &str) -> Option<Robot> {
-        ROBOTS.iter().find(|r| r.name == name).copied()
+    pub fn by_name(name: &str) -> Option<&'static Robot> {
+        ROBOTS.iter().find(|r| r.name == name)
     }
 
     /// Limits of joint `j` (0..6, joint order) of leg `side`. The right leg mirrors the left

@@ -72,10 +72,10 @@ fn every_description_validates_and_is_found_by_name() {
     for (robot, name) in ROBOTS.iter().zip(ROBOT_NAMES) {
         assert_eq!(robot.validate(), Ok(()), "{name}");
         assert_eq!(robot.validate_bus(), Ok(()), "{name}");
-        assert_eq!(Robot::by_name(name), Some(*robot));
+        assert_eq!(Robot::by_name(name), Some(robot));
     }
-    assert_eq!(Robot::by_name("tku-x"), Some(Robot::reference()));
-    assert_eq!(Robot::by_name("op3"), Some(Robot::op3()));
+    assert_eq!(Robot::by_name("tku-x"), Some(&Robot::reference()));
+    assert_eq!(Robot::by_name("op3"), Some(&Robot::op3()));
     assert_eq!(Robot::by_name("OP3"), None);
     assert_eq!(Robot::by_name(""), None);
 }

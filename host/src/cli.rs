@@ -498,6 +498,10 @@ pub struct RunArgs {
     /// Firmware parameters for every run, 'key=value …' (docs/parameters.md), checked before QEMU starts.
     #[arg(long, value_name = "'K=V …'")]
     pub firmware_args: Option<String>,
+    /// The robot walked, by its description: the simulated robot and the firmware's `robot=`
+    /// (default tku-x, the reference robot).
+    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(gait_core::robot::ROBOT_NAMES))]
+    pub robot: Option<String>,
     /// Wall-clock limit per run, s (default 1800).
     #[arg(long, value_name = "S", value_parser = seconds, allow_negative_numbers = true)]
     pub timeout: Option<Duration>,
@@ -1162,7 +1166,13 @@ impl RunSetup {
         };
         let mut sim = crate::sim::SimConfig::default();
         a.sim.over(file_sim).apply(cmd, &mut sim)?;
-        let extra_tokens = tokens(a.firmware_args.as_deref());
+        let mut extra_tokens = tokens(a.firmware_args.as_deref());
+        if let Some(name) = &a.robot {
+            let robot = Robot::by_name(name)
+                .ok_or_else(|| CliError::usage(format!("walker {cmd}: unknown robot {name}")))?;
+            sim.robot = *robot;
+            extra_tokens.insert(0, format!("robot={name}"));
+        }
         // The firmware's own parser, on the host, before QEMU starts.
         crate::fil::check_tokens(&spec, &extra_tokens)
             .map_err(|e| CliError::usage(format!("walker {cmd}: --firmware-args: {e}")))?;

@@ -351,6 +351,39 @@ fn dropped_and_corrupted_replies_are_counted_and_survived() {
 
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
+fn the_op3_is_driven_from_its_description() {
+    // `robot=op3`: the firmware probes the OP3's 20 servos at OP3.robot's IDs at 2 Mbps (no
+    // foot boards, no bus IMU), torques its legs and its held arms and head, and walks the
+    // plan on the MuJoCo OP3 (its own IDs and mounting signs) without a fall. Without foot
+    // sensors there is no measured ZMP in the log.
+    let sim = SimConfig {
+        robot: gait_core::Robot::op3(),
+        ..SimConfig::default()
+    };
+    let (r, log) = fil("op3", short_walk(4), sim, &["robot=op3"]);
+    assert_eq!(r.exit_code, Some(0));
+    assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
+    let startup = log
+        .events
+        .iter()
+        .find_map(|e| match e {
+            Record::Startup(s) => Some(s.clone()),
+            _ => None,
+        })
+        .expect("start-up record");
+    assert_eq!(startup.bus_baud, 2_000_000);
+    assert_eq!(startup.device_count, 20);
+    assert!(startup.probed && startup.missing.is_empty());
+    assert_eq!(r.sim.fall_started_us, None, "fell");
+    assert!(r.sim.bus.instructions > 1000);
+    assert!(
+        log.ticks.iter().all(|t| !t.zmp_valid),
+        "a measured ZMP without foot sensors"
+    );
+}
+
+#[test]
+#[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn a_dead_foot_board_is_reported_missing_at_start_up() {
     let mut sim = SimConfig::default();
     sim.faults.dead_ids = vec![111];

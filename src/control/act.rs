@@ -3,7 +3,6 @@
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
-use walker_contract::bus_map as ids;
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
@@ -34,6 +33,7 @@ pub(crate) fn torque_off<B: Board>(
     cfg: &Config,
 ) {
     let mut off = [false; LEG_JOINTS];
+    let legs = bus.devices().legs;
     for _ in 0..cfg.torque_off_attempts.max(1) {
         if bus
             .master()
@@ -42,7 +42,7 @@ pub(crate) fn torque_off<B: Board>(
         {
             bus.board().torque_off_best_effort();
         }
-        for (done, &id) in off.iter_mut().zip(ids::LEGS.iter()) {
+        for (done, &id) in off.iter_mut().zip(legs.iter()) {
             if !*done {
                 let mut v = [0xFFu8; 1];
                 *done = bus.master().read(id, TORQUE_ENABLE_ADDR, &mut v).is_ok() && v == [0];
@@ -54,7 +54,7 @@ pub(crate) fn torque_off<B: Board>(
         }
     }
     let unconfirmed = off.iter().filter(|&&d| !d).count();
-    if let Some(&id) = off.iter().position(|&d| !d).and_then(|j| ids::LEGS.get(j)) {
+    if let Some(&id) = off.iter().position(|&d| !d).and_then(|j| legs.get(j)) {
         crate::fw_log!(
             error,
             "torque off not confirmed by {} servo(s), first {}",
@@ -89,7 +89,8 @@ pub(crate) fn write_goals<B: Board>(bus: &mut BoardMaster<'_, B>, ticks: &[i32; 
         *d = t.to_le_bytes();
     }
     let mut entries: [(u8, &[u8]); LEG_JOINTS] = [(0, &[]); LEG_JOINTS];
-    for ((e, &id), d) in entries.iter_mut().zip(ids::LEGS.iter()).zip(data.iter()) {
+    let legs = bus.devices().legs;
+    for ((e, &id), d) in entries.iter_mut().zip(legs.iter()).zip(data.iter()) {
         *e = (id, d.as_slice());
     }
     let f = x_series::GOAL_POSITION;

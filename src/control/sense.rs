@@ -5,7 +5,7 @@ use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table};
 use dxl::{BulkReadRequest, DeviceResult};
-use walker_contract::bus_map::{self as ids, SENSOR_IDS};
+use walker_contract::bus_map::SENSOR_SLOTS;
 use walker_contract::codes::SensorRejection;
 
 use crate::board::Board;
@@ -16,29 +16,36 @@ use crate::supervisor::{Freshness, StopReason, Supervisor};
 
 use super::act::fault;
 
+/// The IMU's sensor slot (after the left and the right foot board's).
+const IMU_SLOT: usize = 2;
+
 /// The sensor devices read each tick and where their data lands in the bulk-read buffer.
 struct Sensors {
+    /// Per slot (left foot board, right foot board, IMU): its device, if the robot has one on
+    /// the bus.
+    ids: [Option<u8>; SENSOR_SLOTS],
     reqs: heapless::Vec<BulkReadRequest, 3>,
-    /// Per request: index into [`SENSOR_IDS`] and offset into the buffer.
+    /// Per request: its slot and offset into the buffer.
     slots: heapless::Vec<(usize, usize), 3>,
     buf: [u8; 18 + 18 + 26],
     results: [DeviceResult; 3],
 }
 
 impl Sensors {
-    fn new(missing: &[u8]) -> Self {
+    fn new(ids: [Option<u8>; SENSOR_SLOTS], missing: &[u8]) -> Self {
         let mut s = Sensors {
+            ids,
             reqs: heapless::Vec::new(),
             slots: heapless::Vec::new(),
             buf: [0; 62],
             results: [Ok(()); 3],
         };
         let mut off = 0usize;
-        for (k, &id) in SENSOR_IDS.iter().enumerate() {
-            if missing.contains(&id) {
+        for (k, id) in ids.into_iter().enumerate() {
+            let Some(id) = id.filter(|id| !missing.contains(id)) else {
                 continue;
-            }
-            let f = if id == ids::IMU {
+            };
+            let f = if k == IMU_SLOT {
                 imu_table::SAMPLE
             } else {
                 foot::SAMPLE
@@ -86,7 +93,7 @@ impl Sensors {
             if !self.results.get(i).is_some_and(|r| r.is_ok()) {
                 continue;
             }
-            let verdict = if SENSOR_IDS.get(k) == Some(&ids::IMU) {
+            let verdict = if k == IMU_SLOT {
                 let s = self
                     .data(i, usize::from(imu_table::SAMPLE.len))
                     .and_then(ImuSample::from_bytes);
@@ -120,8 +127,8 @@ impl Sensors {
                 checks.accept(k, f.counter, now_us);
             }
         }
-        if let (Some(s), Some(k)) = (out.imu, SENSOR_IDS.iter().position(|&d| d == ids::IMU)) {
-            checks.accept(k, s.counter, now_us);
+        if let Some(s) = out.imu {
+            checks.accept(IMU_SLOT, s.counter, now_us);
         }
         out
     }
@@ -133,17 +140,16 @@ struct Checked {
     feet: [Option<FootForces>; 2],
     /// Accepted IMU sample.
     imu: Option<ImuSample>,
-    /// Per [`SENSOR_IDS`] index: why its reply was rejected (a reply that never came is `None`).
+    /// Per sensor slot: why its reply was rejected (a reply that never came is `None`).
     rejected: [Option<SensorRejection>; 3],
 }
 
 impl Checked {
-    /// True when sensor `k`'s (index into [`SENSOR_IDS`]) reply was accepted.
+    /// True when sensor slot `k`'s reply was accepted.
     fn accepted(&self, k: usize) -> bool {
-        match SENSOR_IDS.get(k) {
-            Some(&ids::IMU) => self.imu.is_some(),
-            Some(_) => self.feet.get(k).is_some_and(|f| f.is_some()),
-            None => false,
+        match k {
+            IMU_SLOT => self.imu.is_some(),
+            _ => self.feet.get(k).is_some_and(|f| f.is_some()),
         }
     }
 }
@@ -164,10 +170,15 @@ pub(super) struct Sense {
 }
 
 impl Sense {
-    /// Every device of [`SENSOR_IDS`] but the `missing` ones, checked by `plausible`.
-    pub(super) fn new(missing: &[u8], plausible: Plausibility<3>) -> Self {
+    /// The sensor slots' devices `ids` (left foot board, right foot board, IMU; `None`: the
+    /// robot has none on the bus) but the `missing` ones, checked by `plausible`.
+    pub(super) fn new(
+        ids: [Option<u8>; SENSOR_SLOTS],
+        missing: &[u8],
+        plausible: Plausibility<3>,
+    ) -> Self {
         Sense {
-            sensors: Sensors::new(missing),
+            sensors: Sensors::new(ids, missing),
             state: SensorState {
                 feet: [None; 2],
                 held: [0; 3],
@@ -197,7 +208,7 @@ impl Sense {
         let state = &mut self.state;
         let mut imu_fresh = None;
         for &(k, _) in self.sensors.slots.iter() {
-            let Some(&id) = SENSOR_IDS.get(k) else {
+            let Some(id) = self.sensors.ids.get(k).copied().flatten() else {
                 continue;
             };
             let t = bus.board().now_us();
@@ -228,7 +239,7 @@ impl Sense {
                         log.write(bus.board(), rec);
                     }
                     *h = 0;
-                    if id == ids::IMU {
+                    if k == IMU_SLOT {
                         imu_fresh = checked.imu;
                     } else if let (Some(slot), Some(f)) =
                         (state.feet.get_mut(k), checked.feet.get(k))

@@ -15,7 +15,6 @@ use gait_core::measure::odometry::SurveyedSole;
 use gait_core::measure::stiffness::{Stiffness, StiffnessSurvey};
 use gait_core::robot::{ANKLE_PITCH, HIP_PITCH, JOINTS_PER_LEG, KNEE, LEG_JOINTS};
 use gait_core::{Robot, Side};
-use walker_contract::bus_map as ids;
 
 use crate::board::Board;
 use crate::bus::BoardMaster;
@@ -234,7 +233,7 @@ impl ServoSense {
                 || (deflection && self.mask.contains(j))
                 || (surveying && pitch(j))
         }) {
-            if let Some(id) = ids::servo_id(j) {
+            if let Some(&id) = bus.devices().legs.get(j) {
                 // At most LEG_JOINTS entries: cannot fail.
                 let _ = self.reqs.push(BulkReadRequest {
                     id,

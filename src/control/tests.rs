@@ -15,6 +15,7 @@ use gait_core::gait::{Arithmetic, Targets};
 use gait_core::measure::support::SupportPolygon;
 use gait_core::{Robot, Side};
 use std::vec::Vec;
+use walker_contract::bus_map::DEVICE_IDS;
 use walker_contract::command_port::PortState;
 
 fn board(cfg: &Config) -> FakeBoard {

@@ -547,9 +547,13 @@ impl CatchingStep {
                 let dz = |v: f32, m: f32| v.signum() * (v.abs() - m).max(0.0);
                 let k = self.gain;
                 let sigma = if swing == Side::Left { 1.0 } else { -1.0 };
-                let dx = (k * dz(self.error[0], m[0])).clamp(-self.max_x_m, self.max_x_m);
+                let dx = within(k * dz(self.error[0], m[0]), -self.max_x_m, self.max_x_m);
                 let dy = sigma
-                    * (sigma * k * dz(self.error[1], m[1])).clamp(-self.max_in_m, self.max_out_m);
+                    * within(
+                        sigma * k * dz(self.error[1], m[1]),
+                        -self.max_in_m,
+                        self.max_out_m,
+                    );
                 asked = [dx, dy];
                 // Constant indices (the left foot first): checked at compile time.
                 let (ds, cs, swing_load, stance_yaw) = match stance {
@@ -831,5 +835,17 @@ impl StepAdapter {
     /// (A6) on a sample: the feet by their offsets, the CoM and the ZMP reference by the body's.
     pub fn apply(&self, sample: &mut GaitSample<f32>) {
         self.catch.apply(sample);
+    }
+}
+
+/// `v` limited to `[lo, hi]` as `f32::clamp` does (NaN stays NaN), without its panic when the
+/// configured bounds are crossed or NaN (then `hi` wins over `lo`).
+fn within(v: f32, lo: f32, hi: f32) -> f32 {
+    if v > hi {
+        hi
+    } else if v < lo {
+        lo
+    } else {
+        v
     }
 }
