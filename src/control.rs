@@ -612,6 +612,22 @@ fn start_up<B: Board>(
     }
     #[cfg(feature = "board-opencm")]
     let _ = params;
+    // A robot without some sensors says so once (the log's ZMP response then has no measured
+    // ZMP, and no record pretends otherwise).
+    let slots = bus_map::sensor_slots(bus.devices());
+    if slots.iter().any(Option::is_none) {
+        let has = slots
+            .iter()
+            .enumerate()
+            .fold(0u8, |m, (k, s)| if s.is_some() { m | (1 << k) } else { m });
+        crate::fw_log!(
+            info,
+            "sensor slots on the bus (bits: left foot, right foot, IMU): {}",
+            has
+        );
+        let now = bus.board().now_us();
+        log.write(bus.board(), fault(now, FaultKind::SensorsAbsent, has, 0));
+    }
     for (kind, id, value) in timing.notes().into_iter().map(startup::note_record) {
         let now = bus.board().now_us();
         log.write(bus.board(), fault(now, kind, id, value));

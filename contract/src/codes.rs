@@ -426,6 +426,11 @@ pub enum FaultKind {
     /// mN·m/rad (0: too little load to tell); `id` 1 the deflection feedback's gain it set
     /// (gait-core `feedback::deflection` D6), `value` 1/1000 s⁻¹. A notice, not a fault.
     ServoSurvey,
+    /// 22: the robot lacks sensors the walk can use, logged once at start-up when it does
+    /// (`id` = the sensor slots it has on the bus as bits: 0 left foot board, 1 right foot
+    /// board, 2 IMU; `value` 0): without foot boards the log has no measured ZMP, no odometry
+    /// surveys and no feedback from the loads; without a bus IMU no gyro feedback. A notice.
+    SensorsAbsent,
     /// Other kind (code kept for forward compatibility).
     Other(u8),
 }
@@ -433,7 +438,8 @@ pub enum FaultKind {
 impl FaultKind {
     /// A fault, not an event of the walk nor a notice: false for [`FaultKind::CommandReceived`],
     /// [`FaultKind::Footstep`], [`FaultKind::CatchStep`], [`FaultKind::ResetCause`] (logged at every boot),
-    /// the saved parameters' notices [`FaultKind::ParamStore`] and [`FaultKind::ParamValue`] and the
+    /// the saved parameters' notices [`FaultKind::ParamStore`] and [`FaultKind::ParamValue`], the
+    /// servo survey's and the missing sensors' notices, and the
     /// start-up's plan adjustments [`FaultKind::TimingStretched`] and
     /// [`FaultKind::SwingLowered`] (the servo-speed check made the plan fit; the default plan
     /// is stretched on the reference robot, so the port's Fault Kind would read 7 from boot).
@@ -448,6 +454,7 @@ impl FaultKind {
                 | Self::ParamStore
                 | Self::ParamValue
                 | Self::ServoSurvey
+                | Self::SensorsAbsent
                 | Self::TimingStretched
                 | Self::SwingLowered
         )
@@ -477,6 +484,7 @@ impl FaultKind {
             Self::ParamStore => 19,
             Self::ParamValue => 20,
             Self::ServoSurvey => 21,
+            Self::SensorsAbsent => 22,
             Self::Other(c) => c,
         }
     }
@@ -504,6 +512,7 @@ impl FaultKind {
             19 => Self::ParamStore,
             20 => Self::ParamValue,
             21 => Self::ServoSurvey,
+            22 => Self::SensorsAbsent,
             c => Self::Other(c),
         }
     }

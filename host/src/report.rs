@@ -548,8 +548,24 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
                 "servo survey: deflection feedback gain {:.2} 1/s",
                 f64::from(v) * 1e-3
             ),
+            2 => format!(
+                "servo survey: supply at the survey {:.2} V",
+                f64::from(v) * 1e-3
+            ),
             c => format!("servo survey: component {c}, value {v}"),
         },
+        K::SensorsAbsent => {
+            let has = |bit: u8| id & (1 << bit) != 0;
+            let mut out = String::from("sensors:");
+            if !(has(0) && has(1)) {
+                out.push_str(" no foot sensors (no measured ZMP, no odometry, no load feedback);");
+            }
+            if !has(2) {
+                out.push_str(" no IMU on the bus (no gyro feedback);");
+            }
+            out.pop();
+            out
+        }
         K::Other(c) => format!("fault kind {c} (unknown to this reader): id {id}, value {v}"),
     }
 }

@@ -356,11 +356,29 @@ fn the_op3_is_driven_from_its_description() {
     // foot boards, no bus IMU), torques its legs and its held arms and head, and walks the
     // plan on the MuJoCo OP3 (its own IDs and mounting signs) without a fall. Without foot
     // sensors there is no measured ZMP in the log.
+    let spec = short_walk(4);
     let sim = SimConfig {
         robot: gait_core::Robot::op3(),
         ..SimConfig::default()
     };
-    let (r, log) = fil("op3", short_walk(4), sim, &["robot=op3"]);
+    // The same walk on the idealised kinematic OP3 (stance sole bolted down): the whole chain
+    // (plan, IK with the sole point off the ankle, tick map with its signs, the bus's IDs, the
+    // simulator's FK) puts the soles where the plan does.
+    let kinematic = SimConfig {
+        physics: walker_host::sim::PhysicsModel::Kinematic,
+        ..sim.clone()
+    };
+    let ((r, log), (rk, _)) = both(
+        || fil("op3", spec.clone(), sim, &["robot=op3"]),
+        || fil("op3-kinematic", spec.clone(), kinematic, &["robot=op3"]),
+    );
+    let w = walker_host::fil::walk_figures(&rk.truth, &spec).unwrap();
+    assert_eq!(rk.exit_code, Some(0), "{}", w.line());
+    assert!(
+        (w.walked - w.planned).abs() < 0.02 * w.planned,
+        "kinematic OP3: {}",
+        w.line()
+    );
     assert_eq!(r.exit_code, Some(0));
     assert_eq!(stop_reason(&log), Some(StopReason::PlanDone));
     let startup = log
@@ -380,6 +398,18 @@ fn the_op3_is_driven_from_its_description() {
         log.ticks.iter().all(|t| !t.zmp_valid),
         "a measured ZMP without foot sensors"
     );
+    // The log says why: no sensor slot on the bus (id 0: no foot boards, no bus IMU).
+    let absent: Vec<u8> = log
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Record::Fault(f) if f.kind == walker_contract::record::FaultKind::SensorsAbsent => {
+                Some(f.id)
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(absent, [0]);
 }
 
 #[test]
