@@ -60,18 +60,13 @@ pub use dxl::table::x_series::{CENTER_TICK as ZERO_TICK, MAX_EXTENDED_TICKS, TIC
 /// An ID no device answers to (255: not a Dynamixel device ID): a sensor slot the robot does
 /// not have, for tables indexed by slot.
 pub const NOT_ON_BUS: u8 = 0xFF;
-/// Most held servos (arms, head) the firmware drives; a description with more is refused
-/// ([`bus_fits`]).
+/// Most held servos (arms, head) the firmware drives (every description has at most these: a
+/// test checks).
 pub const MAX_HELD: usize = 8;
 /// Sensor slots of the tick's BULK READ: the left and right foot boards and a bus IMU.
 pub const SENSOR_SLOTS: usize = 3;
 /// Most devices on a described bus: the legs, the sensor slots, the held servos.
 pub const MAX_DEVICES: usize = LEG_JOINTS + SENSOR_SLOTS + MAX_HELD;
-
-/// True when the firmware can drive `bus`: at most [`MAX_HELD`] held servos.
-pub fn bus_fits(bus: &BusDescription) -> bool {
-    bus.held.len() <= MAX_HELD
-}
 
 /// The sensor slots of `bus`: left foot board, right foot board, bus IMU; `None` where the
 /// robot has none (no foot boards; the IMU on the controller board).
@@ -182,13 +177,11 @@ impl TickMap {
 
     /// The tick of joint `j` at `rad` (f32; `rad` finite, the caller clamps the result).
     pub fn tick_f32(&self, j: usize, rad: f32) -> i32 {
-        let t = self.sign_of(j) * rad * self.ticks_per_rad_f32();
-        self.zero_tick
-            .saturating_add(gait_core::maths::fastmath::round_i32(t))
+        self.servo_tick_f32(self.sign_of(j) * rad)
     }
 
-    /// The tick of a servo that is not a leg joint (no mounting sign: its own direction) at
-    /// `rad` (f32, finite).
+    /// The tick at `rad` in the servo's own direction (no mounting sign: a held servo, or a
+    /// leg joint's angle already signed), f32, `rad` finite.
     pub fn servo_tick_f32(&self, rad: f32) -> i32 {
         self.zero_tick
             .saturating_add(gait_core::maths::fastmath::round_i32(
@@ -204,9 +197,14 @@ impl TickMap {
     /// The tick of joint `j` at `q` (f64, nearest, half away from zero), saturating at
     /// ±[`MAX_EXTENDED_TICKS`]; a non-finite `q` gives `zero_tick`.
     pub fn tick_f64(&self, j: usize, q: f64) -> i32 {
-        let t = f64::from(self.sign_of(j)) * q * f64::from(self.ticks_per_turn)
-            / core::f64::consts::TAU
-            + f64::from(self.zero_tick);
+        self.servo_tick_f64(f64::from(self.sign_of(j)) * q)
+    }
+
+    /// [`TickMap::tick_f64`] in the servo's own direction (no mounting sign: a held servo, the
+    /// simulated servo's encoder).
+    pub fn servo_tick_f64(&self, q: f64) -> i32 {
+        let t =
+            q * f64::from(self.ticks_per_turn) / core::f64::consts::TAU + f64::from(self.zero_tick);
         let lim = f64::from(MAX_EXTENDED_TICKS);
         if t.is_finite() {
             libm::round(t).clamp(-lim, lim) as i32
@@ -275,7 +273,9 @@ mod tests {
             [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17, 1, 2, 3, 4, 5, 6, 19, 20]
         );
         assert!(!is_foot(&o.bus, 19));
-        assert!(bus_fits(&o.bus) && bus_fits(&t.bus));
+        for r in gait_core::robot::ROBOTS.iter() {
+            assert!(r.bus.held.len() <= MAX_HELD, "{}", r.name);
+        }
     }
 
     #[test]

@@ -488,7 +488,7 @@ fn the_op3_stands_on_its_own_bus_map_and_mounting_signs() {
         let tick = d.get_i32(x_series::PRESENT_POSITION);
         assert_eq!(
             tick,
-            TickMap::reference().tick_f64(0, h.angle),
+            TickMap::reference().servo_tick_f64(h.angle),
             "{}",
             h.name
         );

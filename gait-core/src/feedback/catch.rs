@@ -100,6 +100,7 @@
 
 use crate::feedback::hold::{ClockHold, SwingFoot};
 use crate::feedback::level::SoleLevel;
+use crate::maths::real::Real;
 use crate::robot::{Robot, Side, LEG_JOINTS};
 use crate::trajectory::sampler::{GaitSample, SupportPhase};
 
@@ -547,13 +548,11 @@ impl CatchingStep {
                 let dz = |v: f32, m: f32| v.signum() * (v.abs() - m).max(0.0);
                 let k = self.gain;
                 let sigma = if swing == Side::Left { 1.0 } else { -1.0 };
-                let dx = within(k * dz(self.error[0], m[0]), -self.max_x_m, self.max_x_m);
+                // `clamp_to`: no panic when configured bounds cross (f32::clamp's).
+                let dx = (k * dz(self.error[0], m[0])).clamp_to(-self.max_x_m, self.max_x_m);
                 let dy = sigma
-                    * within(
-                        sigma * k * dz(self.error[1], m[1]),
-                        -self.max_in_m,
-                        self.max_out_m,
-                    );
+                    * (sigma * k * dz(self.error[1], m[1]))
+                        .clamp_to(-self.max_in_m, self.max_out_m);
                 asked = [dx, dy];
                 // Constant indices (the left foot first): checked at compile time.
                 let (ds, cs, swing_load, stance_yaw) = match stance {
@@ -835,17 +834,5 @@ impl StepAdapter {
     /// (A6) on a sample: the feet by their offsets, the CoM and the ZMP reference by the body's.
     pub fn apply(&self, sample: &mut GaitSample<f32>) {
         self.catch.apply(sample);
-    }
-}
-
-/// `v` limited to `[lo, hi]` as `f32::clamp` does (NaN stays NaN), without its panic when the
-/// configured bounds are crossed or NaN (then `hi` wins over `lo`).
-fn within(v: f32, lo: f32, hi: f32) -> f32 {
-    if v > hi {
-        hi
-    } else if v < lo {
-        lo
-    } else {
-        v
     }
 }

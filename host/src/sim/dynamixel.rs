@@ -211,10 +211,10 @@ struct MotorSide {
     flank: f64,
 }
 
-/// The encoder's reading of joint angle `q`: whole ticks (the contract's rad ↔ tick map; the
-/// motor's frame is the joint's, every mounting sign being +1 on the reference robot).
+/// The encoder's reading of the servo's angle `q` (its own direction: the caller applies the
+/// joint's mounting sign): whole ticks (the contract's rad ↔ tick map).
 pub fn encoder_ticks(q: f64) -> i32 {
-    TickMap::reference().tick_f64(0, q)
+    TickMap::reference().servo_tick_f64(q)
 }
 
 impl XServo {

@@ -313,7 +313,7 @@ impl SimConfig {
     /// Checks the numbers.
     pub fn validate(&self) -> Result<(), SimError> {
         let bad = |m: &str| Err(SimError::Config(m.to_string()));
-        if self.robot.validate().is_err() {
+        if self.robot.validate().is_err() || self.robot.validate_bus().is_err() {
             return bad("invalid robot description");
         }
         let p = |v: f64| (0.0..=1.0).contains(&v);
@@ -672,7 +672,7 @@ impl Simulator {
         };
         for (k, h) in bus.held.iter().enumerate() {
             // Joint index past the legs; the servo's own direction (no mounting sign).
-            let tick = TickMap::reference().tick_f64(0, h.angle);
+            let tick = ticks.servo_tick_f64(h.angle);
             devices.push(Device::servo(h.id, LEG_SERVOS + k, tick));
         }
         let bus = DeviceBus::new(devices, cfg.faults.clone(), rng::Rng::new(cfg.seed, 1));
