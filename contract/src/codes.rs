@@ -428,8 +428,9 @@ pub enum FaultKind {
     ServoSurvey,
     /// 22: the robot lacks sensors the walk can use, logged once at start-up when it does
     /// (`id` = the sensor slots it has on the bus as bits: 0 left foot board, 1 right foot
-    /// board, 2 IMU; `value` 0): without foot boards the log has no measured ZMP, no odometry
-    /// surveys and no feedback from the loads; without a bus IMU no gyro feedback. A notice.
+    /// board, 2 IMU; `value` 0): without foot boards the log has no measured ZMP and no feedback
+    /// from the loads, and the leg odometry times its surveys by the loads' split the ZMP
+    /// reference plans; without a bus IMU no gyro feedback. A notice.
     SensorsAbsent,
     /// Other kind (code kept for forward compatibility).
     Other(u8),

@@ -303,3 +303,46 @@ proptest! {
         prop_assert!(c.x.is_finite() && c.y.is_finite() && c.yaw.is_finite());
     }
 }
+
+/// A sample standing on soles `l`, `r` (x, y) with its ZMP reference at `zmp`.
+fn sample_at(l: [f32; 2], r: [f32; 2], zmp: [f32; 2]) -> gait_core::GaitSample<f32> {
+    let mut s = gait_core::GaitSample::<f32>::zero();
+    s.feet[0].x = l[0];
+    s.feet[0].y = l[1];
+    s.feet[1].x = r[0];
+    s.feet[1].y = r[1];
+    s.zmp = zmp;
+    s
+}
+
+proptest! {
+    /// The planned split of the loads (a robot without foot sensors times its surveys by it):
+    /// the ZMP reference at the fraction t of the way from the right sole to the left one gives
+    /// the left foot the share t (1 − t the right), clamped to [0, 1] beyond the soles; shares
+    /// always finite and summing to 1.
+    #[test]
+    fn the_planned_split_is_the_zmp_reference_place_between_the_soles(
+        rx in -0.3f32..0.3, ry in -0.3f32..0.3,
+        dx in -0.1f32..0.1, dy in 0.03f32..0.12,
+        t in -0.5f32..1.5, off in -0.02f32..0.02,
+    ) {
+        let (l, r) = ([rx + dx, ry + dy], [rx, ry]);
+        // A point off the segment, across it, by `off`: the same share.
+        let n = (dx * dx + dy * dy).sqrt();
+        let zmp = [rx + t * dx - off * dy / n, ry + t * dy + off * dx / n];
+        let [sl, sr] = sample_at(l, r, zmp).planned_load_shares();
+        let want = t.clamp(0.0, 1.0);
+        prop_assert!((sl - want).abs() < 1e-4, "{sl} for t = {t}");
+        prop_assert!((sl + sr - 1.0).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn the_planned_split_is_even_on_one_point_and_for_a_non_finite_reference() {
+    let same = sample_at([0.1, 0.0], [0.1, 0.0], [0.3, 0.2]);
+    assert_eq!(same.planned_load_shares(), [0.5, 0.5]);
+    let nan = sample_at([0.0, 0.045], [0.0, -0.045], [f32::NAN, 0.0]);
+    assert_eq!(nan.planned_load_shares(), [0.5, 0.5]);
+    let on_right = sample_at([0.0, 0.045], [0.0, -0.045], [0.0, -0.045]);
+    assert_eq!(on_right.planned_load_shares(), [0.0, 1.0]);
+}

@@ -410,6 +410,17 @@ fn the_op3_is_driven_from_its_description() {
         })
         .collect();
     assert_eq!(absent, [0]);
+    // Its leg odometry still surveys the landings (timed by the plan's load split) and the
+    // landing hold moves the landings it finds off their place (`CatchStep` component 2).
+    let holds = log
+        .events
+        .iter()
+        .filter(|e| {
+            matches!(e, Record::Fault(f)
+                if f.kind == walker_contract::record::FaultKind::CatchStep && f.id & 0xF == 2)
+        })
+        .count();
+    assert!(holds >= 2, "{holds} landing holds in 4 steps");
 }
 
 #[test]

@@ -128,7 +128,8 @@ impl<P: TickPath> Controller<'_, P> {
     }
 
     /// Estimate: the trunk (the supervisor's tilt), τ, the measured ZMP and the loads; the leg
-    /// odometry follows the executed phase.
+    /// odometry follows the executed phase and the loads (a robot without foot sensors: the
+    /// loads' split its ZMP reference plans, which times each landing's survey).
     fn estimate(&mut self, imu: Option<dxl::table::imu::ImuSample>) -> Estimate {
         let trunk = self.path.trunk(imu.as_ref(), self.walk);
         self.sup.tilt(trunk.tilt);
@@ -136,7 +137,12 @@ impl<P: TickPath> Controller<'_, P> {
         let feet = self.sense.feet();
         let zmp = self.path.zmp(feet, &self.prev, self.prev_feet_fx);
         let loads = self.path.loads(feet);
-        self.path.follow(self.prev.phase, loads);
+        let split = if self.cfg.robot.bus.foot_boards.is_some() {
+            loads
+        } else {
+            self.prev.planned_load_shares()
+        };
+        self.path.follow(self.prev.phase, split);
         Estimate {
             trunk,
             tau,

@@ -2776,6 +2776,57 @@ fn the_leg_odometry_places_a_landing_where_the_joints_put_it() {
     assert!(left > 300 && right > 300, "{left} {right}");
 }
 
+/// A robot without foot sensors (the reference robot's description without its foot boards,
+/// the boards gone from the fake's bus) still takes one leg-odometry survey per landing: timed
+/// by the loads' split its ZMP reference plans (the new foot's share reaching σ_min), so in the
+/// same double support as with the load cells and not before them (the fake loads a landing
+/// foot at its touch-down; the reference moves over after it).
+#[test]
+fn without_foot_sensors_each_landing_is_surveyed_when_the_plan_loads_the_new_foot() {
+    let with = cfg_with(ODOMETRY_ONLY);
+    let reference = with.robot;
+    let bare: &'static Robot = std::boxed::Box::leak(std::boxed::Box::new(Robot {
+        bus: gait_core::robot::BusDescription {
+            foot_boards: None,
+            ..reference.bus
+        },
+        ..*reference
+    }));
+    let without = Config {
+        robot: bare,
+        ..with
+    };
+    let mut a = sagging_left_leg(&with);
+    let mut b = sagging_left_leg(&without);
+    if let Some(ids) = reference.bus.foot_boards {
+        for id in ids {
+            b.remove(id);
+        }
+    }
+    for (x, cfg) in [(&mut a, &with), (&mut b, &without)] {
+        assert_eq!(run(x, cfg), RunEnd::Stopped(StopReason::PlanDone));
+    }
+    let surveying = |p: &Pkt| p.op == opcode::BULK_READ && p.tx_bytes == 40;
+    let after_window = ramp_ticks(&with) + 181;
+    let second_reads = |x: &FakeBoard| -> Vec<usize> {
+        let ticks = per_tick(x);
+        (after_window..ticks.len())
+            .filter(|&k| ticks[k].iter().any(surveying) && ticks[k - 1].iter().any(surveying))
+            .collect()
+    };
+    let (sa, sb) = (second_reads(&a), second_reads(&b));
+    assert_eq!(sa.len(), 14, "{sa:?}");
+    assert_eq!(sb.len(), sa.len(), "{sb:?} against {sa:?}");
+    // The double support of the stretched Table 2 walk: its planned share passes σ_min = 0.2
+    // well inside it.
+    for (ka, kb) in sa.iter().zip(&sb) {
+        assert!(
+            kb > ka && kb - ka < 40,
+            "survey at tick {kb} without foot sensors, {ka} with them"
+        );
+    }
+}
+
 /// Mode = 0 (torque off) mid-walk is a graded stop: the online walk finishes its step and
 /// stands (the port's velocity no longer counts), then the robot is lowered to the crouch,
 /// held, and rests there with torque on (stop `Requested`, `rest`): no torque off, the servo

@@ -586,15 +586,7 @@ impl CatchingStep {
             }
             _ => {
                 // (A7): the reference ZMP's place between the feet.
-                let [l, r] = &sample.feet;
-                let (ax, ay) = (l.x - r.x, l.y - r.y);
-                let n2 = ax * ax + ay * ay;
-                let alpha = if n2 > 1e-8 {
-                    (((sample.zmp[0] - r.x) * ax + (sample.zmp[1] - r.y) * ay) / n2).clamp(0.0, 1.0)
-                } else {
-                    0.5
-                };
-                let a = if alpha.is_finite() { alpha } else { 0.5 };
+                let a = sample.left_share();
                 let blend = |[dl, dr]: [[f32; 2]; 2]| {
                     [a * dl[0] + (1.0 - a) * dr[0], a * dl[1] + (1.0 - a) * dr[1]]
                 };

@@ -61,7 +61,10 @@
 //! the new foot carries at least the share `σ_min` of the feet's summed load: the new foot is then
 //! down and stays (it takes the weight), while the old one often lifts for a few tens of
 //! milliseconds in the landing's bounce and comes down a little elsewhere — measured later, the survey would chain that move into every landing
-//! after it. A double support where the new foot never takes that share keeps (O6). The corrections accumulate the landings'
+//! after it. A double support where the new foot never takes that share keeps (O6). A robot
+//! without foot sensors takes the split its ZMP reference plans for the measured one
+//! ([`crate::GaitSample::planned_load_shares`]): the survey then falls due once the reference
+//! has moved σ_min of the way to the new foot. The corrections accumulate the landings'
 //! errors (odometry drift, as a real robot's): the measured ZMP is in the world the firmware
 //! estimates, as the physics' centre of pressure is in the true one. Every output is finite: a
 //! non-finite result is rejected like an implausible one. Cost: two leg FKs and a few `atan2` /
@@ -312,8 +315,8 @@ impl<R: Real> LegOdometry<R> {
     }
 
     /// The survey due now, `(stance, new)`: in the double support after a single support on
-    /// `stance`, not yet taken, with the new foot carrying at least σ_min of `loads` (N, left
-    /// and right; non-finite = unloaded).
+    /// `stance`, not yet taken, with the new foot carrying at least σ_min of `loads` (left and
+    /// right, in any one unit: N measured, or the planned shares; non-finite = unloaded).
     pub fn survey_due(&self, loads: [R; 2]) -> Option<(Side, Side)> {
         let s = self.last_stance?;
         if !self.in_double || self.surveyed {

@@ -103,6 +103,35 @@ impl<R: Real> GaitSample<R> {
     }
 }
 
+impl GaitSample<f32> {
+    /// The left foot's share α of the weight the ZMP reference puts on the soles: its place
+    /// along the segment from the right sole point to the left one,
+    /// α = sat₀¹((p_ref − p_R)·(p_L − p_R)/|p_L − p_R|²); ½ when the soles coincide or a
+    /// number is not finite. The right foot carries 1 − α.
+    pub fn left_share(&self) -> f32 {
+        let [l, r] = &self.feet;
+        let (ax, ay) = (l.x - r.x, l.y - r.y);
+        let n2 = ax * ax + ay * ay;
+        let alpha = if n2 > 1e-8 {
+            (((self.zmp[0] - r.x) * ax + (self.zmp[1] - r.y) * ay) / n2).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+        if alpha.is_finite() {
+            alpha
+        } else {
+            0.5
+        }
+    }
+
+    /// The soles' loads the ZMP reference plans, as shares of the weight (left, right; they
+    /// sum to 1): what a robot without foot sensors takes for the measured loads' split.
+    pub fn planned_load_shares(&self) -> [f32; 2] {
+        let a = self.left_share();
+        [a, 1.0 - a]
+    }
+}
+
 /// The three segments of one step (seed 000: 0 … t1 … t2 … T).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
