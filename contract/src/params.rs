@@ -1316,7 +1316,7 @@ params! {
     },
     {
         key: "robot",
-        plan_key: None,
+        plan_key: Some("robot"),
         unit: "",
         domain: Domain::Word(&gait_core::robot::ROBOT_NAMES),
         doc: "the robot walked, by its description (gait-core `robot/`): tku-x (the reference robot) or op3 (ROBOTIS OP3); sets baud to the robot's (a later baud= overrides it)",

@@ -193,3 +193,32 @@ proptest! {
         }
     }
 }
+
+/// The plan's reach check from each robot's legs (`StepLimits::for_robot`): L = 0.95 × (thigh +
+/// calf), the hip's pitch axis at z_c minus the hip yaw joint's height, the ankle above the
+/// sole; the widest stance adds the soles' outward offsets. Figures worked by hand from the
+/// descriptions' numbers.
+#[test]
+fn the_reach_check_reads_each_robots_legs() {
+    use gait_core::trajectory::plan::StepLimits;
+    // TKU-X at Table 2's z_c 0.217: L = 0.19, h = 0.187, reach = √(0.19² − 0.187²) = 0.033630.
+    let t = StepLimits::for_robot(&Robot::reference(), 0.217);
+    assert!((t.max_length - 2.0 * 0.033630).abs() < 1e-5, "{t:?}");
+    assert!(
+        (t.max_width - (0.09 + 2.0 * 0.033630)).abs() < 1e-5,
+        "{t:?}"
+    );
+    assert!((t.min_width - 0.07).abs() < 1e-12, "{t:?}");
+    // OP3 at z_c 0.235: L = 0.95 × 0.22015 = 0.2091425, h = 0.235 − 0.0285 − 0.0305 = 0.176,
+    // reach = √(0.2091425² − 0.176²) = 0.112981; widest = 2 × (0.035 + 0.0125) + 2 × reach.
+    let o = StepLimits::for_robot(&Robot::op3(), 0.235);
+    assert!((o.max_length - 2.0 * 0.112981).abs() < 1e-5, "{o:?}");
+    assert!(
+        (o.max_width - (0.095 + 2.0 * 0.112981)).abs() < 1e-5,
+        "{o:?}"
+    );
+    assert!((o.min_width - 0.088).abs() < 1e-12, "{o:?}");
+    // At the OP3's straight-leg height nothing is in reach.
+    let straight = StepLimits::for_robot(&Robot::op3(), 0.279);
+    assert_eq!(straight.max_length, 0.0);
+}

@@ -33,7 +33,7 @@ use std::time::Duration;
 
 use gait_core::gait::{self, stretched, support_of, Targets};
 use gait_core::robot::{JOINT_NAMES, LEG_JOINTS};
-use gait_core::{Robot, SupportPhase as PlanPhase};
+use gait_core::SupportPhase as PlanPhase;
 use walker_contract::config::MAX_STEPS;
 use walker_contract::record::{FaultKind, LoggedPhase, Record, POS_NA};
 use walker_contract::{params, Config};
@@ -417,7 +417,7 @@ pub fn score(
     exit_code: Option<i32>,
     fell_at: Option<f64>,
 ) -> Result<RunMetrics, String> {
-    let robot = Robot::reference();
+    let robot = *cfg.robot;
     let log = report::decode_file(log_path)?;
     let truth = read_truth(truth_path)?;
     let cfg = adjusted_config(cfg, &log.events);
@@ -821,6 +821,7 @@ pub fn goal_section(runs: &[RunMetrics]) -> String {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use gait_core::Robot;
 
     #[test]
     fn axis_error_skips_nan() {

@@ -499,7 +499,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "'K=V …'")]
     pub firmware_args: Option<String>,
     /// The robot walked, by its description: the simulated robot and the firmware's `robot=`
-    /// (default tku-x, the reference robot).
+    /// (default: the plan's `robot`, else tku-x, the reference robot; a plan written for
+    /// another robot is refused).
     #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(gait_core::robot::ROBOT_NAMES))]
     pub robot: Option<String>,
     /// Wall-clock limit per run, s (default 1800).
@@ -651,6 +652,10 @@ pub struct DriveArgs {
     /// With --sim: the plan file (walking parameters; default the built-in Table 2 walk).
     #[arg(long, value_name = "FILE", requires = "sim")]
     pub plan: Option<PathBuf>,
+    /// With --sim: the robot walked, by its description (default: the plan's robot, else
+    /// tku-x).
+    #[arg(long, requires = "sim", value_parser = clap::builder::PossibleValuesParser::new(gait_core::robot::ROBOT_NAMES))]
+    pub robot: Option<String>,
     /// With --sim: the firmware ELF (default target/thumbv7em-none-eabihf/release/qemu).
     #[arg(long, value_name = "ELF", requires = "sim")]
     pub elf: Option<PathBuf>,
@@ -1153,7 +1158,7 @@ struct RunSetup {
 
 impl RunSetup {
     fn new(cmd: &str, a: RunArgs) -> Result<RunSetup, CliError> {
-        let (spec, plan_name, file_sim, file) = match &a.config {
+        let (mut spec, plan_name, file_sim, file) = match &a.config {
             Some(c) => {
                 let rc = crate::runconfig::load(c).map_err(CliError::failed)?;
                 let file = (rc.elf, rc.machine, rc.timeout);
@@ -1166,13 +1171,11 @@ impl RunSetup {
         };
         let mut sim = crate::sim::SimConfig::default();
         a.sim.over(file_sim).apply(cmd, &mut sim)?;
-        let mut extra_tokens = tokens(a.firmware_args.as_deref());
+        let extra_tokens = tokens(a.firmware_args.as_deref());
         if let Some(name) = &a.robot {
-            let robot = Robot::by_name(name)
-                .ok_or_else(|| CliError::usage(format!("walker {cmd}: unknown robot {name}")))?;
-            sim.robot = *robot;
-            extra_tokens.insert(0, format!("robot={name}"));
+            with_robot(cmd, &mut spec, name)?;
         }
+        sim.robot = *spec.robot();
         // The firmware's own parser, on the host, before QEMU starts.
         crate::fil::check_tokens(&spec, &extra_tokens)
             .map_err(|e| CliError::usage(format!("walker {cmd}: --firmware-args: {e}")))?;
@@ -1211,6 +1214,25 @@ impl RunSetup {
             extra_tokens: self.extra_tokens,
         };
         (opts, self.plan_name)
+    }
+}
+
+/// The plan `spec` walked by the robot `name` (`--robot`): a plan written for another robot is
+/// refused; one that names none is checked against this robot's legs and walks it (the
+/// firmware's `robot=` and the simulated robot follow the plan's robot).
+fn with_robot(cmd: &str, spec: &mut WalkSpec, name: &str) -> Result<(), CliError> {
+    let robot = Robot::by_name(name)
+        .ok_or_else(|| CliError::usage(format!("walker {cmd}: unknown robot {name}")))?;
+    match spec.robot.as_deref() {
+        Some(own) if own != name => Err(CliError::usage(format!(
+            "walker {cmd}: --robot {name}: the plan is written for the robot {own}"
+        ))),
+        Some(_) => Ok(()),
+        None => {
+            spec.robot = Some(name.to_string());
+            spec.check(robot)
+                .map_err(|e| CliError::usage(format!("walker {cmd}: --robot {name}: {e}")))
+        }
     }
 }
 
@@ -1395,16 +1417,15 @@ pub fn apply_stall_torque(cfg: &mut crate::sim::SimConfig, t: f64) -> Result<(),
 
 fn run_export(a: ExportArgs) -> Result<(), CliError> {
     let ExportArgs { plan, out, dt } = a;
-    let robot = Robot::reference();
     let (spec, name) = match plan.as_deref() {
         Some(p) => (
-            export::load_for_export(p, &robot).map_err(CliError::failed)?,
+            export::load_for_export(p).map_err(CliError::failed)?,
             p.display().to_string(),
         ),
         None => load_plan(None)?,
     };
     let dt = dt.unwrap_or(spec.dt);
-    let (rows, summary) = export::export_rows(&spec, &robot, dt).map_err(|e| {
+    let (rows, summary) = export::export_rows(&spec, spec.robot(), dt).map_err(|e| {
         let e = if e.field == "dt" {
             planfile::PlanError {
                 field: "--dt / dt".into(),
@@ -1463,12 +1484,12 @@ fn run_report(a: ReportArgs) -> Result<(), CliError> {
         spec,
         plan_name,
     };
-    let r = report::run(&opts, &Robot::reference())?;
+    let r = report::run(&opts, opts.spec.robot())?;
     for w in &r.warnings {
         eprintln!("warning: {w}");
     }
     if let Some(m) = &mcap {
-        let counts = crate::mcap_export::export_run(&opts, &r, &Robot::reference(), None, m)?;
+        let counts = crate::mcap_export::export_run(&opts, &r, opts.spec.robot(), None, m)?;
         println!(
             "{}: {} channels, {} messages (Foxglove: open the file)",
             m.display(),
@@ -1958,7 +1979,7 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         spec: spec.clone(),
         plan_name,
     };
-    let rep = match report::run(&ropts, &Robot::reference()) {
+    let rep = match report::run(&ropts, spec.robot()) {
         Ok(rep) => rep,
         // A firmware that stopped before walking: its exit code is the news, not the report.
         Err(e) if r.exit_code != Some(0) => {
@@ -2005,8 +2026,7 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
         let tokens: Vec<String> = crate::fil::qemu_append(&opts)
             .map(|t| t.split_whitespace().map(str::to_string).collect())
             .map_err(|e| CliError::failed(format!("walker fil: {e}")))?;
-        let counts =
-            crate::mcap_export::export_run(&ropts, &rep, &Robot::reference(), Some(&tokens), m)?;
+        let counts = crate::mcap_export::export_run(&ropts, &rep, spec.robot(), Some(&tokens), m)?;
         println!(
             "mcap: {} ({} channels, {} messages)",
             m.display(),
@@ -2275,6 +2295,7 @@ fn run_drive(a: DriveArgs) -> Result<(), CliError> {
     let mut sim = match a.sim {
         true => Some(crate::drive::SimRun::start(
             a.plan.as_deref(),
+            a.robot.as_deref(),
             a.elf.as_deref(),
             &a.out,
         )?),

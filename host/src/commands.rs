@@ -703,15 +703,15 @@ pub fn standing_feet(half_width: f32) -> [Place<f32>; 2] {
 /// Replays a log's `CommandReceived` and `Footstep` records through [`StepGenerator`] (f32,
 /// the firmware's arithmetic; a footstep's logged heading-hold correction, id s·16 + 3, and
 /// position-hold correction, ids s·16 + 7, 8, are passed to [`StepGenerator::next_step_held`])
-/// for a walk of CoM height `z_c` and half width `half_width`, with
+/// for `robot`'s walk of CoM height `z_c` and half width `half_width`, with
 /// the step period the firmware logged (`Footstep` id 0): a new generator at each start from
 /// standing, first swing = the logged step's side.
 pub fn replay_footsteps(
     records: &[Record],
+    robot: &Robot,
     z_c: f64,
     half_width: f32,
 ) -> Result<FootstepCheck, String> {
-    let robot = Robot::reference();
     let mut log = FootstepLog::new();
     let mut feet = standing_feet(half_width);
     let mut gen: Option<StepGenerator<f32>> = None;
@@ -738,7 +738,7 @@ pub fn replay_footsteps(
         let period = (f64::from(log.period_us().unwrap_or(0)) * 1e-6) as f32;
         let new_gen = |feet| {
             StepGenerator::new(
-                &robot,
+                robot,
                 z_c,
                 CommandLimits::DEFAULT,
                 half_width,

@@ -416,6 +416,7 @@ impl SimRun {
     /// given), its output in `out/fil.out` and `out/fil.err`.
     pub fn start(
         plan: Option<&std::path::Path>,
+        robot: Option<&str>,
         elf: Option<&std::path::Path>,
         out: &std::path::Path,
     ) -> Result<Self, String> {
@@ -432,6 +433,9 @@ impl SimRun {
             .arg(out);
         if let Some(p) = plan {
             c.arg("--plan").arg(p);
+        }
+        if let Some(r) = robot {
+            c.args(["--robot", r]);
         }
         if let Some(e) = elf {
             c.arg("--elf").arg(e);

@@ -227,7 +227,7 @@ pub fn is_run_config(text: &str) -> bool {
 /// The walk `walker export --plan FILE` samples: a plan file, or a run configuration's walk,
 /// checked as [`export_rows`] checks it (at the plan's dt). A refusal carries the reason the
 /// file's header gives, if it gives one ([`not_exported_reason`]).
-pub fn load_for_export(path: &std::path::Path, robot: &Robot) -> Result<WalkSpec, String> {
+pub fn load_for_export(path: &std::path::Path) -> Result<WalkSpec, String> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("{}: cannot read the plan: {e}", path.display()))?;
     let loaded = if is_run_config(&text) {
@@ -236,7 +236,7 @@ pub fn load_for_export(path: &std::path::Path, robot: &Robot) -> Result<WalkSpec
         crate::planfile::load(path).map_err(|e| e.to_string())
     };
     let checked = loaded.and_then(|spec| {
-        check_exportable(&spec, robot, spec.dt)
+        check_exportable(&spec, spec.robot(), spec.dt)
             .map(|()| spec)
             .map_err(|e| format!("{}: {e}", path.display()))
     });
@@ -304,7 +304,6 @@ mod shipped_plans {
     #[test]
     fn every_shipped_plan_exports_or_says_why_not() {
         let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../plans"));
-        let robot = Robot::reference();
         let mut files: Vec<_> = std::fs::read_dir(dir)
             .unwrap()
             .map(|e| e.unwrap().path())
@@ -316,9 +315,9 @@ mod shipped_plans {
             let name = path.file_name().unwrap().to_string_lossy().into_owned();
             let text = std::fs::read_to_string(path).unwrap();
             let why = not_exported_reason(&text);
-            match (load_for_export(path, &robot), &why) {
+            match (load_for_export(path), &why) {
                 (Ok(spec), None) => {
-                    let (rows, _) = export_rows(&spec, &robot, spec.dt)
+                    let (rows, _) = export_rows(&spec, spec.robot(), spec.dt)
                         .unwrap_or_else(|e| panic!("{name}: {e}"));
                     assert!(rows.len() > 100, "{name}: {} rows", rows.len());
                     exported += 1;

@@ -643,8 +643,12 @@ pub fn command_figures(
     extra.push("autostart=0".into());
     let (_, cfg) = check_tokens(spec, &extra)?;
     let log = crate::report::decode_file(&r.log)?;
-    let footsteps =
-        crate::commands::replay_footsteps(&log.events, cfg.walk.z_c, cfg.walk.step_width as f32)?;
+    let footsteps = crate::commands::replay_footsteps(
+        &log.events,
+        cfg.robot,
+        cfg.walk.z_c,
+        cfg.walk.step_width as f32,
+    )?;
     let [l, rt] = footsteps.commanded_feet;
     let mid = |a: f32, b: f32| 0.5 * (f64::from(a) + f64::from(b));
     let yaw = {
@@ -687,7 +691,8 @@ pub fn command_figures(
 pub struct WalkFigures {
     /// When the truth first marked a fall, s.
     pub fell_at: Option<f64>,
-    /// Pelvis travel along x from the first to the last truth row, m.
+    /// Pelvis travel along x from the first to the last truth row, m, less the whole-body
+    /// compensation's offset of the pelvis from the CoM at the end (0 without it).
     pub walked: f64,
     /// The plan's CoM travel along x, m.
     pub planned: f64,
@@ -713,7 +718,24 @@ impl WalkFigures {
     }
 }
 
-/// Reads the walk's figures off the simulator's truth CSV and the plan.
+/// How far ahead of the plan's CoM whole-body compensation puts the pelvis at the plan's last
+/// sample, m (0 without it): the simulated robot starts from the uncompensated pose, so the
+/// pelvis travels this much further than the whole body's CoM it places on the plan's.
+fn compensation_offset(spec: &WalkSpec, last: &gait_core::GaitSample<f64>) -> f64 {
+    match spec.compensation {
+        crate::planfile::CompensationName::None => 0.0,
+        crate::planfile::CompensationName::Wholebody => {
+            let wb = gait_core::kinematics::wholebody::WholeBody::<f64>::new(
+                spec.robot(),
+                gait_core::gait::WHOLEBODY_ITERATIONS,
+            );
+            wb.joint_targets(last).pelvis.x - last.com[0]
+        }
+    }
+}
+
+/// Reads the walk's figures off the simulator's truth CSV and the plan: the pelvis's travel
+/// (less the whole-body compensation's offset) against the plan's CoM travel.
 pub fn walk_figures(truth: &Path, spec: &WalkSpec) -> Result<WalkFigures, String> {
     walk_figures_of(&crate::report::read_truth(truth)?, truth, spec)
 }
@@ -749,16 +771,18 @@ pub fn walk_figures_of(
         .filter(|a| a.is_finite())
         .fold(0.0, f64::max);
     let (first, last) = ((x0, yaw0), (x1, yaw1));
-    let robot = gait_core::Robot::reference();
-    let mut s = spec.sampler(&robot, spec.dt).map_err(|e| e.to_string())?;
-    let start = s.next(0.0).com[0];
-    let mut end = start;
+    let mut s = spec
+        .sampler(spec.robot(), spec.dt)
+        .map_err(|e| e.to_string())?;
+    let first_sample = s.next(0.0);
+    let mut last_sample = first_sample;
     while !s.is_done() {
-        end = s.next(0.0).com[0];
+        last_sample = s.next(0.0);
     }
+    let (start, end) = (first_sample.com[0], last_sample.com[0]);
     Ok(WalkFigures {
         fell_at,
-        walked: last.0 - first.0,
+        walked: last.0 - first.0 - compensation_offset(spec, &last_sample),
         planned: end - start,
         heading_drift: last.1 - first.1,
         max_tilt,
@@ -841,8 +865,9 @@ pub fn sole_figures(table: &crate::report::TruthTable, planned: [f64; 2]) -> Opt
 
 /// The plan's travel of each foot along x (left, right), m.
 pub fn planned_feet_travel(spec: &WalkSpec) -> Result<[f64; 2], String> {
-    let robot = gait_core::Robot::reference();
-    let mut s = spec.sampler(&robot, spec.dt).map_err(|e| e.to_string())?;
+    let mut s = spec
+        .sampler(spec.robot(), spec.dt)
+        .map_err(|e| e.to_string())?;
     let first = s.next(0.0).feet;
     let mut last = first;
     while !s.is_done() {

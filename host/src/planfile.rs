@@ -274,6 +274,10 @@ pub struct WalkSpec {
     pub stabilizer: bool,
     /// Any other firmware parameter by its token key (the plan's `[firmware]` table).
     pub firmware: toml::Table,
+    /// The robot the plan is written for, by its description's name (gait-core `ROBOT_NAMES`;
+    /// default the reference robot): the plan is checked against its legs, and the firmware's
+    /// `robot=` and the simulated robot follow it.
+    pub robot: Option<String>,
 }
 
 impl Default for WalkSpec {
@@ -306,6 +310,7 @@ impl Default for WalkSpec {
             compensation: CompensationName::None,
             stabilizer: false,
             firmware: toml::Table::new(),
+            robot: None,
         }
     }
 }
@@ -317,8 +322,7 @@ pub fn load(path: &Path) -> Result<WalkSpec, PlanError> {
         PlanError::new("", format!("cannot read the plan file: {e}")).in_file(&name)
     })?;
     let spec = parse(&text).map_err(|e| e.in_file(&name))?;
-    spec.check(&Robot::reference())
-        .map_err(|e| e.in_file(&name))?;
+    spec.check(spec.robot()).map_err(|e| e.in_file(&name))?;
     Ok(spec)
 }
 
@@ -478,8 +482,18 @@ impl WalkSpec {
         }
     }
 
-    /// Checks every field and builds the plan once (errors name the field): first the
-    /// firmware's parser on the plan's tokens (ranges of the parameter table), then the walk.
+    /// The robot the plan is written for ([`WalkSpec::robot`]'s name; the reference robot when
+    /// it names none or one [`WalkSpec::check`] refuses).
+    pub fn robot(&self) -> &'static Robot {
+        self.robot
+            .as_deref()
+            .and_then(Robot::by_name)
+            .unwrap_or(&gait_core::robot::ROBOTS[0]) // the reference robot
+    }
+
+    /// Checks every field and builds the plan once for `robot`'s legs (errors name the field):
+    /// first the firmware's parser on the plan's tokens (ranges of the parameter table, the
+    /// robot's name), then the walk.
     pub fn check(&self, robot: &Robot) -> Result<(), PlanError> {
         self.firmware_config()?;
         self.sampler(robot, self.dt).map(|_| ())
@@ -522,7 +536,13 @@ impl WalkSpec {
             Err(e) => return Err(PlanError::new("plan", e.to_string())),
         };
         let mut out = Vec::new();
-        for p in PARAMS.iter() {
+        // The robot's token first: it sets the robot's own values (its bus speed) that the
+        // plan's other tokens may override.
+        let robot_first = PARAMS
+            .iter()
+            .filter(|p| p.key == "robot")
+            .chain(PARAMS.iter().filter(|p| p.key != "robot"));
+        for p in robot_first {
             let (field, text) = match p.plan_key {
                 Some(pk) => match plan.get(pk) {
                     Some(v) => (pk.to_string(), toml_text(v)),
@@ -855,6 +875,35 @@ mod tests {
             let e = parse(&src).and_then(|s| s.check(&robot)).expect_err(&src);
             assert_eq!(e.field, field, "{src}: {e}");
         }
+    }
+
+    /// A plan names its robot (`robot = "op3"`): it is checked against that robot's legs, its
+    /// firmware tokens start with `robot=` (so that the plan's own `baud` overrides the robot's
+    /// bus speed), and an unknown robot is refused naming the key.
+    #[test]
+    fn a_plan_is_checked_against_the_robot_it_names() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../plans/op3-forward.toml");
+        let spec = load(Path::new(path)).unwrap();
+        assert_eq!(spec.robot().name, "op3");
+        // Its z_c (0.235 m) is beyond the reference robot's 0.23 m legs.
+        let e = spec.check(&Robot::reference()).unwrap_err();
+        assert!(e.reason.contains("reach"), "{e}");
+        let tokens = spec.firmware_tokens().unwrap();
+        assert_eq!(tokens.first().map(String::as_str), Some("robot=op3"));
+        let with_baud = parse("robot = \"op3\"\n[firmware]\nbaud = 1000000\n").unwrap();
+        let cfg = with_baud.firmware_config().unwrap();
+        assert_eq!((cfg.robot.name, cfg.bus_baud), ("op3", 1_000_000));
+        let only_robot = parse("robot = \"op3\"\n")
+            .unwrap()
+            .firmware_config()
+            .unwrap();
+        assert_eq!(only_robot.bus_baud, 2_000_000);
+        let e = parse("robot = \"nao\"\n")
+            .unwrap()
+            .check(&Robot::reference())
+            .unwrap_err();
+        assert_eq!(e.field, "robot", "{e}");
+        assert_eq!(WalkSpec::default().robot().name, "tku-x");
     }
 
     #[test]

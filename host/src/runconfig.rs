@@ -28,7 +28,6 @@
 
 use crate::cli::SimArgs;
 use crate::planfile::{self, PlanError, WalkSpec};
-use gait_core::Robot;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -116,7 +115,7 @@ pub fn parse(text: &str, base: &Path) -> Result<RunConfig, (String, String)> {
             planfile::load(&base.join(p)).map_err(|e| ("plan_file".into(), e.to_string()))?
         }
         (None, Some(spec)) => {
-            spec.check(&Robot::reference())
+            spec.check(spec.robot())
                 .map_err(|e| plan_field("plan.", e))?;
             spec
         }

@@ -147,6 +147,7 @@ pub fn script(axis: Axis, level: f64, period_s: f64) -> (CommandScript, (f64, f6
 /// The velocity the step generator settles at for `axis` at `level` (f32, the firmware's
 /// arithmetic): the reach limits' cap.
 pub fn delivered(
+    robot: &Robot,
     axis: Axis,
     level: f64,
     z_c: f64,
@@ -155,7 +156,7 @@ pub fn delivered(
 ) -> Result<f64, String> {
     let feet = crate::commands::standing_feet(half_width);
     let mut g = StepGenerator::new(
-        &Robot::reference(),
+        robot,
         z_c,
         CommandLimits::DEFAULT,
         half_width,
@@ -236,6 +237,7 @@ fn speed_run(opts: &SpeedOptions, axis: Axis, level: f64) -> Result<SpeedRun, St
     let (script, hold) = script(axis, level, cfg.walk.period);
     let deliver = |period: f64| {
         delivered(
+            cfg.robot,
             axis,
             level,
             cfg.walk.z_c,
@@ -468,11 +470,12 @@ mod tests {
     fn the_delivered_velocity_is_the_reach_cap() {
         // Table 2's z_c and T = 0.64 s: 0.067 m per step at the reach limit (command.rs docs),
         // ≈ 0.105 m/s; 0.05 m/s is within it.
-        let slow = delivered(Axis::Forward, 0.05, 0.217, 0.045, 0.64).unwrap();
+        let slow = delivered(&Robot::reference(), Axis::Forward, 0.05, 0.217, 0.045, 0.64).unwrap();
         assert!((slow - 0.05).abs() < 1e-6, "{slow}");
-        let capped = delivered(Axis::Forward, 0.2, 0.217, 0.045, 0.64).unwrap();
+        let capped =
+            delivered(&Robot::reference(), Axis::Forward, 0.2, 0.217, 0.045, 0.64).unwrap();
         assert!(capped > 0.09 && capped < 0.12, "{capped}");
-        let turn = delivered(Axis::Turn, 0.2, 0.217, 0.045, 0.64).unwrap();
+        let turn = delivered(&Robot::reference(), Axis::Turn, 0.2, 0.217, 0.045, 0.64).unwrap();
         assert!((turn - 0.2).abs() < 1e-6, "{turn}");
     }
 

@@ -352,13 +352,21 @@ fn dropped_and_corrupted_replies_are_counted_and_survived() {
 #[test]
 #[ignore = "needs QEMU and the firmware ELF; run by scripts/test.sh"]
 fn the_op3_is_driven_from_its_description() {
-    // `robot=op3`: the firmware probes the OP3's 20 servos at OP3.robot's IDs at 2 Mbps (no
-    // foot boards, no bus IMU), torques its legs and its held arms and head, and walks the
+    // The OP3's own plan (plans/op3-forward.toml, `robot = "op3"`: the firmware's `robot=op3`),
+    // four steps of it: the firmware probes the OP3's 20 servos at OP3.robot's IDs at 2 Mbps
+    // (no foot boards, no bus IMU), torques its legs and its held arms and head, and walks the
     // plan on the MuJoCo OP3 (its own IDs and mounting signs) without a fall. Without foot
     // sensors there is no measured ZMP in the log.
-    let spec = short_walk(4);
+    let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/../plans/op3-forward.toml");
+    let spec = WalkSpec {
+        steps: 4,
+        lead_in: 1.0,
+        lead_out: 1.0,
+        ..walker_host::planfile::load(std::path::Path::new(plan)).expect("the OP3's plan")
+    };
+    assert_eq!(spec.robot().name, "op3");
     let sim = SimConfig {
-        robot: gait_core::Robot::op3(),
+        robot: *spec.robot(),
         ..SimConfig::default()
     };
     // The same walk on the idealised kinematic OP3 (stance sole bolted down): the whole chain
@@ -369,8 +377,8 @@ fn the_op3_is_driven_from_its_description() {
         ..sim.clone()
     };
     let ((r, log), (rk, _)) = both(
-        || fil("op3", spec.clone(), sim, &["robot=op3"]),
-        || fil("op3-kinematic", spec.clone(), kinematic, &["robot=op3"]),
+        || fil("op3", spec.clone(), sim, &[]),
+        || fil("op3-kinematic", spec.clone(), kinematic, &[]),
     );
     let w = walker_host::fil::walk_figures(&rk.truth, &spec).unwrap();
     assert_eq!(rk.exit_code, Some(0), "{}", w.line());

@@ -197,11 +197,12 @@ pub struct StepLimits {
 impl StepLimits {
     /// Limits from the leg geometry at CoM height `z_c`: with the pelvis midway between the
     /// feet, each ankle may sit at most √(L² − h²) from under its hip, L = 0.95·(thigh + calf),
-    /// h = z_c − ankle height.
+    /// h = z_c − hip yaw joint's height − ankle height (the hip's roll and pitch axes lie that
+    /// far below the pelvis point); the soles lie `sole_offset` outward of the ankles.
     pub fn for_robot(robot: &Robot, z_c: f64) -> StepLimits {
         let g = &robot.geometry;
         let l = 0.95 * (g.thigh + g.calf);
-        let h = z_c - g.ankle_height;
+        let h = z_c - g.hip_yaw_height - g.ankle_height;
         let reach = if l > h {
             libm::sqrt(l * l - h * h)
         } else {
@@ -215,7 +216,7 @@ impl StepLimits {
         StepLimits {
             max_length: 2.0 * reach,
             min_width: g.sole_width + 0.01,
-            max_width: 2.0 * g.hip_offset_y + 2.0 * reach,
+            max_width: 2.0 * (g.hip_offset_y + g.sole_offset[1]) + 2.0 * reach,
             max_turn: yaw,
         }
     }
