@@ -78,6 +78,10 @@ cargo build --release --no-default-features --features board-qemu --bin qemu
 # The OpenCR image for ROBOTIS' USB bootloader (`walker flash`): sector 5 only, kept as opencr-boot.
 cargo build --release --no-default-features --features board-opencr,opencr-bootloader --bin opencr
 cp "$target/thumbv7em-none-eabihf/release/opencr" "$target/thumbv7em-none-eabihf/release/opencr-boot"
+# The same image for a ROBOTIS OP3's OpenCR (the OP3's description as the build's robot).
+cargo clippy --release --no-deps --no-default-features --features robot-op3,opencr-bootloader --bins -- -D warnings
+cargo build --release --no-default-features --features robot-op3,opencr-bootloader --bin opencr
+cp "$target/thumbv7em-none-eabihf/release/opencr" "$target/thumbv7em-none-eabihf/release/opencr-op3-boot"
 cargo build --release --no-default-features --features board-opencr --bin opencr
 # The FPU-less Cortex-M3 builds (fixed-point path, size-oriented profile release-m3): the
 # ROBOTIS OpenCM 9.04 and the QEMU board for mps2-an385 (firmware-in-the-loop on the M3).
@@ -93,6 +97,7 @@ python3 scripts/sizes.py \
     "$target/thumbv7em-none-eabihf/release/qemu-fixed" \
     "$target/thumbv7em-none-eabihf/release/opencr" \
     --limit 256:320 "$target/thumbv7em-none-eabihf/release/opencr-boot" \
+    --limit 256:320 "$target/thumbv7em-none-eabihf/release/opencr-op3-boot" \
     "$target/thumbv7m-none-eabi/release-m3/qemu" \
     --limit 112:16 "$target/thumbv7m-none-eabi/release-m3/opencm"
 # The limit check itself must be able to fail: the qemu ELF is far over 1 KiB of flash.

@@ -410,10 +410,34 @@ pub fn standby<B: Board>(
 
 /// The robot of a real board's build: its flash holds the walk's set-up for this one robot,
 /// folded by the compiler from its description (for all of them it would not fit the OpenCM
-/// 9.04's 114 KiB nor the OpenCR bootloader's 256 KiB region). QEMU builds walk any described
-/// robot (`robot=`).
+/// 9.04's 114 KiB nor the OpenCR bootloader's 256 KiB region): the ROBOTIS OP3 with the
+/// feature `robot-op3`, else the reference robot. QEMU builds walk any described robot
+/// (`robot=`).
+#[cfg(all(
+    any(feature = "board-opencm", feature = "board-opencr"),
+    not(feature = "robot-op3")
+))]
+pub const BUILD_ROBOT: Robot = Robot::reference();
+/// The robot of a real board's build (see above): the ROBOTIS OP3.
+#[cfg(all(feature = "board-opencr", feature = "robot-op3"))]
+pub const BUILD_ROBOT: Robot = Robot::op3();
+
+/// The configuration a build for `robot` starts from: the defaults with `robot` and its bus
+/// speed (what the parameter `robot=` sets).
+pub fn defaults_for(robot: &'static Robot) -> Config {
+    Config {
+        robot,
+        bus_baud: robot.bus.baud,
+        ..Config::default()
+    }
+}
+
+/// The configuration a real board's build starts from: [`defaults_for`] its robot
+/// ([`BUILD_ROBOT`]).
 #[cfg(any(feature = "board-opencm", feature = "board-opencr"))]
-const BUILD_ROBOT: Robot = Robot::reference();
+pub fn build_defaults() -> Config {
+    defaults_for(&BUILD_ROBOT)
+}
 
 /// [`run`] with the command port `link` (kept by [`run_on_enable`] across runs).
 pub fn run_with<B: Board>(

@@ -11,6 +11,7 @@
 //! power-cycled.
 //!
 //! Build: `cargo build --release --no-default-features --features board-opencr --bin opencr`
+//! (a ROBOTIS OP3's OpenCR: `--features robot-op3`, [`walker_firmware::control::BUILD_ROBOT`])
 //! Flash and run (needs probe-rs and a probe on the SWD header): `cargo run --release --bin opencr`
 #![cfg_attr(all(target_arch = "arm", target_os = "none"), no_std, no_main)]
 
@@ -27,7 +28,7 @@ mod firmware {
         peripherals: stm32f7xx_hal::pac::Peripherals::take(),
         config: Config {
             wait_enable: true,
-            ..Config::default()
+            ..walker_firmware::control::build_defaults()
         },
         board: OpenCrBoard::new,
         panic: panic_reset,

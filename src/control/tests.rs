@@ -3546,3 +3546,21 @@ fn the_servo_survey_measures_the_pitch_servos_spring_standing() {
     );
     assert_eq!(replies[3], (None, 105u16.to_le_bytes().to_vec()));
 }
+
+/// A build's defaults for a robot (`control::defaults_for`, what a real board's build starts
+/// from) are the defaults with the parameter `robot=` of that robot applied: its description and
+/// its bus speed, nothing else.
+#[test]
+fn a_builds_defaults_for_a_robot_are_its_robot_parameter() {
+    for robot in gait_core::robot::ROBOTS.iter() {
+        let mut by_param = Config::default();
+        crate::params::apply(&mut by_param, format!("robot={}", robot.name).as_bytes()).unwrap();
+        let built = super::defaults_for(robot);
+        assert_eq!(built, by_param, "{}", robot.name);
+        assert_eq!(built.bus_baud, robot.bus.baud);
+    }
+    assert_eq!(
+        super::defaults_for(&gait_core::robot::ROBOTS[1]).bus_baud,
+        2_000_000
+    );
+}
