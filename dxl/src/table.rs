@@ -164,9 +164,9 @@ pub mod x_series {
 
 /// Foot force-sensor board (our device): four load cells under each sole.
 ///
-/// Frame: x forward, y left, origin at the ground projection of the ankle joint.
-/// Sensor order and position (m): 0 front-left (+0.040, +0.025), 1 front-right
-/// (+0.040, −0.025), 2 rear-left (−0.040, +0.025), 3 rear-right (−0.040, −0.025).
+/// Sensor order: 0 front-left, 1 front-right, 2 rear-left, 3 rear-right; where the cells sit
+/// under the sole is the robot's description (gait-core `Geometry::force_sensors`), not the
+/// board's.
 ///
 /// | addr | size | field |
 /// |---|---|---|
@@ -188,13 +188,6 @@ pub mod foot {
     pub const COUNTER: Field = f(144, 2);
     /// Model number reported by the foot board.
     pub const MODEL_NUMBER_VALUE: u16 = 0x5A11;
-    /// Sensor positions `[x, y]` in metres, in force order.
-    pub const SENSOR_POSITIONS_M: [[f32; 2]; 4] = [
-        [0.040, 0.025],
-        [0.040, -0.025],
-        [-0.040, 0.025],
-        [-0.040, -0.025],
-    ];
 
     /// One sample of a foot board.
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -223,23 +216,6 @@ pub mod foot {
         /// Total vertical force in newtons.
         pub fn total_n(&self) -> f32 {
             self.forces_mn.iter().map(|&v| v as f32).sum::<f32>() * 1e-3
-        }
-
-        /// Centre of pressure `[x, y]` (m) when the total force exceeds `min_total_n`.
-        pub fn cop_m(&self, min_total_n: f32) -> Option<[f32; 2]> {
-            let total = self.total_n();
-            // Written so that NaN thresholds also yield `None`.
-            if total.partial_cmp(&min_total_n) != Some(core::cmp::Ordering::Greater) || total <= 0.0
-            {
-                return None;
-            }
-            let mut cop = [0.0f32; 2];
-            for (&fz, pos) in self.forces_mn.iter().zip(SENSOR_POSITIONS_M) {
-                let w = fz as f32 * 1e-3 / total;
-                cop[0] += w * pos[0];
-                cop[1] += w * pos[1];
-            }
-            Some(cop)
         }
     }
 }
@@ -356,13 +332,7 @@ mod tests {
             forces_mn: [10_000; 4],
             counter: 0,
         };
-        let cop = even.cop_m(1.0).unwrap();
-        assert!(cop[0].abs() < 1e-6 && cop[1].abs() < 1e-6);
-        let front = FootForces {
-            forces_mn: [10_000, 10_000, 0, 0],
-            counter: 0,
-        };
-        assert!((front.cop_m(1.0).unwrap()[0] - 0.040).abs() < 1e-6);
-        assert_eq!(FootForces::default().cop_m(1.0), None);
+        assert!((even.total_n() - 40.0).abs() < 1e-4);
+        assert_eq!(FootForces::from_bytes(&even.to_bytes()), Some(even));
     }
 }

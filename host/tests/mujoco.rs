@@ -330,6 +330,41 @@ fn the_mujoco_model_is_the_robot_description() {
     for robot in gait_core::robot::ROBOTS {
         model_is_the_description(robot);
     }
+    // And a made-up robot whose every leg dimension, sign and ID differs from both: a number of
+    // either robot left in the generator would put its soles elsewhere (the reference robot's
+    // round dimensions cannot be told from other constants by a literal scan:
+    // host/tests/descriptions.rs).
+    model_is_the_description(made_up_robot());
+}
+
+/// The reference robot with other legs: every dimension changed, the sole off the ankle, the
+/// hip's roll and pitch axes below the pelvis point, mixed mounting signs and other IDs.
+fn made_up_robot() -> gait_core::Robot {
+    let r = gait_core::Robot::reference();
+    let g = gait_core::robot::Geometry {
+        hip_offset_y: 0.052,
+        thigh: 0.107,
+        calf: 0.093,
+        ankle_height: 0.027,
+        sole_offset: [0.004, 0.006],
+        hip_yaw_height: 0.013,
+        sole_length: 0.097,
+        sole_width: 0.063,
+        ..r.geometry
+    };
+    let made = gait_core::Robot {
+        name: "made-up",
+        geometry: g,
+        mounting: [1, -1, 1, -1, -1, 1, -1, 1, 1, -1, 1, -1],
+        bus: gait_core::robot::BusDescription {
+            legs: [21, 22, 23, 24, 25, 26, 31, 32, 33, 34, 35, 36],
+            ..r.bus
+        },
+        ..r
+    };
+    made.validate().unwrap();
+    made.validate_bus().unwrap();
+    made
 }
 
 fn model_is_the_description(robot: gait_core::Robot) {
