@@ -533,6 +533,8 @@ impl<O: Observer> FakeRobot<O> {
                 d.i_gain = u16::from_le_bytes([*a, *b]);
                 true
             }
+            // Profile Velocity: accepted; the fake's servos reach their goal at once.
+            (Kind::Servo(_), 112, [_, _, _, _]) => true,
             (Kind::Servo(_), 116, [a, b, c, e]) => {
                 d.goal = i32::from_le_bytes([*a, *b, *c, *e]);
                 if d.torque {

@@ -1,5 +1,6 @@
 //! The servo monitor: while the robot walks (and while a graded stop lowers it), every leg
-//! servo is watched, one small READ at a time, round-robin:
+//! servo and every held servo (a robot's arms and head: the bus description's `held`) is
+//! watched, one small READ at a time, round-robin:
 //!
 //! | READ | addresses | bytes on the bus | checks |
 //! | --- | --- | --- | --- |
@@ -7,8 +8,9 @@
 //! | supply | Present Input Voltage, Present Temperature (144 ..= 146, 3 bytes) | 14 + 14 | voltage, temperature |
 //! | current | Present Current (126 ..= 127, 2 bytes) | 14 + 13 | current |
 //!
-//! The round is 48 READs: four passes over the 12 servos, status, supply, status, current. Every
-//! servo is READ every 12 READs and its status every 24.
+//! The round is four passes over the n servos (12 legs and the held ones), status, supply,
+//! status, current: 48 READs for a robot without held servos, every servo READ every 12 READs and
+//! its status every 24 (the OP3's 20 servos: every 20 and 40, 50 ms and 100 ms).
 //!
 //! The READs are spread in time, not in ticks: one every [`READ_EVERY_US`] (2.5 ms), so every
 //! servo answers (or not) every 30 ms and reports its torque and hardware error every 60 ms at
@@ -37,19 +39,21 @@
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
+use walker_contract::bus_map::{TickMap, MAX_HELD};
 use walker_contract::codes::ServoCheck;
 use walker_contract::config::ServoLimits;
 
 use crate::board::{Clock, ServoBus};
 use crate::bus::BoardMaster;
+use crate::startup::held_goal;
 use crate::supervisor::StopReason;
 
 /// Time between two of the monitor's READs, µs: 12 READs (one for each servo) make 30 ms.
 pub const READ_EVERY_US: u32 = 2_500;
 /// Most READs in one tick (a tick longer than 5 ms does not make the monitor's bus time grow).
 pub const MAX_READS_PER_TICK: u32 = 2;
-/// READs in a round: four passes over the leg servos (status, supply, status, current).
-pub const ROUND: usize = 4 * LEG_JOINTS;
+/// READs a round makes per servo: status, supply, status, current.
+pub const PASSES: usize = 4;
 
 /// First address of the status READ (Torque Enable).
 pub const STATUS_ADDR: u16 = x_series::TORQUE_ENABLE.addr;
@@ -69,7 +73,7 @@ pub const SUPPLY_LEN: usize =
 pub struct ServoMonitor {
     next: usize,
     credit_us: u32,
-    misses: [u8; LEG_JOINTS],
+    misses: [u8; LEG_JOINTS + MAX_HELD],
     /// The last Present Input Voltage read, 0.1 V (0: none yet).
     supply_dv: u16,
 }
@@ -136,7 +140,7 @@ impl ServoMonitor {
         ServoMonitor {
             next: 0,
             credit_us: 0,
-            misses: [0; LEG_JOINTS],
+            misses: [0; LEG_JOINTS + MAX_HELD],
             supply_dv: 0,
         }
     }
@@ -148,20 +152,21 @@ impl ServoMonitor {
 
     /// One tick of `period_us`: the READs that fell due (one every [`READ_EVERY_US`], at most
     /// [`MAX_READS_PER_TICK`]), each checked; the first stop reason found. `goals` are the
-    /// Goal Positions last sent (ticks): a servo found limp gets its own back before its
-    /// torque.
+    /// leg servos' Goal Positions last sent (ticks): a leg servo found limp gets its own back
+    /// before its torque, a held servo its pose (through the rad → tick map `ticks`).
     pub fn poll<B: ServoBus + Clock>(
         &mut self,
         bus: &mut BoardMaster<'_, B>,
         lim: &ServoLimits,
         period_us: u32,
         goals: &[i32; LEG_JOINTS],
+        ticks: &TickMap,
     ) -> Option<StopReason> {
         let cap = READ_EVERY_US * MAX_READS_PER_TICK;
         self.credit_us = self.credit_us.saturating_add(period_us).min(cap);
         while self.credit_us >= READ_EVERY_US {
             self.credit_us -= READ_EVERY_US;
-            if let Some(fault) = self.read_next(bus, lim, goals) {
+            if let Some(fault) = self.read_next(bus, lim, goals, ticks) {
                 return Some(fault);
             }
         }
@@ -174,11 +179,18 @@ impl ServoMonitor {
         bus: &mut BoardMaster<'_, B>,
         lim: &ServoLimits,
         goals: &[i32; LEG_JOINTS],
+        ticks: &TickMap,
     ) -> Option<StopReason> {
-        let k = self.next % ROUND;
-        let j = k % LEG_JOINTS;
-        let id = *bus.devices().legs.get(j)?;
-        let health = match k / LEG_JOINTS {
+        let devices = bus.devices();
+        let n = LEG_JOINTS + devices.held.len().min(MAX_HELD);
+        let round = PASSES * n;
+        let k = self.next % round;
+        let j = k % n;
+        let id = match j.checked_sub(LEG_JOINTS) {
+            None => *devices.legs.get(j)?,
+            Some(h) => devices.held.get(h)?.id,
+        };
+        let health = match k / n {
             1 => {
                 let mut b = [0u8; SUPPLY_LEN];
                 bus.master().read(id, SUPPLY_ADDR, &mut b).ok().map(|()| {
@@ -211,13 +223,13 @@ impl ServoMonitor {
             let lost_before = *misses >= lim.miss_limit;
             *misses = misses.saturating_add(1);
             if lost_before {
-                self.next = (k + 1) % ROUND;
+                self.next = (k + 1) % round;
             }
             // Reported once, when the count reaches the limit.
             return (*misses == lim.miss_limit).then_some(StopReason::ServoLost { id });
         };
         *misses = 0;
-        self.next = (k + 1) % ROUND;
+        self.next = (k + 1) % round;
         if let ServoHealth::Supply { voltage_dv, .. } = health {
             self.supply_dv = voltage_dv;
         }
@@ -229,7 +241,11 @@ impl ServoMonitor {
         {
             // Limp after a brown-out: its last goal back, then its torque (best effort: the
             // stop is on its way whatever the bus says).
-            let goal = goals.get(j).copied().unwrap_or(0);
+            let goal = match j.checked_sub(LEG_JOINTS) {
+                None => goals.get(j).copied(),
+                Some(h) => devices.held.get(h).map(|h| held_goal(ticks, h)),
+            };
+            let goal = goal.unwrap_or(0);
             let _ = bus
                 .master()
                 .write(id, x_series::GOAL_POSITION.addr, &goal.to_le_bytes());

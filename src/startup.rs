@@ -41,7 +41,7 @@ use crate::record::MAX_MISSING;
 use crate::Config;
 use gait_core::gait::Targets;
 use gait_core::kinematics::leg::JointSpeedReport;
-use gait_core::robot::LEG_JOINTS;
+use gait_core::robot::{HeldServo, LEG_JOINTS};
 use gait_core::trajectory::fourier_walk::WalkSampler;
 use gait_core::{GaitError, Robot};
 use walker_contract::config::MAX_STEPS;
@@ -316,11 +316,16 @@ pub fn enable_torque<B: ServoBus + Clock>(
     for h in devices.held.iter().take(MAX_HELD) {
         let profile = HELD_PROFILE_VELOCITY.to_le_bytes();
         write(bus, h.id, x_series::PROFILE_VELOCITY.addr, &profile)?;
-        let goal = ticks.servo_tick_f32(h.angle as f32).to_le_bytes();
+        let goal = held_goal(&ticks, h).to_le_bytes();
         write(bus, h.id, x_series::GOAL_POSITION.addr, &goal)?;
         write(bus, h.id, addr, &[1])?;
     }
     Ok(())
+}
+
+/// A held servo's Goal Position (ticks): its angle in its own direction.
+pub fn held_goal(ticks: &TickMap, h: &HeldServo) -> i32 {
+    ticks.servo_tick_f32(h.angle as f32)
 }
 
 /// Profile Velocity of the held servos (0.229 rpm units: 20 ≈ 0.48 rad/s), so that an arm

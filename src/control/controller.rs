@@ -370,7 +370,10 @@ impl<P: TickPath> Controller<'_, P> {
         self.last_ticks = ticks;
         let limits = &self.cfg.servo_limits;
         let period = self.cfg.tick_period_us;
-        if let Some(reason) = self.monitor.poll(bus, limits, period, &self.last_ticks) {
+        if let Some(reason) =
+            self.monitor
+                .poll(bus, limits, period, &self.last_ticks, &self.map.ticks)
+        {
             crate::fw_log!(error, "servo fault: {}", reason);
             let (_, id, _) = reason.code();
             let now = bus.board().now_us();

@@ -3028,6 +3028,80 @@ fn a_leg_servo_back_with_torque_off_is_turned_on_again_and_the_robot_lowered() {
     assert!(torque_off_sent(&b));
 }
 
+/// A held servo (an arm) is watched like the legs: one that browns out for a tick comes back
+/// limp, the monitor's status READ finds it, writes its held pose (not a leg's goal) and turns
+/// its torque on again, and the robot is lowered (`ServoFault` `TorqueOff` with its ID). The
+/// robot: the reference robot with one held servo, ID 20, at 0.3 rad.
+#[test]
+fn a_held_servo_back_with_torque_off_gets_its_pose_and_the_robot_is_lowered() {
+    use walker_contract::codes::ServoCheck;
+    static HELD: [gait_core::robot::HeldServo; 1] = [gait_core::robot::HeldServo {
+        name: "arm",
+        id: 20,
+        angle: 0.3,
+    }];
+    let reference = Robot::reference();
+    let armed: &'static Robot = std::boxed::Box::leak(std::boxed::Box::new(Robot {
+        bus: gait_core::robot::BusDescription {
+            held: &HELD,
+            ..reference.bus
+        },
+        ..reference
+    }));
+    let cfg = Config {
+        robot: armed,
+        ..autostart_config()
+    };
+    let mut b = board(&cfg);
+    b.devices
+        .push(crate::fake_robot::FakeDevice::new(
+            20,
+            Kind::Servo(12),
+            2048,
+        ))
+        .unwrap();
+    b.kill_at = Some((20, walk_write(&cfg, 50)));
+    b.revive_at = Some((20, walk_write(&cfg, 51)));
+    let end = run(&mut b, &cfg);
+    let want = StopReason::ServoFault {
+        id: 20,
+        check: ServoCheck::TorqueOff,
+        reading: 0,
+    };
+    assert_eq!(end, RunEnd::Stopped(want));
+    // Found within one round of the 13 servos' status READs (every 26 READs, 65 ms: 13 ticks).
+    let tr = ticks_of(&b.records());
+    let back = ramp_ticks(&cfg) + 50;
+    let stopped = tr.iter().position(|t| t.fault != FaultState::Ok).unwrap();
+    assert!(
+        stopped > back && stopped <= back + 15,
+        "stopped at {stopped}, back at {back}"
+    );
+    // Its pose at start-up and again when found limp (then its torque), nothing else.
+    let pose = crate::startup::held_goal(&JointMap::from_robot(armed).ticks, &HELD[0]);
+    assert_eq!(
+        pose,
+        2048 + (0.3f64 * 4096.0 / core::f64::consts::TAU).round() as i32
+    );
+    let own = |p: &Pkt| p.id == 20 && p.op == opcode::WRITE;
+    let goals: Vec<usize> = (0..b.packets.len())
+        .filter(|&i| own(&b.packets[i]) && b.packets[i].addr == 116)
+        .collect();
+    assert_eq!(goals.len(), 2, "{goals:?}");
+    for &i in &goals {
+        assert_eq!(b.packets[i].data, pose.to_le_bytes());
+    }
+    let next = b.packets[goals[1] + 1..].iter().find(|p| own(p)).unwrap();
+    assert_eq!((next.addr, next.data.as_slice()), (64, &[1u8][..]));
+    // The monitor READs it as it READs a leg: status, supply, status, current.
+    let reads = b
+        .packets
+        .iter()
+        .filter(|p| p.id == 20 && p.op == opcode::READ)
+        .count();
+    assert!(reads >= 4, "{reads} READs of the held servo");
+}
+
 /// With `wait_enable` torque stays off at power-on until a master writes Mode = stand (the
 /// command port answers meanwhile: State = waiting); after an operator's stop the robot rests
 /// in the crouch with torque on and the port still answers (State = resting, Stop Code), a
