@@ -68,6 +68,7 @@ pub mod control;
 pub mod flash_store;
 pub mod imu;
 pub mod monitor;
+pub mod mpu9250;
 pub mod plausible;
 pub mod rx_ring;
 pub mod startup;

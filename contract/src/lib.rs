@@ -31,6 +31,7 @@ pub mod command_port;
 pub mod config;
 pub mod footstep_log;
 pub mod lockstep;
+pub mod mpu9250;
 pub mod param_store;
 pub mod params;
 pub mod record;
