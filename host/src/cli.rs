@@ -1175,10 +1175,11 @@ impl RunSetup {
         if let Some(name) = &a.robot {
             with_robot(cmd, &mut spec, name)?;
         }
-        sim.robot = *spec.robot();
-        // The firmware's own parser, on the host, before QEMU starts.
-        crate::fil::check_tokens(&spec, &extra_tokens)
+        // The firmware's own parser, on the host, before QEMU starts; the simulated robot is
+        // the one the firmware will walk (the plan's, or a `robot=` of --firmware-args).
+        let (_, fw) = crate::fil::check_tokens(&spec, &extra_tokens)
             .map_err(|e| CliError::usage(format!("walker {cmd}: --firmware-args: {e}")))?;
+        sim.robot = *fw.robot;
         for w in crate::fil::token_overrides(&spec, &extra_tokens) {
             eprintln!("warning: walker {cmd}: --firmware-args: {w}");
         }
