@@ -1879,6 +1879,14 @@ fn run_fil(a: FilArgs) -> Result<(), CliError> {
     if let Some(m) = a.model {
         spec.model = m;
     }
+    if sim.physics == crate::sim::PhysicsModel::Kinematic && !a.open_loop {
+        // docs/simulation.md: the idealised model checks the open-loop chain.
+        eprintln!(
+            "warning: walker fil: the kinematic robot's trunk follows its joints exactly; the \
+             firmware's feedback acts on it without meaning (long walks end \"fallen\"): add \
+             --open-loop"
+        );
+    }
     let out = a.out;
     let video = a.video;
     if video.is_some() && sim.physics != crate::sim::PhysicsModel::MuJoCo {
