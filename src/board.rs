@@ -21,6 +21,14 @@ pub const COMMAND_BAUD: u32 = 1_000_000;
 /// ring is smaller: its RAM.)
 pub const COMMAND_RX_RING: usize = 1024;
 
+/// The board IMU's SPI clock while it starts (register access, ≤ 1 MHz for an MPU-9250):
+/// the OpenCR's APB2 108 MHz ÷ 128, Hz. QEMU's board charges its virtual clock at the same
+/// rates.
+pub const IMU_SPI_REGISTER_HZ: u32 = 843_750;
+/// The board IMU's SPI clock for its samples (≤ 20 MHz for the sensor registers): 108 MHz ÷
+/// 16, Hz.
+pub const IMU_SPI_SAMPLE_HZ: u32 = 6_750_000;
+
 /// Error of a bus transport operation (not a protocol error: CRC and status errors are the
 /// Dynamixel driver's business).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -76,6 +84,10 @@ impl<T: ServoBus + ?Sized> ServoBus for &mut T {
 /// Monotonic microsecond clock of the board (virtual and deterministic under QEMU): the one
 /// clock trait, the Dynamixel master's ([`dxl::Clock`]).
 pub use dxl::Clock;
+
+use crate::mpu9250::ImuError;
+use dxl::table::imu::ImuSample;
+use embedded_hal::spi::Operation;
 
 pub use walker_contract::record::LogSink;
 
@@ -174,6 +186,70 @@ pub trait Board: ServoBus + Clock + TickTimer + LogSink + Watchdog {
     #[inline(always)]
     fn stage(&mut self, stage: Stage) {
         let _ = stage;
+    }
+    /// Starts the board's own IMU ([`gait_core::robot::ImuPlace::Board`]): its chip checked,
+    /// reset and configured ([`crate::mpu9250::Mpu9250::start`], ≈ 100 ms). `None` on a board
+    /// without one (the default). Called once, at start-up, for a robot whose IMU is on the
+    /// board.
+    fn imu_start(&mut self) -> Option<Result<(), ImuError>> {
+        None
+    }
+    /// One sample of the board's IMU, read now, in the chip's axes; `None` on a board without
+    /// one or whose IMU did not start (the default).
+    fn imu_sample(&mut self) -> Option<Result<ImuSample, ImuError>> {
+        None
+    }
+}
+
+/// The bytes a chip-select-low SPI transaction `ops` clocks out, in order, into `mosi` (a
+/// read clocks out zeros; a transfer its write bytes, then zeros up to its read's length);
+/// their count, `None` when they do not fit. Delays clock nothing. With [`spi_scatter`]: an
+/// `embedded-hal` transaction as one full-duplex transfer (a board that moves whole frames).
+pub fn spi_gather(ops: &[Operation<'_, u8>], mosi: &mut [u8]) -> Option<usize> {
+    let mut n = 0usize;
+    for op in ops {
+        let (out, len): (&[u8], usize) = match op {
+            Operation::Write(w) => (w, w.len()),
+            Operation::Read(r) => (&[], r.len()),
+            Operation::Transfer(r, w) => (w, r.len().max(w.len())),
+            Operation::TransferInPlace(b) => (b, b.len()),
+            Operation::DelayNs(_) => (&[], 0),
+        };
+        let dst = mosi.get_mut(n..n.checked_add(len)?)?;
+        dst.fill(0);
+        dst.get_mut(..out.len())?.copy_from_slice(out);
+        n += len;
+    }
+    Some(n)
+}
+
+/// The bytes clocked in (`miso`, one for each byte [`spi_gather`] clocked out) handed back to
+/// the reads of `ops`.
+pub fn spi_scatter(ops: &mut [Operation<'_, u8>], miso: &[u8]) {
+    let mut n = 0usize;
+    for op in ops.iter_mut() {
+        let (dst, len): (&mut [u8], usize) = match op {
+            Operation::Write(w) => (&mut [], w.len()),
+            Operation::Read(r) => {
+                let l = r.len();
+                (r, l)
+            }
+            Operation::Transfer(r, w) => {
+                let l = r.len().max(w.len());
+                (r, l)
+            }
+            Operation::TransferInPlace(b) => {
+                let l = b.len();
+                (b, l)
+            }
+            Operation::DelayNs(_) => (&mut [], 0),
+        };
+        if let Some(src) = miso.get(n..).map(|m| &m[..m.len().min(dst.len())]) {
+            if let Some(d) = dst.get_mut(..src.len()) {
+                d.copy_from_slice(src);
+            }
+        }
+        n = n.saturating_add(len);
     }
 }
 
@@ -468,6 +544,45 @@ impl LineTime {
 
 #[cfg(test)]
 mod tests {
+    /// A register read (address out, one byte in), a write, a transfer longer on its read
+    /// side and a delay: gathered as one frame, the frame's echo scattered back to the reads.
+    #[test]
+    fn an_spi_transaction_is_one_full_duplex_frame() {
+        use super::{spi_gather, spi_scatter};
+        use embedded_hal::spi::Operation;
+        let mut r1 = [0xEEu8; 2];
+        let mut r2 = [0xEEu8; 3];
+        let mut inplace = [7u8, 8];
+        let mut mosi = [0xAAu8; 16];
+        {
+            let mut ops = [
+                Operation::Write(&[0xF5]),
+                Operation::Read(&mut r1),
+                Operation::DelayNs(100),
+                Operation::Transfer(&mut r2, &[1, 2]),
+                Operation::TransferInPlace(&mut inplace),
+            ];
+            assert_eq!(spi_gather(&ops, &mut mosi), Some(8));
+            // The chip answers each byte out with its index + 100.
+            let miso: [u8; 8] = core::array::from_fn(|i| 100 + i as u8);
+            spi_scatter(&mut ops, &miso);
+        }
+        assert_eq!(mosi[..8], [0xF5, 0, 0, 1, 2, 0, 7, 8]);
+        assert_eq!(r1, [101, 102]);
+        assert_eq!(r2, [103, 104, 105]);
+        assert_eq!(inplace, [106, 107]);
+        // Too long for the frame: refused, nothing written past it.
+        let big = [0u8; 20];
+        assert_eq!(spi_gather(&[Operation::Write(&big)], &mut mosi), None);
+        // A short answer leaves the rest of a read as it was.
+        let mut r = [0xEEu8; 3];
+        spi_scatter(
+            &mut [Operation::Write(&[1]), Operation::Read(&mut r)],
+            &[9, 10],
+        );
+        assert_eq!(r, [10, 0xEE, 0xEE]);
+    }
+
     use super::*;
 
     #[test]

@@ -177,9 +177,25 @@ impl<'b, B: ServoBus + Clock> BoardMaster<'b, B> {
         }
     }
 
-    /// The devices on this bus (the configured robot's IDs).
+    /// The devices on this bus (the configured robot's IDs). A real board's build walks its
+    /// own robot ([`crate::control::BUILD_ROBOT`]: another `robot=` is refused at start-up),
+    /// whose bus is a constant there: the code for the sensors it does not have folds away.
     pub fn devices(&self) -> &'static BusDescription {
-        self.devices
+        #[cfg(all(
+            any(feature = "board-opencm", feature = "board-opencr"),
+            target_os = "none"
+        ))]
+        {
+            let _ = self.devices;
+            &crate::control::BUILD_ROBOT.bus
+        }
+        #[cfg(not(all(
+            any(feature = "board-opencm", feature = "board-opencr"),
+            target_os = "none"
+        )))]
+        {
+            self.devices
+        }
     }
 
     /// The master, ready for one transaction (the clock is re-read from the board).

@@ -625,7 +625,11 @@ fn start_up<B: Board>(
     params: &ParamNotes<'_>,
 ) -> Result<Started, RunEnd> {
     let devices = bus_map::device_ids(bus.devices());
-    let missing = startup::probe(bus, &devices, cfg);
+    let mut missing = startup::probe(bus, &devices, cfg);
+    if !startup::board_imu_started(bus) {
+        // At most MAX_MISSING: a full list already stops the run.
+        let _ = missing.push(bus_map::BOARD_IMU);
+    }
     {
         let b = bus.board();
         let rec = startup_record(&*b, cfg, Some(&missing));
@@ -638,7 +642,7 @@ fn start_up<B: Board>(
     let _ = params;
     // A robot without some sensors says so once (the log's ZMP response then has no measured
     // ZMP, and no record pretends otherwise).
-    let slots = bus_map::sensor_slots(bus.devices());
+    let slots = bus_map::sensor_ids(bus.devices());
     if slots.iter().any(Option::is_none) {
         let has = slots
             .iter()
@@ -646,7 +650,7 @@ fn start_up<B: Board>(
             .fold(0u8, |m, (k, s)| if s.is_some() { m | (1 << k) } else { m });
         crate::fw_log!(
             info,
-            "sensor slots on the bus (bits: left foot, right foot, IMU): {}",
+            "sensor slots (bits: left foot, right foot, IMU): {}",
             has
         );
         let now = bus.board().now_us();
@@ -663,7 +667,7 @@ fn start_up<B: Board>(
         }
     }
     let ticks = |us: u32| u16::try_from(cfg.ticks_for_us(us)).unwrap_or(u16::MAX);
-    let sensors = bus_map::sensor_slots(bus.devices()).map(|s| s.unwrap_or(bus_map::NOT_ON_BUS));
+    let sensors = bus_map::sensor_ids(bus.devices()).map(|s| s.unwrap_or(bus_map::NOT_ON_BUS));
     let mut sup = Supervisor::new(cfg.supervisor, sensors)
         .with_grades(ticks(cfg.settle_us), ticks(cfg.lower_us))
         .with_rest(cfg.rest);
@@ -752,7 +756,7 @@ fn walk_on<B: Board, P: TickPath>(
         walk,
         path: make_path(first.com[2]),
         sense: Sense::new(
-            bus_map::sensor_slots(bus.devices()),
+            bus.devices(),
             &missing,
             Plausibility::<3>::new(cfg, weight_n, bus.board().now_us()),
         ),

@@ -29,6 +29,7 @@ use core::ops::{Deref, DerefMut};
 use dxl::table::{foot, foot::FootForces, imu, imu::ImuSample, x_series};
 use dxl::{encode_status, Instruction, StatusError};
 use gait_core::kinematics::leg::{leg_fk, Pose};
+use gait_core::robot::ImuAxes;
 use gait_core::{Robot, Side};
 use walker_contract::bus_map::{self, TickMap};
 
@@ -243,6 +244,10 @@ pub struct FakeRobot<O> {
     /// Script: board `id` reports an out-of-range value (a byte-shifted sample) at the
     /// `n`-th SYNC WRITE only.
     pub spike_at: Option<(u8, usize)>,
+    /// The controller board's IMU, for a robot whose IMU is on the board: the same motion as
+    /// the bus IMU's, in the chip's axes turned so in the trunk ((I2) of [`ImuAxes`]), and
+    /// whether its start fails. `None`: the board has none.
+    pub board_imu: Option<(ImuAxes, bool)>,
     imu_counter: u16,
     foot_counters: [u16; 2],
     /// The observer.
@@ -295,6 +300,7 @@ impl<O: Observer> FakeRobot<O> {
             slow: heapless::Vec::new(),
             freeze_at: None,
             spike_at: None,
+            board_imu: None,
             imu_counter: 0,
             foot_counters: [0; 2],
             observer,
@@ -330,6 +336,14 @@ impl<O: Observer> FakeRobot<O> {
             *v = TickMap::reference().tick_f32(j, r);
         }
         t
+    }
+
+    /// The same with the IMU on the board instead of the bus: the bus IMU gone, the board's
+    /// chip turned in the trunk as `axes` say.
+    pub fn with_board_imu(mut self, axes: ImuAxes) -> Self {
+        self.remove(bus_map::IMU);
+        self.board_imu = Some((axes, false));
+        self
     }
 
     /// Removes device `id` from the bus.
@@ -409,7 +423,7 @@ impl<O: Observer> FakeRobot<O> {
         })
     }
 
-    fn imu_sample(&mut self) -> [u8; 26] {
+    fn imu_bytes(&mut self) -> [u8; 26] {
         if !self.scripted(self.freeze_at, bus_map::IMU, false) {
             self.imu_counter = self.imu_counter.wrapping_add(1);
         }
@@ -502,7 +516,7 @@ impl<O: Observer> FakeRobot<O> {
                 Some(b.len())
             }
             (Kind::Imu, 128, 26) => {
-                let b = self.imu_sample();
+                let b = self.imu_bytes();
                 out.get_mut(..b.len())?.copy_from_slice(&b);
                 Some(b.len())
             }
@@ -822,6 +836,27 @@ impl<O: Observer> Board for FakeRobot<O> {
         let now = self.now_us;
         self.button_us
             .map(|spans| spans.iter().any(|&(a, b)| now >= a && now < b))
+    }
+
+    fn imu_start(&mut self) -> Option<Result<(), crate::mpu9250::ImuError>> {
+        let (_, fails) = self.board_imu?;
+        Some(if fails {
+            Err(crate::mpu9250::ImuError::NotMpu9250(0))
+        } else {
+            Ok(())
+        })
+    }
+
+    fn imu_sample(&mut self) -> Option<Result<ImuSample, crate::mpu9250::ImuError>> {
+        let (axes, _) = self.board_imu?;
+        let s = ImuSample::from_bytes(&self.imu_bytes())?;
+        // i32 → f64 → i32 is exact; the turn only moves and negates the values.
+        let chip = |v: [i32; 3]| axes.to_chip_f64(v.map(f64::from)).map(|x| x as i32);
+        Some(Ok(ImuSample {
+            gyro_urad_s: chip(s.gyro_urad_s),
+            accel_um_s2: chip(s.accel_um_s2),
+            counter: s.counter,
+        }))
     }
 }
 

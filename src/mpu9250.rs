@@ -8,71 +8,81 @@
 //! configuration [`walker_contract::mpu9250::INIT`], each register read back. Each tick
 //! ([`Mpu9250::sample`]): one 15-byte transaction (the address and the 14-byte burst) into an
 //! [`ImuSample`] (µrad/s, µm/s², the driver's own sample counter), the sensor's axes.
+//!
+//! The driver keeps no port: the board lends it its SPI device (and, to start, its way of
+//! waiting) for each call, so that a board whose SPI and clock are one value (QEMU's, whose
+//! transfers and waits both move its virtual clock) can lend it.
 
 use dxl::table::imu::ImuSample;
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::{Operation, SpiDevice};
 use walker_contract::mpu9250 as reg;
 
-/// Why the IMU did not start or give a sample.
+/// Why the IMU did not start or give a sample ([`ImuError::code`]: its code in the log).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImuError {
     /// The SPI transfer failed.
     Bus,
-    /// WHO_AM_I read this instead of an MPU-9250's 0x71.
+    /// WHO_AM_I read this instead of an MPU-9250's 0x71 (an ICM-20648, the later OpenCR
+    /// boards' chip, reads 0x00 there).
     NotMpu9250(u8),
     /// A configuration register read back this other value: (register, value).
     ConfigMismatch(u8, u8),
 }
 
-/// An MPU-9250 on `spi`, configured.
-pub struct Mpu9250<S> {
-    spi: S,
+impl ImuError {
+    /// The error's code (1 the SPI, 2 another chip, 3 a register that did not take) and its
+    /// byte (what WHO_AM_I read; the register that did not take; 0).
+    pub fn code(&self) -> (u8, u8) {
+        match *self {
+            ImuError::Bus => (1, 0),
+            ImuError::NotMpu9250(who) => (2, who),
+            ImuError::ConfigMismatch(r, _) => (3, r),
+        }
+    }
+}
+
+/// A started MPU-9250: its sample counter.
+#[derive(Debug)]
+pub struct Mpu9250 {
     counter: u16,
 }
 
-impl<S: SpiDevice> Mpu9250<S> {
-    /// Checks the chip, resets and configures it (about 100 ms, `delay`).
-    pub fn start(mut spi: S, delay: &mut impl DelayNs) -> Result<Self, ImuError> {
-        let who = read_register(&mut spi, reg::WHO_AM_I)?;
+impl Mpu9250 {
+    /// Checks the chip on `port`, resets and configures it (about 100 ms of `port`'s wait).
+    pub fn start<P: SpiDevice + DelayNs>(port: &mut P) -> Result<Self, ImuError> {
+        let who = read_register(port, reg::WHO_AM_I)?;
         if who != reg::WHO_AM_I_VALUE {
             return Err(ImuError::NotMpu9250(who));
         }
-        write_register(&mut spi, reg::PWR_MGMT_1, reg::H_RESET)?;
-        delay.delay_us(reg::RESET_US);
+        write_register(port, reg::PWR_MGMT_1, reg::H_RESET)?;
+        port.delay_us(reg::RESET_US);
         for (r, v) in reg::INIT {
-            write_register(&mut spi, r, v)?;
-            let back = read_register(&mut spi, r)?;
+            write_register(port, r, v)?;
+            let back = read_register(port, r)?;
             if back != v {
                 return Err(ImuError::ConfigMismatch(r, back));
             }
         }
-        Ok(Mpu9250 { spi, counter: 0 })
+        Ok(Mpu9250 { counter: 0 })
     }
 
-    /// One burst as an [`ImuSample`] (its counter counts the driver's good samples).
-    pub fn sample(&mut self) -> Result<ImuSample, ImuError> {
+    /// One burst over `spi` as an [`ImuSample`] (its counter counts the driver's good
+    /// samples).
+    pub fn sample<S: SpiDevice>(&mut self, spi: &mut S) -> Result<ImuSample, ImuError> {
         let mut raw = [0u8; reg::BURST_LEN];
-        self.spi
-            .transaction(&mut [
-                Operation::Write(&[reg::ACCEL_XOUT_H | reg::READ]),
-                Operation::Read(&mut raw),
-            ])
-            .map_err(|_| ImuError::Bus)?;
-        let r = reg::decode(&raw);
+        spi.transaction(&mut [
+            Operation::Write(&[reg::ACCEL_XOUT_H | reg::READ]),
+            Operation::Read(&mut raw),
+        ])
+        .map_err(|_| ImuError::Bus)?;
+        let (gyro_urad_s, accel_um_s2) = reg::decode_micro(&raw);
         self.counter = self.counter.wrapping_add(1);
-        // |ω| ≤ 35 rad/s and |a| ≤ 157 m/s² at full scale: far inside i32 in µ units.
-        let micro = |v: f64| (v * 1e6) as i32;
         Ok(ImuSample {
-            gyro_urad_s: r.gyro_rad_s.map(micro),
-            accel_um_s2: r.accel_m_s2.map(micro),
+            gyro_urad_s,
+            accel_um_s2,
             counter: self.counter,
         })
-    }
-
-    /// The SPI device back.
-    pub fn release(self) -> S {
-        self.spi
     }
 }
 
@@ -103,6 +113,8 @@ mod tests {
         fail: bool,
         /// A register that ignores writes (a broken chip).
         stuck: Option<u8>,
+        /// Time waited on the port, µs.
+        waited_us: u32,
     }
 
     impl Chip {
@@ -116,6 +128,7 @@ mod tests {
                 reset_seen: false,
                 fail: false,
                 stuck: None,
+                waited_us: 0,
             }
         }
     }
@@ -165,21 +178,22 @@ mod tests {
         }
     }
 
-    struct NoDelay(u32);
-
-    impl DelayNs for NoDelay {
+    impl DelayNs for Chip {
         fn delay_ns(&mut self, ns: u32) {
-            self.0 = self.0.saturating_add(ns / 1000);
+            self.waited_us = self.waited_us.saturating_add(ns / 1000);
         }
     }
 
     #[test]
     fn start_checks_the_chip_resets_it_and_writes_the_configuration() {
-        let mut d = NoDelay(0);
-        let imu = Mpu9250::start(Chip::new(), &mut d).unwrap();
-        let chip = imu.release();
+        let mut chip = Chip::new();
+        Mpu9250::start(&mut chip).unwrap();
         assert!(chip.reset_seen);
-        assert!(d.0 >= reg::RESET_US, "waited {} µs after the reset", d.0);
+        assert!(
+            chip.waited_us >= reg::RESET_US,
+            "waited {} µs after the reset",
+            chip.waited_us
+        );
         // The reset first, then the configuration in order.
         let mut want = vec![(reg::PWR_MGMT_1, reg::H_RESET)];
         want.extend(reg::INIT);
@@ -189,52 +203,57 @@ mod tests {
     }
 
     #[test]
+    fn each_error_has_its_code() {
+        assert_eq!(ImuError::Bus.code(), (1, 0));
+        assert_eq!(ImuError::NotMpu9250(0xE0).code(), (2, 0xE0));
+        assert_eq!(ImuError::ConfigMismatch(0x1B, 0).code(), (3, 0x1B));
+    }
+
+    #[test]
     fn another_chip_a_dead_bus_or_a_register_that_does_not_take_stop_the_start() {
-        let mut d = NoDelay(0);
-        let other = Chip {
+        let mut other = Chip {
             who: 0x70,
             ..Chip::new()
         };
-        let mut other = other;
         other.regs[usize::from(reg::WHO_AM_I)] = 0x70;
         assert_eq!(
-            Mpu9250::start(other, &mut d).err(),
+            Mpu9250::start(&mut other).err(),
             Some(ImuError::NotMpu9250(0x70))
         );
-        let dead = Chip {
+        let mut dead = Chip {
             fail: true,
             ..Chip::new()
         };
-        assert_eq!(Mpu9250::start(dead, &mut d).err(), Some(ImuError::Bus));
-        let stuck = Chip {
+        assert_eq!(Mpu9250::start(&mut dead).err(), Some(ImuError::Bus));
+        let mut stuck = Chip {
             stuck: Some(reg::GYRO_CONFIG),
             ..Chip::new()
         };
         assert_eq!(
-            Mpu9250::start(stuck, &mut d).err(),
+            Mpu9250::start(&mut stuck).err(),
             Some(ImuError::ConfigMismatch(reg::GYRO_CONFIG, 0))
         );
     }
 
     #[test]
     fn a_sample_is_the_burst_in_micro_units_with_a_counter() {
-        let mut d = NoDelay(0);
-        let mut imu = Mpu9250::start(Chip::new(), &mut d).unwrap();
+        let mut chip = Chip::new();
+        let mut imu = Mpu9250::start(&mut chip).unwrap();
         // Upright, turning: 1 g on z; 0.5 rad/s about y (pitching), −0.2 about z.
         let burst = reg::encode(&reg::Reading {
             gyro_rad_s: [0.0, 0.5, -0.2],
             accel_m_s2: [0.0, 0.0, reg::G],
         });
-        imu.spi.regs[usize::from(reg::ACCEL_XOUT_H)..][..reg::BURST_LEN].copy_from_slice(&burst);
-        let s = imu.sample().unwrap();
+        chip.regs[usize::from(reg::ACCEL_XOUT_H)..][..reg::BURST_LEN].copy_from_slice(&burst);
+        let s = imu.sample(&mut chip).unwrap();
         let lsb_urad = 1e6 * core::f64::consts::PI / (180.0 * 16.4);
         assert!((f64::from(s.gyro_urad_s[1]) - 5e5).abs() <= 0.5 * lsb_urad + 1.0);
         assert!((f64::from(s.gyro_urad_s[2]) + 2e5).abs() <= 0.5 * lsb_urad + 1.0);
         assert_eq!(s.gyro_urad_s[0], 0);
         assert!((f64::from(s.accel_um_s2[2]) - 9_806_650.0).abs() <= 1.0);
         assert_eq!(s.counter, 1);
-        assert_eq!(imu.sample().unwrap().counter, 2);
-        imu.spi.fail = true;
-        assert_eq!(imu.sample(), Err(ImuError::Bus));
+        assert_eq!(imu.sample(&mut chip).unwrap().counter, 2);
+        chip.fail = true;
+        assert_eq!(imu.sample(&mut chip), Err(ImuError::Bus));
     }
 }

@@ -33,9 +33,10 @@
 //! `StartupFailed`, exit code 20).
 
 use dxl::table::x_series;
+use gait_core::robot::ImuPlace;
 use walker_contract::bus_map::{TickMap, MAX_HELD};
 
-use crate::board::{Clock, ServoBus};
+use crate::board::{Board, Clock, ServoBus};
 use crate::bus::BoardMaster;
 use crate::record::MAX_MISSING;
 use crate::Config;
@@ -142,6 +143,32 @@ pub fn probe<B: ServoBus + Clock>(
         }
     }
     missing
+}
+
+/// Starts the board's IMU when the robot's IMU is on the board ([`Board::imu_start`]);
+/// false when it is and did not start (no IMU on this board, another chip, a dead bus), true
+/// otherwise.
+pub fn board_imu_started<B: Board>(bus: &mut BoardMaster<'_, B>) -> bool {
+    if !matches!(bus.devices().imu, ImuPlace::Board(_)) {
+        return true;
+    }
+    match bus.board().imu_start() {
+        Some(Ok(())) => true,
+        Some(Err(e)) => {
+            let (code, byte) = e.code();
+            crate::fw_log!(
+                error,
+                "the board's IMU did not start: error {} ({})",
+                code,
+                byte
+            );
+            false
+        }
+        None => {
+            crate::fw_log!(error, "the robot's IMU is the board's: this board has none");
+            false
+        }
+    }
 }
 
 /// Sets Return Delay Time to 0 on every device of `devices` (write only when needed) and

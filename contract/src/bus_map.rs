@@ -43,7 +43,7 @@ pub const FOOT_RIGHT: u8 = FEET[1];
 /// Waist IMU board.
 pub const IMU: u8 = match BUS.imu {
     ImuPlace::Bus(id) => id,
-    ImuPlace::Board => 0,
+    ImuPlace::Board(_) => 0,
 };
 /// Devices read every control tick, in bulk-read order.
 pub const SENSOR_IDS: [u8; 3] = [FOOT_LEFT, FOOT_RIGHT, IMU];
@@ -68,18 +68,31 @@ pub const SENSOR_SLOTS: usize = 3;
 /// Most devices on a described bus: the legs, the sensor slots, the held servos.
 pub const MAX_DEVICES: usize = LEG_JOINTS + SENSOR_SLOTS + MAX_HELD;
 
-/// The sensor slots of `bus`: left foot board, right foot board, bus IMU; `None` where the
-/// robot has none (no foot boards; the IMU on the controller board).
+/// The controller board's own IMU ([`ImuPlace::Board`]) where the supervisor, the start-up
+/// record and the fault records name a device: an ID no Dynamixel device has (they stop at
+/// 252; 254 is the broadcast ID).
+pub const BOARD_IMU: u8 = 253;
+
+/// The sensor slots of `bus` on the bus: left foot board, right foot board, bus IMU; `None`
+/// where the robot has none there (no foot boards; the IMU on the controller board).
 pub fn sensor_slots(bus: &BusDescription) -> [Option<u8>; SENSOR_SLOTS] {
+    let [l, r, imu] = sensor_ids(bus);
+    [l, r, imu.filter(|&id| id != BOARD_IMU)]
+}
+
+/// The sensors of the robot, slot by slot (left foot board, right foot board, IMU): the
+/// device each slot's samples come from, [`BOARD_IMU`] for the controller board's IMU, `None`
+/// where the robot has none.
+pub fn sensor_ids(bus: &BusDescription) -> [Option<u8>; SENSOR_SLOTS] {
     let [l, r] = match bus.foot_boards {
         Some([l, r]) => [Some(l), Some(r)],
         None => [None, None],
     };
     let imu = match bus.imu {
-        ImuPlace::Bus(id) => Some(id),
-        ImuPlace::Board => None,
+        ImuPlace::Bus(id) => id,
+        ImuPlace::Board(_) => BOARD_IMU,
     };
-    [l, r, imu]
+    [l, r, Some(imu)]
 }
 
 /// Every device of `bus` in probe order: the legs (joint order), the sensors, the held servos
@@ -268,6 +281,14 @@ mod tests {
         assert!(is_foot(&t.bus, 111) && is_foot(&t.bus, 112) && !is_foot(&t.bus, 200));
         let o = Robot::op3();
         assert_eq!(sensor_slots(&o.bus), [None; 3]);
+        assert_eq!(sensor_ids(&o.bus), [None, None, Some(BOARD_IMU)]);
+        assert_eq!(sensor_ids(&t.bus), SENSOR_IDS.map(Some));
+        // No robot's bus can hold the board IMU's ID.
+        let mut on_bus = vec![];
+        for r in gait_core::robot::ROBOTS.iter() {
+            r.for_each_bus_id(|id| on_bus.push(id));
+        }
+        assert!(!on_bus.contains(&BOARD_IMU) && BOARD_IMU > 252 && BOARD_IMU != 254);
         assert_eq!(
             device_ids(&o.bus),
             [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17, 1, 2, 3, 4, 5, 6, 19, 20]

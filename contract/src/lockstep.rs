@@ -15,6 +15,11 @@
 //! pipes also [`packet_header`] (`0x50` + u16 LE length) followed by one instruction packet.
 //! Simulator → firmware: [`reply_header`] (`0xA5` + u16 LE count of reply bytes for the last
 //! instruction packet, 0 when none), after the reply bytes on UART0 or before them on the pipe.
+//!
+//! The board's IMU (the OpenCR's SPI chip, simulated; pipes only): firmware → simulator
+//! [`spi_header`] (`0x53` + u16 LE length) followed by the bytes the board clocks out (MOSI)
+//! in one chip-select-low transfer; simulator → firmware [`reply_header`] of the same count
+//! followed by the bytes the chip clocked back (MISO), one for each byte out.
 
 /// First byte of a time frame (firmware → simulator).
 pub const TIME: u8 = 0x5A;
@@ -22,6 +27,11 @@ pub const TIME: u8 = 0x5A;
 pub const REPLY: u8 = 0xA5;
 /// First byte of a bus packet frame on the pipe transport (firmware → simulator).
 pub const PACKET: u8 = 0x50;
+/// First byte of a board IMU's SPI transfer frame on the pipe transport (firmware →
+/// simulator).
+pub const SPI: u8 = 0x53;
+/// Longest SPI transfer a frame carries, bytes (the IMU's burst is 15).
+pub const SPI_MAX: usize = 32;
 /// The board's word `lockstep=PREFIX`: lock-step over the named pipes at `PREFIX` (the bare
 /// word `lockstep`: over the UARTs). The parameter parser skips both.
 pub const PIPE_WORD: &str = "lockstep";
@@ -30,8 +40,15 @@ pub const TO_SIM_SUFFIX: &str = "-to-sim";
 /// Suffix of the pipe the firmware reads (reply announcements and replies).
 pub const TO_FIRMWARE_SUFFIX: &str = "-to-fw";
 
-// A frame's kind is its first byte: the three markers differ.
-const _: () = assert!(TIME != REPLY && TIME != PACKET && REPLY != PACKET);
+// A frame's kind is its first byte: the four markers differ.
+const _: () = assert!(
+    TIME != REPLY
+        && TIME != PACKET
+        && REPLY != PACKET
+        && SPI != TIME
+        && SPI != REPLY
+        && SPI != PACKET
+);
 
 /// Longest `PREFIX` of the pipes' paths, bytes (the firmware ignores a longer one).
 pub const PREFIX_MAX: usize = 200;
@@ -51,6 +68,12 @@ pub fn time_frame(t_us: u64) -> [u8; TIME_FRAME_LEN] {
 pub fn packet_header(len: u16) -> [u8; HEADER_LEN] {
     let [lo, hi] = len.to_le_bytes();
     [PACKET, lo, hi]
+}
+
+/// The header of an SPI transfer of `len` bytes on the pipe transport.
+pub fn spi_header(len: u16) -> [u8; HEADER_LEN] {
+    let [lo, hi] = len.to_le_bytes();
+    [SPI, lo, hi]
 }
 
 /// The announcement of `n` reply bytes (a count over `u16::MAX` is announced as `u16::MAX`).
@@ -75,6 +98,7 @@ mod tests {
             [0x5A, 8, 7, 6, 5, 4, 3, 2, 1]
         );
         assert_eq!(packet_header(0x1234), [0x50, 0x34, 0x12]);
+        assert_eq!(spi_header(15), [0x53, 15, 0]);
         assert_eq!(reply_header(180), [0xA5, 180, 0]);
         assert_eq!(reply_header(70_000), [0xA5, 0xFF, 0xFF]);
         assert_eq!(header_count(0x34, 0x12), 0x1234);

@@ -222,10 +222,77 @@ pub struct ServoLimits {
 /// Where the robot's IMU (gyro and accelerometer) is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImuPlace {
-    /// A Dynamixel 2.0 device on the servo bus with this ID (a waist sensor board).
+    /// A Dynamixel 2.0 device on the servo bus with this ID (a waist sensor board), reporting
+    /// in the trunk's axes.
     Bus(u8),
-    /// On the controller board itself (the OpenCR's IMU).
-    Board,
+    /// On the controller board itself (the OpenCR's IMU), the chip turned in the trunk as
+    /// these axes say.
+    Board(ImuAxes),
+}
+
+/// How an IMU chip's axes lie in the trunk frame (x forward, y left, z up): trunk axis `i`
+/// is `sign[i]` times chip axis `axis[i]`, a signed permutation
+///
+/// ```text
+///   v_trunk[i] = sign[i] · v_chip[axis[i]]                     (I1)
+///   v_chip[axis[i]] = sign[i] · v_trunk[i]                     (I2, its inverse)
+/// ```
+///
+/// ([`ImuAxes::is_rotation`]: a proper rotation, no mirror). For the gyroscope and the
+/// accelerometer alike.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImuAxes {
+    /// The chip axis (0 x, 1 y, 2 z) each trunk axis reads.
+    pub axis: [u8; 3],
+    /// Its sign, ±1.
+    pub sign: [i8; 3],
+}
+
+impl ImuAxes {
+    /// The chip's axes are the trunk's.
+    pub const ALIGNED: ImuAxes = ImuAxes {
+        axis: [0, 1, 2],
+        sign: [1, 1, 1],
+    };
+
+    /// True when the axes are a permutation with signs ±1 and a determinant of +1 (a turn of
+    /// the chip, not a mirror image).
+    pub fn is_rotation(&self) -> bool {
+        let [a, b, c] = self.axis;
+        let perm_ok = a < 3 && b < 3 && c < 3 && a != b && b != c && a != c;
+        let signs_ok = self.sign.iter().all(|&s| s == 1 || s == -1);
+        if !(perm_ok && signs_ok) {
+            return false;
+        }
+        // The permutation's parity: even for the cyclic orders of (0, 1, 2).
+        let even = matches!((a, b, c), (0, 1, 2) | (1, 2, 0) | (2, 0, 1));
+        let sign_product: i32 = self.sign.iter().map(|&s| i32::from(s)).product();
+        (if even { 1 } else { -1 }) * sign_product == 1
+    }
+
+    /// A chip vector in trunk axes (I1); integer units, saturating (−i32::MIN is i32::MAX).
+    pub fn to_trunk_i32(&self, chip: [i32; 3]) -> [i32; 3] {
+        core::array::from_fn(|i| {
+            let a = self.axis.get(i).map_or(0, |&a| usize::from(a));
+            let v = chip.get(a).copied().unwrap_or(0);
+            if self.sign.get(i).is_some_and(|&s| s < 0) {
+                v.saturating_neg()
+            } else {
+                v
+            }
+        })
+    }
+
+    /// A trunk vector in chip axes (I2).
+    pub fn to_chip_f64(&self, trunk: [f64; 3]) -> [f64; 3] {
+        let mut chip = [0.0; 3];
+        for ((&a, &s), &v) in self.axis.iter().zip(&self.sign).zip(&trunk) {
+            if let Some(c) = chip.get_mut(usize::from(a)) {
+                *c = f64::from(s) * v;
+            }
+        }
+        chip
+    }
 }
 
 /// A servo that is not a leg joint and is held at one angle while the robot walks (arms,
@@ -390,12 +457,18 @@ impl Robot {
     }
 
     /// Checks the bus and the mounting: every ID used once and a valid Dynamixel ID
-    /// (0..=252), every mounting sign ±1, a baud rate above 0. ([`Robot::validate`] checks
-    /// what the gait and the kinematics read; this, what the bus and the tick map read.)
+    /// (0..=252), every mounting sign ±1, a baud rate above 0, a board IMU's axes a turn
+    /// ([`ImuAxes::is_rotation`]). ([`Robot::validate`] checks what the gait and the kinematics
+    /// read; this, what the bus, the tick map and the sensors read.)
     pub fn validate_bus(&self) -> Result<(), GaitError> {
+        let imu_ok = match self.bus.imu {
+            ImuPlace::Bus(_) => true,
+            ImuPlace::Board(axes) => axes.is_rotation(),
+        };
         if self.mounting.iter().any(|&s| s != 1 && s != -1)
             || self.bus.baud == 0
             || !self.bus_ids_unique()
+            || !imu_ok
         {
             return Err(GaitError::BadRobotDescription);
         }

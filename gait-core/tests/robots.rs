@@ -92,7 +92,16 @@ fn the_two_robots_differ_where_the_sources_say() {
     assert_eq!(o.bus.legs, [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17]);
     assert_eq!(o.bus.baud, 2_000_000);
     assert_eq!(o.bus.foot_boards, None);
-    assert_eq!(o.bus.imu, ImuPlace::Board);
+    // open_cr_module.cpp: the robot's x and y are the chip's negated, z is z.
+    let ImuPlace::Board(axes) = o.bus.imu else {
+        panic!("the OP3's IMU is the OpenCR's");
+    };
+    assert!(axes.is_rotation());
+    assert_eq!(
+        axes.to_trunk_i32([10, 20, 30]),
+        [-10, -20, 30],
+        "the chip's x and y point backward and right in the torso"
+    );
     let mut held: Vec<u8> = o.bus.held.iter().map(|h| h.id).collect();
     held.sort_unstable();
     assert_eq!(held, [1, 2, 3, 4, 5, 6, 19, 20]);
@@ -221,4 +230,70 @@ fn the_reach_check_reads_each_robots_legs() {
     // At the OP3's straight-leg height nothing is in reach.
     let straight = StepLimits::for_robot(&Robot::op3(), 0.279);
     assert_eq!(straight.max_length, 0.0);
+}
+
+/// (I1) and (I2) of [`ImuAxes`], against a quarter turn worked by hand and over every signed
+/// permutation: the inverse undoes the turn, the rotation check keeps the 24 turns of a cube
+/// and refuses its 24 mirror images and any bad axis or sign.
+#[test]
+fn imu_axes_turn_a_vector_and_back() {
+    use gait_core::robot::ImuAxes;
+    // The chip turned a quarter turn left about z: its x points along the trunk's y, its y
+    // along the trunk's −x. A trunk x reads the chip's −y, the trunk's y the chip's x.
+    let quarter = ImuAxes {
+        axis: [1, 0, 2],
+        sign: [-1, 1, 1],
+    };
+    assert!(quarter.is_rotation());
+    // A chip rate of 1 about its x is a rate of 1 about the trunk's y.
+    assert_eq!(quarter.to_trunk_i32([1, 0, 0]), [0, 1, 0]);
+    assert_eq!(quarter.to_trunk_i32([0, 1, 0]), [-1, 0, 0]);
+    assert_eq!(quarter.to_chip_f64([0.0, 1.0, 0.0]), [1.0, 0.0, 0.0]);
+    assert_eq!(quarter.to_trunk_i32([i32::MIN, 0, 0]), [0, i32::MIN, 0]);
+    assert_eq!(quarter.to_trunk_i32([0, i32::MIN, 0]), [i32::MAX, 0, 0]);
+    assert_eq!(ImuAxes::ALIGNED.to_trunk_i32([4, 5, 6]), [4, 5, 6]);
+    let mut turns = 0;
+    for axis in [
+        [0, 1, 2],
+        [0, 2, 1],
+        [1, 0, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [2, 1, 0],
+    ] {
+        for bits in 0..8u8 {
+            let sign = [0, 1, 2].map(|k| if bits & (1 << k) != 0 { -1 } else { 1 });
+            let a = ImuAxes { axis, sign };
+            // The determinant of the signed permutation matrix, by cofactors.
+            let mut m = [[0i32; 3]; 3];
+            for i in 0..3 {
+                m[i][usize::from(axis[i])] = i32::from(sign[i]);
+            }
+            let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+                - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+                + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+            assert_eq!(a.is_rotation(), det == 1, "{a:?}");
+            turns += usize::from(det == 1);
+            let v = [3.0, -5.0, 7.0];
+            let chip = a.to_chip_f64(v);
+            let back = a.to_trunk_i32(chip.map(|x| x as i32));
+            assert_eq!(back, v.map(|x| x as i32), "{a:?}");
+        }
+    }
+    assert_eq!(turns, 24);
+    assert!(!ImuAxes {
+        axis: [0, 0, 2],
+        sign: [1, 1, 1]
+    }
+    .is_rotation());
+    assert!(!ImuAxes {
+        axis: [0, 1, 3],
+        sign: [1, 1, 1]
+    }
+    .is_rotation());
+    assert!(!ImuAxes {
+        axis: [0, 1, 2],
+        sign: [1, 0, 1]
+    }
+    .is_rotation());
 }

@@ -561,7 +561,7 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
                 out.push_str(" no foot sensors (no measured ZMP, no feedback from the loads; odometry surveys timed by the plan's load split);");
             }
             if !has(2) {
-                out.push_str(" no IMU on the bus (no gyro feedback);");
+                out.push_str(" no IMU (no gyro feedback);");
             }
             out.pop();
             out

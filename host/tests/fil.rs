@@ -354,9 +354,9 @@ fn dropped_and_corrupted_replies_are_counted_and_survived() {
 fn the_op3_is_driven_from_its_description() {
     // The OP3's own plan (plans/op3-forward.toml, `robot = "op3"`: the firmware's `robot=op3`),
     // four steps of it: the firmware probes the OP3's 20 servos at OP3.robot's IDs at 2 Mbps
-    // (no foot boards, no bus IMU), torques its legs and its held arms and head, and walks the
-    // plan on the MuJoCo OP3 (its own IDs and mounting signs) without a fall. Without foot
-    // sensors there is no measured ZMP in the log.
+    // (no foot boards; its IMU the OpenCR's, on SPI), torques its legs and its held arms and
+    // head, and walks the plan on the MuJoCo OP3 (its own IDs and mounting signs) without a
+    // fall. Without foot sensors there is no measured ZMP in the log.
     let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/../plans/op3-forward.toml");
     let spec = WalkSpec {
         steps: 4,
@@ -369,16 +369,24 @@ fn the_op3_is_driven_from_its_description() {
         robot: *spec.robot(),
         ..SimConfig::default()
     };
-    // The same walk on the idealised kinematic OP3 (stance sole bolted down): the whole chain
-    // (plan, IK with the sole point off the ankle, tick map with its signs, the bus's IDs, the
-    // simulator's FK) puts the soles where the plan does.
+    // The same walk on the idealised kinematic OP3 (stance sole bolted down), open loop (its
+    // trunk follows its joints exactly: the feedback has nothing to act on there): the whole
+    // chain (plan, IK with the sole point off the ankle, tick map with its signs, the bus's
+    // IDs, the simulator's FK) puts the soles where the plan does.
     let kinematic = SimConfig {
         physics: walker_host::sim::PhysicsModel::Kinematic,
         ..sim.clone()
     };
     let ((r, log), (rk, _)) = both(
         || fil("op3", spec.clone(), sim, &[]),
-        || fil("op3-kinematic", spec.clone(), kinematic, &[]),
+        || {
+            fil(
+                "op3-kinematic",
+                spec.clone(),
+                kinematic,
+                walker_host::beyond::OPEN_LOOP,
+            )
+        },
     );
     let w = walker_host::fil::walk_figures(&rk.truth, &spec).unwrap();
     assert_eq!(rk.exit_code, Some(0), "{}", w.line());
@@ -406,7 +414,7 @@ fn the_op3_is_driven_from_its_description() {
         log.ticks.iter().all(|t| !t.zmp_valid),
         "a measured ZMP without foot sensors"
     );
-    // The log says why: no sensor slot on the bus (id 0: no foot boards, no bus IMU).
+    // The log says why: no foot boards (the bits of the slots there: only the IMU's, 4).
     let absent: Vec<u8> = log
         .events
         .iter()
@@ -417,7 +425,14 @@ fn the_op3_is_driven_from_its_description() {
             _ => None,
         })
         .collect();
-    assert_eq!(absent, [0]);
+    assert_eq!(absent, [4]);
+    // The board's IMU is read: τ = J·φ̈ from its pitch rate moves in most walking ticks.
+    let walking = log
+        .ticks
+        .iter()
+        .filter(|t| t.phase != walker_contract::record::LoggedPhase::Stopped);
+    let (n, moving) = walking.fold((0, 0), |(n, m), t| (n + 1, m + usize::from(t.tau_mnm != 0)));
+    assert!(moving * 2 > n, "τ moved in {moving} of {n} ticks");
     // Its leg odometry still surveys the landings (timed by the plan's load split) and the
     // landing hold moves the landings it finds off their place (`CatchStep` component 2).
     let holds = log

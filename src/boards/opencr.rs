@@ -12,12 +12,19 @@
 //! | command port | **USART2**, PD5 TX / PD6 RX (AF7) at [`COMMAND_BAUD`], received by DMA1 stream 5 (channel 4) into a [`COMMAND_RX_RING`]-byte ring | the 4-pin "UART" connector of the OpenCR (Arduino `Serial2`, `huart_inst[DRV_UART_NUM_2]` in ROBOTIS' `drv_uart.c`), where ROBOTIS' BT-210/BT-410 modules and a USB–TTL adapter plug in |
 //! | tick and µs clock | TIM2, 32-bit, free-running at 1 MHz | extended to 64 bits in software |
 //! | watchdog | IWDG (LSI ≈ 32 kHz) | started at boot (`control::run`), fed in the bus and tick waits, the dry run and each tick |
+//! | on-board IMU (InvenSense MPU-9250) | **SPI1**: PA5 SCK / PA6 MISO / PB5 MOSI (AF5, pulled up), chip select **PA4** (push-pull, high = idle); SPI1 on APB2 (108 MHz, RCC `SPI1EN`), GPIOA/GPIOB clocked by the HAL | ROBOTIS' variant: `BDPIN_SPI_CS_IMU` / `_CLK_` / `_SDO_` / `_SDI_IMU` (Arduino pins 28, 37, 38, 39), `SPI_IMU` = SPI1 and its pins in `HAL_SPI_MspInit` (`drv_spi.c`) |
+//! | IMU SPI frames | mode 3 (CPOL = 1, CPHA = 1), master, MSB first, 8 bits, software NSS; 108 MHz / 128 = 843.75 kHz to start ([`IMU_SPI_REGISTER_HZ`]), / 16 = 6.75 MHz for the samples ([`IMU_SPI_SAMPLE_HZ`]) | ROBOTIS' IMU library, `MPU9250.cpp` `begin`: `SPI_MODE3`, `SPI_CLOCK_DIV128` while it configures, `DIV8` (13.5 MHz) after; the MPU-9250 takes ≤ 1 MHz for every register, ≤ 20 MHz for the sensor registers |
 //! | defmt | RTT (probe-rs) | |
 //!
 //! The pins are the `BUS_*`, `LOG_*` constants' documentation and the concrete pin types in
 //! [`OpenCrBoard::new`]; change both together if a board revision differs.
 //! Both UARTs are clocked from SYSCLK (216 MHz, oversampling 16), so the bus can run at 1, 2,
 //! 3 or 4.5 Mbps (BRR ≥ 16 needs ≤ 13.5 Mbps) and the log at 921 600 baud (−0.16 %).
+//!
+//! Later OpenCR boards carry an ICM-20648 instead of the MPU-9250 (ROBOTIS' `imu_selector.cpp`
+//! tries one, then the other): its WHO_AM_I at 0x75 does not read 0x71, so the start fails
+//! with [`ImuError::NotMpu9250`], and a robot whose IMU is the board's stops at start-up as
+//! with a missing IMU.
 //!
 //! # Timing
 //! [`TickTimer::wait_tick`](crate::board::TickTimer::wait_tick) busy-waits on TIM2 until `k · period` (deadlines never drift) and
@@ -32,10 +39,13 @@
 // Link the runtime and the defmt global logger (RTT) into every binary using this board.
 use cortex_m_rt as _;
 use defmt_rtt as _;
+use dxl::table::imu::ImuSample;
+use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType, OutputPin};
+use embedded_hal::spi::{ErrorKind, Operation, SpiDevice};
 use embedded_storage::nor_flash as nor;
 use stm32f7xx_hal::flash::Flash;
-use stm32f7xx_hal::gpio::{Output, PushPull, PC9, PF15};
+use stm32f7xx_hal::gpio::{Output, PinState, PushPull, Speed, PA4, PC9, PF15};
 use stm32f7xx_hal::pac;
 use stm32f7xx_hal::prelude::*;
 use stm32f7xx_hal::rcc::{Clocks, HSEClock, HSEClockMode};
@@ -43,16 +53,24 @@ use stm32f7xx_hal::serial::{self, Serial};
 use stm32f7xx_hal::watchdog::IndependentWatchdog;
 
 use super::stm32::{self, register_blocks, stm32_board, BusUart, Stm32Bus, Stm32State};
-use crate::board::{Clock, LogRing, Watchdog, TORQUE_OFF_PACKET};
+use crate::board::{
+    spi_gather, spi_scatter, BusError, Clock, LogRing, Watchdog, IMU_SPI_REGISTER_HZ,
+    IMU_SPI_SAMPLE_HZ, TORQUE_OFF_PACKET,
+};
 use crate::flash_store::FlashStore;
+use crate::mpu9250::{ImuError, Mpu9250};
 use crate::record::BoardId;
 use crate::rx_ring::DmaRxCursor;
 use crate::Config;
+use walker_contract::lockstep::SPI_MAX;
 
 /// SYSCLK, Hz.
 pub const SYSCLK_HZ: u32 = 216_000_000;
 /// HSE crystal of the OpenCR 1.0, Hz.
 pub const HSE_HZ: u32 = 25_000_000;
+/// APB2 (PCLK2), Hz, SPI1's clock: SYSCLK / 2, the most APB2 takes at 216 MHz (the HAL's
+/// `freeze` picks it).
+pub const APB2_HZ: u32 = 108_000_000;
 /// Log UART baud rate.
 pub const LOG_BAUD: u32 = 921_600;
 pub use crate::board::{COMMAND_BAUD, COMMAND_RX_RING};
@@ -213,6 +231,8 @@ register_blocks! {
     fn usart6() -> pac::usart1::RegisterBlock = pac::USART6;
     /// The command port USART2 (owned by the board after `new`).
     fn usart2() -> pac::usart1::RegisterBlock = pac::USART2;
+    /// The IMU's SPI1 (owned by the board after `new`).
+    fn spi1() -> pac::spi1::RegisterBlock = pac::SPI1;
 }
 
 /// Best-effort torque off from anywhere (panic handler): direction pin high, the broadcast
@@ -255,6 +275,10 @@ pub fn panic_reset(info: &core::panic::PanicInfo) -> ! {
 pub struct OpenCrBoard<D: OutputPin = DxlDir> {
     dir: D,
     dxl_power: PF15<Output<PushPull>>,
+    /// The IMU's chip select (high = idle).
+    imu_cs: PA4<Output<PushPull>>,
+    /// The IMU once started ([`crate::board::Board::imu_start`]).
+    imu: Option<Mpu9250>,
     baud: u32,
     tim: pac::TIM2,
     iwdg: IndependentWatchdog,
@@ -281,6 +305,8 @@ impl OpenCrBoard<DxlDir> {
             .sysclk(SYSCLK_HZ.Hz())
             .freeze();
 
+        let gpioa = dp.GPIOA.split();
+        let gpiob = dp.GPIOB.split();
         let gpioc = dp.GPIOC.split();
         let gpiod = dp.GPIOD.split();
         let gpiof = dp.GPIOF.split();
@@ -313,11 +339,30 @@ impl OpenCrBoard<DxlDir> {
         uart_up(dp.USART2, cmd_pins, &clocks, COMMAND_BAUD);
         command_rx_dma_up(&dp.DMA1);
 
+        // The IMU: its chip select high first, then SPI1's pins (pulled up as ROBOTIS'
+        // `HAL_SPI_MspInit` has them: SCK idles high in mode 3 while SPI1 is off, and MISO
+        // reads 0xFF without a chip). SPI1 itself is set up by `imu_start`.
+        let imu_cs = gpioa.pa4.into_push_pull_output_in_state(PinState::High);
+        let _imu_spi = (
+            gpioa
+                .pa5
+                .into_alternate::<5>()
+                .set_speed(Speed::High)
+                .internal_pull_up(true),
+            gpioa.pa6.into_alternate::<5>().internal_pull_up(true),
+            gpiob
+                .pb5
+                .into_alternate::<5>()
+                .set_speed(Speed::High)
+                .internal_pull_up(true),
+        );
+
         // TIM2: 32-bit free-running µs counter. APB1 timers run at 2 × PCLK1.
-        // SAFETY: enabling the TIM2 clock in RCC.APB1ENR (read-modify-write, single core,
-        // before interrupts are used).
+        // SAFETY: enabling the TIM2 clock in RCC.APB1ENR and SPI1's in RCC.APB2ENR
+        // (read-modify-writes, single core, before interrupts are used).
         let rcc_regs = unsafe { &*pac::RCC::ptr() };
         rcc_regs.apb1enr.modify(|_, w| w.tim2en().set_bit());
+        rcc_regs.apb2enr.modify(|_, w| w.spi1en().set_bit());
         let tim = dp.TIM2;
         let prescale = (clocks.timclk1().raw() / 1_000_000).saturating_sub(1);
         tim.psc.write(|w| w.psc().bits(prescale.min(0xFFFF) as u16));
@@ -330,6 +375,8 @@ impl OpenCrBoard<DxlDir> {
         OpenCrBoard {
             dir: DxlDir(dir),
             dxl_power: power,
+            imu_cs,
+            imu: None,
             baud: cfg.bus_baud,
             tim,
             iwdg,
@@ -355,6 +402,15 @@ impl<D: OutputPin> OpenCrBoard<D> {
         let start = self.now_us();
         while iwdg.sr.read().bits() & 0b11 != 0 && self.now_us() < start + 10_000 {}
         self.iwdg.feed();
+    }
+
+    /// Busy-waits until `until_us` on the µs clock, feeding a running watchdog meanwhile (the
+    /// IMU's 100 ms waits at start-up outlast its period; the wait itself is bounded).
+    #[inline(never)]
+    fn wait_fed(&mut self, until_us: u64) {
+        while self.now_us() < until_us {
+            self.feed();
+        }
     }
 
     /// Moves log bytes from the ring to USART6 while its data register is free.
@@ -519,9 +575,164 @@ stm32_board! {
             ok
         }
 
+        fn imu_start(&mut self) -> Option<Result<(), ImuError>> {
+            // As ROBOTIS' `cMPU9250::begin`: the chip's power-up time, then the chip checked,
+            // reset and configured at the register rate, the samples at the faster one.
+            self.imu = None;
+            imu_spi_up(IMU_BR_REGISTER);
+            self.wait_fed(IMU_POWER_UP_US);
+            let started = Mpu9250::start(&mut ImuPort { board: self });
+            Some(started.map(|imu| {
+                imu_spi_up(IMU_BR_SAMPLE);
+                self.imu = Some(imu);
+            }))
+        }
+
+        fn imu_sample(&mut self) -> Option<Result<ImuSample, ImuError>> {
+            let mut imu = self.imu.take()?;
+            let s = imu.sample(&mut ImuPort { board: self });
+            self.imu = Some(imu);
+            Some(s)
+        }
+
         fn exit(&mut self, code: i32) -> ! {
             defmt::warn!("exit({=i32}): torque off, servo power off, reset", code);
             self.shut_down(panic_torque_off)
         }
+    }
+}
+
+/// SPI1's CR1.BR for `hz`: f_SCK = f_PCLK2 / 2^(BR + 1) (RM0385 SPI_CR1); exact only for a
+/// power-of-two divider of [`APB2_HZ`] (checked below).
+const fn spi1_br(hz: u32) -> u8 {
+    // log2(f_PCLK2 / hz) ≤ 31 fits a u8; 0 for a rate of 0 or above f_PCLK2.
+    match APB2_HZ.checked_div(hz) {
+        Some(div) => match div.checked_ilog2() {
+            Some(log2) => log2.saturating_sub(1) as u8,
+            None => 0,
+        },
+        None => 0,
+    }
+}
+/// SPI1's BR while the IMU starts (every register: ≤ 1 MHz).
+const IMU_BR_REGISTER: u8 = spi1_br(IMU_SPI_REGISTER_HZ);
+/// SPI1's BR for the IMU's samples (sensor registers: ≤ 20 MHz).
+const IMU_BR_SAMPLE: u8 = spi1_br(IMU_SPI_SAMPLE_HZ);
+const _: () = assert!(APB2_HZ / 128 == IMU_SPI_REGISTER_HZ && IMU_BR_REGISTER == 0b110);
+const _: () = assert!(APB2_HZ / 16 == IMU_SPI_SAMPLE_HZ && IMU_BR_SAMPLE == 0b011);
+
+/// Longest busy-wait on an SPI1 flag (TXE, RXNE, BSY), loop iterations: one iteration is at
+/// least a few cycles (a peripheral read and a compare), so 10⁴ are ≥ 0.1 ms at 216 MHz, more
+/// than ten bytes at the slowest rate (8 bits at 843.75 kHz: 9.5 µs), while a hung SPI costs
+/// a tick a millisecond or two (one timeout ends the transfer).
+const IMU_SPIN_LIMIT: u32 = 10_000;
+
+/// Time from power-up before the MPU-9250's registers answer, µs (its start-up time for
+/// register access, ≤ 100 ms; ROBOTIS' `begin` waits 100 ms too): `imu_start` waits until the
+/// µs clock, started in `new`, reads it.
+const IMU_POWER_UP_US: u64 = 100_000;
+
+/// Empties SPI1's receive FIFO (≤ 4 bytes) and so clears an overrun (a DR read, then an SR
+/// read): bytes a transfer that timed out left there.
+fn imu_spi_drain(spi: &pac::spi1::RegisterBlock) {
+    for _ in 0..4 {
+        if spi.sr.read().rxne().bit_is_clear() {
+            break;
+        }
+        // SAFETY: an 8-bit read of SPI1_DR (a byte out of the receive FIFO), the one
+        // access size that takes one 8-bit frame (RM0385 "Data packing").
+        let _ = unsafe { core::ptr::read_volatile(spi.dr.as_ptr().cast::<u8>()) };
+    }
+}
+
+/// SPI1 set up for the IMU at f_PCLK2 / 2^(`br` + 1) and enabled (RM0385 "Serial peripheral
+/// interface", "Configuration of SPI", "Procedure for disabling the SPI"): first disabled once
+/// its last frame is out (BSY clear, bounded) and its receive FIFO emptied; CR1 = master
+/// (MSTR), mode 3 (CPOL = 1: SCK idles high; CPHA = 1: data captured on the second, rising
+/// edge, where the MPU-9250 latches), `br`, MSB first, full duplex, software NSS held high
+/// (SSM = SSI = 1: no mode fault; PA4 selects the chip), no CRC; CR2 = 8-bit frames
+/// (DS = 0111) with RXNE at one byte in the FIFO (FRXTH = 1), no NSS output, no interrupts, no
+/// DMA; then SPE.
+#[inline(never)]
+fn imu_spi_up(br: u8) {
+    let spi = spi1();
+    let _ = imu_spi_until(|sr| sr.bsy().bit_is_clear());
+    spi.cr1.modify(|_, w| w.spe().disabled());
+    imu_spi_drain(spi);
+    spi.cr1.write(|w| {
+        w.cpha()
+            .second_edge()
+            .cpol()
+            .idle_high()
+            .mstr()
+            .master()
+            .br()
+            .bits(br)
+            .lsbfirst()
+            .msbfirst()
+            .ssi()
+            .slave_not_selected()
+            .ssm()
+            .enabled()
+    });
+    spi.cr2.write(|w| w.ds().eight_bit().frxth().quarter());
+    spi.cr1.modify(|_, w| w.spe().enabled());
+}
+
+/// One full-duplex frame on SPI1 (the chip selected), in place: each byte of `frame` written
+/// when TXE and replaced by the byte clocked in when RXNE, then BSY clear; every wait bounded.
+fn imu_spi_frame(frame: &mut [u8]) -> Result<(), BusError> {
+    let dr = spi1().dr.as_ptr().cast::<u8>();
+    for b in frame.iter_mut() {
+        imu_spi_until(|sr| sr.txe().bit_is_set())?;
+        // SAFETY: 8-bit accesses of SPI1_DR, the size that moves one 8-bit frame (a 16-bit
+        // access would pack two, RM0385 "Data packing"); SPI1 belongs to the board.
+        unsafe { core::ptr::write_volatile(dr, *b) };
+        imu_spi_until(|sr| sr.rxne().bit_is_set())?;
+        // SAFETY: as above.
+        *b = unsafe { core::ptr::read_volatile(dr) };
+    }
+    imu_spi_until(|sr| sr.bsy().bit_is_clear())
+}
+
+/// Waits (bounded: [`IMU_SPIN_LIMIT`]) until SPI1_SR satisfies `ready`.
+#[inline(never)]
+fn imu_spi_until(ready: fn(&pac::spi1::sr::R) -> bool) -> Result<(), BusError> {
+    stm32::spin(IMU_SPIN_LIMIT, || ready(&spi1().sr.read()))
+}
+
+/// The board's SPI1 to its IMU, at the rate `imu_spi_up` set, and its wait (TIM2's µs, the
+/// watchdog fed).
+struct ImuPort<'a, D: OutputPin> {
+    board: &'a mut OpenCrBoard<D>,
+}
+
+impl<D: OutputPin> embedded_hal::spi::ErrorType for ImuPort<'_, D> {
+    type Error = ErrorKind;
+}
+
+impl<D: OutputPin> SpiDevice for ImuPort<'_, D> {
+    fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), ErrorKind> {
+        // The bytes out, then in their place the bytes in.
+        let mut buf = [0u8; SPI_MAX];
+        let n = spi_gather(ops, &mut buf).ok_or(ErrorKind::Other)?;
+        let frame = buf.get_mut(..n).ok_or(ErrorKind::Other)?;
+        imu_spi_drain(spi1());
+        self.board.imu_cs.set_low();
+        let clocked = imu_spi_frame(frame);
+        // CS held ≥ 500 ns after the last SCK edge (the MPU-9250's t_HD.CS): ≥ 1 µs here.
+        cortex_m::asm::delay(SYSCLK_HZ / 1_000_000);
+        self.board.imu_cs.set_high();
+        clocked.map_err(|_| ErrorKind::Other)?;
+        spi_scatter(ops, frame);
+        Ok(())
+    }
+}
+
+impl<D: OutputPin> DelayNs for ImuPort<'_, D> {
+    fn delay_ns(&mut self, ns: u32) {
+        // One more µs: the counter's resolution.
+        let until = self.board.now_us() + u64::from(ns.div_ceil(1_000)) + 1;
+        self.board.wait_fed(until);
     }
 }

@@ -107,12 +107,16 @@ use cortex_m_rt as _;
 use defmt_semihosting as _;
 
 use crate::board::{
-    Board, BusError, Clock, CrashCell, CrashCode, LineTime, LogSink, ResetCause, ServoBus, Tick,
-    TickSchedule, TickTimer, Watchdog, COMMAND_BAUD, COMMAND_RX_RING, TORQUE_OFF_PACKET,
+    spi_gather, spi_scatter, Board, BusError, Clock, CrashCell, CrashCode, LineTime, LogSink,
+    ResetCause, ServoBus, Tick, TickSchedule, TickTimer, Watchdog, COMMAND_BAUD, COMMAND_RX_RING,
+    IMU_SPI_REGISTER_HZ, IMU_SPI_SAMPLE_HZ, TORQUE_OFF_PACKET,
 };
+use crate::mpu9250::{ImuError, Mpu9250};
 use crate::record::BoardId;
 use crate::rx_ring::LineRx;
 use crate::Config;
+use dxl::table::imu::ImuSample;
+use embedded_hal::spi::{ErrorKind, ErrorType, Operation, SpiDevice};
 
 /// UART / SysTick clock of the mps2 boards, Hz.
 pub const SYSCLK_HZ: u32 = 25_000_000;
@@ -673,6 +677,8 @@ pub struct QemuBoard {
     /// `realtime`: the host clock's tick rate; each tick ends no earlier on QEMU's host clock
     /// than its virtual time.
     realtime_hz: Option<u64>,
+    /// The board's IMU once started: the simulator's chip on the lock-step pipes.
+    imu: Option<Mpu9250>,
 }
 
 impl QemuBoard {
@@ -758,7 +764,38 @@ impl QemuBoard {
             store,
             pipe,
             realtime_hz,
+            imu: None,
         }
+    }
+
+    /// One SPI transfer with the simulator's IMU chip on the pipes (a time frame first):
+    /// `mosi` out, as many bytes back into `miso`; the virtual clock charged 8 bits a byte at
+    /// `hz`. False when the simulator's answer is not one byte for each byte out.
+    fn spi_transfer(&mut self, mosi: &[u8], miso: &mut [u8], hz: u32) -> bool {
+        let Ok(len) = u16::try_from(mosi.len()) else {
+            return false;
+        };
+        self.sync_time(true);
+        let Some(p) = &mut self.pipe else {
+            return false;
+        };
+        p.queue(&lockstep::spi_header(len));
+        p.queue(mosi);
+        p.flush();
+        let n = self.read_announcement();
+        let ls = self.lockstep_uart;
+        for k in 0..n {
+            let b = self.lockstep_byte(ls);
+            if let Some(slot) = miso.get_mut(k) {
+                *slot = b;
+            }
+        }
+        self.virt_ns += u64::from(len) * 8 * 1_000_000_000 / u64::from(hz.max(1));
+        if n != mosi.len() {
+            self.lockstep_errors = self.lockstep_errors.saturating_add(1);
+            return false;
+        }
+        true
     }
 
     /// True when the lock-step channel is in use.
@@ -1100,11 +1137,63 @@ impl Board for QemuBoard {
         }
     }
 
+    fn imu_start(&mut self) -> Option<Result<(), ImuError>> {
+        // The simulated chip answers on the pipes only.
+        self.pipe.as_ref()?;
+        let started = Mpu9250::start(&mut ChipPort {
+            board: self,
+            hz: IMU_SPI_REGISTER_HZ,
+        });
+        Some(started.map(|imu| self.imu = Some(imu)))
+    }
+
+    fn imu_sample(&mut self) -> Option<Result<ImuSample, ImuError>> {
+        let mut imu = self.imu.take()?;
+        let s = imu.sample(&mut ChipPort {
+            board: self,
+            hz: IMU_SPI_SAMPLE_HZ,
+        });
+        self.imu = Some(imu);
+        Some(s)
+    }
+
     fn exit(&mut self, code: i32) -> ! {
         defmt::info!(
             "stack high-water mark {=u32} B (painted at boot, scripts/stack-depth.py bounds it)",
             stack_high_water()
         );
         semihosting_exit(code)
+    }
+}
+
+/// The board's SPI to the simulator's IMU chip, at `hz`, and its wait (virtual time).
+struct ChipPort<'a> {
+    board: &'a mut QemuBoard,
+    hz: u32,
+}
+
+impl ErrorType for ChipPort<'_> {
+    type Error = ErrorKind;
+}
+
+impl SpiDevice for ChipPort<'_> {
+    fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), ErrorKind> {
+        let mut mosi = [0u8; lockstep::SPI_MAX];
+        let mut miso = [0u8; lockstep::SPI_MAX];
+        let n = spi_gather(ops, &mut mosi).ok_or(ErrorKind::Other)?;
+        let (Some(out), Some(back)) = (mosi.get(..n), miso.get_mut(..n)) else {
+            return Err(ErrorKind::Other);
+        };
+        if !self.board.spi_transfer(out, back, self.hz) {
+            return Err(ErrorKind::Other);
+        }
+        spi_scatter(ops, back);
+        Ok(())
+    }
+}
+
+impl embedded_hal::delay::DelayNs for ChipPort<'_> {
+    fn delay_ns(&mut self, ns: u32) {
+        self.board.virt_ns += u64::from(ns);
     }
 }

@@ -1,11 +1,14 @@
-//! Sense: the sensor devices' ONE BULK READ a tick, each reply checked for plausibility
-//! ([`crate::plausible`]) and its freshness decided by the supervisor.
+//! Sense: the sensor devices' ONE BULK READ a tick (and the board's IMU, where the robot's
+//! IMU is the controller board's: its sample turned into the trunk's axes, (I1) of
+//! [`ImuAxes`]), each reply checked for plausibility ([`crate::plausible`]) and its freshness
+//! decided by the supervisor.
 
 use dxl::table::foot::FootForces;
 use dxl::table::imu::ImuSample;
 use dxl::table::{foot, imu as imu_table};
 use dxl::{BulkReadRequest, DeviceResult};
-use walker_contract::bus_map::SENSOR_SLOTS;
+use gait_core::robot::{BusDescription, ImuAxes, ImuPlace};
+use walker_contract::bus_map::{self, SENSOR_SLOTS};
 use walker_contract::codes::SensorRejection;
 
 use crate::board::Board;
@@ -21,9 +24,13 @@ const IMU_SLOT: usize = 2;
 
 /// The sensor devices read each tick and where their data lands in the bulk-read buffer.
 struct Sensors {
-    /// Per slot (left foot board, right foot board, IMU): its device, if the robot has one on
-    /// the bus.
+    /// Per slot (left foot board, right foot board, IMU): its device, if the robot has one
+    /// ([`bus_map::BOARD_IMU`]: the board's IMU).
     ids: [Option<u8>; SENSOR_SLOTS],
+    /// The IMU slot is the board's IMU, turned in the trunk so (`None`: a bus IMU, or none).
+    board_imu: Option<ImuAxes>,
+    /// The board IMU's sample of this tick (trunk axes), if it gave one.
+    board_sample: Option<ImuSample>,
     reqs: heapless::Vec<BulkReadRequest, 3>,
     /// Per request: its slot and offset into the buffer.
     slots: heapless::Vec<(usize, usize), 3>,
@@ -32,16 +39,23 @@ struct Sensors {
 }
 
 impl Sensors {
-    fn new(ids: [Option<u8>; SENSOR_SLOTS], missing: &[u8]) -> Self {
+    fn new(bus: &BusDescription, missing: &[u8]) -> Self {
+        let ids = bus_map::sensor_ids(bus);
+        let board_imu = match bus.imu {
+            ImuPlace::Board(axes) if !missing.contains(&bus_map::BOARD_IMU) => Some(axes),
+            _ => None,
+        };
         let mut s = Sensors {
             ids,
+            board_imu,
+            board_sample: None,
             reqs: heapless::Vec::new(),
             slots: heapless::Vec::new(),
             buf: [0; 62],
             results: [Ok(()); 3],
         };
         let mut off = 0usize;
-        for (k, id) in ids.into_iter().enumerate() {
+        for (k, id) in bus_map::sensor_slots(bus).into_iter().enumerate() {
             let Some(id) = id.filter(|id| !missing.contains(id)) else {
                 continue;
             };
@@ -62,18 +76,28 @@ impl Sensors {
         s
     }
 
-    /// ONE BULK READ; afterwards `results[i]` is request i's outcome.
+    /// ONE BULK READ (afterwards `results[i]` is request i's outcome), then the board's IMU.
     fn read<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>) {
         let n = self.reqs.len();
-        let Some(results) = self.results.get_mut(..n) else {
-            return;
-        };
-        if n == 0 {
-            return;
+        if let Some(results) = self.results.get_mut(..n).filter(|_| n > 0) {
+            if let Err(e) = bus.master().bulk_read(&self.reqs, &mut self.buf, results) {
+                results.iter_mut().for_each(|r| *r = Err(e));
+            }
         }
-        if let Err(e) = bus.master().bulk_read(&self.reqs, &mut self.buf, results) {
-            results.iter_mut().for_each(|r| *r = Err(e));
-        }
+        self.board_sample = self.board_imu.and_then(|axes| {
+            let s = bus.board().imu_sample()?.ok()?;
+            Some(ImuSample {
+                gyro_urad_s: axes.to_trunk_i32(s.gyro_urad_s),
+                accel_um_s2: axes.to_trunk_i32(s.accel_um_s2),
+                counter: s.counter,
+            })
+        });
+    }
+
+    /// The sensor slots read this tick: the BULK READ's, then the board IMU's.
+    fn read_slots(&self) -> impl Iterator<Item = usize> + '_ {
+        let board = self.board_imu.map(|_| IMU_SLOT);
+        self.slots.iter().map(|&(k, _)| k).chain(board)
     }
 
     fn data(&self, req: usize, len: usize) -> Option<&[u8]> {
@@ -83,7 +107,9 @@ impl Sensors {
 
     /// Parses and checks every reply of the last [`Sensors::read`] ([`crate::plausible`]);
     /// accepted samples are recorded in `checks` at `now_us`.
-    fn check(&self, checks: &mut Plausibility<3>, now_us: u64) -> Checked {
+    /// `feet`: the robot has foot boards (a constant on a real board's build: without them
+    /// the foot samples' checks fold away).
+    fn check(&self, checks: &mut Plausibility<3>, now_us: u64, feet: bool) -> Checked {
         let mut out = Checked {
             feet: [None; 2],
             imu: None,
@@ -91,6 +117,9 @@ impl Sensors {
         };
         for (i, &(k, _)) in self.slots.iter().enumerate() {
             if !self.results.get(i).is_some_and(|r| r.is_ok()) {
+                continue;
+            }
+            if k != IMU_SLOT && !feet {
                 continue;
             }
             let verdict = if k == IMU_SLOT {
@@ -114,7 +143,17 @@ impl Sensors {
                 *slot = Some(r);
             }
         }
-        if let [Some(a), Some(b)] = &out.feet {
+        if let Some(s) = self.board_sample {
+            match checks.imu(IMU_SLOT, &s) {
+                Ok(()) => out.imu = Some(s),
+                Err(r) => {
+                    if let Some(slot) = out.rejected.get_mut(IMU_SLOT) {
+                        *slot = Some(r);
+                    }
+                }
+            }
+        }
+        if let ([Some(a), Some(b)], true) = (&out.feet, feet) {
             if let Err(r) = checks.feet_together(a, b) {
                 out.feet = [None; 2];
                 for slot in out.rejected.iter_mut().take(2) {
@@ -170,15 +209,11 @@ pub(super) struct Sense {
 }
 
 impl Sense {
-    /// The sensor slots' devices `ids` (left foot board, right foot board, IMU; `None`: the
-    /// robot has none on the bus) but the `missing` ones, checked by `plausible`.
-    pub(super) fn new(
-        ids: [Option<u8>; SENSOR_SLOTS],
-        missing: &[u8],
-        plausible: Plausibility<3>,
-    ) -> Self {
+    /// The sensors of `bus` ([`bus_map::sensor_ids`]: left foot board, right foot board,
+    /// IMU) but the `missing` ones, checked by `plausible`.
+    pub(super) fn new(bus: &BusDescription, missing: &[u8], plausible: Plausibility<3>) -> Self {
         Sense {
-            sensors: Sensors::new(ids, missing),
+            sensors: Sensors::new(bus, missing),
             state: SensorState {
                 feet: [None; 2],
                 held: [0; 3],
@@ -204,10 +239,11 @@ impl Sense {
         sup: &mut Supervisor<3>,
     ) -> Option<ImuSample> {
         let now = bus.board().now_us();
-        let checked = self.sensors.check(&mut self.plausible, now);
+        let feet = bus.devices().foot_boards.is_some();
+        let checked = self.sensors.check(&mut self.plausible, now, feet);
         let state = &mut self.state;
         let mut imu_fresh = None;
-        for &(k, _) in self.sensors.slots.iter() {
+        for k in self.sensors.read_slots() {
             let Some(id) = self.sensors.ids.get(k).copied().flatten() else {
                 continue;
             };

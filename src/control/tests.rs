@@ -3638,3 +3638,82 @@ fn a_builds_defaults_for_a_robot_are_its_robot_parameter() {
         2_000_000
     );
 }
+
+/// `cfg` with the reference robot's IMU on the controller board, its chip turned in the trunk
+/// as `axes` say.
+fn on_board_imu(cfg: &Config, axes: gait_core::robot::ImuAxes) -> Config {
+    let r = cfg.robot;
+    let robot: &'static Robot = std::boxed::Box::leak(std::boxed::Box::new(Robot {
+        bus: gait_core::robot::BusDescription {
+            imu: gait_core::robot::ImuPlace::Board(axes),
+            ..r.bus
+        },
+        ..*r
+    }));
+    Config { robot, ..*cfg }
+}
+
+/// The board's IMU, its chip half a turn about z in the trunk (the OP3's OpenCR), read each
+/// tick and turned back into the trunk's axes ((I1) of `ImuAxes`): with the trunk tipping
+/// backward in a swing (the catching step acts on the pitch rate's sign), the walk's goals are
+/// the bus IMU run's, goal for goal; read as if the chip were aligned, they are not (the rate's
+/// sign flipped). Either way every sensor slot is there: no `SensorsAbsent` record.
+#[test]
+fn the_board_imu_turned_in_the_trunk_reads_as_the_bus_imu() {
+    use crate::fake_robot::ImuMotion;
+    use gait_core::robot::{op3::OPENCR_IN_TORSO, ImuAxes};
+    let on_bus = cfg_with("landing_gain=0");
+    let on_board = on_board_imu(&on_bus, OPENCR_IN_TORSO);
+    let misread = on_board_imu(&on_bus, ImuAxes::ALIGNED);
+    let tip = |cfg: &Config, chip: Option<ImuAxes>| {
+        let mut b = board(cfg).with_imu_rate(0.0);
+        if let Some(axes) = chip {
+            b = b.with_board_imu(axes);
+        }
+        b.imu_motion = ImuMotion::Tip {
+            rate: TIP_RATE,
+            from_us: 2_000_000,
+            until_us: 2_000_000 + TIP_US,
+        };
+        assert_eq!(run(&mut b, cfg), RunEnd::Stopped(StopReason::PlanDone));
+        b
+    };
+    let a = tip(&on_bus, None);
+    let b = tip(&on_board, Some(OPENCR_IN_TORSO));
+    let c = tip(&misread, Some(OPENCR_IN_TORSO));
+    assert!(b.device(200).is_none() && !b.packets.iter().any(|p| p.id == 200));
+    assert_eq!(a.goals.len(), b.goals.len());
+    assert!(
+        a.goals == b.goals,
+        "the board IMU's walk differs from the bus IMU's"
+    );
+    assert!(
+        a.goals != c.goals,
+        "a chip read in the wrong axes changed nothing"
+    );
+    for x in [&a, &b] {
+        assert!(!x.records().iter().any(|r| matches!(r,
+            Record::Fault(f) if f.kind == FaultKind::SensorsAbsent)));
+    }
+}
+
+/// A board IMU that does not start (another chip, a dead SPI, a board without one) is a
+/// missing IMU: the run stops at start-up with the board IMU's ID in the start-up record, and
+/// no servo's torque goes on.
+#[test]
+fn a_board_imu_that_does_not_start_stops_the_run_at_start_up() {
+    use gait_core::robot::op3::OPENCR_IN_TORSO;
+    use walker_contract::bus_map::BOARD_IMU;
+    let cfg = on_board_imu(&autostart_config(), OPENCR_IN_TORSO);
+    let want = RunEnd::Stopped(StopReason::DeviceMissing { id: BOARD_IMU });
+    let mut b = board(&cfg).with_board_imu(OPENCR_IN_TORSO);
+    b.board_imu = Some((OPENCR_IN_TORSO, true));
+    assert_eq!(run(&mut b, &cfg), want);
+    assert_eq!(&startup_of(&b.records()).missing[..], &[BOARD_IMU]);
+    assert_eq!(b.count(opcode::SYNC_WRITE), 0);
+    assert!(b.ticks.is_empty());
+    // A board without an IMU at all: the same.
+    let mut b = board(&cfg);
+    b.remove(200);
+    assert_eq!(run(&mut b, &cfg), want);
+}

@@ -36,6 +36,14 @@
 //! Left: hip yaw −z, hip roll −x, hip pitch +y, knee +y, ankle pitch −y, ankle roll +x; the
 //! right leg's pitch axes are the opposite (hip pitch −y, knee −y, ankle pitch +y).
 //!
+//! # The OpenCR's IMU in the torso
+//! ROBOTIS' own software turns the chip's axes into the robot's as x → −x, y → −y, z → z:
+//! the OpenCR's `IMU` library passes the chip's gyro and accelerometer axes through unchanged
+//! (`GYRO_ORIENTATION`, `ACC_ORIENTATION` with ROLL = 0, PITCH = 1, YAW = 2), its OP3 firmware
+//! (`dxl_hw_op3.cpp`) reports them as `gyro_x/y/z`, `acc_x/y/z`, and `op3_manager`'s
+//! `open_cr_module.cpp` negates x and y of both into `body_link`'s frame. The board lies turned
+//! half a turn about the vertical ([`OPENCR_IN_TORSO`]).
+//!
 //! # Shape (assumed: boxes around op3.xml's body and head meshes, by eye)
 //! Pelvis box 0.08 × 0.12 × 0.04 m from P up, trunk box 0.09 × 0.12 × 0.14 m (0.04–0.18 m above
 //! P, 1 cm behind it), head sphere r 0.045 m at 0.22 m.
@@ -45,12 +53,18 @@
 //! XM430-W350 at 12 V (no-load 4.8 rad/s, 4096 ticks per turn, 2048 = 0 rad).
 
 use super::{
-    BodyShape, BusDescription, Geometry, HeldServo, ImuPlace, Masses, Robot, ServoLimits,
+    BodyShape, BusDescription, Geometry, HeldServo, ImuAxes, ImuPlace, Masses, Robot, ServoLimits,
     WALKING_LIMITS,
 };
 
 /// The arm and head servos, held while walking: arms hanging 0.27 rad out from the body
 /// (shoulder roll ±1.3 rad from op3.xml's T-pose), elbows straight, head straight ahead.
+/// The OpenCR's IMU chip in the OP3's torso: half a turn about z (see the module docs).
+pub const OPENCR_IN_TORSO: ImuAxes = ImuAxes {
+    axis: [0, 1, 2],
+    sign: [-1, -1, 1],
+};
+
 const HELD: [HeldServo; 8] = [
     HeldServo {
         name: "r_sho_pitch",
@@ -130,7 +144,7 @@ pub const OP3: Robot = Robot {
         baud: 2_000_000,
         legs: [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17],
         foot_boards: None,
-        imu: ImuPlace::Board,
+        imu: ImuPlace::Board(OPENCR_IN_TORSO),
         held: &HELD,
     },
     shape: &BodyShape {

@@ -24,6 +24,7 @@
 
 pub mod body;
 pub mod bus;
+pub mod chip;
 pub mod device;
 pub mod dynamixel;
 pub mod forces;
@@ -629,6 +630,9 @@ pub struct Simulator {
     /// servos), when the robot has them.
     foot_index: Option<[usize; 2]>,
     imu_index: Option<usize>,
+    /// The controller board's IMU chip, turned in the trunk so, when the robot's IMU is the
+    /// board's ([`transport`]'s SPI frames).
+    board_chip: Option<(gait_core::robot::ImuAxes, chip::Mpu9250Chip)>,
 }
 
 impl fmt::Debug for Simulator {
@@ -668,7 +672,11 @@ impl Simulator {
                 devices.push(Device::imu(id));
                 Some(devices.len() - 1)
             }
-            ImuPlace::Board => None,
+            ImuPlace::Board(_) => None,
+        };
+        let board_chip = match bus.imu {
+            ImuPlace::Board(axes) => Some((axes, chip::Mpu9250Chip::new())),
+            ImuPlace::Bus(_) => None,
         };
         for (k, h) in bus.held.iter().enumerate() {
             // Joint index past the legs; the servo's own direction (no mounting sign).
@@ -710,6 +718,7 @@ impl Simulator {
             ticks,
             foot_index,
             imu_index,
+            board_chip,
         };
         sim.publish()?;
         Ok(sim)
@@ -891,6 +900,13 @@ impl Simulator {
             if let Some(i) = self.imu_index {
                 self.bus.devices[i].set(dxl::table::imu::SAMPLE, &imu.to_bytes());
             }
+            if let Some((axes, chip)) = &mut self.board_chip {
+                let si = |v: [i32; 3]| axes.to_chip_f64(v.map(|x| f64::from(x) * 1e-6));
+                chip.measure(walker_contract::mpu9250::Reading {
+                    gyro_rad_s: si(imu.gyro_urad_s),
+                    accel_m_s2: si(imu.accel_um_s2),
+                });
+            }
         }
         // Held servos: at their goal while torque is on.
         for d in self.bus.devices.iter_mut().skip(LEG_SERVOS) {
@@ -923,6 +939,15 @@ impl Simulator {
             }
         }
         Ok(())
+    }
+
+    /// One SPI transfer with the controller board's IMU chip: `mosi` in, a byte out for each
+    /// (zeros where the robot has no such chip: nothing drives the line).
+    pub fn spi(&mut self, mosi: &[u8]) -> Vec<u8> {
+        match &mut self.board_chip {
+            Some((_, chip)) => chip.transfer(mosi),
+            None => vec![0; mosi.len()],
+        }
     }
 
     /// Feeds one bus byte; returns a packet when one completes.

@@ -41,7 +41,9 @@
 //! its ends before QEMU starts (its read end non-blocking, its write end read-write, so that
 //! neither open waits), waits for the firmware to open its ends, then reads blocking (the
 //! firmware's exit, QEMU closing its end, ends the run) and removes the two names at the
-//! firmware's first frame.
+//! firmware's first frame. On the pipes only, the controller board's IMU chip too: an SPI
+//! frame (`0x53`, u16 LE length, the bytes out) is answered `0xA5`, the same count and the
+//! chip's bytes ([`super::chip`]).
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::{Ipv4Addr, SocketAddr, TcpListener, TcpStream};
@@ -533,6 +535,27 @@ fn serve_pipes(
                 }
                 let header = lockstep::reply_header(out.len() - lockstep::HEADER_LEN);
                 out[..lockstep::HEADER_LEN].copy_from_slice(&header);
+                if pipes.to_fw.write_all(&out).is_err() {
+                    break;
+                }
+            }
+            lockstep::SPI => {
+                let mut len = [0u8; 2];
+                if input.read_exact(&mut len).is_err() {
+                    break;
+                }
+                let n = lockstep::header_count(len[0], len[1]);
+                if n > lockstep::SPI_MAX {
+                    errors += 1;
+                }
+                packet.resize(n, 0);
+                if input.read_exact(&mut packet).is_err() {
+                    break;
+                }
+                let miso = sim.spi(&packet);
+                out.clear();
+                out.extend_from_slice(&lockstep::reply_header(miso.len()));
+                out.extend_from_slice(&miso);
                 if pipes.to_fw.write_all(&out).is_err() {
                     break;
                 }
