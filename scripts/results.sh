@@ -16,6 +16,8 @@
 #   out/results/servos-open/   walker sweep --family servos --plan plans/table2-paper.toml
 #   out/results/ablation/      walker beyond --ablation --plan plans/table2.toml
 #   out/results/pushes/        walker pushes --plan plans/table2.toml
+#   out/results/op3/           walker sweep --family servos --plan plans/op3-forward.toml
+#                              (the ROBOTIS OP3: its plan, the defaults across the servo family)
 # Each sweep row is scored as `walker sweep` does: distance, heading drift and tilt from the
 # truth (host/src/fil.rs `walk_figures`), true CoP − reference mean |e| over the walking ticks
 # (host/src/beyond.rs `score`).
@@ -52,6 +54,7 @@ if [ "${SKIP_WALKS:-0}" != 1 ]; then
     walk servos-open sweep --family servos --plan plans/table2-paper.toml --jobs "$jobs"
     walk ablation beyond --ablation --plan plans/table2.toml
     walk pushes pushes --plan plans/table2.toml
+    walk op3 sweep --family servos --plan plans/op3-forward.toml --jobs "$jobs"
 fi
 
 echo
@@ -136,6 +139,18 @@ if w is not None:
         [f"Table 2, the defaults on the servo family's worst case (`{w[0]}`)",
          "`walker sweep --family servos`"] + w[1]) + " |")
 summary = "\n".join(summary)
+op3 = [
+    "| walk | how | fall | walked (of 0.260 m) | heading drift | true CoP − reference mean \\|e\\| x / y (mm) |",
+    "| --- | --- | --- | ---: | ---: | ---: |",
+    "| " + " | ".join(["The OP3's forward walk, the defaults", "`plans/op3-forward.toml`"]
+                     + nominal("op3")) + " |",
+]
+w = worst("op3")
+if w is not None:
+    op3.append("| " + " | ".join(
+        [f"the same on the servo family's worst case (`{w[0]}`)",
+         "`walker sweep --family servos`"] + w[1]) + " |")
+op3 = "\n".join(op3)
 
 commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                         text=True).stdout.strip() or "unknown"
@@ -191,6 +206,9 @@ no fall, ≥ 95 % of the planned distance, heading drift < 3°, true mean |e| < 
 {section("The closed loop, one part at a time",
          "`walker beyond --ablation --plan plans/table2.toml` (the stretched timing): the three models open loop, then TLIPFM with one part added per row; the row marked (default) is the firmware's default configuration. Distance here is the pelvis's travel between the first and the last gait sample the firmware commanded.",
          "ablation", "beyond.md")}
+{section("The ROBOTIS OP3 across the servo family",
+         "`walker sweep --family servos --plan plans/op3-forward.toml`: the second robot (gait-core `robot/op3.rs`: Menagerie's op3.xml, its OpenCR's IMU, no foot sensors) on its own plan, the firmware's defaults, the same servo family.",
+         "op3", "sweep.md")}
 {section("The largest torso push survived",
          "`walker pushes --plan plans/table2.toml`: 10 ms horizontal impulses on the torso, standing (1 s after ready) and walking (6 s into Table 2), climbing until a fall, resolution 0.25 N·s.",
          "pushes", "pushes.md")}"""
@@ -201,6 +219,9 @@ readme = open("README.md", encoding="utf-8").read()
 b, e = "<!-- results:begin -->", "<!-- results:end -->"
 i, j = readme.index(b) + len(b), readme.index(e)
 readme = readme[:i] + "\n" + summary + "\n" + readme[j:]
+b, e = "<!-- op3:begin -->", "<!-- op3:end -->"
+i, j = readme.index(b) + len(b), readme.index(e)
+readme = readme[:i] + "\n" + op3 + "\n" + readme[j:]
 with open("README.md", "w", encoding="utf-8") as f:
     f.write(readme)
 print(summary)

@@ -90,7 +90,11 @@ pub fn servo_cases() -> [SweepCase; 21] {
         SweepCase { name, what, apply }
     }
     [
-        c("nominal", "XM430-W350, reference robot, friction 1", |_| {}),
+        c(
+            "nominal",
+            "XM430-W350, the plan's robot, friction 1",
+            |_| {},
+        ),
         c("stall2.5", "servo stall torque 2.5 N·m", |s| {
             s.xservo.stall_torque = 2.5
         }),
@@ -185,7 +189,11 @@ pub fn cases() -> [SweepCase; 11] {
         SweepCase { name, what, apply }
     }
     [
-        c("nominal", "XM430-W350, reference robot, friction 1", |_| {}),
+        c(
+            "nominal",
+            "XM430-W350, the plan's robot, friction 1",
+            |_| {},
+        ),
         c("torque-20", "servo stall torque × 0.8", |s| {
             s.xservo.stall_torque *= 0.8
         }),

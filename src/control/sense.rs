@@ -27,10 +27,6 @@ struct Sensors {
     /// Per slot (left foot board, right foot board, IMU): its device, if the robot has one
     /// ([`bus_map::BOARD_IMU`]: the board's IMU).
     ids: [Option<u8>; SENSOR_SLOTS],
-    /// The IMU slot is the board's IMU, turned in the trunk so (`None`: a bus IMU, or none).
-    board_imu: Option<ImuAxes>,
-    /// The board IMU's sample of this tick (trunk axes), if it gave one.
-    board_sample: Option<ImuSample>,
     reqs: heapless::Vec<BulkReadRequest, 3>,
     /// Per request: its slot and offset into the buffer.
     slots: heapless::Vec<(usize, usize), 3>,
@@ -40,15 +36,8 @@ struct Sensors {
 
 impl Sensors {
     fn new(bus: &BusDescription, missing: &[u8]) -> Self {
-        let ids = bus_map::sensor_ids(bus);
-        let board_imu = match bus.imu {
-            ImuPlace::Board(axes) if !missing.contains(&bus_map::BOARD_IMU) => Some(axes),
-            _ => None,
-        };
         let mut s = Sensors {
-            ids,
-            board_imu,
-            board_sample: None,
+            ids: bus_map::sensor_ids(bus),
             reqs: heapless::Vec::new(),
             slots: heapless::Vec::new(),
             buf: [0; 62],
@@ -76,7 +65,7 @@ impl Sensors {
         s
     }
 
-    /// ONE BULK READ (afterwards `results[i]` is request i's outcome), then the board's IMU.
+    /// ONE BULK READ; afterwards `results[i]` is request i's outcome.
     fn read<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>) {
         let n = self.reqs.len();
         if let Some(results) = self.results.get_mut(..n).filter(|_| n > 0) {
@@ -84,20 +73,15 @@ impl Sensors {
                 results.iter_mut().for_each(|r| *r = Err(e));
             }
         }
-        self.board_sample = self.board_imu.and_then(|axes| {
-            let s = bus.board().imu_sample()?.ok()?;
-            Some(ImuSample {
-                gyro_urad_s: axes.to_trunk_i32(s.gyro_urad_s),
-                accel_um_s2: axes.to_trunk_i32(s.accel_um_s2),
-                counter: s.counter,
-            })
-        });
     }
 
-    /// The sensor slots read this tick: the BULK READ's, then the board IMU's.
-    fn read_slots(&self) -> impl Iterator<Item = usize> + '_ {
-        let board = self.board_imu.map(|_| IMU_SLOT);
-        self.slots.iter().map(|&(k, _)| k).chain(board)
+    /// The sensor slots read this tick: the BULK READ's, then the IMU's when it is the
+    /// board's (`board`).
+    fn read_slots(&self, board: bool) -> impl Iterator<Item = usize> + '_ {
+        self.slots
+            .iter()
+            .map(|&(k, _)| k)
+            .chain(board.then_some(IMU_SLOT))
     }
 
     fn data(&self, req: usize, len: usize) -> Option<&[u8]> {
@@ -109,7 +93,14 @@ impl Sensors {
     /// accepted samples are recorded in `checks` at `now_us`.
     /// `feet`: the robot has foot boards (a constant on a real board's build: without them
     /// the foot samples' checks fold away).
-    fn check(&self, checks: &mut Plausibility<3>, now_us: u64, feet: bool) -> Checked {
+    /// `board_sample`: the board IMU's sample of this tick (trunk axes), if it gave one.
+    fn check(
+        &self,
+        checks: &mut Plausibility<3>,
+        now_us: u64,
+        feet: bool,
+        board_sample: Option<ImuSample>,
+    ) -> Checked {
         let mut out = Checked {
             feet: [None; 2],
             imu: None,
@@ -143,7 +134,7 @@ impl Sensors {
                 *slot = Some(r);
             }
         }
-        if let Some(s) = self.board_sample {
+        if let Some(s) = board_sample {
             match checks.imu(IMU_SLOT, &s) {
                 Ok(()) => out.imu = Some(s),
                 Err(r) => {
@@ -223,7 +214,8 @@ impl Sense {
         }
     }
 
-    /// ONE BULK READ of the sensor devices.
+    /// ONE BULK READ of the sensor devices (the board's IMU is read by
+    /// [`Sense::supervise`]).
     pub(super) fn read<B: Board>(&mut self, bus: &mut BoardMaster<'_, B>) {
         self.sensors.read(bus);
     }
@@ -239,11 +231,19 @@ impl Sense {
         sup: &mut Supervisor<3>,
     ) -> Option<ImuSample> {
         let now = bus.board().now_us();
-        let feet = bus.devices().foot_boards.is_some();
-        let checked = self.sensors.check(&mut self.plausible, now, feet);
+        let devices = bus.devices();
+        let feet = devices.foot_boards.is_some();
+        let board = match devices.imu {
+            ImuPlace::Board(axes) => Some(axes),
+            ImuPlace::Bus(_) => None,
+        };
+        let board_sample = board.and_then(|axes| board_imu_sample(bus, axes));
+        let checked = self
+            .sensors
+            .check(&mut self.plausible, now, feet, board_sample);
         let state = &mut self.state;
         let mut imu_fresh = None;
-        for k in self.sensors.read_slots() {
+        for k in self.sensors.read_slots(board.is_some()) {
             let Some(id) = self.sensors.ids.get(k).copied().flatten() else {
                 continue;
             };
@@ -299,4 +299,15 @@ impl Sense {
     pub(super) fn feet(&self) -> &[Option<FootForces>; 2] {
         &self.state.feet
     }
+}
+
+/// The board IMU's sample, read now, turned into the trunk's axes ((I1) of [`ImuAxes`]);
+/// `None` when it gave none.
+fn board_imu_sample<B: Board>(bus: &mut BoardMaster<'_, B>, axes: ImuAxes) -> Option<ImuSample> {
+    let s = bus.board().imu_sample()?.ok()?;
+    Some(ImuSample {
+        gyro_urad_s: axes.to_trunk_i32(s.gyro_urad_s),
+        accel_um_s2: axes.to_trunk_i32(s.accel_um_s2),
+        counter: s.counter,
+    })
 }
