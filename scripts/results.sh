@@ -133,24 +133,19 @@ def worst(name):
     dist = f"{m.group(1)} m ({m.group(3)} %)" if m else c[3]
     return c[0], [fall, dist, c[4], c[6]]
 
-w = worst("servos/defaults")
-if w is not None:
-    summary.append("| " + " | ".join(
-        [f"Table 2, the defaults on the servo family's worst case (`{w[0]}`)",
-         "`walker sweep --family servos`"] + w[1]) + " |")
+def worst_row(name, what):
+    """The README row of a servo-family sweep's worst case (none when it was not walked)."""
+    w = worst(name)
+    if w is None:
+        return []
+    return ["| " + " | ".join([what.format(w[0]), "`walker sweep --family servos`"] + w[1]) + " |"]
+
+summary += worst_row("servos/defaults", "Table 2, the defaults on the servo family's worst case (`{}`)")
 summary = "\n".join(summary)
-op3 = [
-    "| walk | how | fall | walked (of 0.260 m) | heading drift | true CoP − reference mean \\|e\\| x / y (mm) |",
-    "| --- | --- | --- | ---: | ---: | ---: |",
+op3 = "\n".join(summary.splitlines()[:2] + [
     "| " + " | ".join(["The OP3's forward walk, the defaults", "`plans/op3-forward.toml`"]
                      + nominal("op3")) + " |",
-]
-w = worst("op3")
-if w is not None:
-    op3.append("| " + " | ".join(
-        [f"the same on the servo family's worst case (`{w[0]}`)",
-         "`walker sweep --family servos`"] + w[1]) + " |")
-op3 = "\n".join(op3)
+] + worst_row("op3", "the same on the servo family's worst case (`{}`)"))
 
 commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                         text=True).stdout.strip() or "unknown"

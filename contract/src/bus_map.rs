@@ -9,10 +9,11 @@
 //! (right); the waist IMU board 200.
 //!
 //! # rad ↔ tick ([`TickMap`])
-//! `tick = zero_tick + round(sign_j · q · ticks_per_rad)` and
-//! `q = sign_j · (tick − zero_tick) / ticks_per_rad`, with `ticks_per_rad = ticks_per_turn / 2π`
-//! (4096 / 2π ≈ 651.9 on X-series servos, `zero_tick` = 2048 = 0 rad) and `sign_j` = ±1 the
-//! mounting of joint j (the description's `mounting`: all +1 on the reference robot). The firmware works in f32
+//! `tick = zero_tick + o_j + round(sign_j · q · ticks_per_rad)` and
+//! `q = sign_j · (tick − zero_tick − o_j) / ticks_per_rad`, with `ticks_per_rad = ticks_per_turn / 2π`
+//! (4096 / 2π ≈ 651.9 on X-series servos, `zero_tick` = 2048 = 0 rad), `sign_j` = ±1 the
+//! mounting of joint j (the description's `mounting`: all +1 on the reference robot) and `o_j`
+//! its servo's zero offset in ticks (the description's `zero_offsets`: 0 on both robots). The firmware works in f32
 //! ([`TickMap::tick_f32`], [`TickMap::rad_f32`]), the simulator in f64 ([`TickMap::tick_f64`],
 //! [`TickMap::rad_f64`]), the fixed-point pipeline in I16F16 bits ([`TickMap::tick_fx`]); the
 //! four are the same map in three number types.
@@ -143,6 +144,8 @@ pub struct TickMap {
     pub ticks_per_turn: i32,
     /// +1 when joint-positive is servo-positive, −1 otherwise (mounting), per joint.
     pub sign: [i8; LEG_JOINTS],
+    /// Each leg servo's zero offset, ticks (the tick of its joint's 0 rad minus `zero_tick`).
+    pub offset: [i8; LEG_JOINTS],
 }
 
 impl Default for TickMap {
@@ -158,6 +161,7 @@ impl TickMap {
             zero_tick: ZERO_TICK,
             ticks_per_turn: TICKS_PER_TURN,
             sign: Robot::reference().mounting,
+            offset: Robot::reference().zero_offsets,
         }
     }
 
@@ -167,7 +171,14 @@ impl TickMap {
             zero_tick: robot.servo.zero_tick,
             ticks_per_turn: i32::try_from(robot.servo.ticks_per_turn).unwrap_or(TICKS_PER_TURN),
             sign: robot.mounting,
+            offset: robot.zero_offsets,
         }
+    }
+
+    /// The zero tick of joint `j`: `zero_tick` + its offset (`zero_tick` beyond the 12).
+    fn zero_of(&self, j: usize) -> i32 {
+        self.zero_tick
+            .saturating_add(self.offset.get(j).map_or(0, |&o| i32::from(o)))
     }
 
     /// The mounting sign of joint `j` as ±1.0 (+1 beyond the 12 joints).
@@ -191,6 +202,7 @@ impl TickMap {
     /// The tick of joint `j` at `rad` (f32; `rad` finite, the caller clamps the result).
     pub fn tick_f32(&self, j: usize, rad: f32) -> i32 {
         self.servo_tick_f32(self.sign_of(j) * rad)
+            .saturating_add(self.zero_of(j) - self.zero_tick)
     }
 
     /// The tick at `rad` in the servo's own direction (no mounting sign: a held servo, or a
@@ -204,13 +216,15 @@ impl TickMap {
 
     /// The joint angle (rad, f32) of joint `j` at `tick`.
     pub fn rad_f32(&self, j: usize, tick: i32) -> f32 {
-        self.sign_of(j) * (tick.saturating_sub(self.zero_tick)) as f32 / self.ticks_per_rad_f32()
+        self.sign_of(j) * (tick.saturating_sub(self.zero_of(j))) as f32 / self.ticks_per_rad_f32()
     }
 
     /// The tick of joint `j` at `q` (f64, nearest, half away from zero), saturating at
-    /// ±[`MAX_EXTENDED_TICKS`]; a non-finite `q` gives `zero_tick`.
+    /// ±[`MAX_EXTENDED_TICKS`]; a non-finite `q` gives its zero tick.
     pub fn tick_f64(&self, j: usize, q: f64) -> i32 {
-        self.servo_tick_f64(f64::from(self.sign_of(j)) * q)
+        let lim = MAX_EXTENDED_TICKS;
+        (self.servo_tick_f64(f64::from(self.sign_of(j)) * q) + (self.zero_of(j) - self.zero_tick))
+            .clamp(-lim, lim)
     }
 
     /// [`TickMap::tick_f64`] in the servo's own direction (no mounting sign: a held servo, the
@@ -229,7 +243,7 @@ impl TickMap {
     /// The joint angle (rad, f64) of joint `j` at `tick`.
     pub fn rad_f64(&self, j: usize, tick: i32) -> f64 {
         f64::from(self.sign_of(j))
-            * (f64::from(tick) - f64::from(self.zero_tick))
+            * (f64::from(tick) - f64::from(self.zero_of(j)))
             * core::f64::consts::TAU
             / f64::from(self.ticks_per_turn)
     }
@@ -246,7 +260,7 @@ impl TickMap {
     pub fn tick_fx_k(&self, j: usize, bits: i32, k: i64) -> i32 {
         let s = i64::from(bits) * i64::from(self.sign_of(j) as i8);
         let t = (s * k + (1 << 31)) >> 32;
-        (t as i32).saturating_add(self.zero_tick)
+        (t as i32).saturating_add(self.zero_of(j))
     }
 
     /// Ticks per rad × 2⁻¹⁶ × 2³² (42 722 830 for 4096 ticks per turn).
@@ -325,5 +339,47 @@ mod tests {
         assert_eq!(flipped.tick_fx(4, 32768), 2048 - 326);
         assert!((flipped.rad_f32(4, 2048 - 326) - 0.5).abs() < 1e-3);
         assert!((flipped.rad_f64(4, 2048 + 326) + 0.5).abs() < 1e-3);
+    }
+
+    /// A servo whose horn sits 37 ticks off (joint 2) and one 15 ticks the other way on a
+    /// servo mounted reversed (joint 8): the joint's 0 rad is the servo's zero tick plus the
+    /// offset in every number type, the mounting sign applies to the angle only, and the
+    /// joints without an offset read as before.
+    #[test]
+    fn a_zero_offset_moves_the_joints_zero_tick() {
+        let mut m = TickMap::reference();
+        m.offset[2] = 37;
+        m.offset[8] = -15;
+        m.sign[8] = -1;
+        assert_eq!(m.tick_f32(2, 0.0), 2048 + 37);
+        assert_eq!(m.tick_f64(2, 0.0), 2048 + 37);
+        assert_eq!(m.tick_fx(2, 0), 2048 + 37);
+        assert_eq!(m.tick_f64(2, f64::NAN), 2048 + 37);
+        assert_eq!(m.tick_f32(2, 0.5), 2048 + 37 + 326);
+        assert_eq!(m.tick_f64(8, 0.5), 2048 - 15 - 326);
+        assert_eq!(m.tick_fx(8, 32768), 2048 - 15 - 326);
+        assert_eq!(m.tick_f32(3, 0.5), 2048 + 326);
+        assert_eq!(m.rad_f64(2, 2048 + 37), 0.0);
+        assert_eq!(m.rad_f32(8, 2048 - 15), 0.0);
+        for (j, t) in [
+            (2, 0),
+            (2, 2085),
+            (2, 4095),
+            (8, 1000),
+            (8, 2033),
+            (8, 3900),
+        ] {
+            assert_eq!(m.tick_f64(j, m.rad_f64(j, t)), t);
+            assert_eq!(m.tick_f32(j, m.rad_f32(j, t)), t);
+            let bits = libm::round(m.rad_f64(j, t) * 65536.0) as i32;
+            assert_eq!(m.tick_fx(j, bits), t, "{j} {t}");
+        }
+        // The description's offsets are the map's.
+        let r = Robot {
+            zero_offsets: [0, 0, 37, 0, 0, 0, 0, 0, -15, 0, 0, 0],
+            ..Robot::reference()
+        };
+        assert_eq!(TickMap::from_robot(&r).offset, r.zero_offsets);
+        assert!(r.validate_bus().is_ok());
     }
 }

@@ -353,6 +353,10 @@ pub struct Robot {
     /// positive direction (right-hand rule about +x, +y or +z of the pelvis frame at the zero
     /// pose) is the servo's positive direction, −1 when it is the opposite.
     pub mounting: [i8; LEG_JOINTS],
+    /// Each leg servo's zero offset, left leg then right leg, ticks: the servo reads
+    /// `zero_tick + zero_offsets[j]` when joint j is at 0 rad (a calibration, within ±127
+    /// ticks: ±11° on a 4096-tick servo; 0 on a robot assembled to its drawings).
+    pub zero_offsets: [i8; LEG_JOINTS],
     /// The servo bus.
     pub bus: BusDescription,
     /// The upper body's collision shape.

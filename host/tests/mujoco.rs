@@ -338,7 +338,8 @@ fn the_mujoco_model_is_the_robot_description() {
 }
 
 /// The reference robot with other legs: every dimension changed, the sole off the ankle, the
-/// hip's roll and pitch axes below the pelvis point, mixed mounting signs and other IDs.
+/// hip's roll and pitch axes below the pelvis point, mixed mounting signs, zero offsets and
+/// other IDs.
 fn made_up_robot() -> gait_core::Robot {
     let r = gait_core::Robot::reference();
     let g = gait_core::robot::Geometry {
@@ -356,6 +357,7 @@ fn made_up_robot() -> gait_core::Robot {
         name: "made-up",
         geometry: g,
         mounting: [1, -1, 1, -1, -1, 1, -1, 1, 1, -1, 1, -1],
+        zero_offsets: [5, -12, 30, 0, -7, 3, 9, 0, -25, 14, 2, -4],
         bus: gait_core::robot::BusDescription {
             legs: [21, 22, 23, 24, 25, 26, 31, 32, 33, 34, 35, 36],
             ..r.bus

@@ -54,7 +54,7 @@
 
 use super::{
     BodyShape, BusDescription, Geometry, HeldServo, ImuAxes, ImuPlace, Masses, Robot, ServoLimits,
-    WALKING_LIMITS,
+    LEG_JOINTS, WALKING_LIMITS,
 };
 
 /// The arm and head servos, held while walking: arms hanging 0.27 rad out from the body
@@ -140,6 +140,9 @@ pub const OP3: Robot = Robot {
         zero_tick: 2048,
     },
     mounting: [-1, -1, 1, 1, -1, 1, -1, -1, -1, -1, 1, 1],
+    // ROBOTIS' home position: every joint at 0 rad reads 2048 (robotis-japan-support
+    // `joints_op3.md`); a robot's own calibration (op3_manager's offset.yaml) goes here.
+    zero_offsets: [0; LEG_JOINTS],
     bus: BusDescription {
         baud: 2_000_000,
         legs: [8, 10, 12, 14, 16, 18, 7, 9, 11, 13, 15, 17],

@@ -53,6 +53,7 @@ pub const TKU_X: Robot = Robot {
         zero_tick: 2048,
     },
     mounting: [1; LEG_JOINTS],
+    zero_offsets: [0; LEG_JOINTS],
     bus: BusDescription {
         baud: 1_000_000,
         legs: [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12],
