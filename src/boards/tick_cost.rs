@@ -10,9 +10,9 @@
 /// Worst-case instructions per control tick, hard-float build (Cortex-M7/M4F, mps2-an500).
 pub const TICK_INSTRUCTIONS_MAX_FPU: u32 = 29080;
 /// Average instructions per control tick, hard-float build (for reference).
-pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = 20739;
+pub const TICK_INSTRUCTIONS_AVG_FPU: u32 = 20741;
 /// Worst-case instructions per control tick, soft-float build (Cortex-M3, mps2-an385).
-pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = 238640;
+pub const TICK_INSTRUCTIONS_MAX_SOFT: u32 = 238600;
 /// Average instructions per control tick, soft-float build (for reference).
 pub const TICK_INSTRUCTIONS_AVG_SOFT: u32 = 175863;
 /// Worst-case instructions per control tick, Cortex-M3 build with the fixed-point path

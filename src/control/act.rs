@@ -3,6 +3,7 @@
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
+use walker_contract::bus_map::MAX_HELD;
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
@@ -23,7 +24,8 @@ pub(crate) fn fault(time_us: u64, kind: FaultKind, id: u8, value: i32) -> Record
 
 /// The stop that stops: up to [`Config::torque_off_attempts`] rounds of broadcast Torque
 /// Enable = 0 (the board's best-effort raw packet if the master cannot send it) followed by a
-/// READ of Torque Enable from every leg servo not yet confirmed at 0; then the servo power is
+/// READ of Torque Enable from every servo (the legs, then the held ones) not yet confirmed at
+/// 0; then the servo power is
 /// cut ([`Board::servo_power`]) whatever the outcome. Servos never confirmed are logged
 /// (`TorqueOffUnconfirmed`). The watchdog is fed after each round (a dead bus costs
 /// `attempts` × 12 reply timeouts, 36 ms by default).
@@ -32,8 +34,20 @@ pub(crate) fn torque_off<B: Board>(
     log: &mut LogWriter,
     cfg: &Config,
 ) {
-    let mut off = [false; LEG_JOINTS];
-    let legs = bus.devices().legs;
+    let devices = bus.devices();
+    let held = devices
+        .held
+        .get(..devices.held.len().min(MAX_HELD))
+        .unwrap_or(&[]);
+    let id_of = |k: usize| match devices.legs.get(k) {
+        Some(&id) => Some(id),
+        None => held.get(k.checked_sub(LEG_JOINTS)?).map(|h| h.id),
+    };
+    let mut off = [false; LEG_JOINTS + MAX_HELD];
+    // The slots past the robot's servos count as confirmed.
+    for d in off.iter_mut().skip(LEG_JOINTS + held.len()) {
+        *d = true;
+    }
     for _ in 0..cfg.torque_off_attempts.max(1) {
         if bus
             .master()
@@ -42,7 +56,10 @@ pub(crate) fn torque_off<B: Board>(
         {
             bus.board().torque_off_best_effort();
         }
-        for (done, &id) in off.iter_mut().zip(legs.iter()) {
+        for (k, done) in off.iter_mut().enumerate() {
+            let Some(id) = id_of(k) else {
+                continue;
+            };
             if !*done {
                 let mut v = [0xFFu8; 1];
                 *done = bus.master().read(id, TORQUE_ENABLE_ADDR, &mut v).is_ok() && v == [0];
@@ -54,7 +71,7 @@ pub(crate) fn torque_off<B: Board>(
         }
     }
     let unconfirmed = off.iter().filter(|&&d| !d).count();
-    if let Some(&id) = off.iter().position(|&d| !d).and_then(|j| legs.get(j)) {
+    if let Some(id) = off.iter().position(|&d| !d).and_then(id_of) {
         crate::fw_log!(
             error,
             "torque off not confirmed by {} servo(s), first {}",

@@ -3035,31 +3035,8 @@ fn a_leg_servo_back_with_torque_off_is_turned_on_again_and_the_robot_lowered() {
 #[test]
 fn a_held_servo_back_with_torque_off_gets_its_pose_and_the_robot_is_lowered() {
     use walker_contract::codes::ServoCheck;
-    static HELD: [gait_core::robot::HeldServo; 1] = [gait_core::robot::HeldServo {
-        name: "arm",
-        id: 20,
-        angle: 0.3,
-    }];
-    let reference = Robot::reference();
-    let armed: &'static Robot = std::boxed::Box::leak(std::boxed::Box::new(Robot {
-        bus: gait_core::robot::BusDescription {
-            held: &HELD,
-            ..reference.bus
-        },
-        ..reference
-    }));
-    let cfg = Config {
-        robot: armed,
-        ..autostart_config()
-    };
-    let mut b = board(&cfg);
-    b.devices
-        .push(crate::fake_robot::FakeDevice::new(
-            20,
-            Kind::Servo(12),
-            2048,
-        ))
-        .unwrap();
+    let (cfg, mut b) = armed_robot();
+    let armed = cfg.robot;
     b.kill_at = Some((20, walk_write(&cfg, 50)));
     b.revive_at = Some((20, walk_write(&cfg, 51)));
     let end = run(&mut b, &cfg);
@@ -3078,7 +3055,7 @@ fn a_held_servo_back_with_torque_off_gets_its_pose_and_the_robot_is_lowered() {
         "stopped at {stopped}, back at {back}"
     );
     // Its pose at start-up and again when found limp (then its torque), nothing else.
-    let pose = crate::startup::held_goal(&JointMap::from_robot(armed).ticks, &HELD[0]);
+    let pose = crate::startup::held_goal(&JointMap::from_robot(armed).ticks, &ARM[0]);
     assert_eq!(
         pose,
         2048 + (0.3f64 * 4096.0 / core::f64::consts::TAU).round() as i32
@@ -3100,6 +3077,69 @@ fn a_held_servo_back_with_torque_off_gets_its_pose_and_the_robot_is_lowered() {
         .filter(|p| p.id == 20 && p.op == opcode::READ)
         .count();
     assert!(reads >= 4, "{reads} READs of the held servo");
+    // The stop's torque off is read back from it too: a READ of its Torque Enable after the
+    // broadcast Torque Enable = 0.
+    let off = b
+        .packets
+        .iter()
+        .rposition(|p| p.id == 0xFE && p.op == opcode::WRITE && p.addr == 64)
+        .unwrap();
+    assert!(b.packets[off..]
+        .iter()
+        .any(|p| p.id == 20 && p.op == opcode::READ && p.addr == 64));
+}
+
+/// The held servo of [`armed_robot`]: an arm at 0.3 rad, ID 20.
+static ARM: [gait_core::robot::HeldServo; 1] = [gait_core::robot::HeldServo {
+    name: "arm",
+    id: 20,
+    angle: 0.3,
+}];
+
+/// The reference robot with one held servo ([`ARM`]) and the fake board with it on its bus.
+fn armed_robot() -> (Config, FakeBoard) {
+    let reference = Robot::reference();
+    let armed: &'static Robot = std::boxed::Box::leak(std::boxed::Box::new(Robot {
+        bus: gait_core::robot::BusDescription {
+            held: &ARM,
+            ..reference.bus
+        },
+        ..reference
+    }));
+    let cfg = Config {
+        robot: armed,
+        ..autostart_config()
+    };
+    let mut b = board(&cfg);
+    b.devices
+        .push(crate::fake_robot::FakeDevice::new(
+            20,
+            Kind::Servo(12),
+            2048,
+        ))
+        .unwrap();
+    (cfg, b)
+}
+
+/// A held servo that stops answering mid-walk: the monitor loses it (`ServoLost`), and the
+/// stop's torque off, confirmed from every servo, says it could not confirm that one
+/// (`TorqueOffUnconfirmed` with its ID, one servo), the 12 legs confirmed.
+#[test]
+fn a_held_servo_lost_is_the_one_the_torque_off_cannot_confirm() {
+    let (cfg, mut b) = armed_robot();
+    b.kill_at = Some((20, walk_write(&cfg, 50)));
+    let end = run(&mut b, &cfg);
+    assert_eq!(end, RunEnd::Stopped(StopReason::ServoLost { id: 20 }));
+    let unconfirmed: Vec<(u8, i32)> = b
+        .records()
+        .iter()
+        .filter_map(|r| match r {
+            Record::Fault(f) if f.kind == FaultKind::TorqueOffUnconfirmed => Some((f.id, f.value)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(unconfirmed, [(20, 1)]);
+    assert!(b.servos().all(|d| !d.torque || d.id == 20));
 }
 
 /// With `wait_enable` torque stays off at power-on until a master writes Mode = stand (the
