@@ -105,9 +105,10 @@ pub fn decode(raw: &[u8; BURST_LEN]) -> Reading {
 /// full scale).
 pub fn decode_micro(raw: &[u8; BURST_LEN]) -> ([i32; 3], [i32; 3]) {
     let w = words(raw);
-    // 10⁶·π/(180·16.4) and 10⁶·9.80665/2048.
-    const GYRO_URAD_S_PER_LSB: f32 = 1_064.225_2;
-    const ACCEL_UM_S2_PER_LSB: f32 = 4_788.403_3;
+    // (M1) and (M2) × 10⁶, once, in the compiler.
+    const GYRO_URAD_S_PER_LSB: f32 =
+        (1e6 * core::f64::consts::PI / (180.0 * GYRO_LSB_PER_DPS)) as f32;
+    const ACCEL_UM_S2_PER_LSB: f32 = (1e6 * G / ACCEL_LSB_PER_G) as f32;
     // Rounded half away from zero; |v| ≤ 3.5·10⁷ and 1.6·10⁸: inside i32.
     let micro = |v: i16, per: f32| {
         let x = f32::from(v) * per;
