@@ -765,7 +765,7 @@ fn walk_on<B: Board, P: TickPath>(
         link,
         log,
         faults: FaultInjector::new(cfg),
-        last_ticks: present.map(|t| t.clamp(map.tick_min, map.tick_max)),
+        last_ticks: present.map(|t| t.max(map.tick_min).min(map.tick_max)),
         prev: first,
         prev_feet_fx: None,
         goal: path::Goal::Rad([0.0; LEG_JOINTS]),

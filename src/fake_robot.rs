@@ -90,6 +90,10 @@ pub struct FakeDevice {
     pub voltage_dv: u16,
     /// Present Current, units of 2.69 mA.
     pub current_raw: i16,
+    /// Present Current READs still to answer `current_spike_raw` instead of `current_raw`.
+    pub current_spikes: u8,
+    /// Present Current of a spike, units of 2.69 mA.
+    pub current_spike_raw: i16,
     /// Deflection under load, ticks: with torque on the servo stands at goal − `sag`.
     pub sag: i32,
 }
@@ -112,6 +116,8 @@ impl FakeDevice {
             temperature: 40,
             voltage_dv: 120,
             current_raw: 300,
+            current_spikes: 0,
+            current_spike_raw: 0,
             sag: 0,
         }
     }
@@ -505,6 +511,11 @@ impl<O: Observer> FakeRobot<O> {
             (Kind::Servo(_), 64, 7) => put(&[u8::from(d.torque), 0, 0, 0, 2, 0, d.hw_error]),
             (Kind::Servo(_), 82, 2) => put(&d.i_gain.to_le_bytes()),
             (Kind::Servo(_), 70, 1) => put(&[d.hw_error]),
+            (Kind::Servo(_), 126, 2) if d.current_spikes > 0 => {
+                let dev = self.devices.get_mut(i)?;
+                dev.current_spikes -= 1;
+                put(&d.current_spike_raw.to_le_bytes())
+            }
             (Kind::Servo(_), 126, 2) => put(&d.current_raw.to_le_bytes()),
             (Kind::Servo(_), 144, 3) => {
                 let [lo, hi] = d.voltage_dv.to_le_bytes();

@@ -31,8 +31,13 @@
 //!   written again (the last target sent) and its torque turned on again, and the robot stops
 //!   (`ServoFault` `TorqueOff`).
 //! * Hardware Error Status ≠ 0, temperature > `servo_temp_max` °C, voltage (0.1 V units)
-//!   outside [`servo_volt_min`, `servo_volt_max`], |current| (2.69 mA units) >
-//!   `servo_current_max`: `ServoFault` (exit 21).
+//!   outside [`servo_volt_min`, `servo_volt_max`]: `ServoFault` (exit 21).
+//! * |current| (2.69 mA units) > `servo_current_max` in two current READs of one servo
+//!   in a row (one round apart: 120 ms with 12 servos, 200 ms with 20): `ServoFault` (exit
+//!   21). A shorted or blocked motor draws it all along (and the servo flags its own Overload
+//!   and Electrical Shock in Hardware Error Status); a knee back-driven at a landing draws it
+//!   for tens of milliseconds, and a motor heats over seconds: one reading over the limit is
+//!   not a finding.
 //!
 //! What each stop does (a hardware error goes limp at once; the others are graded stops) is the
 //! supervisor's ([`crate::supervisor`], docs/stops.md).
@@ -74,6 +79,8 @@ pub struct ServoMonitor {
     next: usize,
     credit_us: u32,
     misses: [u8; LEG_JOINTS + MAX_HELD],
+    /// Bit j: servo j's last Present Current READ was over the limit.
+    current_over: u32,
     /// The last Present Input Voltage read, 0.1 V (0: none yet).
     supply_dv: u16,
 }
@@ -141,6 +148,7 @@ impl ServoMonitor {
             next: 0,
             credit_us: 0,
             misses: [0; LEG_JOINTS + MAX_HELD],
+            current_over: 0,
             supply_dv: 0,
         }
     }
@@ -171,6 +179,31 @@ impl ServoMonitor {
             }
         }
         None
+    }
+
+    /// A current reading over the limit counts only as the second in a row of servo `j` (its
+    /// slot in the round); any other finding passes as it is.
+    fn debounce(
+        &mut self,
+        j: usize,
+        health: &ServoHealth,
+        found: Option<StopReason>,
+    ) -> Option<StopReason> {
+        if !matches!(health, ServoHealth::Current(_)) {
+            return found;
+        }
+        let bit = 1u32.checked_shl(j as u32).unwrap_or(0);
+        if found.is_none() {
+            self.current_over &= !bit;
+            return None;
+        }
+        let before = self.current_over & bit != 0;
+        self.current_over |= bit;
+        if before {
+            found
+        } else {
+            None
+        }
     }
 
     /// The next READ of the round and its checks.
@@ -233,7 +266,7 @@ impl ServoMonitor {
         if let ServoHealth::Supply { voltage_dv, .. } = health {
             self.supply_dv = voltage_dv;
         }
-        let found = check(id, &health, lim);
+        let found = self.debounce(j, &health, check(id, &health, lim));
         if let Some(StopReason::ServoFault {
             check: ServoCheck::TorqueOff,
             ..
@@ -305,5 +338,37 @@ mod tests {
             check(3, &ServoHealth::Current(-930), &lim),
             f(ServoCheck::Current, 2501)
         );
+    }
+
+    #[test]
+    fn a_current_over_the_limit_counts_at_the_second_reading_in_a_row() {
+        let lim = ServoLimits::xm430();
+        let mut m = ServoMonitor::new();
+        let over = ServoHealth::Current(1000);
+        let under = ServoHealth::Current(-900);
+        let read = |m: &mut ServoMonitor, j: usize, id: u8, h: ServoHealth| {
+            m.debounce(j, &h, check(id, &h, &lim))
+        };
+        let fault = Some(StopReason::ServoFault {
+            id: 19,
+            check: ServoCheck::Current,
+            reading: 2690,
+        });
+        // Servo slot 19 (the OP3's last held servo): over, under, over, over.
+        assert_eq!(read(&mut m, 19, 19, over), None);
+        assert_eq!(read(&mut m, 19, 19, under), None);
+        assert_eq!(read(&mut m, 19, 19, over), None);
+        // Another servo's reading in between does not clear slot 19's.
+        assert_eq!(read(&mut m, 3, 4, under), None);
+        assert_eq!(read(&mut m, 3, 4, over), None);
+        assert_eq!(read(&mut m, 19, 19, over), fault);
+        // The other checks are not held back: one hot reading stops.
+        let hot = ServoHealth::Supply {
+            voltage_dv: 120,
+            temperature_c: 71,
+        };
+        assert!(read(&mut ServoMonitor::new(), 0, 1, hot).is_some());
+        // Every slot has its bit.
+        const { assert!(LEG_JOINTS + MAX_HELD <= 32) };
     }
 }

@@ -453,7 +453,7 @@ impl JointMap {
             rad
         };
         let t = self.ticks.tick_f32(j, c);
-        let tc = t.clamp(self.tick_min, self.tick_max);
+        let tc = t.max(self.tick_min).min(self.tick_max);
         (tc, c != rad || tc != t)
     }
 }
@@ -512,7 +512,7 @@ pub fn safe_targets(
             }
         } else {
             non_finite |= 1 << j;
-            *out = p.clamp(map.tick_min, map.tick_max);
+            *out = p.max(map.tick_min).min(map.tick_max);
         }
     }
     if non_finite == 0 {
@@ -543,7 +543,7 @@ pub fn safe_targets_fx(
         let b = q.to_bits();
         let c = b.max(l[0]).min(l[1]);
         let t = map.ticks.tick_fx_k(j, c, map.fx_k);
-        *out = t.clamp(map.tick_min, map.tick_max);
+        *out = t.max(map.tick_min).min(map.tick_max);
         if c != b || *out != t {
             clamped |= 1 << j;
         }

@@ -74,7 +74,8 @@ pub struct ServoLimits {
 impl ServoLimits {
     /// XM430-W350 defaults: 70 °C (the servo shuts down at its 80 °C Temperature Limit),
     /// 10.0 ..= 14.8 V (its operating range), 2.5 A (above its 2.3 A stall current at 12 V:
-    /// only a shorted or blocked motor draws it; the MuJoCo Table 2 walk peaks at 2.1 A).
+    /// only a shorted or blocked motor draws it for long: the monitor stops at two readings
+    /// over it in a row; the MuJoCo Table 2 walk peaks at 2.1 A).
     pub const fn xm430() -> Self {
         ServoLimits {
             temperature_max_c: 70,

@@ -1211,7 +1211,7 @@ params! {
         plan_key: None,
         unit: "A",
         domain: range(0.0, 20.0),
-        doc: "servo monitor: highest |Present Current|",
+        doc: "servo monitor: highest |Present Current| (over it in two READs of a servo in a row: stop)",
         set: |c, v| { c.servo_limits.current_max_a = v as f32 },
         get: |c| { Some(Value::Num32(c.servo_limits.current_max_a)) },
     },

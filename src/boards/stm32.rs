@@ -48,13 +48,17 @@ pub(crate) use register_blocks;
 
 /// Panic path of an STM32 board: log, record the panic in no-init RAM, the board's
 /// `torque_off` (bounded, from anywhere), reset (the next boot logs the record and does not
-/// walk).
+/// walk). The log has the panic's location and its message when that is a plain string, not
+/// a formatted one: formatting it would link the formatting of every library message that
+/// can reach it (flash the OP3's bootloader image does not have).
 // Inline: the board's panic handler is this (no call through a pointer for `torque_off`).
-// The OpenCM 9.04 has its own, without `core::fmt` (flash).
+// The OpenCM 9.04 has its own (its torque off needs no board).
 #[inline(always)]
 #[cfg_attr(feature = "board-opencm", allow(dead_code))]
 pub(crate) fn panic_reset(info: &core::panic::PanicInfo, torque_off: impl FnOnce()) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
+    let message = info.message().as_str().unwrap_or("");
+    let (file, line) = info.location().map_or(("", 0), |l| (l.file(), l.line()));
+    defmt::error!("panic: {=str} at {=str}:{=u32}", message, file, line);
     crash_cell().record(CrashCode::Panic);
     torque_off();
     SCB::sys_reset()

@@ -1098,8 +1098,10 @@ fn the_servo_monitor_stops_on_each_limit() {
     let cfg = autostart_config();
     // Each fault set on servo 8 from the start. Two READs a tick, round-robin from servo 1 at
     // tick 0: servo 8's status is READ #7 (tick 3), its supply #19 (tick 9), its current #43
-    // (tick 21); the next tick acts on it: a hardware error goes limp at once (torque off), the
-    // other limits settle (the ramp cannot: the lowering begins at once).
+    // (tick 21) and again #91 (tick 45), a round of 48 READs later: a current over the limit
+    // counts at its second reading in a row. The next tick acts on it: a hardware error goes
+    // limp at once (torque off), the other limits settle (the ramp cannot: the lowering begins
+    // at once).
     type SetFault = fn(&mut crate::fake_robot::FakeDevice);
     let cases: [(SetFault, ServoCheck, u16, usize, FaultState); 5] = [
         (
@@ -1135,7 +1137,7 @@ fn the_servo_monitor_stops_on_each_limit() {
             |d| d.current_raw = -1000,
             ServoCheck::Current,
             2690,
-            22,
+            46,
             FaultState::Stopping,
         ),
     ];
@@ -1166,6 +1168,28 @@ fn the_servo_monitor_stops_on_each_limit() {
     let mut b = board(&cfg);
     b.device_mut(8).unwrap().temperature = 75;
     assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    // One current reading over the limit between readings under it is not a finding; the
+    // same with the limit lowered under the servo's steady current is.
+    let cfg = cfg_with("elf steps=1");
+    let mut b = board(&cfg);
+    let d = b.device_mut(8).unwrap();
+    (d.current_spikes, d.current_spike_raw) = (1, -1000);
+    assert_eq!(run(&mut b, &cfg), RunEnd::Stopped(StopReason::PlanDone));
+    assert_eq!(
+        b.device_mut(8).unwrap().current_spikes,
+        0,
+        "the spike was read"
+    );
+    let cfg = cfg_with("elf steps=1 servo_current_max=0.8");
+    let mut b = board(&cfg);
+    assert!(matches!(
+        run(&mut b, &cfg),
+        RunEnd::Stopped(StopReason::ServoFault {
+            check: ServoCheck::Current,
+            reading: 807,
+            ..
+        })
+    ));
 }
 
 /// The boot records of `recs`: (reset cause code, raw flags), crash record (code, tick).

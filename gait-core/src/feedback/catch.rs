@@ -595,7 +595,7 @@ impl CatchingStep {
         };
         let toward = |d: [f32; 2], t: [f32; 2], step: f32| {
             [0, 1].map(|i| {
-                (d[i] + (t[i] - d[i]).clamp(-step, step)).clamp(-MAX_OFFSET_M, MAX_OFFSET_M)
+                (d[i] + (t[i] - d[i]).clamp_to(-step, step)).clamp(-MAX_OFFSET_M, MAX_OFFSET_M)
             })
         };
         for (d, t) in self.feet.iter_mut().zip(targets) {

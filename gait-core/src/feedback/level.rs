@@ -36,6 +36,7 @@
 //! forgotten once the leg is on the ground.
 
 use crate::feedback::catch::StepAdaptation;
+use crate::maths::real::Real;
 use crate::robot::{Side, ANKLE_PITCH, ANKLE_ROLL, JOINTS_PER_LEG, LEG_JOINTS};
 use crate::trajectory::sampler::SupportPhase;
 
@@ -126,7 +127,7 @@ impl SoleLevel {
         {
             let swinging = swing == Some(side);
             let target = if swinging { 1.0 } else { 0.0 };
-            *w += (target - *w).clamp(-step, step);
+            *w += (target - *w).clamp_to(-step, step);
             if !swinging && *w <= 0.0 {
                 *lag = 0.0;
             }
