@@ -128,6 +128,12 @@ impl Side {
     }
 }
 
+/// True for the joints whose right-leg limits are the left's mirrored, [−max, −min]: hip yaw,
+/// hip roll, ankle roll ([`Robot::joint_limit`]).
+pub const fn mirrored_limit(j: usize) -> bool {
+    matches!(j, 0 | 1 | 5)
+}
+
 /// Lower and upper limit of one joint, rad.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct JointLimit {
@@ -144,19 +150,58 @@ pub struct Masses {
     pub upper_body: f64,
     /// Height l_u of the upper-body mass above the pelvis point P, m.
     pub upper_body_height: f64,
-    /// Thigh m_t, each leg, kg (at the middle of the thigh).
+    /// Thigh m_t, each leg, kg (on the hip–knee line, [`Masses::thigh_com`]).
     pub thigh: f64,
-    /// Calf, each leg, kg (at the middle of the calf).
+    /// Calf, each leg, kg (on the knee–ankle line, [`Masses::calf_com`]).
     pub calf: f64,
-    /// Sole, each leg, kg (under the ankle, [`Masses::sole_height`] above the ground).
+    /// Sole, each leg, kg ([`Masses::sole_height`] above the ground, [`Masses::sole_com`]
+    /// from the sole point).
     pub sole: f64,
     /// Height of the sole mass above the ground, m.
     pub sole_height: f64,
+    /// Where the thigh's mass sits: its share of the way from the hip to the knee (0.5: the
+    /// middle; the pendulum models' constants keep the seed's fractions).
+    pub thigh_com: f64,
+    /// Where the calf's mass sits: its share of the way from the knee to the ankle.
+    pub calf_com: f64,
+    /// The sole mass's offset from the sole point, foot frame: (forward, outward), m; the
+    /// outward offset is +y on the left foot and −y on the right.
+    pub sole_com: [f64; 2],
+    /// The links' rotational inertias where a source gives them (`None`: the simulator
+    /// assumes rods, a box and the upper body's roll and yaw from J).
+    pub inertias: Option<&'static LinkInertias>,
     /// Upper-body rotational inertia J about the pitch axis, kg·m² (τ = J·φ̈, seed 000 eq 1).
     pub upper_body_inertia: f64,
     /// Forward offset of the upper-body mass from the pelvis point P, pelvis frame, m (the
     /// whole-body compensation puts it there; the pendulum models keep it over P).
     pub upper_body_forward: f64,
+}
+
+/// Moments of inertia of the lumped links about their own centres of mass and the link frame's
+/// axes at the zero pose (x forward, y left, z up; the left leg's, the right mirrored; products
+/// of inertia left out), kg·m².
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkInertias {
+    /// The upper body's about x (roll) and z (yaw); its pitch moment is
+    /// [`Masses::upper_body_inertia`].
+    pub upper_body_roll_yaw: [f64; 2],
+    /// A thigh's (x, y, z).
+    pub thigh: [f64; 3],
+    /// A calf's (x, y, z).
+    pub calf: [f64; 3],
+    /// A sole lump's (x, y, z).
+    pub sole: [f64; 3],
+}
+
+impl LinkInertias {
+    /// Every moment, in one list (for the checks).
+    fn all(&self) -> [f64; 11] {
+        let [r, y] = self.upper_body_roll_yaw;
+        let [a, b, c] = self.thigh;
+        let [d, e, f] = self.calf;
+        let [g, h, i] = self.sole;
+        [r, y, a, b, c, d, e, f, g, h, i]
+    }
 }
 
 impl Masses {
@@ -395,12 +440,13 @@ impl Robot {
             Some(l) => *l,
             None => return JointLimit { min: 0.0, max: 0.0 },
         };
-        match (side, j) {
-            (Side::Right, 0) | (Side::Right, 1) | (Side::Right, 5) => JointLimit {
+        if side == Side::Right && mirrored_limit(j) {
+            JointLimit {
                 min: -l.max,
                 max: -l.min,
-            },
-            _ => l,
+            }
+        } else {
+            l
         }
     }
 
@@ -417,6 +463,10 @@ impl Robot {
             m.sole_height,
             m.upper_body_inertia,
             m.upper_body_forward,
+            m.thigh_com,
+            m.calf_com,
+            m.sole_com[0],
+            m.sole_com[1],
             g.hip_offset_y,
             g.thigh,
             g.calf,
@@ -440,6 +490,14 @@ impl Robot {
         }
         if m.upper_body_inertia < 0.0 {
             return Err(GaitError::NonPositiveMass);
+        }
+        if let Some(i) = &m.inertias {
+            if i.all().iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(GaitError::NonPositiveMass);
+            }
+        }
+        if !((0.0..=1.0).contains(&m.thigh_com) && (0.0..=1.0).contains(&m.calf_com)) {
+            return Err(GaitError::NonPositiveLength);
         }
         if g.thigh <= 0.0 || g.calf <= 0.0 || g.ankle_height < 0.0 || g.sole_length <= 0.0 {
             return Err(GaitError::NonPositiveLength);

@@ -558,7 +558,7 @@ fn fault_words(f: &walker_contract::record::FaultRecord) -> String {
             let has = |bit: u8| id & (1 << bit) != 0;
             let mut out = String::from("sensors:");
             if !(has(0) && has(1)) {
-                out.push_str(" no foot sensors (no measured ZMP, no feedback from the loads; odometry surveys timed by the plan's load split);");
+                out.push_str(" no foot sensors (no measured ZMP, no feedback from the loads: the ZMP stabilizer and the fdc idle; the odometry's landing surveys, and with them the landing hold, timed by the plan's load split);");
             }
             if !has(2) {
                 out.push_str(" no IMU (no gyro feedback);");

@@ -75,7 +75,7 @@
 use crate::error::GaitError;
 use crate::maths::fastmath::sin_cos_real;
 use crate::maths::real::Real;
-use crate::robot::{Robot, Side, JOINTS_PER_LEG, JOINT_NAMES, LEG_JOINTS};
+use crate::robot::{mirrored_limit, Robot, Side, JOINTS_PER_LEG, JOINT_NAMES, LEG_JOINTS};
 
 /// A position (m) and ZYX orientation (rad): `R = Rz(yaw)·Ry(pitch)·Rx(roll)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -180,11 +180,11 @@ pub struct LegPoints<R> {
     pub ankle: [R; 3],
     /// Sole point: the ankle's projection on the bottom of the sole.
     pub sole: [R; 3],
-    /// Thigh mass point (middle of the thigh).
+    /// Thigh mass point (`masses.thigh_com` of the way from the hip to the knee).
     pub thigh_mass: [R; 3],
-    /// Calf mass point (middle of the calf).
+    /// Calf mass point (`masses.calf_com` of the way from the knee to the ankle).
     pub calf_mass: [R; 3],
-    /// Sole mass point (`masses.sole_height` above the sole point, under the ankle).
+    /// Sole mass point (`masses.sole_height` above the sole point, `masses.sole_com` from it).
     pub sole_mass: [R; 3],
 }
 
@@ -244,10 +244,15 @@ pub struct LegKinematics<R> {
     /// The sole point's (forward, outward) offset from the ankle's ground projection.
     sole_offset: [R; 2],
     sole_mass_height: R,
+    /// `masses.thigh_com` − ½ and `masses.calf_com` − ½: the mass points from the links'
+    /// middles, in link lengths (exactly 0 for a link's middle).
+    mass_shift: [R; 2],
+    /// `masses.sole_com`: the sole mass from the sole point, (forward, outward), m.
+    sole_mass_offset: [R; 2],
     d_min: R,
     d_max: R,
-    /// [min, max] per joint, left leg then right leg.
-    limits: [[[R; 2]; JOINTS_PER_LEG]; 2],
+    /// [min, max] per joint of the left leg (the right's from them, [`mirrored_limit`]).
+    limits: [[R; 2]; JOINTS_PER_LEG],
 }
 
 /// `a·b` for 3-vectors.
@@ -397,9 +402,17 @@ impl<R: Real> LegKinematics<R> {
             ankle_height: R::of(g.ankle_height),
             sole_offset: [R::of(g.sole_offset[0]), R::of(g.sole_offset[1])],
             sole_mass_height: R::of(robot.masses.sole_height),
+            mass_shift: [
+                R::of(robot.masses.thigh_com - 0.5),
+                R::of(robot.masses.calf_com - 0.5),
+            ],
+            sole_mass_offset: [
+                R::of(robot.masses.sole_com[0]),
+                R::of(robot.masses.sole_com[1]),
+            ],
             d_min: R::of(d_min),
             d_max: R::of(d_max),
-            limits: [lim(Side::Left), lim(Side::Right)],
+            limits: lim(Side::Left),
         }
     }
 
@@ -414,11 +427,16 @@ impl<R: Real> LegKinematics<R> {
     }
 
     /// The [min, max] limits of the leg's six joints, rad.
-    pub fn limits(&self, side: Side) -> &[[R; 2]; JOINTS_PER_LEG] {
-        match side {
-            Side::Left => &self.limits[0],
-            Side::Right => &self.limits[1],
+    pub fn limits(&self, side: Side) -> [[R; 2]; JOINTS_PER_LEG] {
+        let mut l = self.limits;
+        if side == Side::Right {
+            for (j, [min, max]) in l.iter_mut().enumerate() {
+                if mirrored_limit(j) {
+                    (*min, *max) = (-*max, -*min);
+                }
+            }
         }
+        l
     }
 
     /// Hip position and the leg's frames: (hip, knee, ankle, sole, foot rotation columns).
@@ -477,7 +495,7 @@ impl<R: Real> LegKinematics<R> {
         pelvis: &Pose<R>,
         q: &LegAngles<R>,
     ) -> (LegPoints<R>, [[R; 3]; JOINTS_PER_LEG]) {
-        self.points_axes(self.chain_axes(side, pelvis, q))
+        self.points_axes(side, self.chain_axes(side, pelvis, q))
     }
 
     /// [`Self::joint_axes`] of both legs (left, right) for the 12 joint angles `q` (joint
@@ -492,8 +510,14 @@ impl<R: Real> LegKinematics<R> {
             core::array::from_fn(|j| q.get(i * JOINTS_PER_LEG + j).copied().unwrap_or(R::zero()))
         };
         [
-            self.points_axes(self.chain_axes_in(Side::Left, pelvis, &rp, &leg(0))),
-            self.points_axes(self.chain_axes_in(Side::Right, pelvis, &rp, &leg(1))),
+            self.points_axes(
+                Side::Left,
+                self.chain_axes_in(Side::Left, pelvis, &rp, &leg(0)),
+            ),
+            self.points_axes(
+                Side::Right,
+                self.chain_axes_in(Side::Right, pelvis, &rp, &leg(1)),
+            ),
         ]
     }
 
@@ -501,16 +525,35 @@ impl<R: Real> LegKinematics<R> {
     #[cfg_attr(target_abi = "eabihf", inline(always))]
     fn points_axes(
         &self,
+        side: Side,
         ([hip, knee, ankle, sole], rf, axes): ([V3<R>; 4], Cols<R>, [V3<R>; JOINTS_PER_LEG]),
     ) -> (LegPoints<R>, [[R; 3]; JOINTS_PER_LEG]) {
+        // Each link's mass point: its middle plus (share − ½) of the link; the sole's is
+        // `sole_height` up the foot's z and `sole_com` along its x and outward y. Zero shifts
+        // add exact zeros: a robot with its masses in the middles gets the middles bit for bit.
+        let [s_thigh, s_calf] = self.mass_shift;
+        let along = |a: &V3<R>, b: &V3<R>, s: R| {
+            let m = mid(a, b);
+            [
+                m[0] + (b[0] - a[0]) * s,
+                m[1] + (b[1] - a[1]) * s,
+                m[2] + (b[2] - a[2]) * s,
+            ]
+        };
+        let [fwd, out] = self.sole_mass_offset;
+        let out = match side {
+            Side::Left => out,
+            Side::Right => -out,
+        };
+        let up = axpy(&sole, self.sole_mass_height, &rf[2]);
         let points = LegPoints {
             hip,
             knee,
             ankle,
             sole,
-            thigh_mass: mid(&hip, &knee),
-            calf_mass: mid(&knee, &ankle),
-            sole_mass: axpy(&sole, self.sole_mass_height, &rf[2]),
+            thigh_mass: along(&hip, &knee, s_thigh),
+            calf_mass: along(&knee, &ankle, s_calf),
+            sole_mass: axpy(&axpy(&up, fwd, &rf[0]), out, &rf[1]),
         };
         (points, axes)
     }
@@ -634,7 +677,7 @@ impl<R: Real> LegKinematics<R> {
         let q4 = -(l1 * s3).atan2(l2 + l1 * c3) - r[0].atan2(wz);
 
         let mut flags = 0u8;
-        let [lim0, lim1, lim2, lim3, lim4, lim5] = lims;
+        let [lim0, lim1, lim2, lim3, lim4, lim5] = &lims;
         let q3 = limit(q3, lim3, 1 << 3, &mut flags);
         let q4 = limit(q4, lim4, 1 << 4, &mut flags);
         let q5 = limit(q5, lim5, 1 << 5, &mut flags);

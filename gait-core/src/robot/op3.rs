@@ -28,9 +28,18 @@
 //! links (0.01181 + 0.17886 kg, their servos at the hip) barely move with the leg and count in
 //! the upper body with the trunk (1.34928), the head (0.01176 + 0.13631) and the arms
 //! (2 × (0.01176 + 0.17758 + 0.04127)): M_u = 2.33991 kg, its CoM 0.0801 above P and 0.0113
-//! behind it, J_yy = 0.0113 kg·m² about it. Thigh = the hip pitch link, 0.11543 kg; calf = the
-//! knee link, 0.04015 kg; sole = the ankle pitch and roll links, 0.2482 kg, 0.0315 above the
-//! ground. Whole robot 3.14747 kg.
+//! behind it, J_yy = 0.0113 kg·m² about it. Thigh = the hip pitch link, 0.11543 kg, 0.08408
+//! below the hip point (76.33 % of the thigh; 0.6 mm ahead of the line); calf = the knee link,
+//! 0.04015 kg, half-way down (2.5 mm inward of the line); sole = the ankle pitch and roll links,
+//! 0.2482 kg, 0.0315 above the ground, 0.01467 behind and 0.0031 outward of the ankle (the
+//! ankle servo sits behind it): 0.01457 behind and 0.0094 inward of the sole point. Whole
+//! robot 3.14747 kg.
+//!
+//! The inertias ([`super::LinkInertias`]) are the same lumps' about their centres of mass:
+//! each link's `diaginertia` turned by its `quat` into the link frame, the lump's links summed
+//! with the parallel-axis terms, the diagonal kept (the largest product left out, the upper
+//! body's I_xz = −6.6e-4 kg·m², is 4–7 % of its diagonal; gait-core's tests/robots.rs computes
+//! them again from op3.xml's numbers).
 //!
 //! # Joint signs (op3.xml's axes)
 //! Left: hip yaw −z, hip roll −x, hip pitch +y, knee +y, ankle pitch −y, ankle roll +x; the
@@ -53,8 +62,8 @@
 //! XM430-W350 at 12 V (no-load 4.8 rad/s, 4096 ticks per turn, 2048 = 0 rad).
 
 use super::{
-    BodyShape, BusDescription, Geometry, HeldServo, ImuAxes, ImuPlace, Masses, Robot, ServoLimits,
-    LEG_JOINTS, WALKING_LIMITS,
+    BodyShape, BusDescription, Geometry, HeldServo, ImuAxes, ImuPlace, LinkInertias, Masses, Robot,
+    ServoLimits, LEG_JOINTS, WALKING_LIMITS,
 };
 
 /// The arm and head servos, held while walking: arms hanging 0.27 rad out from the body
@@ -120,6 +129,15 @@ pub const OP3: Robot = Robot {
         sole_height: 0.0315,
         upper_body_inertia: 0.0113,
         upper_body_forward: -0.0113,
+        thigh_com: 0.7633,
+        calf_com: 0.5,
+        sole_com: [-0.01457, -0.0094],
+        inertias: Some(&LinkInertias {
+            upper_body_roll_yaw: [0.017102, 0.0094562],
+            thigh: [1.0499e-4, 9.6130e-5, 2.4930e-5],
+            calf: [3.715e-5, 2.751e-5, 1.511e-5],
+            sole: [1.7095e-4, 3.0257e-4, 2.4914e-4],
+        }),
     },
     geometry: Geometry {
         hip_offset_y: 0.035,

@@ -7,7 +7,7 @@
 //! | thigh, calf | 0.100 m, 0.100 m |
 //! | ankle above the sole; sole point | 0.030 m; under the ankle |
 //! | sole | 0.100 × 0.060 m; force sensors at (±0.040, ±0.025) m |
-//! | masses | M_u 3.05 kg at l_u 0.09 m; thigh 0.20, calf 0.50, sole 0.25 kg (0.015 m up) |
+//! | masses | M_u 3.05 kg at l_u 0.09 m; thigh 0.20, calf 0.50 kg (each in its link's middle), sole 0.25 kg (0.015 m above the sole point) |
 //! | bus | 1 Mbps; legs 1–6 (left), 7–12 (right); foot boards 111, 112; IMU board 200 |
 //! | mounting | every joint +1 |
 //! | shape (assumed) | pelvis box 0.07 × 0.14 × 0.04 m, trunk box 0.09 × 0.16 × 0.2 m (0.03–0.23 m above P), head r 0.045 m at 0.29 m |
@@ -29,6 +29,10 @@ pub const TKU_X: Robot = Robot {
         sole_height: 0.015,
         upper_body_inertia: 0.026,
         upper_body_forward: 0.0,
+        thigh_com: 0.5,
+        calf_com: 0.5,
+        sole_com: [0.0, 0.0],
+        inertias: None,
     },
     geometry: Geometry {
         hip_offset_y: 0.045,

@@ -73,23 +73,28 @@ impl<R: Real> ZmpSpan<R> {
         }
     }
 
-    /// The ZMP slope K = (p₁ − p₀)/d, m/s (0 for an empty span).
-    fn slope(&self, i: usize) -> R {
+    /// The ZMP slope K = (p₁ − p₀)/d of both axes, m/s (0 for an empty span).
+    fn slope(&self) -> [R; 2] {
+        let [x1, y1] = self.p1;
+        let [x0, y0] = self.p0;
         if self.d > R::zero() {
-            (self.p1[i] - self.p0[i]) / self.d
+            [(x1 - x0) / self.d, (y1 - y0) / self.d]
         } else {
-            R::zero()
+            [R::zero(); 2]
         }
     }
 
     /// (C4): the DCM at the span's start from the DCM `xi1` at its end.
     pub fn dcm_back(&self, omega: R, xi1: [R; 2]) -> [R; 2] {
-        let mut out = [R::zero(); 2];
-        for (i, o) in out.iter_mut().enumerate() {
-            let kw = self.slope(i) / omega;
-            *o = self.p0[i] + kw + (xi1[i] - self.p1[i] - kw) * self.decay;
-        }
-        out
+        let k = self.slope();
+        let axis = |p0: R, p1: R, k: R, xi1: R| {
+            let kw = k / omega;
+            p0 + kw + (xi1 - p1 - kw) * self.decay
+        };
+        [
+            axis(self.p0[0], self.p1[0], k[0], xi1[0]),
+            axis(self.p0[1], self.p1[1], k[1], xi1[1]),
+        ]
     }
 }
 
@@ -126,9 +131,9 @@ impl<R: Real> ComSegment<R> {
             decay: span.decay,
             ..Default::default()
         };
+        s.slope = span.slope();
         for i in 0..2 {
-            let k = span.slope(i);
-            s.slope[i] = k;
+            let k = s.slope[i];
             s.a[i] = (xi1[i] - span.p1[i] - k / omega) * R::of(0.5);
             s.c[i] = x0[i] - span.p0[i] - s.a[i] * span.decay;
         }

@@ -4,23 +4,27 @@
 //! # Bodies (world x forward, y left, z up; `σ` = +1 left, −1 right)
 //!
 //! * `torso`, on a free joint, origin at the pelvis point P: the upper body's mass M_u at
-//!   (f_u, 0, l_u) (its forward offset and height) with the pitch inertia J of the description;
-//!   roll inertia J and yaw inertia J/2 are assumptions (the seed gives only J). Site `imu` at
+//!   (f_u, 0, l_u) (its forward offset and height) with the pitch inertia J of the description
+//!   and its roll and yaw inertias where the description has them
+//!   ([`gait_core::robot::LinkInertias`]), else roll J and yaw J/2 (the seed gives only J). Site `imu` at
 //!   P (gyro and accelerometer). Collision boxes for the pelvis and the trunk and a sphere for
 //!   the head, from the description's [`gait_core::robot::BodyShape`] (a fall is a torso
 //!   contact).
 //! * `{l,r}_thigh` at the hip (0, σ·d, 0) with the joints `hip_yaw` (z), `hip_roll` (x),
 //!   `hip_pitch` (y) in that order (MuJoCo composes a body's joints in order, giving
-//!   `Rz(q0)·Rx(q1)·Ry(q2)` of [`gait_core::kinematics::leg`]); mass m_t at (0, 0, −L1/2).
-//! * `{l,r}_calf` at (0, 0, −L1), joint `knee` (y); mass of the calf at (0, 0, −L2/2).
+//!   `Rz(q0)·Rx(q1)·Ry(q2)` of [`gait_core::kinematics::leg`]); mass m_t at (0, 0, −c_t·L1)
+//!   (c_t = `masses.thigh_com`).
+//! * `{l,r}_calf` at (0, 0, −L1), joint `knee` (y); mass of the calf at (0, 0, −c_c·L2).
 //! * `{l,r}_foot` at the ankle (0, 0, −L2), joints `ankle_pitch` (y), `ankle_roll` (x); the sole
-//!   mass `masses.sole_height` above the sole point; the sole box `{l,r}_sole` (the
+//!   mass `masses.sole_height` above the sole point and `masses.sole_com` from it (the same
+//!   mass points as gait-core's forward kinematics); the sole box `{l,r}_sole` (the
 //!   description's length × width, 10 mm thick, centred on the sole point
 //!   S = (o_x, σ·o_y, −h) from the ankle, its bottom at S) with rubber-like
 //!   contact (`solref` 4 ms, critically damped, as MuJoCo Menagerie's ROBOTIS OP3 feet; friction
 //!   from [`EnvConfig::floor_friction`]); site `{l,r}_sole` at the sole point.
 //!
-//! Link inertias are those of uniform rods and of the sole box. Joint ranges are the robot's
+//! Link inertias are the description's ([`gait_core::robot::Masses::inertias`]) or, where it
+//! has none, those of uniform rods and of the sole box. Joint ranges are the robot's
 //! limits (mechanical stops; the right leg's mirrored ones from [`Robot::joint_limit`]);
 //! armature, damping and friction loss come from the servo model ([`super::dynamixel`]). Every
 //! joint has a `motor` actuator (gear 1, the servo model's output torque as its control).
@@ -37,7 +41,7 @@
 use std::fmt::Write as _;
 
 use gait_core::kinematics::leg::{leg_fk, Pose};
-use gait_core::robot::JOINT_NAMES;
+use gait_core::robot::{LinkInertias, JOINT_NAMES};
 use gait_core::{Robot, Side};
 
 use super::dynamixel::XServoParams;
@@ -172,15 +176,15 @@ fn box_inertia(m: f64, x: f64, y: f64, z: f64) -> [f64; 3] {
     ]
 }
 
-/// A leg link hanging from its joint: a uniform rod of `len` and `mass` (radius 2 cm) and its
-/// capsule geom.
-fn rod_link(out: &mut String, pad: &str, len: f64, mass: f64) {
+/// A leg link hanging from its joint: `mass` at `com` of the way down its `len`, with the
+/// description's `inertia` (else a uniform rod's, radius 2 cm), and its capsule geom.
+fn rod_link(out: &mut String, pad: &str, len: f64, mass: f64, com: f64, inertia: Option<[f64; 3]>) {
     inertial(
         out,
         pad,
-        [0.0, 0.0, -len / 2.0],
+        [0.0, 0.0, -com * len],
         mass,
-        rod_inertia(mass, len, 0.02),
+        inertia.unwrap_or_else(|| rod_inertia(mass, len, 0.02)),
     );
     let _ = writeln!(
         out,
@@ -282,6 +286,16 @@ pub fn model_xml(
     let _ = writeln!(x, "    <body name=\"torso\" pos=\"0 0 {z0}\">");
     x.push_str("      <freejoint name=\"root\"/>\n");
     let j = m.upper_body_inertia * ms;
+    let inertias = m.inertias.map(|i| LinkInertias {
+        upper_body_roll_yaw: i.upper_body_roll_yaw.map(|v| v * ms),
+        thigh: i.thigh.map(|v| v * ms),
+        calf: i.calf.map(|v| v * ms),
+        sole: i.sole.map(|v| v * ms),
+    });
+    let ub_diag = inertias.map_or([j, j, 0.5 * j], |i| {
+        let [roll, yaw] = i.upper_body_roll_yaw;
+        [roll, j, yaw]
+    });
     inertial(
         &mut x,
         "      ",
@@ -291,7 +305,7 @@ pub fn model_xml(
             m.upper_body_height,
         ],
         m.upper_body * ms,
-        [j, j, 0.5 * j],
+        ub_diag,
     );
     x.push_str("      <site name=\"imu\" pos=\"0 0 0\" size=\"0.01\"/>\n");
     for (name, h, p) in torso_boxes(robot) {
@@ -346,14 +360,28 @@ pub fn model_xml(
         joint(&mut x, "        ", 0, "0 0 1");
         joint(&mut x, "        ", 1, "1 0 0");
         joint(&mut x, "        ", 2, "0 1 0");
-        rod_link(&mut x, "        ", g.thigh, m.thigh * ms);
+        rod_link(
+            &mut x,
+            "        ",
+            g.thigh,
+            m.thigh * ms,
+            m.thigh_com,
+            inertias.map(|i| i.thigh),
+        );
         let _ = writeln!(
             x,
             "        <body name=\"{pfx}_calf\" pos=\"0 0 {}\">",
             -g.thigh
         );
         joint(&mut x, "          ", 3, "0 1 0");
-        rod_link(&mut x, "          ", g.calf, m.calf * ms);
+        rod_link(
+            &mut x,
+            "          ",
+            g.calf,
+            m.calf * ms,
+            m.calf_com,
+            inertias.map(|i| i.calf),
+        );
         let _ = writeln!(
             x,
             "          <body name=\"{pfx}_foot\" pos=\"0 0 {}\">",
@@ -365,9 +393,16 @@ pub fn model_xml(
         inertial(
             &mut x,
             "            ",
-            [sp[0], sp[1], -(g.ankle_height - m.sole_height)],
+            [
+                sp[0] + m.sole_com[0],
+                sp[1] + sigma * m.sole_com[1],
+                -(g.ankle_height - m.sole_height),
+            ],
             m.sole * ms,
-            box_inertia(m.sole * ms, g.sole_length, g.sole_width, 0.02),
+            inertias.map_or_else(
+                || box_inertia(m.sole * ms, g.sole_length, g.sole_width, 0.02),
+                |i| i.sole,
+            ),
         );
         let _ = writeln!(
             x,
