@@ -174,6 +174,9 @@ pub struct Config {
     pub gyro_feedback: gait_core::feedback::gyro::GyroFeedback,
     /// Feed-forward of the position servos' static sag ([`gait_core::feedback::compliance`]).
     pub compliance: gait_core::feedback::compliance::Compliance,
+    /// The sag feed-forward takes the servo survey's stiffness (at the present supply) in place
+    /// of `compliance.stiffness` once the survey has it.
+    pub compliance_follow: bool,
     /// Foot force difference control in double support ([`gait_core::feedback::fdc`]).
     pub foot_force: gait_core::feedback::fdc::FootForceControl,
     /// The catching step: the swing foot's landing place moved by the capture-point error
@@ -286,6 +289,7 @@ impl Config {
             stabilizer: gait_core::feedback::stabilizer::StabilizerConfig::default_gains(),
             gyro_feedback: gait_core::feedback::gyro::GyroFeedback::DEFAULT,
             compliance: gait_core::feedback::compliance::Compliance::DEFAULT,
+            compliance_follow: false,
             foot_force: gait_core::feedback::fdc::FootForceControl::OFF,
             step_adaptation: gait_core::feedback::catch::StepAdaptation::DEFAULT,
             deflection: gait_core::feedback::deflection::DeflectionConfig::DEFAULT,

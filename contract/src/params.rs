@@ -859,6 +859,15 @@ params! {
         get: |c| { Some(Value::Num32(c.compliance.stiffness)) },
     },
     {
+        key: "compliance_follow",
+        plan_key: None,
+        unit: "",
+        domain: Domain::Word(&["0", "1"]),
+        doc: "1: the sag feed-forward takes the servo survey's stiffness (at the present supply, at most 3× softer than servo_stiffness) once measured; 0 (default): servo_stiffness",
+        set: |c, v| { c.compliance_follow = v as usize == 1 },
+        get: |c| { Some(Value::Word(usize::from(c.compliance_follow))) },
+    },
+    {
         key: "compliance_max",
         plan_key: None,
         unit: "rad",

@@ -148,17 +148,24 @@ fn survey_records<B: Board>(
 /// (`deflection_soft` > 0) or the gyro damping's gains following the stiffness.
 fn survey_wanted(cfg: &Config) -> bool {
     let g = &cfg.gyro_feedback;
-    cfg.deflection.soft_ki > 0.0 || (g.follow_stiffness && (g.ankle != 0.0 || g.hip != 0.0))
+    cfg.deflection.soft_ki > 0.0
+        || (g.follow_stiffness && (g.ankle != 0.0 || g.hip != 0.0))
+        || (cfg.compliance_follow && (cfg.compliance.roll != 0.0 || cfg.compliance.pitch != 0.0))
 }
 
 impl F32Path<'_> {
-    /// The gyro damping's gains for the servo survey's stiffness at the present supply (G3);
-    /// the configured ones before the survey.
+    /// The gyro damping's gains for the servo survey's stiffness at the present supply (G3),
+    /// and with `compliance_follow` the sag feed-forward's stiffness (at most
+    /// 1 + `MAX_SOFTNESS` times softer than configured); the configured ones before the survey.
     fn follow_survey(&mut self) {
-        if let Some(k) = self.servo_sense.stiffness() {
-            self.gyro = self
-                .gyro_configured
-                .for_stiffness(self.sag.compliance.stiffness, k);
+        let Some(k) = self.servo_sense.stiffness() else {
+            return;
+        };
+        let k_n = self.compliance_configured;
+        self.gyro = self.gyro_configured.for_stiffness(k_n, k);
+        if self.compliance_follow {
+            let softest = k_n / (1.0 + gait_core::measure::stiffness::MAX_SOFTNESS);
+            self.sag.compliance.stiffness = libm::fmaxf(k, softest);
         }
     }
 }
@@ -174,6 +181,10 @@ pub(super) struct F32Path<'r> {
     stabilizer: StabilizerCorrection<'r>,
     foot_force: FootForceCorrection,
     sag: SagFeedForward,
+    /// The sag feed-forward's configured stiffness K_n (N·m/rad), and whether it follows the
+    /// servo survey's.
+    compliance_configured: f32,
+    compliance_follow: bool,
     /// The gyro damping as configured, and as it acts (its gains follow the servo survey's
     /// stiffness, gait-core gyro G3).
     gyro_configured: GyroFeedback,
@@ -201,6 +212,8 @@ impl<'r> F32Path<'r> {
                 load: LoadModel::new(robot),
                 compliance: cfg.compliance,
             },
+            compliance_configured: cfg.compliance.stiffness,
+            compliance_follow: cfg.compliance_follow,
             gyro_configured: cfg.gyro_feedback,
             gyro: cfg.gyro_feedback,
             servo_sense: ServoSense::new(

@@ -3685,6 +3685,81 @@ fn the_servo_survey_measures_the_pitch_servos_spring_standing() {
     assert_eq!(replies[3], (None, 105u16.to_le_bytes().to_vec()));
 }
 
+/// `compliance_follow`: the sag feed-forward takes the servo survey's stiffness. The fake
+/// robot's pitch servos sag as springs of K = 11 N·m/rad (softer than the configured 18.875);
+/// standing after the survey, with the full model on the pitch joints and no other feedback on
+/// them, each pitch servo's goal moves by the predicted sag's change, c·τ·(1/K̂ − 1/K_n), over
+/// the goal without the option; the roll and yaw goals do not move.
+#[test]
+fn the_sag_feed_forward_follows_the_surveyed_stiffness() {
+    use gait_core::feedback::compliance::{LoadModel, XM430_STIFFNESS};
+    use gait_core::robot::{ANKLE_PITCH, HIP_PITCH, JOINTS_PER_LEG, KNEE};
+    let tokens = "autostart=0 compliance_pitch=1 deflection_ki=0 deflection_soft=0";
+    let mut base = Config::default();
+    crate::params::apply(&mut base, tokens.as_bytes()).unwrap();
+    let mut follow = base;
+    crate::params::apply(&mut follow, b"compliance_follow=1").unwrap();
+    let robot = Robot::reference();
+    let map = JointMap::from_robot(&robot);
+    let mut online = commanded::online_walk(&base, &robot).unwrap();
+    let standing = online.tick();
+    let q = Targets::new(&robot, base.compensation)
+        .joints(&standing, [0.0; 2])
+        .0;
+    let tau = LoadModel::new(&robot).joint_torques(&standing, [0.0; 2], &q);
+    let k = 11.0f32;
+    let pitch: Vec<usize> = (0..2)
+        .flat_map(|leg| [HIP_PITCH, KNEE, ANKLE_PITCH].map(|j| leg * JOINTS_PER_LEG + j))
+        .collect();
+    let ramp = ramp_ticks(&base);
+    let at = ramp + 250;
+    let walk = |cfg: &Config| {
+        let mut script = vec![(at + 10, write_mode(0))];
+        script.extend(heartbeats(ramp + 10, at + 10));
+        let mut b = PortBoard::new(cfg, script);
+        for &j in &pitch {
+            let sag = map.ticks.tick_f32(j, q[j]) - map.ticks.tick_f32(j, q[j] - tau[j] / k);
+            let id = walker_contract::bus_map::servo_id(j).unwrap();
+            b.inner.devices.iter_mut().find(|d| d.id == id).unwrap().sag = sag;
+        }
+        assert_eq!(run(&mut b, cfg), RunEnd::Resting(StopReason::Requested));
+        let k_hat = b.inner.records().iter().find_map(|r| match r {
+            Record::Fault(f)
+                if f.kind == walker_contract::record::FaultKind::ServoSurvey && f.id == 0 =>
+            {
+                Some(f.value as f32 * 1e-3)
+            }
+            _ => None,
+        });
+        (k_hat, b.inner.goals[at])
+    };
+    let (k_base, g_base) = walk(&base);
+    let (k_hat, g_follow) = walk(&follow);
+    let k_hat = k_hat.expect("the survey measured K̂");
+    assert_eq!(k_base, Some(k_hat), "the same survey either way");
+    // (The full model on the pitch joints moves the pose the survey's torques are taken at:
+    // K̂ reads ≈ 11 % high here; the default model reads K within 6 %, the survey's own test.)
+    assert!((k_hat - k).abs() < 0.15 * k, "K̂ {k_hat}");
+    let per_rad = 4096.0 / core::f32::consts::TAU;
+    for j in 0..LEG_JOINTS {
+        let moved = g_follow[j] - g_base[j];
+        let want = if pitch.contains(&j) {
+            tau[j] * (1.0 / k_hat - 1.0 / XM430_STIFFNESS) * per_rad
+        } else {
+            0.0
+        };
+        assert!(
+            (moved as f32 - want).abs() <= 1.5,
+            "joint {j}: moved {moved} ticks, predicted {want:.1}"
+        );
+    }
+    let knee = KNEE;
+    assert!(
+        (g_follow[knee] - g_base[knee]).abs() >= 5,
+        "the knee's correction grows measurably"
+    );
+}
+
 /// A build's defaults for a robot (`control::defaults_for`, what a real board's build starts
 /// from) are the defaults with the parameter `robot=` of that robot applied: its description and
 /// its bus speed, nothing else.
