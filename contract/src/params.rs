@@ -1297,6 +1297,15 @@ params! {
         get: |c| { Some(Value::Num32(c.step_adaptation.landing_gain)) },
     },
     {
+        key: "landing_lateral",
+        plan_key: None,
+        unit: "1/step",
+        domain: range(0.0, 1.0),
+        doc: "plan walk: the landing hold across the stance heading, share of the feet's midpoint's sideways distance the next landing place corrects (gait-core catch A9; 0 = off: sideways the plan's)",
+        set: |c, v| { c.step_adaptation.landing_lateral = v as f32 },
+        get: |c| { Some(Value::Num32(c.step_adaptation.landing_lateral)) },
+    },
+    {
         key: "landing_ramp",
         plan_key: None,
         unit: "s",

@@ -284,6 +284,7 @@ proptest! {
             level_joints: vals[1],
             hold_lag_m: vals[2],
             landing_gain: vals[9],
+            landing_lateral: vals[5],
             landing_ramp_s: vals[10],
         };
         let mut a = StepAdapter::new(&cfg, &Robot::reference(), z_c, dt);

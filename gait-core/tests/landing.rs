@@ -213,6 +213,41 @@ fn the_move_is_along_the_stance_heading_within_its_bound() {
     assert!((d[0] - MAX_LANDING_SHIFT_M).abs() < 1e-6, "{d:?}");
 }
 
+/// `landing_lateral`: the midpoint's sideways distance (across the stance heading) corrected
+/// by its own gain, within the same bound; the forward part as without it.
+#[test]
+fn the_lateral_move_corrects_the_midpoint_across_the_heading() {
+    let lateral = |k_lat: f32| {
+        let cfg = StepAdaptation {
+            landing_gain: 1.0,
+            landing_lateral: k_lat,
+            landing_ramp_s: 0.0,
+            ..StepAdaptation::DEFAULT
+        };
+        StepAdapter::new(&cfg, &Robot::reference(), Z_C, DT)
+    };
+    // Heading 0: 6 mm long, 4 mm to the left; half the sideways part back.
+    let d = swing_offset_after(&mut lateral(0.5), [0.006, 0.004], 0.0, 20);
+    assert!(
+        (d[0] + 0.006).abs() < 1e-6 && (d[1] + 0.002).abs() < 1e-6,
+        "{d:?}"
+    );
+    // Heading 90°: sideways is −x; e across it is −0.006, e along it 0.004.
+    let d = swing_offset_after(
+        &mut lateral(1.0),
+        [0.006, 0.004],
+        core::f32::consts::FRAC_PI_2,
+        20,
+    );
+    assert!(
+        (d[0] + 0.006).abs() < 1e-5 && (d[1] + 0.004).abs() < 1e-5,
+        "{d:?}"
+    );
+    // Bounded like the forward move.
+    let d = swing_offset_after(&mut lateral(1.0), [0.0, 0.5], 0.0, 40);
+    assert!((d[1] + MAX_LANDING_SHIFT_M).abs() < 1e-6, "{d:?}");
+}
+
 #[test]
 fn the_move_enters_over_the_ramp() {
     let ramp_s = 0.2;

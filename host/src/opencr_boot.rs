@@ -2200,11 +2200,18 @@ mod tests {
         let server = std::thread::spawn(move || {
             let mut board = SimBoard::new();
             let mut buf = [0u8; 4096];
-            while !stop2.load(Ordering::SeqCst) {
-                if let Ok(n) = master.read(&mut buf) {
-                    board.write_all(&buf[..n]).expect("in memory");
-                    let out: Vec<u8> = board.out.drain(..).collect();
-                    master.write_all(&out).expect("to the pty");
+            loop {
+                // Stop only at a read that finds nothing after the flag: what the tool wrote
+                // before it returned (its last command, the jump) is served first.
+                let stopping = stop2.load(Ordering::SeqCst);
+                match master.read(&mut buf) {
+                    Ok(n) if n > 0 => {
+                        board.write_all(&buf[..n]).expect("in memory");
+                        let out: Vec<u8> = board.out.drain(..).collect();
+                        master.write_all(&out).expect("to the pty");
+                    }
+                    _ if stopping => break,
+                    _ => {}
                 }
             }
             board

@@ -70,7 +70,8 @@
 //!
 //! ```text
 //!   ē = (e_s + e_swing)/2        e_swing: where the swing foot stood until it lifted
-//!   u = h·clamp(−k_l·(h·ē), ±u_max),   h = (cos ψ_s, sin ψ_s)
+//!   u = h·clamp(−k_l·(h·ē), ±u_max) + n·clamp(−k_n·(n·ē), ±u_max),
+//!       h = (cos ψ_s, sin ψ_s),  n = (−sin ψ_s, cos ψ_s)
 //!   d*_swing = d_s + R(ψ_s)·Δ_b + u                 (in place of (A5))                    (A9)
 //! ```
 //!
@@ -82,8 +83,10 @@
 //! puts one foot ahead and the other behind) leaves the midpoint where it is and asks no move:
 //! the midpoint is where the robot stands, each foot alone is not. u enters the landing place
 //! over T_u after lift-off (`landing_ramp_s`: the lifting foot is not slid along the floor).
-//! Sideways the landing stays the plan's: the step width sets the lateral sway the plan's ZMP
-//! was made for, and an inward move could bring the feet together. u is taken once per single
+//! Sideways (k_n = `landing_lateral`, 0 by default) the landing stays the plan's: the step
+//! width sets the lateral sway the plan's ZMP was made for, and an inward move could bring the
+//! feet together. With k_n > 0 the midpoint's sideways drift (both feet landing to one side)
+//! is taken back the same way; the width, the feet's difference, asks no move. u is taken once per single
 //! support; a foot's e is dropped when it lifts (a refused survey leaves no correction until
 //! both feet are surveyed again). The online walk corrects its own footsteps instead
 //! ([`crate::trajectory::online`], P1–P2) and does not feed (A8). The references the firmware
@@ -161,6 +164,10 @@ pub struct StepAdaptation {
     /// where it should stand that the next landing place corrects (A8)–(A9; 0 = off; needs
     /// the leg odometry's surveys).
     pub landing_gain: f32,
+    /// Gain of the landing hold across the stance foot's heading: the share of the feet's
+    /// midpoint's sideways distance the next landing place corrects (A9; 0 = off: sideways the
+    /// landing stays the plan's).
+    pub landing_lateral: f32,
     /// Time over which the landing hold's move u enters the swing foot's landing place after
     /// lift-off, s (A9).
     pub landing_ramp_s: f32,
@@ -202,6 +209,7 @@ impl StepAdaptation {
         hold_settle_s: 0.1,
         hold_lag_m: 0.0,
         landing_gain: 1.0,
+        landing_lateral: 0.0,
         landing_ramp_s: 0.2,
     };
 
@@ -239,6 +247,7 @@ impl StepAdaptation {
             hold_settle_s: limit(self.hold_settle_s),
             hold_lag_m: limit(self.hold_lag_m),
             landing_gain: limit(self.landing_gain),
+            landing_lateral: limit(self.landing_lateral),
             landing_ramp_s: limit(self.landing_ramp_s),
             ..*self
         }
@@ -293,6 +302,8 @@ pub struct CatchingStep {
     body: [f32; 2],
     /// Gain k_l of the landing hold (A9); 0 when off.
     landing_gain: f32,
+    /// Its gain across the stance foot's heading (A9); 0 when off.
+    landing_lateral: f32,
     /// The catches' share c of the left and right foot's offset (A8), plan frame, m.
     caught: [[f32; 2]; 2],
     /// Each foot's surveyed distance e from where it should stand (A8), plan frame, m; `None`
@@ -342,6 +353,7 @@ impl CatchingStep {
             feet: [[0.0; 2]; 2],
             body: [0.0; 2],
             landing_gain: if ok { cfg.landing_gain } else { 0.0 },
+            landing_lateral: if ok { cfg.landing_lateral } else { 0.0 },
             caught: [[0.0; 2]; 2],
             landing_error: [None; 2],
             landing_shift: None,
@@ -412,7 +424,8 @@ impl CatchingStep {
                 let (sn, cs) = crate::maths::fastmath::sin_cos(stance_yaw);
                 let m = MAX_LANDING_SHIFT_M;
                 let forward = (-self.landing_gain * (cs * ex + sn * ey)).clamp(-m, m);
-                let u = [cs * forward, sn * forward];
+                let side = (-self.landing_lateral * (cs * ey - sn * ex)).clamp(-m, m);
+                let u = [cs * forward - sn * side, sn * forward + cs * side];
                 if u.iter().all(|v| v.is_finite()) {
                     (forward, u)
                 } else {
