@@ -106,37 +106,37 @@ impl Sensors {
             imu: None,
             rejected: [None; 3],
         };
+        // The IMU's sample of this tick, from the bus or from the board (a robot has one IMU).
+        let mut imu = board_sample.map(Ok);
         for (i, &(k, _)) in self.slots.iter().enumerate() {
             if !self.results.get(i).is_some_and(|r| r.is_ok()) {
                 continue;
             }
-            if k != IMU_SLOT && !feet {
+            if k == IMU_SLOT {
+                imu = Some(
+                    self.data(i, usize::from(imu_table::SAMPLE.len))
+                        .and_then(ImuSample::from_bytes)
+                        .ok_or(SensorRejection::Malformed),
+                );
                 continue;
             }
-            let verdict = if k == IMU_SLOT {
-                let s = self
-                    .data(i, usize::from(imu_table::SAMPLE.len))
-                    .and_then(ImuSample::from_bytes);
-                match s {
-                    Some(s) => checks.imu(k, &s).map(|()| out.imu = Some(s)),
-                    None => Err(SensorRejection::Malformed),
-                }
-            } else {
-                let f = self
-                    .data(i, usize::from(foot::SAMPLE.len))
-                    .and_then(FootForces::from_bytes);
-                match (f, out.feet.get_mut(k)) {
-                    (Some(f), Some(slot)) => checks.foot(k, &f).map(|()| *slot = Some(f)),
-                    _ => Err(SensorRejection::Malformed),
-                }
+            if !feet {
+                continue;
+            }
+            let f = self
+                .data(i, usize::from(foot::SAMPLE.len))
+                .and_then(FootForces::from_bytes);
+            let verdict = match (f, out.feet.get_mut(k)) {
+                (Some(f), Some(slot)) => checks.foot(k, &f).map(|()| *slot = Some(f)),
+                _ => Err(SensorRejection::Malformed),
             };
             if let (Err(r), Some(slot)) = (verdict, out.rejected.get_mut(k)) {
                 *slot = Some(r);
             }
         }
-        if let Some(s) = board_sample {
-            match checks.imu(IMU_SLOT, &s) {
-                Ok(()) => out.imu = Some(s),
+        if let Some(sample) = imu {
+            match sample.and_then(|s| checks.imu(IMU_SLOT, &s).map(|()| s)) {
+                Ok(s) => out.imu = Some(s),
                 Err(r) => {
                     if let Some(slot) = out.rejected.get_mut(IMU_SLOT) {
                         *slot = Some(r);
