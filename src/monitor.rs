@@ -44,7 +44,7 @@
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
-use walker_contract::bus_map::{TickMap, MAX_HELD};
+use walker_contract::bus_map::{servo_slot_id, servo_slots, TickMap, MAX_HELD};
 use walker_contract::codes::ServoCheck;
 use walker_contract::config::ServoLimits;
 
@@ -215,14 +215,11 @@ impl ServoMonitor {
         ticks: &TickMap,
     ) -> Option<StopReason> {
         let devices = bus.devices();
-        let n = LEG_JOINTS + devices.held.len().min(MAX_HELD);
+        let n = servo_slots(devices);
         let round = PASSES * n;
         let k = self.next % round;
         let j = k % n;
-        let id = match j.checked_sub(LEG_JOINTS) {
-            None => *devices.legs.get(j)?,
-            Some(h) => devices.held.get(h)?.id,
-        };
+        let id = servo_slot_id(devices, j)?;
         let health = match k / n {
             1 => {
                 let mut b = [0u8; SUPPLY_LEN];

@@ -96,6 +96,22 @@ pub fn sensor_ids(bus: &BusDescription) -> [Option<u8>; SENSOR_SLOTS] {
     [l, r, Some(imu)]
 }
 
+/// The servos of `bus`, legs (joint order) then held ones (at most [`MAX_HELD`]): how many,
+/// and the ID of servo slot `k` (`None` past them). The servo monitor's round and the stop's
+/// torque-off read-back go through these slots.
+pub fn servo_slots(bus: &BusDescription) -> usize {
+    LEG_JOINTS + bus.held.len().min(MAX_HELD)
+}
+
+/// [`servo_slots`]' slot `k`: its servo's ID.
+pub fn servo_slot_id(bus: &BusDescription, k: usize) -> Option<u8> {
+    match k.checked_sub(LEG_JOINTS) {
+        None => bus.legs.get(k).copied(),
+        Some(h) if h < MAX_HELD => bus.held.get(h).map(|h| h.id),
+        Some(_) => None,
+    }
+}
+
 /// Every device of `bus` in probe order: the legs (joint order), the sensors, the held servos
 /// (at most [`MAX_HELD`]).
 pub fn device_ids(bus: &BusDescription) -> heapless::Vec<u8, MAX_DEVICES> {
@@ -339,6 +355,22 @@ mod tests {
         assert_eq!(flipped.tick_fx(4, 32768), 2048 - 326);
         assert!((flipped.rad_f32(4, 2048 - 326) - 0.5).abs() < 1e-3);
         assert!((flipped.rad_f64(4, 2048 + 326) + 0.5).abs() < 1e-3);
+    }
+
+    /// The servo slots: the legs in joint order, then the held servos; nothing past them.
+    #[test]
+    fn servo_slots_are_the_legs_then_the_held_servos() {
+        let o = Robot::op3();
+        assert_eq!(servo_slots(&o.bus), 20);
+        assert_eq!(servo_slot_id(&o.bus, 0), Some(8));
+        assert_eq!(servo_slot_id(&o.bus, 11), Some(17));
+        assert_eq!(servo_slot_id(&o.bus, 12), Some(1));
+        assert_eq!(servo_slot_id(&o.bus, 19), Some(20));
+        assert_eq!(servo_slot_id(&o.bus, 20), None);
+        let t = Robot::reference();
+        assert_eq!(servo_slots(&t.bus), 12);
+        assert_eq!(servo_slot_id(&t.bus, 11), Some(12));
+        assert_eq!(servo_slot_id(&t.bus, 12), None);
     }
 
     /// A servo whose horn sits 37 ticks off (joint 2) and one 15 ticks the other way on a

@@ -3,7 +3,7 @@
 
 use dxl::table::x_series;
 use gait_core::robot::LEG_JOINTS;
-use walker_contract::bus_map::MAX_HELD;
+use walker_contract::bus_map::{servo_slot_id, servo_slots, MAX_HELD};
 
 use crate::board::{Board, BROADCAST_ID, TORQUE_ENABLE_ADDR};
 use crate::bus::BoardMaster;
@@ -35,17 +35,10 @@ pub(crate) fn torque_off<B: Board>(
     cfg: &Config,
 ) {
     let devices = bus.devices();
-    let held = devices
-        .held
-        .get(..devices.held.len().min(MAX_HELD))
-        .unwrap_or(&[]);
-    let id_of = |k: usize| match devices.legs.get(k) {
-        Some(&id) => Some(id),
-        None => held.get(k.checked_sub(LEG_JOINTS)?).map(|h| h.id),
-    };
+    let id_of = |k: usize| servo_slot_id(devices, k);
     let mut off = [false; LEG_JOINTS + MAX_HELD];
     // The slots past the robot's servos count as confirmed.
-    for d in off.iter_mut().skip(LEG_JOINTS + held.len()) {
+    for d in off.iter_mut().skip(servo_slots(devices)) {
         *d = true;
     }
     for _ in 0..cfg.torque_off_attempts.max(1) {
